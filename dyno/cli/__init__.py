@@ -1,0 +1,77 @@
+"""The ``dyno`` command.
+
+Each sub-command lives in its own module under ``dyno.cli`` exposing
+``add_arguments(parser)`` and ``run(args) -> int``.  Modules are imported
+lazily, only for the command being run, so ``dyno calibrate`` never pays for
+the belt-model solver (python-can's lazy BACKENDS table, for commands).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from dyno.errors import ConfigError, DynoError
+
+# name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("dyno.cli.run_cmd", "run a steady-state test (simulated rig with --sim)"),
+    "replay": ("dyno.cli.replay_cmd", "re-process a logged run (viewer, or --json)"),
+    "export": ("dyno.cli.export_cmd", "export a run's points and streams to CSV"),
+    "import-legacy": ("dyno.cli.legacy_cmd", "import a folder of the thesis rig's logs"),
+    "model": ("dyno.cli.model_cmd", "belt-model library: point, sweep, study"),
+    "firmware-sim": ("dyno.cli.firmware_sim_cmd", "run the real firmware ELF in simavr against the host"),
+    "ui": ("dyno.cli.ui_cmd", "terminal UI for the rig (--sim for the simulated rig)"),
+    "calibrate": ("dyno.cli.calibrate_cmd", "torque calibration wizard"),
+    "doctor": ("dyno.cli.doctor_cmd", "check the rig's hardware and report what works"),
+    "shift-curve": ("dyno.cli.shift_curve_cmd", "predicted shift curve for a tune"),
+    "design": ("dyno.cli.design_cmd", "CVT design method (Arango & Munoz 2020)"),
+    "arcvt": ("dyno.cli.arcvt_cmd", "AR-CVT actuation model (van Kerkhoven 2006)"),
+}
+
+
+def _available(name: str) -> bool:
+    return importlib.util.find_spec(COMMANDS[name][0]) is not None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="dyno", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="store_true", help="print the version and exit")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_text) in COMMANDS.items():
+        if not _available(name):
+            continue
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in COMMANDS and _available(argv[0]):
+        name = argv[0]
+        mod = importlib.import_module(COMMANDS[name][0])
+        parser = argparse.ArgumentParser(prog=f"dyno {name}", description=COMMANDS[name][1])
+        mod.add_arguments(parser)
+        args = parser.parse_args(argv[1:])
+        try:
+            return int(mod.run(args) or 0)
+        except ConfigError as exc:
+            print(f"dyno {name}: error: {exc}", file=sys.stderr)
+            return 2
+        except DynoError as exc:
+            print(f"dyno {name}: error: {exc}", file=sys.stderr)
+            return 1
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.version:
+        from dyno import __version__
+
+        print(__version__)
+        return 0
+    parser.print_help()
+    return 0 if not argv else 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
