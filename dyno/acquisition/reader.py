@@ -1,0 +1,192 @@
+"""Frame readers: one poll of a transport -> host-side events with unwrapped times.
+
+A reader owns the protocol session for one device and turns accepted frames
+into :class:`dyno.protocol.v1.Event` objects whose ``t_us`` is *unwrapped*
+(monotonic int, not reduced mod 2**32) on one host timeline.  Readers are
+synchronous and pure apart from the injected transport; the asyncio poller
+schedules them.
+"""
+
+from __future__ import annotations
+
+from dyno.errors import FrameError
+from dyno.protocol import v0, v1
+from dyno.protocol.session import LinkSession, LinkStats
+from dyno.transports.base import Transport, TransportFault
+
+Event = v1.Event
+WRAP = 1 << 32
+
+
+class Unwrapper:
+    """Unwraps u32 microsecond counters into one monotonic timeline.
+
+    ``d = (t - r) mod 2**32`` read as signed 32-bit, added to the last
+    unwrapped value: exact while consecutive times are < 2**31 us apart.
+    """
+
+    def __init__(self) -> None:
+        self.raw: int | None = None
+        self.unwrapped = 0
+        self.offset = 0
+
+    def __call__(self, t_raw: int) -> int:
+        if self.raw is None:
+            self.raw = t_raw
+            self.unwrapped = self.offset + t_raw
+            return self.unwrapped
+        d = (t_raw - self.raw) & 0xFFFFFFFF
+        if d & 0x80000000:
+            d -= WRAP
+        self.raw = t_raw
+        self.unwrapped += d
+        return self.unwrapped
+
+    def new_epoch(self, gap_us: int) -> None:
+        """The device restarted its counter: continue after a host-measured gap."""
+        base = self.unwrapped + max(0, gap_us)
+        self.raw = None
+        self.offset = base
+
+    def peek(self, t_raw: int) -> int:
+        if self.raw is None:
+            return self.offset + t_raw
+        d = (t_raw - self.raw) & 0xFFFFFFFF
+        return self.unwrapped + (d - WRAP if d & 0x80000000 else d)
+
+
+class V1Reader:
+    """Reads our firmware's v1 frames with acknowledge/re-send."""
+
+    protocol = "v1"
+    read_len = v1.FRAME_MAX
+
+    def __init__(self, transport: Transport) -> None:
+        self.transport = transport
+        self.session = LinkSession()
+        self.unwrap = Unwrapper()
+        self.events_lost = 0
+        self.device_time_us: int | None = None  # latest unwrapped device time known
+        self.more = False
+        self._dropped_last: int | None = None
+        self._last_frame_s: float | None = None
+
+    @property
+    def stats(self) -> LinkStats:
+        return self.session.stats
+
+    def poll(self, now_s: float) -> list[Event]:
+        """One transaction; returns the new events (possibly none)."""
+        try:
+            buf = self.transport.transfer(self.session.request(), self.read_len)
+        except TransportFault as exc:
+            self.session.transport_error(exc.cause)
+            self.more = False
+            return []
+        frame = self.session.accept(buf)
+        if frame is None:
+            self.more = False
+            return []
+        if frame.flags & v1.FLAG_RESET and self._last_frame_s is not None:
+            self.unwrap.new_epoch(int((now_s - self._last_frame_s) * 1e6))
+            self._dropped_last = None
+        self._last_frame_s = now_s
+        if self._dropped_last is not None:
+            self.events_lost += (frame.events_dropped - self._dropped_last) & 0xFFFF
+        elif frame.flags & v1.FLAG_RESET:
+            self.events_lost += frame.events_dropped
+        self._dropped_last = frame.events_dropped
+        self.more = bool(frame.flags & v1.FLAG_MORE)
+        unwrap = self.unwrap
+        out = [Event(e.channel, unwrap(e.t_us), e.code, e.status) for e in frame.events]
+        t_dev = unwrap.peek(frame.t0_us) if not out else max(e.t_us for e in out)
+        if self.device_time_us is None or t_dev > self.device_time_us:
+            self.device_time_us = t_dev
+        return out
+
+    def command(self, request: bytes) -> None:
+        """Send a command that gets no answer (SET_DEBOUNCE, CLEAR_COUNTERS)."""
+        self.transport.write(request)
+
+    def read_info(self) -> v1.InfoFrame | None:
+        try:
+            buf = self.transport.transfer(v1.encode_command(v1.OP_INFO), self.read_len)
+        except TransportFault:
+            return None
+        try:
+            frame = v1.decode_frame(buf)
+        except FrameError:
+            return None
+        return frame if isinstance(frame, v1.InfoFrame) else None
+
+
+class V0Reader:
+    """Reads the thesis rig's legacy 20-byte frame; new timestamps become events.
+
+    Hall events carry the device's rpm value in ``code`` (v0 can miss edges
+    between polls, so the rpm slot is the only trustworthy period then).
+    """
+
+    protocol = "v0"
+    read_len = v0.FRAME_LEN
+
+    def __init__(self, transport: Transport) -> None:
+        self.transport = transport
+        self.session = LinkSession()  # only its stats are used
+        self.unwrap = Unwrapper()
+        self.events_lost = 0  # unknowable in v0; reported as 0
+        self.device_time_us: int | None = None
+        self.more = False
+        self._last_bytes: bytes | None = None
+        self._last: v0.LegacyFrame | None = None
+
+    @property
+    def stats(self) -> LinkStats:
+        return self.session.stats
+
+    def poll(self, now_s: float) -> list[Event]:
+        st = self.session.stats
+        try:
+            buf = self.transport.transfer(b"", self.read_len)
+        except TransportFault as exc:
+            self.session.transport_error(exc.cause)
+            return []
+        st.read += 1
+        try:
+            f = v0.decode_legacy_frame(buf)
+        except FrameError as exc:
+            st.rejected[exc.cause] += 1
+            return []
+        raw = bytes(buf[: v0.FRAME_LEN])
+        if raw == self._last_bytes:
+            st.rejected["stale_repeat"] += 1
+            return []
+        self._last_bytes = raw
+        st.accepted += 1
+        last = self._last
+        self._last = f
+        new = []
+        if last is None or f.t_primary_us != last.t_primary_us:
+            new.append(Event(v1.CH_PRIMARY, f.t_primary_us, f.rpm_primary))
+        if last is None or f.t_secondary_us != last.t_secondary_us:
+            new.append(Event(v1.CH_SECONDARY, f.t_secondary_us, f.rpm_secondary))
+        if last is None or f.t_adc_us != last.t_adc_us:
+            new.append(Event(v1.CH_ADC, f.t_adc_us, f.adc_code))
+        if last is None:
+            # The first read's slots hold whatever happened before we looked
+            # (or the sketch's initial values): a time origin, not events.
+            for e in sorted(new, key=lambda e: e.t_us):
+                self.unwrap(e.t_us)
+            return []
+        new.sort(key=lambda e: (e.t_us - (last.t_adc_us)) & 0xFFFFFFFF)
+        out = [Event(e.channel, self.unwrap(e.t_us), e.code, e.status) for e in new]
+        self.device_time_us = max(e.t_us for e in out) if out else self.device_time_us
+        return out
+
+
+def make_reader(protocol: str, transport: Transport):
+    if protocol == "v1":
+        return V1Reader(transport)
+    if protocol == "v0":
+        return V0Reader(transport)
+    raise ValueError(f"protocol must be v1 or v0, not {protocol!r}")
