@@ -1,0 +1,416 @@
+"""The rig description: ``hardware/rig.toml`` loaded into frozen dataclasses.
+
+Everything that differs between one physical dynamometer and another (pin
+map, bus addresses, serial port, gear ratio, Hall debounce windows, limits,
+actuator timing, throttle servo end points) lives in one TOML file, validated
+on load so a typo stops the program before it touches a pin.  Every quantity
+carries its unit in its key.
+
+:func:`rig_from_dict` validates a parsed mapping; :func:`load_rig` is the only
+function that touches a file.  Bad input raises
+:class:`dyno.errors.ConfigError` naming the file, the dotted field and what
+was expected (the CLI prints it on one line and exits 2).
+
+Pins are Broadcom (BCM) GPIO numbers as gpiozero uses them.  ``"BOARD33"``
+(physical header pin, the numbering of the thesis code, Messick 2018 App. H)
+and ``"GPIO13"`` are accepted too and converted, because copying pin numbers
+off the thesis PCB silkscreen is exactly the mistake this file should catch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from dyno.errors import ConfigError
+
+SCHEMA = "dyno.rig/1"
+
+#: The repo's rig description, found relative to the package so it works from
+#: any working directory (and from an editable install on the Pi).
+DEFAULT_RIG_PATH = Path(__file__).resolve().parent.parent / "hardware" / "rig.toml"
+#: Environment override, so the systemd unit can point at /etc/dyno/rig.toml.
+RIG_ENV = "DYNO_RIG"
+
+# 40-pin header: physical pin -> BCM GPIO (power/ground pins are absent).
+_BOARD_TO_BCM = {
+    3: 2, 5: 3, 7: 4, 8: 14, 10: 15, 11: 17, 12: 18, 13: 27, 15: 22, 16: 23, 18: 24,
+    19: 10, 21: 9, 22: 25, 23: 11, 24: 8, 26: 7, 27: 0, 28: 1, 29: 5, 31: 6, 32: 12,
+    33: 13, 35: 19, 36: 16, 37: 26, 38: 20, 40: 21,
+}
+# BCM 0/1 are the HAT ID EEPROM bus and 2/3 are I2C1 (SDA/SCL, with 1k8
+# pull-ups on the board): an output there would fight the bus we poll.
+RESERVED_BCM = {0: "HAT ID EEPROM (ID_SD)", 1: "HAT ID EEPROM (ID_SC)",
+                2: "I2C1 SDA", 3: "I2C1 SCL"}
+OUTPUT_BCM = range(4, 28)
+
+PIN_NAMES = ("brake_enable", "brake_direction", "throttle_servo", "engine_kill", "arduino_reset")
+# Hardware PWM channels on the header; the throttle servo jitters on software PWM.
+HARDWARE_PWM_BCM = {12, 13, 18, 19}
+
+I2C_ADDRESS_MIN, I2C_ADDRESS_MAX = 0x03, 0x77  # 7-bit, outside the reserved ranges
+
+
+@dataclass(frozen=True)
+class Pins:
+    """BCM GPIO numbers of the rig's outputs."""
+
+    brake_enable: int  # MOSFET gate: high powers the brake actuator
+    brake_direction: int  # DPDT relay: energised = APPLY (extend), off = RELEASE
+    throttle_servo: int  # 50 Hz servo PWM
+    engine_kill: int  # ignition kill relay
+    arduino_reset: int  # drives the Nano's RESET through a transistor
+
+    def as_dict(self) -> dict[str, int]:
+        return {name: getattr(self, name) for name in PIN_NAMES}
+
+
+@dataclass(frozen=True)
+class I2CConfig:
+    bus: int  # /dev/i2c-<bus>
+    firmware_address: int  # the Nano (0x03)
+    thermometer_address: int  # MLX90614 (0x5A)
+    bus_speed_hz: int  # must match dtparam=i2c_arm_baudrate in /boot/config.txt
+    retries: int = 3  # extra attempts per poll before it counts as a failure
+    retry_backoff_s: float = 0.002  # first back-off; doubles per retry
+    reset_after_failures: int = 20  # consecutive failed polls before pulsing RESET
+
+
+@dataclass(frozen=True)
+class SerialConfig:
+    port: str
+    baud: int
+    timeout_s: float = 0.05  # one poll's answer at 115200 Bd takes < 4 ms
+
+
+@dataclass(frozen=True)
+class Gear:
+    """Chain/belt drive from the CVT secondary to the brake rotor."""
+
+    secondary_sprocket_teeth: int
+    brake_sprocket_teeth: int
+
+    @property
+    def ratio_brake_per_secondary(self) -> float:
+        """Brake-rotor rpm per secondary rpm (32/61 on the thesis rig)."""
+        return self.secondary_sprocket_teeth / self.brake_sprocket_teeth
+
+
+@dataclass(frozen=True)
+class Limits:
+    rotor_temp_max_c: float
+    overspeed_primary_rpm: float
+    overspeed_secondary_rpm: float
+    comms_timeout_s: float
+
+
+@dataclass(frozen=True)
+class ActuatorConfig:
+    step_s: float  # default brake step the controller asks for
+    full_stroke_s: float  # end stop to end stop at rated load
+    relay_settle_s: float = 0.03  # direction relay contact bounce + release time
+    watchdog_s: float = 0.5  # control loop silent this long -> safe state
+
+
+@dataclass(frozen=True)
+class ThrottleConfig:
+    """Servo end points as pulse widths (thesis: 11 % / 4 % duty at 50 Hz)."""
+
+    idle_pulse_us: float
+    full_pulse_us: float
+    frame_us: float = 20000.0  # 50 Hz servo frame
+
+    def pulse_us(self, fraction: float) -> float:
+        """Pulse width for a throttle fraction, clamped to 0..1."""
+        f = min(1.0, max(0.0, float(fraction)))
+        return self.idle_pulse_us + f * (self.full_pulse_us - self.idle_pulse_us)
+
+
+@dataclass(frozen=True)
+class ResetConfig:
+    pulse_s: float = 0.25  # thesis value; the Nano needs > 2.5 us, relay/RC margin
+    boot_s: float = 1.0  # optiboot waits ~0.5-1 s before the sketch runs
+    active_high: bool = True  # pin high -> transistor pulls RESET low
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    path: str
+    protocol: str  # "v1" | "v0"
+    transport: str  # "i2c" | "serial"
+    poll_hz: float
+    debounce_primary_us: int
+    debounce_secondary_us: int
+    kill_relay: str  # "energise_to_run" (fail-safe) | "energise_to_kill" (thesis PCB)
+    pins: Pins
+    i2c: I2CConfig
+    serial: SerialConfig
+    gear: Gear
+    limits: Limits
+    actuator: ActuatorConfig
+    throttle: ThrottleConfig
+    reset: ResetConfig
+
+    @property
+    def gear_ratio_brake_per_secondary(self) -> float:
+        return self.gear.ratio_brake_per_secondary
+
+    @property
+    def poll_period_s(self) -> float:
+        return 1.0 / self.poll_hz
+
+
+# --------------------------------------------------------------------------- validation
+
+
+_REQUIRED = object()  # sentinel: the field has no default
+
+
+class _Reader:
+    """Pulls typed fields out of a mapping; every problem becomes a ConfigError."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def err(self, fld: str, expected: str) -> ConfigError:
+        return ConfigError(self.path, fld, expected)
+
+    def _get(self, data: Mapping, key: str, prefix: str, default: Any):
+        fld = f"{prefix}{key}"
+        if key not in data:
+            if default is _REQUIRED:
+                raise self.err(fld, "missing (required)")
+            return fld, default, True
+        return fld, data[key], False
+
+    def table(self, data: Mapping, key: str) -> Mapping:
+        fld, v, _ = self._get(data, key, "", _REQUIRED)
+        if not isinstance(v, Mapping):
+            raise self.err(fld, f"expected a table [{key}], got {type(v).__name__}")
+        return v
+
+    def integer(self, data, key, prefix, lo=None, hi=None, default=None, required=True, hexfmt=False):
+        fld, v, defaulted = self._get(data, key, prefix, _REQUIRED if required else default)
+        if defaulted:
+            return v
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.err(fld, f"expected an integer, got {v!r}")
+        fmt = (lambda x: f"0x{x:02X}") if hexfmt else str
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise self.err(fld, f"expected {fmt(lo)}..{fmt(hi)}, got {fmt(v)}")
+        return v
+
+    def number(self, data, key, prefix, *, positive=True, default=None, required=True):
+        fld, v, defaulted = self._get(data, key, prefix, _REQUIRED if required else default)
+        if defaulted:
+            return v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.err(fld, f"expected a number, got {v!r}")
+        if positive and not v > 0:
+            raise self.err(fld, f"expected a number > 0, got {v!r}")
+        return float(v)
+
+    def string(self, data, key, prefix, choices=None, default=None, required=True):
+        fld, v, defaulted = self._get(data, key, prefix, _REQUIRED if required else default)
+        if defaulted:
+            return v
+        if not isinstance(v, str) or not v:
+            raise self.err(fld, f"expected a string, got {v!r}")
+        if choices and v not in choices:
+            raise self.err(fld, f"expected one of {', '.join(map(repr, choices))}, got {v!r}")
+        return v
+
+    def boolean(self, data, key, prefix, default):
+        fld, v, defaulted = self._get(data, key, prefix, default)
+        if not defaulted and not isinstance(v, bool):
+            raise self.err(fld, f"expected true or false, got {v!r}")
+        return v
+
+    def no_extra(self, data: Mapping, allowed, prefix: str) -> None:
+        for key in data:
+            if key not in allowed:
+                raise self.err(f"{prefix}{key}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+    def pin(self, data: Mapping, key: str) -> int:
+        fld, v, _ = self._get(data, key, "pins.", _REQUIRED)
+        raw = v
+        if isinstance(v, str):
+            s = v.strip().upper()
+            prefix = next((x for x in ("BOARD", "GPIO", "BCM") if s.startswith(x)), None)
+            if prefix is None or not s[len(prefix):].isdigit():
+                raise self.err(fld, f"unknown pin {raw!r}: expected a BCM number, 'GPIOn' or 'BOARDn'")
+            n = int(s[len(prefix):])
+            if prefix == "BOARD":
+                if n not in _BOARD_TO_BCM:
+                    raise self.err(fld, f"unknown pin {raw!r}: header pin {n} is not a GPIO")
+                n = _BOARD_TO_BCM[n]
+            v = n
+        elif isinstance(v, bool) or not isinstance(v, int):
+            raise self.err(fld, f"unknown pin {raw!r}: expected a BCM number, 'GPIOn' or 'BOARDn'")
+        if v in RESERVED_BCM:
+            raise self.err(fld, f"pin {raw!r} is GPIO{v}, reserved for {RESERVED_BCM[v]}")
+        if v not in OUTPUT_BCM:
+            raise self.err(fld, f"unknown pin {raw!r}: expected a BCM GPIO number 4..27")
+        return v
+
+
+_TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
+             "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
+             "actuator", "throttle", "reset"}
+
+
+def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
+    """Validate a parsed rig description.
+
+    Raises
+    ------
+    ConfigError
+        naming the dotted field: unknown key or pin, duplicate pin, address out
+        of 0x03..0x77, missing field, wrong type.
+    """
+    r = _Reader(str(path))
+    r.no_extra(data, _TOP_KEYS, "")
+    schema = r.string(data, "schema", "", required=False, default=SCHEMA)
+    if schema != SCHEMA:
+        raise r.err("schema", f"expected {SCHEMA!r}, got {schema!r}")
+
+    # pins
+    p = r.table(data, "pins")
+    r.no_extra(p, set(PIN_NAMES), "pins.")
+    pins_by_name: dict[str, int] = {}
+    for name in PIN_NAMES:
+        bcm = r.pin(p, name)
+        for other, other_bcm in pins_by_name.items():
+            if other_bcm == bcm:
+                raise r.err(f"pins.{name}", f"duplicate pin: GPIO{bcm} is already pins.{other}")
+        pins_by_name[name] = bcm
+    pins = Pins(**pins_by_name)
+
+    # i2c
+    t = r.table(data, "i2c")
+    r.no_extra(t, {"bus", "firmware_address", "thermometer_address", "bus_speed_hz", "retries",
+                   "retry_backoff_s", "reset_after_failures"}, "i2c.")
+    a = dict(lo=I2C_ADDRESS_MIN, hi=I2C_ADDRESS_MAX, hexfmt=True)
+    i2c = I2CConfig(
+        bus=r.integer(t, "bus", "i2c.", lo=0, hi=255),
+        firmware_address=r.integer(t, "firmware_address", "i2c.", **a),
+        thermometer_address=r.integer(t, "thermometer_address", "i2c.", **a),
+        # 10 kHz..400 kHz: below that the 150 Hz poll does not fit, above is fast-mode plus
+        bus_speed_hz=r.integer(t, "bus_speed_hz", "i2c.", lo=10_000, hi=400_000),
+        retries=r.integer(t, "retries", "i2c.", lo=0, hi=10, required=False, default=3),
+        retry_backoff_s=r.number(t, "retry_backoff_s", "i2c.", required=False, default=0.002),
+        reset_after_failures=r.integer(t, "reset_after_failures", "i2c.", lo=1, hi=10_000,
+                                       required=False, default=20),
+    )
+    if i2c.firmware_address == i2c.thermometer_address:
+        raise r.err("i2c.thermometer_address",
+                    f"duplicate address 0x{i2c.thermometer_address:02X}: same as i2c.firmware_address")
+
+    # serial
+    t = r.table(data, "serial")
+    r.no_extra(t, {"port", "baud", "timeout_s"}, "serial.")
+    serial = SerialConfig(
+        port=r.string(t, "port", "serial."),
+        baud=r.integer(t, "baud", "serial.", lo=1200, hi=4_000_000),
+        timeout_s=r.number(t, "timeout_s", "serial.", required=False, default=0.05),
+    )
+
+    # gear
+    t = r.table(data, "gear")
+    r.no_extra(t, {"secondary_sprocket_teeth", "brake_sprocket_teeth"}, "gear.")
+    gear = Gear(
+        secondary_sprocket_teeth=r.integer(t, "secondary_sprocket_teeth", "gear.", lo=1, hi=1000),
+        brake_sprocket_teeth=r.integer(t, "brake_sprocket_teeth", "gear.", lo=1, hi=1000),
+    )
+
+    # limits
+    t = r.table(data, "limits")
+    lim_keys = ("rotor_temp_max_c", "overspeed_primary_rpm", "overspeed_secondary_rpm", "comms_timeout_s")
+    r.no_extra(t, set(lim_keys), "limits.")
+    limits = Limits(**{k: r.number(t, k, "limits.") for k in lim_keys})
+
+    # actuator
+    t = r.table(data, "actuator")
+    r.no_extra(t, {"step_s", "full_stroke_s", "relay_settle_s", "watchdog_s"}, "actuator.")
+    actuator = ActuatorConfig(
+        step_s=r.number(t, "step_s", "actuator."),
+        full_stroke_s=r.number(t, "full_stroke_s", "actuator."),
+        relay_settle_s=r.number(t, "relay_settle_s", "actuator.", required=False, default=0.03),
+        watchdog_s=r.number(t, "watchdog_s", "actuator.", required=False, default=0.5),
+    )
+    if actuator.step_s > actuator.full_stroke_s:
+        raise r.err("actuator.step_s", f"expected <= actuator.full_stroke_s ({actuator.full_stroke_s})")
+
+    # throttle: the servo accepts ~500..2500 us; anything else is a unit mistake (ms, duty %)
+    t = r.table(data, "throttle")
+    r.no_extra(t, {"idle_pulse_us", "full_pulse_us", "frame_us"}, "throttle.")
+    throttle = ThrottleConfig(
+        idle_pulse_us=r.number(t, "idle_pulse_us", "throttle."),
+        full_pulse_us=r.number(t, "full_pulse_us", "throttle."),
+        frame_us=r.number(t, "frame_us", "throttle.", required=False, default=20000.0),
+    )
+    for k in ("idle_pulse_us", "full_pulse_us"):
+        if not 400 <= getattr(throttle, k) <= 2600:
+            raise r.err(f"throttle.{k}", f"expected a servo pulse width 400..2600 us, got {getattr(throttle, k)}")
+    if throttle.idle_pulse_us == throttle.full_pulse_us:
+        raise r.err("throttle.full_pulse_us", "expected to differ from throttle.idle_pulse_us")
+    if max(throttle.idle_pulse_us, throttle.full_pulse_us) >= throttle.frame_us:
+        raise r.err("throttle.frame_us", "expected longer than both pulse widths")
+
+    # reset (optional table)
+    t = data.get("reset", {})
+    if not isinstance(t, Mapping):
+        raise r.err("reset", f"expected a table [reset], got {type(t).__name__}")
+    r.no_extra(t, {"pulse_s", "boot_s", "active_high"}, "reset.")
+    reset = ResetConfig(
+        pulse_s=r.number(t, "pulse_s", "reset.", required=False, default=0.25),
+        boot_s=r.number(t, "boot_s", "reset.", required=False, default=1.0),
+        active_high=r.boolean(t, "active_high", "reset.", default=True),
+    )
+
+    return RigConfig(
+        path=str(path),
+        protocol=r.string(data, "protocol", "", choices=("v1", "v0")),
+        transport=r.string(data, "transport", "", choices=("i2c", "serial"), required=False, default="i2c"),
+        poll_hz=r.number(data, "poll_hz", ""),
+        debounce_primary_us=r.integer(data, "debounce_primary_us", "", lo=0, hi=65535),
+        debounce_secondary_us=r.integer(data, "debounce_secondary_us", "", lo=0, hi=65535),
+        kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
+        pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
+        actuator=actuator, throttle=throttle, reset=reset,
+    )
+
+
+def resolve_rig_path(path: str | Path | None = None) -> Path:
+    """``path``, else ``$DYNO_RIG``, else the repo's ``hardware/rig.toml``."""
+    if path is not None:
+        return Path(path)
+    env = os.environ.get(RIG_ENV)
+    return Path(env) if env else DEFAULT_RIG_PATH
+
+
+def load_rig(path: str | Path | None = None) -> RigConfig:
+    """Read and validate a rig description (see :func:`resolve_rig_path`)."""
+    p = resolve_rig_path(path)
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(p, "file", "not found") from None
+    except OSError as exc:
+        raise ConfigError(p, "file", f"unreadable ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(p, "toml", f"not valid TOML ({exc})") from None
+    return rig_from_dict(data, p)
+
+
+def add_rig_argument(parser: argparse.ArgumentParser) -> None:
+    """``--rig PATH`` for any command; load it with ``load_rig(args.rig)``."""
+    parser.add_argument(
+        "--rig", metavar="PATH", default=None,
+        help=f"rig description (default: ${RIG_ENV} or {DEFAULT_RIG_PATH.parent.name}/{DEFAULT_RIG_PATH.name})",
+    )
