@@ -1,0 +1,72 @@
+"""Writes a run directory that is valid at every instant (Bluesky-style documents).
+
+Layout::
+
+    RUN/meta.json         run metadata (rig, calibration, engine map, software, protocol), atomic
+    RUN/calibration.json  the calibration entry applied, atomic
+    RUN/engine_map.csv    a copy of the engine map used, atomic
+    RUN/documents.jsonl   append-only: start, state, point, abort, stop documents
+    RUN/events.bin        append-only raw event stream, 12-byte records <B q H B>:
+                          channel, unwrapped t_us, ADC code (or v0 device rpm), status
+
+Every append is flushed to the kernel at once, so a SIGKILL loses nothing
+already recorded; a record torn by a kill is at the very end and readers drop it.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from pathlib import Path
+
+from dyno import __version__
+from dyno.runlog.files import dumps, write_atomic, write_json_atomic
+
+EVENT_RECORD = struct.Struct("<BqHB")
+
+
+class RunWriter:
+    def __init__(self, run_dir: Path, meta: dict, calibration: dict | None = None,
+                 engine_map_text: str | None = None) -> None:
+        self.run_dir = Path(run_dir)
+        if self.run_dir.exists() and any(self.run_dir.iterdir()):
+            from dyno.errors import ConfigError
+
+            raise ConfigError(self.run_dir, "--out", "an empty or new directory (refusing to overwrite a run)")
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        meta = dict(meta)
+        meta.setdefault("software_version", __version__)
+        meta.setdefault("created_unix_s", time.time())
+        meta.setdefault("format", "dyno-run/1")
+        if calibration is not None:
+            write_json_atomic(self.run_dir / "calibration.json", calibration)
+        if engine_map_text is not None:
+            write_atomic(self.run_dir / "engine_map.csv", engine_map_text)
+        write_json_atomic(self.run_dir / "meta.json", meta)
+        self._docs = open(self.run_dir / "documents.jsonl", "a", encoding="utf-8")
+        self._events = open(self.run_dir / "events.bin", "ab")
+        self._pack = EVENT_RECORD.pack
+        self.closed = False
+        self.doc("start", **{k: meta[k] for k in ("software_version", "format") if k in meta})
+
+    def events(self, events, now_s: float | None = None) -> None:
+        if not events or self.closed:
+            return
+        pack = self._pack
+        self._events.write(b"".join(pack(e.channel, e.t_us, e.code & 0xFFFF, e.status & 0xFF) for e in events))
+        self._events.flush()
+
+    def doc(self, doc_type: str, **fields) -> None:
+        if self.closed:
+            return
+        fields["type"] = doc_type
+        self._docs.write(dumps(fields) + "\n")
+        self._docs.flush()
+
+    def close(self, exit_status: str, reason: str = "", **extra) -> None:
+        if self.closed:
+            return
+        self.doc("stop", exit_status=exit_status, reason=reason, **extra)
+        self.closed = True
+        self._docs.close()
+        self._events.close()

@@ -1,0 +1,159 @@
+"""The firmware, emulated: sensor events in, protocol bytes out.
+
+It behaves as docs/protocol.md says the Nano does (ring buffer with an
+overflow counter, per-channel Hall debounce, frames frozen once sent and
+retired only by a matching ACK_POLL, RESET flag and a new time epoch after a
+reset) so the host decodes the simulated rig through exactly the path it uses
+on the real one.  ``protocol="v0"`` emulates the thesis sketch's 20-byte frame
+instead.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from dyno.errors import FrameError
+from dyno.protocol import v0, v1
+
+CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
+FW_VERSION = (1, 0, 0)
+
+
+class EmulatedFirmware:
+    """The Nano's behaviour on the bus.
+
+    Parameters
+    ----------
+    protocol : "v1" or "v0"
+    ring_capacity : events the ring holds (the firmware's is 64)
+    clock_offset_us : device counter value at boot; set near 2**32 to test the wrap
+    clock_ppm : crystal error of the device's time base
+    """
+
+    def __init__(self, protocol: str = "v1", ring_capacity: int = 64, clock_offset_us: int = 0,
+                 clock_ppm: float = 0.0) -> None:
+        self.protocol = protocol
+        self.ring_capacity = ring_capacity
+        self.clock_offset_us = clock_offset_us
+        self.clock_scale = 1.0 + clock_ppm * 1e-6
+        self.boot_count = 0
+        self.debounce_us = {v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000}
+        self.served: dict[int, bytes] = {}  # seq -> bytes last served (truth for audits)
+        self.events_generated = 0  # accepted into the ring (truth)
+        self.bounces_rejected = 0
+        self._boot(0.0)
+
+    # --- state ---------------------------------------------------------------
+    def _boot(self, now_s: float) -> None:
+        self.boot_time_s = now_s
+        self.ring: deque = deque()
+        self.events_dropped = 0
+        self.overflow = False
+        self.seq = 0
+        self.reset_flag = True
+        self.frame: bytes | None = None
+        self.frame_events: tuple = ()
+        self.frame_sent = False
+        self.info_pending = False
+        self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
+        self._legacy = {v1.CH_PRIMARY: [100, 0], v1.CH_SECONDARY: [100, 0], v1.CH_ADC: [0, 0]}
+        self._legacy_prev_t = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}
+
+    def reset(self, now_s: float) -> None:
+        """Watchdog or power reset: counters and buffers restart."""
+        self.boot_count += 1
+        self._boot(now_s)
+
+    def device_us(self, t_s: float) -> int:
+        """The device's u32 microsecond counter at simulation time ``t_s``."""
+        ticks = int((t_s - self.boot_time_s) * 1e6 * self.clock_scale)
+        return (self.clock_offset_us + ticks) & 0xFFFFFFFF
+
+    # --- capture (what the ISRs and the ADC loop do) ----------------------------
+    def capture(self, channel: str, t_s: float, code: int = 0, status: int = 0) -> None:
+        tag = CHANNEL_TAG[channel]
+        t_us = self.device_us(t_s)
+        if tag != v1.CH_ADC:
+            last = self._last_edge_us[tag]
+            if last is not None and ((t_us - last) & 0xFFFFFFFF) < self.debounce_us[tag]:
+                self.bounces_rejected += 1
+                return
+            self._last_edge_us[tag] = t_us
+        if self.protocol == "v0":
+            self._capture_v0(tag, t_us, code, status)
+            return
+        if len(self.ring) >= self.ring_capacity:
+            self.events_dropped = (self.events_dropped + 1) & 0xFFFF
+            self.overflow = True
+            return
+        self.events_generated += 1
+        self.ring.append(v1.Event(tag, t_us, code, status))
+
+    def _capture_v0(self, tag: int, t_us: int, code: int, status: int) -> None:
+        self.events_generated += 1
+        if tag == v1.CH_ADC:
+            if not status & v1.ADC_STATUS_ERR:  # the thesis sketch drops errored reads
+                self._legacy[tag] = [code, t_us]
+            return
+        period = (t_us - self._legacy_prev_t[tag]) & 0xFFFFFFFF
+        self._legacy_prev_t[tag] = t_us
+        rpm = min(65535, 60_000_000 // period) if period else 0
+        self._legacy[tag] = [rpm, t_us]
+
+    # --- the bus side --------------------------------------------------------------
+    def write(self, data: bytes, now_s: float) -> None:
+        """The master wrote ``data`` (a command)."""
+        if self.protocol == "v0" or not data:
+            return
+        try:
+            cmd = v1.decode_command(bytes(data))
+        except FrameError:
+            return  # ignored, as the firmware does: the current frame is served again
+        if cmd.op == v1.OP_ACK_POLL:
+            if self.frame is not None and self.frame_sent and cmd.args[0] == self.seq:
+                self.frame = None
+                self.frame_events = ()
+                self.frame_sent = False
+                self.seq = (self.seq + 1) & 0xFF
+                self.reset_flag = False
+        elif cmd.op == v1.OP_SET_DEBOUNCE:
+            self.debounce_us[v1.CH_PRIMARY], self.debounce_us[v1.CH_SECONDARY] = cmd.args
+        elif cmd.op == v1.OP_CLEAR_COUNTERS:
+            self.events_dropped = 0
+            self.overflow = False
+        elif cmd.op == v1.OP_INFO:
+            self.info_pending = True
+
+    def read(self, n: int, now_s: float) -> bytes:
+        """The master reads ``n`` bytes; returns what the device puts on the bus."""
+        if self.protocol == "v0":
+            (rp, tp), (rs, ts), (adc, ta) = (self._legacy[c] for c in (1, 2, 3))
+            out = v0.encode_legacy_frame(v0.LegacyFrame(rp, tp, rs, ts, adc, ta))
+            return out[:n].ljust(n, b"\xff")
+        if self.info_pending:
+            self.info_pending = False
+            info = v1.InfoFrame(self.seq, self._flags(), FW_VERSION, self.boot_count,
+                                int((now_s - self.boot_time_s) * 1000) & 0xFFFFFFFF,
+                                self.debounce_us[v1.CH_PRIMARY], self.debounce_us[v1.CH_SECONDARY])
+            return v1.encode_info_frame(info)[:n].ljust(n, b"\xff")
+        if not self.frame_sent:
+            self._build(now_s)
+        self.frame_sent = True
+        self.served[self.seq] = self.frame[: self.frame[1]]
+        # A master reading past our buffer gets 0xFF (SDA released).
+        return self.frame[:n].ljust(n, b"\xff")
+
+    def _flags(self) -> int:
+        f = v1.FLAG_RESET if self.reset_flag else 0
+        return f | (v1.FLAG_OVERFLOW if self.overflow else 0)
+
+    def _build(self, now_s: float) -> None:
+        """(Re)build the unsent current frame from the ring (events stay queued until retired)."""
+        # Put the current frame's events back first: an unsent frame may be rebuilt.
+        if self.frame_events:
+            self.ring.extendleft(reversed(self.frame_events))
+        n = v1.fit_events(self.ring)
+        events = tuple(self.ring.popleft() for _ in range(n))
+        flags = self._flags() | (v1.FLAG_MORE if self.ring else 0)
+        self.frame_events = events
+        self.frame = v1.encode_data_frame(self.seq, flags, self.events_dropped, events, self.device_us(now_s))
