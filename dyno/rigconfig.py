@@ -47,6 +47,7 @@ _BOARD_TO_BCM = {
 RESERVED_BCM = {0: "HAT ID EEPROM (ID_SD)", 1: "HAT ID EEPROM (ID_SC)",
                 2: "I2C1 SDA", 3: "I2C1 SCL"}
 OUTPUT_BCM = range(4, 28)
+BOOT_PULL_UP_BCM = range(4, 9)  # default pulls until a program claims the pin
 
 PIN_NAMES = ("brake_enable", "brake_direction", "throttle_servo", "engine_kill", "arduino_reset")
 # Hardware PWM channels on the header; the throttle servo jitters on software PWM.
@@ -288,6 +289,12 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
             if other_bcm == bcm:
                 raise r.err(f"pins.{name}", f"duplicate pin: GPIO{bcm} is already pins.{other}")
         pins_by_name[name] = bcm
+    for name in ("brake_enable", "brake_direction"):
+        # BCM 4..8 have pull-ups at power-on: the actuator would move while the
+        # Pi boots, before dyno has claimed the pin.
+        if pins_by_name[name] in BOOT_PULL_UP_BCM:
+            raise r.err(f"pins.{name}", f"GPIO{pins_by_name[name]} is pulled up at boot (GPIO4..8); "
+                        "use a pin pulled down at boot (GPIO9..27)")
     pins = Pins(**pins_by_name)
 
     # i2c

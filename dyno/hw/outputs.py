@@ -1,0 +1,382 @@
+"""The rig's outputs on Raspberry Pi GPIO (gpiozero), behind :class:`Actuators`.
+
+Ported from the thesis Pi code (Messick 2018, App. H: ``apply_brake``,
+``step_brake``, ``set_throttle``, ``reset_arduino``, ``E_STOP``) with the
+hazards that code left open closed:
+
+* The direction relay is never switched while the actuator enable MOSFET is
+  on: switching a DPDT relay under motor current arcs its contacts and, for a
+  moment, shorts the supply through the H-bridge wiring.  Order is always
+  enable off -> settle -> relay -> settle -> enable on.
+* Travel is integrated from enable-on time so the actuator is de-energised at
+  its end stops instead of stalling against the internal limit switch forever.
+* Nothing blocks except the explicit blocking helpers (:meth:`step`,
+  :meth:`reset_arduino`, :meth:`finish_release`): the controller's loop drives
+  time-based behaviour through :meth:`tick`, as the ``Actuators`` contract asks.
+
+Relay polarity (``brake_direction`` energised = APPLY) follows the thesis
+board: RELEASE is the relay's rest state, so a safe-state release needs only
+the enable.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+from gpiozero import DigitalOutputDevice, PWMOutputDevice
+
+from dyno.control.outputs import APPLY, RELEASE, STOP
+from dyno.errors import SafetyAbort
+from dyno.hw.clock import MonotonicClock
+from dyno.rigconfig import RigConfig
+
+#: Keep driving into an end stop for this fraction of a stroke beyond the
+#: estimate, so estimate drift never leaves the brake short of its stop.
+END_STOP_OVERRUN_FRACTION = 0.10
+
+
+class GpioActuators:
+    """Brake actuator, throttle servo, engine kill and Arduino reset on GPIO.
+
+    Parameters
+    ----------
+    config : RigConfig
+    pin_factory : gpiozero pin factory, optional
+        ``MockFactory`` in tests; ``None`` lets gpiozero pick (lgpio on a Pi 5).
+    clock : object with ``now()`` and ``sleep(s)``, optional
+        :class:`dyno.hw.clock.MonotonicClock` by default.
+
+    Construction puts every output in its safe value at once (throttle idle,
+    engine killed, brake enable off, relay at rest) and starts a release
+    stroke, because the brake position at start-up is unknown.
+    """
+
+    def __init__(self, config: RigConfig, pin_factory=None, clock=None) -> None:
+        self.config = config
+        self.clock = clock or MonotonicClock()
+        self.brake_full_stroke_s = config.actuator.full_stroke_s
+        self._settle_s = config.actuator.relay_settle_s
+        self._lock = threading.RLock()  # the watchdog thread and signal handlers call in too
+        pins = config.pins
+        pf = dict(pin_factory=pin_factory)
+        self._devices = []
+        try:
+            # Enable first and off: whatever happens next, the actuator has no power.
+            self._enable = self._add(DigitalOutputDevice(pins.brake_enable, initial_value=False, **pf))
+            self._direction = self._add(DigitalOutputDevice(pins.brake_direction, initial_value=False, **pf))
+            # ``value`` True means "engine killed" whichever way the relay is wired.
+            self._kill = self._add(DigitalOutputDevice(
+                pins.engine_kill, active_high=(config.kill_relay == "energise_to_kill"),
+                initial_value=True, **pf))
+            self._reset = self._add(DigitalOutputDevice(
+                pins.arduino_reset, active_high=config.reset.active_high, initial_value=False, **pf))
+            th = config.throttle
+            self._throttle = self._add(PWMOutputDevice(
+                pins.throttle_servo, frequency=1e6 / th.frame_us,
+                initial_value=th.idle_pulse_us / th.frame_us, **pf))
+        except Exception:
+            self.close()
+            raise
+        now = self.clock.now()
+        self._throttle_fraction = 0.0
+        self._target = STOP  # direction asked for
+        self._moving = STOP  # direction the actuator is powered in (STOP = enable off)
+        self._enable_changed_s = now - 10 * self._settle_s  # pretend everything settled long ago
+        self._relay_changed_s = now - 10 * self._settle_s
+        self._last_integrated_s = now
+        self._position = 1.0  # 0 released .. 1 full apply; unknown at start -> assume worst
+        self._step_s: float | None = None  # pending timed step: duration once powered
+        self._stop_at_s: float | None = None
+        self._generation = 0  # bumps on every new command, so a stale step never stops a newer one
+        self._latched = False
+        self._safe_release = False
+        self.last_tick_s = now
+        self.closed = False
+        self.safe_state()
+
+    def _add(self, dev):
+        self._devices.append(dev)
+        return dev
+
+    # ------------------------------------------------------------------ Actuators protocol
+
+    def brake(self, direction: int) -> None:
+        """Start moving (APPLY/RELEASE) until told to STOP or an end stop is reached."""
+        with self._lock:
+            self._command(direction, None)
+
+    def brake_step(self, direction: int, duration_s: float) -> None:
+        """Non-blocking timed step: power for ``duration_s`` once the relay has settled.
+
+        The stop happens at the first :meth:`tick` after the time is up, so
+        the step is accurate to one control period; :meth:`step` is exact.
+        """
+        with self._lock:
+            self._command(direction, float(duration_s))
+
+    def throttle(self, fraction: float) -> None:
+        f = min(1.0, max(0.0, float(fraction)))
+        with self._lock:
+            if f > 0 and self._latched:
+                raise SafetyAbort("throttle refused: safe state latched")
+            self._throttle_fraction = f
+            self._throttle.value = self.config.throttle.pulse_us(f) / self.config.throttle.frame_us
+
+    def engine_kill(self, killed: bool) -> None:
+        with self._lock:
+            if not killed and self._latched:
+                raise SafetyAbort("engine run refused: safe state latched")
+            self._kill.value = bool(killed)
+
+    def safe_state(self, latch: bool = False) -> None:
+        """Throttle idle, engine killed, enable off now; release stroke follows via tick().
+
+        ``latch=True`` (the watchdog, the signal path) also refuses throttle,
+        run and apply commands until :meth:`clear_latch`.
+        """
+        with self._lock:
+            if self.closed:
+                return
+            self._throttle_fraction = 0.0
+            th = self.config.throttle
+            self._throttle.value = th.idle_pulse_us / th.frame_us
+            self._kill.value = True
+            now = self.clock.now()
+            self._integrate(now)
+            self._power_off(now)  # immediately, before any wait: the one non-negotiable action
+            self._latched = self._latched or latch
+            # A full stroke from wherever the estimate says, or from full apply:
+            # after a fault the estimate is not trusted.
+            self._position = max(self._position, 1.0)
+            self._safe_release = True
+            self._generation += 1
+            self._target, self._step_s, self._stop_at_s = RELEASE, None, None
+            self._advance(now)
+
+    def tick(self, now_s: float | None = None) -> None:
+        """Called every control period; also the watchdog's sign of life.
+
+        ``now_s`` is accepted for the protocol; the injected clock is used so
+        all timing shares one time base.
+        """
+        with self._lock:
+            self.last_tick_s = self.clock.now()
+            self.service()
+
+    # ------------------------------------------------------------------ extras
+
+    def service(self) -> None:
+        """Advance time-based behaviour without counting as a control-loop tick."""
+        with self._lock:
+            if not self.closed:
+                self._advance(self.clock.now())
+
+    def step(self, direction: int, duration_s: float) -> None:
+        """Blocking timed step: the enable is on for exactly ``duration_s``.
+
+        If anything interrupts it (exception, signal) the enable is switched off
+        on the way out, unless a newer command (e.g. the safe state) owns it.
+        """
+        with self._lock:
+            gen = self._command(direction, float(duration_s))
+        try:
+            while True:
+                with self._lock:
+                    if self._generation != gen or self.closed:
+                        return
+                    now = self.clock.now()
+                    self._advance(now)
+                    if self._moving == STOP and self._target == STOP:
+                        return
+                    wait = self._next_event_s(now)
+                self.clock.sleep(max(0.0, wait - now) if wait is not None else self._settle_s)
+        finally:
+            with self._lock:
+                if self._generation == gen and not self.closed:
+                    self._command(STOP, None)
+
+    def finish_release(self, timeout_s: float | None = None) -> bool:
+        """Block until the brake is released and de-energised (exit paths)."""
+        limit = timeout_s if timeout_s is not None else 2 * self.brake_full_stroke_s + 10 * self._settle_s + 1
+        t_end = self.clock.now() + limit
+        while True:
+            with self._lock:
+                if self.closed:
+                    return False
+                now = self.clock.now()
+                self._advance(now)
+                if self.released:
+                    return True
+                if now >= t_end:
+                    self._power_off(now)
+                    return False
+                wait = self._next_event_s(now)
+            step = (wait - now) if wait is not None else self._settle_s
+            self.clock.sleep(min(max(step, 1e-3), max(t_end - now, 1e-3)))
+
+    def reset_arduino(self) -> None:
+        """Pulse the Nano's RESET, then wait for its bootloader to hand over (blocking)."""
+        r = self.config.reset
+        with self._lock:
+            self._reset.on()
+        try:
+            self.clock.sleep(r.pulse_s)
+        finally:
+            with self._lock:
+                self._reset.off()
+        self.clock.sleep(r.boot_s)
+
+    def clear_latch(self) -> None:
+        with self._lock:
+            self._latched = False
+
+    @property
+    def latched(self) -> bool:
+        return self._latched
+
+    @property
+    def released(self) -> bool:
+        """Brake at its release stop with the actuator de-energised."""
+        return self._moving == STOP and self._target == STOP and self._position <= 0.0 \
+            and not self._enable.value
+
+    @property
+    def brake_position(self) -> float:
+        """Estimated travel, 0 released .. 1 full apply."""
+        return min(1.0, max(0.0, self._position))
+
+    @property
+    def throttle_fraction(self) -> float:
+        return self._throttle_fraction
+
+    @property
+    def engine_killed(self) -> bool:
+        return bool(self._kill.value)
+
+    def pin_states(self) -> dict[str, float]:
+        """Electrical state of every output pin (1 = driven high), for doctor and tests."""
+        p = self.config.pins
+        devs = {"brake_enable": (p.brake_enable, self._enable), "brake_direction": (p.brake_direction, self._direction),
+                "engine_kill": (p.engine_kill, self._kill), "arduino_reset": (p.arduino_reset, self._reset),
+                "throttle_servo": (p.throttle_servo, self._throttle)}
+        return {name: (float(d.pin.state) if d.pin is not None else float("nan")) for name, (_, d) in devs.items()}
+
+    def close(self) -> None:
+        """Drive every output to its safe value, then release the pins.
+
+        Does not wait for a release stroke (call :meth:`finish_release` first,
+        as :class:`dyno.hw.safety.SafetyGuard` does).
+        """
+        with self._lock:
+            if getattr(self, "closed", False):
+                return
+            for name in ("_enable", "_direction", "_reset"):
+                dev = getattr(self, name, None)
+                if dev is not None:
+                    dev.off()
+            if getattr(self, "_kill", None) is not None:
+                self._kill.value = True
+            if getattr(self, "_throttle", None) is not None:
+                th = self.config.throttle
+                self._throttle.value = th.idle_pulse_us / th.frame_us
+            for dev in reversed(self._devices):
+                dev.close()
+            self.closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ------------------------------------------------------------------ brake state machine
+
+    def _command(self, direction: int, duration_s: float | None) -> int:
+        if direction not in (APPLY, RELEASE, STOP):
+            raise ValueError(f"brake direction must be APPLY, RELEASE or STOP, got {direction!r}")
+        if direction == APPLY and self._latched:
+            raise SafetyAbort("brake apply refused: safe state latched")
+        if self.closed:
+            raise SafetyAbort("actuators closed")
+        now = self.clock.now()
+        self._integrate(now)
+        self._generation += 1
+        self._safe_release = False
+        self._target = direction
+        self._step_s = duration_s if direction != STOP else None
+        self._stop_at_s = None
+        if self._moving == direction and duration_s is not None:
+            self._stop_at_s = now + duration_s  # already powered this way: the step starts now
+            self._step_s = None
+        self._advance(now)
+        return self._generation
+
+    def _integrate(self, now: float) -> None:
+        dt = now - self._last_integrated_s
+        self._last_integrated_s = now
+        if self._moving != STOP and dt > 0:
+            self._position += self._moving * dt / self.brake_full_stroke_s
+
+    def _power_off(self, now: float) -> None:
+        if self._enable.value:
+            self._enable.off()
+            self._enable_changed_s = now
+        self._moving = STOP
+
+    def _end_stop_reached(self, direction: int) -> bool:
+        over = END_STOP_OVERRUN_FRACTION
+        return (direction == APPLY and self._position >= 1.0 + over) or \
+            (direction == RELEASE and self._position <= -over)
+
+    def _advance(self, now: float) -> None:
+        """Move one safe step toward the target; never relay-with-enable-on."""
+        self._integrate(now)
+        if self._stop_at_s is not None and now >= self._stop_at_s - 1e-12:
+            self._target, self._stop_at_s = STOP, None
+        if self._target != STOP and self._end_stop_reached(self._target):
+            self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
+            self._target, self._stop_at_s, self._step_s = STOP, None, None
+            self._safe_release = False
+        target = self._target
+        if target == STOP:
+            self._power_off(now)
+            self._position = min(max(self._position, 0.0), 1.0 + END_STOP_OVERRUN_FRACTION)
+            return
+        want_relay = target == APPLY
+        if bool(self._direction.value) != want_relay:
+            if self._enable.value:
+                self._power_off(now)
+                return
+            if now < self._enable_changed_s + self._settle_s:
+                return
+            self._direction.value = want_relay
+            self._relay_changed_s = now
+            return
+        if not self._enable.value:
+            if now < self._relay_changed_s + self._settle_s:
+                return
+            self._enable.on()
+            self._enable_changed_s = now
+            self._moving = target
+            if self._step_s is not None:
+                self._stop_at_s = now + self._step_s
+                self._step_s = None
+
+    def _next_event_s(self, now: float) -> float | None:
+        """Earliest time at which :meth:`_advance` would change something."""
+        t = []
+        if self._stop_at_s is not None:
+            t.append(self._stop_at_s)
+        if self._target != STOP:
+            want_relay = self._target == APPLY
+            if bool(self._direction.value) != want_relay:
+                t.append(self._enable_changed_s + self._settle_s)
+            elif not self._enable.value:
+                t.append(self._relay_changed_s + self._settle_s)
+            if self._moving != STOP:
+                over = END_STOP_OVERRUN_FRACTION
+                dist = (1.0 + over - self._position) if self._moving == APPLY else (self._position + over)
+                t.append(now + max(0.0, dist) * self.brake_full_stroke_s)
+        t = [x for x in t if math.isfinite(x)]
+        return max(now, min(t)) if t else None

@@ -1,0 +1,177 @@
+"""Getting the rig into its safe state on every way out.
+
+Safe state = throttle idle, engine killed, brake released (enable off at once,
+release stroke, then de-energised).  Paths covered:
+
+* start-up: :class:`SafetyGuard` enters it on ``__enter__`` (the brake
+  position after a crash is unknown);
+* normal exit and any unhandled exception: ``__exit__`` (and ``atexit`` as a
+  backstop for code that never leaves the ``with`` block cleanly);
+* SIGTERM (systemd stop) and SIGINT (Ctrl-C): the handler enters the safe
+  state *inside the handler*, before unwinding, then raises ``SystemExit`` so
+  ``finally`` blocks and ``__exit__`` still run;
+* the controller's abort: it calls ``actuators.safe_state()`` itself;
+* a control loop that stops ticking: :class:`Watchdog`, as an asyncio task
+  (:meth:`Watchdog.run`) or, for loops that may block the event loop itself,
+  a thread (:meth:`Watchdog.start_thread`).
+
+The waits are all on the actuators' injected clock, so tests run in no time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import atexit
+import signal
+import threading
+
+from dyno.hw.clock import MonotonicClock
+
+DEFAULT_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+
+
+class SafetyGuard:
+    """Context manager: safe state on entry, on exit of any kind, on signals.
+
+    >>> with SafetyGuard(actuators):     # doctest: +SKIP
+    ...     run_test(actuators)
+    """
+
+    def __init__(self, actuators, *, signals=DEFAULT_SIGNALS, use_atexit: bool = True,
+                 release_timeout_s: float | None = None) -> None:
+        self.actuators = actuators
+        self.signals = tuple(signals)
+        self.use_atexit = use_atexit
+        self.release_timeout_s = release_timeout_s
+        self._old_handlers: dict[int, object] = {}
+        self._done = False
+        self.signal_received: int | None = None
+
+    # -- the parts, public so an event-loop program can wire them itself
+
+    def handle_signal(self, signum, frame=None) -> None:
+        """Signal handler: safe state first, then unwind with exit code 128+signum."""
+        self.signal_received = signum
+        self.actuators.safe_state(latch=True)
+        raise SystemExit(128 + int(signum))
+
+    def install(self) -> None:
+        # signal.signal only works in the main thread; elsewhere rely on __exit__/atexit.
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.signals:
+                self._old_handlers[sig] = signal.signal(sig, self.handle_signal)
+        if self.use_atexit:
+            atexit.register(self.shutdown)
+
+    def uninstall(self) -> None:
+        for sig, old in self._old_handlers.items():
+            signal.signal(sig, old)
+        self._old_handlers.clear()
+        if self.use_atexit:
+            atexit.unregister(self.shutdown)
+
+    def shutdown(self) -> None:
+        """Safe state, wait for the release stroke, release the pins.  Idempotent."""
+        if self._done:
+            return
+        self._done = True
+        act = self.actuators
+        try:
+            act.safe_state()
+            finish = getattr(act, "finish_release", None)
+            if finish is not None:
+                finish(self.release_timeout_s)
+        finally:
+            close = getattr(act, "close", None)
+            if close is not None:
+                close()
+
+    def __enter__(self):
+        self.actuators.safe_state()
+        self.install()
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        # A second Ctrl-C during the release stroke must not leave the enable
+        # on: ignore further signals while shutting down.
+        for sig in self.signals:
+            if sig in self._old_handlers:
+                signal.signal(sig, signal.SIG_IGN)
+        try:
+            self.shutdown()
+        finally:
+            self.uninstall()
+        return False
+
+
+class Watchdog:
+    """Forces the safe state if the control loop stops ticking.
+
+    The loop's sign of life is ``actuators.last_tick_s`` (set by
+    ``tick()``) or an explicit :meth:`kick`.  Once tripped, the watchdog latches
+    the safe state and keeps servicing the actuators, because with the loop
+    dead nobody else would finish the release stroke.
+    """
+
+    def __init__(self, actuators, timeout_s: float, clock=None, on_trip=None) -> None:
+        self.actuators = actuators
+        self.timeout_s = float(timeout_s)
+        self.clock = clock or getattr(actuators, "clock", None) or MonotonicClock()
+        self.on_trip = on_trip
+        self._last_kick_s = self.clock.now()
+        self.tripped = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def kick(self) -> None:
+        self._last_kick_s = self.clock.now()
+
+    def last_alive_s(self) -> float:
+        return max(self._last_kick_s, getattr(self.actuators, "last_tick_s", float("-inf")))
+
+    def check(self) -> bool:
+        """One watchdog look; returns True if tripped (now or before)."""
+        now = self.clock.now()
+        if not self.tripped and now - self.last_alive_s() > self.timeout_s:
+            self.tripped = True
+            try:
+                self.actuators.safe_state(latch=True)
+            except TypeError:  # an Actuators implementation without latching
+                self.actuators.safe_state()
+            if self.on_trip is not None:
+                self.on_trip(now - self.last_alive_s())
+        if self.tripped:
+            service = getattr(self.actuators, "service", None)
+            if service is not None:
+                service()
+            else:
+                self.actuators.tick(now)
+        return self.tripped
+
+    @property
+    def period_s(self) -> float:
+        return max(self.timeout_s / 5, 0.005)
+
+    async def run(self, period_s: float | None = None) -> None:
+        """asyncio task: ``asyncio.create_task(watchdog.run())``; cancel to stop."""
+        period = period_s or self.period_s
+        while True:
+            self.check()
+            await asyncio.sleep(period)
+
+    def start_thread(self, period_s: float | None = None) -> threading.Thread:
+        """Same job on a daemon thread: still runs if the event loop itself hangs."""
+        period = period_s or self.period_s
+
+        def loop():
+            while not self._stop.wait(period):
+                self.check()
+
+        self._thread = threading.Thread(target=loop, name="dyno-watchdog", daemon=True)
+        self._thread.start()
+        return self._thread
+
+    def stop_thread(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
