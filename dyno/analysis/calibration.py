@@ -1,0 +1,773 @@
+"""Torque-sensor calibration: fit, history file, unit conversion.
+
+The rig measures torque with a strain-gauge bridge on the brake-rotor shaft,
+downstream of a 32:61 gear reduction, digitised by a 16-bit ADC (Messick 2018,
+Sections 8.2.2 and 9.2).  The calibration maps ADC counts to the torque on the
+CVT **secondary** shaft (thesis eq 9.1)::
+
+    counts = slope_counts_per_nm * T_secondary_nm + intercept_counts
+    ADC    = 108.19 T + 35145                                      (eq 9.1)
+
+Known loads are applied by hanging a mass from a rope wrapped on the brake
+rotor with the secondary locked; see :func:`torque_from_mass`.
+
+Only :func:`load_history`, :func:`load_legacy_cal_values` and
+:func:`append_entry` touch files.  Malformed files raise
+:class:`dyno.errors.ConfigError` naming the file, the line and the field.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from datetime import date as _date
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from dyno.errors import ConfigError, DynoError
+
+#: Brake-rotor rpm per secondary rpm on the thesis rig (32-tooth secondary
+#: sprocket, 61-tooth brake sprocket).  With a lossless reduction the secondary
+#: torque is the brake-shaft torque times this ratio.
+GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY = 32 / 61
+
+#: Standard gravity, m/s^2 (the value that defines kgf).  A lab in Blacksburg
+#: has g about 9.800; the 0.07 % difference is below the fit's uncertainty but
+#: can be passed in when known.
+G_STANDARD_M_PER_S2 = 9.80665
+
+HISTORY_COLUMNS = (
+    "date",
+    "slope_counts_per_nm",
+    "intercept_counts",
+    "r2",
+    "n_samples",
+    "lever_arm_m",
+    "gear_ratio_brake_per_secondary",
+    "note",
+)
+
+#: Default acceptance threshold on R^2 of the calibration line (the thesis
+#: rig achieved 0.9997; anything below 0.999 means a slipping rope, a bad
+#: bridge or a load applied in the wrong place).
+R2_MIN_DEFAULT = 0.999
+
+
+class CalibrationRejected(DynoError, ValueError):
+    """A calibration fit is not good enough to use; the message says why."""
+
+
+class NoCalibration(DynoError, LookupError):
+    """A calibration history holds no entry."""
+
+
+class _FieldError(Exception):
+    """Internal: one field failed validation (caller adds file/line context)."""
+
+    def __init__(self, field_name: str, expected: str):
+        self.field_name = field_name
+        self.expected = expected
+        super().__init__(f"{field_name}: {expected}")
+
+
+# --------------------------------------------------------------------------
+# field validation shared by the dataclass, from_dict and the CSV loaders
+
+
+def _parse_date(value: Any) -> str:
+    if isinstance(value, datetime):
+        return value.isoformat()
+    if isinstance(value, _date):
+        return value.isoformat()
+    text = str(value).strip()
+    try:
+        _date_key(text)
+    except ValueError:
+        raise _FieldError("date", f"an ISO 8601 date such as 2019-04-18, got {value!r}") from None
+    return text
+
+
+def _date_key(text: str) -> datetime:
+    """Sortable key of an ISO date or date-time (aware times compared in UTC)."""
+    try:
+        d = _date.fromisoformat(text)
+        return datetime(d.year, d.month, d.day)
+    except ValueError:
+        dt = datetime.fromisoformat(text)  # raises ValueError if not ISO
+        if dt.tzinfo is not None:
+            dt = dt.astimezone(timezone.utc).replace(tzinfo=None)
+        return dt
+
+
+def _parse_float(name: str, value: Any, *, positive: bool = False, lo: float | None = None,
+                 hi: float | None = None) -> float:
+    what = "a finite number"
+    if positive:
+        what += " > 0"
+    if lo is not None and hi is not None:
+        what = f"a number in [{lo}, {hi}]"
+    if isinstance(value, bool):  # bool is an int subclass; True is not a slope
+        raise _FieldError(name, f"{what}, got {value!r}")
+    try:
+        x = float(str(value).strip()) if isinstance(value, str) else float(value)
+    except (TypeError, ValueError):
+        raise _FieldError(name, f"{what}, got {value!r}") from None
+    if not math.isfinite(x) or (positive and not x > 0) or (lo is not None and x < lo) or (
+            hi is not None and x > hi):
+        raise _FieldError(name, f"{what}, got {value!r}")
+    return x
+
+
+def _parse_count(name: str, value: Any) -> int:
+    expected = f"an integer >= 0 (0 = unknown), got {value!r}"
+    if isinstance(value, bool):
+        raise _FieldError(name, expected)
+    if isinstance(value, (int, np.integer)):
+        n = int(value)
+    else:
+        text = str(value).strip()
+        # int("5.0") fails on purpose: a fractional sample count is a typo.
+        try:
+            n = int(text)
+        except ValueError:
+            raise _FieldError(name, expected) from None
+    if n < 0:
+        raise _FieldError(name, expected)
+    return n
+
+
+def _parse_lever(value: Any) -> float | None:
+    if value is None or (isinstance(value, str) and value.strip() == ""):
+        return None
+    return _parse_float("lever_arm_m", value, positive=True)
+
+
+def _validated_fields(raw: Mapping[str, Any]) -> dict[str, Any]:
+    """Check and convert every field of one history entry (raises _FieldError)."""
+    note = raw.get("note", "")
+    if note is None:
+        note = ""
+    if not isinstance(note, str):
+        raise _FieldError("note", f"a string, got {note!r}")
+    if "\n" in note or "\r" in note:
+        # One row per calibration keeps the file greppable and line numbers meaningful.
+        raise _FieldError("note", "a single line of text (no newline)")
+    return {
+        "date": _parse_date(raw["date"]),
+        "slope_counts_per_nm": _parse_float("slope_counts_per_nm", raw["slope_counts_per_nm"],
+                                            positive=True),
+        "intercept_counts": _parse_float("intercept_counts", raw["intercept_counts"]),
+        "r2": _parse_float("r2", raw["r2"], lo=0.0, hi=1.0),
+        "n_samples": _parse_count("n_samples", raw["n_samples"]),
+        "lever_arm_m": _parse_lever(raw.get("lever_arm_m")),
+        "gear_ratio_brake_per_secondary": _parse_float(
+            "gear_ratio_brake_per_secondary",
+            raw.get("gear_ratio_brake_per_secondary", GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY),
+            positive=True),
+        "note": note,
+    }
+
+
+# --------------------------------------------------------------------------
+# the history entry
+
+
+@dataclass(frozen=True)
+class CalibrationEntry:
+    """One accepted calibration of the torque channel.
+
+    Attributes
+    ----------
+    date : str
+        ISO 8601 date (or date-time) of the calibration.
+    slope_counts_per_nm : float
+        ADC counts per N·m of **secondary** torque, > 0.
+    intercept_counts : float
+        ADC counts at zero torque (bridge offset).
+    r2 : float
+        Coefficient of determination of the fit, in [0, 1].
+    n_samples : int
+        ADC samples behind the fit; 0 means unknown (imported history).
+    lever_arm_m : float or None
+        Rope radius on the brake rotor used for the loads; None if unknown.
+    gear_ratio_brake_per_secondary : float
+        Brake rpm per secondary rpm used to refer the loads to the secondary
+        (32/61 on the thesis rig).
+    note : str
+        Free text, one line.
+
+    Notes
+    -----
+    The conversion is the inverse of thesis eq 9.1,
+
+    .. math:: T_s = (c - b) / a ,
+
+    with slope :math:`a` and intercept :math:`b`.
+    """
+
+    date: str
+    slope_counts_per_nm: float
+    intercept_counts: float
+    r2: float
+    n_samples: int
+    lever_arm_m: float | None = None
+    gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY
+    note: str = ""
+
+    def __post_init__(self):
+        # Validate here too so a bad entry can never be appended to the history.
+        try:
+            fields = _validated_fields(self.to_dict())
+        except _FieldError as exc:
+            raise ValueError(f"CalibrationEntry.{exc.field_name}: {exc.expected}") from None
+        for name, value in fields.items():
+            object.__setattr__(self, name, value)
+
+    def torque_secondary_nm(self, counts):
+        """Secondary-shaft torque from ADC counts, :math:`T_s = (c - b)/a`.
+
+        Parameters
+        ----------
+        counts : float or array_like
+            Raw ADC counts.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            Torque on the CVT secondary in N·m (same shape as ``counts``).
+        """
+        c = np.asarray(counts, dtype=float)
+        t = (c - self.intercept_counts) / self.slope_counts_per_nm
+        return float(t) if t.ndim == 0 else t
+
+    def counts(self, torque_secondary_nm):
+        """ADC counts expected for a secondary torque, :math:`c = a T_s + b`."""
+        t = np.asarray(torque_secondary_nm, dtype=float)
+        c = self.slope_counts_per_nm * t + self.intercept_counts
+        return float(c) if c.ndim == 0 else c
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict with the history column names as keys."""
+        return {name: getattr(self, name) for name in HISTORY_COLUMNS}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "CalibrationEntry":
+        """Build from a mapping with the history column names.
+
+        Raises
+        ------
+        ValueError
+            If a field is missing, extra or invalid (the message names it).
+        """
+        missing = [k for k in HISTORY_COLUMNS[:5] if k not in data]
+        extra = [k for k in data if k not in HISTORY_COLUMNS]
+        if missing or extra:
+            raise ValueError(f"CalibrationEntry.from_dict: missing {missing}, unknown {extra}")
+        return cls(**{k: data[k] for k in HISTORY_COLUMNS if k in data})
+
+
+# --------------------------------------------------------------------------
+# history file
+
+
+def _history_row(entry: CalibrationEntry) -> list[str]:
+    # repr() is the shortest string that round-trips the float exactly.
+    return [
+        entry.date,
+        repr(entry.slope_counts_per_nm),
+        repr(entry.intercept_counts),
+        repr(entry.r2),
+        str(entry.n_samples),
+        "" if entry.lever_arm_m is None else repr(entry.lever_arm_m),
+        repr(entry.gear_ratio_brake_per_secondary),
+        entry.note,
+    ]
+
+
+def _parse_history_text(text: str, path: Path) -> list[CalibrationEntry]:
+    lines = text.splitlines()
+    if not lines or lines[0].strip().lstrip("\ufeff") == "":
+        raise ConfigError(path, "line 1 (header)", "the header " + ",".join(HISTORY_COLUMNS))
+    header = [h.strip() for h in next(csv.reader([lines[0].lstrip("\ufeff")]))]
+    if tuple(header) != HISTORY_COLUMNS:
+        raise ConfigError(path, "line 1 (header)",
+                          f"exactly {','.join(HISTORY_COLUMNS)}, got {','.join(header)}")
+    entries = []
+    for lineno, line in enumerate(lines[1:], start=2):
+        if line.strip() == "":
+            continue  # tolerate blank lines (an editor's trailing newline)
+        row = next(csv.reader([line]))
+        if len(row) != len(HISTORY_COLUMNS):
+            raise ConfigError(path, f"line {lineno}",
+                              f"{len(HISTORY_COLUMNS)} comma-separated fields "
+                              f"({','.join(HISTORY_COLUMNS)}), got {len(row)}")
+        try:
+            fields = _validated_fields(dict(zip(HISTORY_COLUMNS, row)))
+        except _FieldError as exc:
+            raise ConfigError(path, f"line {lineno}, field {exc.field_name}", exc.expected) from None
+        entries.append(CalibrationEntry(**fields))
+    return entries
+
+
+def load_history(path) -> list[CalibrationEntry]:
+    """Read a calibration history CSV (new format), validating every field.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        CSV with header ``date,slope_counts_per_nm,intercept_counts,r2,
+        n_samples,lever_arm_m,gear_ratio_brake_per_secondary,note``, one
+        calibration per row, oldest first.
+
+    Returns
+    -------
+    list of CalibrationEntry
+        In file order (possibly empty if only the header is present).
+
+    Raises
+    ------
+    ConfigError
+        Missing/unreadable file, wrong header, or a row with a bad field
+        (the message names the file, the line and the field).
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise ConfigError(path, "file", "an existing calibration history CSV") from None
+    except UnicodeDecodeError:
+        raise ConfigError(path, "file", "UTF-8 text") from None
+    return _parse_history_text(text, path)
+
+
+def latest(history: Sequence[CalibrationEntry]) -> CalibrationEntry:
+    """The calibration in force: latest date, ties broken by file order.
+
+    Ties are common (several calibrations in one day, or imported history
+    with a placeholder date); the later row wins, as on the thesis rig where
+    the last row of ``cal_values.csv`` was used.
+
+    Raises
+    ------
+    NoCalibration
+        If ``history`` is empty.
+    """
+    if not history:
+        raise NoCalibration("calibration history is empty: run a torque calibration first")
+    best = max(range(len(history)), key=lambda i: (_date_key(history[i].date), i))
+    return history[best]
+
+
+def append_entry(path, entry: CalibrationEntry) -> None:
+    """Append one calibration to the history file atomically.
+
+    The new file (old bytes unchanged + one row) is written to a temporary
+    file in the same directory, flushed and fsync'ed, then moved over the old
+    one with :func:`os.replace`, so a crash or power cut leaves either the
+    old or the new file, never a truncated one.  A missing file is created
+    with the header.
+
+    Raises
+    ------
+    ConfigError
+        If the existing file is malformed; it is then left untouched, because
+        appending to a file we cannot read would hide the damage.
+
+    Notes
+    -----
+    Not safe against two processes appending at the same instant (the later
+    replace wins); calibrations are run by one operator at a time.
+    """
+    if not isinstance(entry, CalibrationEntry):
+        raise TypeError(f"append_entry needs a CalibrationEntry, got {type(entry).__name__}")
+    path = Path(path)
+    if path.exists():
+        old = path.read_bytes()
+        try:
+            _parse_history_text(old.decode("utf-8"), path)
+        except UnicodeDecodeError:
+            raise ConfigError(path, "file", "UTF-8 text") from None
+        if old and not old.endswith(b"\n"):
+            old += b"\n"
+        mode = path.stat().st_mode & 0o777
+    else:
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerow(HISTORY_COLUMNS)
+        old = buf.getvalue().encode("utf-8")
+        mode = 0o644
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(_history_row(entry))
+    new = old + buf.getvalue().encode("utf-8")
+
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(new)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    # Persist the rename itself (directory entry); best effort on odd filesystems.
+    try:
+        dfd = os.open(path.parent, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
+
+
+def load_legacy_cal_values(path, *, date: str = "2019-04-18",
+                           note: str = "thesis rig 2019 (imported); date unknown",
+                           gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                           ) -> list[CalibrationEntry]:
+    """Read the thesis rig's headerless ``cal_values.csv`` in place.
+
+    Each row is ``slope,intercept,r2`` (counts per N·m of secondary torque,
+    counts, R^2); the last row was the one in force.  The legacy format has
+    no date, sample count or rope radius: entries get ``date`` (default: the
+    day of the archived runs), ``n_samples = 0`` (unknown) and
+    ``lever_arm_m = None``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, line and field of the first bad row.
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except FileNotFoundError:
+        raise ConfigError(path, "file", "an existing cal_values.csv") from None
+    except UnicodeDecodeError:
+        raise ConfigError(path, "file", "UTF-8 text") from None
+    names = ("slope_counts_per_nm", "intercept_counts", "r2")
+    entries = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if line.strip() == "":
+            continue
+        row = [c.strip() for c in line.split(",")]
+        if len(row) != 3:
+            raise ConfigError(path, f"line {lineno}",
+                              f"3 numbers slope,intercept,r2 (no header), got {len(row)} fields")
+        raw = dict(zip(names, row), date=date, n_samples=0, lever_arm_m=None,
+                   gear_ratio_brake_per_secondary=gear_ratio_brake_per_secondary, note=note)
+        try:
+            fields = _validated_fields(raw)
+        except _FieldError as exc:
+            raise ConfigError(path, f"line {lineno}, field {exc.field_name}", exc.expected) from None
+        entries.append(CalibrationEntry(**fields))
+    if not entries:
+        raise ConfigError(path, "file", "at least one row slope,intercept,r2")
+    return entries
+
+
+# --------------------------------------------------------------------------
+# applying known loads and fitting the line
+
+
+def torque_from_mass(mass_kg, lever_arm_m, gear_ratio_brake_per_secondary=GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                     g=G_STANDARD_M_PER_S2):
+    """Secondary-shaft torque from a mass hung on a rope round the brake rotor.
+
+    .. math::
+
+        T_{brake} = m g r, \\qquad T_s = T_{brake} \\, \\frac{\\omega_{brake}}{\\omega_s}
+                  = m g r \\cdot \\tfrac{32}{61}
+
+    The rope tension ``m g`` acts at the rope radius ``r`` (rotor radius plus
+    half the rope diameter).  The reduction is taken as lossless (static
+    test, thesis Section 8.1), so power balance gives the secondary torque as
+    the brake-shaft torque times the speed ratio.
+
+    Parameters
+    ----------
+    mass_kg : float or array_like
+        Hanging mass including the bucket, kg (>= 0).
+    lever_arm_m : float
+        Rope radius on the brake rotor, m (> 0).
+    gear_ratio_brake_per_secondary : float
+        Brake rpm per secondary rpm (32/61 on the thesis rig).
+    g : float
+        Local gravitational acceleration, m/s^2.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        Torque on the CVT secondary, N·m.
+    """
+    m = np.asarray(mass_kg, dtype=float)
+    for name, v in (("lever_arm_m", lever_arm_m), ("gear_ratio_brake_per_secondary",
+                                                   gear_ratio_brake_per_secondary), ("g", g)):
+        if not (math.isfinite(float(v)) and float(v) > 0):
+            raise ValueError(f"torque_from_mass: {name} must be a finite number > 0, got {v!r}")
+    if not np.all(np.isfinite(m)) or np.any(m < 0):
+        raise ValueError("torque_from_mass: mass_kg must be finite and >= 0")
+    t = m * g * lever_arm_m * gear_ratio_brake_per_secondary
+    return float(t) if t.ndim == 0 else t
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationFit:
+    """Result of :func:`fit_calibration` (all counts are raw ADC counts).
+
+    Attributes
+    ----------
+    slope_counts_per_nm, intercept_counts : float
+        Least-squares line ``counts = slope * T + intercept``.
+    slope_se_counts_per_nm, intercept_se_counts : float
+        Standard errors from the step-to-step scatter (n_steps - 2 dof).
+    cov_slope_intercept : float
+        Covariance of slope and intercept (needed to propagate into torque).
+    r2 : float
+        Coefficient of determination of the step means.
+    torques_nm, counts_mean, residuals_counts, n_samples_per_step : numpy.ndarray
+        Per step: applied secondary torque, mean counts, residual, samples.
+    n_samples : int
+        Total ADC samples (number of steps if only means were given).
+    n_distinct_loads : int
+    full_scale_counts : float
+        Output span used for the percentages.
+    nonlinearity_pct_fs : float
+        ``max |residual| / full_scale_counts * 100``.
+    hysteresis_counts, hysteresis_pct_fs : float or None
+        Largest loading-vs-unloading difference at a common load; None if no
+        direction was given or no load was visited in both directions.
+    within_step_sd_counts : float or None
+        Pooled within-step standard deviation (raw input only): the ripple.
+    """
+
+    slope_counts_per_nm: float
+    intercept_counts: float
+    slope_se_counts_per_nm: float
+    intercept_se_counts: float
+    cov_slope_intercept: float
+    r2: float
+    torques_nm: np.ndarray
+    counts_mean: np.ndarray
+    residuals_counts: np.ndarray
+    n_samples_per_step: np.ndarray
+    n_samples: int
+    n_distinct_loads: int
+    full_scale_counts: float
+    nonlinearity_pct_fs: float
+    hysteresis_counts: float | None = None
+    hysteresis_pct_fs: float | None = None
+    within_step_sd_counts: float | None = None
+
+    def to_entry(self, date: str, *, lever_arm_m: float | None = None,
+                 gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                 note: str = "") -> CalibrationEntry:
+        """A history entry for this fit (append it with :func:`append_entry`)."""
+        return CalibrationEntry(date=date, slope_counts_per_nm=self.slope_counts_per_nm,
+                                intercept_counts=self.intercept_counts, r2=self.r2,
+                                n_samples=self.n_samples, lever_arm_m=lever_arm_m,
+                                gear_ratio_brake_per_secondary=gear_ratio_brake_per_secondary,
+                                note=note)
+
+
+def _distinct_groups(values: np.ndarray) -> np.ndarray:
+    """Group label per value; loads equal to 1e-9 relative are the same load."""
+    order = np.argsort(values, kind="stable")
+    labels = np.empty(len(values), dtype=int)
+    label = -1
+    prev = None
+    for i in order:
+        v = values[i]
+        if prev is None or not math.isclose(v, prev, rel_tol=1e-9, abs_tol=1e-12):
+            label += 1
+            prev = v
+        labels[i] = label
+    return labels
+
+
+def _direction_sign(d) -> int:
+    if isinstance(d, str):
+        key = d.strip().lower()
+        if key in ("up", "load", "loading", "+", "+1"):
+            return 1
+        if key in ("down", "unload", "unloading", "-", "-1"):
+            return -1
+    elif d in (1, -1) and not isinstance(d, bool):
+        return int(d)
+    raise ValueError(f"fit_calibration: direction must be +1/'up' (loading) or -1/'down' "
+                     f"(unloading), got {d!r}")
+
+
+def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
+                    r2_min: float = R2_MIN_DEFAULT, full_scale_nm: float | None = None,
+                    min_distinct_loads: int = 3) -> CalibrationFit:
+    """Fit ``counts = slope * T + intercept`` to a calibration run.
+
+    Parameters
+    ----------
+    torques_nm : array_like, shape (n_steps,)
+        Applied secondary torque per step, N·m (see :func:`torque_from_mass`).
+    counts : array_like
+        Either per-step mean counts, shape (n_steps,), or raw samples per
+        step: a 2-D array (n_steps, n) or a sequence of 1-D arrays (ragged).
+    n_samples : array_like of int, optional
+        Samples behind each per-step mean (only with means; recorded, not used
+        as weights).  Default 1 per step.
+    direction : sequence, optional
+        Per step +1/'up' while loading, -1/'down' while unloading, to compute
+        hysteresis.
+    r2_min : float
+        Refuse the fit below this R^2 (default 0.999).
+    full_scale_nm : float, optional
+        Torque span defining full scale for the percentages; default the
+        calibrated span ``max(T) - min(T)``.
+    min_distinct_loads : int
+        Refuse with fewer distinct loads (default 3: two points always lie on
+        a line, so they cannot show non-linearity or a bad point).
+
+    Returns
+    -------
+    CalibrationFit
+
+    Raises
+    ------
+    CalibrationRejected
+        Too few distinct loads, R^2 below ``r2_min``, or a non-positive slope.
+    ValueError
+        Malformed input (lengths, non-finite values).
+
+    Notes
+    -----
+    Ordinary least squares on the *step means*, one point per load step:
+
+    .. math::
+
+        a = \\frac{\\sum (T_i - \\bar T)(c_i - \\bar c)}{\\sum (T_i - \\bar T)^2},
+        \\quad b = \\bar c - a \\bar T, \\quad
+        s^2 = \\frac{\\sum r_i^2}{n - 2},
+
+        \\mathrm{se}(a) = \\frac{s}{\\sqrt{S_{TT}}}, \\quad
+        \\mathrm{se}(b) = s \\sqrt{\\frac{1}{n} + \\frac{\\bar T^2}{S_{TT}}}, \\quad
+        \\mathrm{cov}(a, b) = -\\bar T s^2 / S_{TT}.
+
+    Raw samples are reduced to step means first, on purpose: the hundreds of
+    samples in one step are correlated (bridge drift, mechanical ripple), so
+    fitting them as independent points would shrink the standard errors by
+    about :math:`\\sqrt{n}` without making the line any better known.  The
+    step-to-step scatter is the honest error of the line.
+
+    Non-linearity is :math:`\\max_i |r_i| / FS \\times 100` with
+    :math:`FS = a \\cdot` ``full_scale_nm``.  Hysteresis is
+    :math:`\\max_T |\\bar c_{up}(T) - \\bar c_{down}(T)|` over loads visited
+    both loading and unloading.
+    """
+    t = np.asarray(torques_nm, dtype=float)
+    if t.ndim != 1 or len(t) == 0:
+        raise ValueError("fit_calibration: torques_nm must be a non-empty 1-D array")
+    n_steps = len(t)
+
+    within_sd = None
+    if isinstance(counts, np.ndarray) and counts.ndim == 2 or (
+            not isinstance(counts, np.ndarray) and len(counts) > 0
+            and all(np.ndim(c) == 1 for c in counts)):
+        # Raw samples per step.
+        if n_samples is not None:
+            raise ValueError("fit_calibration: n_samples is implied by raw samples; do not pass it")
+        steps = [np.asarray(c, dtype=float) for c in counts]
+        if len(steps) != n_steps:
+            raise ValueError(f"fit_calibration: {n_steps} torques but {len(steps)} sample arrays")
+        for i, s in enumerate(steps):
+            if len(s) == 0 or not np.all(np.isfinite(s)):
+                raise ValueError(f"fit_calibration: step {i} samples must be non-empty and finite")
+        c_mean = np.array([s.mean() for s in steps])
+        n_per = np.array([len(s) for s in steps], dtype=int)
+        dof = int(np.sum(n_per - 1))
+        if dof > 0:
+            within_sd = float(np.sqrt(sum(np.sum((s - s.mean()) ** 2) for s in steps) / dof))
+    else:
+        c_mean = np.asarray(counts, dtype=float)
+        if c_mean.shape != (n_steps,):
+            raise ValueError(f"fit_calibration: {n_steps} torques but counts shape {c_mean.shape}")
+        if n_samples is None:
+            n_per = np.ones(n_steps, dtype=int)
+        else:
+            n_per = np.asarray(n_samples)
+            if n_per.shape != (n_steps,) or not np.all(n_per == np.round(n_per)) or np.any(n_per < 1):
+                raise ValueError("fit_calibration: n_samples must be one integer >= 1 per step")
+            n_per = n_per.astype(int)
+    if not np.all(np.isfinite(t)) or not np.all(np.isfinite(c_mean)):
+        raise ValueError("fit_calibration: torques and counts must be finite")
+
+    groups = _distinct_groups(t)
+    n_distinct = int(groups.max()) + 1
+    if n_distinct < min_distinct_loads:
+        raise CalibrationRejected(
+            f"only {n_distinct} distinct load(s); at least {min_distinct_loads} are needed to "
+            f"check linearity (add more masses)")
+
+    t_bar = t.mean()
+    c_bar = c_mean.mean()
+    s_tt = float(np.sum((t - t_bar) ** 2))
+    slope = float(np.sum((t - t_bar) * (c_mean - c_bar)) / s_tt)
+    intercept = float(c_bar - slope * t_bar)
+    resid = c_mean - (slope * t + intercept)
+    ss_res = float(np.sum(resid ** 2))
+    ss_tot = float(np.sum((c_mean - c_bar) ** 2))
+    r2 = 1.0 - ss_res / ss_tot if ss_tot > 0 else 0.0
+    r2 = min(max(r2, 0.0), 1.0)  # guard rounding just outside [0, 1]
+    s2 = ss_res / (n_steps - 2)
+    slope_se = math.sqrt(s2 / s_tt)
+    intercept_se = math.sqrt(s2 * (1.0 / n_steps + t_bar ** 2 / s_tt))
+    cov_ab = -t_bar * s2 / s_tt
+
+    if not slope > 0:
+        raise CalibrationRejected(
+            f"slope {slope:.6g} counts/N·m is not positive: bridge or amplifier wired with the "
+            f"opposite sign, or loads applied in the wrong direction")
+    if r2 < r2_min:
+        raise CalibrationRejected(
+            f"R^2 = {r2:.6f} is below the required {r2_min} (largest residual "
+            f"{np.max(np.abs(resid)):.1f} counts at {t[np.argmax(np.abs(resid))]:.3g} N·m): "
+            f"check for a slipping rope, a rubbing brake or a load that was still swinging")
+
+    span_nm = float(full_scale_nm) if full_scale_nm is not None else float(t.max() - t.min())
+    if not (math.isfinite(span_nm) and span_nm > 0):
+        raise ValueError(f"fit_calibration: full_scale_nm must be > 0, got {full_scale_nm!r}")
+    fs_counts = slope * span_nm
+    nonlin = float(np.max(np.abs(resid)) / fs_counts * 100.0)
+
+    hyst = hyst_pct = None
+    if direction is not None:
+        if len(direction) != n_steps:
+            raise ValueError(f"fit_calibration: {n_steps} torques but {len(direction)} directions")
+        sign = np.array([_direction_sign(d) for d in direction])
+        diffs = []
+        for g in range(n_distinct):
+            up = c_mean[(groups == g) & (sign > 0)]
+            down = c_mean[(groups == g) & (sign < 0)]
+            if len(up) and len(down):
+                diffs.append(abs(up.mean() - down.mean()))
+        if diffs:
+            hyst = float(max(diffs))
+            hyst_pct = hyst / fs_counts * 100.0
+
+    return CalibrationFit(
+        slope_counts_per_nm=slope, intercept_counts=intercept,
+        slope_se_counts_per_nm=slope_se, intercept_se_counts=intercept_se,
+        cov_slope_intercept=cov_ab, r2=r2, torques_nm=t, counts_mean=c_mean,
+        residuals_counts=resid, n_samples_per_step=n_per, n_samples=int(n_per.sum()),
+        n_distinct_loads=n_distinct, full_scale_counts=fs_counts, nonlinearity_pct_fs=nonlin,
+        hysteresis_counts=hyst, hysteresis_pct_fs=hyst_pct, within_step_sd_counts=within_sd,
+    )
