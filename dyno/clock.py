@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import selectors
+import time
 
 
 class _VirtualSelector(selectors.BaseSelector):
@@ -46,6 +47,8 @@ class _VirtualSelector(selectors.BaseSelector):
             # finishing, a signal) can wake us; wait for it in real time.
             return self._inner.select(None)
         if timeout > 0:
+            if self._loop.speed:
+                time.sleep(timeout / self._loop.speed)  # paced: N x real time
             self._loop.advance(timeout)
         return []
 
@@ -53,8 +56,9 @@ class _VirtualSelector(selectors.BaseSelector):
 class VirtualTimeLoop(asyncio.SelectorEventLoop):
     """An asyncio loop on a virtual clock (seconds, starting at ``start_s``)."""
 
-    def __init__(self, start_s: float = 0.0) -> None:
+    def __init__(self, start_s: float = 0.0, speed: float | None = None) -> None:
         self._virtual_s = float(start_s)
+        self.speed = speed  # None: as fast as possible; N: paced at N x real time
         super().__init__(selector=_VirtualSelector(self))
 
     def time(self) -> float:  # asyncio's clock
@@ -64,8 +68,8 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         self._virtual_s += dt_s
 
 
-def run(main, *, virtual: bool, start_s: float = 0.0):
-    """Run coroutine ``main`` on a virtual-time loop or a real one."""
-    factory = (lambda: VirtualTimeLoop(start_s)) if virtual else None
+def run(main, *, virtual: bool, start_s: float = 0.0, speed: float | None = None):
+    """Run coroutine ``main`` on a virtual-time loop (optionally paced) or a real one."""
+    factory = (lambda: VirtualTimeLoop(start_s, speed)) if virtual else None
     with asyncio.Runner(loop_factory=factory) as runner:
         return runner.run(main)

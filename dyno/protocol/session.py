@@ -46,7 +46,8 @@ class LinkSession:
     def __init__(self) -> None:
         self.stats = LinkStats()
         self.last_seq: int | None = None
-        self._last_bytes: bytes | None = None
+        self.last_accepted: bytes | None = None  # raw bytes of the last accepted frame
+        self.frame_listeners: list = []  # callables(raw) on every accepted frame
         self._suspect: bytes | None = None  # a CRC-valid frame out of sequence
         self.info: v1.InfoFrame | None = None
 
@@ -71,7 +72,7 @@ class LinkSession:
             return None
         length = buf[1]
         raw = bytes(buf[:length])
-        if raw == self._last_bytes:
+        if raw == self.last_accepted:
             self.stats.rejected["stale_repeat"] += 1
             return None
         expected = None if self.last_seq is None else (self.last_seq + 1) & 0xFF
@@ -89,7 +90,9 @@ class LinkSession:
                 return None
             self.stats.resyncs += 1
         self._suspect = None
-        self._last_bytes = raw
+        self.last_accepted = raw
         self.last_seq = frame.seq
         self.stats.accepted += 1
+        for fn in self.frame_listeners:
+            fn(raw)
         return frame

@@ -1,0 +1,110 @@
+"""Reduce a steady-state window of raw streams to one operating point.
+
+The live controller and ``dyno replay`` call the same function on the same
+raw events, so a replay reproduces the live points exactly (and re-processes
+them with another calibration or engine map when asked).
+
+Speeds are mean speeds by edge count over the window (insensitive to firing
+ripple); their scatter is the standard deviation of per-period rpm, their
+standard error comes from batch means.  ADC conversions with the AD7171 error
+bit, or at a rail (0 / 65535), are excluded and counted, never averaged in.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
+from dyno.analysis.efficiency import batch_mean, point_efficiency
+from dyno.analysis.engine_map import OutOfMapRange
+from dyno.protocol import v1
+
+ADC_RAILS = (0, 0xFFFF)
+
+
+def _speed(streams, channel: int, t0_us: int, t1_us: int) -> dict:
+    edges = streams.edge_window(channel, t0_us, t1_us)
+    rpm, periods = rpm_by_count(edges)
+    _, per = rpm_per_period(edges)
+    device_rpm = streams.edge_rpm_window(channel, t0_us, t1_us)
+    out = {"rpm": rpm, "n_edges": int(edges.size), "std": float(per.std()) if per.size > 1 else math.nan,
+           "sem": math.nan, "source": "edge_count"}
+    if per.size >= 12:
+        out["sem"] = batch_mean(per)[1]
+    if device_rpm.size and np.any(device_rpm > 0):
+        # v0 logs: the device's own rpm per edge is the trustworthy period when
+        # the 150 Hz poll missed edges; prefer it and keep the count as a check.
+        valid = device_rpm[device_rpm > 0]
+        out.update(rpm=float(valid.mean()), std=float(valid.std()), source="device_rpm",
+                   rpm_by_count=rpm)
+        out["sem"] = batch_mean(valid)[1] if valid.size >= 12 else math.nan
+    return out
+
+
+def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, index: int | None = None) -> dict:
+    """Statistics of one steady window ``[t0_us, t1_us]`` (host-unwrapped device times).
+
+    Returns a flat dict with means, standard deviations, standard errors
+    (``*_sem``), sample counts, the time span, powers and efficiency, and a
+    ``faults`` list of what kept a value from being computed.
+    """
+    faults = []
+    p = _speed(streams, v1.CH_PRIMARY, t0_us, t1_us)
+    s = _speed(streams, v1.CH_SECONDARY, t0_us, t1_us)
+    t_adc, codes, status = streams.adc_window(t0_us, t1_us)
+    err = (status & v1.ADC_STATUS_ERR) != 0
+    rail = np.isin(codes, ADC_RAILS)
+    good = codes[~err & ~rail]
+    point = {
+        "t_start_us": int(t0_us), "t_end_us": int(t1_us), "duration_s": (t1_us - t0_us) / 1e6,
+        "rpm_primary": p["rpm"], "rpm_primary_std": p["std"], "rpm_primary_sem": p["sem"],
+        "n_primary_edges": p["n_edges"],
+        "rpm_secondary": s["rpm"], "rpm_secondary_std": s["std"], "rpm_secondary_sem": s["sem"],
+        "n_secondary_edges": s["n_edges"],
+        "n_adc": int(codes.size), "n_adc_error": int(err.sum()), "n_adc_rail": int(rail.sum()),
+        "adc_mean": math.nan, "adc_std": math.nan,
+    }
+    if index is not None:
+        point["index"] = index
+    for name, sp in (("primary", p), ("secondary", s)):
+        if sp["n_edges"] < 2:
+            faults.append({"channel": name, "reason": f"{sp['n_edges']} edges in the window: no speed"})
+    if good.size >= 2:
+        point["adc_mean"] = float(good.mean())
+        point["adc_std"] = float(good.std())
+        adc_sem = batch_mean(good)[1] if good.size >= 12 else float(good.std() / math.sqrt(good.size))
+    else:
+        adc_sem = math.nan
+        faults.append({"channel": "adc", "reason": f"{good.size} valid conversions in the window"})
+    if point["n_adc_error"]:
+        faults.append({"channel": "adc", "reason": f"{point['n_adc_error']} conversions with the AD7171 error bit excluded",
+                       "severity": "warning"})
+    if point["n_adc_rail"]:
+        faults.append({"channel": "adc", "reason": f"{point['n_adc_rail']} conversions at a rail excluded",
+                       "severity": "warning"})
+    torque = calibration.torque_secondary_nm(point["adc_mean"]) if good.size >= 2 else math.nan
+    point["torque_secondary_nm"] = float(torque)
+    point["torque_secondary_std_nm"] = float(point["adc_std"] / calibration.slope_counts_per_nm)
+    point["torque_secondary_sem_nm"] = float(adc_sem / calibration.slope_counts_per_nm)
+    rp, rs = point["rpm_primary"], point["rpm_secondary"]
+    point["ratio"] = rp / rs if rs and rs > 0 and not math.isnan(rp) else math.nan
+    point.update(power_out_w=math.nan, power_in_w=math.nan, efficiency=math.nan, efficiency_sem=math.nan)
+    if not any(math.isnan(x) for x in (rp, rs, torque)):
+        point["power_out_w"] = torque * rs * 2 * math.pi / 60
+        try:
+            eff = point_efficiency(rp, _nz(p["sem"]), rs, _nz(s["sem"]), torque, _nz(point["torque_secondary_sem_nm"]),
+                                   engine_map)
+        except OutOfMapRange as exc:
+            faults.append({"channel": "primary", "reason": f"engine speed outside the engine map: {exc}"})
+        else:
+            point.update(power_out_w=eff["power_out_w"], power_in_w=eff["power_in_w"],
+                         efficiency=eff["efficiency"], efficiency_sem=eff["efficiency_sem"])
+    point["faults"] = faults
+    point["valid"] = not any(f.get("severity", "error") == "error" for f in faults)
+    return point
+
+
+def _nz(x: float) -> float:
+    return 0.0 if x is None or math.isnan(x) else float(x)

@@ -1,0 +1,39 @@
+"""dyno replay: re-process a logged run (opens the viewer; --json stays headless)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+
+def add_arguments(p) -> None:
+    p.add_argument("run", type=Path, nargs="+", help="run directory (several to overlay in the viewer)")
+    p.add_argument("--calibration", type=Path, default=None, help="re-process with this calibration history")
+    p.add_argument("--engine-map", type=Path, default=None, help="re-process with this engine map")
+    p.add_argument("--json", action="store_true", help="print the points as one JSON document, no viewer")
+
+
+def run(args) -> int:
+    from dyno.app import public_point
+    from dyno.replay import replay
+
+    if not args.json and importlib.util.find_spec("dyno.ui.replay_app") is not None:
+        from dyno.ui.replay_app import main as viewer
+
+        return viewer(args)
+    results = [replay(r, args.calibration, args.engine_map) for r in args.run]
+    if args.json:
+        docs = [{"run_dir": r["run_dir"], "points": [public_point(p) for p in r["points"]],
+                 "stop": r["stop"], "aborts": r["aborts"], "torn": r["torn"]} for r in results]
+        print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1, default=str))
+        return 0
+    from dyno.cli.run_cmd import _print_table
+
+    for r in results:
+        _print_table({"run_dir": r["run_dir"], "state": (r["stop"] or {}).get("exit_status", "killed?"),
+                      "reason": (r["stop"] or {}).get("reason", "no stop document"),
+                      "points": [public_point(p) for p in r["points"]],
+                      "frames": {"read": "-", "accepted": "-", "rejected": "-"}, "events_lost": "-",
+                      "aborts": r["aborts"]})
+    return 0

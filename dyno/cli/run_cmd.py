@@ -1,0 +1,68 @@
+"""dyno run: a complete steady-state test."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--sim", action="store_true", help="run on the simulated rig (no hardware)")
+    p.add_argument("--headless", action="store_true", help="no UI; GO is given automatically")
+    p.add_argument("--speed", type=float, default=None,
+                   help="simulation pace as a multiple of real time (default: as fast as possible)")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed")
+    p.add_argument("--fault-rate", type=float, default=0.0,
+                   help="fraction of bus transfers corrupted (bit errors, NACKs, truncation)")
+    p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
+    p.add_argument("--protocol", choices=("v1", "v0"), default=None)
+    p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
+    p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
+    p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
+                   help="settling: detected from the data, or the thesis's fixed 4 s")
+    p.add_argument("--json", action="store_true", help="print one JSON document")
+    from dyno.rigconfig import add_rig_argument
+
+    add_rig_argument(p)
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from dyno.app import RunOptions, run_test
+    from dyno.control.controller import TestPlan
+
+    if not args.sim:
+        print("dyno run: only --sim is available headless here; on the rig use `dyno ui`", file=sys.stderr)
+        return 2
+    opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
+                      protocol=args.protocol, rig_path=getattr(args, "rig", None),
+                      plan=replace(TestPlan(), settle_mode=args.settle))
+    if args.calibration:
+        opts.calibration_path = args.calibration
+    if args.engine_map:
+        opts.engine_map_path = args.engine_map
+    result = run_test(opts)
+    if args.json:
+        print(json.dumps(result, indent=1, default=str))
+    else:
+        _print_table(result)
+    return 0 if result["state"] == "done" else 1
+
+
+def _print_table(result: dict) -> None:
+    print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
+    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s Nm':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5}")
+    for p in result["points"]:
+        def f(k, scale=1.0, fmt="{:.0f}"):
+            v = p.get(k)
+            return "-" if v is None else fmt.format(v * scale)
+        print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
+              f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
+              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5}")
+    fr = result["frames"]
+    print(f"frames: read {fr['read']}, accepted {fr['accepted']}, rejected {fr['rejected']}; "
+          f"events lost {result['events_lost']}")
+    for a in result["aborts"]:
+        print(f"ABORT: {a['cause']}: {a['detail']}")

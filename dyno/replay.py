@@ -1,0 +1,83 @@
+"""Re-process a logged run from its raw streams (optionally with another calibration or engine map).
+
+Uses the very function the live controller used (:func:`dyno.analysis.points.reduce_point`)
+on the very events it logged, so with the run's own calibration and map the
+points come out identical.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+from dyno.analysis.points import reduce_point
+from dyno.runlog.reader import load_run
+
+PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "step_s", "efficiency_true",
+                "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
+                "power_out_true_w", "legacy_point", "discarded")
+
+
+def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
+    from dyno.analysis.calibration import CalibrationEntry, latest, load_history
+    from dyno.analysis.engine_map import load_engine_map
+
+    run = load_run(run_dir)
+    if calibration_path is not None:
+        calibration = latest(load_history(calibration_path))
+    elif run.calibration is not None:
+        calibration = CalibrationEntry.from_dict(run.calibration)
+    else:
+        from dyno.errors import ConfigError
+
+        raise ConfigError(run.path, "calibration.json", "the run's calibration (or pass --calibration FILE)")
+    engine_map = load_engine_map(engine_map_path or run.engine_map_path)
+    points = []
+    for doc in run.points:
+        p = reduce_point(run.streams, doc["t_start_us"], doc["t_end_us"], calibration, engine_map,
+                         index=doc.get("index"))
+        for k in PASS_THROUGH:
+            if k in doc:
+                p[k] = doc[k]
+        points.append(p)
+    return {"run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
+            "aborts": run.docs("abort"), "meta": run.meta, "calibration": calibration.to_dict(),
+            "engine_map": str(engine_map.source)}
+
+
+CSV_COLUMNS = ("index", "rpm_primary", "rpm_primary_std", "rpm_secondary", "rpm_secondary_std", "ratio",
+               "torque_secondary_nm", "torque_secondary_std_nm", "power_out_w", "power_in_w", "efficiency",
+               "efficiency_sem", "n_primary_edges", "n_secondary_edges", "n_adc", "n_adc_error", "duration_s",
+               "t_start_us", "t_end_us", "settled_by", "valid", "efficiency_true")
+
+
+def points_csv(points) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(CSV_COLUMNS)
+    for p in points:
+        w.writerow(["" if p.get(c) is None else p.get(c) for c in CSV_COLUMNS])
+    return buf.getvalue()
+
+
+def export(run_dir, out_dir=None, **kw) -> list[Path]:
+    """Write points.csv and the raw streams as CSV (primary/secondary edges, ADC)."""
+    from dyno.runlog.files import write_atomic
+
+    result = replay(run_dir, **kw)
+    run = load_run(run_dir)
+    out = Path(out_dir) if out_dir else Path(run_dir) / "export"
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    write_atomic(out / "points.csv", points_csv(result["points"]))
+    written.append(out / "points.csv")
+    s = run.streams
+    for name, ch in (("primary_edges", 1), ("secondary_edges", 2)):
+        rows = "t_us\n" + "".join(f"{t}\n" for t in s.edges[ch])
+        write_atomic(out / f"{name}.csv", rows)
+        written.append(out / f"{name}.csv")
+    rows = "t_us,adc_code,status\n" + "".join(f"{t},{c},{st}\n" for t, c, st in zip(s.adc_t, s.adc_code, s.adc_status))
+    write_atomic(out / "adc.csv", rows)
+    written.append(out / "adc.csv")
+    return written
