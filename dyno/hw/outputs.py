@@ -80,6 +80,7 @@ class GpioActuators:
             raise
         now = self.clock.now()
         self._throttle_fraction = 0.0
+        self._killed = True
         self._target = STOP  # direction asked for
         self._moving = STOP  # direction the actuator is powered in (STOP = enable off)
         self._enable_changed_s = now - 10 * self._settle_s  # pretend everything settled long ago
@@ -128,6 +129,7 @@ class GpioActuators:
             if not killed and self._latched:
                 raise SafetyAbort("engine run refused: safe state latched")
             self._kill.value = bool(killed)
+            self._killed = bool(killed)
 
     def safe_state(self, latch: bool = False) -> None:
         """Throttle idle, engine killed, enable off now; release stroke follows via tick().
@@ -142,6 +144,7 @@ class GpioActuators:
             th = self.config.throttle
             self._throttle.value = th.idle_pulse_us / th.frame_us
             self._kill.value = True
+            self._killed = True
             now = self.clock.now()
             self._integrate(now)
             self._power_off(now)  # immediately, before any wait: the one non-negotiable action
@@ -239,7 +242,7 @@ class GpioActuators:
     def released(self) -> bool:
         """Brake at its release stop with the actuator de-energised."""
         return self._moving == STOP and self._target == STOP and self._position <= 0.0 \
-            and not self._enable.value
+            and (self.closed or not self._enable.value)
 
     @property
     def brake_position(self) -> float:
@@ -252,7 +255,7 @@ class GpioActuators:
 
     @property
     def engine_killed(self) -> bool:
-        return bool(self._kill.value)
+        return self._killed  # kept in Python: readable after close()
 
     def pin_states(self) -> dict[str, float]:
         """Electrical state of every output pin (1 = driven high), for doctor and tests."""
@@ -277,6 +280,7 @@ class GpioActuators:
                     dev.off()
             if getattr(self, "_kill", None) is not None:
                 self._kill.value = True
+                self._killed = True
             if getattr(self, "_throttle", None) is not None:
                 th = self.config.throttle
                 self._throttle.value = th.idle_pulse_us / th.frame_us
