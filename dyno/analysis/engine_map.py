@@ -1,0 +1,381 @@
+"""Engine map: full-throttle torque vs speed, for the efficiency denominator.
+
+The rig cannot measure engine power (thesis Section 9.3): efficiency divides
+the measured secondary power by the power an engine map says the engine makes
+at the measured primary (crank) speed.  This module loads such maps,
+interpolates them with a monotone, shape-preserving PCHIP of torque vs rpm,
+refuses to extrapolate, and converts between the SAE J1349 standard
+conditions the map is assumed to be corrected to and the run's ambient air.
+
+Only :func:`load_engine_map` and :func:`load_legacy_engine_map` read files;
+malformed files raise :class:`dyno.errors.ConfigError` naming file, line and
+field.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from dyno.errors import ConfigError, DynoError
+
+#: Mechanical (imperial) horsepower in W: 550 ft·lbf/s.  US engine dyno
+#: charts (the thesis map, Baja SAE forum data) use this, not metric PS.
+W_PER_HP = 745.6998715822702
+RAD_PER_S_PER_RPM = 2.0 * math.pi / 60.0
+
+#: SAE J1349 reference conditions: 25 °C intake air, 99 kPa dry-air pressure.
+J1349_REFERENCE_TEMP_C = 25.0
+J1349_REFERENCE_DRY_PRESSURE_KPA = 99.0
+
+_VALUE_COLUMNS = {"torque_nm": "torque", "power_hp": "hp", "power_kw": "kw"}
+
+
+class OutOfMapRange(DynoError, ValueError):
+    """An engine speed lies outside the engine map; extrapolating would be a guess."""
+
+    def __init__(self, rpm, rpm_min: float, rpm_max: float, source: str = ""):
+        self.rpm = rpm
+        self.rpm_min = rpm_min
+        self.rpm_max = rpm_max
+        where = f" ({source})" if source else ""
+        super().__init__(f"engine speed {rpm} rpm is outside the engine map{where} range "
+                         f"[{rpm_min:g}, {rpm_max:g}] rpm; refusing to extrapolate")
+
+
+def _torque_from_power_w(rpm: np.ndarray, power_w: np.ndarray) -> np.ndarray:
+    return power_w / (rpm * RAD_PER_S_PER_RPM)
+
+
+class EngineMap:
+    """Full-throttle engine torque vs crank speed, interpolated by PCHIP.
+
+    Parameters
+    ----------
+    rpm : array_like
+        Crank speeds, strictly increasing, > 0, at least 2 points.
+    torque_nm : array_like
+        Brake torque at each speed, N·m, finite and >= 0.
+    source : str, optional
+        Where the data came from (file path), recorded for run metadata.
+    sha256 : str, optional
+        Hex SHA-256 of the source file's bytes, recorded for run metadata.
+
+    Attributes
+    ----------
+    rpm, torque_nm_knots : numpy.ndarray
+        The knots (read-only copies).
+    rpm_min, rpm_max : float
+    source, sha256 : str or None
+    j1349_factor : float
+        Correction factor this map was divided by (1.0 = standard conditions).
+    ambient : tuple of (temp_c, dry_pressure_kpa) or None
+
+    Notes
+    -----
+    Torque (not power) is interpolated: PCHIP (Fritsch–Carlson) chooses
+    knot slopes so the interpolant is monotone wherever the data are and has
+    no overshoot beyond neighbouring knots, unlike a cubic spline which rings
+    around the governor droop.  Power is derived,
+
+    .. math:: P(n) = T(n)\\,\\omega, \\quad \\omega = 2\\pi n / 60,
+              \\qquad \\frac{dP}{dn} = \\frac{2\\pi}{60}\\left(T + n\\frac{dT}{dn}\\right).
+    """
+
+    def __init__(self, rpm, torque_nm, *, source: str | None = None, sha256: str | None = None,
+                 _j1349_factor: float = 1.0, _ambient=None, _standard_torque_nm=None):
+        n = np.array(rpm, dtype=float)
+        t = np.array(torque_nm, dtype=float)
+        if n.ndim != 1 or t.shape != n.shape:
+            raise ValueError(f"EngineMap: rpm and torque_nm must be 1-D of equal length, "
+                             f"got shapes {n.shape} and {t.shape}")
+        if len(n) < 2:
+            raise ValueError("EngineMap: at least 2 points are needed")
+        if not (np.all(np.isfinite(n)) and np.all(np.isfinite(t))):
+            raise ValueError("EngineMap: rpm and torque_nm must be finite")
+        if np.any(n <= 0):
+            raise ValueError("EngineMap: rpm must be > 0")
+        bad = np.nonzero(np.diff(n) <= 0)[0]
+        if len(bad):
+            raise ValueError(f"EngineMap: rpm must be strictly increasing (point {bad[0] + 1}: "
+                             f"{n[bad[0] + 1]:g} after {n[bad[0]]:g})")
+        if np.any(t < 0):
+            raise ValueError("EngineMap: torque_nm must be >= 0")
+        n.setflags(write=False)
+        t.setflags(write=False)
+        self.rpm = n
+        self.torque_nm_knots = t
+        self.rpm_min = float(n[0])
+        self.rpm_max = float(n[-1])
+        self.source = source
+        self.sha256 = sha256
+        self.j1349_factor = float(_j1349_factor)
+        self.ambient = _ambient
+        # The standard-condition torque, so at_ambient() never compounds corrections.
+        self._standard_torque_nm = t if _standard_torque_nm is None else _standard_torque_nm
+        self._pchip = PchipInterpolator(n, t, extrapolate=False)
+        self._dpchip = self._pchip.derivative()
+
+    def __repr__(self) -> str:
+        amb = "" if self.ambient is None else f", ambient={self.ambient}"
+        return (f"EngineMap({len(self.rpm)} points, {self.rpm_min:g}-{self.rpm_max:g} rpm, "
+                f"source={self.source!r}{amb})")
+
+    # -- range -------------------------------------------------------------
+
+    def covers(self, rpm) -> bool:
+        """True if every value of ``rpm`` is finite and within [rpm_min, rpm_max]."""
+        n = np.asarray(rpm, dtype=float)
+        return bool(np.all(np.isfinite(n) & (n >= self.rpm_min) & (n <= self.rpm_max)))
+
+    def _checked(self, rpm) -> np.ndarray:
+        n = np.asarray(rpm, dtype=float)
+        if not self.covers(n):
+            outside = n[~(np.isfinite(n) & (n >= self.rpm_min) & (n <= self.rpm_max))]
+            first = outside.flat[0] if outside.size else n
+            raise OutOfMapRange(float(first), self.rpm_min, self.rpm_max, self.source or "")
+        return n
+
+    @staticmethod
+    def _out(x: np.ndarray):
+        return float(x) if x.ndim == 0 else x
+
+    # -- evaluation ----------------------------------------------------------
+
+    def torque_nm(self, rpm):
+        """Engine torque at ``rpm``, N·m (raises :class:`OutOfMapRange` outside the map)."""
+        n = self._checked(rpm)
+        return self._out(np.asarray(self._pchip(n)))
+
+    def power_w(self, rpm):
+        """Engine power :math:`P = T(n)\\,2\\pi n/60` at ``rpm``, W."""
+        n = self._checked(rpm)
+        return self._out(np.asarray(self._pchip(n)) * n * RAD_PER_S_PER_RPM)
+
+    def dpower_drpm(self, rpm):
+        """Slope of power vs speed, W per rpm (for uncertainty propagation).
+
+        .. math:: \\frac{dP}{dn} = \\frac{2\\pi}{60}\\left(T(n) + n\\,T'(n)\\right)
+        """
+        n = self._checked(rpm)
+        return self._out(RAD_PER_S_PER_RPM * (np.asarray(self._pchip(n))
+                                              + n * np.asarray(self._dpchip(n))))
+
+    # -- ambient correction ----------------------------------------------------
+
+    def at_ambient(self, temp_c: float, dry_pressure_kpa: float) -> "EngineMap":
+        """The engine at the run's air: standard power divided by the J1349 factor.
+
+        The map is assumed to be corrected to SAE J1349 standard conditions
+        (25 °C, 99 kPa dry air).  On a hot day or at altitude the engine
+        makes less power than the map says; dividing by
+        :func:`j1349_correction_factor` (> 1 in thinner air) gives the power
+        actually delivered, which is the right efficiency denominator.
+
+        Always computed from the standard-condition map, so calling it on a
+        map that is already at some ambient does not compound corrections.
+        """
+        cf = j1349_correction_factor(temp_c, dry_pressure_kpa)
+        std = self._standard_torque_nm
+        src = f"{self.source} at {temp_c:g} C, {dry_pressure_kpa:g} kPa dry (SAE J1349 CF {cf:.4f})"
+        return EngineMap(self.rpm, std / cf, source=src, sha256=self.sha256, _j1349_factor=cf,
+                         _ambient=(float(temp_c), float(dry_pressure_kpa)),
+                         _standard_torque_nm=std)
+
+    def metadata(self) -> dict:
+        """Provenance for run metadata: source, sha256, range, correction."""
+        return {"source": self.source, "sha256": self.sha256, "rpm_min": self.rpm_min,
+                "rpm_max": self.rpm_max, "j1349_factor": self.j1349_factor,
+                "ambient_temp_c": None if self.ambient is None else self.ambient[0],
+                "ambient_dry_pressure_kpa": None if self.ambient is None else self.ambient[1]}
+
+
+# ----------------------------------------------------------------------------
+# SAE J1349 and air
+
+
+def j1349_correction_factor(temp_c: float, dry_pressure_kpa: float) -> float:
+    """SAE J1349 (1990) power correction factor for spark-ignition engines.
+
+    .. math:: CF = 1.176 \\, \\frac{99}{p_d} \\sqrt{\\frac{T + 273}{298}} - 0.176
+
+    Reference conditions: intake air at 25 °C (298 K) and 99 kPa *dry-air*
+    partial pressure (total 100 kPa less water vapour), where CF = 1.
+    Standard power = observed power × CF.  The 0.176 term accounts for the
+    ~15 % of indicated power lost to friction, which does not scale with
+    air density.  (The 2004 revision rounds to 1.18/0.18.)
+
+    Parameters
+    ----------
+    temp_c : float
+        Intake air temperature, °C.
+    dry_pressure_kpa : float
+        Dry-air partial pressure, kPa (see :func:`dry_air_pressure_kpa`).
+    """
+    t = float(temp_c)
+    p = float(dry_pressure_kpa)
+    if not (math.isfinite(t) and -60.0 < t < 80.0):
+        raise ValueError(f"j1349_correction_factor: temp_c {temp_c!r} is not a plausible air "
+                         f"temperature (-60..80 C)")
+    if not (math.isfinite(p) and 30.0 < p < 120.0):
+        raise ValueError(f"j1349_correction_factor: dry_pressure_kpa {dry_pressure_kpa!r} is not "
+                         f"plausible (30..120 kPa); is it in kPa?")
+    return 1.176 * (J1349_REFERENCE_DRY_PRESSURE_KPA / p) * math.sqrt((t + 273.0) / 298.0) - 0.176
+
+
+def saturation_vapour_pressure_kpa(temp_c: float) -> float:
+    """Saturation vapour pressure of water over liquid, kPa (Buck 1996).
+
+    .. math:: e_s = 0.61121 \\exp\\left[\\left(18.678 - \\frac{T}{234.5}\\right)
+              \\frac{T}{257.14 + T}\\right]
+
+    Accurate to ~0.05 % from -40 to 50 °C (Buck's improved Magnus form).
+    """
+    t = float(temp_c)
+    return 0.61121 * math.exp((18.678 - t / 234.5) * (t / (257.14 + t)))
+
+
+def dry_air_pressure_kpa(total_pressure_kpa: float, temp_c: float,
+                         relative_humidity_pct: float) -> float:
+    """Dry-air partial pressure from barometer, temperature and humidity.
+
+    .. math:: p_d = p - \\frac{RH}{100} e_s(T)
+
+    Parameters
+    ----------
+    total_pressure_kpa : float
+        Station (not sea-level-corrected) barometric pressure, kPa.
+    temp_c : float
+        Air temperature, °C.
+    relative_humidity_pct : float
+        Relative humidity, 0–100 %.
+    """
+    rh = float(relative_humidity_pct)
+    if not (math.isfinite(rh) and 0.0 <= rh <= 100.0):
+        raise ValueError(f"dry_air_pressure_kpa: relative_humidity_pct must be in [0, 100], "
+                         f"got {relative_humidity_pct!r}")
+    p = float(total_pressure_kpa)
+    if not (math.isfinite(p) and p > 0):
+        raise ValueError(f"dry_air_pressure_kpa: total_pressure_kpa must be > 0, got {p!r}")
+    return p - rh / 100.0 * saturation_vapour_pressure_kpa(temp_c)
+
+
+# ----------------------------------------------------------------------------
+# loaders
+
+
+def _read(path: Path) -> tuple[bytes, str]:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(path, "file", "an existing engine map CSV") from None
+    try:
+        return raw, raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ConfigError(path, "file", "UTF-8 text") from None
+
+
+def _number(path: Path, lineno: int, name: str, text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        x = math.nan
+    if not math.isfinite(x):
+        raise ConfigError(path, f"line {lineno}, field {name}", f"a finite number, got {text!r}")
+    return x
+
+
+def _parse_rows(path: Path, rows: list[tuple[int, str]], value_name: str):
+    """Validate data rows; returns (rpm, value) arrays.  Names the offending line."""
+    rpm, val = [], []
+    for lineno, line in rows:
+        cells = [c.strip() for c in line.split(",")]
+        if len(cells) != 2:
+            raise ConfigError(path, f"line {lineno}",
+                              f"2 comma-separated numbers rpm,{value_name}, got {len(cells)} fields")
+        n = _number(path, lineno, "rpm", cells[0])
+        v = _number(path, lineno, value_name, cells[1])
+        if n <= 0:
+            raise ConfigError(path, f"line {lineno}, field rpm", f"rpm > 0, got {cells[0]!r}")
+        if rpm and n <= rpm[-1]:
+            raise ConfigError(path, f"line {lineno}, field rpm",
+                              f"rpm strictly increasing, got {n:g} after {rpm[-1]:g}")
+        if v < 0:
+            raise ConfigError(path, f"line {lineno}, field {value_name}",
+                              f"a value >= 0, got {cells[1]!r}")
+        rpm.append(n)
+        val.append(v)
+    if len(rpm) < 2:
+        raise ConfigError(path, "data rows", f"at least 2 rows rpm,{value_name}, got {len(rpm)}")
+    return np.array(rpm), np.array(val)
+
+
+def _content_lines(text: str) -> list[tuple[int, str]]:
+    # '#' lines document provenance (e.g. "REPRESENTATIVE map, not a measurement").
+    return [(i, line) for i, line in enumerate(text.splitlines(), start=1)
+            if line.strip() and not line.lstrip().startswith("#")]
+
+
+def load_engine_map(path) -> EngineMap:
+    """Load an engine map CSV with a header naming the units.
+
+    Format: optional ``#`` comment lines, then a header ``rpm,torque_nm``,
+    ``rpm,power_hp`` (mechanical hp, 745.7 W) or ``rpm,power_kw``, then one
+    row per speed, strictly increasing rpm.  Power is converted to torque at
+    the knots (:math:`T = P/\\omega`) and torque is interpolated.  The map is
+    taken to be at SAE J1349 standard conditions (see
+    :meth:`EngineMap.at_ambient`).
+
+    For the thesis's headerless ``rpm,hp`` file use
+    :func:`load_legacy_engine_map`; guessing units from numbers is how
+    efficiencies of 130 % get published.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, line and field (or header) that is wrong.
+    """
+    path = Path(path)
+    raw, text = _read(path)
+    lines = _content_lines(text)
+    expected_header = "a header rpm,torque_nm or rpm,power_hp or rpm,power_kw"
+    if not lines:
+        raise ConfigError(path, "header", expected_header)
+    lineno, header = lines[0]
+    cols = [c.strip() for c in header.split(",")]
+    if len(cols) != 2 or cols[0] != "rpm" or cols[1] not in _VALUE_COLUMNS:
+        hint = ""
+        try:
+            [float(c) for c in cols]
+            hint = " (headerless rpm,hp files: use load_legacy_engine_map)"
+        except ValueError:
+            pass
+        raise ConfigError(path, f"line {lineno} (header)", f"{expected_header}, got {header.strip()!r}{hint}")
+    rpm, val = _parse_rows(path, lines[1:], cols[1])
+    kind = _VALUE_COLUMNS[cols[1]]
+    if kind == "torque":
+        torque = val
+    elif kind == "hp":
+        torque = _torque_from_power_w(rpm, val * W_PER_HP)
+    else:
+        torque = _torque_from_power_w(rpm, val * 1000.0)
+    return EngineMap(rpm, torque, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
+
+
+def load_legacy_engine_map(path) -> EngineMap:
+    """Load the thesis's headerless ``rpm,hp`` engine map (``engine_power_RPM.csv``).
+
+    Each row is crank rpm and power in mechanical hp, digitised from a
+    published go-kart dyno chart of a used 10 hp Baja engine (thesis
+    Section 9.3).  Read in place; validated like :func:`load_engine_map`.
+    """
+    path = Path(path)
+    raw, text = _read(path)
+    lines = _content_lines(text)
+    rpm, hp = _parse_rows(path, lines, "hp")
+    return EngineMap(rpm, _torque_from_power_w(rpm, hp * W_PER_HP), source=str(path),
+                     sha256=hashlib.sha256(raw).hexdigest())
