@@ -103,7 +103,7 @@ def render() -> dict[str, str]:
     good = v1.encode_command(v1.OP_ACK_POLL, 5)
     lines.append(f"badcmd crc cause=crc hex={(good[:-1] + bytes([good[-1] ^ 0x80])).hex()}")
     lines.append(f"badcmd unknown_op cause=op hex={bytes([0x77, 0, 0]).hex()}")
-    lines.append(f"badcmd wrong_length cause=length hex={good[:2].hex() + '0000'}")
+    lines.append(f"badcmd wrong_length cause=length hex={good.hex() + '00'}")
     out = {"v1.hex": "\n".join(lines) + "\n"}
     lines = ["# Protocol v0 (thesis legacy 20-byte frame) golden vectors."]
     for name, f in _v0():

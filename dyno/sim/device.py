@@ -79,6 +79,7 @@ class EmulatedFirmware:
                 self.bounces_rejected += 1
                 return
             self._last_edge_us[tag] = t_us
+            code = status = 0  # a Hall edge carries only its time
         if self.protocol == "v0":
             self._capture_v0(tag, t_us, code, status)
             return
