@@ -1,0 +1,627 @@
+"""Physics of the simulated CVT dynamometer (engine, CVT, brake, sensors).
+
+Public API: :class:`RigParams`, :class:`SensorEvent`, :class:`Truth`,
+:class:`RigModel`.  The model is deterministic under its seed and has no
+clock of its own: time advances only through :meth:`RigModel.step`.
+
+Drivetrain
+----------
+Two rotating bodies: the crank (engine, flywheel, primary pulley; inertia
+``J_e``) and the secondary side (secondary pulley and shaft, plus the 32:61
+gear pair and the brake shaft with the rotor reflected by ``g^2``,
+``g = 32/61``; inertia ``J_s``).  With the belt gripping (clutch locked) the
+secondary speed is tied to the crank speed, ``omega_s = k omega_e``,
+``k = (1 - s)/i`` (see :mod:`dyno.sim.cvt`), and the pair is one degree of
+freedom:
+
+.. math:: J_e \\dot\\omega_e = T_e - T_p,\\qquad
+          J_s k \\dot\\omega_e = i(\\eta_m T_p - T_d) - T_L
+
+    \\Rightarrow\\ \\dot\\omega_e = \\frac{i \\eta_m T_e - i T_d - T_L}{J_s k + i \\eta_m J_e}
+
+where ``T_L = g T_brake`` is the brake's kinetic friction referred to the
+secondary.  When the needed belt torque ``T_p`` exceeds what the
+centrifugal engagement can pass, or below the engagement speed, the two
+bodies move separately (belt slipping with ``T_p = +-T_cap``), with
+Karnopp stick/slip for the brake at zero speed (the brake holds up to its
+capacity and never drives the shaft backwards).  When the ratio ``k``
+changes (shifting) the two speeds are kept consistent by the belt impulse
+that conserves ``i J_e omega_e + J_s omega_s``.
+
+Integration: fixed internal steps of at most ``max_substep_s`` (1-2 ms),
+explicit for the (slow) mean speeds, exact exponentials for the shift lag,
+rotor temperature and lock-in filter, and exact within-step angle/edge
+timing for the constant acceleration of each step.
+
+Signals calibrated on the thesis rig's real logs
+-------------------------------------------------
+Measured from ``vt-cvt-dyno-2019`` (runs 2 and 3, steady points 1-34; run 4's
+ADC channel is all zeros, i.e. a dead channel, not used), per point: mean
+ADC counts, and least-squares sinusoid fits at the engine firing frequency
+(``n_p/120``), at the brake-shaft frequency (``n_s g / 60``) and at twice the
+firing frequency (engine revolution order), then the residual:
+
+* ADC conversion rate: 126.6-127.0 Hz in Arduino time (nominal 125 Hz):
+  ``adc_clock_error_frac = +0.015``.
+* Firing-order ripple after the 15 Hz filter: 90-190 counts at 4-6 N*m
+  (secondary), 450-1000 counts at 10-23 N*m, 600-850 at 25-35 N*m; about
+  45 counts per N*m, i.e. 0.42 x the mean torque, at 23-28 Hz.  Through a
+  2nd-order 15 Hz Butterworth (|H(25 Hz)| = 0.34) that is a *shaft* ripple
+  of 1.2 x mean: ``ripple_firing_frac = 1.2``.
+* Revolution-order (2 x firing, 46-55 Hz): 5-65 counts, ~2.5 counts/N*m after
+  the filter (|H(48 Hz)| = 0.10): ``ripple_engine_rev_frac = 0.25``.
+* Brake-shaft order: < 15 counts above 35 Hz, 60-320 counts at 10-26 Hz
+  (heavy load); 9-17 counts/N*m before the filter, ~0.1 x mean:
+  ``ripple_brake_shaft_frac = 0.10``.
+* Residual (broadband) noise after removing the three components: 85-130
+  counts std at 4-10 N*m, 130-290 counts at 15-35 N*m:
+  ``adc_noise_counts = 85``, ``adc_noise_counts_per_nm = 5``.
+* Total ADC std per point: 150-240 counts at light load, 540-740 at heavy
+  load (the simulator reproduces this; see ``tests/sim``).
+* Primary rpm change between consecutive revolutions: mean |diff| 0.6-1.6 %
+  of the rpm (long/short revolutions from the firing pulses), matched by the
+  crank-angle ripple with ``engine_firing_ripple_ratio = 1.2``,
+  ``engine_inertia_kg_m2 = 0.045`` and ``hall_primary_phase_rad = 0.7``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dyno.sim.brake import Brake
+from dyno.sim.cvt import CVT
+from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
+from dyno.sim.sensors import LowPassFilter, angle_at, crossing_time_s
+
+TWO_PI = 2.0 * math.pi
+_REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
+
+ADC_STATUS_ERROR = 0x20
+
+
+def _resolve_map_path(path: str) -> Path:
+    p = Path(path)
+    if p.is_absolute():
+        return p
+    # Repository-relative by design (the default), so it works from any cwd;
+    # fall back to cwd-relative for user-supplied relative paths.
+    repo_p = _REPO_ROOT / p
+    return repo_p if repo_p.exists() or not p.exists() else p
+
+
+@dataclass
+class RigParams:
+    """Every parameter of the simulated rig (units in the names).
+
+    Defaults describe the thesis rig (Messick 2018, Sections 8-9) where it
+    gives a number, and representative values elsewhere (commented).
+    """
+
+    # ---- engine
+    engine_map_path: str = DEFAULT_ENGINE_MAP
+    engine_inertia_kg_m2: float = 0.045          # crank + flywheel + primary pulley
+    engine_idle_rpm: float = 1800.0
+    engine_idle_offset_rpm: float = 20.0         # governor set point above idle: friction balance lands on ~1800
+    engine_governor_droop_rpm: float = 150.0     # part-throttle governor band
+    engine_friction_nm: float = 1.5              # motoring friction at 0 rpm
+    engine_friction_at_3600_rpm_nm: float = 3.0  # motoring friction + pumping at 3600 rpm
+    engine_firing_ripple_ratio: float = 1.2      # half-order gas-torque amplitude / gross torque
+    engine_stall_rpm: float = 600.0
+    engine_start_rpm: float = 1000.0             # speed the pull start leaves the engine at
+    # ---- CVT (ratio = primary speed / secondary speed)
+    cvt_ratio_low: float = 1.74                  # thesis belt-model range, Fig. 6.20
+    cvt_ratio_high: float = 0.72
+    cvt_primary_radius_max_m: float = 0.093      # belt radius at full shift (thesis 9.4.1)
+    cvt_sheave_half_angle_deg: float = 13.0
+    cvt_flyweight_coeff_kg_m: float = 0.0104     # n m r dr/dz of the flyweights (eq. 9.2), held constant
+    cvt_primary_spring_preload_n: float = 660.0  # 950 N at full shift - 18200 N/m x travel (thesis)
+    cvt_primary_spring_rate_n_per_m: float = 18200.0
+    cvt_secondary_spring_preload_n: float = 200.0
+    cvt_secondary_spring_rate_n_per_m: float = 5000.0
+    cvt_helix_gain_n_per_nm: float = 20.0        # axial force per N*m through the helix
+    cvt_shift_time_constant_s: float = 0.4
+    cvt_engage_start_rpm: float = 1900.0
+    cvt_engage_full_rpm: float = 2100.0
+    cvt_clutch_capacity_nm: float = 60.0
+    cvt_slip_base_frac: float = 0.01
+    cvt_slip_per_20nm_frac: float = 0.015
+    cvt_loss_frac_min: float = 0.04
+    cvt_loss_frac_high_ratio: float = 0.07       # extra loss toward overdrive (thesis Fig. 9.6)
+    cvt_loss_frac_low_ratio: float = 0.02
+    cvt_ratio_best_eff: float = 1.35
+    cvt_bending_drag_nm: float = 0.25
+    # ---- driveline
+    secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
+    brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
+    gear_ratio_brake_per_secondary: float = 32.0 / 61.0
+    # ---- brake
+    actuator_speed_mm_s: float = 5.0
+    actuator_travel_mm: float = 50.0
+    brake_free_travel_mm: float = 1.0
+    brake_spring_rate_n_per_mm: float = 5.0
+    master_cylinder_bore_mm: float = 19.05
+    caliper_piston_bore_mm: float = 48.0
+    brake_pad_radius_m: float = 0.10
+    brake_mu_cold: float = 0.40
+    brake_mu_fade_per_c: float = 6e-4
+    brake_mu_floor_frac: float = 0.5
+    brake_residual_drag_nm: float = 0.5          # at the brake shaft, pads just touching
+    rotor_heat_capacity_j_per_k: float = 2800.0  # ~6 kg cast-iron rotor
+    rotor_cooling_w_per_k: float = 8.0
+    rotor_cooling_w_per_k_per_rad_s: float = 0.15
+    ambient_temp_c: float = 25.0
+    rotor_temp_limit_c: float = 600.0            # physical sanity cap only; the controller's limit is its own
+    # ---- torque sensor chain
+    adc_gain_counts_per_nm: float = 108.188097293   # counts per N*m of SECONDARY torque (thesis eq. 9.1)
+    adc_offset_counts: float = 35144.7019735
+    lockin_cutoff_hz: float = 15.0
+    lockin_filter_order: int = 2
+    adc_rate_hz: float = 125.0
+    adc_clock_error_frac: float = 0.015
+    adc_noise_counts: float = 85.0
+    adc_noise_counts_per_nm: float = 5.0
+    ripple_firing_frac: float = 1.2
+    ripple_engine_rev_frac: float = 0.25
+    ripple_brake_shaft_frac: float = 0.10
+    adc_error_prob: float = 0.0
+    # ---- Hall sensors
+    hall_bounce_prob: float = 0.05
+    hall_bounce_min_s: float = 50e-6
+    hall_bounce_max_s: float = 500e-6
+    hall_primary_phase_rad: float = 0.7          # magnet position relative to the firing cycle
+    # ---- numerics
+    max_substep_s: float = 0.004               # 1/150 s host polls -> two 3.3 ms substeps
+
+
+@dataclass
+class SensorEvent:
+    """One sensor event: a Hall falling edge or an ADC conversion."""
+
+    channel: str          # "primary" | "secondary" | "adc"
+    t_s: float            # true simulation time of the event
+    code: int = 0         # ADC code (0..65535, clipped at the rails)
+    status: int = 0       # AD7171 status bits; 0x20 = error bit
+
+
+@dataclass
+class Truth:
+    """True state of the rig at the current time (for tests)."""
+
+    t_s: float
+    rpm_primary: float
+    rpm_secondary: float
+    ratio: float                   # primary speed / secondary speed (speed ratio, includes creep)
+    torque_engine_nm: float        # mean net engine torque (no firing ripple)
+    torque_primary_nm: float       # belt input torque
+    torque_secondary_nm: float     # belt output torque
+    torque_brake_shaft_nm: float   # torque in the instrumented brake shaft (mean, no ripple)
+    power_in_w: float              # CVT input power  T_p omega_p
+    power_out_w: float             # CVT output power T_s omega_s
+    efficiency: float              # power_out / power_in (0 when no power flows)
+    rotor_temp_c: float
+    actuator_mm: float
+    engine_running: bool
+    ratio_geometric: float = 0.0   # r_s / r_p of the sheaves
+    shift_travel_frac: float = 0.0
+    power_engine_w: float = 0.0    # engine mean torque x speed
+    power_loss_w: float = 0.0      # power_in - power_out (belt losses)
+    brake_mu: float = 0.0
+    brake_torque_capacity_nm: float = 0.0
+    clutch_locked: bool = False
+
+
+class RigModel:
+    """The simulated rig.  See the module docstring for the physics.
+
+    Inputs (attributes set by the device/actuator emulation):
+    ``throttle_frac`` (0 idle .. 1 full), ``engine_enabled`` (False = kill
+    relay open), ``actuator_dir`` (+1 extend/apply, -1 retract, 0 stop).
+    Fault knobs: ``stuck_hall`` (set of channel names that give no edges),
+    ``adc_error_prob``.
+    """
+
+    def __init__(self, params: RigParams | None = None, seed: int = 0):
+        p = params if params is not None else RigParams()
+        self.params = p
+        self.seed = seed
+        self.engine_map = EngineMap.from_csv(_resolve_map_path(p.engine_map_path))
+        self.engine = Engine(self.engine_map, idle_rpm=p.engine_idle_rpm, idle_offset_rpm=p.engine_idle_offset_rpm,
+                             governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
+                             friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
+                             firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
+        self.cvt = CVT(ratio_low=p.cvt_ratio_low, ratio_high=p.cvt_ratio_high,
+                       primary_radius_max_m=p.cvt_primary_radius_max_m,
+                       sheave_half_angle_deg=p.cvt_sheave_half_angle_deg,
+                       flyweight_coeff_kg_m=p.cvt_flyweight_coeff_kg_m,
+                       primary_spring_preload_n=p.cvt_primary_spring_preload_n,
+                       primary_spring_rate_n_per_m=p.cvt_primary_spring_rate_n_per_m,
+                       secondary_spring_preload_n=p.cvt_secondary_spring_preload_n,
+                       secondary_spring_rate_n_per_m=p.cvt_secondary_spring_rate_n_per_m,
+                       helix_gain_n_per_nm=p.cvt_helix_gain_n_per_nm, engage_start_rpm=p.cvt_engage_start_rpm,
+                       engage_full_rpm=p.cvt_engage_full_rpm, clutch_capacity_nm=p.cvt_clutch_capacity_nm,
+                       slip_base_frac=p.cvt_slip_base_frac, slip_per_20nm_frac=p.cvt_slip_per_20nm_frac,
+                       loss_frac_min=p.cvt_loss_frac_min, loss_frac_high_ratio=p.cvt_loss_frac_high_ratio,
+                       loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
+                       bending_drag_nm=p.cvt_bending_drag_nm)
+        self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
+                           free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
+                           master_cylinder_bore_mm=p.master_cylinder_bore_mm,
+                           caliper_piston_bore_mm=p.caliper_piston_bore_mm, pad_radius_m=p.brake_pad_radius_m,
+                           mu_cold=p.brake_mu_cold, mu_fade_per_c=p.brake_mu_fade_per_c,
+                           mu_floor_frac=p.brake_mu_floor_frac, residual_drag_nm=p.brake_residual_drag_nm,
+                           rotor_heat_capacity_j_per_k=p.rotor_heat_capacity_j_per_k,
+                           rotor_cooling_w_per_k=p.rotor_cooling_w_per_k,
+                           rotor_cooling_w_per_k_per_rad_s=p.rotor_cooling_w_per_k_per_rad_s,
+                           ambient_c=p.ambient_temp_c)
+        self.lockin = LowPassFilter(p.lockin_cutoff_hz, p.lockin_filter_order)
+
+        # Independent random streams, so that e.g. changing the bounce
+        # probability does not change the ADC noise sequence.
+        ss = np.random.SeedSequence(seed)
+        s_noise, s_bounce, s_err, s_phase = ss.spawn(4)
+        self._rng_noise = np.random.default_rng(s_noise)
+        self._rng_bounce = np.random.default_rng(s_bounce)
+        self._rng_err = np.random.default_rng(s_err)
+        rng_phase = np.random.default_rng(s_phase)
+        self._noise_buf: list[float] = []
+        self._bounce_buf: list[float] = []
+        self._err_buf: list[float] = []
+
+        # inputs
+        self.throttle_frac = 0.0
+        self.engine_enabled = True
+        self.actuator_dir = 0
+        # fault knobs
+        self.stuck_hall: set[str] = set()
+        self.adc_error_prob = p.adc_error_prob
+
+        g = p.gear_ratio_brake_per_secondary
+        self._g = g
+        self._j_e = p.engine_inertia_kg_m2
+        self._j_s = p.secondary_inertia_kg_m2 + p.brake_shaft_inertia_kg_m2 * g * g
+        self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
+
+        # state
+        self.t_s = 0.0
+        self._running = False
+        self._th_e = 0.0
+        self._w_e = 0.0
+        self._th_s = float(rng_phase.uniform(0.0, TWO_PI))
+        self._w_s = 0.0
+        self._x = 0.0
+        self._ratio_geo = self.cvt.ratio_of_travel(0.0)
+        self._slip = p.cvt_slip_base_frac
+        self._locked = False
+        self._act_mm = 0.0
+        self._rotor_c = p.ambient_temp_c
+        self._t_e = 0.0
+        self._t_p = 0.0
+        self._t_s = 0.0
+        self._t_gauge = 0.0
+        self._t_brake_cap = self.brake.torque_capacity_nm(0.0, self._rotor_c)
+        self._filt_x = self.lockin.steady_state(0.0)
+        self._filt_y = 0.0
+        self._next_edge_e = 1       # index k of the next primary edge (measured angle 2 pi k)
+        self._next_edge_s = int(self._th_s // TWO_PI) + 1
+        self._phase_firing = float(rng_phase.uniform(0.0, TWO_PI))
+        self._phase_rev = float(rng_phase.uniform(0.0, TWO_PI))
+        self._phase_brake = float(rng_phase.uniform(0.0, TWO_PI))
+        self._next_adc_t = float(rng_phase.uniform(0.0, self._adc_period_s))
+        self._pending: list[SensorEvent] = []   # bounce edges beyond the current step's end
+
+    # ------------------------------------------------------------ inputs
+    def start_engine(self) -> None:
+        """Operator pull-start: if enabled and stopped, the engine fires and runs up to idle."""
+        if not self.engine_enabled or self._running:
+            return
+        self._running = True
+        self._w_e = max(self._w_e, self.params.engine_start_rpm * RAD_S_PER_RPM)
+        if self._locked:
+            self._w_s = self._kin_ratio() * self._w_e
+
+    @property
+    def rotor_temp_c(self) -> float:
+        """Brake rotor temperature (for the emulated MLX90614)."""
+        return self._rotor_c
+
+    @property
+    def actuator_mm(self) -> float:
+        return self._act_mm
+
+    @property
+    def engine_running(self) -> bool:
+        return self._running
+
+    def _kin_ratio(self) -> float:
+        return (1.0 - self._slip) / self._ratio_geo
+
+    # ------------------------------------------------------------ random buffers
+    def _normal(self) -> float:
+        buf = self._noise_buf
+        if not buf:
+            buf.extend(self._rng_noise.standard_normal(4096).tolist())
+        return buf.pop()
+
+    def _uniform_bounce(self) -> float:
+        buf = self._bounce_buf
+        if not buf:
+            buf.extend(self._rng_bounce.random(4096).tolist())
+        return buf.pop()
+
+    def _uniform_err(self) -> float:
+        buf = self._err_buf
+        if not buf:
+            buf.extend(self._rng_err.random(4096).tolist())
+        return buf.pop()
+
+    # ------------------------------------------------------------ stepping
+    def step(self, dt_s: float) -> list[SensorEvent]:
+        """Advance by ``dt_s``; return the sensor events in ``(t, t + dt]``, in time order."""
+        if not dt_s > 0.0:
+            if dt_s == 0.0:
+                return []
+            raise ValueError("dt_s must be >= 0")
+        t_end = self.t_s + dt_s
+        events: list[SensorEvent] = []
+        h_max = self.params.max_substep_s
+        n_sub = max(1, int(math.ceil(dt_s / h_max - 1e-9)))
+        h = dt_s / n_sub
+        for j in range(n_sub):
+            t1 = t_end if j == n_sub - 1 else self.t_s + h
+            self._substep(t1 - self.t_s, events)
+            self.t_s = t1
+        if self._pending:
+            keep = []
+            for ev in self._pending:
+                (events if ev.t_s <= t_end else keep).append(ev)
+            self._pending = keep
+        events.sort(key=_event_time)
+        return events
+
+    def _substep(self, h: float, events: list[SensorEvent]) -> None:
+        p = self.params
+        cvt = self.cvt
+        eng = self.engine
+        brk = self.brake
+        g = self._g
+        j_e = self._j_e
+        j_s = self._j_s
+        t0 = self.t_s
+
+        if not self.engine_enabled:
+            self._running = False
+
+        # --- actuator and brake capacity (inputs act from the start of the step)
+        self._act_mm = brk.move_actuator_mm(self._act_mm, self.actuator_dir, h)
+        t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
+        t_load_cap = t_brake_cap * g                                        # referred to the secondary
+
+        w_e0 = self._w_e
+        w_s0 = self._w_s
+        rpm_e = w_e0 * RPM_PER_RAD_S
+        running = self._running
+        t_e = eng.torque_nm(rpm_e, self.throttle_frac, running)
+
+        # --- shift: quasi-static balance + first-order lag (exact exponential)
+        x_star = cvt.equilibrium_travel(w_e0, self._t_s)
+        self._x += (x_star - self._x) * (1.0 - math.exp(-h / p.cvt_shift_time_constant_s))
+        i = cvt.ratio_of_travel(self._x)
+        self._ratio_geo = i
+        eta_m = 1.0 - cvt.loss_frac(i)
+        t_d = cvt.drag_nm(i)
+        self._slip = cvt.creep_slip(self._t_p)
+        k = (1.0 - self._slip) / i
+        cap = cvt.clutch_capacity_nm_at(rpm_e)
+
+        locked = self._locked
+        if locked:
+            # Ratio changed since the last step: belt impulse keeps the two
+            # speeds consistent, conserving i J_e w_e + J_s w_s.
+            w_e0 = (i * j_e * w_e0 + j_s * w_s0) / (j_s * k + i * j_e)
+            w_s0 = k * w_e0
+            acc, t_p = self._locked_accel(t_e, i, k, eta_m, t_d, t_load_cap)
+            if abs(t_p) > cap or not running and w_e0 <= 0.0:
+                locked = False
+        if locked:
+            w_e1 = w_e0 + acc * h
+            if w_e1 < 0.0:
+                w_e1 = 0.0
+            w_s1 = k * w_e1
+            t_s = cvt.secondary_torque_nm(t_p, i, eta_m, t_d)
+            acc_s = (w_s1 - w_s0) / h
+            t_brake_applied = t_brake_cap if w_s1 > 0.0 else t_s / g
+        else:
+            # Belt slipping (or open): torque limited by the engagement capacity.
+            v_rel = k * w_e0 - w_s0
+            if cap > 0.0 and v_rel != 0.0:
+                t_p = cap if v_rel > 0.0 else -cap
+            else:
+                t_p = 0.0
+            t_s = i * eta_m * t_p if t_p >= 0.0 else i * t_p / eta_m
+            w_e1 = w_e0 + h * (t_e - t_p) / j_e
+            if w_e1 < 0.0:
+                w_e1 = 0.0
+            # Karnopp stick/slip for the brake on the secondary side.
+            if w_s0 <= 0.0 and abs(t_s) <= t_load_cap:
+                w_s1 = 0.0
+                t_brake_applied = t_s / g
+            else:
+                w_s1 = w_s0 + h * (t_s - t_load_cap) / j_s
+                t_brake_applied = t_brake_cap
+                if w_s1 <= 0.0:
+                    w_s1 = 0.0
+            acc_s = (w_s1 - w_s0) / h
+            # Lock when the slip speed crosses zero and the locked torque fits.
+            v_rel1 = k * w_e1 - w_s1
+            if cap > 0.0 and (v_rel > 0.0) != (v_rel1 > 0.0) or (cap > 0.0 and v_rel == 0.0 and w_e1 > 0.0):
+                acc_l, t_p_l = self._locked_accel(t_e, i, k, eta_m, t_d, t_load_cap)
+                if abs(t_p_l) <= cap:
+                    w_e1 = (i * j_e * w_e1 + j_s * w_s1) / (j_s * k + i * j_e)
+                    w_s1 = k * w_e1
+                    locked = True
+                    t_p = t_p_l
+                    t_s = cvt.secondary_torque_nm(t_p, i, eta_m, t_d)
+                    acc_s = (w_s1 - w_s0) / h
+        self._locked = locked
+
+        if running and w_e1 * RPM_PER_RAD_S < p.engine_stall_rpm and w_e1 < w_e0:
+            self._running = False   # stalled
+
+        # --- angles (trapezoid = exact for the constant acceleration of the step)
+        th_e0 = self._th_e
+        th_s0 = self._th_s
+        a_e = (w_e1 - w_e0) / h
+        a_s = (w_s1 - w_s0) / h
+        th_e1 = th_e0 + 0.5 * (w_e0 + w_e1) * h
+        th_s1 = th_s0 + 0.5 * (w_s0 + w_s1) * h
+        self._th_e = th_e1
+        self._th_s = th_s1
+        self._w_e = w_e1
+        self._w_s = w_s1
+        self._t_e = t_e
+        self._t_p = t_p
+        self._t_s = t_s
+        self._t_brake_cap = t_brake_cap
+
+        # --- torque in the instrumented brake shaft: brake + rotor inertia
+        t_gauge = t_brake_applied + p.brake_shaft_inertia_kg_m2 * g * acc_s
+        self._t_gauge = t_gauge
+
+        # --- rotor heat (exact relaxation over the step)
+        w_b = 0.5 * (w_s0 + w_s1) * g
+        p_brake = t_brake_cap * w_b if w_b > 0.0 else 0.0
+        self._rotor_c = min(brk.rotor_temp_after_c(self._rotor_c, p_brake, w_b, h), p.rotor_temp_limit_c)
+
+        # --- Hall edges
+        t1 = t0 + h
+        if th_e1 > TWO_PI * self._next_edge_e - 0.25:
+            amp = eng.firing_angle_amplitude_rad(w_e1, t_e, rpm_e) if running else 0.0
+            self._primary_edges(t0, h, th_e0, w_e0, a_e, th_e1, amp, events)
+        if th_s1 >= TWO_PI * self._next_edge_s:
+            self._secondary_edges(t0, h, th_s0, w_s0, a_s, th_s1, events)
+
+        # --- lock-in filter (exact ZOH) and ADC conversions
+        y0 = self._filt_y
+        xf, y1 = self.lockin.advance(self._filt_x, t_gauge, h)
+        self._filt_x = xf
+        self._filt_y = y1
+        while self._next_adc_t <= t1:
+            ta = self._next_adc_t
+            tau = ta - t0
+            y = y0 + (y1 - y0) * (tau / h)
+            events.append(self._adc_event(ta, tau, y, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge))
+            self._next_adc_t = ta + self._adc_period_s
+
+    def _locked_accel(self, t_e, i, k, eta_m, t_d, t_load):
+        """Crank acceleration and belt input torque with the belt gripping."""
+        j_e = self._j_e
+        j_s = self._j_s
+        acc = (i * eta_m * t_e - i * t_d - t_load) / (j_s * k + i * eta_m * j_e)
+        t_p = t_e - j_e * acc
+        if t_p < 0.0:
+            # reverse power flow (engine braking): losses the other way
+            acc = (i * t_e / eta_m - i * t_d - t_load) / (j_s * k + i * j_e / eta_m)
+            t_p = t_e - j_e * acc
+        return acc, t_p
+
+    def _emit_edge(self, channel: str, t: float, events: list[SensorEvent]) -> None:
+        if channel in self.stuck_hall:
+            return
+        events.append(SensorEvent(channel, t))
+        pb = self.params.hall_bounce_prob
+        if pb > 0.0 and self._uniform_bounce() < pb:
+            p = self.params
+            tb = t + p.hall_bounce_min_s + (p.hall_bounce_max_s - p.hall_bounce_min_s) * self._uniform_bounce()
+            self._pending.append(SensorEvent(channel, tb))
+
+    def _primary_edges(self, t0, h, th0, w0, a, th1, amp, events) -> None:
+        """Edges where the *measured* crank angle (mean + firing ripple) crosses 2 pi k."""
+        ph = self.params.hall_primary_phase_rad
+        while True:
+            target = TWO_PI * self._next_edge_e
+            ts = target
+            if amp > 0.0:
+                for _ in range(4):   # fixed point, contraction amp/2 < 0.1
+                    ts = target + amp * math.sin(0.5 * ts + ph)
+            if th1 < ts:
+                return
+            tau = crossing_time_s(th0, w0, a, ts)
+            tau = min(max(tau, 0.0), h)
+            self._emit_edge("primary", t0 + tau, events)
+            self._next_edge_e += 1
+
+    def _secondary_edges(self, t0, h, th0, w0, a, th1, events) -> None:
+        while th1 >= TWO_PI * self._next_edge_s:
+            tau = crossing_time_s(th0, w0, a, TWO_PI * self._next_edge_s)
+            tau = min(max(tau, 0.0), h)
+            self._emit_edge("secondary", t0 + tau, events)
+            self._next_edge_s += 1
+
+    def _adc_event(self, ta, tau, y_mean, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge) -> SensorEvent:
+        p = self.params
+        g = self._g
+        th_e = angle_at(th_e0, w_e0, a_e, tau)
+        w_e = w_e0 + a_e * tau
+        sig = y_mean
+        amp_base = abs(t_gauge)
+        if amp_base > 0.0 and w_e > 0.0:
+            lp = self.lockin
+            gm, ph = lp.gain_phase(0.5 * w_e)
+            sig += p.ripple_firing_frac * amp_base * gm * math.sin(0.5 * th_e + self._phase_firing + ph)
+            gm, ph = lp.gain_phase(w_e)
+            sig += p.ripple_engine_rev_frac * amp_base * gm * math.sin(th_e + self._phase_rev + ph)
+            w_s = w_s0 + a_s * tau
+            if w_s > 0.0:
+                th_b = g * angle_at(th_s0, w_s0, a_s, tau)
+                gm, ph = lp.gain_phase(g * w_s)
+                sig += p.ripple_brake_shaft_frac * amp_base * gm * math.sin(th_b + self._phase_brake + ph)
+        t_sec = sig * g
+        sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
+        code = p.adc_offset_counts + p.adc_gain_counts_per_nm * t_sec + sigma * self._normal()
+        code_i = int(round(code))
+        code_i = 0 if code_i < 0 else (65535 if code_i > 65535 else code_i)
+        status = 0
+        if self.adc_error_prob > 0.0 and self._uniform_err() < self.adc_error_prob:
+            status = ADC_STATUS_ERROR
+        return SensorEvent("adc", ta, code_i, status)
+
+    # ------------------------------------------------------------ truth
+    def truth(self) -> Truth:
+        w_e = self._w_e
+        w_s = self._w_s
+        p_in = self._t_p * w_e
+        p_out = self._t_s * w_s
+        eff = p_out / p_in if p_in > 1e-9 and p_out > 0.0 else 0.0
+        speed_ratio = w_e / w_s if w_s > 1e-9 else 0.0
+        return Truth(
+            t_s=self.t_s,
+            rpm_primary=w_e * RPM_PER_RAD_S,
+            rpm_secondary=w_s * RPM_PER_RAD_S,
+            ratio=speed_ratio,
+            torque_engine_nm=self._t_e,
+            torque_primary_nm=self._t_p,
+            torque_secondary_nm=self._t_s,
+            torque_brake_shaft_nm=self._t_gauge,
+            power_in_w=p_in,
+            power_out_w=p_out,
+            efficiency=eff,
+            rotor_temp_c=self._rotor_c,
+            actuator_mm=self._act_mm,
+            engine_running=self._running,
+            ratio_geometric=self._ratio_geo,
+            shift_travel_frac=self._x,
+            power_engine_w=self._t_e * w_e,
+            power_loss_w=p_in - p_out,
+            brake_mu=self.brake.mu(self._rotor_c),
+            brake_torque_capacity_nm=self._t_brake_cap,
+            clutch_locked=self._locked,
+        )
+
+
+def _event_time(ev: SensorEvent) -> float:
+    return ev.t_s
