@@ -1,0 +1,118 @@
+"""The firmware over the Pi's I²C bus (smbus2), with retry, bus recovery and reset.
+
+:class:`RecoveringI2CTransport` keeps the base class's one combined
+``i2c_rdwr`` per poll and adds, below the protocol:
+
+* retry with exponential back-off inside one ``transfer``.  Re-sending the
+  same request is safe in v1: ``ACK_POLL(seq)`` for a frame the device
+  already retired just serves the current frame again (docs/protocol.md);
+* bus recovery after a stuck transfer (ETIMEDOUT): close and reopen
+  ``/dev/i2c-N``, which re-initialises the BCM2835 controller state the
+  driver keeps per open file.  (The classic 9-clock SDA release needs the
+  pins as GPIO; with the ``i2c-gpio`` overlay the kernel does it itself, see
+  hardware/README.md);
+* an Arduino reset (via the reset pin) after N consecutive failed transfers,
+  because a Nano whose TWI state machine has wedged holding SDA low never
+  recovers on its own.  Its RESET flag then starts a new time epoch.
+
+Failures still reach the caller as ``TransportFault`` so the reader counts them.
+"""
+
+from __future__ import annotations
+
+import errno
+from collections import Counter
+
+from dyno.hw.clock import MonotonicClock
+from dyno.transports.base import _ERRNO_CAUSE, I2CTransport, TransportFault
+
+
+class RecoveringI2CTransport(I2CTransport):
+    name = "i2c"
+
+    def __init__(self, bus, address: int, *, retries: int = 3, retry_backoff_s: float = 0.002,
+                 reset_after_failures: int = 20, reopen=None, reset=None, clock=None) -> None:
+        super().__init__(bus, address)
+        self.retries = int(retries)
+        self.retry_backoff_s = float(retry_backoff_s)
+        self.reset_after_failures = int(reset_after_failures)
+        self._reopen = reopen  # () -> new bus; None: recovery not possible (e.g. simulated bus)
+        self._reset = reset  # () -> None, pulses the Arduino's RESET
+        self.clock = clock or MonotonicClock()
+        self.consecutive_failures = 0
+        self.retried: Counter = Counter()  # attempts that failed but were retried, by cause
+        self.recoveries = 0
+        self.resets = 0
+
+    def _transfer(self, request: bytes, read_len: int) -> bytes:
+        delay = self.retry_backoff_s
+        last: BaseException | None = None
+        for attempt in range(self.retries + 1):
+            try:
+                data = super()._transfer(request, read_len)
+            except (OSError, TransportFault) as exc:
+                last = exc
+                cause = exc.cause if isinstance(exc, TransportFault) else _ERRNO_CAUSE.get(exc.errno, "io")
+                if cause == "timeout":
+                    self._recover_bus()
+                if attempt < self.retries:
+                    self.retried[cause] += 1
+                    self.clock.sleep(delay)
+                    delay *= 2
+                continue
+            self.consecutive_failures = 0
+            return data
+        self.consecutive_failures += 1
+        if self._reset is not None and self.consecutive_failures >= self.reset_after_failures:
+            self.consecutive_failures = 0
+            self.resets += 1
+            self._reset()
+        assert last is not None
+        raise last
+
+    def _recover_bus(self) -> None:
+        if self._reopen is None:
+            return
+        try:
+            close = getattr(self.bus, "close", None)
+            if close:
+                close()
+        except OSError:
+            pass
+        try:
+            self.bus = self._reopen()
+            self.recoveries += 1
+        except OSError as exc:  # adapter gone: the retry will fail and be counted
+            raise TransportFault("io", f"bus reopen failed: {exc}") from exc
+
+
+def smbus_factory(bus_number: int):
+    """A callable opening ``/dev/i2c-<n>`` (imported lazily: laptops have no smbus2 device)."""
+
+    def open_bus():
+        from smbus2 import SMBus
+
+        try:
+            return SMBus(bus_number)
+        except FileNotFoundError as exc:
+            raise OSError(errno.ENODEV, f"/dev/i2c-{bus_number} not found (enable I2C: raspi-config)") from exc
+
+    return open_bus
+
+
+def open_i2c(config, *, bus=None, reset=None, clock=None, address=None) -> RecoveringI2CTransport:
+    """The firmware transport for a :class:`dyno.rigconfig.RigConfig`.
+
+    ``bus`` defaults to ``smbus2.SMBus(config.i2c.bus)`` (reopened on recovery);
+    pass the simulated bus to run the same code off the rig.  ``reset`` is
+    usually ``GpioActuators.reset_arduino``.
+    """
+    c = config.i2c
+    reopen = None
+    if bus is None:
+        reopen = smbus_factory(c.bus)
+        bus = reopen()
+    return RecoveringI2CTransport(
+        bus, c.firmware_address if address is None else address,
+        retries=c.retries, retry_backoff_s=c.retry_backoff_s,
+        reset_after_failures=c.reset_after_failures, reopen=reopen, reset=reset, clock=clock)

@@ -1,0 +1,229 @@
+"""The firmware over USB serial (pyserial): v1 frames as COBS packets ending in 0x00.
+
+Framing (docs/protocol.md, "v1 over USB serial"): each command and each frame
+is COBS-encoded and terminated by one 0x00.  COBS output has no zero byte, so
+a 0x00 always ends a packet and a receiver resynchronises at the next 0x00.
+
+Garbage glued to the front of a packet (line noise, a reset mid-packet, a
+bootloader banner) is not separated from it by a 0x00.  :class:`CobsDeframer`
+therefore checks each packet with a validator (default: a v1 frame, whose
+length byte and CRC-16 must agree) and, if the whole packet fails, tries its
+suffixes, so no complete frame is lost to garbage in front of it.
+
+Over serial, frames come without padding; the transport pads them to the
+asked length so the same v1 decoder (which checks padding) reads both links.
+"""
+
+from __future__ import annotations
+
+import binascii
+from collections import Counter, deque
+
+from dyno.hw.clock import MonotonicClock
+from dyno.transports.base import Transport, TransportFault
+
+DELIMITER = b"\x00"
+FRAME_MAX = 32  # v1 frames are at most the Nano's 32-byte Wire buffer
+# COBS adds one byte per 254 (and one minimum): a frame never encodes longer than this.
+ENCODED_MAX = FRAME_MAX + 1 + FRAME_MAX // 254
+
+
+# The `cobs` PyPI package is not installed on the rig image and the codec is
+# tiny, so it is written out here (Cheshire & Baker 1999).
+
+def cobs_encode(data: bytes) -> bytes:
+    """COBS-encode ``data`` (no delimiter added)."""
+    out = bytearray()
+    block = bytearray()
+    for byte in data:
+        if byte == 0:
+            out.append(len(block) + 1)
+            out += block
+            block.clear()
+        else:
+            block.append(byte)
+            if len(block) == 254:  # a full block: code 0xFF means "254 bytes, no zero follows"
+                out.append(255)
+                out += block
+                block.clear()
+    out.append(len(block) + 1)
+    out += block
+    return bytes(out)
+
+
+def cobs_decode(packet: bytes) -> bytes:
+    """Decode one COBS packet (without its 0x00).  Raises ValueError if malformed."""
+    out = bytearray()
+    i, n = 0, len(packet)
+    while i < n:
+        code = packet[i]
+        if code == 0:
+            raise ValueError("zero byte inside a COBS packet")
+        end = i + code
+        if end > n:
+            raise ValueError("COBS code runs past the end of the packet")
+        block = packet[i + 1:end]
+        if 0 in block:
+            raise ValueError("zero byte inside a COBS packet")
+        out += block
+        i = end
+        if code != 255 and i < n:
+            out.append(0)
+    return bytes(out)
+
+
+def is_v1_frame(data: bytes) -> bool:
+    """Length byte matches and CRC-16/CCITT-FALSE checks (docs/protocol.md)."""
+    n = len(data)
+    if n < 13 or n > FRAME_MAX or data[1] != n:
+        return False
+    return binascii.crc_hqx(data[:-2], 0xFFFF) == (data[-2] << 8 | data[-1])
+
+
+class CobsDeframer:
+    """Byte stream in, decoded packets out; resynchronises after garbage.
+
+    ``validate(decoded) -> bool`` (default :func:`is_v1_frame`; ``None`` accepts
+    any well-formed COBS packet).  Counters: ``packets``, ``garbage_bytes``,
+    ``bad_packets`` (delimited chunks with no valid packet in them).
+    """
+
+    def __init__(self, validate=is_v1_frame, max_encoded: int = ENCODED_MAX) -> None:
+        self.validate = validate
+        self.max_encoded = max_encoded
+        self._buf = bytearray()
+        self.stats: Counter = Counter()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        out = []
+        for chunk_end in _split_keep(data):
+            piece, ended = chunk_end
+            self._buf += piece
+            if not ended:
+                # No delimiter yet: keep at most one maximal packet's worth, since
+                # anything older can only be garbage.
+                if self.validate is not None and len(self._buf) > self.max_encoded:
+                    drop = len(self._buf) - self.max_encoded
+                    self.stats["garbage_bytes"] += drop
+                    del self._buf[:drop]
+                continue
+            chunk = bytes(self._buf)
+            self._buf.clear()
+            if chunk:
+                pkt = self._extract(chunk)
+                if pkt is not None:
+                    out.append(pkt)
+        return out
+
+    def _extract(self, chunk: bytes) -> bytes | None:
+        start_min = max(0, len(chunk) - self.max_encoded) if self.validate is not None else 0
+        starts = range(start_min, len(chunk)) if self.validate is not None else (0,)
+        for start in starts:  # longest suffix first: the whole chunk when it is clean
+            try:
+                pkt = cobs_decode(chunk[start:])
+            except ValueError:
+                continue
+            if self.validate is None or self.validate(pkt):
+                self.stats["packets"] += 1
+                self.stats["garbage_bytes"] += start
+                return pkt
+        self.stats["bad_packets"] += 1
+        self.stats["garbage_bytes"] += len(chunk)
+        return None
+
+
+def _split_keep(data: bytes):
+    """Yield (piece, ended_by_delimiter) over ``data``."""
+    start = 0
+    while True:
+        i = data.find(0, start)
+        if i < 0:
+            if start < len(data):
+                yield data[start:], False
+            return
+        yield data[start:i], True
+        start = i + 1
+
+
+class SerialTransport(Transport):
+    """One request packet out, one frame packet back, on a pyserial-like port.
+
+    ``port`` needs ``write``, ``read(n)``, ``in_waiting`` and a settable
+    ``timeout`` (pyserial ``Serial`` or ``serial_for_url("loop://")``).
+
+    Packets that were already waiting before a request is sent are late
+    answers to a request whose transfer already timed out; they are dropped
+    (counted as ``late``) so answers never lag requests.  Nothing is lost by
+    that: an unacknowledged v1 frame is served again on the next poll.
+    """
+
+    name = "serial"
+
+    def __init__(self, port, *, timeout_s: float = 0.05, clock=None, validate=is_v1_frame) -> None:
+        super().__init__()
+        self.port = port
+        self.timeout_s = float(timeout_s)
+        self.clock = clock or MonotonicClock()
+        self.deframer = CobsDeframer(validate)
+        self._packets: deque[bytes] = deque()
+        self.late = 0
+
+    def _pump(self, block_s: float) -> None:
+        """Read what is there (waiting up to ``block_s`` for the first byte)."""
+        port = self.port
+        port.timeout = max(0.0, block_s)
+        first = port.read(1)
+        if not first:
+            return
+        rest = port.read(port.in_waiting) if port.in_waiting else b""
+        self._packets.extend(self.deframer.feed(bytes(first) + bytes(rest)))
+
+    def _transfer(self, request: bytes, read_len: int) -> bytes:
+        if read_len:
+            while self.port.in_waiting:
+                self._pump(0.0)
+            self.late += len(self._packets)
+            self._packets.clear()
+        if request:
+            self.port.write(cobs_encode(request) + DELIMITER)
+            flush = getattr(self.port, "flush", None)
+            if flush:
+                flush()
+        if not read_len:
+            return b""
+        deadline = self.clock.now() + self.timeout_s
+        while not self._packets:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
+                raise TransportFault("timeout", f"no frame within {self.timeout_s * 1e3:.0f} ms")
+            self._pump(remaining)
+        pkt = self._packets.popleft()
+        if len(pkt) > read_len:
+            raise TransportFault("io", f"{len(pkt)}-byte packet for a {read_len}-byte read")
+        return pkt + bytes(read_len - len(pkt))
+
+    def receive(self) -> list[bytes]:
+        """Every complete packet received so far (no request): for streaming use and tests."""
+        while self.port.in_waiting:
+            self._pump(0.0)
+        out = list(self._packets)
+        self._packets.clear()
+        return out
+
+    def close(self) -> None:
+        close = getattr(self.port, "close", None)
+        if close:
+            close()
+
+
+def open_serial(config, *, port=None, clock=None) -> SerialTransport:
+    """The firmware transport over USB serial for a RigConfig (8N1, ``config.serial``)."""
+    if port is None:
+        import serial  # pyserial, imported lazily so the I2C-only rig never needs it
+
+        try:
+            port = serial.serial_for_url(config.serial.port, baudrate=config.serial.baud,
+                                         timeout=config.serial.timeout_s)
+        except serial.SerialException as exc:
+            raise TransportFault("io", f"{config.serial.port}: {exc}") from exc
+    return SerialTransport(port, timeout_s=config.serial.timeout_s, clock=clock)
