@@ -1,0 +1,655 @@
+r"""Full steady model of the thesis: Kong-Parker contact with bending, both spans, BVP.
+
+This ports Messick (2018) Sections 3 and 5 (equations, and the appendix code
+where the errata in ``docs/belt-model.md`` say the code is right) to
+:func:`scipy.integrate.solve_bvp`.  scipy is imported lazily, inside the
+solver, so importing this module is cheap.
+
+Regions and independent variable
+--------------------------------
+Four regions share one normalised coordinate :math:`t \in [0, 1]`, each
+solved in the direction of belt travel (both pulleys turn counter-clockwise,
+primary centre at the origin, secondary at :math:`(L_c, 0)`):
+
+* primary contact (driver), :math:`\phi = \Phi_P t`, entered from the tight span;
+* slack span, :math:`s = L_s t`, from the primary to the secondary;
+* secondary contact (driven), :math:`\phi = \Phi_S t`;
+* tight span, :math:`s = L_t t`, from the secondary back to the primary.
+
+Contact equations (hat = derivative in t; T tractive tension, theta angle of
+inclination, x radial penetration)
+-----------------------------------------------------------------------------
+Belt speed from the mass flow G (eqs 3.5-3.11)
+:math:`V = G (T + EA) / (EA\,m_o - G^2)`; sliding velocity components
+:math:`v_r = V \sin\theta`, :math:`v_c = V\cos\theta - (R - x)\omega` (3.12);
+sliding angle :math:`\cos\gamma = v_r/|v|`, :math:`\sin\gamma = v_c/|v|` (3.13);
+apparent sheave angle :math:`\tan\beta_s = \tan\beta\cos\gamma` (3.14);
+sheave pressure :math:`p = k x / (2(\cos\beta + \mu\sin\beta_s))` (3.18);
+viscous-Coulomb friction :math:`\mu = \mu_0 \min(1, |v|/v_{th})` (Fig. 3.6).
+
+With :math:`Q = -EI\hat\theta''/(R^2\Phi^2) + EI\hat x'/(R^3\Phi)` (3.38) and
+:math:`\hat x'' = \Phi(\hat x'\tan\theta - (R-x)\hat\theta'\sec^2\theta)` (3.42):
+
+.. math::
+
+    \hat T' &= 2\Phi p(R-x)\,[-\sin\beta\tan\theta
+              + \mu\cos\beta_s(\tan\theta\cos\gamma + \sin\gamma)] + (\hat\theta' - \Phi) Q \\
+    \hat\theta''' &= \frac{T R^3 \Phi^3}{EI (R + 2x)}\Big(\frac{\hat\theta'}{\Phi} - 1
+              + \frac{2p}{T}(R-x)[\sin\beta - \mu\cos\beta_s(\cos\gamma - \sin\gamma\tan\theta)]
+              + \frac{EI\,\hat x''}{T R^3 \Phi^2}\Big)
+
+(eq 3.39/5.5 and eq 5.6 with the Q' sign of the appendix code, which the
+errata show is the right one: tension then gives a decaying bending response).
+Integrated torque and axial force (5.54, 5.60):
+:math:`\hat M' = 2\Phi\mu p\cos\beta_s\sin\gamma (R-x)^2/\cos\theta`,
+:math:`\hat A' = \Phi (k x / 2)(R - x)/\cos\theta`.
+
+Span equations (Kong & Parker; thesis 3.45, 3.48, 5.13, 5.14)
+-------------------------------------------------------------
+:math:`\hat\tau' = -(EI/L^2)\hat\vartheta'\hat\vartheta''`,
+:math:`\hat\vartheta''' = (L^2\tau/EI)\hat\vartheta'`,
+:math:`\hat X' = \cos\vartheta`, :math:`\hat Y' = \sin\vartheta` (positions scaled by L).
+
+Variant ``as_published`` keeps the appendix code's three errors: ``L^2`` and
+``1/L^2`` swapped in both span equations (an effective span stiffness
+EI L^4), the primary exit zero-shear condition using the entry value of
+:math:`\hat x'`, and the zero-shear conditions without the factor Phi.
+
+Unknown constants
+-----------------
+Eight ``p`` parameters of ``solve_bvp`` (faster than zero-derivative states):
+secondary speed and mass flow as per-mille creeps about their ideal values,
+the wrap angles :math:`\Phi_S, \Phi_P`, the orientation angles
+:math:`C_S, C_P` (Fig. 5.1) and the span lengths :math:`L_t, L_s`.
+
+Boundary conditions (34 = 26 states + 8 parameters)
+---------------------------------------------------
+Zero penetration at every contact end (5.51); eq 3.24 at each entry (5.52,
+5.53); zero torque and axial force at the primary entry (5.61, 5.62);
+continuity of tension (5.47-5.50), direction (5.35-5.38 with 5.21-5.24,
+5.23 with :math:`-\theta_{S1}`), curvature (5.39-5.42) and position
+(5.27-5.34, exit/entry labels as in the code); zero shear at the four contact
+ends (5.43-5.46, :math:`-\hat\theta'' + \Phi\hat x'/R = 0`); and the
+operating point: primary torque plus either the slack-span tractive tension
+at the primary exit or the primary axial force.
+
+Numerics
+--------
+Geometric initial guess (wrap angles and tangent points shortened by the
+conventional arching deficit, straight spans, tension ramp, penetration
+T/(k R tan beta) ramped to zero at both ends, theta from eq 3.24),
+continuation on the slip threshold from 1 m/s down by a factor per step,
+re-meshing to a few hundred nodes between steps (``solve_bvp`` only adds
+nodes), warm starts with homotopy in the physical parameters.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from dyno.errors import DidNotConverge
+from dyno.model import geometry
+from dyno.model.params import VARIANTS, ModelParams, OperatingPoint, TABLE_6_1, TABLE_6_1_POINT, bad_input
+
+# ---- state layout ---------------------------------------------------------------------------
+# secondary contact
+S_T, S_TH, S_TH1, S_TH2, S_X, S_X1 = range(0, 6)
+# primary contact
+P_T, P_TH, P_TH1, P_TH2, P_X, P_X1, P_M, P_A = range(6, 14)
+# tight span (secondary exit -> primary entry) and slack span (primary exit -> secondary entry)
+T_TAU, T_V, T_V1, T_V2, T_XP, T_YP = range(14, 20)
+L_TAU, L_V, L_V1, L_V2, L_XP, L_YP = range(20, 26)
+N_STATES = 26
+# parameters
+K_WS, K_PHIS, K_G, K_PHIP, K_CS, K_CP, K_LT, K_LS = range(8)
+N_PARAMS = 8
+
+# Scales: solve_bvp's tolerances are relative to 1 + |value|, so every state
+# is kept O(1): a penetration of 1 mm held in metres would be "converged"
+# with a 1 mm error.
+TENSION_REF_N = 100.0
+PENETRATION_REF_M = 1e-3
+TORQUE_REF_NM = 10.0
+AXIAL_REF_N = 100.0
+POSITION_BC_REF_M = 1e-3  # position continuity residuals in mm
+CREEP_SCALE = 1e-3  # speed and mass-flow unknowns are per-mille creeps
+
+
+@dataclass(frozen=True)
+class Case:
+    """One numerical case: all the floats the ODEs and BCs need, in SI units."""
+
+    r_primary_m: float
+    r_secondary_m: float
+    centre_distance_m: float
+    ea_n: float
+    ei_nm2: float
+    k_n_m2: float
+    mass_kg_m: float
+    mu: float
+    beta_rad: float
+    omega_primary_rad_s: float
+    torque_nm: float
+    slack_tension_n: float  # used when bc == "slack_tension"
+    axial_force_n: float  # used when bc == "primary_axial_force"
+    slip_threshold_m_s: float
+    variant: str = "corrected"
+    bc: str = "slack_tension"
+
+    @property
+    def g_ref(self) -> float:
+        """Ideal mass flow: the belt at the primary's pitch speed, unstretched."""
+        return self.mass_kg_m * self.omega_primary_rad_s * self.r_primary_m
+
+    @property
+    def omega_secondary_ref(self) -> float:
+        return self.omega_primary_rad_s * self.r_primary_m / self.r_secondary_m
+
+    def name(self) -> str:
+        level = (
+            f"T_slack={self.slack_tension_n:g} N" if self.bc == "slack_tension" else f"F_axial,P={self.axial_force_n:g} N"
+        )
+        return (
+            f"[{self.variant}] R_S/R_P={self.r_secondary_m / self.r_primary_m:.4g} "
+            f"({self.r_primary_m * 1e3:.2f}/{self.r_secondary_m * 1e3:.2f} mm), "
+            f"{self.omega_primary_rad_s * 60 / (2 * math.pi):.0f} rpm, {self.torque_nm:g} N*m, {level}, "
+            f"EI={self.ei_nm2:g} N*m^2, beta={math.degrees(self.beta_rad):g} deg, k={self.k_n_m2:.4g} N/m^2, "
+            f"mu={self.mu:g}, v_th={self.slip_threshold_m_s:.3g} m/s"
+        )
+
+
+def make_case(
+    params: ModelParams,
+    op: OperatingPoint,
+    variant: str = "corrected",
+    slip_threshold_m_s: float = 1e-4,
+) -> Case:
+    if variant not in VARIANTS:
+        raise bad_input("variant", f"one of {', '.join(VARIANTS)}, got {variant!r}")
+    if not (math.isfinite(slip_threshold_m_s) and slip_threshold_m_s > 0):
+        raise bad_input("slip_threshold_m_s", f"a positive speed, got {slip_threshold_m_s!r}")
+    belt, drive = params.belt, params.drive
+    r_p, r_s = geometry.radii_for_ratio(op.ratio, belt.pitch_length_m, drive.centre_distance_m)
+    return Case(
+        r_primary_m=r_p,
+        r_secondary_m=r_s,
+        centre_distance_m=drive.centre_distance_m,
+        ea_n=belt.axial_stiffness_n,
+        ei_nm2=belt.bending_stiffness_nm2,
+        k_n_m2=belt.radial_stiffness_n_m2,
+        mass_kg_m=belt.mass_per_length_kg_m,
+        mu=belt.friction_coefficient,
+        beta_rad=drive.sheave_half_angle_rad,
+        omega_primary_rad_s=op.primary_speed_rad_s,
+        torque_nm=op.primary_torque_nm,
+        slack_tension_n=op.slack_tension_n if op.slack_tension_n is not None else float("nan"),
+        axial_force_n=op.primary_axial_force_n if op.primary_axial_force_n is not None else float("nan"),
+        slip_threshold_m_s=slip_threshold_m_s,
+        variant=variant,
+        bc=op.boundary_condition,
+    )
+
+
+# ---- physics --------------------------------------------------------------------------------
+
+
+def contact_terms(case: Case, t_n, th, th1, th2, x_m, x1_m, radius_m, phi, omega, g):
+    """Right-hand sides of one contact region, physical units.
+
+    Returns ``(dT, dth3, dx2, dM, dA, extras)`` where derivatives are with
+    respect to the normalised coordinate and ``extras`` holds the sliding
+    speed, sliding angle, friction coefficient and pressure for output.
+    """
+    c, s = np.cos(th), np.sin(th)
+    tn = s / c
+    sec2 = 1.0 / (c * c)
+    ea, m = case.ea_n, case.mass_kg_m
+    v_belt = g * (t_n + ea) / (ea * m - g * g)
+    r_loc = radius_m - x_m
+    v_rad = v_belt * s
+    v_circ = v_belt * c - r_loc * omega
+    v_mag = np.sqrt(v_rad * v_rad + v_circ * v_circ) + 1e-300
+    mu = case.mu * np.minimum(1.0, v_mag / case.slip_threshold_m_s)
+    cos_g = v_rad / v_mag
+    sin_g = v_circ / v_mag
+    tb = math.tan(case.beta_rad) * cos_g
+    cbs = 1.0 / np.sqrt(1.0 + tb * tb)
+    sbs = tb * cbs
+    sb, cb = math.sin(case.beta_rad), math.cos(case.beta_rad)
+    press = case.k_n_m2 * x_m / (2.0 * (cb + mu * sbs))
+    ei = case.ei_nm2
+    r = radius_m
+    x2_m = phi * (x1_m * tn - r_loc * th1 * sec2)
+    shear = -ei / (r * r * phi * phi) * th2 + ei / (r**3 * phi) * x1_m
+    d_t = 2.0 * phi * press * r_loc * (-sb * tn + mu * cbs * (tn * cos_g + sin_g)) + (th1 - phi) * shear
+    normal = (2.0 * press / t_n) * r_loc * (sb - mu * cbs * (cos_g - sin_g * tn))
+    d_th3 = (t_n * r**3 * phi**3) / (ei * (r + 2.0 * x_m)) * (
+        th1 / phi - 1.0 + normal + ei * x2_m / (t_n * r**3 * phi * phi)
+    )
+    arc = phi * r_loc / c  # ds / dt
+    d_m = 2.0 * mu * press * cbs * sin_g * r_loc * arc
+    d_a = 0.5 * case.k_n_m2 * x_m * arc
+    extras = {"sliding_speed_m_s": v_mag, "sliding_angle_rad": np.arctan2(sin_g, cos_g), "mu": mu, "pressure_n_m": press,
+              "belt_speed_m_s": v_belt, "arc_m": arc}
+    return d_t, d_th3, x2_m, d_m, d_a, extras
+
+
+def span_terms(case: Case, tau_n, v1, v2, length_m):
+    """(d tau, d theta''') of one span in the normalised coordinate (physical units)."""
+    ei = case.ei_nm2
+    if case.variant == "as_published":
+        # Appendix C rhs(21), rhs(24): L^2 and 1/L^2 swapped.
+        return -length_m**2 * ei * v1 * v2, tau_n / (length_m**2 * ei) * v1
+    return -(ei / length_m**2) * v1 * v2, length_m**2 * tau_n / ei * v1
+
+
+def _unpack_params(case: Case, p):
+    omega_s = case.omega_secondary_ref * (1.0 + CREEP_SCALE * p[K_WS])
+    g = case.g_ref * (1.0 + CREEP_SCALE * p[K_G])
+    return omega_s, g
+
+
+def make_fun(case: Case):
+    """The ``fun(t, y, p)`` of solve_bvp for ``case`` (scaled states)."""
+
+    def fun(t, y, p):
+        omega_s, g = _unpack_params(case, p)
+        dy = np.empty_like(y)
+        for (i_t, i_th, i_th1, i_th2, i_x, i_x1), radius, phi, omega in (
+            ((S_T, S_TH, S_TH1, S_TH2, S_X, S_X1), case.r_secondary_m, p[K_PHIS], omega_s),
+            ((P_T, P_TH, P_TH1, P_TH2, P_X, P_X1), case.r_primary_m, p[K_PHIP], case.omega_primary_rad_s),
+        ):
+            t_n = y[i_t] * TENSION_REF_N
+            x_m = y[i_x] * PENETRATION_REF_M
+            x1_m = y[i_x1] * PENETRATION_REF_M
+            d_t, d_th3, x2_m, d_m, d_a, _ = contact_terms(
+                case, t_n, y[i_th], y[i_th1], y[i_th2], x_m, x1_m, radius, phi, omega, g
+            )
+            dy[i_t] = d_t / TENSION_REF_N
+            dy[i_th] = y[i_th1]
+            dy[i_th1] = y[i_th2]
+            dy[i_th2] = d_th3
+            dy[i_x] = y[i_x1]
+            dy[i_x1] = x2_m / PENETRATION_REF_M
+            if i_t == P_T:
+                dy[P_M] = d_m / TORQUE_REF_NM
+                dy[P_A] = d_a / AXIAL_REF_N
+        for (i_tau, i_v, i_v1, i_v2, i_xp, i_yp), length in (
+            ((T_TAU, T_V, T_V1, T_V2, T_XP, T_YP), p[K_LT]),
+            ((L_TAU, L_V, L_V1, L_V2, L_XP, L_YP), p[K_LS]),
+        ):
+            d_tau, d_v3 = span_terms(case, y[i_tau] * TENSION_REF_N, y[i_v1], y[i_v2], length)
+            dy[i_tau] = d_tau / TENSION_REF_N
+            dy[i_v] = y[i_v1]
+            dy[i_v1] = y[i_v2]
+            dy[i_v2] = d_v3
+            dy[i_xp] = np.cos(y[i_v])
+            dy[i_yp] = np.sin(y[i_v])
+        return dy
+
+    return fun
+
+
+def make_bc(case: Case):
+    """The ``bc(ya, yb, p)`` of solve_bvp for ``case`` (34 residuals, O(1) scaled)."""
+    r_s, r_p, lc = case.r_secondary_m, case.r_primary_m, case.centre_distance_m
+    published = case.variant == "as_published"
+
+    def bc(ya, yb, p):
+        phi_s, phi_p, c_s, c_p, l_t, l_s = p[K_PHIS], p[K_PHIP], p[K_CS], p[K_CP], p[K_LT], p[K_LS]
+        xs0, xs1 = ya[S_X] * PENETRATION_REF_M, yb[S_X] * PENETRATION_REF_M
+        xp0, xp1 = ya[P_X] * PENETRATION_REF_M, yb[P_X] * PENETRATION_REF_M
+        # Entry/exit directions w.r.t. +x (5.21-5.24; 5.23 with -theta_S1).
+        e_st = math.pi / 2 - c_s - yb[S_TH]
+        e_ss = 3 * math.pi / 2 - c_s - phi_s - ya[S_TH]
+        e_pt = c_p - math.pi / 2 - ya[P_TH]
+        e_ps = c_p + phi_p - 3 * math.pi / 2 - yb[P_TH]
+        # Contact end points (5.17-5.20 with the code's labels).
+        pts = {
+            "st": (lc - r_s * math.cos(c_s), r_s * math.sin(c_s)),
+            "ss": (lc - r_s * math.cos(c_s + phi_s), r_s * math.sin(c_s + phi_s)),
+            "pt": (r_p * math.cos(c_p), r_p * math.sin(c_p)),
+            "ps": (r_p * math.cos(c_p + phi_p), r_p * math.sin(c_p + phi_p)),
+        }
+
+        def curvature(th, th1, x_m, radius, phi):
+            return math.cos(th) / (radius - x_m) * (1.0 - th1 / phi)
+
+        def shear(th2, x1_scaled, radius, phi):
+            x1 = x1_scaled * PENETRATION_REF_M
+            return -th2 + (x1 / radius if published else phi * x1 / radius)
+
+        if case.bc == "slack_tension":
+            level = yb[P_T] - case.slack_tension_n / TENSION_REF_N
+        else:
+            level = yb[P_A] - case.axial_force_n / AXIAL_REF_N
+        res = [
+            ya[S_X],
+            yb[S_X],
+            (ya[S_X1] * PENETRATION_REF_M + phi_s * (r_s - xs0) * math.tan(ya[S_TH])) / PENETRATION_REF_M,
+            yb[P_M] + case.torque_nm / TORQUE_REF_NM,
+            level,
+            ya[P_X],
+            yb[P_X],
+            ya[P_M],
+            (ya[P_X1] * PENETRATION_REF_M + phi_p * (r_p - xp0) * math.tan(ya[P_TH])) / PENETRATION_REF_M,
+            ya[P_A],
+            # tension continuity (5.47-5.50)
+            ya[S_T] - yb[L_TAU],
+            yb[S_T] - ya[T_TAU],
+            ya[P_T] - yb[T_TAU],
+            yb[P_T] - ya[L_TAU],
+            # direction continuity (5.35-5.38)
+            e_ss - yb[L_V],
+            e_st + math.pi - ya[T_V],
+            e_pt + math.pi - yb[T_V],
+            e_ps - ya[L_V],
+            # curvature continuity (5.39-5.42), made dimensionless with the radius
+            r_s * (curvature(ya[S_TH], ya[S_TH1], xs0, r_s, phi_s) - yb[L_V1] / l_s),
+            r_s * (curvature(yb[S_TH], yb[S_TH1], xs1, r_s, phi_s) - ya[T_V1] / l_t),
+            r_p * (curvature(ya[P_TH], ya[P_TH1], xp0, r_p, phi_p) - yb[T_V1] / l_t),
+            r_p * (curvature(yb[P_TH], yb[P_TH1], xp1, r_p, phi_p) - ya[L_V1] / l_s),
+            # zero shear (5.43-5.46); as published, bc(26) reads the entry x'.
+            shear(ya[S_TH2], ya[S_X1], r_s, phi_s),
+            shear(yb[S_TH2], yb[S_X1], r_s, phi_s),
+            shear(ya[P_TH2], ya[P_X1], r_p, phi_p),
+            shear(yb[P_TH2], ya[P_X1] if published else yb[P_X1], r_p, phi_p),
+            # position continuity (5.27-5.34), in mm
+            (pts["st"][0] - ya[T_XP] * l_t) / POSITION_BC_REF_M,
+            (pts["st"][1] - ya[T_YP] * l_t) / POSITION_BC_REF_M,
+            (pts["ss"][0] - yb[L_XP] * l_s) / POSITION_BC_REF_M,
+            (pts["ss"][1] - yb[L_YP] * l_s) / POSITION_BC_REF_M,
+            (pts["pt"][0] - yb[T_XP] * l_t) / POSITION_BC_REF_M,
+            (pts["pt"][1] - yb[T_YP] * l_t) / POSITION_BC_REF_M,
+            (pts["ps"][0] - ya[L_XP] * l_s) / POSITION_BC_REF_M,
+            (pts["ps"][1] - ya[L_YP] * l_s) / POSITION_BC_REF_M,
+        ]
+        return np.array(res)
+
+    return bc
+
+
+# ---- initial guess --------------------------------------------------------------------------
+
+
+def _smoothstep(t):
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _span_bending_length_m(case: Case, tension_n: float) -> float:
+    ei_eff = case.ei_nm2
+    if case.variant == "as_published":
+        ei_eff = case.ei_nm2 * 0.2**4  # swapped L^2 terms: EI L^4 with L ~ the span length
+    return math.sqrt(ei_eff / max(tension_n, 1.0))
+
+
+def initial_guess(case: Case, n_nodes: int = 301):
+    """Geometric initial guess ``(t, y, p)``; needs no starting solution."""
+    from dyno.model.closed_form import closed_form_point  # noqa: F401  (tension level estimate below)
+
+    r_p, r_s, lc = case.r_primary_m, case.r_secondary_m, case.centre_distance_m
+    dt_n = case.torque_nm / r_p
+    if case.bc == "slack_tension":
+        t_slack = case.slack_tension_n
+    else:
+        # Frictional-wedge estimate of the driver thrust (closed form, eq 17 with rho = 0).
+        wedge = 2.0 * math.tan(case.beta_rad + math.atan(case.mu))
+        t_tight = case.axial_force_n * wedge / math.pi
+        t_slack = max(t_tight - dt_n, 0.2 * dt_n)
+    t_tight = t_slack + dt_n
+    theta_t = geometry.tangent_angle_rad(r_p, r_s, lc)
+    d_pt = _span_bending_length_m(case, t_tight) / r_p
+    d_ps = _span_bending_length_m(case, t_slack) / r_p
+    d_st = _span_bending_length_m(case, t_tight) / r_s
+    d_ss = _span_bending_length_m(case, t_slack) / r_s
+    c_p = math.pi / 2 + theta_t + d_pt
+    phi_p = math.pi - 2 * theta_t - d_pt - d_ps
+    c_s = math.pi / 2 - theta_t + d_st
+    phi_s = math.pi + 2 * theta_t - d_ss - d_st
+    if phi_p < 0.3 or phi_s < 0.3:
+        phi_p, phi_s = max(phi_p, 0.3), max(phi_s, 0.3)
+
+    t = np.linspace(0.0, 1.0, n_nodes)
+    y = np.zeros((N_STATES, n_nodes))
+    delta = 0.04
+    ramp = (1.0 - np.exp(-t / delta)) * (1.0 - np.exp(-(1.0 - t) / delta))
+    ramp /= ramp.max()
+    tanb = math.tan(case.beta_rad)
+    for (i_t, i_th, i_th1, i_th2, i_x, i_x1), radius, phi, t_in, t_out in (
+        ((S_T, S_TH, S_TH1, S_TH2, S_X, S_X1), r_s, phi_s, t_slack, t_tight),
+        ((P_T, P_TH, P_TH1, P_TH2, P_X, P_X1), r_p, phi_p, t_tight, t_slack),
+    ):
+        tension = t_in + (t_out - t_in) * _smoothstep(t)
+        x_m = tension / (radius * case.k_n_m2 * tanb) * ramp
+        x1_m = np.gradient(x_m, t)
+        th = -np.arctan(x1_m / phi / (radius - x_m))
+        th1 = np.gradient(th, t)
+        th2 = np.gradient(th1, t)
+        y[i_t] = tension / TENSION_REF_N
+        y[i_th], y[i_th1], y[i_th2] = th, th1, th2
+        y[i_x], y[i_x1] = x_m / PENETRATION_REF_M, x1_m / PENETRATION_REF_M
+        if i_t == P_T:
+            y[P_M] = -(t_tight - tension) * r_p / TORQUE_REF_NM
+            arc = phi * (radius - x_m) / np.cos(th)
+            integrand = 0.5 * case.k_n_m2 * x_m * arc
+            y[P_A] = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(t))]) / AXIAL_REF_N
+
+    def chord(a, b):
+        dx, dy_ = b[0] - a[0], b[1] - a[1]
+        return math.hypot(dx, dy_), math.atan2(dy_, dx)
+
+    st = (lc - r_s * math.cos(c_s), r_s * math.sin(c_s))
+    ss = (lc - r_s * math.cos(c_s + phi_s), r_s * math.sin(c_s + phi_s))
+    pt = (r_p * math.cos(c_p), r_p * math.sin(c_p))
+    ps = (r_p * math.cos(c_p + phi_p), r_p * math.sin(c_p + phi_p))
+    l_t, ang_t = chord(st, pt)
+    l_s, ang_s = chord(ps, ss)
+    ang_t = ang_t % (2 * math.pi)  # ~ pi, matching the E_St + pi convention
+    ang_s = (ang_s + math.pi) % (2 * math.pi) - math.pi  # ~ 0
+    for (i_tau, i_v, i_v1, i_v2, i_xp, i_yp), start, end, length, ang, tension in (
+        ((T_TAU, T_V, T_V1, T_V2, T_XP, T_YP), st, pt, l_t, ang_t, t_tight),
+        ((L_TAU, L_V, L_V1, L_V2, L_XP, L_YP), ps, ss, l_s, ang_s, t_slack),
+    ):
+        y[i_tau] = tension / TENSION_REF_N
+        y[i_v] = ang
+        y[i_xp] = (start[0] + (end[0] - start[0]) * t) / length
+        y[i_yp] = (start[1] + (end[1] - start[1]) * t) / length
+    p = np.zeros(N_PARAMS)
+    p[K_PHIS], p[K_PHIP], p[K_CS], p[K_CP], p[K_LT], p[K_LS] = phi_s, phi_p, c_s, c_p, l_t, l_s
+    # Creep guesses: belt leaves the driver at the slack strain (Reynolds).
+    ea = case.ea_n
+    v0 = case.omega_primary_rad_s * r_p
+    fc = case.mass_kg_m * v0 * v0
+    eps_t, eps_s = (t_tight + fc) / ea, (t_slack + fc) / ea
+    p[K_G] = (1.0 / (1.0 + eps_t) - 1.0) / CREEP_SCALE
+    p[K_WS] = ((1.0 + eps_s) / (1.0 + eps_t) - 1.0) / CREEP_SCALE - 5.0  # driven pulley slips a little more
+    return t, y, p
+
+
+# ---- solver driver --------------------------------------------------------------------------
+
+
+def remesh(t_old: np.ndarray, n_nodes: int) -> np.ndarray:
+    """A mesh of ``n_nodes`` that keeps the old mesh's density (3/4) blended with uniform (1/4).
+
+    solve_bvp refines by inserting nodes and never removes any; re-meshing
+    between continuation steps keeps the node count, and SuperLU's memory,
+    bounded while keeping nodes where the boundary layers are.
+    """
+    u = np.linspace(0.0, len(t_old) - 1.0, n_nodes)
+    dens = np.interp(u, np.arange(len(t_old)), t_old)
+    mesh = 0.75 * dens + 0.25 * np.linspace(0.0, 1.0, n_nodes)
+    mesh[0], mesh[-1] = 0.0, 1.0
+    return mesh
+
+
+@dataclass
+class StepRecord:
+    step: int
+    slip_threshold_m_s: float
+    status: int
+    residual_max: float
+    nodes: int
+    seconds: float
+    what: str = ""
+
+
+@dataclass
+class RawSolution:
+    """What solve_bvp returned for one case, plus the continuation history."""
+
+    case: Case
+    t: np.ndarray
+    y: np.ndarray
+    p: np.ndarray
+    sol: object  # scipy PPoly-like callable from solve_bvp
+    residual_max: float
+    bc_residual_max: float
+    tol: float
+    history: list = field(default_factory=list)
+    solve_s: float = 0.0
+
+
+def _sanity_problem(case: Case, y: np.ndarray, p: np.ndarray) -> str | None:
+    """Physical sanity of a converged solution; a message if it is nonsense."""
+    if not (0.05 < p[K_PHIP] < 2 * math.pi and 0.05 < p[K_PHIS] < 2 * math.pi):
+        return f"wrap angles out of range (Phi_P={p[K_PHIP]:.3g}, Phi_S={p[K_PHIS]:.3g} rad)"
+    if p[K_LT] <= 0 or p[K_LS] <= 0:
+        return "negative span length"
+    tensions = np.concatenate([y[S_T], y[P_T], y[T_TAU], y[L_TAU]]) * TENSION_REF_N
+    if not np.all(np.isfinite(tensions)) or tensions.min() <= 0:
+        return f"non-positive tractive tension (min {np.nanmin(tensions):.3g} N)"
+    if np.abs(y[[S_TH, P_TH]]).max() > 1.2:
+        return "inclination angle beyond 70 degrees"
+    return None
+
+
+def _solve_once(case: Case, t, y, p, tol: float, max_nodes: int):
+    from scipy.integrate import solve_bvp
+
+    fun, bc = make_fun(case), make_bc(case)
+    with np.errstate(all="ignore"):
+        res = solve_bvp(fun, bc, t, y, p, tol=tol, max_nodes=max_nodes, bc_tol=tol)
+    rms = float(np.max(res.rms_residuals)) if res.rms_residuals is not None and len(res.rms_residuals) else float("inf")
+    bc_res = float(np.max(np.abs(bc(res.y[:, 0], res.y[:, -1], res.p))))
+    ok = res.status == 0 and np.isfinite(rms) and bc_res <= 10 * tol
+    problem = _sanity_problem(case, res.y, res.p) if ok else None
+    return res, rms, bc_res, ok and problem is None, problem
+
+
+def _interp_case(a: Case, b: Case, s: float) -> Case:
+    """Homotopy between two cases: geometric in EI and the slip threshold, linear otherwise."""
+    changes = {}
+    for f_ in fields(Case):
+        va, vb = getattr(a, f_.name), getattr(b, f_.name)
+        if isinstance(va, str):
+            changes[f_.name] = vb
+        elif f_.name in ("ei_nm2", "slip_threshold_m_s", "k_n_m2"):
+            changes[f_.name] = va * (vb / va) ** s
+        elif isinstance(va, float) and math.isnan(va):
+            changes[f_.name] = vb
+        else:
+            changes[f_.name] = va + (vb - va) * s
+    return replace(a, **changes)
+
+
+def solve_case(
+    case: Case,
+    *,
+    guess: RawSolution | None = None,
+    tol: float = 1e-3,
+    nodes: int = 300,
+    max_nodes: int = 30000,
+    start_slip_m_s: float = 1.0,
+    slip_factor: float = 0.4,
+    max_halvings: int = 6,
+    time_limit_s: float = 120.0,
+    log=None,
+) -> RawSolution:
+    """Solve one case, by slip-threshold continuation from the geometric guess or by homotopy from ``guess``.
+
+    Raises :class:`~dyno.errors.DidNotConverge` naming the case, the
+    continuation step and the last residual.
+    """
+    t0 = time.perf_counter()
+    history: list[StepRecord] = []
+    last = {"rms": float("nan"), "step": 0, "msg": ""}
+
+    def attempt(c: Case, t, y, p, what: str):
+        ts = time.perf_counter()
+        res, rms, bc_res, ok, problem = _solve_once(c, t, y, p, tol, max_nodes)
+        history.append(StepRecord(len(history) + 1, c.slip_threshold_m_s, res.status, rms, res.x.size,
+                                  time.perf_counter() - ts, what))
+        last.update(rms=rms, step=len(history), msg=problem or res.message)
+        if log is not None:
+            log(history[-1])
+        return res, rms, bc_res, ok
+
+    def fail(reason: str):
+        raise DidNotConverge(
+            f"belt model did not converge for {case.name()}: {reason} at continuation step {last['step']} "
+            f"(last residual {last['rms']:.3g}, tol {tol:g}; {last['msg']})"
+        )
+
+    def march(start: Case, target: Case, t, y, p, first_fraction: float, what: str, max_fraction: float = 1.0):
+        """Homotopy from ``start`` (solved: t, y, p) to ``target``; adaptive step."""
+        s, ds = 0.0, first_fraction
+        halvings = 0
+        best = None
+        while s < 1.0:
+            if time.perf_counter() - t0 > time_limit_s:
+                fail(f"time limit {time_limit_s:g} s during {what}")
+            s_new = min(1.0, s + ds)
+            c = _interp_case(start, target, s_new)
+            mesh = remesh(t, nodes)
+            from scipy.interpolate import PchipInterpolator
+
+            y_guess = PchipInterpolator(t, y, axis=1)(mesh)
+            res, rms, bc_res, ok = attempt(c, mesh, y_guess, p, f"{what} s={s_new:.3g}")
+            if ok:
+                s = s_new
+                t, y, p = res.x, res.y, res.p
+                best = (c, res, rms, bc_res)
+                halvings = 0
+                ds = min(ds * 1.5, max_fraction)
+            else:
+                halvings += 1
+                ds *= 0.5
+                if halvings > max_halvings:
+                    fail(f"{what} stalled at fraction {s:.3g}")
+        return best
+
+    if guess is not None:
+        start = replace(guess.case)
+        target = case
+        if start.bc != target.bc:
+            # Switch the tension-level BC at the guess's own operating point first.
+            level = replace(start, bc=target.bc)
+            if target.bc == "primary_axial_force":
+                level = replace(level, axial_force_n=float(guess.y[P_A, -1] * AXIAL_REF_N))
+            else:
+                level = replace(level, slack_tension_n=float(guess.y[P_T, -1] * TENSION_REF_N))
+            start = level
+        best = march(start, target, guess.t, guess.y, guess.p, 1.0, "warm-start homotopy")
+    else:
+        t, y, p = initial_guess(case, nodes)
+        # From the guess, solve with a heavily smoothed friction law first.
+        v_start = max(start_slip_m_s, case.slip_threshold_m_s)
+        c0 = replace(case, slip_threshold_m_s=v_start)
+        res, rms, bc_res, ok = attempt(c0, t, y, p, "geometric guess")
+        if not ok:
+            fail("first solve from the geometric initial guess failed")
+        best = (c0, res, rms, bc_res)
+        if v_start > case.slip_threshold_m_s:
+            n_steps = math.log(v_start / case.slip_threshold_m_s) / -math.log(slip_factor)
+            frac = 1.0 / max(n_steps, 1.0)
+            best = march(c0, case, res.x, res.y, res.p, frac, "slip-threshold continuation", max_fraction=2.0 * frac)
+    c, res, rms, bc_res = best
+    return RawSolution(
+        case=case, t=res.x, y=res.y, p=res.p, sol=res.sol, residual_max=rms, bc_residual_max=bc_res, tol=tol,
+        history=history, solve_s=time.perf_counter() - t0,
+    )
