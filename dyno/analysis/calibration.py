@@ -64,8 +64,11 @@ class CalibrationRejected(DynoError, ValueError):
     """A calibration fit is not good enough to use; the message says why."""
 
 
-class NoCalibration(DynoError, LookupError):
-    """A calibration history holds no entry."""
+class NoCalibration(ConfigError, LookupError):
+    """A calibration history holds no entry (a ConfigError, so the CLI exits 2)."""
+
+    def __init__(self, path="calibration history"):
+        super().__init__(path, "rows", "at least one calibration entry; run a torque calibration first")
 
 
 class _FieldError(Exception):
@@ -360,7 +363,7 @@ def latest(history: Sequence[CalibrationEntry]) -> CalibrationEntry:
         If ``history`` is empty.
     """
     if not history:
-        raise NoCalibration("calibration history is empty: run a torque calibration first")
+        raise NoCalibration()
     best = max(range(len(history)), key=lambda i: (_date_key(history[i].date), i))
     return history[best]
 

@@ -47,6 +47,22 @@ class OutOfMapRange(DynoError, ValueError):
                          f"[{rpm_min:g}, {rpm_max:g}] rpm; refusing to extrapolate")
 
 
+class NoMapPower(OutOfMapRange):
+    """The map gives no power at this speed (e.g. governor cut-off): no efficiency.
+
+    A subclass of :class:`OutOfMapRange` because it means the same thing to a
+    caller: this engine speed is outside the part of the map that can serve
+    as an efficiency denominator.
+    """
+
+    def __init__(self, rpm: float, power_w: float, rpm_min: float, rpm_max: float, source: str = ""):
+        ValueError.__init__(self)  # skip OutOfMapRange's message, keep its attributes
+        self.rpm, self.rpm_min, self.rpm_max, self.power_w = rpm, rpm_min, rpm_max, power_w
+        where = f" ({source})" if source else ""
+        self.args = (f"engine map{where} gives {power_w:g} W at {rpm:g} rpm (governor cut-off?); "
+                     f"efficiency is undefined there",)
+
+
 def _torque_from_power_w(rpm: np.ndarray, power_w: np.ndarray) -> np.ndarray:
     return power_w / (rpm * RAD_PER_S_PER_RPM)
 
@@ -146,15 +162,24 @@ class EngineMap:
 
     # -- evaluation ----------------------------------------------------------
 
+    def _torque(self, n: np.ndarray) -> np.ndarray:
+        t = np.asarray(self._pchip(n), dtype=float)
+        # Return knot values exactly: the cubic evaluated at its own end point can
+        # be 1e-16 instead of 0 at a governor cut-off knot, which would turn
+        # "no power here" into an efficiency of 1e14.
+        i = np.clip(np.searchsorted(self.rpm, n), 0, len(self.rpm) - 1)
+        at_knot = self.rpm[i] == n
+        return np.where(at_knot, self.torque_nm_knots[i], t)
+
     def torque_nm(self, rpm):
         """Engine torque at ``rpm``, N·m (raises :class:`OutOfMapRange` outside the map)."""
         n = self._checked(rpm)
-        return self._out(np.asarray(self._pchip(n)))
+        return self._out(self._torque(n))
 
     def power_w(self, rpm):
         """Engine power :math:`P = T(n)\\,2\\pi n/60` at ``rpm``, W."""
         n = self._checked(rpm)
-        return self._out(np.asarray(self._pchip(n)) * n * RAD_PER_S_PER_RPM)
+        return self._out(self._torque(n) * n * RAD_PER_S_PER_RPM)
 
     def dpower_drpm(self, rpm):
         """Slope of power vs speed, W per rpm (for uncertainty propagation).
@@ -162,8 +187,7 @@ class EngineMap:
         .. math:: \\frac{dP}{dn} = \\frac{2\\pi}{60}\\left(T(n) + n\\,T'(n)\\right)
         """
         n = self._checked(rpm)
-        return self._out(RAD_PER_S_PER_RPM * (np.asarray(self._pchip(n))
-                                              + n * np.asarray(self._dpchip(n))))
+        return self._out(RAD_PER_S_PER_RPM * (self._torque(n) + n * np.asarray(self._dpchip(n))))
 
     # -- ambient correction ----------------------------------------------------
 
