@@ -1,0 +1,44 @@
+/* The AD7171 shifts a bit out on each SCLK falling edge; it is valid by the rising
+ * edge, where we sample it (as the thesis sketch did). SCLK idles high. After the
+ * 24th bit DOUT/RDY returns high until the next conversion (125 Hz at the rig's
+ * setting). Interrupts stay on: a Hall ISR in the middle just stretches one SCLK
+ * phase, which the AD7171 does not mind (no serial timeout). */
+#include <avr/io.h>
+#include "ad7171.h"
+#include "pins.h"
+
+#define SCLK_LOW() (PORTD &= (uint8_t)~_BV(PIN_ADC_SCLK_BIT))
+#define SCLK_HIGH() (PORTD |= _BV(PIN_ADC_SCLK_BIT))
+#define DOUT() ((PIND >> PIN_ADC_DOUT_BIT) & 1u)
+
+void ad7171_init(void)
+{
+    SCLK_HIGH();
+    DDRD |= _BV(PIN_ADC_SCLK_BIT);
+    DDRD &= (uint8_t)~_BV(PIN_ADC_DOUT_BIT);
+    /* DOUT/RDY is a push-pull output: no pull-up (and none to fight). */
+    PORTD &= (uint8_t)~_BV(PIN_ADC_DOUT_BIT);
+}
+
+uint8_t ad7171_ready(void) { return !DOUT(); }
+
+static uint8_t clock_bit(void)
+{
+    SCLK_LOW();
+    __asm__ __volatile__("nop\n\tnop");  /* >= 100 ns SCLK low */
+    SCLK_HIGH();
+    __asm__ __volatile__("nop\n\tnop");  /* DOUT settles after the falling edge */
+    return DOUT();
+}
+
+void ad7171_read(uint16_t *code, uint8_t *status)
+{
+    uint16_t c = 0;
+    uint8_t s = 0;
+    for (uint8_t i = 0; i < 16; i++)
+        c = (uint16_t)(c << 1) | clock_bit();
+    for (uint8_t i = 0; i < 8; i++)
+        s = (uint8_t)(s << 1) | clock_bit();
+    *code = c;
+    *status = s;
+}

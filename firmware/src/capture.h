@@ -1,0 +1,23 @@
+/* Hall edge capture on INT0/INT1 with Timer1-extended timestamps (AVR only). */
+#ifndef DYNO_CAPTURE_H
+#define DYNO_CAPTURE_H
+#include <stdint.h>
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+void capture_init(uint16_t lockout_primary_us, uint16_t lockout_secondary_us);
+/* Device time in us (u32, wraps at 2^32), safe from any context. */
+uint32_t capture_now_us(void);
+/* Main loop housekeeping (keeps the lock-out logic right across 2^32 us). */
+void capture_service(void);
+/* Enqueue an ADC conversion from the main loop (interrupts briefly off). */
+void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status);
+void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us);
+
+extern volatile uint16_t g_edges_rejected[2];  /* bounce counters, diagnostics */
+
+#ifdef __cplusplus
+}
+#endif
+#endif

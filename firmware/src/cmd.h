@@ -1,0 +1,31 @@
+/* Host -> device commands: [op, args..., crc_hi, crc_lo]. Pure C. */
+#ifndef DYNO_CMD_H
+#define DYNO_CMD_H
+#include <stdint.h>
+
+#define OP_POLL 0x10u
+#define OP_ACK_POLL 0x11u
+#define OP_SET_DEBOUNCE 0x20u
+#define OP_CLEAR_COUNTERS 0x21u
+#define OP_INFO 0x30u
+
+#define CMD_MAX_LEN 7u  /* SET_DEBOUNCE: op + 4 + crc */
+
+enum { CMD_OK = 0, CMD_ERR_SHORT = 1, CMD_ERR_OP = 2, CMD_ERR_LENGTH = 3, CMD_ERR_CRC = 4 };
+
+/* Total length of a command with this op (CRC included), or 0 for an unknown op. */
+static inline uint8_t cmd_length(uint8_t op)
+{
+    switch (op) {
+    case OP_POLL: case OP_CLEAR_COUNTERS: case OP_INFO: return 3;
+    case OP_ACK_POLL: return 4;
+    case OP_SET_DEBOUNCE: return 7;
+    default: return 0;
+    }
+}
+
+/* Check a whole command. crc_residue is the CRC-16 run over all n bytes (CRC
+ * included), 0 for an intact command: the TWI ISR accumulates it byte by byte. */
+uint8_t cmd_check(const uint8_t *buf, uint8_t n, uint16_t crc_residue);
+
+#endif

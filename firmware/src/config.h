@@ -1,0 +1,39 @@
+/* Build-time configuration of the Nano firmware (one place to change a value). */
+#ifndef DYNO_CONFIG_H
+#define DYNO_CONFIG_H
+
+/* Reported in the INFO frame; bump on any behaviour change the host may care about. */
+#define FW_VERSION_MAJOR 1
+#define FW_VERSION_MINOR 0
+#define FW_VERSION_PATCH 0
+
+/* docs/protocol.md: the Pi addresses the Nano at 0x03 (the thesis rig's address). */
+#define I2C_ADDRESS 0x03
+#define SERIAL_BAUD 115200UL
+
+/* Hall lock-out windows after an accepted edge (thesis values: 10 ms primary, 6 ms
+ * secondary). The host can change them with SET_DEBOUNCE. */
+#define DEBOUNCE_PRIMARY_US_DEFAULT 10000u
+#define DEBOUNCE_SECONDARY_US_DEFAULT 6000u
+
+/* Event ring: 64 x 8 B = 512 B holds ~0.2 s of events at 3800/7600 rpm + 125 Hz ADC
+ * (~315 events/s; a poll retires up to 6), so a host that stalls for ~30 polls loses
+ * nothing. 128 would not fit the 60 % RAM budget with the serial buffers. Power of 2. */
+#ifndef RING_SIZE
+#define RING_SIZE 64u
+#endif
+
+/* An unsent empty frame carries "device time now" as t0; refresh it this often so
+ * the host's idea of device time stays within a few ms. */
+#define PROTO_EMPTY_REFRESH_US 2000u
+/* INFO frame (uptime) is rebuilt this often in the main loop, never in the ISR. */
+#define INFO_REFRESH_MS 50u
+
+/* The thesis wiring has pull-ups on the Hall sensor boards; set to 1 for bare
+ * open-collector sensors. */
+#define HALL_INTERNAL_PULLUP 0
+
+/* EEPROM byte address of the u16 boot counter. */
+#define EEPROM_BOOTCOUNT_ADDR 0u
+
+#endif

@@ -1,0 +1,14 @@
+/* Nano pin map (thesis rig wiring). Port/bit pairs are used directly in the ISRs and
+ * the ADC bit-bang because digitalWrite()/digitalRead() cost ~50 cycles each. */
+#ifndef DYNO_PINS_H
+#define DYNO_PINS_H
+
+/* Hall sensors: D2 = PD2 = INT0 (primary, engine side), D3 = PD3 = INT1 (secondary). */
+#define PIN_HALL_PRIMARY_BIT 2
+#define PIN_HALL_SECONDARY_BIT 3
+/* AD7171: D4 = PD4 SCLK (output, idles high), D5 = PD5 DOUT/RDY (input). */
+#define PIN_ADC_SCLK_BIT 4
+#define PIN_ADC_DOUT_BIT 5
+/* I2C: A4 = SDA, A5 = SCL (TWI hardware). USB serial: D0/D1 via the CH340/FT232. */
+
+#endif

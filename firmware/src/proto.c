@@ -1,0 +1,206 @@
+#include "proto.h"
+#include "cmd.h"
+#include "config.h"
+#include "port.h"
+
+proto_t g_proto;
+
+typedef struct {
+    const ring_t *ring;
+    uint8_t offset;
+} ring_view_t;
+
+static const dyno_event_t *view_get(const void *ctx, uint8_t i)
+{
+    const ring_view_t *v = (const ring_view_t *)ctx;
+    return ring_peek(v->ring, (uint8_t)(v->offset + i));
+}
+
+/* A buffer with no role. With 5 buffers and at most 4 roles one always exists. */
+static uint8_t free_buffer(const proto_t *p)
+{
+    for (uint8_t b = 0; b < PROTO_NBUF; b++)
+        if (b != p->cur && b != p->nxt && b != p->info && b != p->tx)
+            return b;
+    return PROTO_NONE;  /* unreachable */
+}
+
+/* Encode the data frame that starts `offset` events after the ring tail. */
+static uint8_t build(proto_t *p, uint8_t buf, uint8_t seq, uint8_t offset, uint8_t reset,
+                     uint32_t now_us)
+{
+    ring_t *r = p->ring;
+    uint8_t head = r->head;  /* one byte: a consistent snapshot */
+    uint16_t dropped;
+    uint8_t overflow;
+    PORT_CRITICAL_BEGIN();
+    dropped = r->dropped;
+    overflow = r->overflow;
+    PORT_CRITICAL_END();
+    uint8_t avail = (uint8_t)((uint8_t)(head - r->tail) - offset);
+    ring_view_t view = {r, offset};
+    uint8_t n = frame_fit(view_get, &view, avail);
+    uint8_t flags = (uint8_t)((reset ? FLAG_RESET : 0u) | (avail > n ? FLAG_MORE : 0u) |
+                              (overflow ? FLAG_OVERFLOW : 0u));
+    frame_encode_data(p->pool[buf], seq, flags, dropped, now_us, view_get, &view, n);
+    proto_meta_t *m = &p->meta[buf];
+    m->n = n;
+    m->head = head;
+    m->dropped = dropped;
+    m->built_us = now_us;
+    return n;
+}
+
+static void build_info(proto_t *p, uint8_t buf, uint32_t uptime_ms)
+{
+    frame_info_t info = {p->cur_seq, 0, FW_VERSION_MAJOR, FW_VERSION_MINOR, FW_VERSION_PATCH,
+                         p->boot_count, uptime_ms, p->debounce_primary_us,
+                         p->debounce_secondary_us};
+    frame_encode_info(p->pool[buf], &info);
+}
+
+void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us,
+                uint16_t deb_s_us, uint32_t now_us)
+{
+    uint8_t *raw = (uint8_t *)p;
+    for (unsigned i = 0; i < sizeof *p; i++)
+        raw[i] = 0;
+    p->ring = ring;
+    p->boot_count = boot_count;
+    p->debounce_primary_us = deb_p_us;
+    p->debounce_secondary_us = deb_s_us;
+    p->cur = 0;
+    p->nxt = p->info = p->tx = PROTO_NONE;
+    build(p, 0, 0, 0, 1, now_us);
+    p->info = 1;
+    build_info(p, 1, 0);
+}
+
+/* The host acknowledged the current frame: its events leave the ring, the pre-built
+ * next frame becomes current. */
+static void retire(proto_t *p)
+{
+    ring_retire(p->ring, p->meta[p->cur].n);
+    p->cur = p->nxt;
+    p->nxt = PROTO_NONE;
+    p->nxt_valid = 0;
+    p->cur_seq++;
+    p->cur_sent = 0;
+    p->retired_any = 1;
+    p->gen++;
+    p->retired++;
+}
+
+uint8_t proto_command(proto_t *p, const uint8_t *buf, uint8_t n, uint16_t crc_residue)
+{
+    if (cmd_check(buf, n, crc_residue) != CMD_OK) {
+        p->cmds_bad++;
+        return 0;  /* ignored: the device serves its current frame unchanged */
+    }
+    p->cmds_ok++;
+    switch (buf[0]) {
+    case OP_ACK_POLL:
+        /* Retire only what the host has seen; a next frame must be ready, or the host
+         * would have nothing new to read (it then gets a stale repeat and re-acks). */
+        if (buf[1] == p->cur_seq && p->cur_sent && p->nxt_valid)
+            retire(p);
+        else if (p->cur_sent)
+            p->resent++;
+        break;
+    case OP_SET_DEBOUNCE: {
+        uint16_t dp = (uint16_t)(buf[1] << 8 | buf[2]);
+        uint16_t ds = (uint16_t)(buf[3] << 8 | buf[4]);
+        p->debounce_primary_us = dp;
+        p->debounce_secondary_us = ds;
+        proto_hook_set_debounce(dp, ds);
+        p->info_dirty = 1;
+        break;
+    }
+    case OP_CLEAR_COUNTERS:
+        p->ring->dropped = 0;
+        p->ring->overflow = 0;
+        break;
+    case OP_INFO:
+        p->serve_info = 1;
+        break;
+    default:  /* OP_POLL: serve the current frame, retire nothing */
+        break;
+    }
+    return buf[0];
+}
+
+const uint8_t *proto_begin_read(proto_t *p)
+{
+    if (p->serve_info) {
+        p->serve_info = 0;
+        p->tx = p->info;
+    } else {
+        p->tx = p->cur;
+        p->cur_sent = 1;
+    }
+    return p->pool[p->tx];
+}
+
+void proto_end_read(proto_t *p) { p->tx = PROTO_NONE; }
+
+void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
+{
+    ring_t *r = p->ring;
+    uint8_t gen, seq, cur, buf, reset;
+
+    /* 1. The unsent current frame takes any new events (or a fresh t0 when empty). */
+    if (!p->cur_sent) {
+        cur = p->cur;
+        const proto_meta_t *m = &p->meta[cur];
+        if (m->head != r->head || m->dropped != r->dropped ||
+            (m->n == 0 && (uint32_t)(now_us - m->built_us) >= PROTO_EMPTY_REFRESH_US)) {
+            PORT_CRITICAL_BEGIN();
+            gen = p->gen;
+            seq = p->cur_seq;
+            reset = !p->retired_any;
+            buf = free_buffer(p);
+            PORT_CRITICAL_END();
+            build(p, buf, seq, 0, reset, now_us);
+            PORT_CRITICAL_BEGIN();
+            if (gen == p->gen && !p->cur_sent) {
+                p->cur = buf;
+                p->nxt = PROTO_NONE;  /* it followed the old cur's events */
+                p->nxt_valid = 0;
+                p->gen++;
+            }
+            PORT_CRITICAL_END();
+        }
+    }
+
+    /* 2. Pre-build the next frame so an ACK_POLL can swap it in inside the ISR; the
+     * host has not seen it, so it too takes new events until the swap. */
+    if (!p->nxt_valid || p->meta[p->nxt].head != r->head) {
+        uint8_t offset;
+        PORT_CRITICAL_BEGIN();
+        gen = p->gen;
+        seq = (uint8_t)(p->cur_seq + 1u);
+        offset = p->meta[p->cur].n;
+        buf = free_buffer(p);
+        PORT_CRITICAL_END();
+        build(p, buf, seq, offset, 0, now_us);
+        PORT_CRITICAL_BEGIN();
+        if (gen == p->gen) {  /* cur unchanged, so nxt still follows it */
+            p->nxt = buf;
+            p->nxt_valid = 1;
+        }
+        PORT_CRITICAL_END();
+    }
+
+    /* 3. Info frame (uptime), never built in the ISR. */
+    if (p->info_dirty || (uint32_t)(uptime_ms - p->info_built_ms) >= INFO_REFRESH_MS) {
+        PORT_CRITICAL_BEGIN();
+        buf = free_buffer(p);
+        p->info_dirty = 0;
+        PORT_CRITICAL_END();
+        build_info(p, buf, uptime_ms);
+        p->info_built_ms = uptime_ms;
+        PORT_CRITICAL_BEGIN();
+        p->info = buf;
+        PORT_CRITICAL_END();
+    }
+}

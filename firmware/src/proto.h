@@ -1,0 +1,73 @@
+/* The v1 link state machine (docs/protocol.md "Acknowledge and re-send"). Pure C.
+ *
+ * The device holds a *current* frame and a pre-built *next* frame, both encoded with
+ * CRC in a small buffer pool. The link ISR never encodes anything: a read just points
+ * the transmitter at a ready buffer, and an ACK_POLL that retires the current frame
+ * swaps in the pre-built next one, so the TWI slave never stretches the clock while
+ * the Pi waits (the BCM2835 I2C master mishandles clock stretching).
+ *
+ * Roles of the pool buffers (indices): cur, nxt, info, and tx (the one being
+ * transmitted, which may be a former role holder). The main loop builds into a buffer
+ * that has no role and publishes it with a short critical section, only if nothing
+ * changed meanwhile (the `gen` counter).
+ *
+ * Invariant: cur holds ring events [tail, tail + n_cur), nxt the next n_nxt after
+ * those. Once any byte of cur was transmitted it is frozen until retired. */
+#ifndef DYNO_PROTO_H
+#define DYNO_PROTO_H
+#include <stdint.h>
+#include "frame.h"
+#include "ring.h"
+
+#define PROTO_NBUF 5u
+#define PROTO_NONE 0xFFu
+
+typedef struct {
+    uint8_t n;          /* ring events in this frame */
+    uint8_t head;       /* ring head when built: new events since? */
+    uint16_t dropped;   /* ring dropped count when built */
+    uint32_t built_us;  /* device time when built (empty-frame refresh) */
+} proto_meta_t;
+
+typedef struct {
+    uint8_t pool[PROTO_NBUF][FRAME_MAX];
+    proto_meta_t meta[PROTO_NBUF];
+    ring_t *ring;
+    volatile uint8_t cur, nxt, info, tx;
+    volatile uint8_t cur_seq;
+    volatile uint8_t cur_sent;     /* a byte of cur has gone out: frozen */
+    volatile uint8_t nxt_valid;
+    volatile uint8_t serve_info;   /* INFO received: the next read returns the info frame */
+    volatile uint8_t retired_any;  /* no RESET flag once the first frame was acknowledged */
+    volatile uint8_t gen;          /* bumped whenever cur changes */
+    volatile uint8_t info_dirty;
+    uint16_t debounce_primary_us, debounce_secondary_us;  /* mirrored for INFO */
+    uint16_t boot_count;
+    uint32_t info_built_ms;
+    /* link statistics (diagnostics, not on the wire) */
+    uint16_t cmds_ok, cmds_bad, retired, resent;
+} proto_t;
+
+extern proto_t g_proto;
+
+/* Hooks the firmware (or a test) provides: apply new Hall lock-out windows. Called in
+ * ISR context or with interrupts off. */
+void proto_hook_set_debounce(uint16_t primary_us, uint16_t secondary_us);
+
+void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us,
+                uint16_t deb_s_us, uint32_t now_us);
+
+/* A complete command arrived (crc_residue: CRC-16 over all n bytes, 0 if intact).
+ * ISR context or interrupts off. Returns the op, or 0 if the command was ignored. */
+uint8_t proto_command(proto_t *p, const uint8_t *buf, uint8_t n, uint16_t crc_residue);
+
+/* A read starts / ends (ISR context or interrupts off). begin returns the 32 bytes to
+ * send; a data frame counts as sent from here on. */
+const uint8_t *proto_begin_read(proto_t *p);
+void proto_end_read(proto_t *p);
+
+/* Main loop: rebuild the unsent current frame with new events, pre-build the next
+ * frame, refresh the info frame. Never blocks; interrupts off only to publish. */
+void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms);
+
+#endif

@@ -1,0 +1,60 @@
+/* Lossless single-consumer event ring with an overflow counter. Pure C.
+ *
+ * Producers: the Hall ISRs (INT0/INT1) and the main loop (ADC, inside cli). Consumer:
+ * the frame builder reads entries in place (no copy out) and the ACK in the TWI ISR
+ * retires them by moving `tail`. Indices are free-running u8 (RING_SIZE <= 128 divides
+ * 256), so count = head - tail needs no wrap test and every index access is one byte,
+ * i.e. atomic on the AVR. A full ring drops the *new* event and counts it: old events
+ * are never overwritten, so what the host already expects stays consistent. */
+#ifndef DYNO_RING_H
+#define DYNO_RING_H
+#include <stdint.h>
+#include "config.h"
+#include "event.h"
+
+#if (RING_SIZE & (RING_SIZE - 1)) || RING_SIZE > 128
+#error "RING_SIZE must be a power of two <= 128"
+#endif
+#define RING_MASK ((uint8_t)(RING_SIZE - 1u))
+
+typedef struct {
+    dyno_event_t ev[RING_SIZE];
+    volatile uint8_t head;      /* next slot to write (producers) */
+    volatile uint8_t tail;      /* oldest event not yet acknowledged by the host */
+    volatile uint8_t overflow;  /* 1 once an event was dropped, until CLEAR_COUNTERS */
+    volatile uint16_t dropped;  /* events dropped since boot or CLEAR_COUNTERS (wraps) */
+} ring_t;
+
+extern ring_t g_ring;
+
+void ring_init(ring_t *r);
+
+static inline uint8_t ring_count(const ring_t *r) { return (uint8_t)(r->head - r->tail); }
+
+/* Caller guarantees no other producer runs meanwhile (ISR context, or interrupts off). */
+static inline uint8_t ring_push(ring_t *r, uint8_t tag, uint32_t t_us, uint16_t code, uint8_t status)
+{
+    uint8_t h = r->head;
+    if ((uint8_t)(h - r->tail) >= RING_SIZE) {
+        r->dropped++;
+        r->overflow = 1;
+        return 0;
+    }
+    dyno_event_t *e = &r->ev[h & RING_MASK];
+    e->t_us = t_us;
+    e->code = code;
+    e->status = status;
+    e->tag = tag;
+    r->head = (uint8_t)(h + 1u);  /* publish only after the entry is complete */
+    return 1;
+}
+
+/* k-th oldest unacknowledged event (k < ring_count). */
+static inline const dyno_event_t *ring_peek(const ring_t *r, uint8_t k)
+{
+    return &r->ev[(uint8_t)(r->tail + k) & RING_MASK];
+}
+
+static inline void ring_retire(ring_t *r, uint8_t n) { r->tail = (uint8_t)(r->tail + n); }
+
+#endif
