@@ -152,7 +152,7 @@ def _thermometer(bus, address: int):
     except ImportError:  # pragma: no cover - the hw package is part of the install
         return None
     sensor = MLX90614(bus, address)
-    return sensor.object_temp_c
+    return sensor.object_c
 
 
 def _asdict(obj):

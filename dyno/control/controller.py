@@ -63,7 +63,10 @@ class TestPlan:
     step_min_s: float = 0.08
     step_max_s: float = 1.0
     target_points: int = 20  # adapt the step so the run gives about this many points
-    measure_s: float = 3.0  # the thesis's 3 s average
+    measure_s: float = 3.0  # the thesis's 3 s average (the minimum)
+    target_efficiency_sem: float = 0.0015  # extend the average until the standard error is this small ...
+    max_measure_s: float = 12.0  # ... or this long (rotor heat limits how long a point can last)
+    min_point_torque_nm: float = 3.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
     settle: SettleCriteria = field(default_factory=SettleCriteria)
     min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
@@ -222,9 +225,19 @@ class TestController:
             self._enter(State.MEASURE, f"averaging {p.measure_s:.1f} s")
             host_t0, dev_t0 = self._now(), self.poller.device_now_us()
             await self._sleep(p.measure_s)
-            host_t1, dev_t1 = self._now(), self.poller.device_now_us()
-            point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
-                                 index=len(self.points))
+            while True:
+                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
+                point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
+                                     index=len(self.points))
+                sem = point["efficiency_sem"]
+                if not (sem > p.target_efficiency_sem) or host_t1 - host_t0 >= p.max_measure_s:
+                    break  # (a NaN sem cannot improve by waiting)
+                await self._sleep(min(1.0, p.max_measure_s - (host_t1 - host_t0)))
+            if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
+                self._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
+                                         f"{p.min_point_torque_nm} N m: brake not yet loading")
+                self._adapt_step(math.nan, math.nan)
+                continue
             point.update(settled_by=settled_by, settle_s=settle_s, host_t_start_s=host_t0, host_t_end_s=host_t1,
                          step_s=self._step_s)
             for hook in self.point_hooks:

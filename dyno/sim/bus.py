@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dyno.hw.thermometer import smbus_pec  # the host's own PEC: one definition
+
 FIRMWARE_ADDRESS = 0x03
 THERMOMETER_ADDRESS = 0x5A
 I2C_M_RD = 0x0001
@@ -42,19 +44,6 @@ class BusFaults:
         ber = 1.0 - (1.0 - per_kind) ** (1.0 / 288)  # 36 bytes per poll on the wire
         return cls(bit_error_rate=ber, nack_rate=per_kind / 2, timeout_rate=per_kind / 2,
                    truncate_rate=per_kind)
-
-
-def smbus_pec(data: bytes) -> int:
-    """SMBus packet error code: CRC-8, polynomial x^8+x^2+x+1, init 0.
-
-    binascii has no CRC-8; this is the standard bitwise form (a few bytes per read).
-    """
-    crc = 0
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc
 
 
 class SimSMBus:

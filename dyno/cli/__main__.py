@@ -1,0 +1,3 @@
+import sys
+from dyno.cli import main
+sys.exit(main())
