@@ -1,6 +1,5 @@
 """Torque calibration: fit, refusals, history file atomicity and validation."""
 
-import dataclasses
 import os
 from pathlib import Path
 
