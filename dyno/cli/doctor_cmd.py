@@ -1,0 +1,262 @@
+"""``dyno doctor``: check the rig's hardware and report what works.
+
+Read-only unless ``--toggle``: without it no GPIO pin is claimed (claiming a
+pin drives it), so doctor is safe to run with the engine running.  With
+``--toggle`` it pulses the Arduino reset (and checks the boot counter moved),
+steps the brake actuator out and back by one ``actuator.step_s``, and leaves
+everything in the safe state.
+
+Exit status: 0 all essential checks pass, 1 an essential check failed, 2 the
+rig description is invalid (from the CLI's ConfigError handling).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dyno.rigconfig import add_rig_argument, load_rig
+
+OK, WARN, FAIL, SKIP = "ok", "warn", "FAIL", "skip"
+
+
+@dataclass
+class Check:
+    name: str
+    status: str
+    detail: str
+    essential: bool = True
+
+
+@dataclass
+class Report:
+    checks: list[Check] = field(default_factory=list)
+
+    def add(self, name, status, detail, essential=True) -> Check:
+        c = Check(name, status, detail, essential)
+        self.checks.append(c)
+        return c
+
+    @property
+    def ok(self) -> bool:
+        return not any(c.status == FAIL and c.essential for c in self.checks)
+
+    def render(self) -> str:
+        width = max((len(c.name) for c in self.checks), default=0)
+        lines = [f"  {c.status:>4}  {c.name:<{width}}  {c.detail}" for c in self.checks]
+        verdict = "rig OK" if self.ok else "rig NOT ready: fix the FAIL lines above"
+        return "\n".join(lines + ["", verdict])
+
+
+def add_arguments(parser) -> None:
+    add_rig_argument(parser)
+    parser.add_argument("--toggle", action="store_true",
+                        help="also exercise outputs: pulse the Arduino reset, step the brake out and back")
+    parser.add_argument("--transport", choices=("i2c", "serial"), default=None,
+                        help="firmware link (default: the rig file's)")
+    parser.add_argument("--sim", action="store_true", help="diagnose the simulated rig (no hardware)")
+
+
+def _i2c_clock_hz(bus_number: int) -> int | None:
+    """The kernel's actual I2C clock, from the device tree (None if unknown)."""
+    p = Path(f"/sys/class/i2c-adapter/i2c-{bus_number}/of_node/clock-frequency")
+    try:
+        raw = p.read_bytes()
+    except OSError:
+        return None
+    return int.from_bytes(raw[:4], "big") if len(raw) >= 4 else None
+
+
+def check_firmware(report: Report, cfg, transport) -> object | None:
+    """INFO (v1) or one plain read (v0); returns the info frame if any."""
+    from dyno.acquisition.reader import make_reader
+    from dyno.errors import FrameError
+    from dyno.protocol import v0
+
+    if cfg.protocol == "v0":
+        try:
+            buf = transport.transfer(b"", v0.FRAME_LEN)
+            f = v0.decode_legacy_frame(buf)
+        except (OSError, FrameError) as exc:
+            report.add("firmware", FAIL, f"v0 read failed: {exc}")
+            return None
+        report.add("firmware", OK, f"v0 sketch answers (primary {f.rpm_primary} rpm, ADC code {f.adc_code})")
+        return f
+    reader = make_reader("v1", transport)
+    info = None
+    for _ in range(3):  # the first read after a host restart may still be a data frame in flight
+        info = reader.read_info()
+        if info is not None:
+            break
+    if info is None:
+        fails = dict(transport.failures)
+        report.add("firmware", FAIL, f"no valid INFO frame at 0x{cfg.i2c.firmware_address:02X} "
+                   f"({fails or 'answers, but not a v1 info frame'}): wrong address, v0 sketch, or not flashed?")
+        return None
+    major, minor, patch = info.fw_version
+    report.add("firmware", OK, f"v{major}.{minor}.{patch}, boot #{info.boot_count}, "
+               f"up {info.uptime_ms / 1000:.1f} s")
+    want = (cfg.debounce_primary_us, cfg.debounce_secondary_us)
+    have = (info.debounce_primary_us, info.debounce_secondary_us)
+    report.add("debounce", OK if have == want else WARN,
+               f"device {have[0]}/{have[1]} us, rig file {want[0]}/{want[1]} us"
+               + ("" if have == want else " (dyno sends SET_DEBOUNCE at start)"), essential=False)
+    return info
+
+
+def check_thermometer(report: Report, cfg, bus) -> None:
+    from dyno.errors import TransportError
+    from dyno.hw.thermometer import MLX90614
+
+    t = MLX90614(bus, cfg.i2c.thermometer_address)
+    try:
+        obj, amb = t.object_c(), t.ambient_c()
+    except TransportError as exc:
+        report.add("thermometer", FAIL, f"0x{cfg.i2c.thermometer_address:02X}: {exc}")
+        return
+    limit = cfg.limits.rotor_temp_max_c
+    status = OK if obj < limit else FAIL
+    report.add("thermometer", status, f"rotor {obj:.1f} C (limit {limit:.0f} C), sensor {amb:.1f} C")
+
+
+def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None) -> None:
+    """--toggle: claims the pins (driving them safe), pulses reset, steps the brake."""
+    from dyno.control.outputs import APPLY, RELEASE
+    from dyno.hw.outputs import GpioActuators
+    from dyno.hw.safety import SafetyGuard
+
+    try:
+        act = GpioActuators(cfg, pin_factory=pin_factory, clock=clock)
+    except Exception as exc:  # gpiozero raises a family of pin errors; report, don't crash
+        report.add("gpio", FAIL, f"cannot claim pins {cfg.pins.as_dict()}: {exc}")
+        return
+    with SafetyGuard(act, release_timeout_s=None):
+        report.add("gpio", OK, "pins claimed; throttle idle, engine killed, brake releasing")
+        if not act.finish_release():
+            report.add("brake release", FAIL, "release stroke did not complete")
+            return
+        report.add("brake release", OK, f"released ({cfg.actuator.full_stroke_s:.1f} s stroke)", essential=False)
+        before = _boots(cfg, transport)
+        act.reset_arduino()
+        after = _boots(cfg, transport)
+        if cfg.protocol == "v1" and before is not None:
+            moved = after is not None and after != before
+            report.add("arduino reset", OK if moved else FAIL,
+                       f"boot count {before} -> {after}" + ("" if moved else ": reset line not wired?"))
+        else:
+            report.add("arduino reset", WARN, "pulsed; cannot confirm without a v1 INFO frame", essential=False)
+        act.step(APPLY, cfg.actuator.step_s)
+        act.step(RELEASE, cfg.actuator.step_s)
+        report.add("brake step", OK, f"{cfg.actuator.step_s:.2f} s out and back (watch the actuator move)",
+                   essential=False)
+
+
+def _boots(cfg, transport):
+    if cfg.protocol != "v1":
+        return None
+    from dyno.acquisition.reader import make_reader
+
+    info = make_reader("v1", transport).read_info()
+    return None if info is None else info.boot_count
+
+
+def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=False,
+             clock=None, pin_factory=None) -> Report:
+    """All checks; ``bus``/``serial_port`` inject fakes or the simulated bus."""
+    from dyno.transports.i2c import open_i2c, smbus_factory
+    from dyno.transports.serial import open_serial
+
+    report = Report()
+    report.add("rig file", OK, f"{cfg.path} (protocol {cfg.protocol}, poll {cfg.poll_hz:g} Hz)", essential=False)
+    kind = transport_kind or cfg.transport
+
+    # I2C bus: needed for the thermometer even when the firmware is on USB serial.
+    if bus is None:
+        try:
+            bus = smbus_factory(cfg.i2c.bus)()
+        except OSError as exc:
+            report.add("i2c bus", FAIL, str(exc))
+            bus = None
+        else:
+            actual = _i2c_clock_hz(cfg.i2c.bus)
+            if actual is None:
+                report.add("i2c bus", OK, f"/dev/i2c-{cfg.i2c.bus} open (clock unknown)")
+            elif actual > cfg.i2c.bus_speed_hz:
+                report.add("i2c bus", WARN, f"/dev/i2c-{cfg.i2c.bus} runs at {actual} Hz, rig file says "
+                           f"{cfg.i2c.bus_speed_hz} Hz: set dtparam=i2c_arm_baudrate (hardware/README.md)",
+                           essential=False)
+            else:
+                report.add("i2c bus", OK, f"/dev/i2c-{cfg.i2c.bus} open at {actual} Hz")
+    else:
+        report.add("i2c bus", OK, f"{type(bus).__name__} (injected)", essential=False)
+
+    transport = None
+    if kind == "serial":
+        try:
+            transport = open_serial(cfg, port=serial_port)
+            report.add("serial", OK, f"{cfg.serial.port} at {cfg.serial.baud} Bd")
+        except OSError as exc:
+            report.add("serial", FAIL, str(exc))
+    elif bus is not None:
+        transport = open_i2c(cfg, bus=bus, clock=clock)
+    if transport is not None:
+        check_firmware(report, cfg, transport)
+    else:
+        report.add("firmware", FAIL, "no link to the firmware")
+
+    if bus is not None:
+        check_thermometer(report, cfg, bus)
+    else:
+        report.add("thermometer", FAIL, "no I2C bus")
+
+    if toggle:
+        if transport is None:
+            report.add("gpio", FAIL, "not toggled: no firmware link to confirm the reset")
+        else:
+            check_outputs(report, cfg, transport, clock=clock, pin_factory=pin_factory)
+    else:
+        report.add("gpio", SKIP, "outputs not touched (use --toggle)", essential=False)
+    return report
+
+
+def _sim_pin_factory(sim, reset_bcm: int, active_high: bool, now_s):
+    """Mock pins whose reset pin really resets the emulated firmware (for ``--sim --toggle``)."""
+    from gpiozero.pins.mock import MockFactory, MockPWMPin
+
+    class ResetWiredPin(MockPWMPin):
+        def _change_state(self, value):
+            changed = super()._change_state(value)
+            if changed and self.info.name == f"GPIO{reset_bcm}" and bool(value) == active_high:
+                sim.firmware.reset(now_s())
+            return changed
+
+    return MockFactory(pin_class=ResetWiredPin)
+
+
+def run(args) -> int:
+    cfg = load_rig(args.rig)
+    bus = pin_factory = clock = None
+    if args.sim:
+        import time
+
+        from dyno.sim.rig import SimRig
+
+        t0 = time.monotonic()
+
+        def now_s():  # simulated time starts at 0, or the sim would first simulate the host's uptime
+            return time.monotonic() - t0
+
+        sim = SimRig(now_s, protocol=cfg.protocol)
+        bus = sim.bus
+        if args.toggle:
+            from dyno.hw.clock import FakeClock
+
+            clock = FakeClock()  # an 8 s release stroke need not take 8 s off the rig
+            pin_factory = _sim_pin_factory(sim, cfg.pins.arduino_reset, cfg.reset.active_high, now_s)
+    report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=args.toggle,
+                      clock=clock, pin_factory=pin_factory)
+    print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""))
+    print(report.render())
+    sys.stdout.flush()
+    return 0 if report.ok else 1

@@ -1,0 +1,72 @@
+"""`dyno doctor`: bad rig files exit 2 with one line naming the field; the report on the simulated rig."""
+
+from __future__ import annotations
+
+import errno
+
+import pytest
+
+from dyno.cli import main
+from dyno.rigconfig import DEFAULT_RIG_PATH
+
+GOOD = DEFAULT_RIG_PATH.read_text()
+
+
+def bad_rig(tmp_path, old, new):
+    assert old in GOOD, old
+    p = tmp_path / "bad.toml"
+    p.write_text(GOOD.replace(old, new, 1))
+    return p
+
+
+CASES = [
+    ("unknown pin", "brake_enable = 13", "brake_enable = 99", "pins.brake_enable"),
+    ("duplicate pin", "engine_kill = 24", "engine_kill = 23", "pins.engine_kill"),
+    ("address out of range", "firmware_address = 0x03", "firmware_address = 0x02", "i2c.firmware_address"),
+    ("missing field", "full_stroke_s = 8.0", "", "actuator.full_stroke_s"),
+    ("unknown key", "poll_hz = 150", "poll_hz = 150\npoll_rate = 3", "poll_rate"),
+]
+
+
+@pytest.mark.parametrize("case,old,new,field", CASES, ids=[c[0] for c in CASES])
+def test_hw_doctor_bad_rig_exits_2_with_one_line(tmp_path, capsys, case, old, new, field):
+    p = bad_rig(tmp_path, old, new)
+    rc = main(["doctor", "--rig", str(p)])
+    out, err = capsys.readouterr()
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"dyno doctor: error: {p}: {field}:")
+    assert out == ""
+
+
+def test_hw_doctor_missing_rig_file(tmp_path, capsys):
+    assert main(["doctor", "--rig", str(tmp_path / "none.toml")]) == 2
+    assert "file: not found" in capsys.readouterr().err
+
+
+def test_hw_doctor_sim_toggle_report(capsys):
+    rc = main(["doctor", "--sim", "--toggle"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    for name in ("firmware", "thermometer", "arduino reset", "brake step"):
+        assert any(line.split()[:1] == ["ok"] and name in line for line in out.splitlines()), (name, out)
+    assert "boot count 0 -> 1" in out and out.rstrip().endswith("rig OK")
+
+
+def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):
+    import dyno.hw.outputs as outputs
+    from dyno.cli.doctor_cmd import diagnose
+    from dyno.rigconfig import load_rig
+
+    monkeypatch.setattr(outputs, "GpioActuators", None)  # any use would raise
+
+    class Empty:
+        def i2c_rdwr(self, *msgs):
+            raise OSError(errno.EREMOTEIO, "no ACK")
+
+    report = diagnose(load_rig(), bus=Empty())
+    by = {c.name: c for c in report.checks}
+    assert by["gpio"].status == "skip"
+    assert by["firmware"].status == "FAIL" and by["thermometer"].status == "FAIL"
+    assert not report.ok
