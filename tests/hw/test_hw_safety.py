@@ -233,3 +233,26 @@ def test_hw_watchdog_thread_catches_blocked_event_loop(rig, factory, clock):
     dog2.start_thread(period_s=0.01)
     dog2.stop_thread()
     act.close()
+
+
+def test_hw_hardware_rig_composes_and_exits_safe(rig, factory, clock):
+    from dyno.hw.rig import HardwareRig
+
+    class Bus:
+        closed = False
+
+        def i2c_rdwr(self, *msgs):
+            raise OSError(5, "nothing on this bus")
+
+        def close(self):
+            self.closed = True
+
+    bus = Bus()
+    with pytest.raises(ValueError):
+        with HardwareRig(rig, pin_factory=factory, clock=clock, bus=bus, install_signals=False) as hw:
+            assert hw.transport is not None and hw.thermometer is not None
+            hw.actuators.finish_release()
+            drive(hw.actuators, clock)
+            raise ValueError("controller bug")
+    assert bus.closed
+    assert_safe_and_de_energised(factory, rig, hw.actuators)

@@ -1,0 +1,81 @@
+"""The real rig in one object: what ``dyno.sim.rig.SimRig`` is for the simulated one.
+
+>>> with HardwareRig(load_rig(args.rig)) as hw:          # doctest: +SKIP
+...     asyncio.create_task(hw.watchdog.run())
+...     reader = make_reader(cfg.protocol, hw.transport)
+...     controller(actuators=hw.actuators, ...)
+
+Entering claims the pins (safe state at once, release stroke starting),
+installs the signal/atexit handlers, opens the firmware link (I²C with the
+Arduino reset wired in, or USB serial) and the thermometer.  Leaving, by any
+path, finishes the release stroke, de-energises everything and closes the
+buses.  Every part is injectable (pin factory, clock, bus, serial port), so
+the same object runs on a laptop over the simulated bus.
+"""
+
+from __future__ import annotations
+
+from dyno.hw.outputs import GpioActuators
+from dyno.hw.safety import SafetyGuard, Watchdog
+from dyno.hw.thermometer import MLX90614
+
+
+class _CurrentBus:
+    """The transport's bus as it is now: recovery may reopen it, the thermometer must follow."""
+
+    def __init__(self, transport) -> None:
+        self._transport = transport
+
+    def i2c_rdwr(self, *msgs):
+        return self._transport.bus.i2c_rdwr(*msgs)
+
+
+class HardwareRig:
+    def __init__(self, config, *, pin_factory=None, clock=None, bus=None, serial_port=None,
+                 install_signals: bool = True) -> None:
+        self.config = config
+        self._pin_factory = pin_factory
+        self._clock = clock
+        self._bus = bus
+        self._serial_port = serial_port
+        self._install_signals = install_signals
+        self.actuators = self.guard = self.transport = self.thermometer = self.watchdog = None
+        self._i2c = None
+
+    def __enter__(self) -> "HardwareRig":
+        from dyno.transports.i2c import open_i2c
+        from dyno.transports.serial import open_serial
+
+        cfg = self.config
+        self.actuators = GpioActuators(cfg, pin_factory=self._pin_factory, clock=self._clock)
+        signals = () if not self._install_signals else SafetyGuard.__init__.__kwdefaults__["signals"]
+        self.guard = SafetyGuard(self.actuators, signals=signals, use_atexit=self._install_signals)
+        self.guard.__enter__()
+        try:
+            clock = self.actuators.clock
+            # The thermometer is always on I2C; the firmware is on I2C or USB serial.
+            self._i2c = open_i2c(cfg, bus=self._bus, reset=self.actuators.reset_arduino, clock=clock)
+            if cfg.transport == "serial":
+                self.transport = open_serial(cfg, port=self._serial_port, clock=clock)
+            else:
+                self.transport = self._i2c
+            self.thermometer = MLX90614(_CurrentBus(self._i2c), cfg.i2c.thermometer_address)
+            self.watchdog = Watchdog(self.actuators, cfg.actuator.watchdog_s, clock=clock)
+        except BaseException as exc:
+            self.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            if self.watchdog is not None:
+                self.watchdog.stop_thread()
+            if self.guard is not None:
+                self.guard.__exit__(exc_type, exc, tb)
+        finally:
+            for link in {id(x): x for x in (self.transport, self._i2c) if x is not None}.values():
+                try:
+                    link.close()
+                except OSError:
+                    pass
+        return False
