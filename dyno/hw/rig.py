@@ -16,7 +16,7 @@ the same object runs on a laptop over the simulated bus.
 from __future__ import annotations
 
 from dyno.hw.outputs import GpioActuators
-from dyno.hw.safety import SafetyGuard, Watchdog
+from dyno.hw.safety import DEFAULT_SIGNALS, SafetyGuard, Watchdog
 from dyno.hw.thermometer import MLX90614
 
 
@@ -48,7 +48,7 @@ class HardwareRig:
 
         cfg = self.config
         self.actuators = GpioActuators(cfg, pin_factory=self._pin_factory, clock=self._clock)
-        signals = () if not self._install_signals else SafetyGuard.__init__.__kwdefaults__["signals"]
+        signals = DEFAULT_SIGNALS if self._install_signals else ()
         self.guard = SafetyGuard(self.actuators, signals=signals, use_atexit=self._install_signals)
         self.guard.__enter__()
         try:
