@@ -68,7 +68,7 @@ class CVT:
     """Scalar CVT relations (see the module docstring)."""
 
     def __init__(self, *, ratio_low: float, ratio_high: float, primary_radius_max_m: float,
-                 sheave_half_angle_deg: float, flyweight_coeff_kg_m: float, primary_spring_preload_n: float,
+                 sheave_half_angle_deg: float, flyweight_coeff_kg_m: float, primary_spring_full_shift_n: float,
                  primary_spring_rate_n_per_m: float, secondary_spring_preload_n: float,
                  secondary_spring_rate_n_per_m: float, helix_gain_n_per_nm: float,
                  engage_start_rpm: float, engage_full_rpm: float, clutch_capacity_nm: float,
@@ -82,7 +82,10 @@ class CVT:
         self.rp_min_m = self.r_sum_m / (1.0 + ratio_low)
         self.z_max_m = 2.0 * math.tan(math.radians(sheave_half_angle_deg)) * (self.rp_max_m - self.rp_min_m)
         self.c_fw = flyweight_coeff_kg_m
-        self.f0_n = primary_spring_preload_n + secondary_spring_preload_n
+        # Primary spring preload at low ratio from its full-shift force (thesis
+        # eq. 9.3 bracket: 950 N - k (0.093 - R_p) 2 tan(beta) at R_p = r_p,min).
+        self.primary_preload_n = primary_spring_full_shift_n - primary_spring_rate_n_per_m * self.z_max_m
+        self.f0_n = self.primary_preload_n + secondary_spring_preload_n
         self.k_total_n = (primary_spring_rate_n_per_m + secondary_spring_rate_n_per_m) * self.z_max_m
         self.helix_gain = helix_gain_n_per_nm
         self.n_eng0 = engage_start_rpm
