@@ -76,77 +76,22 @@ void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us
     build_info(p, 1, 0);
 }
 
-/* The host acknowledged the current frame: its events leave the ring, the pre-built
- * next frame becomes current. */
-static void retire(proto_t *p)
-{
-    ring_retire(p->ring, p->meta[p->cur].n);
-    p->cur = p->nxt;
-    p->nxt = PROTO_NONE;
-    p->nxt_valid = 0;
-    p->cur_seq++;
-    p->cur_sent = 0;
-    p->retired_any = 1;
-    p->gen++;
-    p->retired++;
-}
-
-uint8_t proto_command(proto_t *p, const uint8_t *buf, uint8_t n, uint16_t crc_residue)
-{
-    if (cmd_check(buf, n, crc_residue) != CMD_OK) {
-        p->cmds_bad++;
-        return 0;  /* ignored: the device serves its current frame unchanged */
-    }
-    p->cmds_ok++;
-    switch (buf[0]) {
-    case OP_ACK_POLL:
-        /* Retire only what the host has seen; a next frame must be ready, or the host
-         * would have nothing new to read (it then gets a stale repeat and re-acks). */
-        if (buf[1] == p->cur_seq && p->cur_sent && p->nxt_valid)
-            retire(p);
-        else if (p->cur_sent)
-            p->resent++;
-        break;
-    case OP_SET_DEBOUNCE: {
-        uint16_t dp = (uint16_t)(buf[1] << 8 | buf[2]);
-        uint16_t ds = (uint16_t)(buf[3] << 8 | buf[4]);
-        p->debounce_primary_us = dp;
-        p->debounce_secondary_us = ds;
-        proto_hook_set_debounce(dp, ds);
-        p->info_dirty = 1;
-        break;
-    }
-    case OP_CLEAR_COUNTERS:
-        p->ring->dropped = 0;
-        p->ring->overflow = 0;
-        break;
-    case OP_INFO:
-        p->serve_info = 1;
-        break;
-    default:  /* OP_POLL: serve the current frame, retire nothing */
-        break;
-    }
-    return buf[0];
-}
-
-const uint8_t *proto_begin_read(proto_t *p)
-{
-    if (p->serve_info) {
-        p->serve_info = 0;
-        p->tx = p->info;
-    } else {
-        p->tx = p->cur;
-        p->cur_sent = 1;
-    }
-    return p->pool[p->tx];
-}
-
-void proto_end_read(proto_t *p) { p->tx = PROTO_NONE; }
-
 void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
 {
     ring_t *r = p->ring;
     uint8_t gen, seq, cur, buf, reset;
+
+    /* 0. A SET_DEBOUNCE from the ISR: apply it here (the hook may take its time). */
+    if (p->debounce_pending) {
+        uint16_t dp, ds;
+        PORT_CRITICAL_BEGIN();
+        p->debounce_pending = 0;
+        dp = p->debounce_primary_us;
+        ds = p->debounce_secondary_us;
+        PORT_CRITICAL_END();
+        proto_hook_set_debounce(dp, ds);
+        p->info_dirty = 1;
+    }
 
     /* 1. The unsent current frame takes any new events (or a fresh t0 when empty). */
     if (!p->cur_sent) {

@@ -16,6 +16,7 @@
 #ifndef DYNO_PROTO_H
 #define DYNO_PROTO_H
 #include <stdint.h>
+#include "cmd.h"
 #include "frame.h"
 #include "ring.h"
 
@@ -41,30 +42,91 @@ typedef struct {
     volatile uint8_t retired_any;  /* no RESET flag once the first frame was acknowledged */
     volatile uint8_t gen;          /* bumped whenever cur changes */
     volatile uint8_t info_dirty;
+    volatile uint8_t debounce_pending;  /* SET_DEBOUNCE seen in the ISR, applied by the loop */
     uint16_t debounce_primary_us, debounce_secondary_us;  /* mirrored for INFO */
     uint16_t boot_count;
     uint32_t info_built_ms;
-    /* link statistics (diagnostics, not on the wire) */
-    uint16_t cmds_ok, cmds_bad, retired, resent;
+    /* diagnostics, not on the wire: commands ignored (bad CRC/length/op) */
+    uint8_t cmds_bad;
 } proto_t;
 
 extern proto_t g_proto;
 
-/* Hooks the firmware (or a test) provides: apply new Hall lock-out windows. Called in
- * ISR context or with interrupts off. */
+/* Hook the firmware (or a test) provides: apply new Hall lock-out windows. Called
+ * from proto_service() in the main loop, never from the ISR. */
 void proto_hook_set_debounce(uint16_t primary_us, uint16_t secondary_us);
 
 void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us,
                 uint16_t deb_s_us, uint32_t now_us);
 
+/* The ISR-side functions below are inline and call nothing: in an AVR ISR any call
+ * makes gcc save every call-clobbered register, on every TWI interrupt. */
+
+/* The host acknowledged the current frame: its events leave the ring, the pre-built
+ * next frame becomes current. */
+static inline __attribute__((always_inline)) void proto_retire(proto_t *p)
+{
+    ring_retire(p->ring, p->meta[p->cur].n);
+    p->cur = p->nxt;
+    p->nxt = PROTO_NONE;
+    p->nxt_valid = 0;
+    p->cur_seq++;
+    p->cur_sent = 0;
+    p->retired_any = 1;
+    p->gen++;
+}
+
 /* A complete command arrived (crc_residue: CRC-16 over all n bytes, 0 if intact).
  * ISR context or interrupts off. Returns the op, or 0 if the command was ignored. */
-uint8_t proto_command(proto_t *p, const uint8_t *buf, uint8_t n, uint16_t crc_residue);
+static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, const uint8_t *buf,
+                                                                   uint8_t n, uint16_t crc_residue)
+{
+    if (cmd_check(buf, n, crc_residue) != CMD_OK) {
+        p->cmds_bad++;
+        return 0;  /* ignored: the device serves its current frame unchanged */
+    }
+    switch (buf[0]) {
+    case OP_ACK_POLL:
+        /* Retire only what the host has seen; a next frame must be ready, or the host
+         * would have nothing new to read (it then gets a stale repeat and re-acks). */
+        if (buf[1] == p->cur_seq && p->cur_sent && p->nxt_valid)
+            proto_retire(p);
+        break;
+    case OP_SET_DEBOUNCE:
+        p->debounce_primary_us = (uint16_t)(buf[1] << 8 | buf[2]);
+        p->debounce_secondary_us = (uint16_t)(buf[3] << 8 | buf[4]);
+        p->debounce_pending = 1;
+        break;
+    case OP_CLEAR_COUNTERS:
+        p->ring->dropped = 0;
+        p->ring->overflow = 0;
+        break;
+    case OP_INFO:
+        p->serve_info = 1;
+        break;
+    default:  /* OP_POLL: serve the current frame, retire nothing */
+        break;
+    }
+    return buf[0];
+}
 
-/* A read starts / ends (ISR context or interrupts off). begin returns the 32 bytes to
- * send; a data frame counts as sent from here on. */
-const uint8_t *proto_begin_read(proto_t *p);
-void proto_end_read(proto_t *p);
+/* A read starts (ISR context or interrupts off): the 32 bytes to send. A data frame
+ * counts as sent from here on. */
+static inline __attribute__((always_inline)) const uint8_t *proto_begin_read(proto_t *p)
+{
+    uint8_t b;
+    if (p->serve_info) {
+        p->serve_info = 0;
+        b = p->info;
+    } else {
+        b = p->cur;
+        p->cur_sent = 1;
+    }
+    p->tx = b;
+    return p->pool[b];
+}
+
+static inline __attribute__((always_inline)) void proto_end_read(proto_t *p) { p->tx = PROTO_NONE; }
 
 /* Main loop: rebuild the unsent current frame with new events, pre-build the next
  * frame, refresh the info frame. Never blocks; interrupts off only to publish. */

@@ -353,8 +353,8 @@ static void test_proto_basics(void)
     /* SET_DEBOUNCE reaches the hook and the info frame. */
     uint8_t d[4] = {0x13, 0x88, 0x0B, 0xB8};  /* 5000, 3000 */
     send_cmd(&p, c, mk_cmd(c, OP_SET_DEBOUNCE, d, 4));
-    CHECK(hook_p == 5000 && hook_s == 3000, "debounce hook");
     proto_service(&p, 4000, 4);
+    CHECK(hook_p == 5000 && hook_s == 3000, "debounce hook");
     send_cmd(&p, c, mk_cmd(c, OP_INFO, NULL, 0));
     read_frame(&p, f2);
     CHECK(frame_ok(f2) && f2[2] == KIND_INFO && f2[1] == 22, "info frame");

@@ -1,0 +1,203 @@
+"""``dyno firmware-sim``: run the real firmware ELF in simavr against the real host code.
+
+The harness emulates the rig around the MCU (Hall sensors, AD7171, the Pi's I2C
+master); the host side is exactly what ``dyno run`` uses: ``make_reader`` from
+``dyno.acquisition.reader`` over a :class:`~dyno.transports.simavr.SimavrTransport`,
+polled at 150 Hz of simulated time.  At the end the generators stop and the host keeps
+polling until the device's queue is empty, so every edge and conversion the harness
+generated can be counted against what the host decoded.
+
+Exit status: 0 when the run completed (v1: and nothing was lost), 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+
+from dyno.acquisition.reader import make_reader
+from dyno.acquisition.rpm import rpm_by_count
+from dyno.protocol import v1
+from dyno.transports.simavr import FAULT_KINDS, SimavrTransport
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
+    parser.add_argument("--protocol", choices=("v1", "v0"), default="v1")
+    parser.add_argument("--primary-rpm", type=float, default=3800.0)
+    parser.add_argument("--secondary-rpm", type=float, default=7600.0)
+    parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
+    parser.add_argument("--adc-status", type=lambda s: int(s, 0), default=0x05,
+                        help="AD7171 status byte clocked after the data (default 0x05)")
+    parser.add_argument("--adc-error-every", type=int, default=0,
+                        help="set the AD7171 error bit on every Nth conversion (0: never)")
+    parser.add_argument("--adc-hz", type=float, default=125.0)
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds of signal")
+    parser.add_argument("--bounce", action="store_true", help="add two bounce edges per Hall pulse")
+    parser.add_argument("--fault-rate", type=float, default=0.0,
+                        help="probability that a transfer is corrupted between harness and host")
+    parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
+                        help=f"comma list from {','.join(FAULT_KINDS)}")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--poll-hz", type=float, default=150.0)
+    parser.add_argument("--i2c-khz", type=int, default=100)
+    parser.add_argument("--drain-s", type=float, default=0.3,
+                        help="keep polling this long after the signals stop")
+    parser.add_argument("--reset-at", type=float, default=None,
+                        help="reset the MCU at this simulated second (watchdog-like)")
+    parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
+    parser.add_argument("--json", action="store_true", help="print one JSON document")
+
+
+def simulate(args) -> dict:
+    """Run one firmware-in-the-loop session; returns the report dictionary."""
+    wall0 = time.perf_counter()
+    kinds = tuple(k for k in args.fault_kinds.split(",") if k)
+    tr = SimavrTransport(args.elf, harness=args.harness, primary_rpm=args.primary_rpm,
+                         secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
+                         adc_status=args.adc_status, adc_error_every=args.adc_error_every,
+                         adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
+                         fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+    try:
+        reader = make_reader(args.protocol, tr)
+        times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: []}
+        codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
+        dt = 1.0 / args.poll_hz
+        k = 0
+        reset_done = args.reset_at is None
+        # The signals start 50 ms after power-up; they run for args.seconds.
+        t_stop = 0.05 + args.seconds
+        t_end = t_stop + args.drain_s
+        stopped = False
+        while True:
+            t = k * dt
+            if t > t_end:
+                break
+            if not stopped and t >= t_stop:
+                tr.advance_to(t_stop)
+                tr.generators(False)
+                stopped = True
+            if not reset_done and t >= args.reset_at:
+                tr.advance_to(args.reset_at)
+                tr.reset_device()
+                reset_done = True
+            tr.advance_to(t)
+            for ev in reader.poll(t):
+                times[ev.channel].append(ev.t_us)
+                if ev.channel == v1.CH_ADC:
+                    codes.append(ev.code)
+                    statuses.append(ev.status)
+                elif args.protocol == "v0":
+                    slot_rpm[ev.channel].append(ev.code)
+            k += 1
+        info = reader.read_info() if args.protocol == "v1" else None
+        hs = tr.harness_stats()
+        faults = dict(tr.faults_injected)
+    finally:
+        tr.close()
+    return _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults,
+                   time.perf_counter() - wall0)
+
+
+def _channel(ts) -> dict:
+    t = np.asarray(ts, dtype=np.int64)
+    d = np.diff(t) if t.size > 1 else np.zeros(0, dtype=np.int64)
+    return {
+        "received": int(t.size),
+        "duplicates_or_disorder": int(np.count_nonzero(d <= 0)),
+        "period_min_us": int(d.min()) if d.size else None,
+        "period_max_us": int(d.max()) if d.size else None,
+    }
+
+
+def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wall_s) -> dict:
+    rp, _ = rpm_by_count(times[v1.CH_PRIMARY])
+    rs, _ = rpm_by_count(times[v1.CH_SECONDARY])
+
+    def err_pct(got, want):
+        return None if not want or math.isnan(got) else 100.0 * (got - want) / want
+
+    def num(x):
+        return None if x is None or (isinstance(x, float) and math.isnan(x)) else x
+
+    hall = hs["hall"]
+    adc = hs["adc"]
+    events = {
+        "primary": {"expected": hall[0]["edges"], **_channel(times[v1.CH_PRIMARY])},
+        "secondary": {"expected": hall[1]["edges"], **_channel(times[v1.CH_SECONDARY])},
+        "adc": {"expected": adc["generated"], "read_by_device": adc["read"],
+                **_channel(times[v1.CH_ADC])},
+    }
+    for ch in events.values():
+        ch["missing"] = ch["expected"] - ch["received"]
+    stats = reader.stats.as_dict()
+    out = {
+        "protocol": args.protocol,
+        "elf": str(args.elf),
+        "seconds": args.seconds,
+        "poll_hz": args.poll_hz,
+        "rpm_primary": num(rp),
+        "rpm_secondary": num(rs),
+        "rpm_expected": {"primary": args.primary_rpm, "secondary": args.secondary_rpm},
+        "rpm_error_pct": {"primary": num(err_pct(rp, args.primary_rpm)),
+                          "secondary": num(err_pct(rs, args.secondary_rpm))},
+        "adc_mean": float(np.mean(codes)) if codes else None,
+        "adc_error_flags": int(sum(1 for s in statuses if s & v1.ADC_STATUS_ERR)),
+        "frames": {
+            "read": stats["read"],
+            "accepted": stats["accepted"],
+            "rejected": stats["rejected"],
+            "rejected_total": stats["rejected_total"],
+            "transport_errors": stats["transport_errors"],
+            "device_resets": stats["device_resets"],
+            "resyncs": stats["resyncs"],
+        },
+        "events_lost": reader.events_lost,
+        "events": events,
+        "faults_injected": faults,
+        "bounce": bool(args.bounce),
+        "harness": {
+            "bounce_edges": [hall[0]["bounce_edges"], hall[1]["bounce_edges"]],
+            "adc_missed_by_device": adc["missed"],
+            "i2c": hs["i2c"],
+            "sim_s": hs["sim_s"],
+            "sim_per_wall": hs["sim_per_wall"],
+            "crashed": hs["crashed"],
+        },
+        "wall_s": round(wall_s, 3),
+    }
+    if args.protocol == "v0":
+        out["rpm_slot_mean"] = {
+            "primary": float(np.mean(slot_rpm[v1.CH_PRIMARY])) if slot_rpm[v1.CH_PRIMARY] else None,
+            "secondary": float(np.mean(slot_rpm[v1.CH_SECONDARY])) if slot_rpm[v1.CH_SECONDARY] else None,
+        }
+    if info is not None:
+        out["device"] = {"fw_version": ".".join(map(str, info.fw_version)),
+                         "boot_count": info.boot_count, "uptime_ms": info.uptime_ms,
+                         "debounce_primary_us": info.debounce_primary_us,
+                         "debounce_secondary_us": info.debounce_secondary_us}
+    out["ok"] = bool(not hs["crashed"] and (args.protocol != "v1" or (
+        reader.events_lost == 0 and all(ch["missing"] == 0 and ch["duplicates_or_disorder"] == 0
+                                        for ch in events.values()))))
+    return out
+
+
+def run(args) -> int:
+    report = simulate(args)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        ev = report["events"]
+        print(f"{report['protocol']} {report['elf']}: {report['seconds']} s simulated "
+              f"in {report['wall_s']} s wall")
+        print(f"  rpm primary {report['rpm_primary']}, secondary {report['rpm_secondary']}, "
+              f"adc mean {report['adc_mean']}")
+        for name, ch in ev.items():
+            print(f"  {name}: {ch['received']} received of {ch['expected']} generated")
+        fr = report["frames"]
+        print(f"  frames: {fr['read']} read, {fr['accepted']} accepted, rejected {fr['rejected']}, "
+              f"transport errors {fr['transport_errors']}; events lost {report['events_lost']}")
+    return 0 if report["ok"] else 1

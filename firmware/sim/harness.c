@@ -1,0 +1,619 @@
+/* Firmware-in-the-loop harness: runs any ATmega328P ELF in simavr (Debian's libsimavr
+ * 1.6) with the rig around it, and plays the I2C master for a host process that talks
+ * to it over stdin/stdout.
+ *
+ *   - Hall sensors on PD2/PD3 (INT0/INT1): one falling edge per revolution at the given
+ *     rpm, optionally followed by bounce edges inside the lock-out window.
+ *   - AD7171 on PD4 (SCLK, input to us) / PD5 (DOUT/RDY, driven by us): a conversion
+ *     every 1/adc_hz s pulls RDY low; each SCLK falling edge shifts out the next of
+ *     16 data + 8 status bits.
+ *   - I2C master at the bus's bit rate. simavr 1.6 cannot complete a slave-transmit
+ *     (it never produces TWI status 0xB8/0xC0; fixed upstream in 2022), so this
+ *     harness does not use simavr's TWI message IRQs at all: it is the bus. For every
+ *     bus event it waits one byte time (9 SCL clocks), writes the TWI status the real
+ *     hardware would produce into TWSR (keeping the prescaler bits), puts received
+ *     data into TWDR, raises the TWI vector, and waits for the ISR to clear TWINT --
+ *     the time SCL is held low, i.e. clock stretching, which it measures. Transmitted
+ *     bytes are taken from TWDR after the ISR. Any slave (our driver, or Arduino's
+ *     Wire for the v0 sketch) sees the same register behaviour as on silicon.
+ *
+ * Simulated time paces everything; the host advances it explicitly.
+ *
+ * Line protocol (one reply line per command, on the original stdout; simavr's own
+ * messages are sent to stderr):
+ *   run <t_us>           run until simulated time t_us        -> "ok <t_us>"
+ *   xfer <hex|-> <n>     write bytes, repeated start, read n  -> "ok <hex|->" | "nack" | "timeout"
+ *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
+ *   reset                reset the MCU (watchdog-like; EEPROM kept)          -> "ok"
+ *   stats                one JSON object
+ *   quit
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <errno.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "avr_ioport.h"
+#include "sim_avr.h"
+#include "sim_cycle_timers.h"
+#include "sim_elf.h"
+#include "sim_interrupts.h"
+#include "sim_irq.h"
+
+#define F_CPU_HZ 16000000ull
+#define CYCLES_PER_US (F_CPU_HZ / 1000000ull)
+
+/* ATmega328P data-space addresses of the TWI registers. */
+#define REG_TWSR 0xB9
+#define REG_TWAR 0xBA
+#define REG_TWDR 0xBB
+#define REG_TWCR 0xBC
+#define TWCR_TWINT 0x80
+#define TWCR_TWEA 0x40
+#define TWCR_TWEN 0x04
+#define TWI_VECTOR 24
+#define N_VECTORS 26
+
+static avr_t *avr;
+static FILE *proto_out;
+
+/* ---- configuration ------------------------------------------------------------ */
+static double cfg_rpm[2] = {3800.0, 7600.0};
+static unsigned cfg_adc_code = 35145, cfg_adc_status = 0x05, cfg_adc_err_every = 0;
+static double cfg_adc_hz = 125.0;
+static int cfg_bounce = 0;
+static unsigned cfg_i2c_khz = 100, cfg_addr = 0x03;
+static double cfg_start_us = 50000.0, cfg_pulse_us = 200.0;
+static int cfg_profile = 0;
+static double cfg_profile_from_us = 100000.0;
+
+/* ---- Hall generators ------------------------------------------------------------ */
+typedef struct {
+    int ch;                      /* 0 primary (PD2), 1 secondary (PD3) */
+    avr_irq_t *pin;
+    double period_cycles;
+    uint64_t k;                  /* index of the next true edge */
+    double t0_cycles;            /* time of edge 0 */
+    int step;                    /* position in the pulse pattern */
+    uint64_t edge_cycle;         /* cycle of the current true edge */
+    uint64_t generated, bounces;
+    uint64_t first_cycle, last_cycle;
+    int running;
+} hall_t;
+static hall_t hall[2];
+static int gen_enabled = 1;
+
+/* Pulse pattern after a true falling edge, as (offset us, level). With bounce, two
+ * extra falling edges at 150 us and 700 us: well inside both lock-out windows (6 and
+ * 10 ms) and well outside the pulse itself. */
+static const struct { double us; int level; } pattern_plain[] = {{0, 0}, {-1, 1}};
+static const struct { double us; int level; } pattern_bounce[] = {
+    {0, 0}, {20, 1}, {150, 0}, {170, 1}, {700, 0}, {-1, 1}};
+
+static double pattern_us(int step)
+{
+    double us = cfg_bounce ? pattern_bounce[step].us : pattern_plain[step].us;
+    return us < 0 ? cfg_pulse_us + (cfg_bounce ? 700.0 : 0.0) : us;
+}
+
+static avr_cycle_count_t hall_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a;
+    hall_t *h = param;
+    int n = cfg_bounce ? 6 : 2;
+    int level = cfg_bounce ? pattern_bounce[h->step].level : pattern_plain[h->step].level;
+    if (h->step == 0) {
+        if (!gen_enabled) {
+            h->running = 0;
+            return 0;
+        }
+        h->edge_cycle = when;
+        h->generated++;
+        if (!h->first_cycle)
+            h->first_cycle = when;
+        h->last_cycle = when;
+    } else if (level == 0) {
+        h->bounces++;
+    }
+    avr_raise_irq(h->pin, (uint32_t)level);
+    h->step++;
+    if (h->step < n)
+        return h->edge_cycle + (avr_cycle_count_t)(pattern_us(h->step) * CYCLES_PER_US);
+    h->step = 0;
+    h->k++;
+    return (avr_cycle_count_t)(h->t0_cycles + (double)h->k * h->period_cycles + 0.5);
+}
+
+static void hall_start(hall_t *h, uint64_t at_cycle)
+{
+    if (cfg_rpm[h->ch] <= 0)
+        return;
+    h->period_cycles = 60.0 * (double)F_CPU_HZ / cfg_rpm[h->ch];
+    h->t0_cycles = (double)at_cycle;
+    h->k = 0;
+    h->step = 0;
+    h->running = 1;
+    avr_cycle_timer_register(avr, at_cycle - avr->cycle, hall_timer, h);
+}
+
+/* ---- AD7171 --------------------------------------------------------------------- */
+static avr_irq_t *pin_dout;
+static int adc_bit = 24;         /* next bit to shift out; 24 = idle (RDY high) */
+static int adc_ready = 0;        /* RDY low, not yet clocked out */
+static uint32_t adc_word;        /* 16 data bits << 8 | status */
+static int sclk_level = 1;
+static uint64_t adc_generated, adc_read, adc_missed, adc_overrun, adc_errors_set;
+static int adc_running;
+static double adc_period_cycles, adc_t0_cycles;
+static uint64_t adc_k;
+
+static avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a; (void)when; (void)param;
+    avr_raise_irq(pin_dout, 1);
+    return 0;
+}
+
+static avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a; (void)when; (void)param;
+    if (!gen_enabled) {
+        adc_running = 0;
+        return 0;
+    }
+    if (adc_bit > 0 && adc_bit < 24) {
+        adc_overrun++;  /* a read in progress: the real part keeps the old result */
+    } else {
+        if (adc_ready)
+            adc_missed++;  /* previous result never read: overwritten */
+        unsigned status = cfg_adc_status & 0xFF;
+        adc_generated++;
+        if (cfg_adc_err_every && adc_generated % cfg_adc_err_every == 0) {
+            status |= 0x20;
+            adc_errors_set++;
+        }
+        adc_word = ((uint32_t)(cfg_adc_code & 0xFFFF) << 8) | status;
+        adc_bit = 0;
+        adc_ready = 1;
+        avr_raise_irq(pin_dout, 0);  /* RDY */
+    }
+    adc_k++;
+    return (avr_cycle_count_t)(adc_t0_cycles + (double)adc_k * adc_period_cycles + 0.5);
+}
+
+static void adc_sclk_notify(avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    int level = value ? 1 : 0;
+    if (level == sclk_level)
+        return;
+    sclk_level = level;
+    if (!adc_ready)
+        return;
+    if (level == 0 && adc_bit < 24) {
+        /* Falling edge: the AD7171 shifts out the next bit, MSB first. */
+        avr_raise_irq(pin_dout, (adc_word >> (23 - adc_bit)) & 1u);
+        adc_bit++;
+    } else if (level == 1 && adc_bit == 24) {
+        /* After the 24th rising edge DOUT/RDY returns high; 1 us later so the MCU's
+         * sample of the last bit (a few cycles after the edge) still sees it. */
+        adc_ready = 0;
+        adc_read++;
+        avr_cycle_timer_register(avr, CYCLES_PER_US, adc_rdy_high, NULL);
+    }
+}
+
+static void adc_start(uint64_t at_cycle)
+{
+    if (cfg_adc_hz <= 0)
+        return;
+    adc_period_cycles = (double)F_CPU_HZ / cfg_adc_hz;
+    adc_t0_cycles = (double)at_cycle;
+    adc_k = 0;
+    adc_running = 1;
+    avr_cycle_timer_register(avr, at_cycle - avr->cycle, adc_timer, NULL);
+}
+
+/* ---- stepping, with optional ISR / interrupts-off profiling ---------------------- */
+typedef struct {
+    uint64_t count, total, max, min;
+} isr_stat_t;
+static isr_stat_t isr_stat[N_VECTORS];
+static int in_isr = -1;
+static uint64_t isr_start;
+static uint64_t cli_start, cli_max, cli_max_at;
+static int crashed;
+static double wall_s;
+static uint64_t wall_cycles;
+
+static inline void step(void)
+{
+    if (!cfg_profile) {
+        int st = avr_run(avr);
+        if (st == cpu_Crashed || st == cpu_Done)
+            crashed = 1;
+        return;
+    }
+    uint32_t pc = avr->pc;
+    uint16_t op = (uint16_t)(avr->flash[pc] | avr->flash[pc + 1] << 8);
+    uint64_t before = avr->cycle;
+    int st = avr_run(avr);
+    if (st == cpu_Crashed || st == cpu_Done)
+        crashed = 1;
+    int armed = avr->cycle >= (uint64_t)(cfg_profile_from_us * CYCLES_PER_US);
+    if (in_isr >= 0) {
+        if (op == 0x9518) {  /* RETI */
+            uint64_t d = avr->cycle - isr_start;
+            isr_stat_t *s = &isr_stat[in_isr];
+            if (armed) {
+                s->count++;
+                s->total += d;
+                if (d > s->max) s->max = d;
+                if (!s->min || d < s->min) s->min = d;
+            }
+            in_isr = -1;
+        }
+        return;
+    }
+    uint32_t npc = avr->pc;
+    if (npc && npc < N_VECTORS * 4 && !(npc & 3)) {
+        in_isr = (int)(npc / 4);
+        isr_start = before;  /* includes the interrupted instruction: an upper bound */
+        cli_start = 0;
+        return;
+    }
+    /* Interrupts-off windows in the main program (cli ... sei / SREG restore). */
+    if (!avr->sreg[S_I]) {
+        if (!cli_start)
+            cli_start = before;
+    } else if (cli_start) {
+        uint64_t d = avr->cycle - cli_start;
+        if (armed && d > cli_max) {
+            cli_max = d;
+            cli_max_at = cli_start;
+        }
+        cli_start = 0;
+    }
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void run_until(uint64_t cycle)
+{
+    double w0 = now_s();
+    uint64_t c0 = avr->cycle;
+    while (avr->cycle < cycle && !crashed)
+        step();
+    wall_s += now_s() - w0;
+    wall_cycles += avr->cycle - c0;
+}
+
+/* ---- I2C master ------------------------------------------------------------------- */
+static avr_int_vector_t *twi_vec;
+static uint64_t i2c_transfers, i2c_nacks, i2c_timeouts, stretch_max, stretch_total, stretch_n;
+static uint64_t byte_cycles, bit_cycles;
+
+/* simavr 1.6 does not clear TWINT when the ISR writes 1 to it (TWI's vector is
+ * "sticky"), so "the slave released SCL" is detected from the write itself. */
+static int twint_written;
+
+static avr_int_vector_t *find_vector(int num)
+{
+    for (int i = 0; i < avr->interrupts.vector_count; i++)
+        if (avr->interrupts.vector[i] && avr->interrupts.vector[i]->vector == num)
+            return avr->interrupts.vector[i];
+    return NULL;
+}
+
+/* The slave's ISR holds SCL low from TWINT until it clears it. Real masters wait (clock
+ * stretching); a stuck slave times the transfer out. */
+static int wait_twint_clear(void)
+{
+    uint64_t t0 = avr->cycle, limit = t0 + 25000ull * CYCLES_PER_US;
+    double w0 = now_s();
+    while (!twint_written && avr->cycle < limit && !crashed)
+        step();
+    if (twint_written)
+        avr->data[REG_TWCR] &= (uint8_t)~TWCR_TWINT;
+    wall_s += now_s() - w0;
+    wall_cycles += avr->cycle - t0;
+    uint64_t d = avr->cycle - t0;
+    if (getenv("HARNESS_DEBUG") && !twint_written)
+        fprintf(stderr, "harness: TWINT stuck: TWCR %02x TWSR %02x pending %d I %d pc %04x\n",
+                avr->data[REG_TWCR], avr->data[REG_TWSR], twi_vec->pending, avr->sreg[S_I], avr->pc);
+    stretch_total += d;
+    stretch_n++;
+    if (d > stretch_max)
+        stretch_max = d;
+    return twint_written;
+}
+
+static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)a; (void)addr; (void)param;
+    if (v & TWCR_TWINT)
+        twint_written = 1;
+}
+
+static void twi_event(uint8_t status)
+{
+    twint_written = 0;
+    avr->data[REG_TWSR] = (uint8_t)((avr->data[REG_TWSR] & 0x03) | status);
+    avr_raise_interrupt(avr, twi_vec);
+}
+
+static int slave_acks(uint8_t addr7)
+{
+    uint8_t twcr = avr->data[REG_TWCR];
+    if (!(twcr & TWCR_TWEN) || !(twcr & TWCR_TWEA))
+        return 0;
+    return (avr->data[REG_TWAR] >> 1) == addr7;
+}
+
+/* Returns 0 ok, 1 NACK, 2 timeout. */
+static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
+{
+    i2c_transfers++;
+    /* simavr stores a 1 written to TWINT (silicon clears the flag), so TWINT can read
+     * as set with nothing pending: only our own events count. */
+    if ((avr->data[REG_TWCR] & TWCR_TWINT) && !twi_vec->pending)
+        avr->data[REG_TWCR] &= (uint8_t)~TWCR_TWINT;
+    run_until(avr->cycle + bit_cycles);  /* START */
+    if (nw > 0) {
+        run_until(avr->cycle + byte_cycles);  /* SLA+W */
+        if (!slave_acks((uint8_t)cfg_addr))
+            return 1;
+        twi_event(0x60);
+        if (!wait_twint_clear()) return 2;
+        for (int i = 0; i < nw; i++) {
+            run_until(avr->cycle + byte_cycles);
+            if (!(avr->data[REG_TWCR] & TWCR_TWEA))
+                return 1;  /* slave stopped acknowledging */
+            avr->data[REG_TWDR] = wr[i];
+            twi_event(0x80);
+            if (!wait_twint_clear()) return 2;
+        }
+        run_until(avr->cycle + bit_cycles);  /* repeated START, or STOP */
+        twi_event(0xA0);
+        if (!wait_twint_clear()) return 2;
+    }
+    if (nr > 0) {
+        run_until(avr->cycle + byte_cycles);  /* SLA+R */
+        if (!slave_acks((uint8_t)cfg_addr))
+            return 1;
+        twi_event(0xA8);
+        if (!wait_twint_clear()) return 2;
+        rd[0] = avr->data[REG_TWDR];
+        for (int i = 1; i < nr; i++) {
+            run_until(avr->cycle + byte_cycles);  /* byte i-1 out, master ACKs */
+            twi_event(0xB8);
+            if (!wait_twint_clear()) return 2;
+            rd[i] = avr->data[REG_TWDR];
+        }
+        run_until(avr->cycle + byte_cycles);  /* last byte out, master NACKs */
+        twi_event(0xC0);
+        if (!wait_twint_clear()) return 2;
+    }
+    run_until(avr->cycle + bit_cycles);  /* STOP */
+    return 0;
+}
+
+/* ---- setup and command loop ------------------------------------------------------ */
+static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
+{
+    (void)a;
+    if (level <= LOG_WARNING)
+        vfprintf(stderr, fmt, ap);
+}
+
+static const char *vector_name(int v)
+{
+    static const char *names[N_VECTORS] = {
+        "RESET", "INT0", "INT1", "PCINT0", "PCINT1", "PCINT2", "WDT", "TIMER2_COMPA",
+        "TIMER2_COMPB", "TIMER2_OVF", "TIMER1_CAPT", "TIMER1_COMPA", "TIMER1_COMPB",
+        "TIMER1_OVF", "TIMER0_COMPA", "TIMER0_COMPB", "TIMER0_OVF", "SPI_STC", "USART_RX",
+        "USART_UDRE", "USART_TX", "ADC", "EE_READY", "ANALOG_COMP", "TWI", "SPM_READY"};
+    return names[v];
+}
+
+static void print_stats(void)
+{
+    FILE *o = proto_out;
+    fprintf(o, "{\"cycle\": %llu, \"sim_s\": %.6f, \"wall_s\": %.4f, \"sim_per_wall\": %.3f, "
+            "\"crashed\": %s, ",
+            (unsigned long long)avr->cycle, (double)avr->cycle / F_CPU_HZ, wall_s,
+            wall_s > 0 ? (double)wall_cycles / F_CPU_HZ / wall_s : 0.0, crashed ? "true" : "false");
+    fprintf(o, "\"hall\": [");
+    for (int c = 0; c < 2; c++)
+        fprintf(o, "%s{\"rpm\": %.6f, \"edges\": %llu, \"bounce_edges\": %llu, "
+                "\"first_us\": %.4f, \"last_us\": %.4f}", c ? ", " : "", cfg_rpm[c],
+                (unsigned long long)hall[c].generated, (unsigned long long)hall[c].bounces,
+                (double)hall[c].first_cycle / CYCLES_PER_US, (double)hall[c].last_cycle / CYCLES_PER_US);
+    fprintf(o, "], \"adc\": {\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
+            "\"overrun\": %llu, \"error_bit_set\": %llu, \"code\": %u, \"status\": %u}, ",
+            (unsigned long long)adc_generated, (unsigned long long)adc_read,
+            (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
+            (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
+    fprintf(o, "\"i2c\": {\"khz\": %u, \"transfers\": %llu, \"nacks\": %llu, \"timeouts\": %llu, "
+            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f}",
+            cfg_i2c_khz, (unsigned long long)i2c_transfers, (unsigned long long)i2c_nacks,
+            (unsigned long long)i2c_timeouts, (double)stretch_max / CYCLES_PER_US,
+            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0);
+    if (cfg_profile) {
+        fprintf(o, ", \"isr\": {");
+        int first = 1;
+        for (int v = 1; v < N_VECTORS; v++) {
+            isr_stat_t *s = &isr_stat[v];
+            if (!s->count)
+                continue;
+            fprintf(o, "%s\"%s\": {\"count\": %llu, \"mean_cycles\": %.1f, \"max_cycles\": %llu, "
+                    "\"min_cycles\": %llu}", first ? "" : ", ", vector_name(v),
+                    (unsigned long long)s->count, (double)s->total / (double)s->count,
+                    (unsigned long long)s->max, (unsigned long long)s->min);
+            first = 0;
+        }
+        fprintf(o, "}, \"cli_max_cycles\": %llu, \"cli_max_at_us\": %.1f",
+                (unsigned long long)cli_max, (double)cli_max_at / CYCLES_PER_US);
+    }
+    fprintf(o, "}\n");
+}
+
+static void start_generators(uint64_t at_cycle)
+{
+    for (int c = 0; c < 2; c++)
+        if (!hall[c].running)
+            hall_start(&hall[c], at_cycle);
+    if (!adc_running)
+        adc_start(at_cycle);
+}
+
+static void usage(void)
+{
+    fprintf(stderr,
+            "usage: harness FIRMWARE.elf [--primary-rpm R] [--secondary-rpm R] [--adc-code C]\n"
+            "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
+            "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--profile]\n"
+            "       [--profile-from-us T]\n");
+    exit(2);
+}
+
+int main(int argc, char **argv)
+{
+    const char *elf = NULL;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+#define OPT(name) (strcmp(a, name) == 0 && v && (i++, 1))
+        if (OPT("--primary-rpm")) cfg_rpm[0] = atof(v);
+        else if (OPT("--secondary-rpm")) cfg_rpm[1] = atof(v);
+        else if (OPT("--adc-code")) cfg_adc_code = (unsigned)strtoul(v, NULL, 0);
+        else if (OPT("--adc-status")) cfg_adc_status = (unsigned)strtoul(v, NULL, 0);
+        else if (OPT("--adc-error-every")) cfg_adc_err_every = (unsigned)strtoul(v, NULL, 0);
+        else if (OPT("--adc-hz")) cfg_adc_hz = atof(v);
+        else if (OPT("--i2c-khz")) cfg_i2c_khz = (unsigned)strtoul(v, NULL, 0);
+        else if (OPT("--addr")) cfg_addr = (unsigned)strtoul(v, NULL, 0);
+        else if (OPT("--start-us")) cfg_start_us = atof(v);
+        else if (OPT("--pulse-us")) cfg_pulse_us = atof(v);
+        else if (OPT("--profile-from-us")) cfg_profile_from_us = atof(v);
+        else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
+        else if (strcmp(a, "--profile") == 0) cfg_profile = 1;
+        else if (a[0] == '-') usage();
+        else elf = a;
+#undef OPT
+    }
+    if (!elf)
+        usage();
+
+    /* simavr prints traces on stdout: keep the protocol on a private copy of it. */
+    int fd = dup(1);
+    dup2(2, 1);
+    proto_out = fdopen(fd, "w");
+    avr_global_logger_set(logger);
+
+    static elf_firmware_t fw;
+    if (elf_read_firmware(elf, &fw) != 0) {
+        fprintf(stderr, "harness: cannot read %s\n", elf);
+        return 1;
+    }
+    /* Arduino ELFs carry no .mmcu section. */
+    strcpy(fw.mmcu, "atmega328p");
+    fw.frequency = (uint32_t)F_CPU_HZ;
+    avr = avr_make_mcu_by_name(fw.mmcu);
+    if (!avr) {
+        fprintf(stderr, "harness: no atmega328p in libsimavr\n");
+        return 1;
+    }
+    avr_init(avr);
+    avr_load_firmware(avr, &fw);
+    avr->log = LOG_WARNING;
+
+    /* The TWI peripheral is number 0 (not '0') on the mega328. */
+    twi_vec = find_vector(TWI_VECTOR);
+    if (!twi_vec) {
+        fprintf(stderr, "harness: TWI vector not found\n");
+        return 1;
+    }
+    avr_register_io_write(avr, REG_TWCR, twcr_write_hook, NULL);
+    bit_cycles = F_CPU_HZ / (cfg_i2c_khz * 1000ull);
+    byte_cycles = 9 * bit_cycles;
+
+    for (int c = 0; c < 2; c++) {
+        hall[c].ch = c;
+        hall[c].pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2 + c);
+        avr_raise_irq(hall[c].pin, 1);  /* sensor output idles high */
+    }
+    pin_dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 5);
+    avr_raise_irq(pin_dout, 1);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 4),
+                            adc_sclk_notify, NULL);
+    start_generators((uint64_t)(cfg_start_us * CYCLES_PER_US));
+
+    char line[512];
+    uint8_t wr[256], rd[256];
+    while (fgets(line, sizeof line, stdin)) {
+        char cmd[16] = "", a1[300] = "", a2[32] = "";
+        sscanf(line, "%15s %299s %31s", cmd, a1, a2);
+        if (strcmp(cmd, "run") == 0) {
+            uint64_t target = (uint64_t)(atof(a1) * CYCLES_PER_US);
+            run_until(target);
+            fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
+        } else if (strcmp(cmd, "xfer") == 0) {
+            int nw = 0, nr = atoi(a2);
+            if (strcmp(a1, "-") != 0)
+                for (const char *p = a1; p[0] && p[1] && nw < (int)sizeof wr; p += 2) {
+                    unsigned b;
+                    sscanf(p, "%2x", &b);
+                    wr[nw++] = (uint8_t)b;
+                }
+            if (nr < 0 || nr > (int)sizeof rd)
+                nr = 0;
+            int r = i2c_transfer(wr, nw, rd, nr);
+            if (r == 1) {
+                i2c_nacks++;
+                fprintf(proto_out, "nack\n");
+            } else if (r == 2) {
+                i2c_timeouts++;
+                fprintf(proto_out, "timeout\n");
+            } else {
+                fprintf(proto_out, "ok ");
+                if (!nr)
+                    fprintf(proto_out, "-");
+                for (int i = 0; i < nr; i++)
+                    fprintf(proto_out, "%02x", rd[i]);
+                fprintf(proto_out, "\n");
+            }
+        } else if (strcmp(cmd, "gen") == 0) {
+            gen_enabled = strcmp(a1, "off") != 0;
+            if (gen_enabled)
+                start_generators(avr->cycle + CYCLES_PER_US);
+            fprintf(proto_out, "ok\n");
+        } else if (strcmp(cmd, "reset") == 0) {
+            avr_reset(avr);
+            in_isr = -1;
+            cli_start = 0;
+            fprintf(proto_out, "ok\n");
+        } else if (strcmp(cmd, "stats") == 0) {
+            print_stats();
+        } else if (strcmp(cmd, "quit") == 0) {
+            break;
+        } else {
+            fprintf(proto_out, "error unknown command\n");
+        }
+        fflush(proto_out);
+        if (crashed) {
+            fprintf(stderr, "harness: firmware crashed at cycle %llu pc 0x%x\n",
+                    (unsigned long long)avr->cycle, avr->pc);
+        }
+    }
+    return 0;
+}
