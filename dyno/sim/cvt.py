@@ -1,37 +1,32 @@
-"""CVT of the simulated rig: shift balance, centrifugal engagement, belt losses.
+r"""CVT of the simulated rig: shift balance, centrifugal engagement, belt losses.
 
-Shift (quasi-static force balance with a first-order lag)
-----------------------------------------------------------
+Shift (force balance, sheave speed proportional to the imbalance)
+-----------------------------------------------------------------
 The shift state is the primary sheave travel fraction ``x`` in [0, 1]
-(0 = low ratio, primary open; 1 = full shift / overdrive).  The primary
-pitch radius is linear in the sheave travel (``z = 2 tan(alpha) (r_p -
-r_p,min)``, Messick eq. 6.12 geometry) and, to first order in the small
-wrap-angle change, the belt length fixes ``r_p + r_s``:
+(0 = low ratio, primary open; 1 = full shift).  Primary net clamp (Messick
+eq. 9.3: flyweights minus spring) and secondary clamp (springs plus helix
+torque feedback, Sorge eq. 22 at steady state):
 
-.. math:: r_p(x) = r_{p,min} + x (r_{p,max} - r_{p,min}),\\qquad
-          i(x) = \\frac{r_s}{r_p} = \\frac{R_\\Sigma - r_p(x)}{r_p(x)}
+.. math:: F_p(\omega_p, x) = C(x)\,n_p^2 - S_p(x),\qquad
+          F_s(T_s, x) = S_s(x) + B(x) \max(T_s, 0)
 
-with ``R_Sigma = r_p,max (1 + i_high)``, ``r_p,min = R_Sigma/(1 + i_low)``.
+(the helix rollers lift off when the belt torque reverses).  The sheaves
+move at a speed proportional to the imbalance (belt radial creep and sheave
+friction act like a damper), ``dx/dt = (F_p - F_s) / (K_ref tau_shift)``
+with ``K_ref`` the springs' force change over the full travel, so near a
+stable balance this is a first-order lag of time constant ``tau_shift``
+towards the quasi-static ratio; ``x`` stops at the ratio end stops.
 
-Primary net clamp (Messick eq. 9.3: flyweights minus spring) and secondary
-clamp (spring plus helix torque feedback, Sorge eq. 22 simplified to a
-constant helix gain ``H``):
+Two sources for ``C, S_p, S_s, B`` and the ratio ``i(x)``, both tabulated
+over ``x`` once at start-up (the inner loop only interpolates):
 
-.. math:: F_p = C_{fw}\\,\\omega_p^2 - (F_{p0} + k_p z(x)),\\qquad
-          F_s = F_{s0} + k_s z(x) + H\\,T_s
-
-Setting ``F_p = F_s`` (the belt's axial force ratio taken as 1) gives the
-equilibrium travel in closed form,
-
-.. math:: x^* = \\operatorname{clip}\\left(
-          \\frac{C_{fw}\\omega_p^2 - F_{p0} - F_{s0} - H T_s}{(k_p + k_s) z_{max}}, 0, 1\\right)
-
-and the sheave follows it with a first-order lag ``tau_shift`` (belt radial
-creep and sheave friction make the real shift take a few tenths of a
-second).  ``dyno/tuning/actuators.py`` holds the detailed flyweight-profile
-and helix forces; this simulator keeps this closed form on purpose: it is
-cheap enough for the 1-2 ms inner loop, and it needs no tune file.
-
+* a CVT tune file (``RigParams.cvt_tune_path``, default
+  ``calibration/tunes/cvtech-stock.toml``) through the public functions of
+  :mod:`dyno.tuning.actuators` (flyweight profile, spring, helix, belt
+  geometry), when that package and file are available;
+* otherwise a self-contained closed form: ``C`` constant (a flyweight
+  coefficient), linear springs, constant helix gain ``H``, and the ratio
+  from ``r_p + r_s = const`` between the two ratio end stops.
 Engagement
 ----------
 The CVT is its own centrifugal clutch: below the engagement speed the
@@ -48,11 +43,11 @@ worst toward high ratio, as the thesis measured, Fig. 9.6/9.14) and a
 load-independent bending/hysteresis drag referred to the primary,
 ``T_d = c_b (1 + 1/i)`` (bending power ~ belt speed * (1/r_p + 1/r_s)):
 
-.. math:: T_s = i\\,\\bigl((1 - \\varepsilon(i))\\,T_p - T_d(i)\\bigr),\\qquad
-          \\omega_s = \\frac{(1 - s)\\,\\omega_p}{i}
+.. math:: T_s = i\,\bigl((1 - \varepsilon(i))\,T_p - T_d(i)\bigr),\qquad
+          \omega_s = \frac{(1 - s)\,\omega_p}{i}
 
-    \\varepsilon(i) = \\varepsilon_0 + a_h \\max(0, \\tfrac{i_{opt} - i}{i_{opt} - i_{high}})^2
-                     + a_l \\max(0, \\tfrac{i - i_{opt}}{i_{low} - i_{opt}})^2
+    \varepsilon(i) = \varepsilon_0 + a_h \max(0, \tfrac{i_{opt} - i}{i_{opt} - i_{high}})^2
+                     + a_l \max(0, \tfrac{i - i_{opt}}{i_{low} - i_{opt}})^2
 
 Overall efficiency ``eta = T_s omega_s / (T_p omega_p) = (1-s)((1-eps) - T_d/T_p)``:
 about 0.80-0.82 in overdrive at light load, 0.90-0.91 near ``i_opt``,
@@ -63,6 +58,51 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+
+def _tables_closed_form(x, *, ratio_low, ratio_high, primary_radius_max_m, sheave_half_angle_deg,
+                        flyweight_coeff_kg_m, primary_spring_full_shift_n, primary_spring_rate_n_per_m,
+                        secondary_spring_preload_n, secondary_spring_rate_n_per_m, helix_gain_n_per_nm):
+    """Closed-form balance tables.
+
+    ``r_p + r_s = R`` (first order in the wrap-angle change), ``r_p`` linear in
+    the travel; primary spring preload from its full-shift force (thesis eq.
+    9.3 bracket: ``950 N - k 2 tan(beta) (0.093 - R_p)``).
+    """
+    r_sum = primary_radius_max_m * (1.0 + ratio_high)
+    rp_min = r_sum / (1.0 + ratio_low)
+    rp = rp_min + x * (primary_radius_max_m - rp_min)
+    ratio = (r_sum - rp) / rp
+    z = 2.0 * math.tan(math.radians(sheave_half_angle_deg)) * (rp - rp_min)
+    z_max = float(z[-1])
+    c_rpm2 = np.full_like(x, flyweight_coeff_kg_m * (math.pi / 30.0) ** 2)
+    s_p = primary_spring_full_shift_n - primary_spring_rate_n_per_m * (z_max - z)
+    s_s = secondary_spring_preload_n + secondary_spring_rate_n_per_m * z
+    b_s = np.full_like(x, helix_gain_n_per_nm)
+    return ratio, c_rpm2, s_p, s_s, b_s
+
+
+def _tables_from_tune(tune, x):
+    """Balance tables from a CVT tune through :mod:`dyno.tuning.actuators`.
+
+    Only public functions: the centrifugal force is ``c(x) n^2``, so it is
+    evaluated at 1000 rpm and scaled; the steady-state secondary clamp is
+    linear in the belt torque above zero, so two torques give ``S_s`` and ``B``.
+    """
+    from dyno.tuning import actuators as act
+
+    d = tune.drive
+    rp = d.primary_radius_min_m + x * (d.primary_radius_max_m - d.primary_radius_min_m)
+    rs = np.asarray(act.secondary_radius_m(tune, rp), dtype=float)
+    ratio = rs / rp
+    c_rpm2 = np.asarray(act.primary_centrifugal_force_n(tune, 1000.0, rp), dtype=float) / 1.0e6
+    s_p = np.asarray(act.primary_spring_force_n(tune, rp), dtype=float)
+    f0 = np.asarray(act.secondary_axial_force_n(tune, 0.0, rs), dtype=float)
+    f10 = np.asarray(act.secondary_axial_force_n(tune, 10.0, rs), dtype=float)
+    b_s = (f10 - f0) / 10.0
+    return ratio, c_rpm2, s_p, f0, b_s
+
 
 class CVT:
     """Scalar CVT relations (see the module docstring)."""
@@ -71,23 +111,12 @@ class CVT:
                  sheave_half_angle_deg: float, flyweight_coeff_kg_m: float, primary_spring_full_shift_n: float,
                  primary_spring_rate_n_per_m: float, secondary_spring_preload_n: float,
                  secondary_spring_rate_n_per_m: float, helix_gain_n_per_nm: float,
+                 shift_time_constant_s: float,
                  engage_start_rpm: float, engage_full_rpm: float, clutch_capacity_nm: float,
                  slip_base_frac: float, slip_per_20nm_frac: float, loss_frac_min: float,
                  loss_frac_high_ratio: float, loss_frac_low_ratio: float, ratio_best_eff: float,
-                 bending_drag_nm: float):
-        self.ratio_low = ratio_low
-        self.ratio_high = ratio_high
-        self.r_sum_m = primary_radius_max_m * (1.0 + ratio_high)
-        self.rp_max_m = primary_radius_max_m
-        self.rp_min_m = self.r_sum_m / (1.0 + ratio_low)
-        self.z_max_m = 2.0 * math.tan(math.radians(sheave_half_angle_deg)) * (self.rp_max_m - self.rp_min_m)
-        self.c_fw = flyweight_coeff_kg_m
-        # Primary spring preload at low ratio from its full-shift force (thesis
-        # eq. 9.3 bracket: 950 N - k (0.093 - R_p) 2 tan(beta) at R_p = r_p,min).
-        self.primary_preload_n = primary_spring_full_shift_n - primary_spring_rate_n_per_m * self.z_max_m
-        self.f0_n = self.primary_preload_n + secondary_spring_preload_n
-        self.k_total_n = (primary_spring_rate_n_per_m + secondary_spring_rate_n_per_m) * self.z_max_m
-        self.helix_gain = helix_gain_n_per_nm
+                 bending_drag_nm: float, tune=None, n_table: int = 400):
+        self.tau_shift_s = shift_time_constant_s
         self.n_eng0 = engage_start_rpm
         self.n_eng1 = engage_full_rpm
         self.clutch_capacity_nm = clutch_capacity_nm
@@ -98,22 +127,82 @@ class CVT:
         self.a_l = loss_frac_low_ratio
         self.i_opt = ratio_best_eff
         self.c_bend = bending_drag_nm
+        self.tune = tune
+        x = np.linspace(0.0, 1.0, n_table + 1)
+        if tune is not None:
+            ratio, c_rpm2, s_p, s_s, b_s = _tables_from_tune(tune, x)
+            self.source = f"tune {tune.name!r} via dyno.tuning.actuators"
+        else:
+            ratio, c_rpm2, s_p, s_s, b_s = _tables_closed_form(
+                x, ratio_low=ratio_low, ratio_high=ratio_high, primary_radius_max_m=primary_radius_max_m,
+                sheave_half_angle_deg=sheave_half_angle_deg, flyweight_coeff_kg_m=flyweight_coeff_kg_m,
+                primary_spring_full_shift_n=primary_spring_full_shift_n,
+                primary_spring_rate_n_per_m=primary_spring_rate_n_per_m,
+                secondary_spring_preload_n=secondary_spring_preload_n,
+                secondary_spring_rate_n_per_m=secondary_spring_rate_n_per_m, helix_gain_n_per_nm=helix_gain_n_per_nm)
+            self.source = "closed-form balance (dyno.sim.cvt)"
+        # End stops: the requested ratio range, inside what the geometry allows.
+        self.x_min = float(np.interp(-min(ratio_low, ratio[0]), -ratio, x))
+        self.x_max = float(np.interp(-max(ratio_high, ratio[-1]), -ratio, x))
+        self.ratio_low = float(np.interp(self.x_min, x, ratio))
+        self.ratio_high = float(np.interp(self.x_max, x, ratio))
+        self._n = n_table
+        self._ratio = ratio.tolist()
+        self._x_grid = x
+        self._ratio_arr = ratio
+        # Pre-combine per cell for the inner loop: F_p - F_s = C n^2 - S - B T.
+        self._c = c_rpm2.tolist()
+        self._s = (s_p + s_s).tolist()
+        self._b = b_s.tolist()
+        # Force scale of the lag: the springs' force change over the travel.
+        self.k_ref_n = float(max(abs((s_p[-1] + s_s[-1]) - (s_p[0] + s_s[0])), 1.0))
 
     # -- shift ---------------------------------------------------------
+    def _lookup(self, table: list, x: float) -> float:
+        u = x * self._n
+        if u <= 0.0:
+            return table[0]
+        if u >= self._n:
+            return table[-1]
+        j = int(u)
+        f = u - j
+        return table[j] + f * (table[j + 1] - table[j])
+
     def ratio_of_travel(self, x: float) -> float:
         """Geometric ratio ``i = r_s / r_p`` at travel fraction ``x``."""
-        rp = self.rp_min_m + x * (self.rp_max_m - self.rp_min_m)
-        return (self.r_sum_m - rp) / rp
+        return self._lookup(self._ratio, x)
 
     def travel_of_ratio(self, ratio: float) -> float:
-        rp = self.r_sum_m / (1.0 + ratio)
-        return (rp - self.rp_min_m) / (self.rp_max_m - self.rp_min_m)
+        return float(np.interp(-ratio, -self._ratio_arr, self._x_grid))
 
-    def equilibrium_travel(self, omega_p_rad_s: float, torque_secondary_nm: float) -> float:
-        """Quasi-static travel ``x*`` from the flyweight/helix force balance."""
-        num = self.c_fw * omega_p_rad_s * omega_p_rad_s - self.f0_n - self.helix_gain * abs(torque_secondary_nm)
-        x = num / self.k_total_n
-        return 0.0 if x <= 0.0 else (1.0 if x >= 1.0 else x)
+    def force_imbalance_n(self, rpm_primary: float, torque_secondary_nm: float, x: float) -> float:
+        """``F_p - F_s`` (N): > 0 shifts up (towards overdrive)."""
+        u = x * self._n
+        j = 0 if u <= 0.0 else (self._n - 1 if u >= self._n else int(u))
+        f = min(max(u - j, 0.0), 1.0)
+        c, s, b = self._c, self._s, self._b
+        cc = c[j] + f * (c[j + 1] - c[j])
+        ss = s[j] + f * (s[j + 1] - s[j])
+        t = torque_secondary_nm if torque_secondary_nm > 0.0 else 0.0
+        bb = b[j] + f * (b[j + 1] - b[j])
+        return cc * rpm_primary * rpm_primary - ss - bb * t
+
+    def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float) -> float:
+        """Travel after ``dt_s``: ``dx/dt = (F_p - F_s) / (K_ref tau)``, end stops."""
+        dx = self.force_imbalance_n(rpm_primary, torque_secondary_nm, x) * dt_s / (self.k_ref_n * self.tau_shift_s)
+        x = x + dx
+        return self.x_min if x < self.x_min else (self.x_max if x > self.x_max else x)
+
+    def equilibrium_travel(self, rpm_primary: float, torque_secondary_nm: float) -> float:
+        """Quasi-static travel where ``F_p = F_s`` (end stop if none), for tests and plots."""
+        xs = np.linspace(self.x_min, self.x_max, 401)
+        r = np.array([self.force_imbalance_n(rpm_primary, torque_secondary_nm, v) for v in xs])
+        if r[0] <= 0.0:
+            return self.x_min
+        if r[-1] >= 0.0:
+            return self.x_max
+        k = int(np.argmax(r <= 0.0))
+        return float(xs[k - 1] + (xs[k] - xs[k - 1]) * r[k - 1] / (r[k - 1] - r[k]))
 
     # -- engagement ----------------------------------------------------
     def clutch_capacity_nm_at(self, rpm_primary: float) -> float:

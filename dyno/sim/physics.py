@@ -86,8 +86,25 @@ from dyno.sim.sensors import LowPassFilter, angle_at, crossing_time_s
 TWO_PI = 2.0 * math.pi
 _REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
+DEFAULT_TUNE = "calibration/tunes/cvtech-stock.toml"
 
 ADC_STATUS_ERROR = 0x20
+
+
+def _load_tune(path: str | None):
+    """The CVT tune for the shift balance, or None for the closed form.
+
+    Uses :mod:`dyno.tuning` (another part of the project) when it is
+    importable; a missing package falls back to the closed form, a broken
+    tune file is an error (ConfigError naming file and field).
+    """
+    if not path:
+        return None
+    try:
+        from dyno.tuning.tune import load_tune
+    except ImportError:
+        return None
+    return load_tune(_resolve_map_path(path))
 
 
 def _resolve_map_path(path: str) -> Path:
@@ -136,6 +153,9 @@ class RigParams:
     cvt_secondary_spring_rate_n_per_m: float = 5000.0
     cvt_helix_gain_n_per_nm: float = 20.0        # axial force per N*m through the helix
     cvt_shift_time_constant_s: float = 0.4
+    # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
+    # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
+    cvt_tune_path: str | None = DEFAULT_TUNE
     cvt_engage_start_rpm: float = 1900.0
     cvt_engage_full_rpm: float = 2100.0
     cvt_clutch_capacity_nm: float = 60.0
@@ -258,7 +278,9 @@ class RigModel:
                        primary_spring_rate_n_per_m=p.cvt_primary_spring_rate_n_per_m,
                        secondary_spring_preload_n=p.cvt_secondary_spring_preload_n,
                        secondary_spring_rate_n_per_m=p.cvt_secondary_spring_rate_n_per_m,
-                       helix_gain_n_per_nm=p.cvt_helix_gain_n_per_nm, engage_start_rpm=p.cvt_engage_start_rpm,
+                       helix_gain_n_per_nm=p.cvt_helix_gain_n_per_nm,
+                       shift_time_constant_s=p.cvt_shift_time_constant_s, tune=_load_tune(p.cvt_tune_path),
+                       engage_start_rpm=p.cvt_engage_start_rpm,
                        engage_full_rpm=p.cvt_engage_full_rpm, clutch_capacity_nm=p.cvt_clutch_capacity_nm,
                        slip_base_frac=p.cvt_slip_base_frac, slip_per_20nm_frac=p.cvt_slip_per_20nm_frac,
                        loss_frac_min=p.cvt_loss_frac_min, loss_frac_high_ratio=p.cvt_loss_frac_high_ratio,
@@ -310,8 +332,8 @@ class RigModel:
         self._w_e = 0.0
         self._th_s = float(rng_phase.uniform(0.0, TWO_PI))
         self._w_s = 0.0
-        self._x = 0.0
-        self._ratio_geo = self.cvt.ratio_of_travel(0.0)
+        self._x = self.cvt.x_min
+        self._ratio_geo = self.cvt.ratio_of_travel(self._x)
         self._slip = p.cvt_slip_base_frac
         self._locked = False
         self._act_mm = 0.0
@@ -395,6 +417,8 @@ class RigModel:
         if self._pending:
             keep = []
             for ev in self._pending:
+                if ev.channel in self.stuck_hall:
+                    continue        # stuck since the real edge: its bounce never comes either
                 (events if ev.t_s <= t_end else keep).append(ev)
             self._pending = keep
         events.sort(key=_event_time)
@@ -425,8 +449,7 @@ class RigModel:
         t_e = eng.torque_nm(rpm_e, self.throttle_frac, running)
 
         # --- shift: quasi-static balance + first-order lag (exact exponential)
-        x_star = cvt.equilibrium_travel(w_e0, self._t_s)
-        self._x += (x_star - self._x) * (1.0 - math.exp(-h / p.cvt_shift_time_constant_s))
+        self._x = cvt.shift(self._x, rpm_e, self._t_s, h)
         i = cvt.ratio_of_travel(self._x)
         self._ratio_geo = i
         eta_m = 1.0 - cvt.loss_frac(i)

@@ -67,7 +67,7 @@ def test_full_throttle_mean_engine_torque_equals_the_map(make_driver, actuator_s
         assert tr.torque_engine_nm == pytest.approx(float(engine_map.torque_exact_nm(tr.rpm_primary)), abs=2e-3)
     # ... and in steady state it is what drives the belt
     tr = truths[-1]
-    assert tr.torque_primary_nm == pytest.approx(tr.torque_engine_nm, abs=0.02)
+    assert tr.torque_primary_nm == pytest.approx(tr.torque_engine_nm, abs=0.1)   # rotor fade: slow drift
 
 
 def test_kill_stops_the_engine_and_start_needs_enable(make_driver):

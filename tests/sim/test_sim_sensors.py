@@ -140,11 +140,14 @@ def test_adc_mean_maps_back_to_true_secondary_torque(loaded_window):
 
 @pytest.mark.parametrize("seed", [31, 32, 33])
 def test_adc_mean_within_1_percent_at_several_loads(make_driver, seed):
+    # Steady points only: in a transient the gauge (between gear and rotor)
+    # sees brake + rotor inertia torque, not the belt's output torque.
     d = make_driver(seed=seed)
     d.start_full_throttle()
-    for _ in range(2):
-        d.brake_step(1.5, 6.0)
+    for on_s in (1.0, 2.5):
+        d.brake_step(on_s, 8.0)
         events, truths = d.run(3.0)
+        assert abs(truths[-1].rpm_secondary - truths[0].rpm_secondary) < 15.0, "not a steady point"
         _, codes, _ = _adc(events)
         p = d.model.params
         torque = (codes.mean() - p.adc_offset_counts) / p.adc_gain_counts_per_nm

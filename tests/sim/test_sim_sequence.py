@@ -5,10 +5,14 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 
-def test_brake_steps_take_the_secondary_below_1500_rpm(make_driver):
-    d = make_driver(seed=41)
+@pytest.mark.parametrize("tune", ["calibration/tunes/cvtech-stock.toml", None],
+                         ids=["tune-file-balance", "closed-form-balance"])
+def test_brake_steps_take_the_secondary_below_1500_rpm(make_driver, tune):
+    d = make_driver(seed=41, cvt_tune_path=tune)
+    print(f"\nshift balance: {d.model.cvt.source}")
     wall0 = time.perf_counter()
     d.start_full_throttle(settle_s=6.0)
     _, truths = d.run(1.0)
