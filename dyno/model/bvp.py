@@ -139,6 +139,7 @@ class Case:
     slip_threshold_m_s: float
     variant: str = "corrected"
     bc: str = "slack_tension"
+    friction_corner: float = 0.0  # 0: the thesis's sharp viscous-Coulomb corner; > 0: rounded (C-infinity)
 
     @property
     def g_ref(self) -> float:
@@ -213,7 +214,7 @@ def contact_terms(case: Case, t_n, th, th1, th2, x_m, x1_m, radius_m, phi, omega
     v_rad = v_belt * s
     v_circ = v_belt * c - r_loc * omega
     v_mag = np.sqrt(v_rad * v_rad + v_circ * v_circ) + 1e-300
-    mu = case.mu * np.minimum(1.0, v_mag / case.slip_threshold_m_s)
+    mu = case.mu * friction_shape(v_mag / case.slip_threshold_m_s, case.friction_corner)
     cos_g = v_rad / v_mag
     sin_g = v_circ / v_mag
     tb = math.tan(case.beta_rad) * cos_g
@@ -236,6 +237,22 @@ def contact_terms(case: Case, t_n, th, th1, th2, x_m, x1_m, radius_m, phi, omega
     extras = {"sliding_speed_m_s": v_mag, "sliding_angle_rad": np.arctan2(sin_g, cos_g), "mu": mu, "pressure_n_m": press,
               "belt_speed_m_s": v_belt, "arc_m": arc}
     return d_t, d_th3, x2_m, d_m, d_a, extras
+
+
+def friction_shape(u, corner: float = 0.0):
+    """Friction coefficient over its kinetic value vs slip speed over the threshold.
+
+    ``corner == 0`` is the thesis's law (Fig. 3.6): linear below the threshold,
+    constant above, a corner at u = 1.  ``corner > 0`` rounds the corner with a
+    hyperbola of half-width ~``corner`` (C-infinity, within corner/2 of the sharp
+    law and identical away from u = 1), shifted so that it is 0 at u = 0.
+    """
+    if corner <= 0.0:
+        return np.minimum(1.0, u)
+    d2 = corner * corner
+    g = 0.5 * (u + 1.0 - np.sqrt((u - 1.0) ** 2 + d2))
+    g0 = 0.5 * (1.0 - math.sqrt(1.0 + d2))
+    return g - g0 * np.exp(-u)
 
 
 def span_terms(case: Case, tau_n, v1, v2, length_m):
@@ -470,6 +487,52 @@ def initial_guess(case: Case, n_nodes: int = 301):
     return t, y, p
 
 
+def _contact_points(case: Case, p):
+    r_s, r_p, lc = case.r_secondary_m, case.r_primary_m, case.centre_distance_m
+    c_s, phi_s, c_p, phi_p = p[K_CS], p[K_PHIS], p[K_CP], p[K_PHIP]
+    return {
+        "st": complex(lc - r_s * math.cos(c_s), r_s * math.sin(c_s)),
+        "ss": complex(lc - r_s * math.cos(c_s + phi_s), r_s * math.sin(c_s + phi_s)),
+        "pt": complex(r_p * math.cos(c_p), r_p * math.sin(c_p)),
+        "ps": complex(r_p * math.cos(c_p + phi_p), r_p * math.sin(c_p + phi_p)),
+    }
+
+
+def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
+    """Adapt a converged solution of ``old`` into a guess for ``new``.
+
+    Wrap and orientation angles move with the geometric tangent angle, the
+    spans are carried by the similarity transform that maps their old end
+    points onto the new ones (so their shape, normalised curvature and
+    direction changes are kept).  Tensions are left alone: rescaling them to
+    the new level measured slower (the adhesion zone's position matters more).
+    """
+    y, p = y.copy(), p.copy()
+    d_t = geometry.tangent_angle_rad(new.r_primary_m, new.r_secondary_m, new.centre_distance_m) - geometry.tangent_angle_rad(
+        old.r_primary_m, old.r_secondary_m, old.centre_distance_m
+    )
+    p[K_PHIP] -= 2 * d_t
+    p[K_PHIS] += 2 * d_t
+    p[K_CP] += d_t
+    p[K_CS] -= d_t
+    # Spans: similarity transform of the old curves onto the new end points.
+    old_pts, new_pts = _contact_points(old, p), _contact_points(new, p)
+    for rows, k_len, a, b in (
+        ((T_XP, T_YP, T_V), K_LT, "st", "pt"),
+        ((L_XP, L_YP, L_V), K_LS, "ps", "ss"),
+    ):
+        length = p[k_len]
+        z = (y[rows[0]] + 1j * y[rows[1]]) * length
+        za, zb = z[0], z[-1]
+        scale = (new_pts[b] - new_pts[a]) / (zb - za)
+        z_new = new_pts[a] + scale * (z - za)
+        new_len = length * abs(scale)
+        y[rows[0]], y[rows[1]] = z_new.real / new_len, z_new.imag / new_len
+        y[rows[2]] += math.atan2(scale.imag, scale.real)
+        p[k_len] = new_len
+    return y, p
+
+
 # ---- solver driver --------------------------------------------------------------------------
 
 
@@ -568,6 +631,7 @@ def solve_case(
     slip_factor: float = 0.4,
     max_halvings: int = 6,
     time_limit_s: float = 120.0,
+    keep_mesh_below: int = 0,
     log=None,
 ) -> RawSolution:
     """Solve one case, by slip-threshold continuation from the geometric guess or by homotopy from ``guess``.
@@ -600,18 +664,24 @@ def solve_case(
         s, ds = 0.0, first_fraction
         halvings = 0
         best = None
+        c_prev = start
         while s < 1.0:
             if time.perf_counter() - t0 > time_limit_s:
                 fail(f"time limit {time_limit_s:g} s during {what}")
             s_new = min(1.0, s + ds)
             c = _interp_case(start, target, s_new)
-            mesh = remesh(t, nodes)
-            from scipy.interpolate import PchipInterpolator
+            if t.size > keep_mesh_below:
+                mesh = remesh(t, nodes)
+                from scipy.interpolate import PchipInterpolator
 
-            y_guess = PchipInterpolator(t, y, axis=1)(mesh)
-            res, rms, bc_res, ok = attempt(c, mesh, y_guess, p, f"{what} s={s_new:.3g}")
+                y_guess = PchipInterpolator(t, y, axis=1)(mesh)
+            else:
+                mesh, y_guess = t, y
+            y_guess, p_guess = transfer_guess(c_prev, c, y_guess, p)
+            res, rms, bc_res, ok = attempt(c, mesh, y_guess, p_guess, f"{what} s={s_new:.3g}")
             if ok:
                 s = s_new
+                c_prev = c
                 t, y, p = res.x, res.y, res.p
                 best = (c, res, rms, bc_res)
                 halvings = 0
