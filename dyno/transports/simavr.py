@@ -85,6 +85,7 @@ class SimavrTransport(Transport):
         self._rng = random.Random(seed)
         self.faults_injected: Counter = Counter()
         self.sim_time_us = 0.0
+        self._pending_us: float | None = None
 
     # -- harness line protocol --------------------------------------------------
     def _cmd(self, line: str) -> str:
@@ -107,23 +108,36 @@ class SimavrTransport(Transport):
         return self._stderr.read()[-500:]
 
     def advance_to(self, t_s: float) -> None:
-        """Run the simulation until simulated time ``t_s`` (no-op if already past)."""
-        reply = self._cmd(f"run {t_s * 1e6:.3f}")
+        """Simulated time ``t_s`` has come (no-op if already past).
+
+        Lazy: the harness runs there as part of the next command, so a poll costs one
+        pipe round trip, not two (on a loaded machine each costs a scheduler slot).
+        """
+        self._pending_us = max(self._pending_us or 0.0, t_s * 1e6)
+
+    def sync(self) -> float:
+        """Run the simulation to the pending time now; returns simulated time in us."""
+        reply = self._cmd(f"run {(self._pending_us or 0.0):.3f}")
         if not reply.startswith("ok"):
             raise HarnessError(f"run: {reply}")
+        self._pending_us = None
         self.sim_time_us = float(reply.split()[1])
+        return self.sim_time_us
 
     def generators(self, on: bool) -> None:
         """Start/stop the Hall and ADC generators (stop before draining the device)."""
+        self.sync()
         if self._cmd("gen on" if on else "gen off") != "ok":
             raise HarnessError("gen")
 
     def reset_device(self) -> None:
         """Reset the MCU as the watchdog would (EEPROM, hence the boot counter, kept)."""
+        self.sync()
         if self._cmd("reset") != "ok":
             raise HarnessError("reset")
 
     def harness_stats(self) -> dict:
+        self.sync()
         return json.loads(self._cmd("stats"))
 
     # -- Transport ------------------------------------------------------------------
@@ -136,7 +150,9 @@ class SimavrTransport(Transport):
             self.faults_injected[kind] += 1
         if kind == "cmd_bitflip":
             request = _flip(request, self._rng)
-        reply = self._cmd(f"xfer {request.hex() or '-'} {int(read_len)}")
+        at = "" if self._pending_us is None else f" {self._pending_us:.3f}"
+        self._pending_us = None
+        reply = self._cmd(f"xfer {request.hex() or '-'} {int(read_len)}{at}")
         if reply == "nack":
             raise TransportFault("nack", "device did not acknowledge")
         if reply == "timeout":

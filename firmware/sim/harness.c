@@ -22,7 +22,9 @@
  * Line protocol (one reply line per command, on the original stdout; simavr's own
  * messages are sent to stderr):
  *   run <t_us>           run until simulated time t_us        -> "ok <t_us>"
- *   xfer <hex|-> <n>     write bytes, repeated start, read n  -> "ok <hex|->" | "nack" | "timeout"
+ *   xfer <hex|-> <n> [t_us]  (run until t_us first, if given: one pipe round trip per
+ *                        poll), write bytes, repeated start, read n
+ *                                                             -> "ok <hex|->" | "nack" | "timeout"
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
  *   reset                reset the MCU (watchdog-like; EEPROM kept)          -> "ok"
  *   stats                one JSON object
@@ -561,14 +563,16 @@ int main(int argc, char **argv)
     char line[512];
     uint8_t wr[256], rd[256];
     while (fgets(line, sizeof line, stdin)) {
-        char cmd[16] = "", a1[300] = "", a2[32] = "";
-        sscanf(line, "%15s %299s %31s", cmd, a1, a2);
+        char cmd[16] = "", a1[300] = "", a2[32] = "", a3[32] = "";
+        sscanf(line, "%15s %299s %31s %31s", cmd, a1, a2, a3);
         if (strcmp(cmd, "run") == 0) {
             uint64_t target = (uint64_t)(atof(a1) * CYCLES_PER_US);
             run_until(target);
             fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
         } else if (strcmp(cmd, "xfer") == 0) {
             int nw = 0, nr = atoi(a2);
+            if (a3[0])
+                run_until((uint64_t)(atof(a3) * CYCLES_PER_US));
             if (strcmp(a1, "-") != 0)
                 for (const char *p = a1; p[0] && p[1] && nw < (int)sizeof wr; p += 2) {
                     unsigned b;
@@ -601,6 +605,22 @@ int main(int argc, char **argv)
             avr_reset(avr);
             in_isr = -1;
             cli_start = 0;
+            /* The rig keeps turning through the reset: restart the generators (their
+             * timers may have been cleared with the MCU's) and the AD7171 idles. */
+            for (int c = 0; c < 2; c++) {
+                avr_cycle_timer_cancel(avr, hall_timer, &hall[c]);
+                hall[c].running = 0;
+                hall[c].step = 0;
+                avr_raise_irq(hall[c].pin, 1);
+            }
+            avr_cycle_timer_cancel(avr, adc_timer, NULL);
+            avr_cycle_timer_cancel(avr, adc_rdy_high, NULL);
+            adc_running = 0;
+            adc_bit = 24;
+            adc_ready = 0;
+            avr_raise_irq(pin_dout, 1);
+            if (gen_enabled)
+                start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");
         } else if (strcmp(cmd, "stats") == 0) {
             print_stats();

@@ -119,7 +119,8 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
 
     /* 2. Pre-build the next frame so an ACK_POLL can swap it in inside the ISR; the
      * host has not seen it, so it too takes new events until the swap. */
-    if (!p->nxt_valid || p->meta[p->nxt].head != r->head) {
+    uint8_t nxt = p->nxt;  /* once: the ISR may retire (nxt = NONE) at any moment */
+    if (!p->nxt_valid || nxt >= PROTO_NBUF || p->meta[nxt].head != r->head) {
         uint8_t offset;
         PORT_CRITICAL_BEGIN();
         gen = p->gen;

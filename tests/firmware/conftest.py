@@ -1,0 +1,56 @@
+"""Shared fixtures for the firmware tests: build once per session (file-locked, since
+pytest-xdist workers build concurrently), skip cleanly without the AVR toolchain."""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from dyno.transports.simavr import toolchain_missing
+
+FW = Path(__file__).resolve().parents[2] / "firmware"
+BUILD = FW / "build"
+
+
+def _make(*targets: str) -> subprocess.CompletedProcess:
+    BUILD.mkdir(exist_ok=True)
+    with open(BUILD / ".make.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return subprocess.run(["make", "-s", "-C", str(FW), *targets], capture_output=True,
+                              text=True)
+
+
+@pytest.fixture(scope="session")
+def toolchain():
+    why = toolchain_missing()
+    if why:
+        pytest.skip(f"AVR toolchain/simavr not installed: {why}")
+
+
+@pytest.fixture(scope="session")
+def firmware_build(toolchain):
+    """Builds the firmware, the v0 sketch and the simavr harness; returns their paths."""
+    res = _make("firmware", "sim")
+    assert res.returncode == 0, res.stdout + res.stderr
+    return {"elf": BUILD / "dyno_nano.elf", "v0_elf": BUILD / "v0_sketch.elf",
+            "harness": BUILD / "harness", "make_output": res.stdout}
+
+
+@pytest.fixture
+def sim_args():
+    """Arguments for dyno.cli.firmware_sim_cmd.simulate, as the CLI would parse them."""
+    from dyno.cli import firmware_sim_cmd
+
+    def make(*argv: str) -> argparse.Namespace:
+        parser = argparse.ArgumentParser()
+        firmware_sim_cmd.add_arguments(parser)
+        return parser.parse_args(list(argv))
+
+    return make
+
+
+make = _make
