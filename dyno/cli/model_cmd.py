@@ -1,0 +1,179 @@
+"""``dyno model point|sweep|study``: the belt-model library from the command line.
+
+``dyno model point --json`` with no other argument solves the thesis's
+Table 6.1 case.  Sweeps and studies write a CSV and a PNG into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from dyno.model.params import VARIANTS, ModelParams, OperatingPoint, TABLE_6_1, bad_input
+
+STUDIES = ("sheave_angle", "bending_stiffness", "slack_tension", "friction")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION")
+    sub.required = True
+    point = sub.add_parser("point", help="solve one operating point (default: thesis Table 6.1)")
+    sweep = sub.add_parser("sweep", help="operating-range sweep by continuation")
+    study = sub.add_parser("study", help="thesis Section 7 parameter study")
+    study.add_argument("name", choices=STUDIES)
+    study.add_argument("--values", type=float, nargs="+", help="parameter values (default: the thesis's)")
+    for p in (point, sweep, study):
+        p.add_argument("--variant", choices=VARIANTS, default="corrected")
+        p.add_argument("--json", action="store_true", help="print JSON instead of text")
+        p.add_argument("--tier", choices=("full", "closed_form", "capstan"), default="full")
+        p.add_argument("--slip-threshold", type=float, default=1e-4, metavar="M_S", help="adhesion slip speed [m/s]")
+        p.add_argument("--tol", type=float, default=1e-3, help="solve_bvp tolerance")
+        p.add_argument("--rpm", type=float, default=3400.0, help="primary speed [rpm]")
+        p.add_argument("--torque", type=float, default=18.0, help="primary torque [N*m]")
+        p.add_argument("--slack-tension", type=float, default=None, help="slack-span tractive tension [N] (default 100)")
+        p.add_argument("--axial-force", type=float, default=None, help="primary axial force [N] instead of slack tension")
+        p.add_argument("--bending-stiffness", type=float, default=None, help="EI [N*m^2]")
+        p.add_argument("--sheave-angle", type=float, default=None, help="sheave half-angle [deg] (k scaled by tan)")
+        p.add_argument("--friction", type=float, default=None, help="kinetic friction coefficient")
+    point.add_argument("--ratio", type=float, default=1.0, help="geometric ratio R_S/R_P")
+    point.add_argument("--profiles", type=Path, default=None, help="write the profiles to this CSV")
+    for p in (sweep, study):
+        p.add_argument("--points", type=int, default=20, help="ratios between --ratio-range ends")
+        p.add_argument("--ratio-range", type=float, nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"))
+        p.add_argument("--out", type=Path, default=Path("model-out"), help="directory for CSV and PNG")
+
+
+def _params(args) -> ModelParams:
+    params = TABLE_6_1
+    if args.sheave_angle is not None:
+        params = params.with_sheave_angle(args.sheave_angle)
+    changes = {}
+    if args.bending_stiffness is not None:
+        changes["bending_stiffness_nm2"] = args.bending_stiffness
+    if args.friction is not None:
+        changes["friction_coefficient"] = args.friction
+    return params.with_belt(**changes) if changes else params
+
+
+def _op(args, ratio: float = 1.0) -> OperatingPoint:
+    if args.slack_tension is not None and args.axial_force is not None:
+        raise bad_input("--slack-tension/--axial-force", "only one of the two")
+    slack = None if args.axial_force is not None else (100.0 if args.slack_tension is None else args.slack_tension)
+    return OperatingPoint(ratio=ratio, primary_speed_rpm=args.rpm, primary_torque_nm=args.torque,
+                          slack_tension_n=slack, primary_axial_force_n=args.axial_force)
+
+
+def _check_numbers(args) -> None:
+    if not (math.isfinite(args.slip_threshold) and args.slip_threshold > 0):
+        raise bad_input("--slip-threshold", "a positive speed in m/s")
+    if not (1e-8 <= args.tol <= 0.1):
+        raise bad_input("--tol", "between 1e-8 and 0.1")
+
+
+def _fast_summary(tier, params, op) -> dict:
+    if tier == "closed_form":
+        from dyno.model.closed_form import closed_form_point as fn
+    else:
+        from dyno.model.capstan import capstan_point as fn
+    r = fn(params, op)
+    return {
+        "tier": tier,
+        "converged": True,
+        "wrap_deg": {"primary": math.degrees(r.wrap_primary_rad), "secondary": math.degrees(r.wrap_secondary_rad)},
+        "axial_force_n": {"primary": r.axial_force_primary_n, "secondary": r.axial_force_secondary_n},
+        "efficiency": {"speed": r.efficiency_speed, "torque": r.efficiency_torque, "overall": r.efficiency_overall},
+        "span_tension_n": {"tight": r.tight_tension_n, "slack": r.slack_tension_n},
+    }
+
+
+def _print(summary: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary, indent=2, default=float))
+        return
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            inner = ", ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in value.items())
+            print(f"{key}: {inner}")
+        else:
+            print(f"{key}: {value:.6g}" if isinstance(value, float) else f"{key}: {value}")
+
+
+def _run_point(args) -> int:
+    params, op = _params(args), _op(args, args.ratio)
+    if args.tier != "full":
+        summary = _fast_summary(args.tier, params, op)
+        summary["variant"] = args.variant
+        _print(summary, args.json)
+        return 0
+    from dyno.model.solution import solve_point
+
+    sol = solve_point(params, op, variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol)
+    if args.profiles is not None:
+        _write_profiles(sol.profiles(), args.profiles)
+    _print(sol.as_dict(), args.json)
+    return 0
+
+
+def _write_profiles(profiles: dict, path: Path) -> None:
+    import csv
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["region", "quantity", "values..."])
+        for region, cols in profiles.items():
+            for name, values in cols.items():
+                w.writerow([region, name, *(f"{v:.9g}" for v in values)])
+
+
+def _save(out: Path, stem: str, csv_text: str, fig) -> list[str]:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.csv").write_text(csv_text)
+    fig.savefig(out / f"{stem}.png", dpi=110)
+    return [str(out / f"{stem}.csv"), str(out / f"{stem}.png")]
+
+
+def _run_sweep(args) -> int:
+    from dyno.model import sweep
+
+    params = _params(args)
+    log = None if args.json else (lambda m: print(m, file=sys.stderr))
+    rows, _ = sweep.sweep_operating_range(args.points, params, _op(args), ratio_range=tuple(args.ratio_range),
+                                          variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol,
+                                          log=log)
+    files = _save(args.out, f"sweep-{args.variant}", sweep.rows_to_csv(rows),
+                  sweep.plot_sweep({args.variant: rows}, "operating-range sweep"))
+    n_ok = sum(bool(r["converged"]) for r in rows)
+    result = {"variant": args.variant, "points": len(rows), "converged": n_ok, "files": files,
+              "rows": rows if args.json else None}
+    _print({k: v for k, v in result.items() if v is not None}, args.json)
+    return 0 if n_ok == len(rows) else 1
+
+
+def _run_study(args) -> int:
+    from dyno.model import studies, sweep
+
+    log = None if args.json else (lambda m: print(m, file=sys.stderr))
+    result = studies.run_study(args.name, values=args.values, base_params=_params(args), op=_op(args),
+                               n_points=args.points, ratio_range=tuple(args.ratio_range), variant=args.variant,
+                               slip_threshold_m_s=args.slip_threshold, tol=args.tol, log=log)
+    files = _save(args.out, f"study-{args.name}-{args.variant}", studies.study_csv(result),
+                  sweep.plot_sweep({f"{args.name}={v:g}": rows for v, rows in result["series"].items()},
+                                   f"parameter study: {args.name}"))
+    n_ok = sum(bool(r["converged"]) for rows in result["series"].values() for r in rows)
+    n_all = sum(len(rows) for rows in result["series"].values())
+    _print({"study": args.name, "variant": args.variant, "points": n_all, "converged": n_ok, "files": files}, args.json)
+    return 0 if n_ok == n_all else 1
+
+
+def run(args) -> int:
+    _check_numbers(args)
+    if args.action == "point":
+        return _run_point(args)
+    if args.action == "sweep":
+        return _run_sweep(args)
+    return _run_study(args)

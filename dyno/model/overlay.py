@@ -1,0 +1,187 @@
+"""Predicted efficiency and axial forces for measured operating points, cached on disk.
+
+The app hands over measured points (geometric ratio, primary speed, primary
+torque); two tiers answer:
+
+* ``tier="closed_form"``: microseconds per point, for an instant overlay.  Its
+  efficiency is Reynolds' creep only (no seating loss): an upper bound.
+* ``tier="full"``: the thesis's BVP, seconds per point, each point warm-started
+  from the previously solved one (points are visited in ratio order).
+
+Every result is stored as one small JSON file named by the SHA-256 of its
+inputs (parameters, variant, tier, tolerances, the point, and a model
+version), so a replay or a UI refresh never solves the same point twice.
+Failures are cached too, with their message, and come back with
+``converged: false`` rather than a number.  Cache directory: the
+``cache_dir`` argument, else ``$DYNO_MODEL_CACHE``, else
+``~/.cache/dyno/model``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+from dyno.errors import DidNotConverge
+from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, bad_input
+
+MODEL_VERSION = "1"
+TIERS = ("closed_form", "full")
+
+
+def default_cache_dir() -> Path:
+    env = os.environ.get("DYNO_MODEL_CACHE")
+    return Path(env) if env else Path.home() / ".cache" / "dyno" / "model"
+
+
+def point_key(params: ModelParams, op: OperatingPoint, tier: str, variant: str, slip_threshold_m_s: float, tol: float) -> str:
+    payload = {
+        "v": MODEL_VERSION,
+        "params": params.as_dict(),
+        "op": asdict(op),
+        "tier": tier,
+        "variant": variant,
+        "slip": slip_threshold_m_s,
+        "tol": tol,
+    }
+    text = json.dumps(payload, sort_keys=True, default=float)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _as_point(item, slack_tension_n, primary_axial_force_n) -> OperatingPoint:
+    if isinstance(item, OperatingPoint):
+        return item
+    if isinstance(item, dict):
+        ratio, rpm, torque = item["ratio"], item["primary_speed_rpm"], item["primary_torque_nm"]
+    else:
+        try:
+            ratio, rpm, torque = item
+        except (TypeError, ValueError):
+            raise bad_input("points", f"(ratio, primary_speed_rpm, primary_torque_nm) triples, got {item!r}") from None
+    return OperatingPoint(
+        ratio=float(ratio),
+        primary_speed_rpm=float(rpm),
+        primary_torque_nm=float(torque),
+        slack_tension_n=None if primary_axial_force_n is not None else slack_tension_n,
+        primary_axial_force_n=primary_axial_force_n,
+    )
+
+
+def _closed_form_result(params, op) -> dict:
+    from dyno.model.closed_form import closed_form_point
+
+    r = closed_form_point(params, op)
+    return {
+        "converged": True,
+        "tier": "closed_form",
+        "efficiency": {"speed": r.efficiency_speed, "torque": r.efficiency_torque, "overall": r.efficiency_overall},
+        "axial_force_n": {"primary": r.axial_force_primary_n, "secondary": r.axial_force_secondary_n},
+        "span_tension_n": {"tight": r.tight_tension_n, "slack": r.slack_tension_n},
+    }
+
+
+def predict_overlay(
+    points,
+    params: ModelParams = TABLE_6_1,
+    *,
+    tier: str = "full",
+    variant: str = "corrected",
+    slack_tension_n: float = 100.0,
+    primary_axial_force_n: float | None = None,
+    slip_threshold_m_s: float = 1e-4,
+    tol: float = 1e-3,
+    cache_dir: str | os.PathLike | None = None,
+    use_cache: bool = True,
+    time_limit_s: float = 60.0,
+) -> list[dict]:
+    """Predictions for each point, in input order.
+
+    ``points``: iterable of ``(ratio, primary_speed_rpm, primary_torque_nm)``
+    triples, dicts with those keys, or :class:`OperatingPoint`.  The tension
+    level is ``slack_tension_n`` unless ``primary_axial_force_n`` is given.
+    Each result dict has ``ratio``, ``primary_speed_rpm``,
+    ``primary_torque_nm``, ``converged``, ``tier``, ``efficiency``
+    {speed, torque, overall}, ``axial_force_n`` {primary, secondary},
+    ``span_tension_n``, ``cached`` and, for failures, ``error``.
+    """
+    if tier not in TIERS:
+        raise bad_input("tier", f"one of {', '.join(TIERS)}, got {tier!r}")
+    ops = [_as_point(p, slack_tension_n, primary_axial_force_n) for p in points]
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    results: list = [None] * len(ops)
+    todo = []
+    keys = []
+    for i, op in enumerate(ops):
+        key = point_key(params, op, tier, variant, slip_threshold_m_s, tol)
+        keys.append(key)
+        path = cache / f"{key}.json"
+        if use_cache and path.is_file():
+            try:
+                results[i] = {**json.loads(path.read_text()), "cached": True}
+                continue
+            except (OSError, ValueError):
+                pass  # unreadable entry: recompute and overwrite
+        todo.append(i)
+
+    guess = None
+    for i in sorted(todo, key=lambda j: (ops[j].ratio, ops[j].primary_speed_rpm, ops[j].primary_torque_nm)):
+        op = ops[i]
+        if tier == "closed_form":
+            res = _closed_form_result(params, op)
+        else:
+            from dyno.model.solution import solve_point
+
+            try:
+                sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
+                                  guess=guess, time_limit_s=time_limit_s)
+            except DidNotConverge as exc:
+                if guess is not None:
+                    try:  # a far neighbour can be a worse start than none
+                        sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
+                                          time_limit_s=time_limit_s)
+                    except DidNotConverge as exc2:
+                        sol, exc = None, exc2
+                else:
+                    sol = None
+                if sol is None:
+                    res = {"converged": False, "tier": "full", "error": str(exc)}
+            if sol is not None:
+                guess = sol
+                s = sol.summary
+                res = {
+                    "converged": True,
+                    "tier": "full",
+                    "efficiency": s["efficiency"],
+                    "axial_force_n": s["axial_force_n"],
+                    "span_tension_n": s["span_tension_n"],
+                    "residual_max": s["residual_max"],
+                    "slip_threshold_m_s": s["slip_threshold_m_s"],
+                    "solve_s": s["solve_s"],
+                }
+        res.update(ratio=op.ratio, primary_speed_rpm=op.primary_speed_rpm, primary_torque_nm=op.primary_torque_nm,
+                   variant=variant)
+        if use_cache:
+            try:
+                cache.mkdir(parents=True, exist_ok=True)
+                tmp = cache / f"{keys[i]}.json.tmp"
+                tmp.write_text(json.dumps(res, default=float))
+                tmp.replace(cache / f"{keys[i]}.json")  # atomic: a reader never sees half a file
+            except OSError:
+                pass  # a read-only cache must not break the overlay
+        results[i] = {**res, "cached": False}
+    return results
+
+
+def overlay_fast_then_full(points, params: ModelParams = TABLE_6_1, **kwargs):
+    """Generator: the closed-form overlay at once, then the full-model one (for a UI worker)."""
+    fast_kwargs = {k: v for k, v in kwargs.items() if k in ("slack_tension_n", "primary_axial_force_n", "cache_dir", "use_cache")}
+    yield predict_overlay(points, params, tier="closed_form", **fast_kwargs)
+    yield predict_overlay(points, params, tier="full", **kwargs)
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)
