@@ -28,10 +28,11 @@ capacity and never drives the shaft backwards).  When the ratio ``k``
 changes (shifting) the two speeds are kept consistent by the belt impulse
 that conserves ``i J_e omega_e + J_s omega_s``.
 
-Integration: fixed internal steps of at most ``max_substep_s`` (1-2 ms),
-explicit for the (slow) mean speeds, exact exponentials for the shift lag,
-rotor temperature and lock-in filter, and exact within-step angle/edge
-timing for the constant acceleration of each step.
+Integration: a fixed grid of cells of ``max_substep_s`` (4 ms) in absolute
+time, computed ahead of the caller and buffered, so the events do not
+depend on how the host slices time; explicit for the (slow) mean speeds,
+exact exponentials for the rotor temperature and lock-in filter, and exact
+within-cell angle/edge timing for the constant acceleration of each cell.
 
 Signals calibrated on the thesis rig's real logs
 -------------------------------------------------
@@ -211,7 +212,7 @@ class RigParams:
     hall_bounce_max_s: float = 500e-6
     hall_primary_phase_rad: float = 0.7          # magnet position relative to the firing cycle
     # ---- numerics
-    max_substep_s: float = 0.004               # 1/150 s host polls -> two 3.3 ms substeps
+    max_substep_s: float = 0.004                 # fixed physics cell; also the input latency bound
 
 
 @dataclass
@@ -351,7 +352,13 @@ class RigModel:
         self._phase_rev = float(rng_phase.uniform(0.0, TWO_PI))
         self._phase_brake = float(rng_phase.uniform(0.0, TWO_PI))
         self._next_adc_t = float(rng_phase.uniform(0.0, self._adc_period_s))
-        self._pending: list[SensorEvent] = []   # bounce edges beyond the current step's end
+        self._buffer: list[SensorEvent] = []    # events computed ahead of the caller's time
+        self._h = p.max_substep_s
+        self._cell_index = 0
+        self._cell_end_s = 0.0                  # physics state is at this time
+        self._cell_start_s = 0.0
+        self._w_e_start = 0.0
+        self._w_s_start = 0.0
 
     # ------------------------------------------------------------ inputs
     def start_engine(self) -> None:
@@ -400,31 +407,45 @@ class RigModel:
 
     # ------------------------------------------------------------ stepping
     def step(self, dt_s: float) -> list[SensorEvent]:
-        """Advance by ``dt_s``; return the sensor events in ``(t, t + dt]``, in time order."""
-        if not dt_s > 0.0:
-            if dt_s == 0.0:
-                return []
+        """Advance by ``dt_s``; return the sensor events in ``(t, t + dt]``, in time order.
+
+        The physics runs on a fixed grid of cells of ``max_substep_s``
+        (computed ahead as far as needed, events buffered until their time),
+        so the result does not depend on how the caller slices time: many
+        tiny steps cost no more than one long one, and a seed gives the same
+        rig whatever the host's polling pattern.  Inputs (throttle, kill,
+        actuator, faults) set between calls act from the next cell boundary,
+        i.e. with at most one cell (4 ms by default) of latency.
+        """
+        if not dt_s >= 0.0:
             raise ValueError("dt_s must be >= 0")
         t_end = self.t_s + dt_s
-        events: list[SensorEvent] = []
-        h_max = self.params.max_substep_s
-        n_sub = max(1, int(math.ceil(dt_s / h_max - 1e-9)))
-        h = dt_s / n_sub
-        for j in range(n_sub):
-            t1 = t_end if j == n_sub - 1 else self.t_s + h
-            self._substep(t1 - self.t_s, events)
-            self.t_s = t1
-        if self._pending:
-            keep = []
-            for ev in self._pending:
-                if ev.channel in self.stuck_hall:
-                    continue        # stuck since the real edge: its bounce never comes either
-                (events if ev.t_s <= t_end else keep).append(ev)
-            self._pending = keep
-        events.sort(key=_event_time)
-        return events
+        buf = self._buffer
+        h = self._h
+        while self._cell_end_s < t_end:
+            t0 = self._cell_end_s
+            self._cell_index += 1
+            t1 = self._cell_index * h
+            self._substep(t0, h, buf)   # nominal h: keeps the filter's discretisation cached
+            self._cell_end_s = t1
+        self.t_s = t_end
+        if not buf:
+            return []
+        buf.sort(key=_event_time)
+        stuck = self.stuck_hall
+        out: list[SensorEvent] = []
+        k = 0
+        for ev in buf:
+            if ev.t_s > t_end:
+                break
+            k += 1
+            if stuck and ev.channel in stuck:
+                continue        # a stuck sensor gives no edges (nor the bounce of an earlier one)
+            out.append(ev)
+        del buf[:k]
+        return out
 
-    def _substep(self, h: float, events: list[SensorEvent]) -> None:
+    def _substep(self, t0: float, h: float, events: list[SensorEvent]) -> None:
         p = self.params
         cvt = self.cvt
         eng = self.engine
@@ -432,8 +453,6 @@ class RigModel:
         g = self._g
         j_e = self._j_e
         j_s = self._j_s
-        t0 = self.t_s
-
         if not self.engine_enabled:
             self._running = False
 
@@ -512,6 +531,10 @@ class RigModel:
         if running and w_e1 * RPM_PER_RAD_S < p.engine_stall_rpm and w_e1 < w_e0:
             self._running = False   # stalled
 
+        self._cell_start_s = t0
+        self._w_e_start = w_e0
+        self._w_s_start = w_s0
+
         # --- angles (trapezoid = exact for the constant acceleration of the step)
         th_e0 = self._th_e
         th_s0 = self._th_s
@@ -570,14 +593,12 @@ class RigModel:
         return acc, t_p
 
     def _emit_edge(self, channel: str, t: float, events: list[SensorEvent]) -> None:
-        if channel in self.stuck_hall:
-            return
         events.append(SensorEvent(channel, t))
         pb = self.params.hall_bounce_prob
         if pb > 0.0 and self._uniform_bounce() < pb:
             p = self.params
             tb = t + p.hall_bounce_min_s + (p.hall_bounce_max_s - p.hall_bounce_min_s) * self._uniform_bounce()
-            self._pending.append(SensorEvent(channel, tb))
+            events.append(SensorEvent(channel, tb))
 
     def _primary_edges(self, t0, h, th0, w0, a, th1, amp, events) -> None:
         """Edges where the *measured* crank angle (mean + firing ripple) crosses 2 pi k."""
@@ -633,8 +654,16 @@ class RigModel:
 
     # ------------------------------------------------------------ truth
     def truth(self) -> Truth:
-        w_e = self._w_e
-        w_s = self._w_s
+        """True state at the caller's time ``t_s``.
+
+        Speeds are interpolated within the physics cell (they vary linearly
+        there); torques, powers and temperatures are the cell's values.
+        """
+        span = self._cell_end_s - self._cell_start_s
+        f = (self.t_s - self._cell_start_s) / span if span > 0.0 else 1.0
+        f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
+        w_e = self._w_e_start + f * (self._w_e - self._w_e_start)
+        w_s = self._w_s_start + f * (self._w_s - self._w_s_start)
         p_in = self._t_p * w_e
         p_out = self._t_s * w_s
         eff = p_out / p_in if p_in > 1e-9 and p_out > 0.0 else 0.0
