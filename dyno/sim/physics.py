@@ -325,6 +325,10 @@ class RigModel:
         self._j_s = p.secondary_inertia_kg_m2 + p.brake_shaft_inertia_kg_m2 * g * g
         self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
         self._firing_table = tuple((float(a), float(b)) for a, b in p.ripple_firing_frac_table)
+        # hot-loop constants
+        self._stall_rpm = p.engine_stall_rpm
+        self._j_rotor_g = p.brake_shaft_inertia_kg_m2 * g
+        self._rotor_limit_c = p.rotor_temp_limit_c
 
         # state
         self.t_s = 0.0
@@ -528,7 +532,7 @@ class RigModel:
                     acc_s = (w_s1 - w_s0) / h
         self._locked = locked
 
-        if running and w_e1 * RPM_PER_RAD_S < p.engine_stall_rpm and w_e1 < w_e0:
+        if running and w_e1 * RPM_PER_RAD_S < self._stall_rpm and w_e1 < w_e0:
             self._running = False   # stalled
 
         self._cell_start_s = t0
@@ -552,13 +556,13 @@ class RigModel:
         self._t_brake_cap = t_brake_cap
 
         # --- torque in the instrumented brake shaft: brake + rotor inertia
-        t_gauge = t_brake_applied + p.brake_shaft_inertia_kg_m2 * g * acc_s
+        t_gauge = t_brake_applied + self._j_rotor_g * acc_s
         self._t_gauge = t_gauge
 
         # --- rotor heat (exact relaxation over the step)
         w_b = 0.5 * (w_s0 + w_s1) * g
         p_brake = t_brake_cap * w_b if w_b > 0.0 else 0.0
-        self._rotor_c = min(brk.rotor_temp_after_c(self._rotor_c, p_brake, w_b, h), p.rotor_temp_limit_c)
+        self._rotor_c = min(brk.rotor_temp_after_c(self._rotor_c, p_brake, w_b, h), self._rotor_limit_c)
 
         # --- Hall edges
         t1 = t0 + h
@@ -645,7 +649,7 @@ class RigModel:
         t_sec = sig * g
         sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
         code = p.adc_offset_counts + p.adc_gain_counts_per_nm * t_sec + sigma * self._normal()
-        code_i = int(round(code))
+        code_i = math.floor(code + 0.5)
         code_i = 0 if code_i < 0 else (65535 if code_i > 65535 else code_i)
         status = 0
         if self.adc_error_prob > 0.0 and self._uniform_err() < self.adc_error_prob:

@@ -73,6 +73,8 @@ class LowPassFilter:
         self._C = [float(v) for v in np.asarray(C, dtype=float).reshape(-1)]
         self._D = float(np.asarray(D).reshape(-1)[0])
         self._cache: dict[float, tuple[list[list[float]], list[float]]] = {}
+        self._last_h = -1.0
+        self._last = None
         self.n = order
         # DC gain of this realisation: -C A^-1 B + D (should be 1 for a low-pass).
         dc = -np.asarray(self._C) @ np.linalg.solve(self._A, self._B) + self._D
@@ -99,7 +101,11 @@ class LowPassFilter:
 
     def advance(self, x: list[float], u: float, h_s: float) -> tuple[list[float], float]:
         """State after ``h_s`` with ``u`` held, and the output there."""
-        phi, gam = self.discrete(h_s)
+        if h_s == self._last_h:
+            phi, gam = self._last
+        else:
+            phi, gam = self._last = self.discrete(h_s)
+            self._last_h = h_s
         c = self._C
         if self.n == 2:   # the default order, unrolled: this runs every substep
             x0, x1 = x
@@ -133,7 +139,14 @@ class LowPassFilter:
 
     def gain_phase(self, omega_rad_s: float) -> tuple[float, float]:
         """``(|H|, arg H)`` at angular frequency ``omega``."""
-        h = self.response(omega_rad_s / (2.0 * math.pi))
+        s = 1j * omega_rad_s
+        num = 0j
+        for c in self._num:
+            num = num * s + c
+        den = 0j
+        for c in self._den:
+            den = den * s + c
+        h = num / den
         return abs(h), cmath.phase(h)
 
 
