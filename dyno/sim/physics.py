@@ -173,7 +173,7 @@ class RigParams:
     gear_ratio_brake_per_secondary: float = 32.0 / 61.0
     # ---- brake
     actuator_speed_mm_s: float = 5.0
-    actuator_travel_mm: float = 50.0
+    actuator_travel_mm: float = 40.0             # 8 s full stroke at 5 mm/s (the host's release time)
     brake_free_travel_mm: float = 1.0
     brake_spring_rate_n_per_mm: float = 6.5      # ~22 steps of 0.2 s from light load to n_s < 1500 rpm
     master_cylinder_bore_mm: float = 19.05
