@@ -28,6 +28,16 @@ capacity and never drives the shaft backwards).  When the ratio ``k``
 changes (shifting) the two speeds are kept consistent by the belt impulse
 that conserves ``i J_e omega_e + J_s omega_s``.
 
+The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
+``RigParams.cvt_tune_path`` through :mod:`dyno.tuning.actuators` (closed-form
+fallback with ``cvt_tune_path=None``), between the end stops
+``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.
+
+The torque gauge sits on the brake shaft between the gear and the rotor, so
+it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
+``T_s / g`` only in steady state (in a transient the secondary pulley's own
+inertia torque is not seen).
+
 Integration: a fixed grid of cells of ``max_substep_s`` (4 ms) in absolute
 time, computed ahead of the caller and buffered, so the events do not
 depend on how the host slices time; explicit for the (slow) mean speeds,
