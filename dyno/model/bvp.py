@@ -117,6 +117,7 @@ TORQUE_REF_NM = 10.0
 AXIAL_REF_N = 100.0
 POSITION_BC_REF_M = 1e-3  # position continuity residuals in mm
 CREEP_SCALE = 1e-3  # speed and mass-flow unknowns are per-mille creeps
+MIN_RADIUS_M = 0.01  # below this the belt (~7 mm thick) cannot bend round the pulley: outside the model
 
 
 @dataclass(frozen=True)
@@ -175,6 +176,9 @@ def make_case(
         raise bad_input("slip_threshold_m_s", f"a positive speed, got {slip_threshold_m_s!r}")
     belt, drive = params.belt, params.drive
     r_p, r_s = geometry.radii_for_ratio(op.ratio, belt.pitch_length_m, drive.centre_distance_m)
+    if min(r_p, r_s) < MIN_RADIUS_M:
+        raise bad_input("ratio", f"a ratio whose radii are at least {MIN_RADIUS_M * 1e3:g} mm (got R_P={r_p * 1e3:.3g} mm, "
+                                 f"R_S={r_s * 1e3:.3g} mm for R_S/R_P={op.ratio:g})")
     return Case(
         r_primary_m=r_p,
         r_secondary_m=r_s,
@@ -626,7 +630,7 @@ def solve_case(
     guess: RawSolution | None = None,
     tol: float = 1e-3,
     nodes: int = 300,
-    max_nodes: int = 30000,
+    max_nodes: int = 8000,
     start_slip_m_s: float = 1.0,
     slip_factor: float = 0.4,
     max_halvings: int = 6,

@@ -1,0 +1,65 @@
+"""Stiff and extreme cases: converge and verify, or fail fast with a DidNotConverge that names the case."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dyno.errors import DidNotConverge
+from dyno.model import bvp, capstan
+from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
+from dyno.model.solution import solve_point
+
+TIME_LIMIT_S = 15.0
+
+CASES = {
+    "slip_1e-2": (TABLE_6_1, TABLE_6_1_POINT, 1e-2),
+    "slip_1e-5": (TABLE_6_1, TABLE_6_1_POINT, 1e-5),
+    "EI_0.01": (TABLE_6_1.with_belt(bending_stiffness_nm2=0.01), TABLE_6_1_POINT, 1e-4),
+    "EI_1.0": (TABLE_6_1.with_belt(bending_stiffness_nm2=1.0), TABLE_6_1_POINT, 1e-4),
+    "slack_10N": (TABLE_6_1, replace(TABLE_6_1_POINT, slack_tension_n=10.0), 1e-4),
+    "ratio_2.0": (TABLE_6_1, replace(TABLE_6_1_POINT, ratio=2.0), 1e-4),
+    "ratio_0.6": (TABLE_6_1, replace(TABLE_6_1_POINT, ratio=0.6), 1e-4),
+    "rpm_7600": (TABLE_6_1, replace(TABLE_6_1_POINT, primary_speed_rpm=7600.0), 1e-4),
+    "beta_8": (TABLE_6_1.with_sheave_angle(8.0), TABLE_6_1_POINT, 1e-4),
+    "beta_16": (TABLE_6_1.with_sheave_angle(16.0), TABLE_6_1_POINT, 1e-4),
+}
+
+
+def verify(sol):
+    raw = sol.raw
+    assert raw.residual_max <= raw.tol
+    bc = bvp.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
+    assert np.max(np.abs(bc)) < raw.tol
+    s = sol.summary
+    assert 0 < s["efficiency"]["overall"] < 1
+    assert s["axial_force_n"]["primary"] > 0 and s["axial_force_n"]["secondary"] > 0
+    for i_t, k_phi in ((bvp.P_T, bvp.K_PHIP), (bvp.S_T, bvp.K_PHIS)):
+        tension = raw.y[i_t] * 100
+        assert tension.min() > 0
+        assert tension.max() / tension.min() < capstan.max_tension_ratio(raw.p[k_phi], raw.case.mu, raw.case.beta_rad)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CASES))
+def test_extreme_case(name, table_6_1_rounded):
+    params, op, slip = CASES[name]
+    try:
+        sol = solve_point(params, op, slip_threshold_m_s=slip, guess=table_6_1_rounded, friction_corner=0.2,
+                          time_limit_s=TIME_LIMIT_S)
+    except DidNotConverge as exc:
+        msg = str(exc)
+        # Fail fast and say where: the case, the continuation step and the last residual.
+        assert "continuation step" in msg and "last residual" in msg and "R_S/R_P=" in msg
+        assert f"v_th={slip:.3g}" in msg
+        pytest.xfail(f"{name}: {msg[-160:]}")
+    verify(sol)
+
+
+def test_infeasible_geometry_is_a_config_error():
+    from dyno.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        solve_point(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=1e4))  # radii below 10 mm
+    with pytest.raises(ConfigError):
+        solve_point(TABLE_6_1, TABLE_6_1_POINT, variant="nonsense")
