@@ -221,6 +221,7 @@ def solve_point(
     time_limit_s: float = 120.0,
     keep_mesh_below: int = 0,
     friction_corner: float = 0.0,
+    max_nodes: int = 8000,
     log=None,
 ) -> BeltSolution:
     """Solve the full model at one operating point.
@@ -241,6 +242,8 @@ def solve_point(
     guess : BeltSolution, optional
         A solution at a nearby point: warm start by homotopy in the physical
         parameters instead of continuation from the geometric guess.
+    max_nodes : int
+        Mesh-size limit of each solve_bvp call (bounds the time of one step).
     friction_corner : float
         0 (default) keeps the thesis's sharp viscous-Coulomb corner; e.g. 0.2
         rounds it (C-infinity), about halving the mesh and the run time for
@@ -263,6 +266,6 @@ def solve_point(
 
         case = _replace(case, friction_corner=float(friction_corner))
     raw = bvp.solve_case(
-        case, guess=None if guess is None else guess.raw, tol=tol, nodes=nodes, time_limit_s=time_limit_s, keep_mesh_below=keep_mesh_below, log=log
+        case, guess=None if guess is None else guess.raw, tol=tol, nodes=nodes, time_limit_s=time_limit_s, keep_mesh_below=keep_mesh_below, max_nodes=max_nodes, log=log
     )
     return postprocess(raw, params.belt.pitch_length_m)

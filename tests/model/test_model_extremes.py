@@ -46,7 +46,7 @@ def test_extreme_case(name, table_6_1_rounded):
     params, op, slip = CASES[name]
     try:
         sol = solve_point(params, op, slip_threshold_m_s=slip, guess=table_6_1_rounded, friction_corner=0.2,
-                          time_limit_s=TIME_LIMIT_S)
+                          time_limit_s=TIME_LIMIT_S, max_nodes=3000)
     except DidNotConverge as exc:
         msg = str(exc)
         # Fail fast and say where: the case, the continuation step and the last residual.
