@@ -109,6 +109,7 @@ def sweep_ratios(
     slip_threshold_m_s: float = 1e-4,
     tol: float = 1e-3,
     start=None,
+    friction_corner: float = 0.0,
     log=None,
 ):
     """Solve ``op`` at every ratio by continuation; returns ``(rows, solutions)`` in input order.
@@ -129,7 +130,8 @@ def sweep_ratios(
         op_i = replace(op, ratio=ratios[i])
         t0 = time.perf_counter()
         try:
-            s = solve_point(params, op_i, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol, guess=guess)
+            s = solve_point(params, op_i, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol, guess=guess,
+                            friction_corner=friction_corner)
         except DidNotConverge as exc:
             rows[i] = failed_row(op_i, variant, slip_threshold_m_s, str(exc))
             if log:
