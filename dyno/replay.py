@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 from pathlib import Path
 
 from dyno.analysis.points import reduce_point
@@ -16,7 +17,10 @@ from dyno.runlog.reader import load_run
 
 PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "step_s", "efficiency_true",
                 "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
-                "power_out_true_w", "legacy_point", "discarded")
+                "power_out_true_w", "legacy_point", "discarded", "legacy_faults", "thesis_torque_nm",
+                "legacy_channels")
+# Fields a fault found at import/acquisition time withholds (the raw data cannot support them).
+WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 
 
 def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
@@ -40,6 +44,16 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
         for k in PASS_THROUGH:
             if k in doc:
                 p[k] = doc[k]
+        fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
+        if fatal and not math.isnan(p["efficiency"]):
+            # A fault recorded with the run (e.g. a glitch the importer found) still
+            # withholds the number on re-processing: a replay never resurrects it.
+            for k in WITHHELD_BY_FATAL:
+                p[k] = math.nan
+            p["valid"] = False
+            p["faults"] = p["faults"] + [{"channel": f["channel"], "reason": f["reason"], "severity": "error"}
+                                         for f in fatal]
+            p["withheld_by_import"] = True
         points.append(p)
     return {"run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
             "aborts": run.docs("abort"), "meta": run.meta, "calibration": calibration.to_dict(),

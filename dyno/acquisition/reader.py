@@ -93,7 +93,7 @@ class V1Reader:
         self._last_frame_s = now_s
         if self._dropped_last is not None:
             self.events_lost += (frame.events_dropped - self._dropped_last) & 0xFFFF
-        elif frame.flags & v1.FLAG_RESET:
+        else:  # first frame, or after a reset / CLEAR_COUNTERS: the counter started at 0
             self.events_lost += frame.events_dropped
         self._dropped_last = frame.events_dropped
         self.more = bool(frame.flags & v1.FLAG_MORE)
@@ -107,6 +107,11 @@ class V1Reader:
     def command(self, request: bytes) -> None:
         """Send a command that gets no answer (SET_DEBOUNCE, CLEAR_COUNTERS)."""
         self.transport.write(request)
+        if request[:1] == bytes([v1.OP_CLEAR_COUNTERS]):
+            self._dropped_last = None  # the device's counter restarts at 0: no jump in events_lost
+
+    def clear_counters(self) -> None:
+        self.command(v1.encode_command(v1.OP_CLEAR_COUNTERS))
 
     def read_info(self) -> v1.InfoFrame | None:
         try:

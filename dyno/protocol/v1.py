@@ -154,7 +154,7 @@ def encode_info_frame(info: InfoFrame) -> bytes:
     head = struct.pack(">BBBBBBBBHIHH", VERSION, INFO_LEN, KIND_INFO, info.seq & 0xFF,
                        info.flags & 0xFF, major, minor, patch, info.boot_count & 0xFFFF,
                        info.uptime_ms & 0xFFFFFFFF, info.debounce_primary_us,
-                       info.debounce_secondary_us)
+                       info.debounce_secondary_us) + b"\x00\x00"  # bytes 18-19 reserved, zero
     return (head + struct.pack(">H", crc16(head))).ljust(FRAME_MAX, b"\x00")
 
 

@@ -78,7 +78,7 @@ uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info)
 {
     uint8_t *p = out;
     *p++ = FRAME_VERSION;
-    *p++ = FRAME_INFO_LEN;  /* needed now: bytes 18-19 cover it */
+    *p++ = FRAME_INFO_LEN;
     *p++ = KIND_INFO;
     *p++ = info->seq;
     *p++ = info->flags;
@@ -89,9 +89,8 @@ uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info)
     p = put_u32(p, info->uptime_ms);
     p = put_u16(p, info->debounce_primary_us);
     p = put_u16(p, info->debounce_secondary_us);
-    /* Bytes 18-19 are not defined by docs/protocol.md; the golden vector (the Python
-     * encoder) puts the CRC of bytes 0..17 there. Mirror it, so that the frame's CRC
-     * at 20-21 (over 0..19) matches the vector byte for byte (it is then 0x0000). */
-    p = put_u16(p, crc16(out, (uint8_t)(p - out)));
+    /* Bytes 18-19: reserved, zero (docs/protocol.md); the CRC at 20-21 covers 0..19. */
+    *p++ = 0;
+    *p++ = 0;
     return finish(out, p);
 }
