@@ -64,9 +64,9 @@ class TestPlan:
     step_max_s: float = 1.0
     target_points: int = 20  # adapt the step so the run gives about this many points
     measure_s: float = 3.0  # the thesis's 3 s average (the minimum)
-    target_efficiency_sem: float = 0.0015  # extend the average until the standard error is this small ...
-    max_measure_s: float = 12.0  # ... or this long (rotor heat limits how long a point can last)
-    min_point_torque_nm: float = 3.0  # below this the brake has not really loaded the CVT: no point
+    target_efficiency_sem: float = 0.0012  # extend the average until the standard error is this small ...
+    max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
+    min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
     settle: SettleCriteria = field(default_factory=SettleCriteria)
     min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
@@ -80,6 +80,7 @@ class SafetyLimits:
     overspeed_primary_rpm: float = 4300.0
     overspeed_secondary_rpm: float = 9000.0
     comms_timeout_s: float = 0.5
+    thermometer_timeout_s: float = 2.0  # a blind over-temperature monitor is no monitor
     check_period_s: float = 0.01
 
 
@@ -147,15 +148,21 @@ class TestController:
                 t = math.nan
             self.writer.doc(doc_type, host_t_s=t, device_t_us=self.poller.device_now_us(), **fields)
 
-    def abort(self, cause: str, detail: str) -> None:
-        """Safe state now, then record why. Idempotent."""
+    def abort(self, cause: str, detail: str, trigger_s: float | None = None) -> None:
+        """Safe state now, then record why. Idempotent.
+
+        ``trigger_s`` is when the condition became true (e.g. the thermometer
+        reading over the limit, or the moment the link timeout expired); the
+        log keeps it with the time the safe state was commanded.
+        """
         if self.state in (State.ABORTED,):
             return
-        trigger_s = self._now()
+        now = self._now()
         self.act.safe_state()  # first, before any bookkeeping
         safe_s = self._now()
+        trigger_s = now if trigger_s is None else trigger_s
         entry = {"cause": cause, "detail": detail, "state": self.state.value, "trigger_s": trigger_s,
-                 "safe_state_s": safe_s}
+                 "safe_state_s": safe_s, "latency_s": safe_s - trigger_s}
         self.aborts.append(entry)
         self._log("abort", **entry)
         if self.state is not State.DONE:
@@ -230,9 +237,10 @@ class TestController:
                 point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
                                      index=len(self.points))
                 sem = point["efficiency_sem"]
-                if not (sem > p.target_efficiency_sem) or host_t1 - host_t0 >= p.max_measure_s:
-                    break  # (a NaN sem cannot improve by waiting)
-                await self._sleep(min(1.0, p.max_measure_s - (host_t1 - host_t0)))
+                remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                if not (sem > p.target_efficiency_sem) or remaining_s < 0.05:
+                    break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
+                await self._sleep(min(1.0, remaining_s))
             if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
                 self._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
                                          f"{p.min_point_torque_nm} N m: brake not yet loading")
@@ -299,19 +307,27 @@ class TestController:
                 self.abort(*trip)
                 return
 
-    def check_limits(self) -> tuple[str, str] | None:
+    def check_limits(self) -> tuple[str, str, float] | None:
+        """(cause, detail, trigger time) of the first limit exceeded, or None."""
         lim = self.limits
         now = self._now()
         poller = self.poller
         last = poller.last_valid_frame_s if poller.last_valid_frame_s is not None else poller.started_s
         if last is not None and now - last > lim.comms_timeout_s:
-            return "comms_lost", f"no valid frame for {now - last:.3f} s (limit {lim.comms_timeout_s} s)"
+            return ("comms_lost", f"no valid frame for {now - last:.3f} s (limit {lim.comms_timeout_s} s)",
+                    last + lim.comms_timeout_s)
+        if poller.thermometer is not None and poller.started_s is not None:
+            seen = poller.rotor_temp_time_s if not math.isnan(poller.rotor_temp_time_s) else poller.started_s
+            if now - seen > lim.thermometer_timeout_s:
+                return ("thermometer_lost", f"no rotor temperature for {now - seen:.2f} s",
+                        seen + lim.thermometer_timeout_s)
         temp = poller.rotor_temp_c
         if not math.isnan(temp) and temp > lim.rotor_temp_max_c:
-            return "over_temperature", f"rotor {temp:.1f} C > {lim.rotor_temp_max_c:.0f} C"
+            return ("over_temperature", f"rotor {temp:.1f} C > {lim.rotor_temp_max_c:.0f} C",
+                    poller.rotor_temp_time_s)
         rp, rs = poller.rpm(v1.CH_PRIMARY), poller.rpm(v1.CH_SECONDARY)
         if rp > lim.overspeed_primary_rpm:
-            return "overspeed", f"primary {rp:.0f} rpm > {lim.overspeed_primary_rpm:.0f}"
+            return "overspeed", f"primary {rp:.0f} rpm > {lim.overspeed_primary_rpm:.0f}", now
         if rs > lim.overspeed_secondary_rpm:
-            return "overspeed", f"secondary {rs:.0f} rpm > {lim.overspeed_secondary_rpm:.0f}"
+            return "overspeed", f"secondary {rs:.0f} rpm > {lim.overspeed_secondary_rpm:.0f}", now
         return None

@@ -1,0 +1,64 @@
+"""The whole chain on the simulated rig: bytes on a bus -> efficiency points on disk."""
+
+import math
+
+import pytest
+
+from dyno.replay import replay
+
+TOLERANCE_PP = 0.5  # issue 2: every point within 0.5 percentage points of the truth
+
+
+def _check_points_against_truth(result):
+    pts = result["points"]
+    assert len(pts) >= 15, f"only {len(pts)} points"
+    for p in pts:
+        assert p["valid"], p["faults"]
+        err_pp = 100 * abs(p["efficiency"] - p["efficiency_true"])
+        assert err_pp <= TOLERANCE_PP, f"point {p['index']}: {err_pp:.2f} pp off the truth"
+        assert 0 < p["efficiency"] < 1
+    # from light load down to the minimum secondary speed
+    assert pts[0]["rpm_secondary"] > 4500
+    assert pts[-1]["rpm_secondary"] < 2000
+    assert all(a["rpm_secondary"] > b["rpm_secondary"] for a, b in zip(pts, pts[1:]))
+
+
+def test_full_run_points_match_the_truth(full_run):
+    assert full_run["state"] == "done", full_run["reason"]
+    assert not full_run["aborts"]
+    _check_points_against_truth(full_run)
+    fr = full_run["frames"]
+    assert fr["accepted"] == fr["read"] and fr["rejected_total"] == 0
+    assert full_run["events_lost"] == 0
+
+
+def test_five_percent_corrupted_transfers_lose_nothing(full_run, faulty_run):
+    assert faulty_run["state"] == "done", faulty_run["reason"]
+    fr = faulty_run["frames"]
+    assert fr["corrupted_accepted"] == 0
+    assert faulty_run["events_lost"] == 0
+    injected = faulty_run["faults_injected"]
+    assert injected["bit_error"] > 100 and injected["nack"] > 50 and injected["truncate"] > 50
+    assert fr["rejected"].get("crc", 0) > 0 and fr["transport_errors"].get("nack", 0) > 0
+    _check_points_against_truth(faulty_run)
+    # same seed, same physics: the same operating points as the clean run
+    assert len(faulty_run["points"]) == len(full_run["points"])
+    for a, b in zip(full_run["points"], faulty_run["points"]):
+        assert abs(a["efficiency"] - b["efficiency"]) < 0.005
+
+
+def test_replay_gives_the_live_points(full_run):
+    again = replay(full_run["run_dir"])
+    assert len(again["points"]) == len(full_run["points"])
+    for live, re in zip(full_run["points"], again["points"]):
+        for k in ("rpm_primary", "rpm_secondary", "torque_secondary_nm", "power_out_w", "power_in_w", "efficiency"):
+            assert re[k] == pytest.approx(live[k], rel=1e-12), k
+    assert again["stop"]["exit_status"] == "success"
+
+
+def test_point_statistics_are_complete(full_run):
+    p = full_run["points"][5]
+    for k in ("rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm", "efficiency_sem"):
+        assert p[k] is not None and p[k] > 0 and math.isfinite(p[k])
+    assert p["n_primary_edges"] > 100 and p["n_secondary_edges"] > 100 and p["n_adc"] > 300
+    assert p["duration_s"] >= 3.0
