@@ -85,7 +85,9 @@ nodes), warm starts with homotopy in the physical parameters.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 import time
 from dataclasses import dataclass, field, fields, replace
 
@@ -275,7 +277,12 @@ def _unpack_params(case: Case, p):
 
 
 def make_fun(case: Case):
-    """The ``fun(t, y, p)`` of solve_bvp for ``case`` (scaled states)."""
+    """The ``fun(t, y, p)`` of solve_bvp for ``case`` (scaled states).
+
+    ``p`` may be the usual ``(8,)`` vector or an ``(8, m)`` array of per-column
+    parameters (used by :func:`make_fun_jac` to evaluate every perturbation in
+    one vectorised call).
+    """
 
     def fun(t, y, p):
         omega_s, g = _unpack_params(case, p)
@@ -313,6 +320,77 @@ def make_fun(case: Case):
         return dy
 
     return fun
+
+
+# Column colouring of the rhs Jacobian: every region's rhs depends only on its own states
+# (and a few parameters), so the j-th state of all four regions can be perturbed at once.
+_BLOCKS = (
+    (S_T, S_TH, S_TH1, S_TH2, S_X, S_X1),
+    (P_T, P_TH, P_TH1, P_TH2, P_X, P_X1, P_M, P_A),
+    (T_TAU, T_V, T_V1, T_V2, T_XP, T_YP),
+    (L_TAU, L_V, L_V1, L_V2, L_XP, L_YP),
+)
+_BLOCK_OF_ROW = np.empty(N_STATES, dtype=int)
+for _b, _rows in enumerate(_BLOCKS):
+    _BLOCK_OF_ROW[list(_rows)] = _b
+# Parameter groups with disjoint row supports (K_CS, K_CP do not enter the rhs).
+_PARAM_GROUPS = ((K_WS, K_PHIP, K_LT, K_LS), (K_PHIS,), (K_G,))
+_PARAM_ROWS = {
+    K_WS: _BLOCKS[0], K_PHIS: _BLOCKS[0], K_PHIP: _BLOCKS[1], K_LT: _BLOCKS[2], K_LS: _BLOCKS[3],
+    K_G: _BLOCKS[0] + _BLOCKS[1],
+}
+_EPS_SQRT = math.sqrt(np.finfo(float).eps)
+
+
+def make_fun_jac(case: Case, fun=None):
+    """``fun_jac(t, y, p)`` for solve_bvp: forward differences, coloured and vectorised.
+
+    The same forward differences (same steps) as scipy's own estimate, but
+    with the 26 state columns coloured into 8 groups (the four regions are
+    uncoupled in the rhs) and the 8 parameters into 3, and all 12
+    evaluations (base point included) done in one call on a 12m-column
+    array: ~1/3 of the rhs work and 1/34 of its Python overhead.
+    """
+    fun = make_fun(case) if fun is None else fun
+    n_groups = max(len(b) for b in _BLOCKS)
+    n_eval = 1 + n_groups + len(_PARAM_GROUPS)
+
+    def fun_jac(t, y, p):
+        n, m = y.shape
+        h_y = _EPS_SQRT * (1.0 + np.abs(y))
+        h_p = _EPS_SQRT * (1.0 + np.abs(p))
+        y_all = np.tile(y, (1, n_eval))
+        p_all = np.repeat(p[:, None], n_eval * m, axis=1)
+        for j in range(n_groups):
+            cols = slice((1 + j) * m, (2 + j) * m)
+            for rows in _BLOCKS:
+                if j < len(rows):
+                    y_all[rows[j], cols] += h_y[rows[j]]
+        for g_i, group in enumerate(_PARAM_GROUPS):
+            cols = slice((1 + n_groups + g_i) * m, (2 + n_groups + g_i) * m)
+            for k in group:
+                p_all[k, cols] += h_p[k]
+        f_all = fun(np.tile(t, n_eval), y_all, p_all)
+        f0 = f_all[:, :m]
+        df_dy = np.zeros((n, n, m))
+        for j in range(n_groups):
+            diff = f_all[:, (1 + j) * m:(2 + j) * m] - f0
+            for rows in _BLOCKS:
+                if j < len(rows):
+                    i = rows[j]
+                    hi = (y[i] + h_y[i]) - y[i]
+                    rr = list(rows)
+                    df_dy[rr, i, :] = diff[rr] / hi
+        df_dp = np.zeros((n, N_PARAMS, m))
+        for g_i, group in enumerate(_PARAM_GROUPS):
+            diff = f_all[:, (1 + n_groups + g_i) * m:(2 + n_groups + g_i) * m] - f0
+            for k in group:
+                hk = (p[k] + h_p[k]) - p[k]
+                rr = list(_PARAM_ROWS[k])
+                df_dp[rr, k, :] = diff[rr] / hk
+        return df_dy, df_dp
+
+    return fun_jac
 
 
 def make_bc(case: Case):
@@ -595,12 +673,113 @@ def _sanity_problem(case: Case, y: np.ndarray, p: np.ndarray) -> str | None:
     return None
 
 
+_SPLU_LOCK = threading.Lock()
+
+
+def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_dp_middle, dbc_dya, dbc_dyb, dbc_dp):
+    """scipy's ``construct_global_jac`` for this model, exploiting the block-diagonal rhs Jacobian.
+
+    Same formulas (Kierzenka & Shampine's Lobatto IIIA collocation blocks)
+    as ``scipy.integrate._bvp.construct_global_jac``, but the n x n products
+    are formed region by region (6, 8, 6, 6 states: 1/15 of the flops) and
+    only structurally non-zero entries enter the sparse matrix (~1/3).
+    """
+    from scipy.sparse import coo_matrix
+
+    h3 = h[:, None, None]
+    rows, cols, vals = [], [], []
+    base = (np.arange(m - 1) * n)[:, None, None]
+    for blk in _BLOCKS:
+        idx = np.asarray(blk)
+        b = idx.size
+        a = np.transpose(df_dy[idx[:, None], idx[None, :], :], (2, 0, 1))
+        a_mid = np.transpose(df_dy_middle[idx[:, None], idx[None, :], :], (2, 0, 1))
+        eye = np.identity(b)
+        d0 = -eye - h3 / 6 * (a[:-1] + 2 * a_mid) - h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[:-1])
+        d1 = eye - h3 / 6 * (a[1:] + 2 * a_mid) + h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[1:])
+        r = np.broadcast_to(base + idx[None, :, None], (m - 1, b, b))
+        c = np.broadcast_to(base + idx[None, None, :], (m - 1, b, b))
+        rows += [r.ravel(), r.ravel()]
+        cols += [c.ravel(), (c + n).ravel()]
+        vals += [d0.ravel(), d1.ravel()]
+    # boundary conditions on ya, yb
+    bc_r = (m - 1) * n + np.arange(n + k)[:, None]
+    rows += [np.broadcast_to(bc_r, (n + k, n)).ravel()] * 2
+    cols += [np.broadcast_to(np.arange(n)[None, :], (n + k, n)).ravel(),
+             np.broadcast_to((m - 1) * n + np.arange(n)[None, :], (n + k, n)).ravel()]
+    vals += [dbc_dya.ravel(), dbc_dyb.ravel()]
+    if k > 0:
+        fp = np.transpose(df_dp, (2, 0, 1))
+        fp_mid = np.transpose(df_dp_middle, (2, 0, 1)).copy()
+        a_mid_full = np.transpose(df_dy_middle, (2, 0, 1))
+        diff = fp[:-1] - fp[1:]
+        for blk in _BLOCKS:
+            idx = np.asarray(blk)
+            fp_mid[:, idx, :] += 0.125 * h3 * np.einsum("...ij,...jk->...ik", a_mid_full[:, idx[:, None], idx[None, :]],
+                                                       diff[:, idx, :])
+        d_p = -h3 / 6 * (fp[:-1] + fp[1:] + 4 * fp_mid)
+        rows += [np.broadcast_to((base[:, :, 0] + np.arange(n)[None, :])[:, :, None], (m - 1, n, k)).ravel(),
+                 np.broadcast_to(bc_r, (n + k, k)).ravel()]
+        cols += [np.broadcast_to(n * m + np.arange(k)[None, None, :], (m - 1, n, k)).ravel(),
+                 np.broadcast_to(n * m + np.arange(k)[None, :], (n + k, k)).ravel()]
+        vals += [d_p.ravel(), dbc_dp.ravel()]
+    size = n * m + k
+    jac = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+    return jac.tocsc()
+
+
+@contextlib.contextmanager
+def _fast_collocation_linear_algebra():
+    """Speed up solve_bvp's linear algebra for this model (same Newton iterates up to rounding).
+
+    * ``construct_global_jac`` -> :func:`_block_global_jac` (the rhs
+      Jacobian is block-diagonal by region);
+    * ``splu``: the collocation Jacobian is block-bidiagonal (plus the
+      boundary rows and the parameter columns) with diagonal blocks near -I:
+      in its natural order with threshold pivoting (0.1) it fills in less
+      than after COLAMD, and dropping explicit zeros first makes the
+      factorisation 3-5x faster (measured at 1550 nodes: 0.07-0.08 s vs
+      0.2-0.4 s).
+
+    scipy's ``solve_bvp`` has no options for either, so the two module-level
+    names in ``scipy.integrate._bvp`` are swapped for the duration of the
+    call (under a lock; restored after).  If the private names ever
+    disappear, scipy's defaults are used.
+    """
+    import scipy.integrate._bvp as _bvp_mod
+
+    original_splu = getattr(_bvp_mod, "splu", None)
+    original_jac = getattr(_bvp_mod, "construct_global_jac", None)
+    if original_splu is None or original_jac is None:
+        yield
+        return
+
+    def splu_natural(a, *args, **kwargs):
+        a.eliminate_zeros()
+        kwargs.setdefault("permc_spec", "NATURAL")
+        kwargs.setdefault("diag_pivot_thresh", 0.1)
+        return original_splu(a, *args, **kwargs)
+
+    def global_jac(n, *args):
+        if n != N_STATES:
+            return original_jac(n, *args)
+        return _block_global_jac(n, *args)
+
+    with _SPLU_LOCK:
+        _bvp_mod.splu, _bvp_mod.construct_global_jac = splu_natural, global_jac
+        try:
+            yield
+        finally:
+            _bvp_mod.splu, _bvp_mod.construct_global_jac = original_splu, original_jac
+
+
 def _solve_once(case: Case, t, y, p, tol: float, max_nodes: int):
     from scipy.integrate import solve_bvp
 
     fun, bc = make_fun(case), make_bc(case)
-    with np.errstate(all="ignore"):
-        res = solve_bvp(fun, bc, t, y, p, tol=tol, max_nodes=max_nodes, bc_tol=tol)
+    fun_jac = make_fun_jac(case, fun)
+    with np.errstate(all="ignore"), _fast_collocation_linear_algebra():
+        res = solve_bvp(fun, bc, t, y, p, tol=tol, max_nodes=max_nodes, bc_tol=tol, fun_jac=fun_jac)
     rms = float(np.max(res.rms_residuals)) if res.rms_residuals is not None and len(res.rms_residuals) else float("inf")
     bc_res = float(np.max(np.abs(bc(res.y[:, 0], res.y[:, -1], res.p))))
     ok = res.status == 0 and np.isfinite(rms) and bc_res <= 10 * tol
