@@ -20,8 +20,11 @@ from dyno.sim.device import EmulatedFirmware
 class SimActuators:
     """The controller's outputs wired to the physics model's inputs."""
 
-    def __init__(self, rig_model, full_stroke_s: float = 8.0) -> None:
+    def __init__(self, rig_model, full_stroke_s: float = 8.0, sync=None) -> None:
         self.model = rig_model
+        # Bring the physics up to "now" before changing an input, so the input
+        # acts from the moment it was commanded (not from the last bus poll).
+        self._sync = sync or (lambda: None)
         self.brake_full_stroke_s = full_stroke_s
         self.history: list[tuple[float, str, object]] = []  # (sim t, what, value) for tests
         self._release_until_s: float | None = None
@@ -30,19 +33,23 @@ class SimActuators:
         self.history.append((self.model.t_s, what, value))
 
     def brake(self, direction: int) -> None:
+        self._sync()
         self._release_until_s = None
         self.model.actuator_dir = int(direction)
         self._record("brake", int(direction))
 
     def throttle(self, fraction: float) -> None:
+        self._sync()
         self.model.throttle_frac = min(1.0, max(0.0, float(fraction)))
         self._record("throttle", self.model.throttle_frac)
 
     def engine_kill(self, killed: bool) -> None:
+        self._sync()
         self.model.engine_enabled = not killed
         self._record("kill", bool(killed))
 
     def safe_state(self) -> None:
+        self._sync()
         self.model.throttle_frac = 0.0
         self.model.engine_enabled = False
         self.model.actuator_dir = RELEASE
@@ -113,7 +120,7 @@ class SimRig:
         self.model = RigModel(params, seed=seed)
         self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm)
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
-        self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s)
+        self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)
         self.truth = TruthRecorder(self.model)
         self.protocol = protocol
 
