@@ -580,6 +580,51 @@ def _contact_points(case: Case, p):
     }
 
 
+def _belt_speed(case: Case, g, t_n):
+    return g * (t_n + case.ea_n) / (case.ea_n * case.mass_kg_m - g * g)
+
+
+def _mass_flow_for_speed(case: Case, v, t_n):
+    """Inverse of :func:`_belt_speed` in G (the root of V G^2 + (T + EA) G - V EA m = 0)."""
+    b = t_n + case.ea_n
+    return (-b + math.sqrt(b * b + 4.0 * v * v * case.ea_n * case.mass_kg_m)) / (2.0 * v)
+
+
+def _transfer_speeds(old: Case, new: Case, y: np.ndarray, p: np.ndarray) -> None:
+    """Keep the sliding-velocity field when the radii, speed or belt constants change (in place).
+
+    The friction law turns over within v_th (1e-4 m/s) of zero slip, i.e.
+    within 1e-5 of the belt speed: left alone, the mass-flow and secondary
+    creeps of the old solution give sliding speeds tens of v_th off after a
+    1 % change of radius (the x*omega and centrifugal terms do not scale with
+    R).  So the mass flow is set to keep V - (R - x) omega at the primary's
+    point of least slip, and the secondary speed to keep it at the
+    secondary's.
+    """
+    omega_s_old, g_old = _unpack_params(old, p)
+    # primary: the point of least slip (the adhesion zone, if any)
+    t_p = y[P_T] * TENSION_REF_N
+    x_p = y[P_X] * PENETRATION_REF_M
+    v_old = _belt_speed(old, g_old, t_p)
+    slip = np.abs(v_old * np.cos(y[P_TH]) - (old.r_primary_m - x_p) * old.omega_primary_rad_s)
+    j = int(np.argmin(slip))
+    surf_shift = (new.r_primary_m - x_p[j]) * new.omega_primary_rad_s - (old.r_primary_m - x_p[j]) * old.omega_primary_rad_s
+    v_new = v_old[j] + surf_shift / math.cos(y[P_TH, j])
+    if not (math.isfinite(v_new) and v_new > 0):
+        return
+    g_new = _mass_flow_for_speed(new, v_new, t_p[j])
+    p[K_G] = (g_new / new.g_ref - 1.0) / CREEP_SCALE
+    # secondary: keep the sliding speed at its point of least slip
+    t_s = y[S_T] * TENSION_REF_N
+    x_s = y[S_X] * PENETRATION_REF_M
+    vs_old = _belt_speed(old, g_old, t_s)
+    slip_s = vs_old * np.cos(y[S_TH]) - (old.r_secondary_m - x_s) * omega_s_old
+    k = int(np.argmin(np.abs(slip_s)))
+    vs_new = _belt_speed(new, g_new, t_s[k])
+    omega_s_new = (vs_new * math.cos(y[S_TH, k]) - slip_s[k]) / (new.r_secondary_m - x_s[k])
+    p[K_WS] = (omega_s_new / new.omega_secondary_ref - 1.0) / CREEP_SCALE
+
+
 def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
     """Adapt a converged solution of ``old`` into a guess for ``new``.
 
@@ -590,6 +635,7 @@ def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
     the new level measured slower (the adhesion zone's position matters more).
     """
     y, p = y.copy(), p.copy()
+    _transfer_speeds(old, new, y, p)
     d_t = geometry.tangent_angle_rad(new.r_primary_m, new.r_secondary_m, new.centre_distance_m) - geometry.tangent_angle_rad(
         old.r_primary_m, old.r_secondary_m, old.centre_distance_m
     )
@@ -632,6 +678,36 @@ def remesh(t_old: np.ndarray, n_nodes: int) -> np.ndarray:
     return mesh
 
 
+def equidistributed_mesh(t_old: np.ndarray, rms_residuals: np.ndarray, tol: float, n_min: int = 120,
+                         n_max: int = 4000, target_fraction: float = 0.25, order: int = 3,
+                         uniform_share: float = 0.1) -> np.ndarray:
+    """A mesh that equidistributes the collocation residual of a converged solution.
+
+    On interval i of width h_i the RMS residual behaves like r_i ~ K_i h_i^order
+    (cubic collocation: the residual of y' is third order), so the
+    width giving ``target_fraction * tol`` there is h_i (target/r_i)^(1/order),
+    i.e. a node density rho_i = (r_i/target)^(1/order)/h_i.  The density is
+    smoothed over neighbouring intervals (a kink does not follow the power
+    law), blended with a uniform floor (``uniform_share`` of the nodes), and
+    the node count is what it integrates to, clipped to [n_min, n_max].
+    Unlike :func:`remesh` this removes nodes where the old mesh was
+    needlessly dense (solve_bvp only ever adds), e.g. where an adhesion zone
+    was before a parameter change.
+    """
+    h = np.diff(t_old)
+    r = np.maximum(np.asarray(rms_residuals, dtype=float), 1e-6 * tol)
+    dens = (r / (target_fraction * tol)) ** (1.0 / order) / h
+    # smooth: each interval takes the max of itself and its neighbours
+    dens = np.maximum(dens, np.maximum(np.r_[dens[1:], dens[-1]], np.r_[dens[0], dens[:-1]]))
+    n_eq = float(np.sum(dens * h))
+    n = int(np.clip(n_eq / (1.0 - uniform_share), n_min, n_max))
+    dens = dens + uniform_share * n_eq / (1.0 - uniform_share)
+    cum = np.concatenate([[0.0], np.cumsum(dens * h)])
+    mesh = np.interp(np.linspace(0.0, cum[-1], n), cum, t_old)
+    mesh[0], mesh[-1] = 0.0, 1.0
+    return np.unique(mesh)
+
+
 @dataclass
 class StepRecord:
     step: int
@@ -657,6 +733,7 @@ class RawSolution:
     tol: float
     history: list = field(default_factory=list)
     solve_s: float = 0.0
+    rms_residuals: np.ndarray | None = None  # per mesh interval, from solve_bvp (drives re-meshing)
 
 
 def _sanity_problem(case: Case, y: np.ndarray, p: np.ndarray) -> str | None:
@@ -815,6 +892,7 @@ def solve_case(
     max_halvings: int = 6,
     time_limit_s: float = 120.0,
     keep_mesh_below: int = 0,
+    mesh_mode: str = "equidistribute",
     log=None,
 ) -> RawSolution:
     """Solve one case, by slip-threshold continuation from the geometric guess or by homotopy from ``guess``.
@@ -842,7 +920,13 @@ def solve_case(
             f"(last residual {last['rms']:.3g}, tol {tol:g}; {last['msg']})"
         )
 
-    def march(start: Case, target: Case, t, y, p, first_fraction: float, what: str, max_fraction: float = 1.0):
+    def new_mesh(t, rms):
+        if rms is not None and len(rms) == t.size - 1 and mesh_mode == "equidistribute":
+            return equidistributed_mesh(t, rms, tol, n_min=min(nodes, 120), n_max=max_nodes // 2)
+        return remesh(t, nodes)
+
+    def march(start: Case, target: Case, t, y, p, first_fraction: float, what: str, max_fraction: float = 1.0,
+              rms=None):
         """Homotopy from ``start`` (solved: t, y, p) to ``target``; adaptive step."""
         s, ds = 0.0, first_fraction
         halvings = 0
@@ -854,19 +938,19 @@ def solve_case(
             s_new = min(1.0, s + ds)
             c = _interp_case(start, target, s_new)
             if t.size > keep_mesh_below:
-                mesh = remesh(t, nodes)
+                mesh = new_mesh(t, rms)
                 from scipy.interpolate import PchipInterpolator
 
                 y_guess = PchipInterpolator(t, y, axis=1)(mesh)
             else:
                 mesh, y_guess = t, y
             y_guess, p_guess = transfer_guess(c_prev, c, y_guess, p)
-            res, rms, bc_res, ok = attempt(c, mesh, y_guess, p_guess, f"{what} s={s_new:.3g}")
+            res, rms_max, bc_res, ok = attempt(c, mesh, y_guess, p_guess, f"{what} s={s_new:.3g}")
             if ok:
                 s = s_new
                 c_prev = c
-                t, y, p = res.x, res.y, res.p
-                best = (c, res, rms, bc_res)
+                t, y, p, rms = res.x, res.y, res.p, res.rms_residuals
+                best = (c, res, rms_max, bc_res)
                 halvings = 0
                 ds = min(ds * 1.5, max_fraction)
             else:
@@ -887,7 +971,7 @@ def solve_case(
             else:
                 level = replace(level, slack_tension_n=float(guess.y[P_T, -1] * TENSION_REF_N))
             start = level
-        best = march(start, target, guess.t, guess.y, guess.p, 1.0, "warm-start homotopy")
+        best = march(start, target, guess.t, guess.y, guess.p, 1.0, "warm-start homotopy", rms=guess.rms_residuals)
     else:
         t, y, p = initial_guess(case, nodes)
         # From the guess, solve with a heavily smoothed friction law first.
@@ -900,9 +984,10 @@ def solve_case(
         if v_start > case.slip_threshold_m_s:
             n_steps = math.log(v_start / case.slip_threshold_m_s) / -math.log(slip_factor)
             frac = 1.0 / max(n_steps, 1.0)
-            best = march(c0, case, res.x, res.y, res.p, frac, "slip-threshold continuation", max_fraction=2.0 * frac)
+            best = march(c0, case, res.x, res.y, res.p, frac, "slip-threshold continuation", max_fraction=2.0 * frac,
+                         rms=res.rms_residuals)
     c, res, rms, bc_res = best
     return RawSolution(
         case=case, t=res.x, y=res.y, p=res.p, sol=res.sol, residual_max=rms, bc_residual_max=bc_res, tol=tol,
-        history=history, solve_s=time.perf_counter() - t0,
+        history=history, solve_s=time.perf_counter() - t0, rms_residuals=res.rms_residuals,
     )
