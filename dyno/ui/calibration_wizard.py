@@ -1,0 +1,428 @@
+"""The known-weights torque calibration as a pure state machine (no Textual, no I/O).
+
+Procedure (Messick 2018, Section 9.2): lock the secondary, wrap a rope on the
+brake rotor at a measured radius, hang masses in steps.  The torque at the
+secondary is ``m g r * 32/61`` (:func:`dyno.analysis.calibration.torque_from_mass`).
+
+::
+
+    SETUP --start()--> TARE_BEFORE --> LOADING (ascending) --> UNLOADING (descending)
+          --> TARE_AFTER --> REVIEW --accept()--> ACCEPTED
+                                    \\--reject()--> REJECTED
+
+Each step: the operator confirms the load is hanging still (:meth:`begin_step`),
+then ADC samples arrive (:meth:`add_samples`); the first ``settle_samples`` are
+dropped (the rope still swinging, the lock-in filter settling), then
+``n_samples`` are kept.  Conversions with the AD7171 error bit or at a rail
+are refused and counted, never averaged, as in a test point.
+
+The fit is :func:`dyno.analysis.calibration.fit_calibration` on the raw
+samples per step (so its standard errors come from the step-to-step
+scatter); the tare readings are a drift check, not part of the line.
+Nothing is written unless :meth:`accept` is called with a fit that passed
+every check, and then through the atomic :func:`append_entry`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dyno.analysis.calibration import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                                       R2_MIN_DEFAULT, CalibrationRejected, append_entry, fit_calibration,
+                                       torque_from_mass)
+
+ADC_STATUS_ERR = 0x20
+ADC_RAILS = (0, 0xFFFF)
+
+
+class Phase(enum.Enum):
+    SETUP = "setup"
+    TARE_BEFORE = "tare_before"
+    LOADING = "loading"
+    UNLOADING = "unloading"
+    TARE_AFTER = "tare_after"
+    REVIEW = "review"
+    ACCEPTED = "accepted"
+    REJECTED = "rejected"
+
+
+COLLECTING_PHASES = (Phase.TARE_BEFORE, Phase.LOADING, Phase.UNLOADING, Phase.TARE_AFTER)
+
+
+@dataclass
+class Step:
+    """One load step: the plan, then the samples and their statistics."""
+
+    phase: Phase
+    mass_kg: float
+    torque_nm: float
+    direction: int  # +1 loading, -1 unloading, 0 tare
+    samples: list = field(default_factory=list)
+    dropped_settling: int = 0
+    refused: int = 0  # error bit or rail
+
+    @property
+    def n(self) -> int:
+        return len(self.samples)
+
+    @property
+    def mean_counts(self) -> float:
+        return float(np.mean(self.samples)) if self.samples else math.nan
+
+    @property
+    def std_counts(self) -> float:
+        return float(np.std(self.samples, ddof=1)) if len(self.samples) > 1 else math.nan
+
+    @property
+    def sem_counts(self) -> float:
+        return self.std_counts / math.sqrt(self.n) if self.n > 1 else math.nan
+
+
+def check_loads(masses_kg, *, min_distinct: int = 3) -> list[str]:
+    """Why a list of masses would not calibrate well ([] if it is fine).
+
+    At least ``min_distinct`` distinct non-zero loads, and spread over the
+    range: the lightest at most 40 % of the heaviest, and no gap between
+    neighbouring loads wider than 60 % of the span (a line through two
+    clusters cannot show non-linearity in between).
+    """
+    problems = []
+    m = sorted({round(float(x), 9) for x in masses_kg})
+    if any(not math.isfinite(x) or x <= 0 for x in m):
+        problems.append("masses must be finite and > 0 kg")
+        return problems
+    if len(m) < min_distinct:
+        problems.append(f"{len(m)} distinct load(s): at least {min_distinct} are needed to check linearity")
+        return problems
+    span = m[-1] - m[0]
+    if m[0] > 0.4 * m[-1]:
+        problems.append(f"lightest load {m[0]:g} kg is over 40 % of the heaviest ({m[-1]:g} kg): "
+                        f"add a light load so the fit covers the low end")
+    gaps = [b - a for a, b in zip(m, m[1:])]
+    if span > 0 and max(gaps) > 0.6 * span:
+        problems.append(f"a gap of {max(gaps):g} kg between loads (over 60 % of the range): add a load in between")
+    return problems
+
+
+def parse_masses(text: str) -> list[float]:
+    """'5, 10 20' -> [5.0, 10.0, 20.0]; raises ValueError naming the bad item."""
+    out = []
+    for item in text.replace(",", " ").split():
+        try:
+            out.append(float(item))
+        except ValueError:
+            raise ValueError(f"mass {item!r} is not a number (kg)") from None
+    return out
+
+
+class CalibrationWizard:
+    """State and validation of one calibration session.
+
+    Parameters
+    ----------
+    n_samples : int
+        ADC samples kept per step (default 500, about 4 s at 125 Hz).
+    settle_samples : int
+        Samples dropped at the start of each step (default 125, about 1 s).
+    r2_min : float
+        Refuse a fit below this R^2.
+    zero_drift_max_nm : float
+        Refuse when the tare after differs from the tare before by more than
+        this (in secondary torque, with the new slope): the bridge drifted or
+        the rope did not come off.
+    previous : CalibrationEntry, optional
+        The calibration in force: the tare before is compared with its intercept.
+    """
+
+    def __init__(self, *, n_samples: int = 500, settle_samples: int = 125, r2_min: float = R2_MIN_DEFAULT,
+                 min_distinct_loads: int = 3, zero_drift_max_nm: float = 0.25,
+                 gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                 g_m_per_s2: float = G_STANDARD_M_PER_S2, previous=None) -> None:
+        if n_samples < 2:
+            raise ValueError("n_samples must be >= 2")
+        self.n_samples = int(n_samples)
+        self.settle_samples = int(settle_samples)
+        self.r2_min = r2_min
+        self.min_distinct_loads = min_distinct_loads
+        self.zero_drift_max_nm = zero_drift_max_nm
+        self.gear_ratio = gear_ratio_brake_per_secondary
+        self.g_m_per_s2 = g_m_per_s2
+        self.previous = previous
+        self.phase = Phase.SETUP
+        self.radius_m: float | None = None
+        self.masses_kg: list[float] = []
+        self.steps: list[Step] = []
+        self.index = 0  # current step
+        self.collecting = False
+        self.fit = None
+        self.rejection: str | None = None
+        self.entry = None
+        self.step_error: str | None = None  # why the current step stopped without completing
+
+    # --- setup --------------------------------------------------------------------------
+    def configure(self, radius_m: float, masses_kg) -> list[str]:
+        """Set the rope radius and the masses; returns the problems ([] = ready to start)."""
+        problems = []
+        try:
+            radius_m = float(radius_m)
+        except (TypeError, ValueError):
+            radius_m = math.nan
+        if not (math.isfinite(radius_m) and 0.01 <= radius_m <= 1.0):
+            problems.append(f"rope radius must be between 0.01 and 1 m, got {radius_m}")
+        masses = [float(m) for m in masses_kg]
+        problems += check_loads(masses, min_distinct=self.min_distinct_loads)
+        if not problems:
+            self.radius_m = radius_m
+            self.masses_kg = sorted(masses)
+            self._plan()
+        return problems
+
+    def _torque(self, mass_kg: float) -> float:
+        if mass_kg == 0:
+            return 0.0
+        return float(torque_from_mass(mass_kg, self.radius_m, self.gear_ratio, self.g_m_per_s2))
+
+    def _plan(self) -> None:
+        up = self.masses_kg
+        # Unloading revisits every load below the top one: the pairs give the hysteresis.
+        down = list(reversed(up[:-1]))
+        self.steps = ([Step(Phase.TARE_BEFORE, 0.0, 0.0, 0)]
+                      + [Step(Phase.LOADING, m, self._torque(m), +1) for m in up]
+                      + [Step(Phase.UNLOADING, m, self._torque(m), -1) for m in down]
+                      + [Step(Phase.TARE_AFTER, 0.0, 0.0, 0)])
+
+    def start(self) -> None:
+        if not self.steps:
+            raise RuntimeError("configure() the radius and masses first")
+        self.index = 0
+        self.phase = self.steps[0].phase
+
+    # --- steps ----------------------------------------------------------------------------
+    @property
+    def current(self) -> Step | None:
+        return self.steps[self.index] if self.phase in COLLECTING_PHASES else None
+
+    def instruction(self) -> str:
+        """What the operator should do now."""
+        s = self.current
+        if self.phase is Phase.SETUP:
+            return "Enter the rope radius and the masses, then start."
+        if s is not None:
+            where = f"step {self.index + 1}/{len(self.steps)}"
+            if s.direction == 0:
+                which = "before" if s.phase is Phase.TARE_BEFORE else "after"
+                todo = ("Lock the secondary. Rope slack, NO mass hanging" if which == "before"
+                        else "Take ALL masses and the rope off")
+                return f"{where}: zero check {which}. {todo}; then collect."
+            verb = "Add masses to" if s.direction > 0 else "Remove masses down to"
+            return (f"{where} ({s.phase.value}): {verb} a total of {s.mass_kg:g} kg "
+                    f"(T = {s.torque_nm:.2f} N m at the secondary); wait until it hangs still, then collect.")
+        if self.phase is Phase.REVIEW:
+            return "Review the fit: accept to append it to the history, or reject."
+        if self.phase is Phase.ACCEPTED:
+            return "Accepted and appended to the calibration history."
+        return f"Not accepted: {self.rejection}"
+
+    def begin_step(self) -> Step:
+        """The operator says the load is in place and still: start collecting."""
+        s = self.current
+        if s is None:
+            raise RuntimeError(f"nothing to collect in phase {self.phase.value}")
+        s.samples.clear()
+        s.dropped_settling = s.refused = 0
+        self.step_error = None
+        self.collecting = True
+        return s
+
+    def add_samples(self, codes, statuses=None) -> bool:
+        """Feed ADC conversions; returns True when the current step is complete."""
+        if not self.collecting:
+            return False
+        s = self.current
+        statuses = statuses if statuses is not None else [0] * len(codes)
+        for code, status in zip(codes, statuses):
+            if s.dropped_settling < self.settle_samples:
+                s.dropped_settling += 1
+                continue
+            if status & ADC_STATUS_ERR or code in ADC_RAILS:
+                s.refused += 1
+                if s.refused > 2 * self.n_samples:
+                    # An overloaded bridge sits at the rail for ever: stop and say so
+                    # rather than collect until the operator gives up.
+                    self.collecting = False
+                    self.step_error = (f"{s.refused} conversions refused (AD7171 error bit or at a rail): "
+                                       f"the load overloads the ADC or the bridge is disconnected")
+                    return True
+                continue
+            s.samples.append(float(code))
+            if s.n >= self.n_samples:
+                self.collecting = False
+                self._advance()
+                return True
+        return False
+
+    @property
+    def progress(self) -> float:
+        """0..1 of the current step (settling counts as the first part)."""
+        s = self.current
+        if s is None:
+            return 1.0
+        total = self.settle_samples + self.n_samples
+        return min(1.0, (s.dropped_settling + s.n) / total)
+
+    def redo_step(self) -> None:
+        """Discard the current step's samples (e.g. someone bumped the rope)."""
+        s = self.current
+        if s is not None:
+            s.samples.clear()
+            s.dropped_settling = s.refused = 0
+            self.collecting = False
+
+    def _advance(self) -> None:
+        self.index += 1
+        if self.index < len(self.steps):
+            self.phase = self.steps[self.index].phase
+        else:
+            self.phase = Phase.REVIEW
+            self._fit()
+
+    # --- checks and fit -----------------------------------------------------------------------
+    @property
+    def tare_before(self) -> Step:
+        return self.steps[0]
+
+    @property
+    def tare_after(self) -> Step:
+        return self.steps[-1]
+
+    def load_steps(self) -> list[Step]:
+        return [s for s in self.steps if s.direction != 0]
+
+    def zero_drift_counts(self) -> float:
+        return self.tare_after.mean_counts - self.tare_before.mean_counts
+
+    def previous_zero_offset_nm(self) -> float | None:
+        """The tare before against the calibration in force, in N m (None without one)."""
+        if self.previous is None or not self.tare_before.n:
+            return None
+        return float(self.previous.torque_secondary_nm(self.tare_before.mean_counts))
+
+    def _fit(self) -> None:
+        steps = self.load_steps()
+        try:
+            self.fit = fit_calibration([s.torque_nm for s in steps], [np.asarray(s.samples) for s in steps],
+                                       direction=[s.direction for s in steps], r2_min=self.r2_min,
+                                       min_distinct_loads=self.min_distinct_loads)
+        except CalibrationRejected as exc:
+            self.fit = None
+            self.rejection = str(exc)
+            return
+        drift_nm = self.zero_drift_counts() / self.fit.slope_counts_per_nm
+        if abs(drift_nm) > self.zero_drift_max_nm:
+            self.rejection = (f"zero drifted by {drift_nm:+.3f} N m between the tare before and after "
+                              f"(limit {self.zero_drift_max_nm} N m): bridge drift, a rope left on, or the "
+                              f"secondary lock slipped; repeat the calibration")
+        else:
+            self.rejection = None
+
+    @property
+    def acceptable(self) -> bool:
+        return self.phase is Phase.REVIEW and self.fit is not None and self.rejection is None
+
+    def result_lines(self) -> list[str]:
+        """The fit summary for the screen (plain text)."""
+        f = self.fit
+        lines = []
+        if f is not None:
+            lines += [f"slope     {f.slope_counts_per_nm:10.3f} ± {f.slope_se_counts_per_nm:.3f} counts/N m",
+                      f"intercept {f.intercept_counts:10.1f} ± {f.intercept_se_counts:.1f} counts",
+                      f"R²        {f.r2:.6f}  (min {self.r2_min})",
+                      f"non-linearity {f.nonlinearity_pct_fs:.3f} % FS"
+                      + (f"   hysteresis {f.hysteresis_pct_fs:.3f} % FS" if f.hysteresis_pct_fs is not None else ""),
+                      f"zero drift {self.zero_drift_counts():+.1f} counts "
+                      f"({self.zero_drift_counts() / f.slope_counts_per_nm:+.3f} N m)"]
+        prev = self.previous_zero_offset_nm()
+        if prev is not None:
+            lines.append(f"tare vs calibration in force: {prev:+.3f} N m")
+        if self.rejection:
+            lines.append(f"REFUSED: {self.rejection}")
+        return lines
+
+    # --- decision -------------------------------------------------------------------------------
+    def accept(self, history_path, *, date: str | None = None, note: str = ""):
+        """Append the fit to the history (atomically); only for a fit that passed every check."""
+        if not self.acceptable:
+            raise CalibrationRejected(self.rejection or f"nothing to accept in phase {self.phase.value}")
+        date = date or _dt.datetime.now().replace(microsecond=0).isoformat()
+        self.entry = self.fit.to_entry(date, lever_arm_m=self.radius_m,
+                                       gear_ratio_brake_per_secondary=self.gear_ratio,
+                                       note=note or f"dyno calibrate, {len(self.load_steps())} steps")
+        append_entry(history_path, self.entry)
+        self.phase = Phase.ACCEPTED
+        return self.entry
+
+    def reject(self, reason: str = "rejected by the operator") -> None:
+        self.rejection = self.rejection or reason
+        self.phase = Phase.REJECTED
+
+
+class WizardFeeder:
+    """Poller listener: hands the ADC conversions to the wizard while it collects."""
+
+    def __init__(self, wizard: CalibrationWizard, adc_channel: int = 3) -> None:
+        self.wizard = wizard
+        self.adc_channel = adc_channel
+        self.on_step_done = None  # callable() after a step completes
+        self.last_codes: list[int] = []  # the latest conversions, for the live reading
+
+    def __call__(self, events, now_s: float) -> None:
+        codes = [e.code for e in events if e.channel == self.adc_channel]
+        if not codes:
+            return
+        self.last_codes = (self.last_codes + codes)[-250:]
+        if self.wizard.collecting:
+            statuses = [e.status for e in events if e.channel == self.adc_channel]
+            if self.wizard.add_samples(codes, statuses) and self.on_step_done is not None:
+                self.on_step_done()
+
+
+async def run_sim_calibration(wizard: CalibrationWizard, *, seed: int = 0, settle_wait_s: float = 0.0,
+                              **fixture_kw):
+    """Drive a whole calibration on the simulated fixture (the simulated operator hangs each mass).
+
+    For tests and the benchmark: run it on a :class:`dyno.clock.VirtualTimeLoop`.
+    Returns the :class:`~dyno.ui.sim_fixture.FixtureRig`.
+    """
+    import asyncio
+
+    from dyno.ui.sim_fixture import build_fixture_poller
+
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    rig, poller = build_fixture_poller(lambda: loop.time() - t0, seed=seed, **fixture_kw)
+    feeder = WizardFeeder(wizard)
+    poller.listeners.append(feeder)
+    done = asyncio.Event()
+    feeder.on_step_done = done.set
+    task = asyncio.create_task(poller.run())
+    try:
+        wizard.start()
+        while wizard.phase in COLLECTING_PHASES:
+            s = wizard.current
+            rig.hang(s.mass_kg, wizard.radius_m)
+            if settle_wait_s:
+                await asyncio.sleep(settle_wait_s)
+            done.clear()
+            wizard.begin_step()
+            await done.wait()
+            if wizard.step_error:
+                raise RuntimeError(wizard.step_error)
+    finally:
+        poller.stop()
+        await asyncio.gather(task, return_exceptions=True)
+    return rig

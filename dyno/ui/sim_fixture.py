@@ -1,0 +1,159 @@
+"""The simulated rig in its calibration fixture: secondary locked, a mass on a rope.
+
+:class:`dyno.sim.physics.RigModel` has no way to hold the secondary still
+and apply a static torque, so this stands in for it on the simulated bus.
+It duck-types the part of ``RigModel`` that :class:`dyno.sim.bus.SimSMBus`
+uses (``t_s``, ``step(dt_s)``, ``rotor_temp_c``, ``params``), so the ADC
+samples reach the host through the same emulated firmware, frames and
+reader as a test run; only the physics is replaced.
+
+Signal chain (the same model as ``RigModel._adc_event``)::
+
+    T_sec = m g r * 32/61                          (the applied load, N m)
+    T_sig = T_sec + (T_prev - T_sec) exp(-t/tau)    (rope swing + lock-in filter settling)
+    code  = round(offset + gain * T_sig + (sigma0 + sigma1 |T_sig|) n),  n ~ N(0, 1)
+
+The true ``gain`` and ``offset`` are hidden: drawn from the seed around the
+thesis values, so a wizard that reproduced the defaults instead of measuring
+would fail the test that compares its fit with :attr:`true_gain_counts_per_nm`
+and :attr:`true_offset_counts`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dyno.analysis.calibration import G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY
+
+
+class _Event:
+    """Shape of :class:`dyno.sim.physics.SensorEvent` (avoids importing the physics)."""
+
+    __slots__ = ("channel", "t_s", "code", "status")
+
+    def __init__(self, channel: str, t_s: float, code: int, status: int = 0) -> None:
+        self.channel, self.t_s, self.code, self.status = channel, t_s, code, status
+
+
+class FixtureParams:
+    """The few sensor-chain numbers the fixture needs (defaults: ``RigParams``)."""
+
+    def __init__(self, params=None) -> None:
+        if params is None:
+            from dyno.sim.physics import RigParams
+
+            params = RigParams()
+        self.adc_gain_counts_per_nm = params.adc_gain_counts_per_nm
+        self.adc_offset_counts = params.adc_offset_counts
+        self.adc_rate_hz = params.adc_rate_hz
+        self.adc_clock_error_frac = params.adc_clock_error_frac
+        self.adc_noise_counts = params.adc_noise_counts
+        self.adc_noise_counts_per_nm = params.adc_noise_counts_per_nm
+        self.ambient_temp_c = params.ambient_temp_c
+
+
+class CalibrationFixture:
+    """Duck-typed ``RigModel`` for :class:`~dyno.sim.bus.SimSMBus` with the secondary locked.
+
+    Parameters
+    ----------
+    params : RigParams, optional
+        Sensor chain (gain, offset, noise, ADC rate); default the thesis rig.
+    seed : int
+        Noise and hidden-truth seed.
+    gain_spread_frac, offset_spread_counts : float
+        The hidden true gain is ``params gain * (1 + U(-s, s))``, the offset
+        ``params offset + U(-s, s)`` (0 reproduces ``params`` exactly).
+    settle_tau_s : float
+        Time constant of the load settling after a change (swing + filter).
+    nonlinearity_counts_per_nm2 : float
+        A quadratic term, to make a fit fail its R^2 check in tests.
+    """
+
+    def __init__(self, params=None, seed: int = 0, *, gain_spread_frac: float = 0.03,
+                 offset_spread_counts: float = 400.0, settle_tau_s: float = 0.15,
+                 nonlinearity_counts_per_nm2: float = 0.0,
+                 gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                 g_m_per_s2: float = G_STANDARD_M_PER_S2) -> None:
+        self.params = FixtureParams(params)
+        p = self.params
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0xCA1]))
+        self.true_gain_counts_per_nm = p.adc_gain_counts_per_nm * (1.0 + rng.uniform(-1, 1) * gain_spread_frac)
+        self.true_offset_counts = p.adc_offset_counts + rng.uniform(-1, 1) * offset_spread_counts
+        self.nonlinearity_counts_per_nm2 = nonlinearity_counts_per_nm2
+        self.gear_ratio = gear_ratio_brake_per_secondary
+        self.g_m_per_s2 = g_m_per_s2
+        self.settle_tau_s = settle_tau_s
+        self._rng = np.random.default_rng(np.random.SeedSequence([seed, 0xADC]))
+        self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
+        self.t_s = 0.0
+        self._next_adc_t = float(rng.uniform(0.0, self._adc_period_s))
+        self._target_nm = 0.0
+        self._from_nm = 0.0
+        self._change_t_s = 0.0
+        self.rotor_temp_c = p.ambient_temp_c  # locked rotor: nothing heats it
+
+    # --- the simulated operator -----------------------------------------------------
+    def hang(self, mass_kg: float, radius_m: float) -> float:
+        """Hang ``mass_kg`` on the rope at ``radius_m``; returns the true secondary torque (N m)."""
+        torque_nm = mass_kg * self.g_m_per_s2 * radius_m * self.gear_ratio
+        self._from_nm = self.signal_nm(self.t_s)
+        self._target_nm = torque_nm
+        self._change_t_s = self.t_s
+        return torque_nm
+
+    def signal_nm(self, t_s: float) -> float:
+        if self.settle_tau_s <= 0:
+            return self._target_nm
+        decay = math.exp(-max(0.0, t_s - self._change_t_s) / self.settle_tau_s)
+        return self._target_nm + (self._from_nm - self._target_nm) * decay
+
+    def true_counts(self, torque_nm: float) -> float:
+        return (self.true_offset_counts + self.true_gain_counts_per_nm * torque_nm
+                + self.nonlinearity_counts_per_nm2 * torque_nm * torque_nm)
+
+    # --- what SimSMBus calls ------------------------------------------------------------
+    def step(self, dt_s: float) -> list:
+        if not dt_s >= 0.0:
+            raise ValueError("dt_s must be >= 0")
+        t_end = self.t_s + dt_s
+        p = self.params
+        out = []
+        while self._next_adc_t <= t_end:
+            ta = self._next_adc_t
+            t_sig = self.signal_nm(ta)
+            sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(t_sig)
+            code = math.floor(self.true_counts(t_sig) + sigma * float(self._rng.standard_normal()) + 0.5)
+            out.append(_Event("adc", ta, min(65535, max(0, code)), 0))
+            self._next_adc_t = ta + self._adc_period_s
+        self.t_s = t_end
+        return out
+
+
+class FixtureRig:
+    """Fixture + emulated firmware + simulated bus, ready for a reader and a poller."""
+
+    def __init__(self, now_s, *, seed: int = 0, params=None, **fixture_kw) -> None:
+        from dyno.sim.bus import SimSMBus
+        from dyno.sim.device import EmulatedFirmware
+
+        self.fixture = CalibrationFixture(params, seed, **fixture_kw)
+        self.firmware = EmulatedFirmware("v1")
+        self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
+
+    def hang(self, mass_kg: float, radius_m: float) -> float:
+        self.bus.sync()  # the load changes now, not at the last poll
+        return self.fixture.hang(mass_kg, radius_m)
+
+
+def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, address: int = 0x03, **fixture_kw):
+    """(FixtureRig, Poller) over the simulated bus: what ``dyno calibrate --sim`` acquires from."""
+    from dyno.acquisition.poller import Poller
+    from dyno.acquisition.reader import make_reader
+    from dyno.transports.base import I2CTransport
+
+    rig = FixtureRig(now_s, seed=seed, **fixture_kw)
+    reader = make_reader("v1", I2CTransport(rig.bus, address))
+    return rig, Poller(reader, poll_hz=poll_hz)
