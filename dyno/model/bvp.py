@@ -747,6 +747,14 @@ def _sanity_problem(case: Case, y: np.ndarray, p: np.ndarray) -> str | None:
         return f"non-positive tractive tension (min {np.nanmin(tensions):.3g} N)"
     if np.abs(y[[S_TH, P_TH]]).max() > 1.2:
         return "inclination angle beyond 70 degrees"
+    from dyno.model.capstan import max_tension_ratio
+
+    for name, i_t, k_phi in (("primary", P_T, K_PHIP), ("secondary", S_T, K_PHIS)):
+        t_n = y[i_t]
+        if t_n.max() / t_n.min() > max_tension_ratio(p[k_phi], case.mu, case.beta_rad):
+            return f"{name} tension ratio beyond the capstan bound (gross slip)"
+    if abs(p[K_WS]) * CREEP_SCALE > 0.5:
+        return f"secondary speed {1 + p[K_WS] * CREEP_SCALE:.3g} x its no-slip value (gross slip)"
     return None
 
 
@@ -850,6 +858,36 @@ def _fast_collocation_linear_algebra():
             _bvp_mod.splu, _bvp_mod.construct_global_jac = original_splu, original_jac
 
 
+def _slip_diagnosis(case: Case, y: np.ndarray, p: np.ndarray) -> str:
+    """How close the last converged solution of a stalled continuation was to gross slip.
+
+    A pulley whose belt slides everywhere by much more than v_th is near its
+    torque capacity: past it there is no steady solution (the capstan/Gerbert
+    bound on the tension ratio with the arched, shrinking wrap), so a stall
+    there is the physics, not the solver.
+    """
+    from dyno.model.capstan import max_tension_ratio
+
+    try:
+        omega_s, g = _unpack_params(case, p)
+        parts = []
+        for name, i_t, i_th, i_x, k_phi, radius, omega in (
+            ("primary", P_T, P_TH, P_X, K_PHIP, case.r_primary_m, case.omega_primary_rad_s),
+            ("secondary", S_T, S_TH, S_X, K_PHIS, case.r_secondary_m, omega_s),
+        ):
+            t_n = y[i_t] * TENSION_REF_N
+            v = _belt_speed(case, g, t_n)
+            x_m = y[i_x] * PENETRATION_REF_M
+            slip = np.hypot(v * np.sin(y[i_th]), v * np.cos(y[i_th]) - (radius - x_m) * omega)
+            use = t_n.max() / t_n.min() / max_tension_ratio(p[k_phi], case.mu, case.beta_rad)
+            gross = slip.min() > 100 * case.slip_threshold_m_s and use > 0.5
+            parts.append(f"{name}: min sliding {slip.min():.3g} m/s, tension ratio at {100 * use:.0f} % of its "
+                         f"capstan bound{' - approaching gross slip, no steady solution beyond' if gross else ''}")
+        return f" [last converged point ({case.name()}): " + "; ".join(parts) + "]"
+    except Exception:  # the diagnosis must never hide the failure itself
+        return ""
+
+
 def _solve_once(case: Case, t, y, p, tol: float, max_nodes: int):
     from scipy.integrate import solve_bvp
 
@@ -893,6 +931,8 @@ def solve_case(
     time_limit_s: float = 120.0,
     keep_mesh_below: int = 0,
     mesh_mode: str = "equidistribute",
+    step_node_factor: float = 4.0,
+    min_fraction: float = 2e-3,
     log=None,
 ) -> RawSolution:
     """Solve one case, by slip-threshold continuation from the geometric guess or by homotopy from ``guess``.
@@ -906,7 +946,10 @@ def solve_case(
 
     def attempt(c: Case, t, y, p, what: str):
         ts = time.perf_counter()
-        res, rms, bc_res, ok, problem = _solve_once(c, t, y, p, tol, max_nodes)
+        # A step that needs many times its starting mesh is usually a step too far (Newton
+        # wandering): cap it so it fails fast and the step is halved.
+        step_nodes = min(max_nodes, max(int(step_node_factor * t.size), 1500))
+        res, rms, bc_res, ok, problem = _solve_once(c, t, y, p, tol, step_nodes)
         history.append(StepRecord(len(history) + 1, c.slip_threshold_m_s, res.status, rms, res.x.size,
                                   time.perf_counter() - ts, what))
         last.update(rms=rms, step=len(history), msg=problem or res.message)
@@ -934,7 +977,7 @@ def solve_case(
         c_prev = start
         while s < 1.0:
             if time.perf_counter() - t0 > time_limit_s:
-                fail(f"time limit {time_limit_s:g} s during {what}")
+                fail(f"time limit {time_limit_s:g} s during {what} at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p))
             s_new = min(1.0, s + ds)
             c = _interp_case(start, target, s_new)
             if t.size > keep_mesh_below:
@@ -955,9 +998,9 @@ def solve_case(
                 ds = min(ds * 1.5, max_fraction)
             else:
                 halvings += 1
-                ds *= 0.5
-                if halvings > max_halvings:
-                    fail(f"{what} stalled at fraction {s:.3g}")
+                ds = 0.5 * min(ds, 1.0 - s)  # a grown ds may have been clipped at 1: halve the step tried
+                if halvings > max_halvings or ds < min_fraction:
+                    fail(f"{what} stalled at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p))
         return best
 
     if guess is not None:
