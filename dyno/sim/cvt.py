@@ -27,6 +27,24 @@ over ``x`` once at start-up (the inner loop only interpolates):
 * otherwise a self-contained closed form: ``C`` constant (a flyweight
   coefficient), linear springs, constant helix gain ``H``, and the ratio
   from ``r_p + r_s = const`` between the two ratio end stops.
+Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
+-------------------------------------------------------------
+By default the belt passes the primary clamp to the secondary unchanged
+(``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
+tune) the balance is the one :mod:`dyno.tuning.shift_curve` predicts: the
+primary clamp sets the belt tensions and the belt then *requires* a
+secondary thrust ``F_s,belt`` (Sorge & Cammalleri eqs. 17-18 via
+:func:`dyno.model.closed_form.closed_form_point`), so the imbalance is
+``F_s,belt - F_s``.  ``F_s,belt = kappa F_p`` with the thrust ratio
+``kappa(x, T_p, F_p; f)`` re-evaluated every ``belt_update_cells`` calls of
+:meth:`CVT.shift` (a closed-form call costs ~0.4 ms, ~20x a physics cell;
+kappa varies slowly next to the 0.4 s shift lag, and at a steady point it is
+evaluated at that point, so the steady ratio is exact).  The belt's elastic
+creep of the same call replaces the loss model's creep.  Together with
+``flyweight_radius_offset_m`` (added to the tune's flyweight radius table)
+these are the rig's hidden "true" parameters that the fit of
+:mod:`dyno.tuning.fit` estimates.
+
 Engagement
 ----------
 The CVT is its own centrifugal clutch: below the engagement speed the
@@ -83,12 +101,14 @@ def _tables_closed_form(x, *, ratio_low, ratio_high, primary_radius_max_m, sheav
     return ratio, c_rpm2, s_p, s_s, b_s
 
 
-def _tables_from_tune(tune, x):
+def _tables_from_tune(tune, x, flyweight_radius_offset_m=0.0):
     """Balance tables from a CVT tune through :mod:`dyno.tuning.actuators`.
 
     Only public functions: the centrifugal force is ``c(x) n^2``, so it is
     evaluated at 1000 rpm and scaled; the steady-state secondary clamp is
     linear in the belt torque above zero, so two torques give ``S_s`` and ``B``.
+    ``flyweight_radius_offset_m`` shifts the flyweight radius table (eq. 9.2
+    with ``r + dr`` at the same ``dr/dz``): a hidden "true" rig parameter.
     """
     from dyno.tuning import actuators as act
 
@@ -97,6 +117,11 @@ def _tables_from_tune(tune, x):
     rs = np.asarray(act.secondary_radius_m(tune, rp), dtype=float)
     ratio = rs / rp
     c_rpm2 = np.asarray(act.primary_centrifugal_force_n(tune, 1000.0, rp), dtype=float) / 1.0e6
+    if flyweight_radius_offset_m and tune.flyweights is not None:
+        fw = tune.flyweights
+        _, drdz = act.flyweight_radius_m(fw, act.primary_sheave_travel_m(tune, rp))
+        c_rpm2 = c_rpm2 + fw.count * fw.mass_each_kg * flyweight_radius_offset_m * np.asarray(drdz) * (
+            math.pi / 30.0) ** 2
     s_p = np.asarray(act.primary_spring_force_n(tune, rp), dtype=float)
     f0 = np.asarray(act.secondary_axial_force_n(tune, 0.0, rs), dtype=float)
     f10 = np.asarray(act.secondary_axial_force_n(tune, 10.0, rs), dtype=float)
@@ -115,7 +140,9 @@ class CVT:
                  engage_start_rpm: float, engage_full_rpm: float, clutch_capacity_nm: float,
                  slip_base_frac: float, slip_per_20nm_frac: float, loss_frac_min: float,
                  loss_frac_high_ratio: float, loss_frac_low_ratio: float, ratio_best_eff: float,
-                 bending_drag_nm: float, tune=None, n_table: int = 400):
+                 bending_drag_nm: float, tune=None, n_table: int = 400,
+                 belt_friction_coefficient: float | None = None, flyweight_radius_offset_m: float = 0.0,
+                 belt_update_cells: int = 25):
         self.tau_shift_s = shift_time_constant_s
         self.n_eng0 = engage_start_rpm
         self.n_eng1 = engage_full_rpm
@@ -130,7 +157,7 @@ class CVT:
         self.tune = tune
         x = np.linspace(0.0, 1.0, n_table + 1)
         if tune is not None:
-            ratio, c_rpm2, s_p, s_s, b_s = _tables_from_tune(tune, x)
+            ratio, c_rpm2, s_p, s_s, b_s = _tables_from_tune(tune, x, flyweight_radius_offset_m)
             self.source = f"tune {tune.name!r} via dyno.tuning.actuators"
         else:
             ratio, c_rpm2, s_p, s_s, b_s = _tables_closed_form(
@@ -154,6 +181,22 @@ class CVT:
         self._c = c_rpm2.tolist()
         self._s = (s_p + s_s).tolist()
         self._b = b_s.tolist()
+        # Belt thrust-ratio mode keeps the two sides apart (kappa multiplies F_p only).
+        self._sp = s_p.tolist()
+        self._ss = s_s.tolist()
+        self._belt_params = None
+        self._kappa = 1.0
+        self._belt_creep = None
+        self._belt_every = max(int(belt_update_cells), 1)
+        self._belt_count = 0
+        if belt_friction_coefficient is not None:
+            if tune is None:
+                raise ValueError("belt_friction_coefficient needs a CVT tune (the belt geometry)")
+            from dyno.model.params import BeltParams
+            from dyno.tuning.shift_curve import model_params_for
+
+            self._belt_params = model_params_for(tune, BeltParams(friction_coefficient=belt_friction_coefficient))
+            self.source += f", closed-form belt thrusts (f = {belt_friction_coefficient:g})"
         # Force scale of the lag: the springs' force change over the travel.
         self.k_ref_n = float(max(abs((s_p[-1] + s_s[-1]) - (s_p[0] + s_s[0])), 1.0))
 
@@ -185,10 +228,55 @@ class CVT:
         ss = s[j] + f * (s[j + 1] - s[j])
         t = torque_secondary_nm if torque_secondary_nm > 0.0 else 0.0
         bb = b[j] + f * (b[j + 1] - b[j])
+        if self._belt_params is not None:
+            # F_s,belt - F_s = kappa F_p - (S_s + B T); F_p <= 0 (spring holds the sheave
+            # open) keeps kappa out of it, so the imbalance still closes the primary.
+            sp, sss = self._sp, self._ss
+            f_p = cc * rpm_primary * rpm_primary - (sp[j] + f * (sp[j + 1] - sp[j]))
+            f_s = sss[j] + f * (sss[j + 1] - sss[j]) + bb * t
+            return (self._kappa * f_p if f_p > 0.0 else f_p) - f_s
         return cc * rpm_primary * rpm_primary - ss - bb * t
 
-    def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float) -> float:
-        """Travel after ``dt_s``: ``dx/dt = (F_p - F_s) / (K_ref tau)``, end stops."""
+    def primary_force_n(self, rpm_primary: float, x: float) -> float:
+        """Net primary clamp ``F_p = C n^2 - S_p`` (belt mode tables)."""
+        u = min(max(x * self._n, 0.0), float(self._n))
+        j = min(int(u), self._n - 1)
+        f = u - j
+        c, sp = self._c, self._sp
+        return (c[j] + f * (c[j + 1] - c[j])) * rpm_primary * rpm_primary - (sp[j] + f * (sp[j + 1] - sp[j]))
+
+    def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
+        """Re-evaluate the belt thrust ratio ``kappa`` and creep at this state."""
+        from dyno.errors import ConfigError, DidNotConverge
+        from dyno.model.closed_form import closed_form_point
+        from dyno.model.params import OperatingPoint
+
+        f_p = self.primary_force_n(rpm_primary, x)
+        if f_p <= 0.0 or rpm_primary <= 0.0:
+            return  # no clamp: kappa does not enter (see force_imbalance_n)
+        op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
+                            primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
+                            primary_axial_force_n=f_p)
+        try:
+            res = closed_form_point(self._belt_params, op)
+        except (ConfigError, DidNotConverge):
+            # The clamp cannot carry the torque: the secondary wins (as in
+            # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
+            self._kappa = 0.0
+            return
+        self._kappa = res.axial_force_secondary_n / f_p
+        self._belt_creep = 1.0 - res.efficiency_speed
+
+    def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float,
+              torque_primary_nm: float = 0.0) -> float:
+        """Travel after ``dt_s``: ``dx/dt = (F_p - F_s) / (K_ref tau)``, end stops.
+
+        ``torque_primary_nm`` (belt input torque) only matters in belt mode.
+        """
+        if self._belt_params is not None:
+            if self._belt_count % self._belt_every == 0:
+                self.update_belt(x, rpm_primary, torque_primary_nm)
+            self._belt_count += 1
         dx = self.force_imbalance_n(rpm_primary, torque_secondary_nm, x) * dt_s / (self.k_ref_n * self.tau_shift_s)
         x = x + dx
         return self.x_min if x < self.x_min else (self.x_max if x > self.x_max else x)
@@ -216,7 +304,9 @@ class CVT:
 
     # -- losses ----------------------------------------------------------
     def creep_slip(self, torque_primary_nm: float) -> float:
-        """Speed loss fraction ``s``."""
+        """Speed loss fraction ``s`` (belt mode: the closed form's elastic creep)."""
+        if self._belt_creep is not None:
+            return self._belt_creep
         return self.s0 + self.s1 * abs(torque_primary_nm)
 
     def loss_frac(self, ratio: float) -> float:

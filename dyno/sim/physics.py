@@ -31,7 +31,11 @@ that conserves ``i J_e omega_e + J_s omega_s``.
 The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 ``RigParams.cvt_tune_path`` through :mod:`dyno.tuning.actuators` (closed-form
 fallback with ``cvt_tune_path=None``), between the end stops
-``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.
+``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  Optional
+hidden "true" parameters for the shift-model fit (``cvt_belt_friction_coefficient``:
+closed-form belt thrusts in the balance; ``cvt_flyweight_radius_offset_m``;
+``cvt_secondary_friction_torque_nm``: shaft drag between the helix and the
+torque gauge, added to the load) are off by default.
 
 The torque gauge sits on the brake shaft between the gear and the rotor, so
 it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
@@ -177,6 +181,14 @@ class RigParams:
     cvt_loss_frac_low_ratio: float = 0.02
     cvt_ratio_best_eff: float = 1.35
     cvt_bending_drag_nm: float = 0.25
+    # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
+    # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
+    # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
+    cvt_belt_friction_coefficient: float | None = None
+    cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
+    # Bearing/seal drag on the secondary shaft after the helix: the helix feels
+    # the belt torque, the torque gauge (and the brake) that minus this.
+    cvt_secondary_friction_torque_nm: float = 0.0
     # ---- driveline
     secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
     brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
@@ -296,7 +308,9 @@ class RigModel:
                        slip_base_frac=p.cvt_slip_base_frac, slip_per_20nm_frac=p.cvt_slip_per_20nm_frac,
                        loss_frac_min=p.cvt_loss_frac_min, loss_frac_high_ratio=p.cvt_loss_frac_high_ratio,
                        loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
-                       bending_drag_nm=p.cvt_bending_drag_nm)
+                       bending_drag_nm=p.cvt_bending_drag_nm,
+                       belt_friction_coefficient=p.cvt_belt_friction_coefficient,
+                       flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m)
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
                            master_cylinder_bore_mm=p.master_cylinder_bore_mm,
@@ -473,7 +487,8 @@ class RigModel:
         # --- actuator and brake capacity (inputs act from the start of the step)
         self._act_mm = brk.move_actuator_mm(self._act_mm, self.actuator_dir, h)
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
-        t_load_cap = t_brake_cap * g                                        # referred to the secondary
+        fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
+        t_load_cap = t_brake_cap * g + fric                                 # referred to the secondary
 
         w_e0 = self._w_e
         w_s0 = self._w_s
@@ -482,7 +497,7 @@ class RigModel:
         t_e = eng.torque_nm(rpm_e, self.throttle_frac, running)
 
         # --- shift: quasi-static balance + first-order lag (exact exponential)
-        self._x = cvt.shift(self._x, rpm_e, self._t_s, h)
+        self._x = cvt.shift(self._x, rpm_e, self._t_s, h, self._t_p)
         i = cvt.ratio_of_travel(self._x)
         self._ratio_geo = i
         eta_m = 1.0 - cvt.loss_frac(i)
@@ -507,7 +522,7 @@ class RigModel:
             w_s1 = k * w_e1
             t_s = cvt.secondary_torque_nm(t_p, i, eta_m, t_d)
             acc_s = (w_s1 - w_s0) / h
-            t_brake_applied = t_brake_cap if w_s1 > 0.0 else t_s / g
+            t_brake_applied = t_brake_cap if w_s1 > 0.0 else _after_drag(t_s, fric) / g
         else:
             # Belt slipping (or open): torque limited by the engagement capacity.
             v_rel = k * w_e0 - w_s0
@@ -522,7 +537,7 @@ class RigModel:
             # Karnopp stick/slip for the brake on the secondary side.
             if w_s0 <= 0.0 and abs(t_s) <= t_load_cap:
                 w_s1 = 0.0
-                t_brake_applied = t_s / g
+                t_brake_applied = _after_drag(t_s, fric) / g
             else:
                 w_s1 = w_s0 + h * (t_s - t_load_cap) / j_s
                 t_brake_applied = t_brake_cap
@@ -705,6 +720,15 @@ class RigModel:
             brake_torque_capacity_nm=self._t_brake_cap,
             clutch_locked=self._locked,
         )
+
+
+def _after_drag(torque_nm: float, drag_nm: float) -> float:
+    """Torque left for the brake at standstill once the shaft drag holds its share."""
+    if torque_nm > drag_nm:
+        return torque_nm - drag_nm
+    if torque_nm < -drag_nm:
+        return torque_nm + drag_nm
+    return 0.0
 
 
 def _event_time(ev: SensorEvent) -> float:
