@@ -17,6 +17,10 @@ def add_arguments(parser) -> None:
                         help="engine map: rpm + torque_nm / power_kw / hp (default: the first "
                              "calibration/engine_maps/*.csv)")
     parser.add_argument("--run", metavar="RUN", help="overlay a logged run directory's steady points")
+    parser.add_argument("--fit", metavar="RUN", nargs="+",
+                        help="fit belt friction, flyweight radius offset and secondary friction torque to "
+                             "logged runs (each with its tune.toml, else TUNE; its engine_map.csv), then "
+                             "predict TUNE's curve with the fitted values")
     parser.add_argument("--points", type=int, default=50, help="load points along the shift (default 50)")
     parser.add_argument("--phase", choices=("steady", "upshift", "downshift"), default="steady",
                         help="helix torque split of Sorge eq. 11 (default steady: equal split)")
@@ -58,9 +62,23 @@ def run(args) -> int:
         raise ConfigError("<engine map>", "--engine-map", "an engine map CSV (none found in calibration/engine_maps)")
     engine = load_engine_map(map_path)
     closing = {"steady": None, "upshift": False, "downshift": True}[args.phase]
-    curve = predict_shift_curve(tune, engine, n_points=args.points, closing=closing)
+    fit = None
+    params, solver_kw = None, {}
+    if args.fit:
+        from dyno.tuning.fit import fit_runs, load_fit_run, solver_for
+
+        runs = []
+        for run_dir in args.fit:
+            has_tune = (Path(run_dir) / "tune.toml").exists()
+            runs.append(load_fit_run(run_dir, tune=None if has_tune else tune))
+        fit = fit_runs(runs)
+        fitted = solver_for(tune, engine, list(fit.parameters.values()))
+        params = fitted.params
+        solver_kw = {"secondary_friction_torque_nm": fitted.secondary_friction_torque_nm,
+                     "flyweight_radius_offset_m": fitted.flyweight_radius_offset_m}
+    curve = predict_shift_curve(tune, engine, n_points=args.points, params=params, closing=closing, **solver_kw)
     if not args.no_sensitivity:
-        curve.sensitivities = sensitivities(tune, engine, closing=closing)
+        curve.sensitivities = sensitivities(tune, engine, params, closing=closing, **solver_kw)
     measured = measured_points(args.run) if args.run else []
     comparison = compare_to_measured(curve, measured) if measured else None
 
@@ -70,13 +88,20 @@ def run(args) -> int:
     if comparison:
         data["measured"] = measured
         data["comparison"] = comparison
+    if fit:
+        data["fit"] = fit.to_dict()
     if args.png:
         _plot(curve, measured, args.png)
     if args.json:
         json.dump(data, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")
         return 0
-    print(f"predicted shift curve: {tune.name}  (engine map {Path(map_path).name}, {args.phase})")
+    if fit:
+        from dyno.tuning.fit import format_fit
+
+        print(format_fit(fit))
+    print(f"predicted shift curve: {tune.name}  (engine map {Path(map_path).name}, {args.phase}"
+          f"{', fitted parameters' if fit else ''})")
     print(f"  engagement   {curve.engagement_rpm:8.0f} rpm")
     print(f"  shift-out    {curve.shift_out_rpm:8.0f} rpm   (upshift starts, ratio {curve.ratio_low_stop:.2f})")
     print(f"  full shift   {curve.full_shift_rpm:8.0f} rpm   (ratio {curve.ratio_high_stop:.2f})")

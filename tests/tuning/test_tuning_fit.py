@@ -1,0 +1,165 @@
+"""Fit to the rig (issue 7 part E) on the simulated rig.
+
+The simulated CVT (dyno.sim.cvt, belt mode) balances the same forces the
+shift model predicts -- flyweights minus spring (Messick eq. 9.3), the belt's
+closed-form thrusts (Sorge & Cammalleri eqs. 17-18), springs plus helix
+(Sorge eq. 22) -- but with hidden "true" values of the three uncertain
+parameters, and the measured points come through the whole chain (sensor
+noise, firmware protocol, host averaging, settling detection).  The fit
+starts from the nominal values and must find the hidden ones.
+"""
+
+import json
+import math
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dyno.tuning.fit import NOMINAL, PARAMETERS, fit_runs, load_fit_run, solver_for
+from dyno.tuning.shift_curve import compare_to_measured, predict_shift_curve
+from dyno.tuning.tune import dumps_tune, load_tune
+
+ROOT = Path(__file__).resolve().parents[2]
+STOCK = ROOT / "calibration/tunes/cvtech-stock.toml"
+
+#: Hidden truth of the simulated rig (nominal: 0.4, 0 mm, 0 N m).
+TRUE = {"belt_friction_coefficient": 0.33, "flyweight_radius_offset_m": 0.0015,
+        "secondary_friction_torque_nm": 0.8}
+
+#: Three tunes.  A heavier flyweight alone leaves the force balance at a given
+#: ratio and load unchanged (only the rpm moves), so the radius offset (a
+#: relative change of the centrifugal force) and the shaft drag (a constant
+#: helix force) would stay ~100 % correlated; a stiffer primary spring and a
+#: steeper helix change those two forces' proportions and separate them.
+#: All share a full-shift primary radius of 79 mm, which puts the tune's high
+#: stop at the sim's 0.72 (the stock 93 mm gives 0.42, beyond the rig's range).
+TUNE_CHANGES = {
+    "fit-stock": {},
+    "fit-heavy-stiff": {"flyweights.mass_each_kg": 0.30, "primary_spring.preload_n": 850.0},
+    "fit-steep-helix": {"flyweights.mass_each_kg": 0.26, "helix.angle_from_axis_deg": 60.0,
+                        "secondary_spring.preload_n": 300.0},
+}
+
+
+def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
+    """One complete simulated steady-state test (~10-15 s), its tune saved
+    with the run (runs do not store their tune yet; the setup hook does)."""
+    from dyno.app import RunOptions, run_test
+    from dyno.control.controller import TestPlan
+    from dyno.sim.physics import RigParams
+    from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
+
+    tune = load_tune(STOCK).with_changes(**{"drive.primary_radius_max_m": 0.079, "name": name, **changes})
+    tune_path = Path(root) / f"{name}.toml"
+    tune_path.write_text(dumps_tune(tune))
+    engine = load_engine_map(ROOT / "calibration/engine_maps/baja-10hp-representative.csv")
+    stops = Solver(tune, engine, model_params_for(tune))
+    rig = RigParams(cvt_tune_path=str(tune_path), cvt_ratio_low=stops.ratio_low_stop,
+                    cvt_ratio_high=stops.ratio_high_stop,
+                    cvt_belt_friction_coefficient=TRUE["belt_friction_coefficient"],
+                    cvt_flyweight_radius_offset_m=TRUE["flyweight_radius_offset_m"],
+                    cvt_secondary_friction_torque_nm=TRUE["secondary_friction_torque_nm"])
+    out = Path(root) / name
+
+    def save_tune(ctx):
+        (Path(ctx.writer.run_dir) / "tune.toml").write_text(dumps_tune(tune))
+
+    # 3 s averages (no efficiency-SEM extension): the fit needs rpm, not efficiency.
+    res = run_test(RunOptions(sim=True, seed=seed, out_dir=out, sim_params=rig, setup=save_tune,
+                              plan=TestPlan(target_efficiency_sem=1.0)))
+    assert res["state"] == "done", res["reason"]
+    return str(out)
+
+
+@pytest.fixture(scope="session")
+def run_dirs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fit_runs")
+    with ProcessPoolExecutor(max_workers=3) as pool:
+        futs = [pool.submit(_simulate, name, ch, 11 + k, str(root)) for k, (name, ch) in enumerate(TUNE_CHANGES.items())]
+        return [f.result() for f in futs]
+
+
+@pytest.fixture(scope="session")
+def runs(run_dirs):
+    return [load_fit_run(d) for d in run_dirs]
+
+
+@pytest.fixture(scope="session")
+def fit(runs):
+    return fit_runs(runs)
+
+
+def test_runs_cover_the_shift(runs):
+    for run in runs:
+        assert len(run.points) >= 12
+        ratios = [p.engine_rpm / p.secondary_rpm for p in run.points]
+        assert min(ratios) < 0.75 and max(ratios) > 1.8  # from the high stop well into the shift
+
+
+def test_fit_recovers_the_hidden_parameters_within_2_sigma(fit):
+    for name in PARAMETERS:
+        est, sig, true = fit.parameters[name], fit.sigma[name], TRUE[name]
+        assert abs(est - true) <= 2.0 * sig, (name, est, sig, true)
+    # ... and the sigmas mean something: each true value is many sigma from the
+    # nominal starting value, so the fit has really resolved it.
+    for name, nominal in zip(PARAMETERS, NOMINAL):
+        assert abs(TRUE[name] - nominal) > 5.0 * fit.sigma[name], (name, fit.sigma[name])
+    assert fit.sigma["belt_friction_coefficient"] < 0.01
+    assert fit.sigma["flyweight_radius_offset_m"] < 0.3e-3
+    assert fit.sigma["secondary_friction_torque_nm"] < 0.25
+    assert np.allclose(np.diag(fit.correlation), 1.0)
+    assert fit.dof == fit.n_points_fit - 3
+
+
+def test_residuals_smaller_after_the_fit(fit):
+    assert fit.after["rms_rpm"] < 0.2 * fit.before["rms_rpm"]
+    assert fit.after["max_abs_rpm"] < fit.before["max_abs_rpm"]
+    assert fit.before["rms_rpm"] > 20.0  # the nominal model is visibly off
+    # The fitted residual scatter is the measurement's (a few rpm), not model error.
+    assert fit.residual_std_rpm < 5.0
+
+
+def test_predicted_shift_curve_matches_measured_within_50_rpm(runs, fit):
+    # (1) Prediction at each measured secondary rpm and load (what the fit uses):
+    after = fit.after  # residual_summary(runs, fitted parameters)
+    assert after["n"] == sum(len(r.points) for r in runs)
+    assert after["max_abs_rpm"] <= 50.0
+    # (2) The engine-map shift curve (predict_shift_curve, 50 load points), fitted
+    # parameters: the closed form has no belt torque loss (the rig loses 4-11 %),
+    # so its helix torque is a little high and its curve sits ~20-40 rpm above the
+    # measured one -- still inside 50 rpm at every measured point.
+    for run in runs:
+        solver = solver_for(run.tune, run.engine, list(fit.parameters.values()))
+        curve = predict_shift_curve(run.tune, run.engine, params=solver.params,
+                                    secondary_friction_torque_nm=solver.secondary_friction_torque_nm,
+                                    flyweight_radius_offset_m=solver.flyweight_radius_offset_m)
+        cmp = compare_to_measured(curve, [{"engine_rpm": p.engine_rpm, "secondary_rpm": p.secondary_rpm}
+                                          for p in run.points])
+        assert cmp["max_abs_rpm"] <= 50.0, (run.name, cmp)
+
+
+def test_cli_shift_curve_fit(run_dirs, capsys):
+    from dyno.cli import main
+
+    # One run keeps this quick (the three-run fit is the tests above).
+    assert main(["shift-curve", str(STOCK), "--fit", run_dirs[1], "--no-sensitivity", "--json",
+                 "--points", "10"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data["fit"]["parameters"]) == set(PARAMETERS)
+    assert data["fit"]["after"]["rms_rpm"] < data["fit"]["before"]["rms_rpm"]
+    assert all(math.isfinite(v) for v in data["fit"]["sigma"].values())
+
+
+def test_run_without_a_tune_names_the_missing_file(tmp_path, run_dirs):
+    import shutil
+
+    from dyno.errors import ConfigError
+
+    bare = tmp_path / "bare"
+    shutil.copytree(run_dirs[0], bare)
+    (bare / "tune.toml").unlink()
+    with pytest.raises(ConfigError, match="tune.toml"):
+        load_fit_run(bare)
+    assert load_fit_run(bare, tune=STOCK).tune.name == "cvtech-stock"
