@@ -643,6 +643,22 @@ def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
     p[K_PHIS] += 2 * d_t
     p[K_CP] += d_t
     p[K_CS] -= d_t
+    if new.ei_nm2 != old.ei_nm2 or new.variant != old.variant:
+        # The wrap lost to arching at each contact end goes like sqrt(EI/T)/R (as in initial_guess).
+        t_tight, t_slack = y[P_T, 0] * TENSION_REF_N, y[P_T, -1] * TENSION_REF_N
+
+        def lost(case, tension, radius):
+            return _span_bending_length_m(case, tension) / radius
+
+        d_pt = lost(new, t_tight, new.r_primary_m) - lost(old, t_tight, old.r_primary_m)
+        d_ps = lost(new, t_slack, new.r_primary_m) - lost(old, t_slack, old.r_primary_m)
+        d_st = lost(new, t_tight, new.r_secondary_m) - lost(old, t_tight, old.r_secondary_m)
+        d_ss = lost(new, t_slack, new.r_secondary_m) - lost(old, t_slack, old.r_secondary_m)
+        if p[K_PHIP] - d_pt - d_ps > 0.3 and p[K_PHIS] - d_st - d_ss > 0.3:
+            p[K_CP] += d_pt
+            p[K_PHIP] -= d_pt + d_ps
+            p[K_CS] += d_st
+            p[K_PHIS] -= d_ss + d_st
     # Spans: similarity transform of the old curves onto the new end points.
     old_pts, new_pts = _contact_points(old, p), _contact_points(new, p)
     for rows, k_len, a, b in (
