@@ -1,0 +1,30 @@
+"""dyno ui: the live run screen (simulated rig with --sim)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--sim", action="store_true", help="the simulated rig (no hardware)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="simulation pace as a multiple of real time (default 1: real time)")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed")
+    p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
+    p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
+    p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
+    from dyno.rigconfig import add_rig_argument
+
+    add_rig_argument(p)
+
+
+def run(args) -> int:
+    from dyno.ui.live_app import main
+    from dyno.ui.session import LiveOptions
+
+    if not args.speed > 0:
+        raise SystemExit("dyno ui: --speed must be > 0")
+    opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
+                       rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
+                       engine_map_path=args.engine_map)
+    return main(opts)

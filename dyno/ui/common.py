@@ -1,0 +1,86 @@
+"""Pieces every dyno screen shares: the E-STOP keys, the confirmation dialog, the help line.
+
+Layout rules (80x24 over SSH, keyboard only): one help line of keys at the
+bottom of every screen, no mouse-only controls, and colours that only repeat
+what the text already says (a monochrome terminal loses nothing but tint;
+Textual downgrades truecolor to 256/16 colours by itself).
+"""
+
+from __future__ import annotations
+
+from textual.app import App, ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Static
+
+ESTOP_KEYS = "space / Ctrl+C"
+
+BASE_CSS = """
+Screen { layout: vertical; }
+#estop { height: 1; background: $error; color: $text; text-style: bold; }
+#bottom { dock: bottom; height: 2; }
+#help { height: 1; background: $panel; color: $text; }
+#msg { height: 1; color: $warning; }
+ConfirmScreen { align: center middle; }
+ConfirmScreen > Vertical { width: 60; height: auto; border: heavy $warning; background: $surface; padding: 0 1; }
+"""
+
+
+def bottom_lines(help_text: str):
+    """The message line and the help line of keys, docked at the bottom of a screen."""
+    return Vertical(Static("", id="msg"), Static(help_text, id="help"), id="bottom")
+
+
+def estop_bindings() -> list[Binding]:
+    # priority=True: the keys reach the app before any widget (an Input, a modal) can take them.
+    # Ctrl+C replaces Textual's default "help quit"; Ctrl+Q replaces its plain quit.
+    return [Binding("space", "estop", "E-STOP", priority=True),
+            Binding("ctrl+c", "estop", "E-STOP", priority=True, show=False),
+            Binding("ctrl+q", "quit_safe", "quit", priority=True, show=False)]
+
+
+class ConfirmScreen(ModalScreen[bool]):
+    """y / Enter confirms, n / Escape declines.  The E-STOP keys still work (app priority bindings)."""
+
+    BINDINGS = [Binding("y", "answer(True)", "yes"), Binding("enter", "answer(True)", "yes", show=False),
+                Binding("n", "answer(False)", "no"), Binding("escape", "answer(False)", "no", show=False)]
+
+    def __init__(self, question: str) -> None:
+        super().__init__()
+        self.question = question
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Static(self.question, id="question")
+            yield Static("[b]y[/b] / Enter = yes     [b]n[/b] / Esc = no", id="answer")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)
+
+
+class DynoApp(App):
+    """Base: E-STOP everywhere, a message line, safe quit."""
+
+    CSS = BASE_CSS
+    BINDINGS = estop_bindings()
+    ENABLE_COMMAND_PALETTE = False  # Ctrl+P would open a mouse-oriented palette over the E-STOP banner
+
+    def say(self, text: str) -> None:
+        try:
+            self.query_one("#msg", Static).update(text)
+        except Exception:  # during start-up/shut-down the line may not exist
+            pass
+
+    def dismiss_modals(self) -> None:
+        """Close any open confirmation (an E-STOP cancels whatever was being confirmed)."""
+        for _ in range(len(self.screen_stack)):
+            if not isinstance(self.screen, ModalScreen):
+                break
+            self.screen.dismiss(False)
+
+    def action_estop(self) -> None:  # overridden where there is a rig
+        self.say("E-STOP: no rig is attached to this screen")
+
+    async def action_quit_safe(self) -> None:
+        self.exit(0)

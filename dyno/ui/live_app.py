@@ -1,0 +1,319 @@
+"""The live run screen (``dyno ui``): state, live values, plots, and the operator's keys.
+
+Thin over :mod:`dyno.ui.session` (commands) and :mod:`dyno.ui.live_model`
+(values).  The poller and the controller run as tasks on Textual's own
+loop; this screen only reads them, at ``REFRESH_HZ``, and does the slow
+thing (the belt-model overlay) in a worker thread.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal
+from textual.widgets import Static
+from textual_plotext import PlotextPlot
+
+from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, bottom_lines
+from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
+from dyno.ui.session import LiveOptions, LiveSession
+
+REFRESH_HZ = 4.0  # a few Hz: readable, and a refresh is far below the poller's 6.7 ms period
+PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
+HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
+
+LIVE_CSS = """
+#title { height: 1; background: $primary; color: $text; text-style: bold; }
+#state { height: 2; }
+#main { height: 1fr; }
+#fields { width: 30; padding: 0 1; }
+#plot { width: 1fr; }
+#state.aborted { background: $error 40%; }
+#state.done { background: $success 40%; }
+"""
+
+
+class LiveApp(DynoApp):
+    CSS = DynoApp.CSS + LIVE_CSS
+    BINDINGS = DynoApp.BINDINGS + [
+        Binding("g", "go", "GO"), Binding("p", "pause", "pause/resume"), Binding("m", "manual", "manual"),
+        Binding("left_square_bracket", "jog(-1)", "release"), Binding("right_square_bracket", "jog(1)", "apply"),
+        Binding("1", "plot('1')", show=False), Binding("2", "plot('2')", show=False),
+        Binding("3", "plot('3')", show=False), Binding("o", "overlay", "overlay"),
+        Binding("q", "quit_safe", "quit"),
+    ]
+
+    def __init__(self, opts: LiveOptions | None = None) -> None:
+        super().__init__()
+        self.opts = opts or LiveOptions()
+        self.session: LiveSession | None = None
+        self.rate = RateMeter()
+        self.history = History()
+        self.plot_key = "1"
+        self.values = None
+        self.overlay: list | None = None  # predicted efficiency per point, or None
+        self.overlay_tier = ""
+        self.overlay_requested = False
+        self._overlay_points = -1
+        self._plotted = None
+        self._ideal_rpm = math.nan
+
+    # --- layout ------------------------------------------------------------------------------
+    def compose(self) -> ComposeResult:
+        mode = f"SIM x{self.opts.speed:g} seed {self.opts.seed}" if self.opts.sim else "RIG"
+        yield Static(f" dyno live │ {mode}", id="title")
+        yield Static(f" E-STOP: {ESTOP_KEYS} (always active)", id="estop")
+        yield Static("", id="state")
+        with Horizontal(id="main"):
+            yield Static("", id="fields")
+            yield PlotextPlot(id="plot")
+        yield bottom_lines(HELP)
+
+    async def on_mount(self) -> None:
+        from dyno.errors import DynoError
+
+        try:
+            self.session = LiveSession(self.opts)
+        except DynoError as exc:  # a bad config file or run directory: say which, leave cleanly
+            self.exit(2, message=f"dyno ui: error: {exc}")
+            return
+        self._ideal_rpm = ideal_engine_rpm(self.session.controller.engine_map)
+        self.session.start()
+        self.set_interval(1.0 / REFRESH_HZ, self.refresh_values)
+        self.refresh_values()
+
+    # --- refresh -------------------------------------------------------------------------------
+    def refresh_values(self) -> None:
+        s = self.session
+        if s is None:
+            return
+        now = self.session.loop.time()
+        v = live_values(s.poller, s.controller, now, self.rate)
+        self.values = v
+        self.history.add(now - s.t0, v)
+        self.query_one("#state", Static).update(self._state_text(v))
+        st = self.query_one("#state", Static)
+        st.set_class(v.state == "aborted", "aborted")
+        st.set_class(v.state == "done", "done")
+        self.query_one("#fields", Static).update(self._fields_text(v))
+        if self.overlay_requested and len(s.controller.points) != self._overlay_points:
+            self._start_overlay()
+        self._draw_plot()
+
+    def _state_text(self, v) -> Text:
+        t = Text()
+        t.append(f" {v.state.upper()}", style="bold")
+        if v.paused and v.state not in ("done", "aborted"):
+            t.append(" (PAUSED)", style="bold yellow")
+        if self.session.manual:
+            t.append(" MANUAL", style="bold magenta")
+        t.append(f"  {v.reason}")
+        if v.state == "aborted" or v.abort_cause:
+            safe = getattr(self.session.actuators, "is_safe", None)
+            safe_txt = {True: "rig SAFE", False: "rig NOT SAFE", None: "safe state commanded"}[safe]
+            t.append(f"\n {safe_txt}: throttle idle, engine killed, brake released │ cause: "
+                     f"{v.abort_cause}: {v.abort_detail}", style="bold")
+        return t
+
+    def _fields_text(self, v) -> Text:
+        t = Text()
+
+        def row(label: str, value: str, style: str = "") -> None:
+            t.append(f"{label:<10}")
+            t.append(value + "\n", style=style)
+
+        row("engine", fmt(v.rpm_primary, ".0f", " rpm"))
+        row("secondary", fmt(v.rpm_secondary, ".0f", " rpm"))
+        row("ratio", fmt(v.ratio, ".2f"))
+        row("torque", fmt(v.torque_secondary_nm, ".2f", " N m"))
+        row("P out", fmt(v.power_out_w, ".0f", " W"))
+        row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
+        # The map is full throttle: the efficiency means something only while the test holds it there.
+        loaded = v.state in ("warmup", "step", "settle", "measure")
+        row("effic.", fmt(v.efficiency * 100 if loaded and not math.isnan(v.efficiency) else math.nan, ".1f", " %"))
+        colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
+        row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
+        row("points", str(v.points))
+        row("link", fmt(v.frames_per_s, ".0f", " frames/s"))
+        row(" CRC/NACK", f"{v.crc_errors} / {v.nacks} (rej {v.rejected_total})")
+        row(" lost", f"{v.events_lost} events", "bold red" if v.events_lost else "")
+        if self.overlay_requested:
+            row("overlay", self.overlay_tier or "computing…")
+        return t
+
+    def _draw_plot(self) -> None:
+        w = self.query_one("#plot", PlotextPlot)
+        plt = w.plt
+        pts = self.session.controller.points
+        key = (self.plot_key, len(pts), self.overlay_tier, len(self.history.t))
+        if key == self._plotted and self.plot_key != "3":
+            return
+        self._plotted = key
+        plt.clear_data()
+        plt.clear_figure()
+        if self.plot_key == "1":
+            good = [p for p in pts if p.get("efficiency") is not None and math.isfinite(p["efficiency"])]
+            plt.title("efficiency vs secondary rpm")
+            plt.xlabel("secondary rpm")
+            plt.ylabel("%")
+            if good:
+                xs = [p["rpm_secondary"] for p in good]
+                ys = [p["efficiency"] * 100 for p in good]
+                es = [(p.get("efficiency_sem") or 0.0) * 100 for p in good]
+                plt.error(xs, ys, yerr=es, color="cyan", label="measured")
+            if self.overlay:
+                pred = sorted(self.overlay)
+                plt.plot([a for a, _ in pred], [b * 100 for _, b in pred], color="green",
+                         label=f"model ({self.overlay_tier})")
+        elif self.plot_key == "2":
+            plt.title(f"shift curve; ideal {self._ideal_rpm:.0f} rpm (peak power)")
+            plt.xlabel("secondary rpm")
+            plt.ylabel("engine rpm")
+            h = self.history
+            trail = [(b, a) for a, b in zip(h.rpm_primary, h.rpm_secondary) if b > 0 and a > 0]
+            if trail:
+                plt.scatter([x for x, _ in trail], [y for _, y in trail], marker="dot", color="gray", label="live")
+            if pts:
+                plt.scatter([p["rpm_secondary"] for p in pts], [p["rpm_primary"] for p in pts], color="cyan",
+                            label="points")
+            if math.isfinite(self._ideal_rpm):
+                plt.hline(self._ideal_rpm, color="green")  # the flat engine speed a perfect CVT would hold
+        else:
+            h = self.history
+            plt.title("last 30 s: rpm (left), torque N m (right)")
+            t = list(h.t)
+            if t:
+                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.rpm_primary], color="yellow", label="engine")
+                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.rpm_secondary], color="cyan",
+                         label="secondary")
+                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.torque_nm], color="magenta", yside="right",
+                         label="torque")
+            plt.xlabel("s")
+        w.refresh()
+
+    # --- overlay (belt model, off the UI thread) -----------------------------------------------
+    def action_overlay(self) -> None:
+        self.overlay_requested = not self.overlay_requested
+        if not self.overlay_requested:
+            self.overlay, self.overlay_tier = None, ""
+            self.say("overlay off")
+            return
+        self.say("belt-model overlay: closed form now, full model in the background")
+        self._start_overlay()
+
+    def _start_overlay(self) -> None:
+        pts = list(self.session.controller.points)
+        self._overlay_points = len(pts)
+        self.run_worker(lambda: self._overlay_work(pts), thread=True, exclusive=True, group="overlay",
+                        name="overlay")
+
+    def _overlay_work(self, pts) -> None:
+        from textual.worker import get_current_worker
+
+        # Imported here, on first request: the belt model is a slow import the live screen must not pay for.
+        from dyno.model.overlay import predict_overlay
+
+        worker = get_current_worker()
+        pairs = overlay_inputs(pts)
+        rs = [x for x, _ in pairs]
+        ops = [op for _, op in pairs]
+        self.call_from_thread(self._set_overlay, _curve(rs, predict_overlay(ops, tier="closed_form")),
+                              "closed form")
+        import dyno.model.solution  # noqa: F401  the full tier's solver (dyno.model.bvp), only now
+
+        full = []
+        for op in ops:  # one point at a time: a cancelled worker (new points, quit) stops between solves
+            if worker.is_cancelled:
+                return
+            full += predict_overlay([op], tier="full", time_limit_s=20.0)
+        if not worker.is_cancelled:
+            self.call_from_thread(self._set_overlay, _curve(rs, full), "full model")
+
+    def _set_overlay(self, curve, tier: str) -> None:
+        if self.overlay_requested:
+            self.overlay, self.overlay_tier = curve, tier
+
+    # --- keys ------------------------------------------------------------------------------------
+    def action_estop(self) -> None:
+        self.dismiss_modals()
+        if self.session is not None:
+            self.session.estop("operator, " + ESTOP_KEYS)
+            self.say("E-STOP: rig put in its safe state")
+            self.refresh_values()
+
+    def action_go(self) -> None:
+        why = self.session.go_refusal() if self.session else "starting"
+        if why:
+            self.say(why)
+            return
+
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self.say(self.session.go() or "GO: full throttle, brake stepping")
+            else:
+                self.say("GO cancelled")
+
+        self.push_screen(ConfirmScreen("Start the test?\nThrottle goes to FULL and the brake starts stepping."),
+                         answered)
+
+    def action_pause(self) -> None:
+        self.say(self.session.toggle_pause())
+
+    def action_manual(self) -> None:
+        if self.session.manual:
+            self.say(self.session.set_manual(False))
+            return
+        if self.session.finished:
+            self.say("test finished: the rig stays in its safe state")
+            return
+
+        def answered(yes: bool | None) -> None:
+            self.say(self.session.set_manual(True) if yes else "manual mode cancelled")
+
+        self.push_screen(ConfirmScreen("Manual mode: stepping pauses and [ / ] MOVE THE BRAKE actuator "
+                                       f"({self.opts.jog_s:g} s per press).\nEnable?"), answered)
+
+    def action_jog(self, direction: int) -> None:
+        why = self.session.jog(direction)
+        self.say(why or ("jog: apply" if direction > 0 else "jog: release"))
+
+    def action_plot(self, key: str) -> None:
+        self.plot_key = key
+        self._plotted = None
+        self.say(f"plot: {PLOTS[key]}")
+        self._draw_plot()
+
+    async def action_quit_safe(self) -> None:
+        if self.session is None or self.session.finished:
+            await self._quit()
+            return
+
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self.run_worker(self._quit(), exclusive=True, group="quit")
+
+        self.push_screen(ConfirmScreen("Quit? The rig is put in its safe state first."), answered)
+
+    async def _quit(self) -> None:
+        if self.session is not None:
+            await self.session.close("operator quit")
+        self.exit(0)
+
+    async def on_unmount(self) -> None:
+        if self.session is not None:  # any other way out: still safe state first
+            await self.session.close("UI closed")
+
+
+def _curve(rs, results) -> list[tuple[float, float]]:
+    """(secondary rpm, predicted overall efficiency) of the converged predictions."""
+    return [(x, r["efficiency"]["overall"]) for x, r in zip(rs, results)
+            if r.get("converged") and r.get("efficiency")]
+
+
+def main(opts: LiveOptions) -> int:
+    app = LiveApp(opts)
+    app.run()
+    return app.return_code or 0

@@ -1,0 +1,169 @@
+"""What the live run screen shows, computed from the poller and controller (pure, no Textual).
+
+The screen refreshes a few times a second and reads these; nothing here
+blocks or does I/O, so a refresh costs well under a millisecond and never
+delays the poller that shares the event loop.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from dyno.protocol import v1
+
+RAD_S_PER_RPM = 2.0 * math.pi / 60.0
+TORQUE_WINDOW_US = 300_000  # the live torque is the mean of the last 0.3 s of conversions (~38 at 125 Hz)
+
+
+@dataclass
+class LiveValues:
+    state: str
+    reason: str
+    paused: bool
+    rpm_primary: float
+    rpm_secondary: float
+    ratio: float
+    torque_secondary_nm: float
+    power_out_w: float
+    power_engine_w: float  # full-throttle map at the engine speed
+    efficiency: float  # power_out / power_engine (meaningful at full throttle only)
+    rotor_temp_c: float
+    rotor_temp_limit_c: float
+    points: int
+    frames_per_s: float
+    crc_errors: int
+    nacks: int
+    events_lost: int
+    rejected_total: int
+    abort_cause: str | None
+    abort_detail: str | None
+
+
+def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQUE_WINDOW_US) -> float:
+    """Mean secondary torque over the last ``window_us`` of good conversions (NaN if none)."""
+    if device_now_us is None or calibration is None:
+        return math.nan
+    _, codes, status = streams.adc_window(device_now_us - window_us, device_now_us)
+    good = codes[((status & v1.ADC_STATUS_ERR) == 0) & (codes > 0) & (codes < 0xFFFF)]
+    if good.size == 0:
+        return math.nan
+    return float(calibration.torque_secondary_nm(float(good.mean())))
+
+
+def engine_power_w(engine_map, rpm: float) -> float:
+    if engine_map is None or not (rpm > 0) or not engine_map.covers(rpm):
+        return math.nan
+    return float(engine_map.power_w(rpm))
+
+
+def ideal_engine_rpm(engine_map) -> float:
+    """The engine speed of peak power: the flat line a perfectly tuned CVT would hold."""
+    import numpy as np
+
+    if engine_map is None:
+        return math.nan
+    n = np.linspace(engine_map.rpm_min, engine_map.rpm_max, 400)
+    return float(n[int(np.argmax(engine_map.power_w(n)))])
+
+
+class RateMeter:
+    """Frames per second from a running count, over the last ``window_s``."""
+
+    def __init__(self, window_s: float = 2.0) -> None:
+        self.window_s = window_s
+        self._samples: deque = deque()
+
+    def update(self, now_s: float, count: int) -> float:
+        self._samples.append((now_s, count))
+        while len(self._samples) > 2 and now_s - self._samples[0][0] > self.window_s:
+            self._samples.popleft()
+        t0, c0 = self._samples[0]
+        return (count - c0) / (now_s - t0) if now_s > t0 else math.nan
+
+
+def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues:
+    rp = poller.rpm(v1.CH_PRIMARY)
+    rs = poller.rpm(v1.CH_SECONDARY)
+    ratio = rp / rs if rs > 1.0 else math.nan
+    torque = recent_torque_nm(poller.streams, poller.device_now_us(), controller.calibration)
+    p_out = torque * rs * RAD_S_PER_RPM if not math.isnan(torque) else math.nan
+    p_eng = engine_power_w(controller.engine_map, rp)
+    eff = p_out / p_eng if p_eng > 0 and not math.isnan(p_out) else math.nan
+    st = poller.reader.stats
+    abort = controller.aborts[-1] if controller.aborts else None
+    return LiveValues(
+        state=controller.state.value, reason=controller.reason, paused=controller.paused,
+        rpm_primary=rp, rpm_secondary=rs, ratio=ratio, torque_secondary_nm=torque, power_out_w=p_out,
+        power_engine_w=p_eng, efficiency=eff, rotor_temp_c=poller.rotor_temp_c,
+        rotor_temp_limit_c=controller.limits.rotor_temp_max_c, points=len(controller.points),
+        frames_per_s=rate.update(now_s, st.accepted), crc_errors=int(st.rejected.get("crc", 0)),
+        nacks=int(st.transport_errors.get("nack", 0)), events_lost=int(poller.reader.events_lost),
+        rejected_total=int(sum(st.rejected.values())),
+        abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None)
+
+
+def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple[str, str]:
+    """(colour, marker) for the rotor temperature: green at ambient -> yellow -> red at the limit.
+
+    The marker ('', ' warm', ' HOT', ' OVER LIMIT') carries the same meaning on
+    a terminal without colour.
+    """
+    if math.isnan(temp_c):
+        return "#888888", " (no reading)"
+    f = (temp_c - ambient_c) / max(1e-9, limit_c - ambient_c)
+    f = min(1.0, max(0.0, f))
+    if f < 0.5:  # green -> yellow
+        r, g = int(510 * f), 200
+    else:  # yellow -> red
+        r, g = 255, int(200 * (1.0 - f) * 2)
+    marker = " OVER LIMIT" if temp_c >= limit_c else (" HOT" if f >= 0.8 else (" warm" if f >= 0.5 else ""))
+    return f"#{min(r, 255):02x}{g:02x}00", marker
+
+
+def fmt(x: float, spec: str = ".0f", unit: str = "") -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "—"
+    text = f"{x:{spec}}"
+    if text.startswith("-") and float(text) == 0.0:
+        text = text[1:]  # "-0" is noise around zero, not a direction
+    return f"{text}{unit}"
+
+
+class History:
+    """Ring buffers of the last ``span_s`` of live values, for the time plot and the shift-curve trail."""
+
+    def __init__(self, span_s: float = 30.0) -> None:
+        self.span_s = span_s
+        self.t: deque = deque()
+        self.rpm_primary: deque = deque()
+        self.rpm_secondary: deque = deque()
+        self.torque_nm: deque = deque()
+
+    def add(self, t_s: float, v: LiveValues) -> None:
+        self.t.append(t_s)
+        self.rpm_primary.append(v.rpm_primary)
+        self.rpm_secondary.append(v.rpm_secondary)
+        self.torque_nm.append(v.torque_secondary_nm)
+        while self.t and t_s - self.t[0] > self.span_s:
+            for d in (self.t, self.rpm_primary, self.rpm_secondary, self.torque_nm):
+                d.popleft()
+
+
+def overlay_inputs(points) -> list[tuple[float, tuple[float, float, float]]]:
+    """(secondary rpm, (ratio, primary rpm, primary torque)) of each valid point.
+
+    The triple is what :func:`dyno.model.overlay.predict_overlay` takes; the
+    secondary rpm places the prediction on the efficiency plot.
+
+    The primary torque is the engine-map torque the efficiency was computed with
+    (power_in / omega_primary).
+    """
+    out = []
+    for p in points:
+        rp, ratio, p_in = p.get("rpm_primary"), p.get("ratio"), p.get("power_in_w")
+        if any(v is None or not math.isfinite(v) for v in (rp, ratio, p_in)) or rp <= 0:
+            continue
+        out.append((float(p["rpm_secondary"]), (float(ratio), float(rp), float(p_in) / (rp * RAD_S_PER_RPM))))
+    return out

@@ -1,0 +1,236 @@
+"""A live test session for the UI: the backbone (poller, controller, run log) on the app's own loop.
+
+Textual runs its own asyncio loop, so the simulated rig cannot use
+:class:`dyno.clock.VirtualTimeLoop`.  Instead the simulated bus sees a scaled
+clock, ``t_sim = (loop.time() - t0) * speed``, starting at 0 (the loop's
+monotonic clock is hours since boot; the physics would otherwise simulate
+them all on the first poll).  The poller keeps its real-time rate.  At
+``speed > 1`` the plan's durations are divided by ``speed`` so the rig sees
+the usual warm-up, step, settle and measurement times in simulated time,
+and settling uses the fixed time (the detection's window is compared with
+host time and measured in device time, which no longer agree).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from dyno.control.controller import State, TestPlan
+
+FINISHED = (State.DONE, State.ABORTED)
+
+
+@dataclass
+class LiveOptions:
+    sim: bool = True
+    speed: float = 1.0
+    seed: int = 0
+    out_dir: Path | None = None
+    rig_path: Path | None = None
+    calibration_path: Path | None = None
+    engine_map_path: Path | None = None
+    plan: TestPlan = field(default_factory=TestPlan)
+    jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
+
+
+def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
+    """The plan with every duration divided by ``speed`` (host seconds for ``speed`` x simulated ones)."""
+    if speed == 1.0:
+        return plan
+    k = 1.0 / speed
+    settle = replace(plan.settle, min_settle_s=plan.settle.min_settle_s * k,
+                     max_settle_s=plan.settle.max_settle_s * k, fixed_settle_s=plan.settle.fixed_settle_s * k)
+    return replace(plan, engine_detect_s=plan.engine_detect_s * k, warmup_s=plan.warmup_s * k,
+                   step_s=plan.step_s * k, step_min_s=plan.step_min_s * k, step_max_s=plan.step_max_s * k,
+                   measure_s=plan.measure_s * k, max_measure_s=plan.max_measure_s * k, settle_mode="fixed",
+                   settle=settle)
+
+
+class SimTimeActuators:
+    """The simulated actuators with ``tick`` translated to simulated time.
+
+    The controller ticks with the loop's time; the simulated release stroke is
+    timed in the physics' time.  Everything else passes through.
+    """
+
+    def __init__(self, inner, sim_now) -> None:
+        self._inner = inner
+        self._sim_now = sim_now
+
+    def tick(self, now_s: float) -> None:
+        self._inner.tick(self._sim_now())
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+
+class LiveSession:
+    """Owns the run: start the tasks, forward the operator's commands, shut down safely."""
+
+    def __init__(self, opts: LiveOptions) -> None:
+        from dyno.app import RunOptions, build
+
+        self.opts = opts
+        loop = asyncio.get_running_loop()
+        self.loop = loop
+        self.speed = float(opts.speed) if opts.sim else 1.0
+        self.t0 = loop.time()
+        self.sim_now = lambda: (loop.time() - self.t0) * self.speed
+        run_opts = RunOptions(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
+                              rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed))
+        if opts.calibration_path:
+            run_opts.calibration_path = opts.calibration_path
+        if opts.engine_map_path:
+            run_opts.engine_map_path = opts.engine_map_path
+        self.guard = None
+        if opts.sim:
+            self.ctx = build(run_opts, self.sim_now)
+            self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
+            # Each real-time poll spans `speed` x more rig time: let it drain that many more frames.
+            self.ctx.poller.max_burst = max(8, math.ceil(8 * self.speed))
+            # ... and give the emulated firmware's ring the same span of rig time it has at 1x
+            # (64 events ~ 0.28 s of rig events); otherwise a real-time poll gap of a few ms is
+            # `speed` x longer for the device and the ring overflows: an artefact of pacing, not the link.
+            fw = self.ctx.sim.firmware
+            fw.ring_capacity = max(fw.ring_capacity, math.ceil(fw.ring_capacity * self.speed))
+        else:  # pragma: no cover - needs the rig
+            from dyno.hw.safety import SafetyGuard
+
+            self.ctx = build(run_opts, loop.time)
+            # Safe state on SIGTERM and at exit; Ctrl+C reaches the app as a key (raw mode) = E-STOP.
+            import signal
+
+            self.guard = SafetyGuard(self.ctx.controller.act, signals=(signal.SIGTERM,))
+            self.guard.__enter__()
+        self.poller = self.ctx.poller
+        self.controller = self.ctx.controller
+        self._tasks: list[asyncio.Task] = []
+        self.closed = False
+        self.manual = False
+        self._jog_handle = None
+        self._pause_points = 0
+
+    @property
+    def sim(self):
+        return self.ctx.sim
+
+    @property
+    def actuators(self):
+        """The rig's outputs (the simulated ones for ``is_safe``)."""
+        return self.ctx.sim.actuators if self.ctx.sim is not None else self.controller.act
+
+    def start(self) -> None:
+        self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
+                       asyncio.create_task(self.controller.run(), name="controller")]
+
+    @property
+    def finished(self) -> bool:
+        return self.controller.state in FINISHED
+
+    # --- operator commands ---------------------------------------------------------------
+    def estop(self, source: str = "operator") -> None:
+        self.cancel_jog()
+        if self.finished:
+            self.controller.act.safe_state()  # again: an E-stop is never refused
+            if not self.controller.aborts:
+                self.controller.aborts.append({"cause": "estop", "detail": f"E-stop ({source}) after the test",
+                                               "state": self.controller.state.value})
+            return
+        self.controller.estop(source)
+
+    def go_refusal(self) -> str | None:
+        """Why GO cannot be given now (None: it can)."""
+        if self.controller.state is not State.ARMED:
+            return f"GO only when armed (state: {self.controller.state.value})"
+        return None
+
+    def go(self) -> str | None:
+        """Start the armed test; returns why not, or None."""
+        why = self.go_refusal()
+        if why is None:
+            self.controller.go()
+        return why
+
+    def toggle_pause(self) -> str:
+        if self.finished:
+            return "test finished"
+        if self.controller.paused:
+            self.controller.resume()
+            return "stepping resumed"
+        self.controller.pause()
+        self._note_pause()
+        return "stepping paused (after the current point)"
+
+    def set_manual(self, on: bool) -> str:
+        if on and self.finished:
+            return "test finished: no manual mode"
+        self.manual = on
+        if on and not self.controller.paused:
+            self.controller.pause()
+            self._note_pause()
+        if not on:
+            self.cancel_jog()
+        return "manual mode: [ release / ] apply jog the brake" if on else "manual mode off (p resumes stepping)"
+
+    def jog(self, direction: int) -> str | None:
+        """Move the brake actuator for ``jog_s``; returns why not, or None."""
+        from dyno.control.outputs import STOP
+
+        if not self.manual:
+            return "jog only in manual mode (m)"
+        if self.finished:
+            return "test finished: the rig stays in its safe state"
+        if not self._between_steps():
+            return f"wait: the controller is in {self.controller.state.value} (pause takes effect after the point)"
+        self.cancel_jog()
+        self.controller.act.brake(direction)
+        self._jog_handle = self.loop.call_later(self.opts.jog_s / self.speed, self.controller.act.brake, STOP)
+        return None
+
+    def _between_steps(self) -> bool:
+        """True when a jog cannot disturb a step or a measurement.
+
+        A paused controller only stops at the top of its step loop, after the
+        point in progress, still showing that point's state; so a jog is allowed
+        before the stepping starts, or once a point has completed since the pause.
+        (A controller flag "waiting for resume" would make this exact.)
+        """
+        c = self.controller
+        if c.state in (State.WAIT_ENGINE, State.ARMED, State.WARMUP):
+            return True
+        return c.paused and len(c.points) > self._pause_points
+
+    def _note_pause(self) -> None:
+        self._pause_points = len(self.controller.points)
+
+    def cancel_jog(self) -> None:
+        from dyno.control.outputs import STOP
+
+        if self._jog_handle is not None:
+            self._jog_handle.cancel()
+            self._jog_handle = None
+            self.controller.act.brake(STOP)
+
+    async def close(self, why: str = "operator quit") -> None:
+        """Safe state first, then stop the tasks and close the run log."""
+        if self.closed:
+            return
+        self.closed = True
+        self.cancel_jog()
+        self.controller.act.safe_state()
+        if not self.finished:
+            self.controller.abort("quit", why)
+        for t in reversed(self._tasks):
+            if t.get_name() == "poller":
+                self.poller.stop()
+            else:
+                t.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        status = {"done": "success"}.get(self.controller.state.value, "abort")
+        self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
+                              events_lost=self.poller.reader.events_lost)
+        if self.guard is not None:  # pragma: no cover - rig only
+            self.guard.__exit__(None, None, None)
