@@ -18,9 +18,10 @@ CASES = {
     "EI_0.01": (TABLE_6_1.with_belt(bending_stiffness_nm2=0.01), TABLE_6_1_POINT, 1e-4),
     "EI_0.1": (TABLE_6_1.with_belt(bending_stiffness_nm2=0.1), TABLE_6_1_POINT, 1e-4),
     "EI_1.0": (TABLE_6_1.with_belt(bending_stiffness_nm2=1.0), TABLE_6_1_POINT, 1e-4),
-    # 10 N of slack tension carries 6 N*m (wraps ~70 deg: the spans arch far off the pulleys);
+    # 10 N of slack tension carries 2 N*m (wraps ~54 deg: at EI = 0.26 N*m^2 the spans arch far off
+    # the pulleys, and the capstan bound of the short wrap limits the torque; 3 N*m is past it);
     # at the Table 6.1 torque it is past gross slip (test below).
-    "slack_10N_6Nm": (TABLE_6_1, replace(TABLE_6_1_POINT, slack_tension_n=10.0, primary_torque_nm=6.0), 1e-4),
+    "slack_10N_2Nm": (TABLE_6_1, replace(TABLE_6_1_POINT, slack_tension_n=10.0, primary_torque_nm=2.0), 1e-4),
     "ratio_2.0": (TABLE_6_1, replace(TABLE_6_1_POINT, ratio=2.0), 1e-4),
     "ratio_0.6": (TABLE_6_1, replace(TABLE_6_1_POINT, ratio=0.6), 1e-4),
     "rpm_7600": (TABLE_6_1, replace(TABLE_6_1_POINT, primary_speed_rpm=7600.0), 1e-4),
