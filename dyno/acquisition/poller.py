@@ -53,6 +53,7 @@ class Poller:
         self.listeners: list = []  # callables(events, now_s)
         self.timing = PollTiming()
         self.rotor_temp_c: float = math.nan
+        self.rotor_temp_time_s: float = math.nan
         self.temp_errors = 0
         self.last_valid_frame_s: float | None = None
         self.started_s: float | None = None
@@ -102,6 +103,7 @@ class Poller:
             self._last_temp_s = now_s
             try:
                 self.rotor_temp_c = float(self.thermometer())
+                self.rotor_temp_time_s = now_s
             except Exception:  # a failed read keeps the last value; counted, monitored
                 self.temp_errors += 1
         return events
