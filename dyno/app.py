@@ -41,6 +41,7 @@ class RunOptions:
     auto_go: bool = True
     max_sim_s: float = 3600.0  # a run longer than this is stopped (safety net for sims)
     setup: object = None  # callable(ctx) after assembly, before running (tests inject faults)
+    tune_path: Path | None = None  # the CVT tune on the rig (stored with the run); sim: its CVT's tune
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -126,8 +127,24 @@ def build(opts: RunOptions, now_s) -> RunContext:
         "plan": _asdict(opts.plan),
         "limits": _asdict(limits),
     }
+    tune_path = opts.tune_path
+    if tune_path is None and sim is not None:
+        from dyno.sim.physics import _resolve_map_path  # repo-relative default, as the sim resolves it
+
+        tune_path = getattr(sim.model.params, "cvt_tune_path", None)
+        tune_path = _resolve_map_path(tune_path) if tune_path else None
+    tune_text = None
+    if tune_path is not None:
+        import hashlib
+
+        from dyno.tuning.tune import load_tune
+
+        load_tune(tune_path)  # validate: a bad tune is refused before anything is written
+        tune_text = Path(tune_path).read_text()
+        meta["tune_source"] = str(tune_path)
+        meta["tune_sha256"] = hashlib.sha256(tune_text.encode()).hexdigest()
     writer = RunWriter(out, meta, calibration=calibration.to_dict(),
-                       engine_map_text=Path(opts.engine_map_path).read_text())
+                       engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text)
     poller.listeners.append(writer.events)
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,

@@ -19,6 +19,8 @@ def add_arguments(p) -> None:
     p.add_argument("--protocol", choices=("v1", "v0"), default=None)
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
+    p.add_argument("--tune", type=Path, default=None,
+                   help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
     p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
                    help="settling: detected from the data, or the thesis's fixed 4 s")
     p.add_argument("--json", action="store_true", help="print one JSON document")
@@ -43,6 +45,11 @@ def run(args) -> int:
         opts.calibration_path = args.calibration
     if args.engine_map:
         opts.engine_map_path = args.engine_map
+    if args.tune:
+        from dyno.sim.physics import RigParams
+
+        opts.tune_path = args.tune
+        opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
     result = run_test(opts)
     if args.json:
         print(json.dumps(result, indent=1, default=str))

@@ -5,6 +5,7 @@ Layout::
     RUN/meta.json         run metadata (rig, calibration, engine map, software, protocol), atomic
     RUN/calibration.json  the calibration entry applied, atomic
     RUN/engine_map.csv    a copy of the engine map used, atomic
+    RUN/tune.toml         the CVT tune on the rig (flyweights, springs, helix), atomic
     RUN/documents.jsonl   append-only: start, state, point, abort, stop documents
     RUN/events.bin        append-only raw event stream, 12-byte records <B q H B>:
                           channel, unwrapped t_us, ADC code (or v0 device rpm), status
@@ -27,7 +28,7 @@ EVENT_RECORD = struct.Struct("<BqHB")
 
 class RunWriter:
     def __init__(self, run_dir: Path, meta: dict, calibration: dict | None = None,
-                 engine_map_text: str | None = None) -> None:
+                 engine_map_text: str | None = None, tune_text: str | None = None) -> None:
         self.run_dir = Path(run_dir)
         if self.run_dir.exists() and any(self.run_dir.iterdir()):
             from dyno.errors import ConfigError
@@ -42,6 +43,8 @@ class RunWriter:
             write_json_atomic(self.run_dir / "calibration.json", calibration)
         if engine_map_text is not None:
             write_atomic(self.run_dir / "engine_map.csv", engine_map_text)
+        if tune_text is not None:
+            write_atomic(self.run_dir / "tune.toml", tune_text)
         write_json_atomic(self.run_dir / "meta.json", meta)
         self._docs = open(self.run_dir / "documents.jsonl", "a", encoding="utf-8")
         self._events = open(self.run_dir / "events.bin", "ab")
