@@ -271,7 +271,7 @@ class CalibrationWizard:
         """0..1 of the current step (settling counts as the first part)."""
         s = self.current
         if s is None:
-            return 1.0
+            return 0.0 if self.phase is Phase.SETUP else 1.0
         total = self.settle_samples + self.n_samples
         return min(1.0, (s.dropped_settling + s.n) / total)
 
@@ -304,11 +304,13 @@ class CalibrationWizard:
         return [s for s in self.steps if s.direction != 0]
 
     def zero_drift_counts(self) -> float:
+        if not self.steps:
+            return math.nan
         return self.tare_after.mean_counts - self.tare_before.mean_counts
 
     def previous_zero_offset_nm(self) -> float | None:
         """The tare before against the calibration in force, in N m (None without one)."""
-        if self.previous is None or not self.tare_before.n:
+        if self.previous is None or not self.steps or not self.tare_before.n:
             return None
         return float(self.previous.torque_secondary_nm(self.tare_before.mean_counts))
 
@@ -339,16 +341,16 @@ class CalibrationWizard:
         f = self.fit
         lines = []
         if f is not None:
-            lines += [f"slope     {f.slope_counts_per_nm:10.3f} ± {f.slope_se_counts_per_nm:.3f} counts/N m",
-                      f"intercept {f.intercept_counts:10.1f} ± {f.intercept_se_counts:.1f} counts",
-                      f"R²        {f.r2:.6f}  (min {self.r2_min})",
-                      f"non-linearity {f.nonlinearity_pct_fs:.3f} % FS"
-                      + (f"   hysteresis {f.hysteresis_pct_fs:.3f} % FS" if f.hysteresis_pct_fs is not None else ""),
-                      f"zero drift {self.zero_drift_counts():+.1f} counts "
-                      f"({self.zero_drift_counts() / f.slope_counts_per_nm:+.3f} N m)"]
+            drift = self.zero_drift_counts()
+            lines += [f"slope  {f.slope_counts_per_nm:.3f} ± {f.slope_se_counts_per_nm:.3f} counts/N m",
+                      f"icpt   {f.intercept_counts:.1f} ± {f.intercept_se_counts:.1f} counts",
+                      f"R²     {f.r2:.6f} (min {self.r2_min})",
+                      f"non-lin {f.nonlinearity_pct_fs:.3f} %FS"
+                      + (f"  hyst {f.hysteresis_pct_fs:.3f} %FS" if f.hysteresis_pct_fs is not None else ""),
+                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} N m)"]
         prev = self.previous_zero_offset_nm()
         if prev is not None:
-            lines.append(f"tare vs calibration in force: {prev:+.3f} N m")
+            lines.append(f"tare vs cal. in force {prev:+.3f} N m")
         if self.rejection:
             lines.append(f"REFUSED: {self.rejection}")
         return lines

@@ -1,0 +1,45 @@
+"""dyno calibrate: the known-weights torque calibration wizard."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+SIM_HISTORY = Path("runs") / "sim_torque_calibration.csv"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--sim", action="store_true",
+                   help="the simulated rig in its calibration fixture (hidden true gain and offset)")
+    p.add_argument("--samples", type=int, default=500, help="ADC samples per load step (default 500)")
+    p.add_argument("--settle-samples", type=int, default=125,
+                   help="samples dropped at the start of each step while the load settles (default 125)")
+    p.add_argument("--history", type=Path, default=None,
+                   help="calibration history CSV to append to (default: the rig's; with --sim "
+                        f"{SIM_HISTORY}, never the rig's)")
+    p.add_argument("--radius", type=float, default=0.15, help="rope radius on the brake rotor, m")
+    p.add_argument("--masses", default="5,10,20,30,40", help="masses in kg, comma-separated")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed")
+    p.add_argument("--speed", type=float, default=1.0, help="simulation pace, multiple of real time")
+    from dyno.rigconfig import add_rig_argument
+
+    add_rig_argument(p)
+
+
+def run(args) -> int:
+    from dyno.ui.calibrate_app import CalibrateOptions, main
+
+    if args.samples < 2 or args.settle_samples < 0 or not args.speed > 0:
+        raise SystemExit("dyno calibrate: --samples >= 2, --settle-samples >= 0, --speed > 0")
+    history = args.history
+    if history is None:
+        if args.sim:
+            history = SIM_HISTORY  # a simulated calibration must never land in the rig's history
+        else:  # pragma: no cover - rig only
+            from dyno.app import DEFAULT_CALIBRATION
+
+            history = DEFAULT_CALIBRATION
+    Path(history).parent.mkdir(parents=True, exist_ok=True)
+    opts = CalibrateOptions(sim=args.sim, seed=args.seed, speed=args.speed, n_samples=args.samples,
+                            settle_samples=args.settle_samples, history_path=Path(history),
+                            rig_path=getattr(args, "rig", None), radius_m=args.radius, masses=args.masses)
+    return main(opts)

@@ -1,0 +1,335 @@
+"""The calibration wizard screen (``dyno calibrate``): thin over :mod:`dyno.ui.calibration_wizard`.
+
+Acquisition is the same poller as a test (the fixture's ADC conversions go
+through the emulated firmware and the bus in ``--sim``; the real link on the
+rig); the poller's listener feeds the wizard, this screen shows it at a few Hz.
+Nothing here moves hardware: the rig stays in its safe state throughout (the
+secondary is locked by hand), so there is nothing to confirm but the
+acceptance, which is what writes the history.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.widgets import Input, ProgressBar, Static
+from textual_plotext import PlotextPlot
+
+from dyno.ui.calibration_wizard import COLLECTING_PHASES, CalibrationWizard, Phase, WizardFeeder, parse_masses
+from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, bottom_lines
+
+HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
+DEFAULT_RADIUS_M = 0.15
+DEFAULT_MASSES = "5,10,20,30,40"
+
+CAL_CSS = """
+#title { height: 1; background: $primary; color: $text; text-style: bold; }
+#phase { height: 1; text-style: bold; }
+#instruction { height: 2; }
+#setup { height: auto; }
+#setup Input { width: 1fr; }
+#progress { height: 1; }
+#body { height: 1fr; }
+#steps { width: 44; }
+#right { width: 1fr; }
+#reading { height: 1; }
+#result { height: auto; }
+#resid { height: 1fr; }
+"""
+
+
+@dataclass
+class CalibrateOptions:
+    sim: bool = True
+    seed: int = 0
+    speed: float = 1.0  # sim only: fixture time runs this many times faster than the loop's
+    n_samples: int = 500
+    settle_samples: int = 125
+    history_path: Path | None = None
+    rig_path: Path | None = None
+    radius_m: float = DEFAULT_RADIUS_M
+    masses: str = DEFAULT_MASSES
+    fixture_kw: dict | None = None  # sim only: CalibrationFixture options (tests)
+
+
+class CalibrateApp(DynoApp):
+    CSS = DynoApp.CSS + CAL_CSS
+    BINDINGS = DynoApp.BINDINGS + [
+        Binding("c", "collect", "collect"), Binding("enter", "collect", show=False), Binding("r", "redo", "redo"),
+        Binding("a", "accept", "accept"), Binding("x", "reject", "reject"), Binding("q", "quit_safe", "quit"),
+        Binding("escape", "leave_input", show=False),
+    ]
+
+    def __init__(self, opts: CalibrateOptions | None = None) -> None:
+        super().__init__()
+        self.opts = opts or CalibrateOptions()
+        self.wizard: CalibrationWizard | None = None
+        self.feeder: WizardFeeder | None = None
+        self.poller = None
+        self.rig = None  # FixtureRig (sim) or HardwareRig
+        self.calibration_in_force = None
+        self._poll_task = None
+        self._drawn = None
+
+    def compose(self) -> ComposeResult:
+        mode = f"SIM seed {self.opts.seed}" if self.opts.sim else "RIG"
+        yield Static(f" dyno calibrate │ {mode} │ history: {self.opts.history_path}", id="title")
+        yield Static(f" E-STOP: {ESTOP_KEYS} (always active)", id="estop")
+        yield Static("", id="phase")
+        yield Static("", id="instruction")
+        with Horizontal(id="setup"):
+            yield Input(str(self.opts.radius_m), placeholder="rope radius m", id="radius")
+            yield Input(self.opts.masses, placeholder="masses kg, comma-separated", id="masses")
+        yield ProgressBar(total=1.0, show_eta=False, id="progress")
+        with Horizontal(id="body"):
+            yield Static("", id="steps")
+            with Vertical(id="right"):
+                yield Static("", id="reading")
+                yield Static("", id="result")
+                yield PlotextPlot(id="resid")
+        yield bottom_lines(HELP)
+
+    async def on_mount(self) -> None:
+        from dyno.analysis.calibration import latest, load_history
+        from dyno.app import DEFAULT_CALIBRATION
+        from dyno.errors import DynoError
+
+        try:
+            self.calibration_in_force = latest(load_history(
+                self.opts.history_path if self.opts.history_path and Path(self.opts.history_path).exists()
+                else DEFAULT_CALIBRATION))
+        except DynoError:
+            self.calibration_in_force = None  # first calibration: nothing to compare the tare with
+        self.wizard = CalibrationWizard(n_samples=self.opts.n_samples, settle_samples=self.opts.settle_samples,
+                                        previous=self.calibration_in_force)
+        try:
+            self._start_acquisition()
+        except DynoError as exc:
+            self.exit(2, message=f"dyno calibrate: error: {exc}")
+            return
+        self.set_interval(0.25, self.refresh_view)
+        self.query_one("#radius", Input).focus()
+        self.refresh_view()
+
+    def _start_acquisition(self) -> None:
+        loop = asyncio.get_running_loop()
+        if self.opts.sim:
+            from dyno.ui.sim_fixture import build_fixture_poller
+
+            t0, speed = loop.time(), self.opts.speed
+            self.rig, self.poller = build_fixture_poller(lambda: (loop.time() - t0) * speed, seed=self.opts.seed,
+                                                         **(self.opts.fixture_kw or {}))
+            self.poller.max_burst = max(8, math.ceil(8 * speed))
+            self.rig.firmware.ring_capacity = max(64, math.ceil(64 * speed))
+        else:  # pragma: no cover - needs the rig
+            from dyno.acquisition.poller import Poller
+            from dyno.acquisition.reader import make_reader
+            from dyno.hw.rig import HardwareRig
+            from dyno.rigconfig import load_rig
+
+            cfg = load_rig(self.opts.rig_path)
+            self.rig = HardwareRig(cfg).__enter__()  # safe state now; released in on_unmount
+            self.poller = Poller(make_reader(cfg.protocol, self.rig.transport), poll_hz=cfg.poll_hz,
+                                 blocking_io=True)
+        self.feeder = WizardFeeder(self.wizard)
+        self.feeder.on_step_done = self._step_done
+        self.poller.listeners.append(self.feeder)
+        self._poll_task = asyncio.create_task(self.poller.run())
+
+    # --- view ----------------------------------------------------------------------------------
+    def refresh_view(self) -> None:
+        w = self.wizard
+        if w is None:
+            return
+        step = w.current
+        phase = w.phase.value.upper().replace("_", " ")
+        if step is not None:
+            phase += f"  step {w.index + 1}/{len(w.steps)}" + ("  COLLECTING" if w.collecting else "")
+        self.query_one("#phase", Static).update(" " + phase)
+        self.query_one("#instruction", Static).update(" " + w.instruction())
+        self.query_one("#setup").display = w.phase is Phase.SETUP
+        self.query_one("#progress", ProgressBar).update(progress=w.progress)
+        self.query_one("#steps", Static).update(self._steps_text())
+        self.query_one("#reading", Static).update(self._reading_text())
+        result = Text("\n".join(w.result_lines()))
+        if w.rejection:
+            result.stylize("bold red")
+        elif w.fit is not None:
+            result.stylize("green")
+        self.query_one("#result", Static).update(result)
+        self._draw_residuals()
+
+    def _steps_text(self) -> Text:
+        w = self.wizard
+        t = Text("  # pass     kg    N m    mean     sd   n\n", style="bold")
+        for i, s in enumerate(w.steps):
+            mark = ">" if i == w.index and w.phase in COLLECTING_PHASES else " "
+            pas = {1: "load", -1: "unld", 0: "tare"}[s.direction]
+            mean = f"{s.mean_counts:7.1f}" if s.n else "      —"
+            sd = f"{s.std_counts:6.1f}" if s.n > 1 else "     —"
+            t.append(f"{mark}{i + 1:2d} {pas} {s.mass_kg:6.1f} {s.torque_nm:6.2f} {mean} {sd} {s.n:3d}\n")
+        return t
+
+    def _reading_text(self) -> str:
+        codes = self.feeder.last_codes if self.feeder else []
+        if not codes:
+            return "ADC: waiting for conversions"
+        mean = float(np.mean(codes[-125:]))
+        txt = f"ADC now {mean:8.1f} counts"
+        if self.calibration_in_force is not None:
+            txt += f" = {self.calibration_in_force.torque_secondary_nm(mean):+.2f} N m (cal. in force)"
+        return txt
+
+    def _draw_residuals(self) -> None:
+        w = self.wizard
+        key = (w.phase, id(w.fit))
+        if key == self._drawn:
+            return
+        self._drawn = key
+        plot = self.query_one("#resid", PlotextPlot)
+        plt = plot.plt
+        plt.clear_data()
+        plt.clear_figure()
+        f = w.fit
+        if f is None:
+            plt.title("residuals (after the fit)")
+        else:
+            steps = w.load_steps()
+            for sign, colour, label in ((1, "cyan", "loading"), (-1, "magenta", "unloading")):
+                xs = [x for x, s in zip(f.torques_nm, steps) if s.direction == sign]
+                ys = [float(r) for r, s in zip(f.residuals_counts, steps) if s.direction == sign]
+                if xs:
+                    plt.scatter(xs, ys, color=colour, label=label)
+            plt.hline(0.0, color="gray")
+            plt.title("residual counts vs N m")
+        plot.refresh()
+
+    # --- acquisition callbacks ---------------------------------------------------------------------
+    def _step_done(self) -> None:
+        w = self.wizard
+        if w.step_error:
+            self.say(f"step stopped: {w.step_error}")
+        elif w.phase is Phase.REVIEW:
+            self.say("all steps done: review the fit" if w.acceptable else f"fit refused: {w.rejection}")
+        else:
+            self.say(f"step done; next: {w.instruction()[:60]}")
+
+    # --- keys ------------------------------------------------------------------------------------------
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        if event.input.id == "radius":
+            self.query_one("#masses", Input).focus()
+            return
+        self._configure()
+
+    def _configure(self) -> bool:
+        w = self.wizard
+        try:
+            masses = parse_masses(self.query_one("#masses", Input).value)
+        except ValueError as exc:
+            self.say(str(exc))
+            return False
+        problems = w.configure(self.query_one("#radius", Input).value, masses)
+        if problems:
+            self.say("; ".join(problems))
+            return False
+        w.start()
+        for inp in self.query(Input):
+            inp.disabled = True  # nor can a dialog closing hand them the focus back: keys drive the wizard now
+        self.set_focus(None)
+        self.say(f"{len(w.steps)} steps planned: tare, {len(w.masses_kg)} loading, "
+                 f"{len(w.masses_kg) - 1} unloading, tare")
+        self.refresh_view()
+        return True
+
+    def action_collect(self) -> None:
+        w = self.wizard
+        if w.phase is Phase.SETUP:
+            self._configure()
+            return
+        if w.phase not in COLLECTING_PHASES:
+            self.say("nothing to collect now")
+            return
+        if w.collecting:
+            self.say("collecting… (r restarts this step)")
+            return
+        s = w.current
+        if self.opts.sim:
+            self.rig.hang(s.mass_kg, w.radius_m)  # the simulated operator hangs the load now
+        w.begin_step()
+        self.say(f"collecting {w.settle_samples} settling + {w.n_samples} samples")
+
+    def action_leave_input(self) -> None:
+        self.set_focus(None)
+
+    def action_redo(self) -> None:
+        self.wizard.redo_step()
+        self.say("step restarted: collect again when the load hangs still")
+
+    def action_accept(self) -> None:
+        w = self.wizard
+        if not w.acceptable:
+            self.say(f"cannot accept: {w.rejection or 'the fit is not ready'}")
+            return
+
+        def answered(yes: bool | None) -> None:
+            if not yes:
+                return
+            from dyno.errors import DynoError
+
+            try:
+                entry = w.accept(self.opts.history_path)
+            except DynoError as exc:
+                self.say(f"not written: {exc}")
+                return
+            self.say(f"appended to {self.opts.history_path} ({entry.date})")
+            self.refresh_view()
+
+        self.push_screen(ConfirmScreen(f"Append this calibration to\n{self.opts.history_path}?"), answered)
+
+    def action_reject(self) -> None:
+        if self.wizard.phase in (Phase.ACCEPTED, Phase.REJECTED):
+            return
+        self.wizard.reject()
+        self.say("rejected: nothing written")
+        self.refresh_view()
+
+    def action_estop(self) -> None:
+        self.dismiss_modals()
+        if self.wizard is not None:
+            self.wizard.redo_step()
+        act = getattr(self.rig, "actuators", None)  # the rig's outputs (hardware); the fixture has none
+        if act is not None:  # pragma: no cover - rig only
+            act.safe_state()
+        self.say("E-STOP: collection stopped" + ("; rig outputs in their safe state" if act is not None
+                                                 else "; the calibration fixture has no outputs to stop"))
+
+    async def action_quit_safe(self) -> None:
+        await self._shutdown()
+        self.exit(0)
+
+    async def _shutdown(self) -> None:
+        if self.poller is not None:
+            self.poller.stop()
+        if self._poll_task is not None:
+            await asyncio.gather(self._poll_task, return_exceptions=True)
+            self._poll_task = None
+        if not self.opts.sim and self.rig is not None:  # pragma: no cover - rig only
+            self.rig.__exit__(None, None, None)
+            self.rig = None
+
+    async def on_unmount(self) -> None:
+        await self._shutdown()
+
+
+def main(opts: CalibrateOptions) -> int:
+    app = CalibrateApp(opts)
+    app.run()
+    return app.return_code or 0

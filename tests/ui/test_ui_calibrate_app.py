@@ -1,0 +1,98 @@
+"""The calibration wizard screen driven by Textual's pilot on the simulated fixture."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+from dyno.analysis.calibration import load_history
+from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
+from dyno.ui.calibration_wizard import Phase
+
+SIZE = (80, 24)
+HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
+
+
+def screen_text(app) -> str:
+    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
+
+
+def _opts(tmp_path, **kw):
+    base = dict(sim=True, seed=4, speed=4.0, n_samples=100, settle_samples=60, history_path=tmp_path / "hist.csv")
+    base.update(kw)
+    return CalibrateOptions(**base)
+
+
+def test_ui_calibrate_full_procedure_accept_appends(tmp_path):
+    async def scenario():
+        shots = {}
+        app = CalibrateApp(_opts(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.pause(0.5)
+            shots["setup"] = screen_text(app)
+            await pilot.press("enter", "enter")  # radius, masses: the defaults
+            await pilot.pause(0.3)
+            shots["tare"] = screen_text(app)
+            w = app.wizard
+            t_end = time.monotonic() + 90
+            while w.phase is not Phase.REVIEW and time.monotonic() < t_end:
+                if not w.collecting:
+                    await pilot.press("c")
+                await pilot.pause(0.1)
+            await pilot.pause(0.4)
+            shots["review"] = screen_text(app)
+            await pilot.press("a")
+            await pilot.pause(0.2)
+            shots["confirm"] = screen_text(app)
+            await pilot.press("y")
+            await pilot.pause(0.3)
+            shots["accepted"] = screen_text(app)
+            fx = app.rig.fixture
+            await pilot.press("q")
+        return shots, w, fx
+
+    shots, w, fx = asyncio.run(scenario())
+    assert w.phase is Phase.ACCEPTED
+    for name, text in shots.items():
+        lines = text.splitlines()
+        assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
+        assert "E-STOP" in text and HELP in lines[-1], name
+    assert "SETUP" in shots["setup"] and "5,10,20,30,40" in shots["setup"]
+    assert "TARE BEFORE" in shots["tare"] and "NO mass hanging" in shots["tare"]
+    assert " 6 load   40.0  30.87" in shots["tare"] and "11 tare" in shots["tare"]
+    for label in ("slope", "icpt", "R²", "non-lin", "hyst", "zero drift", "residual counts vs N m"):
+        assert label in shots["review"], label
+    assert "Append this calibration" in shots["confirm"]
+    assert "ACCEPTED" in shots["accepted"]
+    (entry,) = load_history(tmp_path / "hist.csv")
+    assert entry.n_samples == 100 * 9 and entry.lever_arm_m == 0.15
+    # 100 samples a step: looser than the 500-sample test in test_ui_calibration_wizard, still near the truth
+    assert abs(entry.slope_counts_per_nm - fx.true_gain_counts_per_nm) < 4 * w.fit.slope_se_counts_per_nm
+
+
+def test_ui_calibrate_refuses_two_loads_and_says_why(tmp_path):
+    async def scenario():
+        app = CalibrateApp(_opts(tmp_path, masses="10,20"))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.pause(0.3)
+            await pilot.press("enter", "enter")
+            await pilot.pause(0.2)
+            text = screen_text(app)
+            phase = app.wizard.phase
+            await pilot.press("escape")  # leave the input: the keys drive the wizard
+            await pilot.press("a")  # nothing to accept
+            await pilot.pause(0.1)
+            text2 = screen_text(app)
+            await pilot.press("ctrl+c")  # E-STOP, not quit
+            await pilot.pause(0.1)
+            running = app.is_running
+            text3 = screen_text(app)
+            await pilot.press("ctrl+q")  # quits from anywhere, even an input
+        return phase, text, text2, running, text3
+
+    phase, text, text2, running, text3 = asyncio.run(scenario())
+    assert phase is Phase.SETUP
+    assert "2 distinct load(s): at least 3 are needed" in text
+    assert "cannot accept" in text2
+    assert running and "E-STOP" in text3 and "no outputs" in text3
+    assert not (tmp_path / "hist.csv").exists()
