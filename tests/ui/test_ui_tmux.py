@@ -1,0 +1,55 @@
+"""The real `dyno ui --sim` in a real terminal (tmux, 80x24): keys in, screen out."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+
+
+def _tmux(*args: str) -> str:
+    return subprocess.run(["tmux", *args], capture_output=True, text=True, timeout=20).stdout
+
+
+def _wait_screen(session: str, needle: str, timeout_s: float) -> str:
+    t_end = time.monotonic() + timeout_s
+    screen = ""
+    while time.monotonic() < t_end:
+        screen = _tmux("capture-pane", "-p", "-t", session)
+        if needle in screen:
+            return screen
+        time.sleep(0.3)
+    raise AssertionError(f"{needle!r} not on screen after {timeout_s} s:\n{screen}")
+
+
+def test_ui_tmux_dyno_ui_sim(tmp_path):
+    session = f"dyno-ui-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    cmd = (f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30")
+    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
+                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
+                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    try:
+        screen = _wait_screen(session, "ARMED", 60)
+        assert "E-STOP" in screen and "g GO" in screen and "engine" in screen
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "Start the test?", 10)
+        _tmux("send-keys", "-t", session, "y")
+        screen = _wait_screen(session, "GO: full throttle", 10)
+        _tmux("send-keys", "-t", session, "C-c")  # E-STOP, not quit
+        screen = _wait_screen(session, "cause: estop", 10)
+        assert "ABORTED" in screen and "rig SAFE" in screen
+        assert "EXITED" not in screen  # Ctrl+C did not kill the app
+        _tmux("send-keys", "-t", session, "q")
+        screen = _wait_screen(session, "EXITED=0", 20)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    docs = (run_dir / "documents.jsonl").read_text()
+    assert '"cause": "estop"' in docs and '"type": "stop"' in docs
