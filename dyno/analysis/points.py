@@ -24,6 +24,20 @@ from dyno.protocol import v1
 ADC_RAILS = (0, 0xFFFF)
 
 
+BATCH_S = 0.5  # batch length for standard errors: >> the firing-ripple correlation time (~40 ms)
+
+
+def _n_batches(t0_us: int, t1_us: int) -> int:
+    """Batches of ~0.5 s: a 3 s point gets 6, a 24 s point 48.
+
+    Few batches make the standard error itself uncertain (chi-squared with
+    n-1 degrees of freedom), and a controller that measures *until* the error
+    is small would then stop on lucky underestimates; more batches as the
+    window grows keep that optional-stopping bias small.
+    """
+    return max(6, int((t1_us - t0_us) / 1e6 / BATCH_S))
+
+
 def _speed(streams, channel: int, t0_us: int, t1_us: int) -> dict:
     edges = streams.edge_window(channel, t0_us, t1_us)
     rpm, periods = rpm_by_count(edges)
@@ -31,15 +45,16 @@ def _speed(streams, channel: int, t0_us: int, t1_us: int) -> dict:
     device_rpm = streams.edge_rpm_window(channel, t0_us, t1_us)
     out = {"rpm": rpm, "n_edges": int(edges.size), "std": float(per.std()) if per.size > 1 else math.nan,
            "sem": math.nan, "source": "edge_count"}
-    if per.size >= 12:
-        out["sem"] = batch_mean(per)[1]
+    nb = _n_batches(t0_us, t1_us)
+    if per.size >= 2 * nb:
+        out["sem"] = batch_mean(per, nb)[1]
     if device_rpm.size and np.any(device_rpm > 0):
         # v0 logs: the device's own rpm per edge is the trustworthy period when
         # the 150 Hz poll missed edges; prefer it and keep the count as a check.
         valid = device_rpm[device_rpm > 0]
         out.update(rpm=float(valid.mean()), std=float(valid.std()), source="device_rpm",
                    rpm_by_count=rpm)
-        out["sem"] = batch_mean(valid)[1] if valid.size >= 12 else math.nan
+        out["sem"] = batch_mean(valid, nb)[1] if valid.size >= 2 * nb else math.nan
     return out
 
 
@@ -74,7 +89,8 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     if good.size >= 2:
         point["adc_mean"] = float(good.mean())
         point["adc_std"] = float(good.std())
-        adc_sem = batch_mean(good)[1] if good.size >= 12 else float(good.std() / math.sqrt(good.size))
+        nb = _n_batches(t0_us, t1_us)
+        adc_sem = batch_mean(good, nb)[1] if good.size >= 2 * nb else float(good.std() / math.sqrt(good.size))
     else:
         adc_sem = math.nan
         faults.append({"channel": "adc", "reason": f"{good.size} valid conversions in the window"})

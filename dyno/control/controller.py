@@ -81,7 +81,11 @@ class SafetyLimits:
     overspeed_secondary_rpm: float = 9000.0
     comms_timeout_s: float = 0.5
     thermometer_timeout_s: float = 2.0  # a blind over-temperature monitor is no monitor
+    sensor_check_rpm: float = 300.0  # a shaft turning faster than this must give Hall edges
     check_period_s: float = 0.01
+
+
+_LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
 
 
 class TestController:
@@ -326,6 +330,15 @@ class TestController:
             return ("over_temperature", f"rotor {temp:.1f} C > {lim.rotor_temp_max_c:.0f} C",
                     poller.rotor_temp_time_s)
         rp, rs = poller.rpm(v1.CH_PRIMARY), poller.rpm(v1.CH_SECONDARY)
+        if self.state in _LOADED_STATES:
+            # One Hall sensor silent while the other shows the drivetrain turning
+            # means a dead sensor: without it over-speed cannot be seen. The
+            # secondary may legitimately stall under a heavy brake (clutch slips),
+            # so it only counts at full throttle with the engine well above engagement.
+            if rp == 0.0 and rs > lim.sensor_check_rpm:
+                return "sensor_fault", f"primary Hall silent while the secondary turns at {rs:.0f} rpm", now
+            if rs == 0.0 and rp > lim.overspeed_primary_rpm * 0.75 and self.state is State.WARMUP:
+                return "sensor_fault", f"secondary Hall silent at full throttle (primary {rp:.0f} rpm)", now
         if rp > lim.overspeed_primary_rpm:
             return "overspeed", f"primary {rp:.0f} rpm > {lim.overspeed_primary_rpm:.0f}", now
         if rs > lim.overspeed_secondary_rpm:
