@@ -22,7 +22,6 @@ import csv
 import io
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from datetime import date as _date
 from datetime import datetime, timezone
@@ -32,6 +31,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from dyno.errors import ConfigError, DynoError
+from dyno.fileio import write_atomic
 
 #: Brake-rotor rpm per secondary rpm on the thesis rig (32-tooth secondary
 #: sprocket, 61-tooth brake sprocket).  With a lossless reduction the secondary
@@ -409,31 +409,7 @@ def append_entry(path, entry: CalibrationEntry) -> None:
     csv.writer(buf, lineterminator="\n").writerow(_history_row(entry))
     new = old + buf.getvalue().encode("utf-8")
 
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(new)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    # Persist the rename itself (directory entry); best effort on odd filesystems.
-    try:
-        dfd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dfd)
-    except OSError:
-        pass
-    finally:
-        os.close(dfd)
+    write_atomic(path, new, mode)
 
 
 def load_legacy_cal_values(path, *, date: str = "2019-04-18",

@@ -3,26 +3,9 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
-
-def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write a whole file so that readers see the old or the new content, never half."""
-    path = Path(path)
-    raw = data.encode() if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(raw)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+from dyno.fileio import write_atomic  # noqa: F401  (re-exported for the run log)
 
 
 def write_json_atomic(path: Path, obj) -> None:
