@@ -9,6 +9,8 @@ object (firmware at 0x03, thermometer at 0x5A) and an
 from __future__ import annotations
 
 import math
+from array import array
+from bisect import bisect_left, bisect_right
 
 import numpy as np
 
@@ -71,9 +73,12 @@ class SimActuators:
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq")
+
     def __init__(self, model) -> None:
         self.model = model
-        self.t, self.p_in, self.p_out, self.rp, self.rs, self.tq = ([] for _ in range(6))
+        self.t = array("d")
+        self.p_in, self.p_out, self.rp, self.rs, self.tq = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -85,17 +90,17 @@ class TruthRecorder:
         self.tq.append(tr.torque_secondary_nm)
 
     def window(self, t0_s: float, t1_s: float) -> dict:
-        t = np.asarray(self.t)
-        m = (t >= t0_s) & (t <= t1_s)
-        if not m.any():
+        i, j = bisect_left(self.t, t0_s), bisect_right(self.t, t1_s)
+        if j <= i:
             return {}
-        p_in = float(np.mean(np.asarray(self.p_in)[m]))
-        p_out = float(np.mean(np.asarray(self.p_out)[m]))
+
+        def mean(a):
+            return float(np.mean(np.frombuffer(a, dtype=np.float64)[i:j]))
+
+        p_in, p_out = mean(self.p_in), mean(self.p_out)
         return {"efficiency_true": p_out / p_in if p_in > 0 else math.nan,
-                "rpm_primary_true": float(np.mean(np.asarray(self.rp)[m])),
-                "rpm_secondary_true": float(np.mean(np.asarray(self.rs)[m])),
-                "torque_secondary_true_nm": float(np.mean(np.asarray(self.tq)[m])),
-                "power_in_true_w": p_in, "power_out_true_w": p_out}
+                "rpm_primary_true": mean(self.rp), "rpm_secondary_true": mean(self.rs),
+                "torque_secondary_true_nm": mean(self.tq), "power_in_true_w": p_in, "power_out_true_w": p_out}
 
     def point_hook(self, point: dict, t0_s: float, t1_s: float) -> None:
         point.update(self.window(t0_s, t1_s))
