@@ -53,6 +53,12 @@ def main(argv: list[str] | None = None) -> int:
         mod = importlib.import_module(COMMANDS[name][0])
         parser = argparse.ArgumentParser(prog=f"dyno {name}", description=COMMANDS[name][1])
         mod.add_arguments(parser)
+        if "--rig" not in parser._option_string_actions:
+            # every command takes --rig PATH (the rig description), even where it only
+            # records it, so scripts can pass it uniformly
+            from dyno.rigconfig import add_rig_argument
+
+            add_rig_argument(parser)
         args = parser.parse_args(argv[1:])
         try:
             return int(mod.run(args) or 0)
