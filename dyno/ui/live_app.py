@@ -9,6 +9,7 @@ thing (the belt-model overlay) in a worker thread.
 from __future__ import annotations
 
 import math
+import time
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -21,7 +22,8 @@ from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
 from dyno.ui.session import LiveOptions, LiveSession
 
-REFRESH_HZ = 4.0  # a few Hz: readable, and a refresh is far below the poller's 6.7 ms period
+REFRESH_HZ = 4.0  # values: a few Hz, readable; a text refresh costs ~1 ms
+PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
 PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
 
@@ -59,6 +61,7 @@ class LiveApp(DynoApp):
         self.overlay_requested = False
         self._overlay_points = -1
         self._plotted = None
+        self._plotted_t = 0.0
         self._ideal_rpm = math.nan
 
     # --- layout ------------------------------------------------------------------------------
@@ -148,10 +151,11 @@ class LiveApp(DynoApp):
         w = self.query_one("#plot", PlotextPlot)
         plt = w.plt
         pts = self.session.controller.points
-        key = (self.plot_key, len(pts), self.overlay_tier, len(self.history.t))
-        if key == self._plotted and self.plot_key != "3":
-            return
-        self._plotted = key
+        key = (self.plot_key, len(pts), self.overlay_tier, bool(self.overlay))
+        now = time.monotonic()
+        if key == self._plotted and (self.plot_key == "1" or now - self._plotted_t < PLOT_PERIOD_S):
+            return  # the efficiency plot changes only with points; the others drift slowly
+        self._plotted, self._plotted_t = key, now
         plt.clear_data()
         plt.clear_figure()
         if self.plot_key == "1":

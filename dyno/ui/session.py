@@ -123,6 +123,10 @@ class LiveSession:
         return self.ctx.sim.actuators if self.ctx.sim is not None else self.controller.act
 
     def start(self) -> None:
+        if self.ctx.sim is not None and self.ctx.sim.model.t_s == 0.0:
+            # Rig time starts now, not when assembly began: building took a few hundred ms
+            # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
+            self.t0 = self.loop.time()
         self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
 

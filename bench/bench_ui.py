@@ -1,0 +1,182 @@
+"""UI benchmarks (issue 5): poll-interval jitter with and without the UI, start-up time and peak memory.
+
+Run:  python bench/bench_ui.py [--seconds S] [--quick]
+
+1. Jitter: the simulated rig in real time (speed 1) on an ordinary asyncio loop,
+   poller at the rig's 150 Hz, test GO'd; first bare (poller + controller only),
+   then inside the live screen (Textual headless driver: it renders every frame
+   exactly as on a terminal), then the live screen with the belt-model overlay
+   computing in its worker thread.  Reports the poll-interval statistics, frames,
+   and events lost (0 = no frame missed).
+2. Entry points: each of ``dyno ui --sim``, ``dyno calibrate --sim`` and
+   ``dyno replay RUN`` started in a fresh interpreter, headless, until its first
+   screen is mounted: wall time from process start, peak RSS, and whether the
+   belt-model solver (dyno.model.bvp) was imported.
+
+Prints figures; asserts nothing (the machine is shared and noisy).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def _summary(poller) -> dict:
+    s = poller.timing.summary()
+    return {**s, "events_lost": poller.reader.events_lost, "frames": poller.reader.stats.accepted,
+            "rejected": sum(poller.reader.stats.rejected.values())}
+
+
+async def _bare(seconds: float, out_dir: Path) -> dict:
+    from dyno.ui.session import LiveOptions, LiveSession
+
+    s = LiveSession(LiveOptions(sim=True, speed=1.0, out_dir=out_dir))
+    s.start()
+    t_end = asyncio.get_running_loop().time() + seconds + 15
+    while s.controller.state.value != "armed" and asyncio.get_running_loop().time() < t_end:
+        await asyncio.sleep(0.05)
+    s.poller.timing.intervals_s.clear()  # measure the test, not the engine start
+    s.go()
+    await asyncio.sleep(seconds)
+    out = _summary(s.poller)
+    out["state"] = s.controller.state.value
+    await s.close("bench")
+    return out
+
+
+async def _with_ui(seconds: float, out_dir: Path, overlay: bool) -> dict:
+    from dyno.ui.live_app import LiveApp
+    from dyno.ui.session import LiveOptions
+
+    app = LiveApp(LiveOptions(sim=True, speed=1.0, out_dir=out_dir))
+    async with app.run_test(size=(80, 24)) as pilot:
+        t_end = time.monotonic() + 20
+        while (app.session is None or app.session.controller.state.value != "armed") and time.monotonic() < t_end:
+            await asyncio.sleep(0.05)
+        s = app.session
+        s.poller.timing.intervals_s.clear()
+        await pilot.press("g")
+        await pilot.press("y")
+        if overlay:
+            # points for the overlay to work on: the run has none yet after a few seconds, so hand it some
+            fake = [{"rpm_primary": 3300.0 + 50 * i, "ratio": 1.5 - 0.1 * i, "power_in_w": 5200.0,
+                     "rpm_secondary": 2200.0 + 200 * i, "efficiency": 0.85} for i in range(4)]
+            app.overlay_requested = True
+            app.run_worker(lambda: app._overlay_work(fake), thread=True, exclusive=True, group="overlay")
+        for key in "123" * int(max(1, seconds // 3)):
+            await asyncio.sleep(1.0)
+            await pilot.press(key)  # switch plots: the heaviest redraws
+        out = _summary(s.poller)
+        out["state"] = s.controller.state.value
+        out["overlay_tier"] = app.overlay_tier
+        await pilot.press("space")
+        await pilot.press("q")
+    return out
+
+
+STARTUP_SCRIPT = r"""
+import time, sys, os
+T0 = float(os.environ["BENCH_T0"])
+import asyncio, json, resource
+from pathlib import Path
+which, arg = sys.argv[1], sys.argv[2]
+
+async def main():
+    if which == "ui":
+        from dyno.ui.live_app import LiveApp
+        from dyno.ui.session import LiveOptions
+        app = LiveApp(LiveOptions(sim=True, out_dir=Path(arg)))
+        ready = lambda: app.session is not None
+    elif which == "calibrate":
+        from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
+        app = CalibrateApp(CalibrateOptions(sim=True, history_path=Path(arg)))
+        ready = lambda: app.poller is not None
+    else:
+        from dyno.ui.replay_app import ReplayApp
+        app = ReplayApp([Path(arg)])
+        ready = lambda: app.rs is not None
+    import importlib
+    from dyno.cli import COMMANDS
+    importlib.import_module(COMMANDS[which][0])
+    async with app.run_test(size=(80, 24)) as pilot:
+        while not ready():
+            await asyncio.sleep(0.01)
+        await pilot.pause()  # first screen rendered
+        t_ready = time.time() - T0
+        await pilot.press("ctrl+q" if which != "ui" else "space")
+        if which == "ui":
+            await pilot.press("q")
+    # VmHWM, not ru_maxrss: Linux carries ru_maxrss over from the parent through fork+exec.
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")]
+    rss_mb = int(hwm[0].split()[1]) / 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"startup_s": t_ready, "peak_rss_mb": rss_mb, "bvp_imported": "dyno.model.bvp" in sys.modules}))
+
+asyncio.run(main())
+"""
+
+
+def startup(which: str, arg: str) -> dict:
+    env = {**os.environ, "BENCH_T0": repr(time.time())}
+    proc = subprocess.run([sys.executable, "-c", STARTUP_SCRIPT, which, arg], capture_output=True, text=True,
+                          timeout=180, env=env, cwd=REPO)
+    if proc.returncode:
+        return {"error": proc.stderr[-500:]}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def fmt_timing(name: str, d: dict) -> str:
+    if d.get("polls", 0) == 0:
+        return f"{name:<26} no polls"
+    return (f"{name:<26} polls {d['polls']:6d}  mean {d['mean_ms']:6.3f} ms  std {d['std_ms']:6.3f} ms  "
+            f"p99 {d['p99_ms']:6.2f} ms  max {d['max_ms']:7.2f} ms  frames {d['frames']:6d}  "
+            f"lost {d['events_lost']}  [{d['state']}]")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=8.0, help="real-time seconds per jitter measurement")
+    ap.add_argument("--quick", action="store_true", help="3 s per measurement")
+    a = ap.parse_args()
+    seconds = 3.0 if a.quick else a.seconds
+    os.environ.setdefault("DYNO_MODEL_CACHE", tempfile.mkdtemp(prefix="bench-ui-cache-"))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "
+              f"(150 Hz), {seconds:g} s after GO each:")
+        bare = asyncio.run(_bare(seconds, tmp / "bare"))
+        print(fmt_timing("without UI", bare))
+        ui = asyncio.run(_with_ui(seconds, tmp / "ui", overlay=False))
+        print(fmt_timing("with UI (80x24)", ui))
+        ov = asyncio.run(_with_ui(seconds, tmp / "ov", overlay=True))
+        print(fmt_timing("with UI + model overlay", ov) + f"  overlay: {ov.get('overlay_tier') or 'pending'}")
+
+        from dyno.app import RunOptions, run_test
+        from dyno.control.controller import TestPlan
+
+        run_dir = tmp / "replay_run"
+        run_test(RunOptions(sim=True, out_dir=run_dir, plan=replace(TestPlan(), max_points=3)))
+        print("\nentry points (fresh interpreter, headless, until the first screen is drawn):")
+        for which, arg in (("ui", str(tmp / "st_ui")), ("calibrate", str(tmp / "st_cal.csv")),
+                           ("replay", str(run_dir))):
+            r = startup(which, arg)
+            if "error" in r:
+                print(f"  dyno {which:<10} ERROR {r['error']}")
+                continue
+            print(f"  dyno {which:<10} start-up {r['startup_s']:5.2f} s   peak RSS {r['peak_rss_mb']:6.1f} MB   "
+                  f"belt solver imported: {r['bvp_imported']}")
+
+
+if __name__ == "__main__":
+    main()
