@@ -59,7 +59,9 @@ class SimActuators:
         self._record("safe_state", True)
 
     def tick(self, now_s: float) -> None:
-        if self._release_until_s is not None and now_s >= self._release_until_s:
+        # The release timer runs on the physics' clock (the caller's clock may be
+        # offset from it, e.g. a UI on the real loop driving a paced simulation).
+        if self._release_until_s is not None and self.model.t_s >= self._release_until_s:
             self.model.actuator_dir = STOP
             self._release_until_s = None
             self._record("brake", STOP)
