@@ -18,7 +18,7 @@ from textual_plotext import PlotextPlot
 
 from dyno.ui.common import DynoApp, bottom_lines
 from dyno.ui.replay_model import (ReplaySet, efficiency_series, export_csv, export_png, finite, ideal_rpm_for,
-                                  point_streams, shift_series)
+                                  point_streams, predicted_shift_series, shift_series)
 
 HELP = "↑↓ point  n run  1-3 plot  c cal  e map  x CSV  s PNG  q quit │ ^C E-STOP"
 COLOURS = ("cyan", "magenta", "yellow", "green", "red", "blue")
@@ -95,6 +95,8 @@ class ReplayApp(DynoApp):
             self.exit(2, message=f"dyno replay: error: {exc}")
             return
         self._ideal = ideal_rpm_for(self.rs.runs[0])
+        self._predicted: dict = {}  # run_dir -> predicted shift curve (from the run's tune)
+        self.run_worker(self._predict_work, thread=True, exclusive=False)
         table = self.query_one("#points", DataTable)
         table.add_columns("#", "n_s", "n_e", "T Nm", "eff %", "±")
         self._fill_table()
@@ -154,6 +156,10 @@ class ReplayApp(DynoApp):
                 x, y = shift_series(rr.points)
                 if x:
                     plt.plot(x, y, marker="dot", color=COLOURS[k % len(COLOURS)], label=rr.label[:18])
+            for k, rr in enumerate(self.rs.runs):
+                pred = self._predicted.get(str(rr.run_dir))
+                if pred:
+                    plt.plot(pred[0], pred[1], color=COLOURS[k % len(COLOURS)], label="predicted (tune)")
             if math.isfinite(self._ideal):
                 plt.hline(self._ideal, color="green")
             plt.xlabel("secondary rpm")
@@ -175,6 +181,15 @@ class ReplayApp(DynoApp):
             else:
                 plt.title("no point selected")
         w.refresh()
+
+    def _predict_work(self) -> None:
+        """Predicted shift curves from each run's stored tune, off the UI thread."""
+        for rr in list(self.rs.runs):
+            pred = predicted_shift_series(rr.run_dir)
+            if pred:
+                self._predicted[str(rr.run_dir)] = pred
+        if self._predicted:
+            self.call_from_thread(self._draw)
 
     # --- keys ------------------------------------------------------------------------------------
     def action_plot(self, key: str) -> None:

@@ -148,3 +148,25 @@ def ideal_rpm_for(rr: ReplayRun) -> float:
         return ideal_engine_rpm(load_engine_map(src)) if src else math.nan
     except Exception:  # a map that cannot be read only loses the reference line
         return math.nan
+
+
+def predicted_shift_series(run_dir, n_points: int = 30):
+    """The tune's predicted shift curve (closed-form belt thrusts) for a run that stored its tune.
+
+    Returns ``(secondary_rpm, engine_rpm)`` lists, or ``None`` when the run has no
+    ``tune.toml`` or the prediction fails (the viewer then just shows the measurement).
+    """
+    run_dir = Path(run_dir)
+    tune_path, map_path = run_dir / "tune.toml", run_dir / "engine_map.csv"
+    if not (tune_path.exists() and map_path.exists()):
+        return None
+    from dyno.errors import DynoError
+    from dyno.tuning.shift_curve import load_engine_map, predict_shift_curve
+    from dyno.tuning.tune import load_tune
+
+    try:
+        curve = predict_shift_curve(load_tune(tune_path), load_engine_map(map_path), n_points=n_points)
+    except (DynoError, ValueError, ArithmeticError):
+        return None
+    a = curve.arrays()
+    return a["secondary_rpm"].tolist(), a["engine_rpm"].tolist()
