@@ -55,7 +55,7 @@ _TABLE_STEP_RPM = 0.25
 
 
 def load_engine_map(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read an engine map CSV: ``#`` comments, header ``rpm,torque_nm``, rows.
+    """Read an engine map CSV with the host's own loader (one parser, one set of checks).
 
     Returns
     -------
@@ -67,50 +67,10 @@ def load_engine_map(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     ConfigError
         Naming the file and the offending line/field.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(path, "file", f"cannot read engine map ({exc.strerror})") from None
-    rpm: list[float] = []
-    torque: list[float] = []
-    header_seen = False
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if not header_seen:
-            header_seen = True
-            if [c.lower() for c in cells[:2]] == ["rpm", "torque_nm"]:
-                continue
-            if len(cells) >= 2 and not _is_number(cells[0]):
-                raise ConfigError(path, f"line {lineno}", "header must be 'rpm,torque_nm'")
-        if len(cells) != 2:
-            raise ConfigError(path, f"line {lineno}", "expected two fields 'rpm,torque_nm'")
-        try:
-            n, t = float(cells[0]), float(cells[1])
-        except ValueError:
-            raise ConfigError(path, f"line {lineno}", "rpm and torque_nm must be numbers") from None
-        if not (math.isfinite(n) and math.isfinite(t)):
-            raise ConfigError(path, f"line {lineno}", "rpm and torque_nm must be finite")
-        if rpm and n <= rpm[-1]:
-            raise ConfigError(path, f"line {lineno} rpm", "rpm must be strictly increasing")
-        if n <= 0:
-            raise ConfigError(path, f"line {lineno} rpm", "rpm must be > 0")
-        rpm.append(n)
-        torque.append(t)
-    if len(rpm) < 2:
-        raise ConfigError(path, "rows", "at least two 'rpm,torque_nm' rows are required")
-    return np.asarray(rpm), np.asarray(torque)
+    from dyno.analysis.engine_map import load_engine_map as load
 
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True
+    m = load(path)
+    return np.asarray(m.rpm, dtype=float), np.asarray(m.torque_nm_knots, dtype=float)
 
 
 class EngineMap:

@@ -30,12 +30,11 @@ Pure functions; :func:`load_engine_map` is the only file reader.
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -47,7 +46,6 @@ from dyno.model.params import BeltParams, DriveParams, ModelParams, OperatingPoi
 from dyno.tuning import actuators as act
 from dyno.tuning.tune import Tune
 
-HP_TO_W = 745.699872
 
 
 # ------------------------------------------------------------- engine map
@@ -83,56 +81,28 @@ class EngineMap:
         return self.speed_rpm[-1]
 
 
-def engine_map_from_rows(header: list[str], rows: list[list[str]], name: str = "<engine map>") -> EngineMap:
-    """Build an engine map from CSV rows.
-
-    Accepted columns: ``rpm`` plus one of ``torque_nm``, ``power_kw``,
-    ``hp``/``power_hp``.  A header-less two-column file is read as the
-    thesis's ``rpm, hp``.
-    """
-    cols = [h.strip().lower() for h in header]
-    if "rpm" not in cols:
-        raise ConfigError(name, "rpm", "a column named rpm")
-    i_rpm = cols.index("rpm")
-    conv: Callable[[float, float], float]
-    for key, fn in (("torque_nm", lambda n, v: v),
-                    ("power_kw", lambda n, v: v * 1e3 / (n * math.pi / 30)),
-                    ("hp", lambda n, v: v * HP_TO_W / (n * math.pi / 30)),
-                    ("power_hp", lambda n, v: v * HP_TO_W / (n * math.pi / 30))):
-        if key in cols:
-            i_val, conv = cols.index(key), fn
-            break
-    else:
-        raise ConfigError(name, "torque_nm", "a torque_nm, power_kw or hp column")
-    pts = []
-    for k, row in enumerate(rows):
-        try:
-            n, v = float(row[i_rpm]), float(row[i_val])
-        except (ValueError, IndexError):
-            raise ConfigError(name, f"row {k + 1}", "numbers in the rpm and torque/power columns") from None
-        if n <= 0:
-            raise ConfigError(name, f"row {k + 1}", "a positive rpm")
-        pts.append((n, conv(n, v)))
-    pts.sort()
-    return EngineMap(tuple(p[0] for p in pts), tuple(p[1] for p in pts), name)
-
-
 def load_engine_map(path: str | Path) -> EngineMap:
-    """Read an engine-map CSV (``#`` comment lines allowed)."""
+    """Read an engine-map CSV with the host's loaders (``dyno.analysis.engine_map``).
+
+    A headed file (``rpm,torque_nm`` / ``rpm,power_hp`` / ``rpm,power_kw``) or the
+    thesis's header-less ``rpm,hp`` file.  Here the map is *held flat* outside its
+    range (a shift-curve sweep brackets roots beyond it), unlike the host's
+    efficiency computation, which refuses to extrapolate.
+    """
+    from dyno.analysis import engine_map as em
+
     path = Path(path)
     try:
-        lines = [ln for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip() and not ln.startswith("#")]
+        first = next((ln for ln in path.read_text(encoding="utf-8").splitlines()
+                      if ln.strip() and not ln.startswith("#")), "")
     except OSError as exc:
         raise ConfigError(path, "<file>", f"a readable engine map ({exc.strerror})") from None
-    rows = list(csv.reader(lines))
-    if not rows:
-        raise ConfigError(path, "<rows>", "at least two rows")
     try:
-        float(rows[0][0])
-        header = ["rpm", "hp"]  # the thesis's header-less rpm,hp file
+        float(first.split(",")[0])
+        m = em.load_legacy_engine_map(path)  # header-less: the thesis's rpm,hp
     except ValueError:
-        header, rows = rows[0], rows[1:]
-    return engine_map_from_rows(header, rows, str(path))
+        m = em.load_engine_map(path)
+    return EngineMap(tuple(float(x) for x in m.rpm), tuple(float(x) for x in m.torque_nm_knots), str(path))
 
 
 # ------------------------------------------------------------ belt params

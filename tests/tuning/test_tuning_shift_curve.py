@@ -13,7 +13,7 @@ import pytest
 from dyno.model.closed_form import closed_form_point
 from dyno.model.params import OperatingPoint
 from dyno.tuning import actuators as act
-from dyno.tuning.shift_curve import (EngineMap, compare_to_measured, engine_map_from_rows, key_speeds_rpm,
+from dyno.tuning.shift_curve import (EngineMap, compare_to_measured, key_speeds_rpm,
                                      load_engine_map, model_params_for, predict_shift_curve, sensitivities)
 from dyno.tuning.tune import load_tune
 
@@ -87,8 +87,9 @@ def test_sensitivity_signs_and_units():
 
 
 def test_engine_map_formats(tmp_path):
-    m = engine_map_from_rows(["rpm", "hp"], [["2000", "5"], ["3000", "8"]])
-    assert m.torque_at_nm(2000) == pytest.approx(5 * 745.699872 / (2000 * np.pi / 30))
+    p = tmp_path / "hp.csv"
+    p.write_text("rpm,power_hp\n2000,5\n3000,8\n")
+    assert load_engine_map(p).torque_at_nm(2000) == pytest.approx(5 * 745.699872 / (2000 * np.pi / 30), rel=1e-4)
     p = tmp_path / "thesis.csv"
     p.write_text("1548.76,3.40\n1655.04,3.95\n1752.96,4.31\n")
     assert load_engine_map(p).speed_rpm[0] == 1548.76
