@@ -37,6 +37,15 @@ closed-form belt thrusts in the balance; ``cvt_flyweight_radius_offset_m``;
 ``cvt_secondary_friction_torque_nm``: shaft drag between the helix and the
 torque gauge, added to the load) are off by default.
 
+Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
+CVT loss into the full belt model's share, from a ratio x torque table solved
+once per machine into the belt model's overlay cache (:mod:`dyno.sim.belt_table`,
+~20 s from an empty cache), and a documented parasitic remainder (the simple
+loss model minus the belt's share at 18 N m: bearings, clutch, sheave friction,
+hysteresis), so the overall efficiency stays in the thesis's measured
+80-92 %; "loss_model" is the simple loss model alone (see :mod:`dyno.sim.cvt`).
+The truth's efficiency is always the model's own power balance.
+
 The torque gauge sits on the brake shaft between the gear and the rotor, so
 it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
 ``T_s / g`` only in steady state (in a transient the secondary pulley's own
@@ -181,6 +190,11 @@ class RigParams:
     cvt_loss_frac_low_ratio: float = 0.02
     cvt_ratio_best_eff: float = 1.35
     cvt_bending_drag_nm: float = 0.25
+    # Belt efficiency: "loss_model" = the simple loss model above; "belt_model" =
+    # the full belt model's share (dyno.sim.belt_table, built once per machine in
+    # the overlay cache) + the loss model's parasitic remainder (see dyno.sim.cvt).
+    belt_efficiency_source: str = "belt_model"
+    belt_table_cache_dir: str | None = None      # None = $DYNO_MODEL_CACHE or ~/.cache/dyno/model
     # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
     # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
     # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
@@ -310,7 +324,8 @@ class RigModel:
                        loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
                        bending_drag_nm=p.cvt_bending_drag_nm,
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
-                       flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m)
+                       flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
+                       belt_table=_belt_table_for(p))
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
                            master_cylinder_bore_mm=p.master_cylinder_bore_mm,
@@ -500,9 +515,9 @@ class RigModel:
         self._x = cvt.shift(self._x, rpm_e, self._t_s, h, self._t_p)
         i = cvt.ratio_of_travel(self._x)
         self._ratio_geo = i
-        eta_m = 1.0 - cvt.loss_frac(i)
+        eps, self._slip = cvt.losses(i, self._t_p)
+        eta_m = 1.0 - eps
         t_d = cvt.drag_nm(i)
-        self._slip = cvt.creep_slip(self._t_p)
         k = (1.0 - self._slip) / i
         cap = cvt.clutch_capacity_nm_at(rpm_e)
 
@@ -720,6 +735,17 @@ class RigModel:
             brake_torque_capacity_nm=self._t_brake_cap,
             clutch_locked=self._locked,
         )
+
+
+def _belt_table_for(p: RigParams):
+    """The belt-model efficiency table when ``belt_efficiency_source == "belt_model"``."""
+    if p.belt_efficiency_source == "loss_model":
+        return None
+    if p.belt_efficiency_source != "belt_model":
+        raise ValueError(f"belt_efficiency_source: 'belt_model' or 'loss_model', got {p.belt_efficiency_source!r}")
+    from dyno.sim.belt_table import belt_table
+
+    return belt_table(p.belt_table_cache_dir)
 
 
 def _after_drag(torque_nm: float, drag_nm: float) -> float:

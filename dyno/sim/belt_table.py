@@ -1,0 +1,278 @@
+"""Belt-model efficiency table for the simulated CVT.
+
+The full belt model (:mod:`dyno.model`, thesis Table 6.1 belt) is solved once
+on a small grid of geometric ratios x primary torques (3400 rpm, 100 N slack
+tension), by continuation: a cold solve at the Table 6.1 point (ratio 1,
+18 N m), warm starts outward in ratio at the reference torque, then each other
+torque warm-started from the same ratio.  Every result is stored in the
+overlay's disk cache (:func:`dyno.model.overlay.point_key`, same JSON entries
+as :func:`~dyno.model.overlay.predict_overlay` writes), so the table is
+computed once per machine and read back in milliseconds afterwards.
+
+A cell whose solve raises :class:`~dyno.errors.DidNotConverge` (or is cached as
+failed) is marked failed and logged; the simulated CVT uses its simple loss
+model in that cell (``BeltTable.ok`` is False there).
+
+Lookup: PCHIP over ratio per torque, sampled on a dense ratio grid at build
+time; at run time a bilinear lookup in that dense grid (a few microseconds,
+called every 4 ms physics cell), clamped to the table's range.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: Default grid: the thesis's solved ratio range (Fig. 6.20: 0.72 overdrive .. 1.74 low) and two
+#: torques.  The sim's CVT reaches 2.4; there the lookup is clamped to the 1.75 values: with a fixed
+#: 100 N slack tension the belt model approaches gross slip beyond ~2 (creep 5-7 % at 2.2-2.4 and
+#: 18 N m, measured), while the rig's helix raises the clamp with the torque.
+DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75)
+DEFAULT_TORQUES_NM = (8.0, 18.0)
+REFERENCE_TORQUE_NM = 18.0
+TABLE_RPM = 3400.0
+SLACK_TENSION_N = 100.0
+_DENSE = 200
+
+
+@dataclass
+class BeltTable:
+    """Torque and speed efficiency of the belt model on a ratio x torque grid."""
+
+    ratios: np.ndarray                 # ascending
+    torques_nm: np.ndarray             # ascending
+    eta_torque: np.ndarray             # (n_ratio, n_torque); NaN where failed
+    eta_speed: np.ndarray
+    ok: np.ndarray                     # bool, converged cells
+    errors: dict = field(default_factory=dict)   # (ratio, torque) -> message
+    build_s: float = 0.0
+    solved: int = 0                    # cells solved now (not from the cache)
+    _dense: tuple | None = None
+
+    def __post_init__(self):
+        self._prepare()
+
+    def _prepare(self):
+        """Dense PCHIP samples over ratio per torque (failed cells excluded)."""
+        from scipy.interpolate import PchipInterpolator
+
+        r = self.ratios
+        grid = np.linspace(r[0], r[-1], _DENSE + 1)
+        et = np.full((grid.size, self.torques_nm.size), np.nan)
+        es = np.full_like(et, np.nan)
+        okd = np.zeros(et.shape, dtype=bool)
+        for j in range(self.torques_nm.size):
+            m = self.ok[:, j]
+            if m.sum() >= 2:
+                et[:, j] = PchipInterpolator(r[m], self.eta_torque[m, j], extrapolate=False)(grid)
+                es[:, j] = PchipInterpolator(r[m], self.eta_speed[m, j], extrapolate=False)(grid)
+            elif m.sum() == 1:
+                k = int(np.argmax(m))
+                near = np.isclose(grid, r[k])
+                et[near, j] = self.eta_torque[k, j]
+                es[near, j] = self.eta_speed[k, j]
+            # a grid ratio between two good cells with a failed cell between them
+            # is not trusted: it lies in a failed cell's neighbourhood
+            for k in range(r.size):
+                lo = r[k - 1] if k > 0 else r[0]
+                hi = r[k + 1] if k + 1 < r.size else r[-1]
+                if not m[k]:
+                    et[(grid > lo) & (grid < hi), j] = np.nan
+                    es[(grid > lo) & (grid < hi), j] = np.nan
+            okd[:, j] = np.isfinite(et[:, j]) & np.isfinite(es[:, j])
+        self._dense = (float(grid[0]), float(grid[-1]), grid.size - 1, et.tolist(), es.tolist(), okd.tolist())
+        span = float(grid[-1] - grid[0])
+        self._inv_dr = (grid.size - 1) / span if span > 0.0 else 0.0
+        self._tq = [float(t) for t in self.torques_nm]
+
+    def lookup(self, ratio: float, torque_nm: float):
+        """``(eta_torque, eta_speed)`` at a point, or None where the table has no answer.
+
+        Ratio and torque are clamped to the table's range (no extrapolation).
+        Pure Python (called every physics cell).
+        """
+        r0, r1, n, et, es, okd = self._dense
+        tq = self._tq
+        u = ((r0 if ratio < r0 else (r1 if ratio > r1 else ratio)) - r0) * self._inv_dr
+        i = int(u)
+        if i >= n:
+            i = n - 1
+        fr = u - i
+        nt = len(tq)
+        if nt == 1:
+            if not (okd[i][0] and okd[i + 1][0]):
+                return None
+            a, b = et[i][0], es[i][0]
+            return a + fr * (et[i + 1][0] - a), b + fr * (es[i + 1][0] - b)
+        t = tq[0] if torque_nm < tq[0] else (tq[-1] if torque_nm > tq[-1] else torque_nm)
+        j = 0
+        while j < nt - 2 and t > tq[j + 1]:
+            j += 1
+        ft = (t - tq[j]) / (tq[j + 1] - tq[j])
+        ri, rn = okd[i], okd[i + 1]
+        if not (ri[j] and ri[j + 1] and rn[j] and rn[j + 1]):
+            return None
+        out = []
+        for tab in (et, es):
+            ti, tn = tab[i], tab[i + 1]
+            lo = ti[j] + fr * (tn[j] - ti[j])
+            hi = ti[j + 1] + fr * (tn[j + 1] - ti[j + 1])
+            out.append(lo + ft * (hi - lo))
+        return out[0], out[1]
+
+
+def _cache_entry(cache: Path, key: str):
+    path = cache / f"{key}.json"
+    if path.is_file():
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError):
+            return None
+    return None
+
+
+def _store(cache: Path, key: str, res: dict) -> None:
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = cache / f"{key}.json.tmp"
+        tmp.write_text(json.dumps(res, default=float))
+        tmp.replace(cache / f"{key}.json")
+    except OSError:
+        pass  # a read-only cache must not break the sim
+
+
+def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, cache_dir=None,
+                     rpm: float = TABLE_RPM, slack_tension_n: float = SLACK_TENSION_N,
+                     time_limit_s: float = 30.0, solve=None) -> BeltTable:
+    """Build (or read back from the overlay cache) the belt-model efficiency table.
+
+    ``solve(op, guess)`` replaces :func:`dyno.model.solution.solve_point` (tests).
+    """
+    from dyno.errors import ConfigError, DidNotConverge
+    from dyno.model.overlay import default_cache_dir, point_key
+    from dyno.model.params import TABLE_6_1, OperatingPoint
+
+    t0 = time.perf_counter()
+    params = TABLE_6_1
+    variant, slip, tol = "corrected", 1e-4, 1e-3
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    ratios = np.array(sorted(float(r) for r in ratios))
+    torques = np.array(sorted(float(t) for t in torques_nm))
+    if solve is None:
+        from dyno.model.solution import solve_point
+
+        def solve(op, guess):
+            return solve_point(params, op, variant=variant, slip_threshold_m_s=slip, tol=tol, guess=guess,
+                               time_limit_s=time_limit_s)
+
+    def op_of(r, t):
+        return OperatingPoint(ratio=float(r), primary_speed_rpm=rpm, primary_torque_nm=float(t),
+                              slack_tension_n=slack_tension_n)
+
+    results: dict = {}
+    solved = 0
+    for r in ratios:
+        for t in torques:
+            e = _cache_entry(cache, point_key(params, op_of(r, t), "full", variant, slip, tol))
+            if e is not None:
+                results[(r, t)] = e
+
+    # Continuation order: reference torque outward from ratio 1 (Table 6.1), then the others.
+    t_ref = torques[int(np.argmin(np.abs(torques - REFERENCE_TORQUE_NM)))]
+    k1 = int(np.argmin(np.abs(ratios - 1.0)))
+    order = [(k, t_ref) for k in range(k1, ratios.size)] + [(k, t_ref) for k in range(k1 - 1, -1, -1)]
+    order += [(k, t) for k in list(range(k1, ratios.size)) + list(range(k1 - 1, -1, -1)) for t in torques if t != t_ref]
+    sols: dict = {}
+    for k, t in order:
+        r = ratios[k]
+        if (r, t) in results:
+            continue
+        op = op_of(r, t)
+        # warm start: the nearest solved ratio at this torque, else this ratio at t_ref, else cold
+        same_t = [(abs(rr - r), rr) for (rr, tt) in sols if tt == t]
+        nearest = sols[(min(same_t)[1], t)] if same_t else None
+        cands = [c for c in (nearest, sols.get((r, t_ref))) if c is not None]
+        cands = [c for m, c in enumerate(cands) if all(c is not d for d in cands[:m])] + [None]
+        sol, err = None, None
+        for guess in cands:   # a far neighbour can be a worse start than none: cold last
+            try:
+                sol = solve(op, guess)
+                break
+            except (DidNotConverge, ConfigError) as exc:   # infeasible input: a failed cell too
+                err = exc
+        solved += 1
+        if sol is None:
+            res = {"converged": False, "tier": "full", "error": str(err)}
+        else:
+            s = sol.summary
+            sols[(r, t)] = sol
+            res = {"converged": True, "tier": "full", "efficiency": s["efficiency"],
+                   "axial_force_n": s.get("axial_force_n"), "span_tension_n": s.get("span_tension_n"),
+                   "residual_max": s.get("residual_max"), "slip_threshold_m_s": s.get("slip_threshold_m_s"),
+                   "solve_s": s.get("solve_s")}
+        res.update(ratio=op.ratio, primary_speed_rpm=op.primary_speed_rpm, primary_torque_nm=op.primary_torque_nm,
+                   variant=variant)
+        _store(cache, point_key(params, op, "full", variant, slip, tol), res)
+        results[(r, t)] = res
+
+    et = np.full((ratios.size, torques.size), np.nan)
+    es = np.full_like(et, np.nan)
+    ok = np.zeros(et.shape, dtype=bool)
+    errors = {}
+    for a, r in enumerate(ratios):
+        for b, t in enumerate(torques):
+            res = results[(r, t)]
+            eff = res.get("efficiency") or {}
+            good = bool(res.get("converged")) and all(
+                isinstance(eff.get(q), (int, float)) and math.isfinite(eff[q]) and 0.0 < eff[q] <= 1.0
+                for q in ("torque", "speed"))
+            if good:
+                et[a, b], es[a, b], ok[a, b] = eff["torque"], eff["speed"], True
+            else:
+                errors[(float(r), float(t))] = res.get("error", f"unphysical efficiency {eff!r}")
+                log.warning("belt table: ratio %.3f, %.1f N m did not converge, the loss model is used there: %s",
+                            r, t, errors[(float(r), float(t))])
+    return BeltTable(ratios=ratios, torques_nm=torques, eta_torque=et, eta_speed=es, ok=ok, errors=errors,
+                     build_s=time.perf_counter() - t0, solved=solved)
+
+
+_TABLES: dict = {}
+
+
+def belt_table(cache_dir=None) -> BeltTable:
+    """The default table, built once per process (and once per machine via the cache).
+
+    Concurrent processes (e.g. pytest-xdist workers) serialise on a lock file in
+    the cache directory: the first builds, the others then read its entries.
+    """
+    from dyno.model.overlay import default_cache_dir
+
+    key = str(cache_dir)
+    if key not in _TABLES:
+        cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        lock = None
+        try:
+            import fcntl
+
+            cache.mkdir(parents=True, exist_ok=True)
+            lock = open(cache / "belt_table.lock", "w")
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        except (ImportError, OSError):
+            lock = None  # no locking available: build anyway (entries are written atomically)
+        try:
+            _TABLES[key] = build_belt_table(cache_dir=cache)
+        finally:
+            if lock is not None:
+                lock.close()
+        t = _TABLES[key]
+        log.info("belt table: %d x %d cells, %d solved now, %d failed, %.2f s", t.ratios.size, t.torques_nm.size,
+                 t.solved, int((~t.ok).sum()), t.build_s)
+    return _TABLES[key]
