@@ -167,9 +167,10 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
     ratios = np.array(sorted(float(r) for r in ratios))
     torques = np.array(sorted(float(t) for t in torques_nm))
     if solve is None:
-        from dyno.model.solution import solve_point
-
         def solve(op, guess):
+            # imported only on a cache miss: with a warm cache the sim never loads the solver
+            from dyno.model.solution import solve_point
+
             return solve_point(params, op, variant=variant, slip_threshold_m_s=slip, tol=tol, guess=guess,
                                time_limit_s=time_limit_s)
 

@@ -33,7 +33,7 @@ def test_engine_map_clamps_outside_its_range():
 
 
 @pytest.mark.parametrize("text, field", [
-    ("rpm,torque_nm\n1500,15\n1400,16\n", "line 3 rpm"),
+    ("rpm,torque_nm\n1500,15\n1400,16\n", "line 3, field rpm"),
     ("rpm,torque_nm\n1500,abc\n", "line 2"),
     ("rpm,torque_nm\n1500,15\n", "rows"),
 ])
