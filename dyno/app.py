@@ -42,6 +42,9 @@ class RunOptions:
     max_sim_s: float = 3600.0  # a run longer than this is stopped (safety net for sims)
     setup: object = None  # callable(ctx) after assembly, before running (tests inject faults)
     tune_path: Path | None = None  # the CVT tune on the rig (stored with the run); sim: its CVT's tune
+    drills: list = field(default_factory=list)  # dyno.drills.Drill, armed from the first frame (sim only)
+    handle_signals: bool = False  # SIGINT/SIGTERM/SIGHUP -> safe state + abort record (the CLI sets it)
+    finish_release: bool = True  # after the test, service the outputs until the brake release stroke ends
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -69,7 +72,8 @@ def load_inputs(opts: RunOptions):
 def limits_from_config(rig_cfg) -> SafetyLimits:
     lim = rig_cfg.limits
     return SafetyLimits(rotor_temp_max_c=lim.rotor_temp_max_c, overspeed_primary_rpm=lim.overspeed_primary_rpm,
-                        overspeed_secondary_rpm=lim.overspeed_secondary_rpm, comms_timeout_s=lim.comms_timeout_s)
+                        overspeed_secondary_rpm=lim.overspeed_secondary_rpm, comms_timeout_s=lim.comms_timeout_s,
+                        check_period_s=SafetyLimits.check_period_s)
 
 
 @dataclass
@@ -82,6 +86,10 @@ class RunContext:
     sim: object = None
     thermometer: object = None
     audit: dict = field(default_factory=lambda: {"corrupted_accepted": 0})
+    watchdog: object = None
+    drills: object = None  # dyno.drills.DrillRunner
+    rig_cfg: object = None
+    signal_received: int | None = None
 
 
 def build(opts: RunOptions, now_s) -> RunContext:
@@ -149,7 +157,11 @@ def build(opts: RunOptions, now_s) -> RunContext:
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
-    ctx = RunContext(poller, controller, writer, sim, thermometer)
+    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg)
+    writer.on_error = lambda exc: controller.abort(
+        "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
+        "safe state; what was recorded before stays readable")
+    _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -160,6 +172,56 @@ def build(opts: RunOptions, now_s) -> RunContext:
 
         reader.session.frame_listeners.append(audit)
     return ctx
+
+
+def _attach_watchdog(ctx: RunContext, timeout_s: float, now_s) -> None:
+    """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
+
+    On a :class:`~dyno.clock.VirtualTimeLoop` it is a background ticker (the loop's
+    stand-in for an OS thread: it runs while a callback blocks the loop); on a real
+    loop it is a daemon thread.  The controller's safety heartbeat feeds it.
+    """
+    from dyno.hw.safety import Watchdog
+
+    controller = ctx.controller
+    trip: dict = {}
+
+    def on_trip(silent_s: float) -> None:
+        trip["silent_s"] = silent_s
+        trip["t_s"] = wd.clock.now()
+
+    class _Clock:  # until start_watchdog() gives it the loop's clock
+        now = staticmethod(now_s)
+
+    wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
+    ctx.watchdog = wd
+
+    def beat() -> None:
+        if wd.tripped and trip and not trip.get("reported"):
+            trip["reported"] = True
+            controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
+                             f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
+        wd.kick()
+
+    controller.heartbeat_hooks.append(beat)
+    # Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on).
+    ctx.poller.listeners.append(lambda events, now_s: wd.kick())
+
+
+def start_watchdog(ctx: RunContext, loop) -> object:
+    """Start ``ctx.watchdog`` beside ``loop``; returns a stop() callable."""
+    from dyno.clock import LoopClock, VirtualTimeLoop
+
+    wd = ctx.watchdog
+    # The loop's liveness is measured on the loop's own clock (the controller's time base):
+    # host time on a real loop (the UI paces the physics on a scaled clock), virtual in simulations.
+    wd.clock = LoopClock(loop)
+    wd.kick()
+    if isinstance(loop, VirtualTimeLoop):
+        entry = loop.add_ticker(wd.check, wd.period_s)
+        return lambda: loop.remove_ticker(entry)
+    wd.start_thread()
+    return wd.stop_thread
 
 
 def _thermometer(bus, address: int):
@@ -189,7 +251,10 @@ async def run_test_async(opts: RunOptions) -> dict:
     ctx = build(opts, loop.time)
     if opts.setup:
         opts.setup(ctx)
-    poll_task = asyncio.create_task(ctx.poller.run())
+    stop_watchdog = start_watchdog(ctx, loop)
+    arm_drills(ctx, opts.drills, loop)
+    restore_signals = _install_signal_handlers(ctx, loop) if opts.handle_signals else (lambda: None)
+    poll_task = asyncio.create_task(ctx.poller.run(), name="poller")
     status = "fail"
     try:
         try:
@@ -198,12 +263,91 @@ async def run_test_async(opts: RunOptions) -> dict:
             ctx.controller.abort("timeout", f"run exceeded {opts.max_sim_s:.0f} s")
             state = ctx.controller.state
         status = "success" if state.value == "done" else "abort"
+        if opts.finish_release:
+            await _finish_release(ctx)
     finally:
+        if ctx.drills is not None:
+            ctx.drills.cancel()
         ctx.poller.stop()
         await asyncio.gather(poll_task, return_exceptions=True)
+        stop_watchdog()
+        restore_signals()
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
                          events_lost=ctx.poller.reader.events_lost)
     return summarize(ctx)
+
+
+def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
+    """Schedule ``drills`` (dyno.drills.Drill) from the run's first accepted frame."""
+    if not drills:
+        return
+    if ctx.sim is None:
+        from dyno.errors import ConfigError
+
+        raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
+    from dyno.drills import DrillRunner
+
+    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
+    poller = ctx.poller
+
+    def first(events, now_s: float) -> None:
+        if poller.last_valid_frame_s is not None:
+            ctx.drills.on_first_frame(poller.last_valid_frame_s)
+            poller.listeners.remove(first)
+
+    poller.listeners.append(first)
+
+
+def _install_signal_handlers(ctx: RunContext, loop):
+    """SIGINT/SIGTERM/SIGHUP: safe state first, then an abort record; the run ends as aborted.
+
+    ``signal.signal`` (not the loop's handler) so that a real rig's outputs are safed
+    even while the loop is busy; the bookkeeping then runs on the loop.  On the
+    simulated rig the physics must not be re-entered from a handler, so the whole
+    abort runs on the loop at once (same simulated instant).
+    """
+    import signal
+
+    sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    old = {}
+
+    def on_loop(signum: int) -> None:
+        name = signal.Signals(signum).name
+        ctx.controller.abort("signal", f"{name} received: safe state, run closed")
+
+    def handler(signum, frame) -> None:
+        if ctx.signal_received is None:
+            ctx.signal_received = signum
+        if ctx.sim is None:
+            ctx.controller.act.safe_state()  # at once, whatever the loop is doing
+        loop.call_soon_threadsafe(on_loop, signum)
+
+    for sig in sigs:
+        try:
+            old[sig] = signal.signal(sig, handler)
+        except (ValueError, OSError):  # not the main thread
+            pass
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore
+
+
+async def _finish_release(ctx: RunContext) -> None:
+    """Keep servicing the outputs until the brake's release stroke has ended (sim and rig)."""
+    act = ctx.controller.act
+    stroke_s = float(getattr(act, "brake_full_stroke_s", 8.0))
+    loop = asyncio.get_running_loop()
+    end = loop.time() + stroke_s + 0.5
+    while loop.time() < end:
+        if ctx.sim is not None and ctx.sim.model.actuator_dir == 0 and not ctx.sim.actuators.releasing:
+            break
+        await asyncio.sleep(0.1)
+        act.tick(loop.time())
+        if ctx.watchdog is not None:
+            ctx.watchdog.kick()  # the loop is alive and servicing the release
 
 
 def summarize(ctx: RunContext) -> dict:
@@ -213,17 +357,53 @@ def summarize(ctx: RunContext) -> dict:
               "rejected_total": sum(st.rejected.values()),
               "transport_errors": dict(sorted(st.transport_errors.items())),
               "device_resets": st.device_resets, "resyncs": st.resyncs}
+    aborts = [dict(a) for a in ctx.controller.aborts]
     out = {"run_dir": str(ctx.writer.run_dir), "state": ctx.controller.state.value,
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
-           "frames": frames, "events_lost": reader.events_lost, "aborts": ctx.controller.aborts}
+           "discarded": list(ctx.controller.discards),
+           "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    outputs = rig_outputs(ctx)
+    out["outputs"] = outputs
+    out["rig_safe"] = bool(outputs.get("safe"))
+    if ctx.writer.error is not None:
+        out["log_error"] = f"{ctx.writer.error.strerror or ctx.writer.error}"
+    if ctx.signal_received is not None:
+        out["signal"] = int(ctx.signal_received)
     if ctx.sim is not None:
         frames["corrupted_accepted"] = ctx.audit["corrupted_accepted"]
         out["faults_injected"] = dict(ctx.sim.bus.injected)
         out["sim_time_s"] = ctx.sim.model.t_s
-    return out
+        if ctx.drills is not None:
+            out["drills"] = ctx.drills.fired
+        from dyno.drills import true_latencies
+
+        true_latencies(ctx, aborts)
+    return _finite(out)
 
 
-POINT_KEYS = ("index", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",
+def rig_outputs(ctx: RunContext) -> dict:
+    """The outputs' final states, by name, and whether together they are the safe state."""
+    act = ctx.controller.act
+    report = getattr(act, "outputs", None)
+    if callable(report):
+        return dict(report())
+    if ctx.sim is not None:
+        return ctx.sim.actuators.output_states()
+    return {}
+
+
+def _finite(obj):
+    """JSON-safe: NaN and infinities become None (null) everywhere in a result."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",
               "efficiency", "efficiency_sem", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
               "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults")

@@ -13,7 +13,53 @@ from __future__ import annotations
 
 import asyncio
 import selectors
+import threading
 import time
+
+
+# --- clocks for code that is not on a loop (hardware adapters, the watchdog thread) ----------
+# Everything time-based on the rig (brake steps, relay settle, release stroke, reset pulse,
+# watchdog) reads ``clock.now()`` and waits with ``clock.sleep()``, so tests swap in
+# :class:`FakeClock` and an 8 s release stroke takes no time.  They live here, below
+# every layer that uses them (transports and hw alike).
+
+class MonotonicClock:
+    """Real time: ``time.monotonic`` (never jumps with NTP on the Pi)."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class FakeClock:
+    """Time that only moves when someone sleeps (or calls :meth:`advance`).
+
+    ``on_sleep(clock, seconds)`` (optional) runs before each sleep; tests use it
+    to throw an exception or deliver a signal part-way through a step.
+    """
+
+    def __init__(self, start_s: float = 1000.0, on_sleep=None) -> None:
+        self._t = float(start_s)
+        self._lock = threading.Lock()
+        self.on_sleep = on_sleep
+        self.slept_s: list[float] = []
+
+    def now(self) -> float:
+        with self._lock:
+            return self._t
+
+    def advance(self, seconds: float) -> None:
+        with self._lock:
+            self._t += max(0.0, float(seconds))
+
+    def sleep(self, seconds: float) -> None:
+        if self.on_sleep is not None:
+            self.on_sleep(self, seconds)
+        self.slept_s.append(seconds)
+        self.advance(seconds)
 
 
 class _VirtualSelector(selectors.BaseSelector):
@@ -54,18 +100,72 @@ class _VirtualSelector(selectors.BaseSelector):
 
 
 class VirtualTimeLoop(asyncio.SelectorEventLoop):
-    """An asyncio loop on a virtual clock (seconds, starting at ``start_s``)."""
+    """An asyncio loop on a virtual clock (seconds, starting at ``start_s``).
+
+    *Background tickers* stand for OS threads (the safety watchdog): they run on
+    the same clock but not on the loop, so they keep running while a callback
+    blocks the loop.  :meth:`advance` calls each one at its period boundaries,
+    whoever advances the clock (the idle selector, or :meth:`block` simulating a
+    callback that hogs the loop).
+    """
 
     def __init__(self, start_s: float = 0.0, speed: float | None = None) -> None:
         self._virtual_s = float(start_s)
         self.speed = speed  # None: as fast as possible; N: paced at N x real time
+        self._tickers: list[list] = []  # [next_due_s, period_s, fn]
         super().__init__(selector=_VirtualSelector(self))
 
     def time(self) -> float:  # asyncio's clock
         return self._virtual_s
 
+    def add_ticker(self, fn, period_s: float):
+        """Call ``fn()`` every ``period_s`` of virtual time, even while the loop is blocked."""
+        entry = [self._virtual_s + period_s, float(period_s), fn]
+        self._tickers.append(entry)
+        return entry
+
+    def remove_ticker(self, entry) -> None:
+        if entry in self._tickers:
+            self._tickers.remove(entry)
+
     def advance(self, dt_s: float) -> None:
-        self._virtual_s += dt_s
+        end = self._virtual_s + dt_s
+        tickers = self._tickers
+        while tickers:
+            entry = min(tickers, key=lambda e: e[0])
+            if entry[0] > end:
+                break
+            self._virtual_s = max(self._virtual_s, entry[0])
+            entry[0] += entry[1]
+            entry[2]()
+        self._virtual_s = end
+
+    def block(self, dt_s: float) -> None:
+        """Simulate a callback that holds the loop for ``dt_s`` (drill ``loop-stall``)."""
+        if self.speed:
+            time.sleep(dt_s / self.speed)
+        self.advance(dt_s)
+
+
+def block_loop(loop, dt_s: float) -> None:
+    """Hold ``loop`` for ``dt_s``: virtual loops advance their clock, real ones really block."""
+    if isinstance(loop, VirtualTimeLoop):
+        loop.block(dt_s)
+    else:
+        time.sleep(dt_s)
+
+
+class LoopClock:
+    """``now()`` of a loop's clock, for code that is not on the loop (the watchdog)."""
+
+    def __init__(self, loop) -> None:
+        self._loop = loop
+
+    def now(self) -> float:
+        return self._loop.time()
+
+    def sleep(self, dt_s: float) -> None:
+        time.sleep(dt_s)
 
 
 def run(main, *, virtual: bool, start_s: float = 0.0, speed: float | None = None):

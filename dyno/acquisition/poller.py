@@ -41,7 +41,7 @@ class PollTiming:
 
 
 class Poller:
-    def __init__(self, reader, *, poll_hz: float = 150.0, thermometer=None, temp_period_s: float = 0.25,
+    def __init__(self, reader, *, poll_hz: float = 150.0, thermometer=None, temp_period_s: float = 0.1,
                  max_burst: int = 8, blocking_io: bool = False) -> None:
         self.reader = reader
         self.poll_period_s = 1.0 / poll_hz
@@ -56,8 +56,17 @@ class Poller:
         self.rotor_temp_time_s: float = math.nan
         self.temp_errors = 0
         self.last_valid_frame_s: float | None = None
+        self.last_poll_s: float | None = None  # last attempt, valid or not (link silence vs host stall)
         self.started_s: float | None = None
         self.polls = 0
+        # What makes a measurement window untrustworthy: events lost, a device reset,
+        # a poll gap (the loop stalled).  dicts {host_t_s, kind, detail}; the controller
+        # discards a point whose window contains one.
+        self.disturbances: list[dict] = []
+        self.epoch_start_us: int | None = None  # first event time of the device's current boot
+        self._lost_seen = 0
+        self._resets_seen = 0
+        self._last_poll_s: float | None = None
         self._stop = asyncio.Event()
         self._last_temp_s = -math.inf
 
@@ -81,15 +90,51 @@ class Poller:
     def stop(self) -> None:
         self._stop.set()
 
+    def disturbances_between(self, t0_s: float, t1_s: float) -> list[dict]:
+        """Disturbances recorded in ``[t0_s, t1_s]`` (host time), plus a poll gap still open at ``t1_s``."""
+        out = [d for d in self.disturbances if t0_s <= d["host_t_s"] <= t1_s]
+        last = self._last_poll_s
+        if last is not None and t1_s - last > self._gap_limit_s():
+            out.append({"host_t_s": last, "kind": "poll_gap", "detail": f"no poll for {t1_s - last:.3f} s"})
+        return out
+
+    def _gap_limit_s(self) -> float:
+        return max(0.1, 10.0 * self.poll_period_s)
+
+    def _note_disturbances(self, now_s: float) -> None:
+        r = self.reader
+        lost = r.events_lost
+        if lost > self._lost_seen:
+            self.disturbances.append({"host_t_s": now_s, "kind": "events_lost",
+                                      "detail": f"{lost - self._lost_seen} events lost"})
+            self._lost_seen = lost
+        resets = r.stats.device_resets
+        if resets > self._resets_seen:
+            self.disturbances.append({"host_t_s": now_s, "kind": "device_reset",
+                                      "detail": f"device reset ({resets - self._resets_seen})"})
+            self._resets_seen = resets
+        last = self._last_poll_s
+        if last is not None and now_s - last > self._gap_limit_s():
+            self.disturbances.append({"host_t_s": last, "kind": "poll_gap",
+                                      "detail": f"no poll for {now_s - last:.3f} s (host stalled)"})
+        self._last_poll_s = now_s
+
     async def poll_once(self, now_s: float) -> list:
+        self.last_poll_s = now_s
         events = []
         for _ in range(self.max_burst):
             accepted_before = self.reader.stats.accepted
+            resets_before = self.reader.stats.device_resets
             if self.blocking_io:
                 new = await asyncio.to_thread(self.reader.poll, now_s)
             else:
                 new = self.reader.poll(now_s)
             self.polls += 1
+            if self.reader.stats.device_resets > resets_before:
+                # A new boot: its edges must never pair with the old boot's (the gap between
+                # the two time bases is only estimated), so speeds restart from its own edges.
+                first = min((e.t_us for e in new), default=self.reader.device_time_us)
+                self.epoch_start_us = first if first is not None else self.epoch_start_us
             if self.reader.stats.accepted > accepted_before:
                 self.last_valid_frame_s = now_s
             events.extend(new)
@@ -97,6 +142,7 @@ class Poller:
                 break
         if events:
             self.streams.extend(events)
+        self._note_disturbances(now_s)
         for listener in self.listeners:
             listener(events, now_s)
         if self.thermometer is not None and now_s - self._last_temp_s >= self.temp_period_s:
@@ -116,7 +162,10 @@ class Poller:
         now = self.device_now_us()
         if now is None:
             return 0.0
-        return current_rpm(self.streams.last_edges(channel), now)
+        edges = self.streams.last_edges(channel)
+        if self.epoch_start_us is not None and len(edges) >= 2 and edges[-2] < self.epoch_start_us:
+            return 0.0  # no two edges of this boot yet: no speed, never one across the reset
+        return current_rpm(edges, now)
 
     def latest_adc(self) -> tuple[int, int] | None:
         s = self.streams

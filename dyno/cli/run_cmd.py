@@ -23,10 +23,25 @@ def add_arguments(p) -> None:
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
     p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
                    help="settling: detected from the data, or the thesis's fixed 4 s")
-    p.add_argument("--json", action="store_true", help="print one JSON document")
+    p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
+    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
+                   help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
+                        "device-reset, hall-dead:primary|secondary|both, thermometer-stuck, thermometer-lost, "
+                        "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, controller-crash, "
+                        "disk-full, sigint, sigterm, sighup (docs/safety.md)")
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
+
+
+#: exit codes (docs/safety.md): 0 done, 2 bad input, 3 aborted to the safe state, 128+N signal N
+EXIT_DONE, EXIT_BAD_INPUT, EXIT_ABORTED = 0, 2, 3
+
+
+def exit_code(result: dict) -> int:
+    if result.get("signal"):
+        return 128 + int(result["signal"])
+    return EXIT_DONE if result["state"] == "done" else EXIT_ABORTED
 
 
 def run(args) -> int:
@@ -34,13 +49,15 @@ def run(args) -> int:
 
     from dyno.app import RunOptions, run_test
     from dyno.control.controller import TestPlan
+    from dyno.drills import parse_drill
 
     if not args.sim:
         print("dyno run: only --sim is available headless here; on the rig use `dyno ui`", file=sys.stderr)
         return 2
+    drills = [parse_drill(d) for d in args.drill]
     opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=replace(TestPlan(), settle_mode=args.settle))
+                      plan=replace(TestPlan(), settle_mode=args.settle), drills=drills, handle_signals=True)
     if args.calibration:
         opts.calibration_path = args.calibration
     if args.engine_map:
@@ -51,11 +68,18 @@ def run(args) -> int:
         opts.tune_path = args.tune
         opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
     result = run_test(opts)
-    if args.json:
-        print(json.dumps(result, indent=1, default=str))
-    else:
-        _print_table(result)
-    return 0 if result["state"] == "done" else 1
+    try:
+        if args.json:
+            print(json.dumps(result, indent=1, default=str, allow_nan=False))
+        else:
+            _print_table(result)
+        sys.stdout.flush()
+    except (BrokenPipeError, OSError):  # a closed pipe or a vanished terminal (SIGHUP): the run is on disk
+        pass
+    if result.get("log_error"):
+        print(f"dyno run: {result['run_dir']}: {result['log_error']}: safe state reached; "
+              "what was recorded before is readable with `dyno replay`", file=sys.stderr)
+    return exit_code(result)
 
 
 def _print_table(result: dict) -> None:
@@ -73,3 +97,6 @@ def _print_table(result: dict) -> None:
           f"events lost {result['events_lost']}")
     for a in result["aborts"]:
         print(f"ABORT: {a['cause']}: {a['detail']}")
+    if result["aborts"]:
+        print(f"rig safe: {'yes' if result.get('rig_safe') else 'NO'}  outputs: "
+              + ", ".join(f"{k}={v}" for k, v in result.get("outputs", {}).items() if k != "safe"))

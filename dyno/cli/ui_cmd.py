@@ -13,6 +13,8 @@ def add_arguments(p) -> None:
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
+    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
+                   help="fault drill at T simulated seconds from the first frame (--sim only; docs/safety.md)")
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
@@ -24,7 +26,13 @@ def run(args) -> int:
 
     if not args.speed > 0:
         raise SystemExit("dyno ui: --speed must be > 0")
+    from dyno.drills import parse_drill
+    from dyno.errors import ConfigError
+
+    drills = [parse_drill(d) for d in args.drill]
+    if drills and not args.sim:
+        raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
-                       engine_map_path=args.engine_map)
+                       engine_map_path=args.engine_map, drills=drills)
     return main(opts)

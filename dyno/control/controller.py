@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 from dyno.analysis.points import reduce_point
 from dyno.control.outputs import APPLY, STOP
+from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.control.steady import SettleCriteria, is_settled
 from dyno.protocol import v1
 
@@ -45,7 +46,7 @@ TRANSITIONS: dict[State, set[State]] = {
     State.WARMUP: {State.STEP},
     State.STEP: {State.SETTLE},
     State.SETTLE: {State.MEASURE, State.DONE},
-    State.MEASURE: {State.STEP, State.DONE},
+    State.MEASURE: {State.STEP, State.DONE, State.MEASURE},
     State.DONE: set(),
     State.ABORTED: set(),
 }
@@ -74,18 +75,11 @@ class TestPlan:
     expected_secondary_span_rpm: float = 4500.0  # light load to min, for the step adaptation
 
 
-@dataclass(frozen=True)
-class SafetyLimits:
-    rotor_temp_max_c: float = 300.0
-    overspeed_primary_rpm: float = 4300.0
-    overspeed_secondary_rpm: float = 9000.0
-    comms_timeout_s: float = 0.5
-    thermometer_timeout_s: float = 2.0  # a blind over-temperature monitor is no monitor
-    sensor_check_rpm: float = 300.0  # a shaft turning faster than this must give Hall edges
-    check_period_s: float = 0.02  # detection latency <= 20 ms, well inside the 100 ms budget
-
-
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
+_ENGINE_STATES = _LOADED_STATES | {State.ARMED}
+MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most this often
+
+__all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 
 
 class TestController:
@@ -113,6 +107,17 @@ class TestController:
         self._resume.set()
         self._aborted = asyncio.Event()
         self._step_s = plan.step_s
+        cal = calibration
+        torque_from_code = None
+        if cal is not None and getattr(cal, "slope_counts_per_nm", 0):
+            def torque_from_code(code: float) -> float:
+                return (code - cal.intercept_counts) / cal.slope_counts_per_nm
+        self.monitor = SafetyMonitor(limits, poller, torque_from_code)
+        self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
+        self.discards: list[dict] = []
+        self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
+        self._checking = False
+        poller.listeners.append(self._on_poll)
 
     # --- commands (from the UI / CLI) ------------------------------------------------------
     def go(self) -> None:
@@ -152,7 +157,7 @@ class TestController:
                 t = math.nan
             self.writer.doc(doc_type, host_t_s=t, device_t_us=self.poller.device_now_us(), **fields)
 
-    def abort(self, cause: str, detail: str, trigger_s: float | None = None) -> None:
+    def abort(self, cause: str, detail: str, trigger_s: float | None = None, *, after_done: bool = False) -> None:
         """Safe state now, then record why. Idempotent.
 
         ``trigger_s`` is when the condition became true (e.g. the thermometer
@@ -171,18 +176,37 @@ class TestController:
         self._log("abort", **entry)
         if self.state is not State.DONE:
             self._enter(State.ABORTED, detail)
+        elif after_done:  # the plan ended, but what it produced is not a result
+            self.state = State.ABORTED
+            self.reason = detail
+            self._log("state", state=State.ABORTED.value, reason=detail)
+            for fn in self.listeners:
+                fn(self)
         self._aborted.set()
 
     async def run(self) -> State:
-        """Run the plan to DONE or ABORTED."""
-        safety = asyncio.create_task(self._safety_loop())
-        plan_task = asyncio.create_task(self._plan())
+        """Run the plan to DONE or ABORTED.
+
+        Three tasks: the plan, the safety heartbeat, and the wait for an abort.  The
+        safety checks also run after every poll (:meth:`_on_poll`), so detection does
+        not wait for the heartbeat; the heartbeat keeps checking if polls stop, feeds
+        the watchdog, and if it ever dies the test aborts (never runs unmonitored).
+        """
+        safety = asyncio.create_task(self._safety_loop(), name="safety")
+        plan_task = self._plan_task = asyncio.create_task(self._plan_guarded(), name="plan")
         aborted = asyncio.create_task(self._aborted.wait())
         try:
-            done, _ = await asyncio.wait({plan_task, aborted}, return_when=asyncio.FIRST_COMPLETED)
-            if plan_task in done and plan_task.exception() is not None:
-                exc = plan_task.exception()
-                self.abort("error", f"controller error: {type(exc).__name__}: {exc}")
+            while True:
+                done, _ = await asyncio.wait({plan_task, aborted, safety}, return_when=asyncio.FIRST_COMPLETED)
+                if plan_task in done and not plan_task.cancelled() and plan_task.exception() is not None:
+                    exc = plan_task.exception()
+                    self.abort("error", f"controller error: {type(exc).__name__}: {exc}")
+                elif safety in done and self.state not in (State.DONE, State.ABORTED):
+                    exc = None if safety.cancelled() else safety.exception()
+                    why = f"{type(exc).__name__}: {exc}" if exc is not None else "stopped"
+                    self.abort("safety_error", f"safety task died ({why}): the rig is not run unmonitored")
+                if plan_task in done or aborted in done or self.state in (State.DONE, State.ABORTED):
+                    break
         except BaseException:
             self.act.safe_state()
             raise
@@ -192,10 +216,32 @@ class TestController:
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
         if self.state is State.DONE:
             self.act.safe_state()  # end of test: same safe state, not an abort
+            if not self.points:
+                # A test that measured nothing is not a success, whatever the plan's end says.
+                self.abort("no_points", "the test ended without a single accepted point", after_done=True)
         return self.state
+
+    async def _plan_guarded(self) -> None:
+        try:
+            await self._plan()
+        except asyncio.CancelledError:
+            if self.fault_injection is not None:  # drill controller-crash: the task raises now
+                exc, self.fault_injection = self.fault_injection, None
+                raise exc from None
+            raise
+
+    def inject_crash(self, exc: BaseException) -> None:
+        """Drill ``controller-crash``: the control task raises ``exc`` at once."""
+        self.fault_injection = exc
+        task = getattr(self, "_plan_task", None)
+        if task is not None and not task.done():
+            task.cancel()
 
     async def _sleep(self, dt_s: float) -> None:
         await asyncio.sleep(dt_s)
+        if self.fault_injection is not None:
+            exc, self.fault_injection = self.fault_injection, None
+            raise exc
         self.act.tick(self._now())
 
     async def _plan(self) -> None:
@@ -230,21 +276,39 @@ class TestController:
             self.act.brake(STOP)
             self._enter(State.SETTLE, "waiting for steady state")
             settled_by, settle_s = await self._settle()
-            if self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm:
+            if await self._secondary_below(p.min_secondary_rpm):
                 self._enter(State.DONE, f"secondary below {p.min_secondary_rpm:.0f} rpm")
                 return
-            self._enter(State.MEASURE, f"averaging {p.measure_s:.1f} s")
-            host_t0, dev_t0 = self._now(), self.poller.device_now_us()
-            await self._sleep(p.measure_s)
-            while True:
-                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
-                point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
-                                     index=len(self.points))
-                sem = point["efficiency_sem"]
-                remaining_s = p.max_measure_s - (host_t1 - host_t0)
-                if not (sem > p.target_efficiency_sem) or remaining_s < 0.05:
-                    break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
-                await self._sleep(min(1.0, remaining_s))
+            for attempt in range(MAX_REMEASURE + 1):
+                self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
+                host_t0, dev_t0 = self._now(), self.poller.device_now_us()
+                await self._sleep(p.measure_s)
+                while True:
+                    host_t1, dev_t1 = self._now(), self.poller.device_now_us()
+                    point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
+                                         index=len(self.points))
+                    sem = point["efficiency_sem"]
+                    remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                    if not (sem > p.target_efficiency_sem) or remaining_s < 0.05:
+                        break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
+                    await self._sleep(min(1.0, remaining_s))
+                # Let the poller look once more: a loss or reset at the window's end is reported late.
+                await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
+                disturbed = self.poller.disturbances_between(host_t0, self._now())
+                if not await self._sensors_alive():
+                    disturbed.append({"detail": "a Hall channel went silent at the window's end"})
+                if not disturbed:
+                    break
+                why = "; ".join(d["detail"] for d in disturbed)
+                entry = {"index": len(self.points), "host_t_start_s": host_t0, "host_t_end_s": host_t1,
+                         "reason": why, "attempt": attempt + 1}
+                self.discards.append(entry)
+                self._log("discard", **entry)
+                for fn in self.listeners:
+                    fn(self)
+                if attempt == MAX_REMEASURE:
+                    point["valid"] = False
+                    point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
             if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
                 self._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
                                          f"{p.min_point_torque_nm} N m: brake not yet loading")
@@ -267,6 +331,37 @@ class TestController:
             if len(self.points) >= p.max_points:
                 self._enter(State.DONE, f"{p.max_points} points")
                 return
+
+    def _channel_quiet_s(self, channel: int) -> float:
+        e = self.poller.streams.edges[channel]
+        now = self.poller.device_now_us()
+        return math.inf if not e or now is None else (now - e[-1]) * 1e-6
+
+    async def _sensors_alive(self) -> bool:
+        """Both Hall channels still ticking; if not, give the safety monitor time to judge.
+
+        A shaft cannot stop between two edges at test speeds, so a silent channel is
+        a dead sensor (the monitor aborts) or a stall (it aborts too); either way the
+        window is not averaged into a point.
+        """
+        lim = self.limits
+        for ch in (v1.CH_PRIMARY, v1.CH_SECONDARY):
+            if self._channel_quiet_s(ch) > 0.1:
+                await self._sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)
+                return False
+        return True
+
+    async def _secondary_below(self, rpm_min: float) -> bool:
+        """The secondary really turns slower than ``rpm_min`` (measured by its edges, not a silent sensor)."""
+        rs = self.poller.rpm(v1.CH_SECONDARY)
+        if rs >= rpm_min:
+            return False
+        if rs == 0.0 and self._channel_quiet_s(v1.CH_SECONDARY) < 2.0:
+            # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
+            # within secondary_quiet_s; never read it as "the test has reached its end".
+            await self._sleep(self.limits.secondary_quiet_s + 0.1)
+            rs = self.poller.rpm(v1.CH_SECONDARY)
+        return rs < rpm_min
 
     def _adapt_step(self, rs_before: float, rs_after: float) -> None:
         """Aim at ~target_points over the range: lengthen short steps, shorten long ones."""
@@ -296,51 +391,48 @@ class TestController:
                     return "detected", self._now() - t0
             if self._now() - t0 >= c.max_settle_s:
                 return "timeout", self._now() - t0
-            if self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and self._now() - t0 > c.min_settle_s + 1:
+            if (self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and self._now() - t0 > c.min_settle_s + 1
+                    and await self._secondary_below(p.min_secondary_rpm)):
                 return "below_min", self._now() - t0
             await self._sleep(0.1)
 
     # --- safety ----------------------------------------------------------------------------------
+    def _on_poll(self, events, now_s: float) -> None:
+        """Poller listener: the checks run on fresh data, not only on the heartbeat."""
+        self._safety_check(now_s)
+
+    def _safety_check(self, now_s: float | None = None) -> None:
+        if self._checking or self.state in (State.DONE, State.ABORTED, State.IDLE):
+            return
+        self._checking = True
+        try:
+            now = self._now() if now_s is None else now_s
+            trip = self.monitor.check(now, loaded=self.state in _LOADED_STATES,
+                                      engine_expected=self.state in _ENGINE_STATES)
+        except Exception as exc:  # a broken check must not leave the rig unmonitored
+            self._checking = False
+            self.abort("safety_error", f"safety check failed: {type(exc).__name__}: {exc}")
+            return
+        self._checking = False
+        if trip:
+            self.abort(trip.cause, trip.detail, trip.trigger_s)
+
     async def _safety_loop(self) -> None:
         lim = self.limits
+        while self.state not in (State.DONE, State.ABORTED):
+            await asyncio.sleep(lim.check_period_s)
+            self.act.tick(self._now())
+            for hook in self.heartbeat_hooks:
+                hook()
+            self._safety_check()
+        # after the test: keep servicing the outputs (release stroke) until cancelled
         while True:
             await asyncio.sleep(lim.check_period_s)
             self.act.tick(self._now())
-            trip = self.check_limits()
-            if trip:
-                self.abort(*trip)
-                return
+            for hook in self.heartbeat_hooks:
+                hook()
 
-    def check_limits(self) -> tuple[str, str, float] | None:
-        """(cause, detail, trigger time) of the first limit exceeded, or None."""
-        lim = self.limits
-        now = self._now()
-        poller = self.poller
-        last = poller.last_valid_frame_s if poller.last_valid_frame_s is not None else poller.started_s
-        if last is not None and now - last > lim.comms_timeout_s:
-            return ("comms_lost", f"no valid frame for {now - last:.3f} s (limit {lim.comms_timeout_s} s)",
-                    last + lim.comms_timeout_s)
-        if poller.thermometer is not None and poller.started_s is not None:
-            seen = poller.rotor_temp_time_s if not math.isnan(poller.rotor_temp_time_s) else poller.started_s
-            if now - seen > lim.thermometer_timeout_s:
-                return ("thermometer_lost", f"no rotor temperature for {now - seen:.2f} s",
-                        seen + lim.thermometer_timeout_s)
-        temp = poller.rotor_temp_c
-        if not math.isnan(temp) and temp > lim.rotor_temp_max_c:
-            return ("over_temperature", f"rotor {temp:.1f} C > {lim.rotor_temp_max_c:.0f} C",
-                    poller.rotor_temp_time_s)
-        rp, rs = poller.rpm(v1.CH_PRIMARY), poller.rpm(v1.CH_SECONDARY)
-        if self.state in _LOADED_STATES:
-            # One Hall sensor silent while the other shows the drivetrain turning
-            # means a dead sensor: without it over-speed cannot be seen. The
-            # secondary may legitimately stall under a heavy brake (clutch slips),
-            # so it only counts at full throttle with the engine well above engagement.
-            if rp == 0.0 and rs > lim.sensor_check_rpm:
-                return "sensor_fault", f"primary Hall silent while the secondary turns at {rs:.0f} rpm", now
-            if rs == 0.0 and rp > lim.overspeed_primary_rpm * 0.75 and self.state is State.WARMUP:
-                return "sensor_fault", f"secondary Hall silent at full throttle (primary {rp:.0f} rpm)", now
-        if rp > lim.overspeed_primary_rpm:
-            return "overspeed", f"primary {rp:.0f} rpm > {lim.overspeed_primary_rpm:.0f}", now
-        if rs > lim.overspeed_secondary_rpm:
-            return "overspeed", f"secondary {rs:.0f} rpm > {lim.overspeed_secondary_rpm:.0f}", now
-        return None
+    def check_limits(self) -> Trip | None:
+        """The first limit or plausibility check failing now, or None (see SafetyMonitor)."""
+        return self.monitor.check(self._now(), loaded=self.state in _LOADED_STATES,
+                                  engine_expected=self.state in _ENGINE_STATES)

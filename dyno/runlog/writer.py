@@ -12,6 +12,10 @@ Layout::
 
 Every append is flushed to the kernel at once, so a SIGKILL loses nothing
 already recorded; a record torn by a kill is at the very end and readers drop it.
+
+A write that fails (disk full, I/O error) stops all further writing — what is on
+disk stays a valid, readable prefix — and calls ``on_error(exc)`` once: the
+composition root turns that into an abort to the safe state (cause ``disk_full``).
 """
 
 from __future__ import annotations
@@ -50,26 +54,65 @@ class RunWriter:
         self._events = open(self.run_dir / "events.bin", "ab")
         self._pack = EVENT_RECORD.pack
         self.closed = False
+        self.error: OSError | None = None
+        self.on_error = None  # callable(OSError), once
         self.doc("start", **{k: meta[k] for k in ("software_version", "format") if k in meta})
+
+    def _append(self, f, data) -> None:
+        if self.error is not None:
+            return
+        try:
+            f.write(data)
+            f.flush()
+        except OSError as exc:
+            self.error = exc
+            if self.on_error is not None:
+                self.on_error(exc)
 
     def events(self, events, now_s: float | None = None) -> None:
         if not events or self.closed:
             return
         pack = self._pack
-        self._events.write(b"".join(pack(e.channel, e.t_us, e.code & 0xFFFF, e.status & 0xFF) for e in events))
-        self._events.flush()
+        self._append(self._events,
+                     b"".join(pack(e.channel, e.t_us, e.code & 0xFFFF, e.status & 0xFF) for e in events))
 
     def doc(self, doc_type: str, **fields) -> None:
         if self.closed:
             return
         fields["type"] = doc_type
-        self._docs.write(dumps(fields) + "\n")
-        self._docs.flush()
+        self._append(self._docs, dumps(fields) + "\n")
+
+    def inject_disk_full(self) -> None:
+        """Drill ``disk-full``: from now on every write fails as on a full filesystem."""
+        self._docs = _FullDisk(self._docs)
+        self._events = _FullDisk(self._events)
 
     def close(self, exit_status: str, reason: str = "", **extra) -> None:
         if self.closed:
             return
         self.doc("stop", exit_status=exit_status, reason=reason, **extra)
         self.closed = True
-        self._docs.close()
-        self._events.close()
+        for f in (self._docs, self._events):
+            try:
+                f.close()
+            except OSError:
+                pass  # a full disk may refuse the final flush too; what is on disk stays readable
+
+
+class _FullDisk:
+    """A file whose writes fail with ENOSPC (the disk-full drill); closing closes the real file."""
+
+    def __init__(self, inner) -> None:
+        self._inner = inner
+
+    def write(self, data):
+        import errno
+        import os
+
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), getattr(self._inner, "name", "?"))
+
+    def flush(self) -> None:
+        self._inner.flush()
+
+    def close(self) -> None:
+        self._inner.close()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import errno
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,10 +59,28 @@ class SimSMBus:
         self.injected = {"bit_error": 0, "nack": 0, "timeout": 0, "truncate": 0, "reset": 0}
         self._resets = sorted(self.faults.reset_times_s)
         self._thermo_cmd = None
+        # The physics is stepped by whoever asks first: the poller, an actuator command, or
+        # the watchdog thread safing the rig while the loop is stalled.  One at a time.
+        self._lock = threading.RLock()
+        self._rng_thermo = np.random.default_rng(seed + 104729)
+        # drills: the cable falls out (every device NACKs); the thermometer stops answering,
+        # or answers with one frozen word forever
+        self.lost = False
+        self.thermometer_lost = False
+        self.thermometer_stuck = False
+        self._thermo_stuck_word: bytes | None = None
+
+    def schedule_reset(self, t_s: float) -> None:
+        """A device reset at simulation time ``t_s`` (a drill)."""
+        self._resets = sorted([*self._resets, t_s])
 
     # --- physics ---------------------------------------------------------------------
     def sync(self) -> None:
         """Advance the physics to now and let the firmware capture what happened."""
+        with self._lock:
+            self._sync()
+
+    def _sync(self) -> None:
         now = self.now_s()
         while self._resets and self._resets[0] <= now:
             t_reset = self._resets.pop(0)
@@ -80,9 +99,15 @@ class SimSMBus:
 
     # --- smbus2 API ---------------------------------------------------------------------
     def i2c_rdwr(self, *msgs) -> None:
-        self.sync()
+        with self._lock:
+            self._i2c_rdwr(*msgs)
+
+    def _i2c_rdwr(self, *msgs) -> None:
+        self._sync()
         now = self.now_s()
         addr = msgs[0].addr
+        if self.lost:
+            raise OSError(errno.EREMOTEIO, "NACK: bus lost (drill)")
         if addr == FIRMWARE_ADDRESS:
             self._firmware_transaction(msgs, now)
         elif addr == THERMOMETER_ADDRESS:
@@ -129,12 +154,24 @@ class SimSMBus:
             raise OSError(errno.ETIMEDOUT, "timeout (injected)")
 
     def _thermometer_transaction(self, msgs) -> None:
-        """MLX90614 SMBus read-word with PEC (object temperature at RAM 0x07)."""
+        """MLX90614 SMBus read-word with PEC (object temperature at RAM 0x07).
+
+        The object temperature is the rotor's seen through the sensor's lag
+        (``RigModel.thermometer_c``) plus read noise, coded in 0.02 K steps.
+        """
+        if self.thermometer_lost:
+            raise OSError(errno.EREMOTEIO, "MLX90614: NACK (drill thermometer-lost)")
         cmd = None
         for msg in msgs:
             if msg.flags & I2C_M_RD:
+                if cmd == 0x07 and self.thermometer_stuck and self._thermo_stuck_word is not None:
+                    ctypes.memmove(msg.buf, self._thermo_stuck_word[: msg.len], min(3, msg.len))
+                    continue
                 if cmd == 0x07:
-                    temp_c = float(self.rig.rotor_temp_c)
+                    temp_c = float(getattr(self.rig, "thermometer_c", self.rig.rotor_temp_c))
+                    noise = getattr(self.rig.params, "thermometer_noise_c", 0.0)
+                    if noise:
+                        temp_c += noise * float(self._rng_thermo.standard_normal())
                 elif cmd == 0x06:
                     temp_c = float(getattr(self.rig.params, "ambient_temp_c", 25.0))
                 else:
@@ -143,7 +180,10 @@ class SimSMBus:
                 lsb, msb = raw & 0xFF, raw >> 8
                 a = THERMOMETER_ADDRESS << 1
                 pec = smbus_pec(bytes([a, cmd, a | 1, lsb, msb]))
-                ctypes.memmove(msg.buf, bytes([lsb, msb, pec])[: msg.len], min(3, msg.len))
+                word = bytes([lsb, msb, pec])
+                if cmd == 0x07 and self.thermometer_stuck:
+                    self._thermo_stuck_word = word  # frozen from this read on
+                ctypes.memmove(msg.buf, word[: msg.len], min(3, msg.len))
             else:
                 data = bytes(msg)
                 cmd = data[0] if data else None

@@ -120,6 +120,9 @@ class EngineMap:
         return t[i] + f * (t[i + 1] - t[i])
 
 
+UNGOVERNED_ZERO_RPM = 6500.0
+
+
 class Engine:
     """Mean-torque engine model (see module docstring for the equations).
 
@@ -153,11 +156,27 @@ class Engine:
         f = (n_set - rpm) / self.droop_rpm
         return 0.0 if f <= 0.0 else (1.0 if f >= 1.0 else f)
 
-    def torque_nm(self, rpm: float, throttle_frac: float, running: bool) -> float:
+    def ungoverned_torque_nm(self, rpm: float) -> float:
+        """Full-throttle torque with the mechanical governor failed (linkage jammed open).
+
+        The map carries the governor's droop over its last ~450 rpm; without it the
+        engine keeps making the torque it makes at the droop's start, falling
+        linearly to zero at ``UNGOVERNED_ZERO_RPM`` (pumping and breathing losses of
+        a small side-valve engine; a representative figure, not a measured one).
+        """
+        knee = self.map.rpm_max - 450.0
+        if rpm <= knee:
+            return self.map.torque_nm_at(rpm)
+        t_knee = self.map.torque_nm_at(knee)
+        return max(0.0, t_knee * (1.0 - (rpm - knee) / (UNGOVERNED_ZERO_RPM - knee)))
+
+    def torque_nm(self, rpm: float, throttle_frac: float, running: bool, governed: bool = True) -> float:
         """Mean net crank torque (N*m) at ``rpm``; negative = friction only."""
         fr = self.friction_nm_at(rpm)
         if not running:
             return -fr
+        if not governed:  # drill "overspeed": throttle stuck wide open, no governor
+            return self.ungoverned_torque_nm(rpm)
         f = self.fuel_fraction(rpm, throttle_frac)
         if f >= 1.0:
             return self.map.torque_nm_at(rpm)

@@ -242,6 +242,10 @@ class RigParams:
     ripple_engine_rev_frac: float = 0.22
     ripple_brake_shaft_frac: float = 0.08
     adc_error_prob: float = 0.0
+    # ---- rotor thermometer (MLX90614): first-order optical/filter lag and read noise;
+    # quantisation (0.02 K) comes from its word format in dyno.sim.bus
+    thermometer_time_constant_s: float = 0.15
+    thermometer_noise_c: float = 0.05
     # ---- Hall sensors
     hall_bounce_prob: float = 0.05
     hall_bounce_min_s: float = 50e-6
@@ -357,6 +361,10 @@ class RigModel:
         # fault knobs
         self.stuck_hall: set[str] = set()
         self.adc_error_prob = p.adc_error_prob
+        self.adc_stuck = False              # drill adc-stuck: every conversion repeats one code
+        self._adc_stuck_code: int | None = None
+        self.extra_rotor_heat_c_per_s = 0.0  # drill overtemp: a dragging pad heats the rotor while the engine runs
+        self.governor_failed = False         # drill overspeed: throttle stuck wide open, governor gone
 
         g = p.gear_ratio_brake_per_secondary
         self._g = g
@@ -382,6 +390,9 @@ class RigModel:
         self._locked = False
         self._act_mm = 0.0
         self._rotor_c = p.ambient_temp_c
+        self._thermo_c = p.ambient_temp_c
+        tau = p.thermometer_time_constant_s
+        self._thermo_alpha = 1.0 - math.exp(-p.max_substep_s / tau) if tau > 0 else 1.0
         self._t_e = 0.0
         self._t_p = 0.0
         self._t_s = 0.0
@@ -417,6 +428,11 @@ class RigModel:
     def rotor_temp_c(self) -> float:
         """Brake rotor temperature (for the emulated MLX90614)."""
         return self._rotor_c
+
+    @property
+    def thermometer_c(self) -> float:
+        """What the rotor thermometer's sensing element sees now (lagged, before noise)."""
+        return self._thermo_c
 
     @property
     def actuator_mm(self) -> float:
@@ -509,7 +525,10 @@ class RigModel:
         w_s0 = self._w_s
         rpm_e = w_e0 * RPM_PER_RAD_S
         running = self._running
-        t_e = eng.torque_nm(rpm_e, self.throttle_frac, running)
+        if self.governor_failed:
+            t_e = eng.torque_nm(rpm_e, 1.0, running, governed=False)
+        else:
+            t_e = eng.torque_nm(rpm_e, self.throttle_frac, running)
 
         # --- shift: quasi-static balance + first-order lag (exact exponential)
         self._x = cvt.shift(self._x, rpm_e, self._t_s, h, self._t_p)
@@ -602,7 +621,11 @@ class RigModel:
         # --- rotor heat (exact relaxation over the step)
         w_b = 0.5 * (w_s0 + w_s1) * g
         p_brake = t_brake_cap * w_b if w_b > 0.0 else 0.0
+        if self.extra_rotor_heat_c_per_s and self.engine_enabled:
+            p_brake += self.extra_rotor_heat_c_per_s * p.rotor_heat_capacity_j_per_k
         self._rotor_c = min(brk.rotor_temp_after_c(self._rotor_c, p_brake, w_b, h), self._rotor_limit_c)
+        # the thermometer sees the rotor through a first-order lag (exact for the held step)
+        self._thermo_c += (self._rotor_c - self._thermo_c) * self._thermo_alpha
 
         # --- Hall edges
         t1 = t0 + h
@@ -694,6 +717,10 @@ class RigModel:
         status = 0
         if self.adc_error_prob > 0.0 and self._uniform_err() < self.adc_error_prob:
             status = ADC_STATUS_ERROR
+        if self.adc_stuck:
+            if self._adc_stuck_code is None:
+                self._adc_stuck_code = code_i
+            code_i = self._adc_stuck_code
         return SensorEvent("adc", ta, code_i, status)
 
     # ------------------------------------------------------------ truth

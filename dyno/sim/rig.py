@@ -71,16 +71,30 @@ class SimActuators:
         m = self.model
         return m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir in (RELEASE, STOP)
 
+    @property
+    def releasing(self) -> bool:
+        """A release stroke is under way (the actuator retracts until its timer ends)."""
+        return self._release_until_s is not None
+
+    def output_states(self) -> dict:
+        """The outputs by name (as the rig's pins would show them) and ``safe``."""
+        m = self.model
+        brake = {RELEASE: "releasing", STOP: "stopped"}.get(m.actuator_dir, "applying")
+        return {"throttle": "idle" if m.throttle_frac == 0.0 else f"{m.throttle_frac:.2f}",
+                "engine_kill": "killed" if not m.engine_enabled else "run",
+                "brake_actuator": brake, "brake_position_mm": round(m.actuator_mm, 3),
+                "safe": self.is_safe}
+
 
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
-    FIELDS = ("p_in", "p_out", "rp", "rs", "tq")
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c")
 
     def __init__(self, model) -> None:
         self.model = model
         self.t = array("d")
-        self.p_in, self.p_out, self.rp, self.rs, self.tq = (array("d") for _ in self.FIELDS)
+        self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -90,6 +104,24 @@ class TruthRecorder:
         self.rp.append(tr.rpm_primary)
         self.rs.append(tr.rpm_secondary)
         self.tq.append(tr.torque_secondary_nm)
+        self.rotor_c.append(tr.rotor_temp_c)
+
+    def crossing_s(self, field: str, level: float, after_s: float = 0.0) -> float | None:
+        """First time (linear interpolation between samples) ``field`` rises above ``level``."""
+        a = getattr(self, field)
+        t = self.t
+        for i in range(max(1, bisect_left(t, after_s)), len(t)):
+            if a[i] > level >= a[i - 1]:
+                f = (level - a[i - 1]) / (a[i] - a[i - 1])
+                return t[i - 1] + f * (t[i] - t[i - 1])
+        if len(t) and bisect_left(t, after_s) < len(t) and a[bisect_left(t, after_s)] > level:
+            return t[bisect_left(t, after_s)]
+        return None
+
+    def max_after(self, field: str, after_s: float) -> float:
+        a = getattr(self, field)
+        i = bisect_left(self.t, after_s)
+        return max(a[i:]) if i < len(a) else math.nan
 
     def window(self, t0_s: float, t1_s: float) -> dict:
         i, j = bisect_left(self.t, t0_s), bisect_right(self.t, t1_s)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import errno
 from collections import Counter
 
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 from dyno.transports.base import _ERRNO_CAUSE, I2CTransport, TransportFault
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import binascii
 from collections import Counter, deque
 
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 from dyno.transports.base import Transport, TransportFault
 
 DELIMITER = b"\x00"

@@ -84,6 +84,7 @@ class LiveApp(DynoApp):
             self.exit(2, message=f"dyno ui: error: {exc}")
             return
         self._ideal_rpm = ideal_engine_rpm(self.session.controller.engine_map)
+        self.session.on_signal = lambda code: self.call_later(self._quit, code)
         self.session.start()
         self.set_interval(1.0 / REFRESH_HZ, self.refresh_values)
         self.refresh_values()
@@ -301,10 +302,10 @@ class LiveApp(DynoApp):
 
         self.push_screen(ConfirmScreen("Quit? The rig is put in its safe state first."), answered)
 
-    async def _quit(self) -> None:
+    async def _quit(self, code: int = 0) -> None:
         if self.session is not None:
-            await self.session.close("operator quit")
-        self.exit(0)
+            await self.session.close("operator quit" if not code else "signal")
+        self.exit(code)
 
     async def on_unmount(self) -> None:
         if self.session is not None:  # any other way out: still safe state first

@@ -34,6 +34,7 @@ class LiveOptions:
     engine_map_path: Path | None = None
     plan: TestPlan = field(default_factory=TestPlan)
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
+    drills: list = field(default_factory=list)  # dyno.drills.Drill (sim only), from the first frame
 
 
 def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
@@ -107,6 +108,9 @@ class LiveSession:
             self.guard.__enter__()
         self.poller = self.ctx.poller
         self.controller = self.ctx.controller
+        self._stop_watchdog = None
+        self._old_signals: dict = {}
+        self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
         self._tasks: list[asyncio.Task] = []
         self.closed = False
         self.manual = False
@@ -127,8 +131,41 @@ class LiveSession:
             # Rig time starts now, not when assembly began: building took a few hundred ms
             # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
             self.t0 = self.loop.time()
+        from dyno.app import arm_drills, start_watchdog
+
+        # The safety path does not depend on the UI: the watchdog is a thread, the checks run
+        # in the poller and the controller's own heartbeat, drills act on the rig itself.
+        self._stop_watchdog = start_watchdog(self.ctx, self.loop)
+        arm_drills(self.ctx, self.opts.drills if self.opts.sim else [], self.loop, sim_now=self.sim_now,
+                   speed=self.speed)
         self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
+        self._install_signal_handlers()
+
+    def _install_signal_handlers(self) -> None:
+        """SIGTERM (systemd, kill) and SIGHUP (terminal or SSH gone): safe state, abort record, exit 128+N.
+
+        SIGINT reaches a Textual app as the Ctrl+C key (raw mode) = E-STOP.
+        """
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return
+
+        def on_loop(signum: int) -> None:
+            name = signal.Signals(signum).name
+            self.controller.abort("signal", f"{name} received: safe state, session closed")
+            if self.on_signal is not None:
+                self.on_signal(128 + signum)
+
+        def handler(signum, frame) -> None:
+            if self.ctx.sim is None:
+                self.controller.act.safe_state()  # at once, whatever the loop is doing
+            self.loop.call_soon_threadsafe(on_loop, signum)
+
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            self._old_signals[sig] = signal.signal(sig, handler)
 
     @property
     def finished(self) -> bool:
@@ -233,6 +270,14 @@ class LiveSession:
             else:
                 t.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self.ctx.drills is not None:
+            self.ctx.drills.cancel()
+        if self._stop_watchdog is not None:
+            self._stop_watchdog()
+        import signal
+
+        for sig, old in self._old_signals.items():
+            signal.signal(sig, old)
         status = {"done": "success"}.get(self.controller.state.value, "abort")
         self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
                               events_lost=self.poller.reader.events_lost)

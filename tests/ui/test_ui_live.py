@@ -45,7 +45,7 @@ def test_ui_live_go_points_estop(tmp_path):
             s = None
             assert await wait_for(pilot, lambda: app.session is not None, 5)
             s = app.session
-            assert await wait_for(pilot, lambda: s.controller.state is State.ARMED, 30), s.controller.state
+            assert await wait_for(pilot, lambda: s.controller.state is State.ARMED, 30), (s.controller.state, s.controller.aborts)
             # GO asks first; "n" declines and nothing moves.
             await pilot.press("g")
             await pilot.pause(0.1)

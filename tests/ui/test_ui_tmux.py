@@ -53,3 +53,29 @@ def test_ui_tmux_dyno_ui_sim(tmp_path):
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     docs = (run_dir / "documents.jsonl").read_text()
     assert '"cause": "estop"' in docs and '"type": "stop"' in docs
+
+
+def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
+    """The terminal (or the SSH link) goes away mid-test: SIGHUP -> safe state, abort + stop record."""
+    session = f"dyno-hup-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    cmd = f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"
+    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
+                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
+                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    try:
+        _wait_screen(session, "ARMED", 60)
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "Start the test?", 10)
+        _tmux("send-keys", "-t", session, "y")
+        _wait_screen(session, "GO: full throttle", 10)
+    finally:
+        # closing the terminal sends SIGHUP to the program in it
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    docs_path = run_dir / "documents.jsonl"
+    t_end = time.monotonic() + 20
+    while time.monotonic() < t_end and '"type": "stop"' not in docs_path.read_text():
+        time.sleep(0.2)
+    docs = docs_path.read_text()
+    assert '"cause": "signal"' in docs and "SIGHUP" in docs
+    assert '"type": "stop"' in docs and '"exit_status": "abort"' in docs

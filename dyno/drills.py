@@ -1,0 +1,248 @@
+"""Fault drills: named, timed faults injected into the simulated rig or the host.
+
+``--drill NAME[:ARG]@T`` (repeatable) on ``dyno run --sim``, ``dyno ui --sim`` and
+``dyno calibrate --sim``; ``T`` is in simulated seconds from the run's first frame.
+Each drill reproduces one fault the way it happens on the rig — in the physics,
+on the bus, in the host process — and records its *physical onset* so that the
+run's JSON can state the safe-state latency in true time (docs/safety.md has the
+table of drills, causes and bounds).
+
+=====================  ==================================================================
+drill                  what happens at T
+=====================  ==================================================================
+device-reset           the Nano resets (watchdog; current bootloader restarts in ~0.1 s)
+hall-dead:CH           the Hall sensor(s) give no more edges (CH: primary|secondary|both)
+thermometer-stuck      the rotor thermometer repeats its last word forever
+thermometer-lost       the rotor thermometer stops answering (NACK)
+adc-error              the AD7171 sets its error bit on every conversion
+adc-stuck              the AD7171 repeats one code forever
+bus-lost               the I2C cable falls out: every device NACKs
+overtemp               a dragging pad heats the rotor at 20 C/s while the engine runs
+overspeed              the governor fails: throttle stuck wide open
+loop-stall:MS          the host's event loop blocks MS milliseconds
+controller-crash       the control task raises
+disk-full              the run directory refuses writes (ENOSPC)
+sigint|sigterm|sighup  the process receives the signal
+=====================  ==================================================================
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+import os
+import signal
+from dataclasses import dataclass
+
+from dyno.errors import ConfigError
+
+OVERTEMP_RATE_C_PER_S = 20.0
+
+#: name -> (argument required?, allowed arguments or None, needs an engine?)
+DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
+    "device-reset": (False, None, False),
+    "hall-dead": (True, ("primary", "secondary", "both"), True),
+    "thermometer-stuck": (False, None, True),
+    "thermometer-lost": (False, None, True),
+    "adc-error": (False, None, False),
+    "adc-stuck": (False, None, False),
+    "bus-lost": (False, None, False),
+    "overtemp": (False, None, True),
+    "overspeed": (False, None, True),
+    "loop-stall": (True, None, False),
+    "controller-crash": (False, None, False),
+    "disk-full": (False, None, False),
+    "sigint": (False, None, False),
+    "sigterm": (False, None, False),
+    "sighup": (False, None, False),
+}
+SIGNAL_DRILLS = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM, "sighup": signal.SIGHUP}
+
+
+@dataclass(frozen=True)
+class Drill:
+    name: str
+    arg: str | None
+    at_s: float  # simulated seconds from the first frame
+
+    def __str__(self) -> str:
+        return f"{self.name}{':' + self.arg if self.arg else ''}@{self.at_s:g}"
+
+
+def parse_drill(text: str, *, engine: bool = True) -> Drill:
+    """``NAME[:ARG]@T`` -> Drill; ConfigError naming ``--drill`` and what is expected."""
+    expected = (f"NAME[:ARG]@T with NAME one of {', '.join(n for n, d in DRILLS.items() if engine or not d[2])} "
+                "and T >= 0 simulated seconds from the first frame")
+    name_arg, at, t_text = text.partition("@")
+    if not at:
+        raise ConfigError("command line", "--drill", f"{text!r}: missing @T; expected {expected}")
+    name, _, arg = name_arg.partition(":")
+    name = name.strip().lower()
+    if name not in DRILLS or (not engine and DRILLS[name][2]):
+        raise ConfigError("command line", "--drill", f"{text!r}: unknown drill {name!r}; expected {expected}")
+    try:
+        t_s = float(t_text)
+    except ValueError:
+        t_s = math.nan
+    if not (math.isfinite(t_s) and 0.0 <= t_s <= 1e6):
+        raise ConfigError("command line", "--drill", f"{text!r}: T must be a number of seconds in [0, 1e6]")
+    needs_arg, allowed, _ = DRILLS[name]
+    arg = arg.strip() or None
+    if needs_arg and arg is None:
+        raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:ARG@T)")
+    if not needs_arg and arg is not None:
+        raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
+    if allowed is not None and arg not in allowed:
+        raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
+    if name == "loop-stall":
+        try:
+            ms = float(arg)
+        except ValueError:
+            ms = math.nan
+        if not (math.isfinite(ms) and 0 < ms <= 60_000):
+            raise ConfigError("command line", "--drill", f"{text!r}: loop-stall:MS needs 0 < MS <= 60000")
+    return Drill(name, arg, t_s)
+
+
+class DrillRunner:
+    """Arms drills on a running rig and records when each fault physically began.
+
+    ``ctx`` is the composition root's RunContext (``sim``, ``controller``,
+    ``writer``, ``poller``); ``loop`` the running asyncio loop.  Drills are
+    scheduled from the first accepted frame (the poller calls :meth:`on_first_frame`).
+    """
+
+    def __init__(self, drills, ctx, loop, *, sim_now=None, speed: float = 1.0) -> None:
+        self.drills = list(drills)
+        self.ctx = ctx
+        self.loop = loop
+        # The UI paces the simulated rig on a real loop: sim time = (loop time - t0) x speed.
+        self._sim_now = sim_now
+        self.speed = float(speed or 1.0)
+        self.fired: list[dict] = []  # {drill, scheduled_s, onset_s, ...} in firing order
+        self.t_first_frame_s: float | None = None
+        self._handles: list = []
+
+    def on_first_frame(self, now_s: float) -> None:
+        if self.t_first_frame_s is not None:
+            return
+        self.t_first_frame_s = now_s
+        sim_first = self.sim_now()
+        for d in self.drills:
+            if d.name == "device-reset":
+                # The reset is a bus-level event at an exact instant: the bus applies it in time order.
+                t = sim_first + d.at_s
+                self.ctx.sim.bus.schedule_reset(t)
+                self.fired.append({"drill": str(d), "name": d.name, "scheduled_s": t, "onset_s": t})
+                continue
+            self._handles.append(self.loop.call_at(now_s + d.at_s / self.speed, self._fire, d))
+
+    def cancel(self) -> None:
+        for h in self._handles:
+            h.cancel()
+
+    def sim_now(self) -> float:
+        if self._sim_now is not None:
+            return self._sim_now()
+        return self.loop.time()
+
+    def _fire(self, d: Drill) -> None:
+        sim = self.ctx.sim
+        if sim is not None:
+            sim.bus.sync()  # the physics up to now: the fault acts from this instant, not the last poll
+        rec = {"drill": str(d), "name": d.name, "scheduled_s": self.loop.time(), "onset_s": self.sim_now()}
+        self.fired.append(rec)
+        getattr(self, "_" + d.name.replace("-", "_"))(d, rec)
+
+    # --- the faults ------------------------------------------------------------------------
+    def _hall_dead(self, d: Drill, rec: dict) -> None:
+        chans = ("primary", "secondary") if d.arg == "both" else (d.arg,)
+        self.ctx.sim.model.stuck_hall.update(chans)
+
+    def _thermometer_stuck(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.bus.thermometer_stuck = True
+
+    def _thermometer_lost(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.bus.thermometer_lost = True
+
+    def _adc_error(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.model.adc_error_prob = 1.0
+
+    def _adc_stuck(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.model.adc_stuck = True
+
+    def _bus_lost(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.bus.lost = True
+
+    def _overtemp(self, d: Drill, rec: dict) -> None:
+        # The physical onset is the moment the rotor crosses the limit: found from the truth trace.
+        self.ctx.sim.model.extra_rotor_heat_c_per_s = OVERTEMP_RATE_C_PER_S
+        rec["onset_from"] = "rotor_temp_c"
+
+    def _overspeed(self, d: Drill, rec: dict) -> None:
+        self.ctx.sim.model.governor_failed = True
+        rec["onset_from"] = "rpm"
+
+    def _loop_stall(self, d: Drill, rec: dict) -> None:
+        from dyno.clock import block_loop
+
+        block_loop(self.loop, float(d.arg) / 1000.0)
+
+    def _controller_crash(self, d: Drill, rec: dict) -> None:
+        self.ctx.controller.inject_crash(RuntimeError("drill controller-crash: the control task raised"))
+
+    def _disk_full(self, d: Drill, rec: dict) -> None:
+        self.ctx.writer.inject_disk_full()
+
+    def _signal(self, d: Drill, rec: dict) -> None:
+        os.kill(os.getpid(), SIGNAL_DRILLS[d.name])
+
+    _sigint = _sigterm = _sighup = _signal
+
+
+def enospc(path) -> OSError:
+    return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+
+def true_latencies(ctx, aborts: list[dict]) -> None:
+    """Add true-time figures to ``aborts[0]`` of a simulated run with drills (in place).
+
+    ``onset_s``: when the fault physically began (the drill's instant, or for
+    ``overtemp``/``overspeed`` the moment the true rotor temperature / shaft speed
+    crossed the limit); ``safe_commanded_s``: when the simulated outputs received
+    the safe state (true time, whoever commanded it: controller, watchdog, signal
+    path); ``latency_s`` = safe - onset (negative: safed before the limit was
+    reached); ``detection_s``: the host's trigger time - onset.
+    """
+    drills = ctx.drills
+    if not aborts or drills is None or not drills.fired:
+        return
+    a = aborts[0]
+    sim = ctx.sim
+    lim = ctx.controller.limits
+    truth = sim.truth
+    rec = min(drills.fired, key=lambda r: r["onset_s"])
+    onset = rec["onset_s"]
+    if rec.get("onset_from") == "rotor_temp_c":
+        crossing = truth.crossing_s("rotor_c", lim.rotor_temp_max_c, onset)
+        a["max_rotor_temp_c"] = truth.max_after("rotor_c", onset)
+        a["overshoot_c"] = a["max_rotor_temp_c"] - lim.rotor_temp_max_c
+        if crossing is None:  # safed before the true temperature reached the limit
+            a["latency_note"] = "safe state commanded before the rotor reached the limit"
+        onset = crossing if crossing is not None else math.nan
+    elif rec.get("onset_from") == "rpm":
+        cands = [truth.crossing_s("rp", lim.overspeed_primary_rpm, onset),
+                 truth.crossing_s("rs", lim.overspeed_secondary_rpm, onset)]
+        cands = [c for c in cands if c is not None]
+        onset = min(cands) if cands else math.nan
+    elif rec["name"].startswith("thermometer"):
+        a["max_rotor_temp_c"] = truth.max_after("rotor_c", onset)
+        a["overshoot_c"] = a["max_rotor_temp_c"] - lim.rotor_temp_max_c
+    t_from = rec["onset_s"] - 1e-9
+    safe = [t for t, what, _ in sim.actuators.history if what == "safe_state" and t >= t_from]
+    a["drill"] = rec["drill"]
+    a["onset_s"] = onset
+    a["safe_commanded_s"] = safe[0] if safe else math.nan
+    a["latency_s"] = a["safe_commanded_s"] - onset
+    a["detection_s"] = a["trigger_s"] - onset if a.get("trigger_s") is not None else math.nan
+    a["latency_basis"] = "true time from the physical onset (simulated rig)"
