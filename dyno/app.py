@@ -41,6 +41,10 @@ class RunOptions:
     auto_go: bool = True
     max_sim_s: float = 3600.0  # a run longer than this is stopped (safety net for sims)
     setup: object = None  # callable(ctx) after assembly, before running (tests inject faults)
+    # real rig only: injectable parts (tests run the real-rig path on MockFactory and a simulated bus)
+    pin_factory: object = None
+    rig_bus: object = None
+    serial_port: object = None
     tune_path: Path | None = None  # the CVT tune on the rig (stored with the run); sim: its CVT's tune
     drills: list = field(default_factory=list)  # dyno.drills.Drill, armed from the first frame (sim only)
     handle_signals: bool = False  # SIGINT/SIGTERM/SIGHUP -> safe state + abort record (the CLI sets it)
@@ -90,16 +94,53 @@ class RunContext:
     drills: object = None  # dyno.drills.DrillRunner
     rig_cfg: object = None
     signal_received: int | None = None
+    hw: object = None  # dyno.hw.rig.HardwareRig on the real rig (closed by close_rig)
+
+
+def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
+    """The real rig's parts, assembled in one place (:class:`dyno.hw.rig.HardwareRig`).
+
+    Entering claims the pins in the safe state, opens the firmware link that
+    ``rig.toml`` names (I2C with the Nano's RESET line, or USB serial) and the
+    thermometer, and builds the watchdog.  Signals are the entry point's job
+    (each installs handlers that leave an abort record); ``close_rig`` finishes
+    the release stroke and releases everything.
+    """
+    from dyno.hw.rig import HardwareRig
+
+    hw = HardwareRig(rig_cfg, pin_factory=pin_factory, bus=bus, serial_port=serial_port, install_signals=False)
+    return hw.__enter__()
+
+
+def close_rig(ctx) -> None:
+    hw = getattr(ctx, "hw", None)
+    if hw is not None:
+        hw.__exit__(None, None, None)
 
 
 def build(opts: RunOptions, now_s) -> RunContext:
-    """Assemble poller, controller and run writer for a simulated or real rig."""
+    """Assemble poller, controller and run writer for a simulated or real rig.
+
+    The one composition root: ``dyno run``, ``dyno ui`` (through the live session) and
+    the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
+    """
+    rig_cfg, calibration, engine_map = load_inputs(opts)
+    holder: dict = {}
+    try:
+        return _build(opts, now_s, rig_cfg, calibration, engine_map, holder)
+    except BaseException:
+        hw = holder.get("hw")
+        if hw is not None:  # the pins were claimed: leave them safe and released
+            hw.__exit__(None, None, None)
+        raise
+
+
+def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) -> RunContext:
     from dyno.runlog.writer import RunWriter
 
-    rig_cfg, calibration, engine_map = load_inputs(opts)
     protocol = opts.protocol or rig_cfg.protocol
     limits = opts.limits or limits_from_config(rig_cfg)
-    sim = None
+    sim = hw = None
     if opts.sim:
         from dyno.sim.bus import BusFaults
         from dyno.sim.rig import SimRig
@@ -109,17 +150,18 @@ def build(opts: RunOptions, now_s) -> RunContext:
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
         bus, actuators = sim.bus, sim.actuators
         blocking = False
-    else:  # pragma: no cover - needs the rig
-        from dyno.hw.outputs import GpioActuators
-        from dyno.transports.i2c import open_i2c
-
-        bus = None
-        transport = open_i2c(rig_cfg)
-        actuators = GpioActuators(rig_cfg)
-        blocking = True
-    transport = I2CTransport(bus, rig_cfg.i2c.firmware_address) if opts.sim else transport
+    else:
+        hw = holder["hw"] = open_rig(rig_cfg, pin_factory=opts.pin_factory, bus=opts.rig_bus,
+                                     serial_port=opts.serial_port)
+        actuators = hw.actuators
+        blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
+    if opts.sim:
+        transport = I2CTransport(bus, rig_cfg.i2c.firmware_address)
+        thermometer = _thermometer(bus, rig_cfg.i2c.thermometer_address)
+    else:
+        transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
+        thermometer = hw.thermometer.object_c
     reader = make_reader(protocol, transport)
-    thermometer = _thermometer(bus if opts.sim else transport.bus, rig_cfg.i2c.thermometer_address)
     poller = Poller(reader, poll_hz=rig_cfg.poll_hz, thermometer=thermometer, blocking_io=blocking)
     out = Path(opts.out_dir) if opts.out_dir else default_run_dir()
     meta = {
@@ -157,7 +199,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
-    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg)
+    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
@@ -193,7 +235,11 @@ def _attach_watchdog(ctx: RunContext, timeout_s: float, now_s) -> None:
     class _Clock:  # until start_watchdog() gives it the loop's clock
         now = staticmethod(now_s)
 
-    wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
+    wd = getattr(ctx.hw, "watchdog", None)
+    if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
+        wd.on_trip = on_trip
+    else:
+        wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
     ctx.watchdog = wd
 
     def beat() -> None:
@@ -274,7 +320,9 @@ async def run_test_async(opts: RunOptions) -> dict:
         restore_signals()
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
                          events_lost=ctx.poller.reader.events_lost)
-    return summarize(ctx)
+        result = summarize(ctx)
+        close_rig(ctx)
+    return result
 
 
 def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
