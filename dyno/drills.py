@@ -69,16 +69,25 @@ class Drill:
         return f"{self.name}{':' + self.arg if self.arg else ''}@{self.at_s:g}"
 
 
+#: the drills that apply to the calibration fixture (no engine, no test controller, no run log)
+CALIBRATION_DRILLS = ("device-reset", "adc-error", "adc-stuck", "bus-lost", "loop-stall", "sigint", "sigterm",
+                      "sighup")
+
+
 def parse_drill(text: str, *, engine: bool = True) -> Drill:
-    """``NAME[:ARG]@T`` -> Drill; ConfigError naming ``--drill`` and what is expected."""
-    expected = (f"NAME[:ARG]@T with NAME one of {', '.join(n for n, d in DRILLS.items() if engine or not d[2])} "
+    """``NAME[:ARG]@T`` -> Drill; ConfigError naming ``--drill`` and what is expected.
+
+    ``engine=False``: only the drills of the calibration fixture (:data:`CALIBRATION_DRILLS`).
+    """
+    names = DRILLS if engine else CALIBRATION_DRILLS
+    expected = (f"NAME[:ARG]@T with NAME one of {', '.join(names)} "
                 "and T >= 0 simulated seconds from the first frame")
     name_arg, at, t_text = text.partition("@")
     if not at:
         raise ConfigError("command line", "--drill", f"{text!r}: missing @T; expected {expected}")
     name, _, arg = name_arg.partition(":")
     name = name.strip().lower()
-    if name not in DRILLS or (not engine and DRILLS[name][2]):
+    if name not in names:
         raise ConfigError("command line", "--drill", f"{text!r}: unknown drill {name!r}; expected {expected}")
     try:
         t_s = float(t_text)

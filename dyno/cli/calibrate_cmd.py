@@ -20,6 +20,9 @@ def add_arguments(p) -> None:
     p.add_argument("--masses", default="5,10,20,30,40", help="masses in kg, comma-separated")
     p.add_argument("--seed", type=int, default=0, help="simulation seed")
     p.add_argument("--speed", type=float, default=1.0, help="simulation pace, multiple of real time")
+    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
+                   help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
+                        "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
@@ -30,6 +33,12 @@ def run(args) -> int:
 
     if args.samples < 2 or args.settle_samples < 0 or not args.speed > 0:
         raise SystemExit("dyno calibrate: --samples >= 2, --settle-samples >= 0, --speed > 0")
+    from dyno.drills import parse_drill
+    from dyno.errors import ConfigError
+
+    drills = [parse_drill(d, engine=False) for d in args.drill]
+    if drills and not args.sim:
+        raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     history = args.history
     if history is None:
         if args.sim:
@@ -41,5 +50,6 @@ def run(args) -> int:
     Path(history).parent.mkdir(parents=True, exist_ok=True)
     opts = CalibrateOptions(sim=args.sim, seed=args.seed, speed=args.speed, n_samples=args.samples,
                             settle_samples=args.settle_samples, history_path=Path(history),
-                            rig_path=getattr(args, "rig", None), radius_m=args.radius, masses=args.masses)
+                            rig_path=getattr(args, "rig", None), radius_m=args.radius, masses=args.masses,
+                            drills=drills)
     return main(opts)

@@ -59,6 +59,9 @@ for _s in State:
 class TestPlan:
     engine_running_rpm: float = 1300.0  # primary above this = engine started
     engine_detect_s: float = 0.5
+    # Ignition enabled and no primary rpm for this long: the engine was not started, or its
+    # Hall sensor is dead (an engine running unseen would be blind to over-speed): abort.
+    engine_start_timeout_s: float = 60.0
     warmup_s: float = 3.0  # full throttle, no brake: let it stabilise
     step_s: float = 0.25  # brake actuator on-time per step (adapted, see below)
     step_min_s: float = 0.08
@@ -252,8 +255,13 @@ class TestController:
         if self.on_wait_engine:
             self.on_wait_engine()
         since = None
+        t_enabled = self._now()
         while True:
             await self._sleep(0.05)
+            if self._now() - t_enabled > p.engine_start_timeout_s:
+                self.abort("stall", f"no engine speed {p.engine_start_timeout_s:.0f} s after enabling the ignition: "
+                                    "engine not started, or the primary Hall sensor is dead")
+                return
             if self.poller.rpm(v1.CH_PRIMARY) > p.engine_running_rpm:
                 since = since if since is not None else self._now()
                 if self._now() - since >= p.engine_detect_s:

@@ -58,6 +58,7 @@ class CalibrateOptions:
     radius_m: float = DEFAULT_RADIUS_M
     masses: str = DEFAULT_MASSES
     fixture_kw: dict | None = None  # sim only: CalibrationFixture options (tests)
+    drills: list = None  # dyno.drills.Drill (sim only), from the first frame
 
 
 class CalibrateApp(DynoApp):
@@ -75,6 +76,8 @@ class CalibrateApp(DynoApp):
         self.feeder: WizardFeeder | None = None
         self.poller = None
         self.rig = None  # FixtureRig (sim) or HardwareRig
+        self.cal_ctx = None  # dyno.app.CalibrationContext
+        self._old_signals: dict = {}
         self.calibration_in_force = None
         self._poll_task = None
         self._drawn = None
@@ -120,29 +123,49 @@ class CalibrateApp(DynoApp):
         self.refresh_view()
 
     def _start_acquisition(self) -> None:
+        from dyno.app import build_calibration
+
         loop = asyncio.get_running_loop()
-        if self.opts.sim:
-            from dyno.ui.sim_fixture import build_fixture_poller
-
-            t0, speed = loop.time(), self.opts.speed
-            self.rig, self.poller = build_fixture_poller(lambda: (loop.time() - t0) * speed, seed=self.opts.seed,
-                                                         **(self.opts.fixture_kw or {}))
-            self.poller.max_burst = max(8, math.ceil(8 * speed))
-            self.rig.firmware.ring_capacity = max(64, math.ceil(64 * speed))
-        else:  # pragma: no cover - needs the rig
-            from dyno.acquisition.poller import Poller
-            from dyno.acquisition.reader import make_reader
-            from dyno.hw.rig import HardwareRig
-            from dyno.rigconfig import load_rig
-
-            cfg = load_rig(self.opts.rig_path)
-            self.rig = HardwareRig(cfg).__enter__()  # safe state now; released in on_unmount
-            self.poller = Poller(make_reader(cfg.protocol, self.rig.transport), poll_hz=cfg.poll_hz,
-                                 blocking_io=True)
+        self.cal_ctx = build_calibration(sim=self.opts.sim, loop=loop, seed=self.opts.seed, speed=self.opts.speed,
+                                         rig_path=self.opts.rig_path, fixture_kw=self.opts.fixture_kw,
+                                         drills=self.opts.drills, on_trip=self._on_trip)
+        self.rig = self.cal_ctx.sim or self.cal_ctx.hw
+        self.poller = self.cal_ctx.poller
         self.feeder = WizardFeeder(self.wizard)
         self.feeder.on_step_done = self._step_done
         self.poller.listeners.append(self.feeder)
         self._poll_task = asyncio.create_task(self.poller.run())
+        self._install_signal_handlers(loop)
+
+    def _on_trip(self, trip) -> None:
+        """A fault ended the calibration: outputs already safe (build_calibration), nothing written."""
+        self.wizard.abort(trip.cause, trip.detail)
+        self.query_one("#estop", Static).update(f" ABORTED ({trip.cause}) │ rig SAFE │ nothing written │ q quit")
+        self.say(f"ABORTED: {trip.cause}: {trip.detail}")
+        self.refresh_view()
+
+    def _install_signal_handlers(self, loop) -> None:
+        """SIGTERM/SIGHUP (systemd, a closed terminal): safe state, the calibration aborted, exit 128+N."""
+        import signal
+
+        from dyno.control.safety import Trip
+
+        def on_loop(signum: int) -> None:
+            if self.cal_ctx.trip is None:
+                self.cal_ctx.trip = Trip("signal", f"{signal.Signals(signum).name} received", loop.time())
+                self._on_trip(self.cal_ctx.trip)
+            self.call_later(self._quit_code, 128 + signum)
+
+        def handler(signum, frame) -> None:
+            if self.cal_ctx.hw is not None:
+                self.cal_ctx.hw.actuators.safe_state()
+            loop.call_soon_threadsafe(on_loop, signum)
+
+        self._old_signals = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGHUP)}
+
+    async def _quit_code(self, code: int) -> None:
+        await self._shutdown()
+        self.exit(code)
 
     # --- view ----------------------------------------------------------------------------------
     def refresh_view(self) -> None:
@@ -308,6 +331,11 @@ class CalibrateApp(DynoApp):
         act = getattr(self.rig, "actuators", None)  # the rig's outputs (hardware); the fixture has none
         if act is not None:  # pragma: no cover - rig only
             act.safe_state()
+        if self.wizard is not None and self.cal_ctx is not None and self.cal_ctx.trip is None:
+            from dyno.control.safety import Trip
+
+            self.cal_ctx.trip = Trip("estop", "E-stop (operator)", asyncio.get_running_loop().time())
+            self._on_trip(self.cal_ctx.trip)
         self.say("E-STOP: collection stopped" + ("; rig outputs in their safe state" if act is not None
                                                  else "; the calibration fixture has no outputs to stop"))
 
@@ -317,13 +345,24 @@ class CalibrateApp(DynoApp):
 
     async def _shutdown(self) -> None:
         if self.poller is not None:
+            # The UI's listener goes first: while Textual unmounts, a last poll must not
+            # update widgets that are closing (that wait never ends).  The safety check stays.
+            if self.feeder in self.poller.listeners:
+                self.poller.listeners.remove(self.feeder)
             self.poller.stop()
         if self._poll_task is not None:
             await asyncio.gather(self._poll_task, return_exceptions=True)
             self._poll_task = None
-        if not self.opts.sim and self.rig is not None:  # pragma: no cover - rig only
-            self.rig.__exit__(None, None, None)
+        if self.cal_ctx is not None:
+            from dyno.app import close_calibration
+
+            close_calibration(self.cal_ctx)  # the rig: release stroke finished, pins released
             self.rig = None
+        import signal
+
+        for sig, old in self._old_signals.items():
+            signal.signal(sig, old)
+        self._old_signals = {}
 
     async def on_unmount(self) -> None:
         await self._shutdown()

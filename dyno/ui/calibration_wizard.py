@@ -165,6 +165,8 @@ class CalibrationWizard:
         self.step_error: str | None = None  # why the current step stopped without completing
 
     # --- setup --------------------------------------------------------------------------
+    aborted: tuple[str, str] | None = None  # (cause, detail) once a fault ended the calibration
+
     def configure(self, radius_m: float, masses_kg) -> list[str]:
         """Set the rope radius and the masses; returns the problems ([] = ready to start)."""
         problems = []
@@ -370,6 +372,12 @@ class CalibrationWizard:
 
     def reject(self, reason: str = "rejected by the operator") -> None:
         self.rejection = self.rejection or reason
+        self.phase = Phase.REJECTED
+
+    def abort(self, cause: str, detail: str) -> None:
+        """A fault (or E-stop) ended the calibration: nothing collected so far can be trusted."""
+        self.aborted = (cause, detail)
+        self.rejection = f"ABORTED ({cause}): {detail}"
         self.phase = Phase.REJECTED
 
 

@@ -44,7 +44,8 @@ def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
     k = 1.0 / speed
     settle = replace(plan.settle, min_settle_s=plan.settle.min_settle_s * k,
                      max_settle_s=plan.settle.max_settle_s * k, fixed_settle_s=plan.settle.fixed_settle_s * k)
-    return replace(plan, engine_detect_s=plan.engine_detect_s * k, warmup_s=plan.warmup_s * k,
+    return replace(plan, engine_detect_s=plan.engine_detect_s * k, engine_start_timeout_s=plan.engine_start_timeout_s * k,
+                   warmup_s=plan.warmup_s * k,
                    step_s=plan.step_s * k, step_min_s=plan.step_min_s * k, step_max_s=plan.step_max_s * k,
                    measure_s=plan.measure_s * k, max_measure_s=plan.max_measure_s * k, settle_mode="fixed",
                    settle=settle)

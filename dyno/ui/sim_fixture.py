@@ -94,6 +94,11 @@ class CalibrationFixture:
         self._from_nm = 0.0
         self._change_t_s = 0.0
         self.rotor_temp_c = p.ambient_temp_c  # locked rotor: nothing heats it
+        # drill knobs, as on RigModel: error bit on conversions, one code repeated forever
+        self.adc_error_prob = 0.0
+        self.adc_stuck = False
+        self._adc_stuck_code: int | None = None
+        self._rng_err = np.random.default_rng(np.random.SeedSequence([seed, 0xE77]))
 
     # --- the simulated operator -----------------------------------------------------
     def hang(self, mass_kg: float, radius_m: float) -> float:
@@ -126,7 +131,12 @@ class CalibrationFixture:
             t_sig = self.signal_nm(ta)
             sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(t_sig)
             code = math.floor(self.true_counts(t_sig) + sigma * float(self._rng.standard_normal()) + 0.5)
-            out.append(_Event("adc", ta, min(65535, max(0, code)), 0))
+            code = min(65535, max(0, code))
+            status = 0x20 if self.adc_error_prob and self._rng_err.random() < self.adc_error_prob else 0
+            if self.adc_stuck:
+                self._adc_stuck_code = code if self._adc_stuck_code is None else self._adc_stuck_code
+                code = self._adc_stuck_code
+            out.append(_Event("adc", ta, code, status))
             self._next_adc_t = ta + self._adc_period_s
         self.t_s = t_end
         return out
@@ -140,6 +150,7 @@ class FixtureRig:
         from dyno.sim.device import EmulatedFirmware
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
+        self.model = self.fixture  # what the drills act on (dyno.drills), as SimRig.model
         self.firmware = EmulatedFirmware("v1")
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
 

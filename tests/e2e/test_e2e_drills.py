@@ -165,6 +165,8 @@ def test_dead_sensors_never_end_done(tmp_path):
     """The issue's cases: both Halls dead, ADC error on every conversion -> aborted, never "done"."""
     r, _ = _run(tmp_path, ["hall-dead:both@0"], name="halls")
     assert r["state"] == "aborted" and exit_code(r) == 3
+    # the engine cannot be seen to start: the ignition is not left enabled for long
+    assert r["aborts"][0]["cause"] in ("stall", "sensor_fault") and r["aborts"][0]["trigger_s"] <= 61
     r, _ = _run(tmp_path, ["adc-error@0"], name="adc")
     assert r["state"] == "aborted" and r["aborts"][0]["cause"] == "sensor_fault"
 

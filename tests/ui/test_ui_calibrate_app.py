@@ -23,6 +23,12 @@ def _opts(tmp_path, **kw):
     return CalibrateOptions(**base)
 
 
+async def _until(pilot, cond, timeout_s: float = 10.0) -> None:
+    t_end = time.monotonic() + timeout_s
+    while not cond() and time.monotonic() < t_end:
+        await pilot.pause(0.05)
+
+
 def test_ui_calibrate_full_procedure_accept_appends(tmp_path):
     async def scenario():
         shots = {}
@@ -41,11 +47,13 @@ def test_ui_calibrate_full_procedure_accept_appends(tmp_path):
                 await pilot.pause(0.1)
             await pilot.pause(0.4)
             shots["review"] = screen_text(app)
+            assert w.acceptable, f"not acceptable: {w.rejection}"
             await pilot.press("a")
-            await pilot.pause(0.2)
+            # wait for the modal rather than a fixed pause: CI's 2 busy cores can be slow
+            await _until(pilot, lambda: "Append this calibration" in screen_text(app))
             shots["confirm"] = screen_text(app)
             await pilot.press("y")
-            await pilot.pause(0.3)
+            await _until(pilot, lambda: w.phase is Phase.ACCEPTED and "ACCEPTED" in screen_text(app))
             shots["accepted"] = screen_text(app)
             fx = app.rig.fixture
             await pilot.press("q")
