@@ -24,7 +24,7 @@ from textual.widgets import Input, ProgressBar, Static
 from textual_plotext import PlotextPlot
 
 from dyno.ui.calibration_wizard import COLLECTING_PHASES, CalibrationWizard, Phase, WizardFeeder, parse_masses
-from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, bottom_lines
+from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, EstopSafeInput, bottom_lines
 
 HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
 DEFAULT_RADIUS_M = 0.15
@@ -89,8 +89,8 @@ class CalibrateApp(DynoApp):
         yield Static("", id="phase")
         yield Static("", id="instruction")
         with Horizontal(id="setup"):
-            yield Input(str(self.opts.radius_m), placeholder="rope radius m", id="radius")
-            yield Input(self.opts.masses, placeholder="masses kg, comma-separated", id="masses")
+            yield EstopSafeInput(str(self.opts.radius_m), placeholder="rope radius m", id="radius")
+            yield EstopSafeInput(self.opts.masses, placeholder="masses kg, comma-separated", id="masses")
         yield ProgressBar(total=1.0, show_eta=False, id="progress")
         with Horizontal(id="body"):
             yield Static("", id="steps")

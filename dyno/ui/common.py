@@ -12,9 +12,10 @@ from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Static
+from textual.widgets import Input, Static
 
 ESTOP_KEYS = "space / Ctrl+C"
+ESTOP_KEY_NAMES = ("space", "ctrl+c")
 
 BASE_CSS = """
 Screen { layout: vertical; }
@@ -38,6 +39,21 @@ def estop_bindings() -> list[Binding]:
     return [Binding("space", "estop", "E-STOP", priority=True),
             Binding("ctrl+c", "estop", "E-STOP", priority=True, show=False),
             Binding("ctrl+q", "quit_safe", "quit", priority=True, show=False)]
+
+
+class EstopSafeInput(Input):
+    """A text field that never takes an E-STOP key.
+
+    Textual drops *every* ancestor binding, priority ones included, for a key the
+    focused Input says it consumes (``Screen._binding_chain``): a plain Input would eat
+    the space bar.  This one declines the E-STOP keys, so they reach the app's priority
+    bindings whatever is focused.  (No field here needs a space: numbers and lists.)
+    """
+
+    def check_consume_key(self, key: str, character: str | None) -> bool:
+        if key in ESTOP_KEY_NAMES:
+            return False
+        return super().check_consume_key(key, character)
 
 
 class ConfirmScreen(ModalScreen[bool]):

@@ -16,7 +16,7 @@ from textual.screen import ModalScreen
 from textual.widgets import DataTable, Input, Static
 from textual_plotext import PlotextPlot
 
-from dyno.ui.common import DynoApp, bottom_lines
+from dyno.ui.common import DynoApp, EstopSafeInput, bottom_lines
 from dyno.ui.replay_model import (ReplaySet, efficiency_series, export_csv, export_png, finite, ideal_rpm_for,
                                   point_streams, predicted_shift_series, shift_series)
 
@@ -47,7 +47,7 @@ class PathScreen(ModalScreen[str | None]):
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Static(self.prompt)
-            yield Input(placeholder="path (Enter = use, Esc = cancel)", id="path")
+            yield EstopSafeInput(placeholder="path (Enter = use, Esc = cancel)", id="path")
 
     def on_mount(self) -> None:
         self.query_one(Input).focus()

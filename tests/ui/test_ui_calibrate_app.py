@@ -104,3 +104,20 @@ def test_ui_calibrate_refuses_two_loads_and_says_why(tmp_path):
     assert "cannot accept" in text2
     assert running and "E-STOP" in text3 and "no outputs" in text3
     assert not (tmp_path / "hist.csv").exists()
+
+
+def test_ui_calibrate_space_with_the_field_focused_is_estop(tmp_path):
+    async def scenario():
+        app = CalibrateApp(_opts(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.pause(0.3)
+            focused = app.focused.id
+            await pilot.press("space", "ctrl+c")
+            await pilot.pause(0.2)
+            value = app.query_one("#radius").value
+            await pilot.press("q")
+        return focused, value, app.wizard.aborted
+
+    focused, value, aborted = asyncio.run(scenario())
+    assert focused == "radius" and value == "0.15"  # nothing typed into the field
+    assert aborted is not None and aborted[0] == "estop"

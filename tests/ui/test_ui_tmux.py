@@ -79,3 +79,49 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
     docs = docs_path.read_text()
     assert '"cause": "signal"' in docs and "SIGHUP" in docs
     assert '"type": "stop"' in docs and '"exit_status": "abort"' in docs
+
+
+def _start(session: str, cmd: str, home: Path, size=("80", "24")) -> None:
+    subprocess.run(["tmux", "new-session", "-d", "-x", size[0], "-y", size[1], "-s", session, cmd], check=True,
+                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
+                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+
+
+def test_ui_tmux_space_estops_with_the_go_dialog_open(tmp_path):
+    """E-STOP on the space bar while a modal has the focus: the modal closes, the rig is safe."""
+    session = f"dyno-esm-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    _start(session, f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30",
+           tmp_path)
+    try:
+        _wait_screen(session, "ARMED", 60)
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "Start the test?", 10)
+        _tmux("send-keys", "-t", session, "Space")
+        screen = _wait_screen(session, "cause: estop", 10)
+        assert "ABORTED" in screen and "rig SAFE" in screen and "Start the test?" not in screen
+        _tmux("send-keys", "-t", session, "q")
+        _wait_screen(session, "EXITED=", 20)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+
+
+def test_calibrate_tmux_space_estops_with_a_text_field_focused(tmp_path):
+    """The wizard starts with the radius field focused: space is E-STOP there too, never a typed blank."""
+    session = f"dyno-esc-{uuid.uuid4().hex[:8]}"
+    hist = tmp_path / "h.csv"
+    _start(session, f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo EXITED=$? ; sleep 30",
+           tmp_path, size=("100", "30"))
+    try:
+        screen = _wait_screen(session, "SETUP", 60)
+        assert "0.15" in screen  # the focused field's default
+        _tmux("send-keys", "-t", session, "Space")
+        screen = _wait_screen(session, "ABORTED (estop)", 10)
+        assert "rig SAFE" in screen and "nothing written" in screen
+        assert "REJECTED" in screen  # the calibration ended; the key was not typed into the field
+        _tmux("send-keys", "-t", session, "q")
+        screen = _wait_screen(session, "EXITED=", 20)
+        assert "EXITED=0" in screen
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    assert not hist.exists()
