@@ -49,6 +49,7 @@ class RunOptions:
     drills: list = field(default_factory=list)  # dyno.drills.Drill, armed from the first frame (sim only)
     handle_signals: bool = False  # SIGINT/SIGTERM/SIGHUP -> safe state + abort record (the CLI sets it)
     finish_release: bool = True  # after the test, service the outputs until the brake release stroke ends
+    mock_pins: bool = False  # sim: drive the physics through the real-rig output code (dyno.hw.mockpins)
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -149,6 +150,10 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         sim = SimRig(now_s, seed=opts.seed, params=opts.sim_params, protocol=protocol, faults=faults,
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
         bus, actuators = sim.bus, sim.actuators
+        if opts.mock_pins:
+            from dyno.hw.mockpins import mock_pin_actuators
+
+            actuators, _ = mock_pin_actuators(rig_cfg, sim.actuators, _LoopTimeClock(now_s))
         blocking = False
     else:
         hw = holder["hw"] = open_rig(rig_cfg, pin_factory=opts.pin_factory, bus=opts.rig_bus,
@@ -216,6 +221,20 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     return ctx
 
 
+class _LoopTimeClock:
+    """The real-rig output code's clock on the host loop's time (virtual in simulations).
+
+    Only the blocking helpers (``step``, ``finish_release``, ``reset_arduino``) sleep;
+    on a virtual loop nothing may block, and the host never calls them there.
+    """
+
+    def __init__(self, now_s) -> None:
+        self.now = now_s
+
+    def sleep(self, dt_s: float) -> None:
+        raise RuntimeError("a blocking sleep on the loop's clock (use the async paths)")
+
+
 def _attach_watchdog(ctx: RunContext, timeout_s: float, now_s) -> None:
     """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
 
@@ -259,6 +278,11 @@ def start_watchdog(ctx: RunContext, loop) -> object:
     from dyno.clock import LoopClock, VirtualTimeLoop
 
     wd = ctx.watchdog
+    estop = getattr(ctx.hw, "estop", None) if ctx.hw is not None else None
+    if estop is not None:  # the E-stop chain's input: outputs already safe (its thread); record the stop
+        estop.on_open.append(lambda detail: loop.call_soon_threadsafe(ctx.controller.abort, "estop", detail))
+        if estop.tripped:
+            loop.call_soon(ctx.controller.abort, "estop", "E-stop chain open at start-up")
     # The loop's liveness is measured on the loop's own clock (the controller's time base):
     # host time on a real loop (the UI paces the physics on a scaled clock), virtual in simulations.
     wd.clock = LoopClock(loop)
@@ -388,9 +412,10 @@ async def _finish_release(ctx: RunContext) -> None:
     act = ctx.controller.act
     stroke_s = float(getattr(act, "brake_full_stroke_s", 8.0))
     loop = asyncio.get_running_loop()
-    end = loop.time() + stroke_s + 0.5
+    end = loop.time() + 2.0 * stroke_s + 1.0  # GpioActuators adds its own margin to a full stroke
     while loop.time() < end:
-        if ctx.sim is not None and ctx.sim.model.actuator_dir == 0 and not ctx.sim.actuators.releasing:
+        if ctx.sim is not None and ctx.sim.model.actuator_dir == 0 and not ctx.sim.actuators.releasing \
+                and getattr(act, "released", True):
             break
         await asyncio.sleep(0.1)
         act.tick(loop.time())
@@ -432,7 +457,7 @@ def summarize(ctx: RunContext) -> dict:
 def rig_outputs(ctx: RunContext) -> dict:
     """The outputs' final states, by name, and whether together they are the safe state."""
     act = ctx.controller.act
-    report = getattr(act, "outputs", None)
+    report = getattr(act, "output_states", None)  # GpioActuators (pins read back) or SimActuators
     if callable(report):
         return dict(report())
     if ctx.sim is not None:

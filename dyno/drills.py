@@ -213,6 +213,34 @@ def enospc(path) -> OSError:
     return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
 
+def first_safe_s(history, t_from_s: float) -> float | None:
+    """First simulated instant >= ``t_from_s`` at which the physics' inputs were all safe.
+
+    Safe: throttle idle, ignition killed, actuator not applying (stopped or releasing).
+    Read from the inputs' history, so it does not matter who commanded them (the
+    controller, the watchdog, a signal handler, or the real-rig output code through
+    the mock pins, whose relay settle makes "release started" a little later).
+    """
+    throttle, enabled, direction = 0.0, False, 0
+    seen_from = False
+    for t, what, value in history:
+        if t >= t_from_s and not seen_from:
+            seen_from = True
+            if throttle == 0.0 and not enabled and direction <= 0:
+                return t_from_s  # already safe when the fault began
+        if what == "safe_state":
+            throttle, enabled, direction = 0.0, False, -1
+        elif what == "throttle":
+            throttle = float(value)
+        elif what == "kill":
+            enabled = not value
+        elif what == "brake":
+            direction = int(value)
+        if t >= t_from_s and throttle == 0.0 and not enabled and direction <= 0:
+            return t
+    return None
+
+
 def true_latencies(ctx, aborts: list[dict]) -> None:
     """Add true-time figures to ``aborts[0]`` of a simulated run with drills (in place).
 
@@ -248,7 +276,8 @@ def true_latencies(ctx, aborts: list[dict]) -> None:
         a["max_rotor_temp_c"] = truth.max_after("rotor_c", onset)
         a["overshoot_c"] = a["max_rotor_temp_c"] - lim.rotor_temp_max_c
     t_from = rec["onset_s"] - 1e-9
-    safe = [t for t, what, _ in sim.actuators.history if what == "safe_state" and t >= t_from]
+    safe = [first_safe_s(sim.actuators.history, t_from)]
+    safe = [t for t in safe if t is not None]
     a["drill"] = rec["drill"]
     a["onset_s"] = onset
     a["safe_commanded_s"] = safe[0] if safe else math.nan

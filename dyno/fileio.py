@@ -12,8 +12,24 @@ import tempfile
 from pathlib import Path
 
 
+def _default_mode(path: Path) -> int:
+    """The mode a plain ``open()`` would give: the old file's, else 0666 less the umask.
+
+    (``mkstemp`` creates 0600: a run's files would be unreadable to the rest of the team.)
+    """
+    try:
+        return path.stat().st_mode & 0o777
+    except OSError:
+        pass
+    umask = os.umask(0o022)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def write_atomic(path, data: bytes | str, mode: int | None = None) -> None:
     path = Path(path)
+    if mode is None:
+        mode = _default_mode(path)
     raw = data.encode() if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:

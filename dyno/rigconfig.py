@@ -20,6 +20,7 @@ off the thesis PCB silkscreen is exactly the mistake this file should catch.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import tomllib
 from dataclasses import dataclass
@@ -65,6 +66,9 @@ class Pins:
     throttle_servo: int  # 50 Hz servo PWM
     engine_kill: int  # ignition kill relay
     arduino_reset: int  # drives the Nano's RESET through a transistor
+    # Optional input: the E-stop chain's monitor contact, normally closed to ground (pull-up
+    # on): open = STOP, so a pressed button, a cut wire or a lost connector all stop the rig.
+    estop_input: int | None = None
 
     def as_dict(self) -> dict[str, int]:
         return {name: getattr(self, name) for name in PIN_NAMES}
@@ -205,14 +209,15 @@ class _Reader:
             raise self.err(fld, f"expected {fmt(lo)}..{fmt(hi)}, got {fmt(v)}")
         return v
 
-    def number(self, data, key, prefix, *, positive=True, default=None, required=True):
+    def number(self, data, key, prefix, *, lo: float, hi: float, default=None, required=True):
+        """A finite number in ``[lo, hi]``: ``inf`` would disable a trip, ``nan`` compares false."""
         fld, v, defaulted = self._get(data, key, prefix, _REQUIRED if required else default)
         if defaulted:
             return v
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.err(fld, f"expected a number, got {v!r}")
-        if positive and not v > 0:
-            raise self.err(fld, f"expected a number > 0, got {v!r}")
+            raise self.err(fld, f"expected a number {lo:g}..{hi:g}, got {v!r}")
+        if not math.isfinite(v) or not lo <= v <= hi:
+            raise self.err(fld, f"expected a number {lo:g}..{hi:g}, got {v!r}")
         return float(v)
 
     def string(self, data, key, prefix, choices=None, default=None, required=True):
@@ -259,6 +264,10 @@ class _Reader:
         return v
 
 
+# limits.*: (lo, hi).  A limit outside its range is a unit mistake or a disabled trip.
+LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500.0, 20000.0),
+                "overspeed_secondary_rpm": (500.0, 20000.0), "comms_timeout_s": (0.02, 5.0)}
+
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset"}
@@ -281,7 +290,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
     # pins
     p = r.table(data, "pins")
-    r.no_extra(p, set(PIN_NAMES), "pins.")
+    r.no_extra(p, set(PIN_NAMES) | {"estop_input"}, "pins.")
     pins_by_name: dict[str, int] = {}
     for name in PIN_NAMES:
         bcm = r.pin(p, name)
@@ -295,7 +304,14 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         if pins_by_name[name] in BOOT_PULL_UP_BCM:
             raise r.err(f"pins.{name}", f"GPIO{pins_by_name[name]} is pulled up at boot (GPIO4..8); "
                         "use a pin pulled down at boot (GPIO9..27)")
-    pins = Pins(**pins_by_name)
+    if "estop_input" in p:
+        bcm = r.pin(p, "estop_input")
+        for other, other_bcm in pins_by_name.items():
+            if other_bcm == bcm:
+                raise r.err("pins.estop_input", f"duplicate pin: GPIO{bcm} is already pins.{other}")
+        pins = Pins(**pins_by_name, estop_input=bcm)
+    else:
+        pins = Pins(**pins_by_name)
 
     # i2c
     t = r.table(data, "i2c")
@@ -309,7 +325,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         # 10 kHz..400 kHz: below that the 150 Hz poll does not fit, above is fast-mode plus
         bus_speed_hz=r.integer(t, "bus_speed_hz", "i2c.", lo=10_000, hi=400_000),
         retries=r.integer(t, "retries", "i2c.", lo=0, hi=10, required=False, default=3),
-        retry_backoff_s=r.number(t, "retry_backoff_s", "i2c.", required=False, default=0.002),
+        retry_backoff_s=r.number(t, "retry_backoff_s", "i2c.", lo=0.0, hi=1.0, required=False, default=0.002),
         reset_after_failures=r.integer(t, "reset_after_failures", "i2c.", lo=1, hi=10_000,
                                        required=False, default=20),
     )
@@ -323,7 +339,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     serial = SerialConfig(
         port=r.string(t, "port", "serial."),
         baud=r.integer(t, "baud", "serial.", lo=1200, hi=4_000_000),
-        timeout_s=r.number(t, "timeout_s", "serial.", required=False, default=0.05),
+        timeout_s=r.number(t, "timeout_s", "serial.", lo=0.001, hi=10.0, required=False, default=0.05),
     )
 
     # gear
@@ -338,16 +354,17 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = r.table(data, "limits")
     lim_keys = ("rotor_temp_max_c", "overspeed_primary_rpm", "overspeed_secondary_rpm", "comms_timeout_s")
     r.no_extra(t, set(lim_keys), "limits.")
-    limits = Limits(**{k: r.number(t, k, "limits.") for k in lim_keys})
+    limits = Limits(**{k: r.number(t, k, "limits.", lo=LIMIT_RANGES[k][0], hi=LIMIT_RANGES[k][1])
+                       for k in lim_keys})
 
     # actuator
     t = r.table(data, "actuator")
     r.no_extra(t, {"step_s", "full_stroke_s", "relay_settle_s", "watchdog_s"}, "actuator.")
     actuator = ActuatorConfig(
-        step_s=r.number(t, "step_s", "actuator."),
-        full_stroke_s=r.number(t, "full_stroke_s", "actuator."),
-        relay_settle_s=r.number(t, "relay_settle_s", "actuator.", required=False, default=0.03),
-        watchdog_s=r.number(t, "watchdog_s", "actuator.", required=False, default=0.5),
+        step_s=r.number(t, "step_s", "actuator.", lo=0.01, hi=10.0),
+        full_stroke_s=r.number(t, "full_stroke_s", "actuator.", lo=0.5, hi=120.0),
+        relay_settle_s=r.number(t, "relay_settle_s", "actuator.", lo=0.0, hi=1.0, required=False, default=0.03),
+        watchdog_s=r.number(t, "watchdog_s", "actuator.", lo=0.05, hi=5.0, required=False, default=0.5),
     )
     if actuator.step_s > actuator.full_stroke_s:
         raise r.err("actuator.step_s", f"expected <= actuator.full_stroke_s ({actuator.full_stroke_s})")
@@ -356,9 +373,9 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = r.table(data, "throttle")
     r.no_extra(t, {"idle_pulse_us", "full_pulse_us", "frame_us"}, "throttle.")
     throttle = ThrottleConfig(
-        idle_pulse_us=r.number(t, "idle_pulse_us", "throttle."),
-        full_pulse_us=r.number(t, "full_pulse_us", "throttle."),
-        frame_us=r.number(t, "frame_us", "throttle.", required=False, default=20000.0),
+        idle_pulse_us=r.number(t, "idle_pulse_us", "throttle.", lo=400, hi=2600),
+        full_pulse_us=r.number(t, "full_pulse_us", "throttle.", lo=400, hi=2600),
+        frame_us=r.number(t, "frame_us", "throttle.", lo=2500, hi=50000, required=False, default=20000.0),
     )
     for k in ("idle_pulse_us", "full_pulse_us"):
         if not 400 <= getattr(throttle, k) <= 2600:
@@ -374,8 +391,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         raise r.err("reset", f"expected a table [reset], got {type(t).__name__}")
     r.no_extra(t, {"pulse_s", "boot_s", "active_high"}, "reset.")
     reset = ResetConfig(
-        pulse_s=r.number(t, "pulse_s", "reset.", required=False, default=0.25),
-        boot_s=r.number(t, "boot_s", "reset.", required=False, default=1.0),
+        pulse_s=r.number(t, "pulse_s", "reset.", lo=0.001, hi=5.0, required=False, default=0.25),
+        boot_s=r.number(t, "boot_s", "reset.", lo=0.0, hi=30.0, required=False, default=1.0),
         active_high=r.boolean(t, "active_high", "reset.", default=True),
     )
 
@@ -383,7 +400,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         path=str(path),
         protocol=r.string(data, "protocol", "", choices=("v1", "v0")),
         transport=r.string(data, "transport", "", choices=("i2c", "serial"), required=False, default="i2c"),
-        poll_hz=r.number(data, "poll_hz", ""),
+        poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0),
         debounce_primary_us=r.integer(data, "debounce_primary_us", "", lo=0, hi=65535),
         debounce_secondary_us=r.integer(data, "debounce_secondary_us", "", lo=0, hi=65535),
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),

@@ -164,16 +164,18 @@ def _validated_fields(raw: Mapping[str, Any]) -> dict[str, Any]:
         raise _FieldError("note", "a single line of text (no newline)")
     return {
         "date": _parse_date(raw["date"]),
+        # Physical bounds of a 16-bit bridge ADC: a slope or offset outside them is a unit or
+        # typing mistake, and a huge one would overflow the torque and efficiency downstream.
         "slope_counts_per_nm": _parse_float("slope_counts_per_nm", raw["slope_counts_per_nm"],
-                                            positive=True),
-        "intercept_counts": _parse_float("intercept_counts", raw["intercept_counts"]),
+                                            lo=0.01, hi=1e5),
+        "intercept_counts": _parse_float("intercept_counts", raw["intercept_counts"], lo=-65536.0, hi=131072.0),
         "r2": _parse_float("r2", raw["r2"], lo=0.0, hi=1.0),
         "n_samples": _parse_count("n_samples", raw["n_samples"]),
         "lever_arm_m": _parse_lever(raw.get("lever_arm_m")),
         "gear_ratio_brake_per_secondary": _parse_float(
             "gear_ratio_brake_per_secondary",
             raw.get("gear_ratio_brake_per_secondary", GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY),
-            positive=True),
+            lo=0.01, hi=100.0),
         "note": note,
     }
 
@@ -347,6 +349,8 @@ def load_history(path) -> list[CalibrationEntry]:
         raise ConfigError(path, "file", "an existing calibration history CSV") from None
     except UnicodeDecodeError:
         raise ConfigError(path, "file", "UTF-8 text") from None
+    except OSError as exc:  # a directory, no permission, an I/O error
+        raise ConfigError(path, "file", f"a readable calibration history CSV ({exc.strerror or exc})") from None
     return _parse_history_text(text, path)
 
 

@@ -31,6 +31,32 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with bad input reported on one line (what and what is expected), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def number_in(lo: float, hi: float, *, integer: bool = False, lo_open: bool = False):
+    """An argparse ``type``: a finite number in [lo, hi] (``(lo, hi]`` with ``lo_open``)."""
+    import math
+
+    def parse(text: str):
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            v = None
+        ok = v is not None and math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi
+        if not ok:
+            kind = "an integer" if integer else "a number"
+            raise argparse.ArgumentTypeError(f"expected {kind} {'>' if lo_open else '>='} {lo:g} and <= {hi:g}, "
+                                             f"got {text!r}")
+        return v
+
+    return parse
+
+
 def _available(name: str) -> bool:
     return importlib.util.find_spec(COMMANDS[name][0]) is not None
 
@@ -51,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv and argv[0] in COMMANDS and _available(argv[0]):
         name = argv[0]
         mod = importlib.import_module(COMMANDS[name][0])
-        parser = argparse.ArgumentParser(prog=f"dyno {name}", description=COMMANDS[name][1])
+        parser = OneLineParser(prog=f"dyno {name}", description=COMMANDS[name][1])
         mod.add_arguments(parser)
         if "--rig" not in parser._option_string_actions:
             # every command takes --rig PATH (the rig description), even where it only
@@ -68,6 +94,14 @@ def main(argv: list[str] | None = None) -> int:
         except DynoError as exc:
             print(f"dyno {name}: error: {exc}", file=sys.stderr)
             return 1
+        except UnicodeDecodeError as exc:  # a binary or non-UTF-8 file where text was expected
+            print(f"dyno {name}: error: a file is not UTF-8 text ({exc.reason} at byte {exc.start})",
+                  file=sys.stderr)
+            return 2
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+            # an input path that is not a readable file (loaders name theirs; this is the net)
+            print(f"dyno {name}: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
+            return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.version:

@@ -7,6 +7,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+from dyno.cli import number_in
+
 
 def add_arguments(parser) -> None:
     parser.add_argument("--params", metavar="TOML", help="overrides of the report's Tables 3.1-3.3 "
@@ -15,7 +17,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rotation", choices=("cw", "ccw"), default="cw",
                         help="radial-pulley rotation for the trace (default cw, the report's choice)")
     parser.add_argument("--vroemen", action="store_true", help="use the report's eq. 3.24 horizontal force")
-    parser.add_argument("--points", type=int, default=12, help="rows of the geometry/force table")
+    parser.add_argument("--points", type=number_in(2, 1000, integer=True), default=12, help="rows of the geometry/force table")
     parser.add_argument("--json", action="store_true", help="print everything as JSON")
 
 

@@ -4,22 +4,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dyno.cli import number_in
+
 SIM_HISTORY = Path("runs") / "sim_torque_calibration.csv"
 
 
 def add_arguments(p) -> None:
     p.add_argument("--sim", action="store_true",
                    help="the simulated rig in its calibration fixture (hidden true gain and offset)")
-    p.add_argument("--samples", type=int, default=500, help="ADC samples per load step (default 500)")
-    p.add_argument("--settle-samples", type=int, default=125,
+    p.add_argument("--samples", type=number_in(2, 100_000, integer=True), default=500, help="ADC samples per load step (default 500)")
+    p.add_argument("--settle-samples", type=number_in(0, 100_000, integer=True), default=125,
                    help="samples dropped at the start of each step while the load settles (default 125)")
     p.add_argument("--history", type=Path, default=None,
                    help="calibration history CSV to append to (default: the rig's; with --sim "
                         f"{SIM_HISTORY}, never the rig's)")
-    p.add_argument("--radius", type=float, default=0.15, help="rope radius on the brake rotor, m")
+    p.add_argument("--radius", type=number_in(0.01, 2.0), default=0.15, help="rope radius on the brake rotor, m")
     p.add_argument("--masses", default="5,10,20,30,40", help="masses in kg, comma-separated")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed")
-    p.add_argument("--speed", type=float, default=1.0, help="simulation pace, multiple of real time")
+    p.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=0, help="simulation seed")
+    p.add_argument("--speed", type=number_in(0.0, 1000.0, lo_open=True), default=1.0, help="simulation pace, multiple of real time")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
                         "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")

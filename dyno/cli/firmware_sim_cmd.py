@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from dyno.cli import number_in
 from dyno.acquisition.reader import make_reader
 from dyno.acquisition.rpm import rpm_by_count
 from dyno.protocol import v1
@@ -27,26 +28,26 @@ from dyno.transports.simavr import FAULT_KINDS, SimavrTransport
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
     parser.add_argument("--protocol", choices=("v1", "v0"), default="v1")
-    parser.add_argument("--primary-rpm", type=float, default=3800.0)
-    parser.add_argument("--secondary-rpm", type=float, default=7600.0)
+    parser.add_argument("--primary-rpm", type=number_in(0.0, 30000.0), default=3800.0)
+    parser.add_argument("--secondary-rpm", type=number_in(0.0, 30000.0), default=7600.0)
     parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
     parser.add_argument("--adc-status", type=lambda s: int(s, 0), default=0x05,
                         help="AD7171 status byte clocked after the data (default 0x05)")
-    parser.add_argument("--adc-error-every", type=int, default=0,
+    parser.add_argument("--adc-error-every", type=number_in(0, 1_000_000, integer=True), default=0,
                         help="set the AD7171 error bit on every Nth conversion (0: never)")
-    parser.add_argument("--adc-hz", type=float, default=125.0)
-    parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds of signal")
+    parser.add_argument("--adc-hz", type=number_in(1.0, 1000.0), default=125.0)
+    parser.add_argument("--seconds", type=number_in(0.0, 3600.0, lo_open=True), default=5.0, help="simulated seconds of signal")
     parser.add_argument("--bounce", action="store_true", help="add two bounce edges per Hall pulse")
-    parser.add_argument("--fault-rate", type=float, default=0.0,
+    parser.add_argument("--fault-rate", type=number_in(0.0, 0.5), default=0.0,
                         help="probability that a transfer is corrupted between harness and host")
     parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
                         help=f"comma list from {','.join(FAULT_KINDS)}")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--poll-hz", type=float, default=150.0)
-    parser.add_argument("--i2c-khz", type=int, default=100)
-    parser.add_argument("--drain-s", type=float, default=0.3,
+    parser.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=1)
+    parser.add_argument("--poll-hz", type=number_in(0.0, 2000.0, lo_open=True), default=150.0)
+    parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100)
+    parser.add_argument("--drain-s", type=number_in(0.0, 60.0), default=0.3,
                         help="keep polling this long after the signals stop")
-    parser.add_argument("--reset-at", type=float, default=None,
+    parser.add_argument("--reset-at", type=number_in(0.0, 3600.0), default=None,
                         help="reset the MCU at this simulated second (watchdog-like)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")

@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from dyno.cli import number_in
 from dyno.model.params import VARIANTS, ModelParams, OperatingPoint, TABLE_6_1, bad_input
 
 STUDIES = ("sheave_angle", "bending_stiffness", "slack_tension", "friction")
@@ -25,25 +26,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sweep = sub.add_parser("sweep", help="operating-range sweep by continuation")
     study = sub.add_parser("study", help="thesis Section 7 parameter study")
     study.add_argument("name", choices=STUDIES)
-    study.add_argument("--values", type=float, nargs="+", help="parameter values (default: the thesis's)")
+    study.add_argument("--values", type=number_in(-1e12, 1e12), nargs="+", help="parameter values (default: the thesis's)")
     for p in (point, sweep, study):
         p.add_argument("--variant", choices=VARIANTS, default="corrected")
         p.add_argument("--json", action="store_true", help="print JSON instead of text")
         p.add_argument("--tier", choices=("full", "closed_form", "capstan"), default="full")
-        p.add_argument("--slip-threshold", type=float, default=1e-4, metavar="M_S", help="adhesion slip speed [m/s]")
-        p.add_argument("--tol", type=float, default=1e-3, help="solve_bvp tolerance")
-        p.add_argument("--rpm", type=float, default=3400.0, help="primary speed [rpm]")
-        p.add_argument("--torque", type=float, default=18.0, help="primary torque [N*m]")
-        p.add_argument("--slack-tension", type=float, default=None, help="slack-span tractive tension [N] (default 100)")
-        p.add_argument("--axial-force", type=float, default=None, help="primary axial force [N] instead of slack tension")
-        p.add_argument("--bending-stiffness", type=float, default=None, help="EI [N*m^2]")
-        p.add_argument("--sheave-angle", type=float, default=None, help="sheave half-angle [deg] (k scaled by tan)")
-        p.add_argument("--friction", type=float, default=None, help="kinetic friction coefficient")
-    point.add_argument("--ratio", type=float, default=1.0, help="geometric ratio R_S/R_P")
+        p.add_argument("--slip-threshold", type=number_in(0.0, 1.0, lo_open=True), default=1e-4, metavar="M_S", help="adhesion slip speed [m/s]")
+        p.add_argument("--tol", type=number_in(0.0, 1.0, lo_open=True), default=1e-3, help="solve_bvp tolerance")
+        p.add_argument("--rpm", type=number_in(0.0, 20000.0, lo_open=True), default=3400.0, help="primary speed [rpm]")
+        p.add_argument("--torque", type=number_in(0.0, 500.0, lo_open=True), default=18.0, help="primary torque [N*m]")
+        p.add_argument("--slack-tension", type=number_in(0.0, 1e5, lo_open=True), default=None, help="slack-span tractive tension [N] (default 100)")
+        p.add_argument("--axial-force", type=number_in(0.0, 1e6, lo_open=True), default=None, help="primary axial force [N] instead of slack tension")
+        p.add_argument("--bending-stiffness", type=number_in(0.0, 100.0, lo_open=True), default=None, help="EI [N*m^2]")
+        p.add_argument("--sheave-angle", type=number_in(1.0, 45.0), default=None, help="sheave half-angle [deg] (k scaled by tan)")
+        p.add_argument("--friction", type=number_in(0.0, 2.0, lo_open=True), default=None, help="kinetic friction coefficient")
+    point.add_argument("--ratio", type=number_in(0.1, 10.0), default=1.0, help="geometric ratio R_S/R_P")
     point.add_argument("--profiles", type=Path, default=None, help="write the profiles to this CSV")
     for p in (sweep, study):
-        p.add_argument("--points", type=int, default=20, help="ratios between --ratio-range ends")
-        p.add_argument("--ratio-range", type=float, nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"))
+        p.add_argument("--points", type=number_in(2, 1000, integer=True), default=20, help="ratios between --ratio-range ends")
+        p.add_argument("--ratio-range", type=number_in(0.1, 10.0), nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"))
         p.add_argument("--out", type=Path, default=Path("model-out"), help="directory for CSV and PNG")
 
 

@@ -10,11 +10,16 @@ from pathlib import Path
 def add_arguments(p) -> None:
     p.add_argument("--sim", action="store_true", help="run on the simulated rig (no hardware)")
     p.add_argument("--headless", action="store_true", help="no UI; GO is given automatically")
-    p.add_argument("--speed", type=float, default=None,
+    from dyno.cli import number_in
+
+    p.add_argument("--speed", type=number_in(0.0, 1000.0, lo_open=True), default=None,
                    help="simulation pace as a multiple of real time (default: as fast as possible)")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed")
-    p.add_argument("--fault-rate", type=float, default=0.0,
-                   help="fraction of bus transfers corrupted (bit errors, NACKs, truncation)")
+    p.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=0, help="simulation seed")
+    p.add_argument("--fault-rate", type=number_in(0.0, 0.5), default=0.0,
+                   help="fraction of bus transfers corrupted, 0..0.5 (bit errors, NACKs, truncation)")
+    p.add_argument("--mock-pins", action="store_true",
+                   help="with --sim: drive the simulated rig through the real-rig output code (gpiozero "
+                        "devices on MockFactory); outputs then reports the pins' final states")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
     p.add_argument("--protocol", choices=("v1", "v0"), default=None)
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
@@ -57,7 +62,8 @@ def run(args) -> int:
     drills = [parse_drill(d) for d in args.drill]
     opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=replace(TestPlan(), settle_mode=args.settle), drills=drills, handle_signals=True)
+                      plan=replace(TestPlan(), settle_mode=args.settle), drills=drills, handle_signals=True,
+                      mock_pins=args.mock_pins)
     if args.calibration:
         opts.calibration_path = args.calibration
     if args.engine_map:

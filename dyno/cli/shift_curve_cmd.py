@@ -7,6 +7,8 @@ import math
 import sys
 from pathlib import Path
 
+from dyno.cli import number_in
+
 REPO = Path(__file__).resolve().parents[2]
 THESIS_ENGINE_MAP = Path("/work/shared/data/vt-cvt-dyno-2019/engine_power_RPM.csv")
 
@@ -21,7 +23,7 @@ def add_arguments(parser) -> None:
                         help="fit belt friction, flyweight radius offset and secondary friction torque to "
                              "logged runs (each with its tune.toml, else TUNE; its engine_map.csv), then "
                              "predict TUNE's curve with the fitted values")
-    parser.add_argument("--points", type=int, default=50, help="load points along the shift (default 50)")
+    parser.add_argument("--points", type=number_in(2, 10_000, integer=True), default=50, help="load points along the shift (default 50)")
     parser.add_argument("--phase", choices=("steady", "upshift", "downshift"), default="steady",
                         help="helix torque split of Sorge eq. 11 (default steady: equal split)")
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")

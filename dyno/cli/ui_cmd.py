@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dyno.cli import number_in
+
 
 def add_arguments(p) -> None:
     p.add_argument("--sim", action="store_true", help="the simulated rig (no hardware)")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--speed", type=number_in(0.0, 1000.0, lo_open=True), default=1.0,
                    help="simulation pace as a multiple of real time (default 1: real time)")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed")
+    p.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=0, help="simulation seed")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")

@@ -265,6 +265,30 @@ class GpioActuators:
                 "throttle_servo": (p.throttle_servo, self._throttle)}
         return {name: (float(d.pin.state) if d.pin is not None else float("nan")) for name, (_, d) in devs.items()}
 
+    def output_states(self) -> dict:
+        """The outputs by name, read back from the pins (as ``SimActuators.output_states``), and ``safe``.
+
+        After :meth:`close` the pins are released: every output is at its de-energised
+        value, which the wiring makes the safe one (hardware/README.md).
+        """
+        with self._lock:
+            if self.closed:
+                return {"throttle": "idle", "engine_kill": "killed", "brake_actuator": "stopped",
+                        "brake_position": round(self.brake_position, 3), "pins": "released", "safe": True}
+            th = self.config.throttle
+            pulse_us = float(self._throttle.value) * th.frame_us
+            idle = abs(pulse_us - th.idle_pulse_us) < 1.0
+            killed = bool(self._kill.value)
+            if not self._enable.value:
+                brake = "stopped"
+            else:
+                brake = "applying" if self._direction.value else "releasing"
+            span = th.full_pulse_us - th.idle_pulse_us
+            return {"throttle": "idle" if idle else f"{(pulse_us - th.idle_pulse_us) / span:.2f}",
+                    "engine_kill": "killed" if killed else "run", "brake_actuator": brake,
+                    "brake_position": round(self.brake_position, 3),
+                    "safe": idle and killed and brake != "applying"}
+
     def close(self) -> None:
         """Drive every output to its safe value, then release the pins.
 

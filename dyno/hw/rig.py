@@ -40,6 +40,7 @@ class HardwareRig:
         self._serial_port = serial_port
         self._install_signals = install_signals
         self.actuators = self.guard = self.transport = self.thermometer = self.watchdog = None
+        self.estop = None  # dyno.hw.estop.EstopInput when rig.toml names pins.estop_input
         self._i2c = None
 
     def __enter__(self) -> "HardwareRig":
@@ -48,6 +49,14 @@ class HardwareRig:
 
         cfg = self.config
         self.actuators = GpioActuators(cfg, pin_factory=self._pin_factory, clock=self._clock)
+        if cfg.pins.estop_input is not None:
+            from dyno.hw.estop import EstopInput
+
+            try:
+                self.estop = EstopInput(cfg.pins.estop_input, self.actuators, pin_factory=self._pin_factory)
+            except BaseException:
+                self.actuators.close()
+                raise
         signals = DEFAULT_SIGNALS if self._install_signals else ()
         self.guard = SafetyGuard(self.actuators, signals=signals, use_atexit=self._install_signals)
         self.guard.__enter__()
@@ -61,6 +70,8 @@ class HardwareRig:
                 self.transport = self._i2c
             self.thermometer = MLX90614(_CurrentBus(self._i2c), cfg.i2c.thermometer_address)
             self.watchdog = Watchdog(self.actuators, cfg.actuator.watchdog_s, clock=clock)
+            if self.estop is not None:
+                self.watchdog.level_checks.append(self.estop.poll)
         except BaseException as exc:
             self.__exit__(type(exc), exc, exc.__traceback__)
             raise
@@ -73,6 +84,8 @@ class HardwareRig:
             if self.guard is not None:
                 self.guard.__exit__(exc_type, exc, tb)
         finally:
+            if self.estop is not None:
+                self.estop.close()
             for link in {id(x): x for x in (self.transport, self._i2c) if x is not None}.values():
                 try:
                     link.close()

@@ -120,6 +120,7 @@ class Watchdog:
         self.on_trip = on_trip
         self._last_kick_s = self.clock.now()
         self.tripped = False
+        self.level_checks = []  # callables run on every look, e.g. the E-stop input's level
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -131,6 +132,8 @@ class Watchdog:
 
     def check(self) -> bool:
         """One watchdog look; returns True if tripped (now or before)."""
+        for level_check in self.level_checks:
+            level_check()
         now = self.clock.now()
         if not self.tripped and now - self.last_alive_s() > self.timeout_s:
             self.tripped = True

@@ -24,6 +24,30 @@ class RecordingPin(MockPWMPin):
         return changed
 
 
+class EstopChainPin(RecordingPin):
+    """The E-stop input wired as on the rig: a normally closed contact to ground.
+
+    The chain, not the pull-up, decides the level while it is closed (gpiozero's mock
+    pin would let ``pull_up`` drive it high); :meth:`open_chain` is the button pressed
+    or the wire cut, :meth:`close_chain` the chain restored.
+    """
+
+    chain_closed = True
+
+    def _set_pull(self, value):
+        super()._set_pull(value)
+        if self.chain_closed:
+            self.drive_low()
+
+    def open_chain(self) -> None:
+        self.chain_closed = False
+        self.drive_high()  # the pull-up wins
+
+    def close_chain(self) -> None:
+        self.chain_closed = True
+        self.drive_low()
+
+
 class RecordingFactory(MockFactory):
     def __init__(self, clock=None):
         super().__init__(pin_class=RecordingPin)

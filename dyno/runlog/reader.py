@@ -41,14 +41,21 @@ def load_run(run_dir) -> Run:
     if not meta_path.is_file():
         raise ConfigError(run_dir, "meta.json", "a run directory written by dyno (meta.json missing)")
     try:
-        meta = json.loads(meta_path.read_text())
+        meta = json.loads(meta_path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError(meta_path, "file", "UTF-8 JSON text") from None
     except json.JSONDecodeError as exc:
         raise ConfigError(meta_path, f"line {exc.lineno}", "valid JSON") from exc
+    if not isinstance(meta, dict):
+        raise ConfigError(meta_path, "top level", f"a JSON object, got {type(meta).__name__}")
     torn = {}
     documents = []
     docs_path = run_dir / "documents.jsonl"
     if docs_path.exists():
-        lines = docs_path.read_text(encoding="utf-8").split("\n")
+        try:
+            lines = docs_path.read_bytes().decode("utf-8").split("\n")
+        except UnicodeDecodeError as exc:
+            raise ConfigError(docs_path, f"byte {exc.start}", "UTF-8 text, one JSON document per line") from None
         for i, line in enumerate(lines):
             if not line.strip():
                 continue

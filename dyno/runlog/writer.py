@@ -20,6 +20,7 @@ composition root turns that into an abort to the safe state (cause ``disk_full``
 
 from __future__ import annotations
 
+import os
 import struct
 import time
 from pathlib import Path
@@ -28,17 +29,32 @@ from dyno import __version__
 from dyno.runlog.files import dumps, write_atomic, write_json_atomic
 
 EVENT_RECORD = struct.Struct("<BqHB")
+LOCK_NAME = ".dyno-lock"  # present while a process writes the run (see RunWriter)
 
 
 class RunWriter:
     def __init__(self, run_dir: Path, meta: dict, calibration: dict | None = None,
                  engine_map_text: str | None = None, tune_text: str | None = None) -> None:
-        self.run_dir = Path(run_dir)
-        if self.run_dir.exists() and any(self.run_dir.iterdir()):
-            from dyno.errors import ConfigError
+        from dyno.errors import ConfigError
 
+        self.run_dir = Path(run_dir)
+        lock = self.run_dir / LOCK_NAME
+        in_use = ConfigError(self.run_dir, "--out", f"a directory no other dyno process is writing ({lock} "
+                             "exists; if no dyno runs, the run that held it was killed: choose a new --out)")
+        if lock.exists():
+            raise in_use
+        if self.run_dir.exists() and any(self.run_dir.iterdir()):
             raise ConfigError(self.run_dir, "--out", "an empty or new directory (refusing to overwrite a run)")
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        # Claim the directory atomically: of two processes given the same --out, one gets
+        # the lock file and the other refuses before writing anything.
+        try:
+            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            raise in_use from None
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f"{os.getpid()}\n")
+        self._lock_path = lock
         meta = dict(meta)
         meta.setdefault("software_version", __version__)
         meta.setdefault("created_unix_s", time.time())
@@ -97,6 +113,10 @@ class RunWriter:
                 f.close()
             except OSError:
                 pass  # a full disk may refuse the final flush too; what is on disk stays readable
+        try:
+            self._lock_path.unlink()
+        except OSError:
+            pass
 
 
 class _FullDisk:

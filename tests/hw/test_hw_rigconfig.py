@@ -46,6 +46,15 @@ BAD = [
     ("unknown key", lambda d: d["actuator"].__setitem__("stepp_s", 1.0), "actuator.stepp_s"),
     ("bad protocol", lambda d: d.__setitem__("protocol", "v2"), "protocol"),
     ("servo in ms", lambda d: d["throttle"].__setitem__("idle_pulse_us", 2.2), "throttle.idle_pulse_us"),
+    # an infinite limit disables its trip; NaN compares false; inf polling hangs the loop
+    ("inf limit", lambda d: d["limits"].__setitem__("rotor_temp_max_c", float("inf")), "limits.rotor_temp_max_c"),
+    ("nan limit", lambda d: d["limits"].__setitem__("overspeed_primary_rpm", float("nan")),
+     "limits.overspeed_primary_rpm"),
+    ("limit out of range", lambda d: d["limits"].__setitem__("comms_timeout_s", 60.0), "limits.comms_timeout_s"),
+    ("inf poll rate", lambda d: d.__setitem__("poll_hz", float("inf")), "poll_hz"),
+    ("zero poll rate", lambda d: d.__setitem__("poll_hz", 0), "poll_hz"),
+    ("watchdog off", lambda d: d["actuator"].__setitem__("watchdog_s", float("inf")), "actuator.watchdog_s"),
+    ("estop pin taken", lambda d: d["pins"].__setitem__("estop_input", d["pins"]["engine_kill"]), "pins.estop_input"),
 ]
 
 
@@ -57,6 +66,8 @@ def test_hw_bad_rig_names_field(base, case, mutate, field):
         rig_from_dict(d, "bad.toml")
     assert exc.value.field == field
     assert "\n" not in str(exc.value) and str(exc.value).startswith("bad.toml: " + field)
+    if "range" in case or "inf" in case or "nan" in case or "zero" in case or "off" in case:
+        assert ".." in str(exc.value)  # the allowed range is stated
 
 
 def test_hw_missing_file(tmp_path):
