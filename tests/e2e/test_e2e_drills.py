@@ -45,14 +45,15 @@ RISKY = {
 }
 
 
-def _run(tmp_path, drills, *, seed=3, limits=None, name="run"):
+def _run(tmp_path, drills, *, seed=3, limits=None, name="run", mock_pins=False):
     captured = {}
 
     def setup(ctx):
         captured["ctx"] = ctx
 
     r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / name, plan=QUICK_PLAN, limits=limits,
-                            drills=[parse_drill(d) for d in drills], handle_signals=True, setup=setup))
+                            drills=[parse_drill(d) for d in drills], handle_signals=True, setup=setup,
+                            mock_pins=mock_pins))
     return r, captured["ctx"]
 
 
@@ -100,6 +101,32 @@ def test_drill_aborts_safe_within_bound(tmp_path, drill):
     logged = load_run(r["run_dir"]).docs("abort")
     if drill != "disk-full":  # a full disk takes the abort record with it; the JSON carries it
         assert logged and logged[0]["cause"] == a["cause"]
+
+
+MOCK_PIN_DRILLS = ["bus-lost", "overspeed", "adc-error", "loop-stall:800", "controller-crash", "hall-dead:primary"]
+
+
+@pytest.mark.parametrize("drill", MOCK_PIN_DRILLS)
+def test_drill_through_the_real_rig_output_code(tmp_path, drill):
+    """--mock-pins: GpioActuators on gpiozero's MockFactory drive the physics; same bounds, pins safe."""
+    from dyno.hw.outputs import GpioActuators
+    from dyno.hw.testing import assert_direction_never_switched_with_enable_on
+
+    t, causes, bound = RISKY[drill]
+    r, ctx = _run(tmp_path, [f"{drill}@{t}"], mock_pins=True)
+    act = ctx.controller.act
+    assert isinstance(act, GpioActuators)
+    assert r["state"] == "aborted" and exit_code(r) == 3
+    a = r["aborts"][0]
+    assert a["cause"] in causes and 0.0 <= a["latency_s"] <= bound, a
+    # outputs read back from the pins: throttle idle, ignition killed, actuator off after its release
+    assert r["rig_safe"] is True and r["outputs"]["brake_actuator"] == "stopped", r["outputs"]
+    assert r["outputs"]["throttle"] == "idle" and r["outputs"]["engine_kill"] == "killed"
+    m = ctx.sim.model
+    assert m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_mm == pytest.approx(0.0, abs=1e-9)
+    factory = act._enable.pin_factory
+    assert_direction_never_switched_with_enable_on(factory.log, ctx.rig_cfg)
+    _assert_kept_and_replays(r)
 
 
 def test_overtemp_latency_from_the_true_crossing(tmp_path):

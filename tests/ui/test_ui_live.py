@@ -142,10 +142,12 @@ def test_ui_live_snapshots_80x24(tmp_path):
                 await pilot.pause(0.3)
                 shots[key] = screen_text(app)
             await pilot.press("g")
-            await pilot.pause(0.1)
+            await wait_for(pilot, lambda: "Start the test?" in screen_text(app), 10)
             shots["confirm"] = screen_text(app)
             await pilot.press("space")  # E-STOP from inside the dialog closes it
-            await pilot.pause(0.4)
+            # wait for the outcome, not a fixed pause: CI's 2 cores are busy
+            await wait_for(pilot, lambda: "cause: estop" in screen_text(app)
+                           and "Start the test?" not in screen_text(app), 10)
             shots["aborted"] = screen_text(app)
         return shots
 
