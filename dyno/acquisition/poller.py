@@ -165,6 +165,17 @@ class Poller:
         edges = self.streams.last_edges(channel)
         if self.epoch_start_us is not None and len(edges) >= 2 and edges[-2] < self.epoch_start_us:
             return 0.0  # no two edges of this boot yet: no speed, never one across the reset
+        if getattr(self.reader, "protocol", None) == "v0" and len(edges) >= 1:
+            # v0 misses edges between polls: two edges the host saw may be several periods
+            # apart.  The device's own period (the rpm slot) is the speed; staleness as below.
+            slot_rpm = float(self.streams.edge_rpm[channel][-1])
+            if slot_rpm <= 0:
+                return 0.0
+            period_us = 60e6 / slot_rpm
+            quiet_us = now - int(edges[-1])
+            if quiet_us > min(500_000, 3.0 * period_us) and quiet_us > period_us:
+                return 0.0
+            return slot_rpm
         return current_rpm(edges, now)
 
     def latest_adc(self) -> tuple[int, int] | None:

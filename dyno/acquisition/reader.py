@@ -144,6 +144,8 @@ class V0Reader:
         self.more = False
         self._last_bytes: bytes | None = None
         self._last: v0.LegacyFrame | None = None
+        self._last_now_s = 0.0
+        self._pending = None  # (frame, raw, reason, now_s): implausible, awaiting its neighbour
 
     @property
     def stats(self) -> LinkStats:
@@ -167,8 +169,33 @@ class V0Reader:
             st.rejected["stale_repeat"] += 1
             return []
         self._last_bytes = raw
-        st.accepted += 1
         last = self._last
+        if last is not None:
+            why = implausible_v0(f, last, now_s - self._last_now_s)
+            if why is not None:
+                # A 16-bit sum lets some corrupted frames through.  Hold the odd one: if the
+                # next frame agrees with it, the change was real (accept it late); if not,
+                # it was corruption and is dropped.
+                pending, self._pending = self._pending, (f, raw, why, now_s)
+                if pending is None or implausible_v0(f, pending[0], now_s - pending[3]) is not None:
+                    if pending is not None:
+                        st.rejected[pending[2]] += 1
+                    return []
+                self._pending = None
+                out = self._accept(pending[0], pending[1], last, pending[3])
+                return out + self._accept(f, raw, pending[0], now_s)
+            if self._pending is not None:
+                st.rejected[self._pending[2]] += 1  # the odd frame stood alone: corruption
+                self._pending = None
+        return self._accept(f, raw, last, now_s)
+
+    def _accept(self, f: v0.LegacyFrame, raw: bytes, last, now_s: float | None = None) -> list[Event]:
+        st = self.session.stats
+        st.accepted += 1
+        for fn in self.session.frame_listeners:
+            fn(raw)
+        if now_s is not None:
+            self._last_now_s = now_s
         self._last = f
         new = []
         if last is None or f.t_primary_us != last.t_primary_us:
@@ -187,6 +214,55 @@ class V0Reader:
         out = [Event(e.channel, self.unwrap(e.t_us), e.code, e.status) for e in new]
         self.device_time_us = max(e.t_us for e in out) if out else self.device_time_us
         return out
+
+
+# v0 plausibility (the checksum is a 16-bit sum): what a frame may change since the last one
+V0_TIME_MARGIN_US = 50_000  # clock slack between a Hall edge slot and the ADC slot
+V0_RPM_JUMP_ABS = 400  # rpm: beyond this and ...
+V0_RPM_JUMP_REL = 0.25  # ... this fraction of the last value, a one-poll change is suspect
+# Torque code between two conversions 8 ms apart: the firing ripple moves it by up to ~2,000
+# counts peak to peak (sim/physics.py, from the thesis logs); a flipped bit 12+ moves it more.
+V0_ADC_JUMP_COUNTS = 4000
+
+
+def implausible_v0(f: v0.LegacyFrame, last: v0.LegacyFrame, host_dt_s: float) -> str | None:
+    """Why frame ``f`` cannot follow ``last`` physically (a rejection cause), or None.
+
+    * the ADC converts every 8 ms, so its slot's time advances by about the host's
+      time between the reads (never backwards, never far more);
+    * a value changes only with its timestamp (the sketch writes both together);
+    * a new Hall edge time lies between the previous ADC time and the new one;
+    * an rpm cannot jump by more than max(400 rpm, 25 %) within one poll;
+    * the gap between the Hall edge times is a whole number of the periods the rpm slot
+      states (a corrupted time would make it shorter, i.e. a false over-speed);
+    * the torque code cannot move more than 4,000 counts between two conversions.
+    """
+    wrap = 0xFFFFFFFF
+    d_adc = (f.t_adc_us - last.t_adc_us) & wrap
+    if d_adc > max(0.0, host_dt_s) * 1e6 * 1.5 + V0_TIME_MARGIN_US:
+        return "implausible_time"
+    for rpm, t, rpm0, t0 in ((f.rpm_primary, f.t_primary_us, last.rpm_primary, last.t_primary_us),
+                             (f.rpm_secondary, f.t_secondary_us, last.rpm_secondary, last.t_secondary_us)):
+        if t == t0:
+            if rpm != rpm0:
+                return "implausible_value"
+            continue
+        since = (t - last.t_adc_us + V0_TIME_MARGIN_US) & wrap
+        if since > d_adc + 2 * V0_TIME_MARGIN_US:
+            return "implausible_time"
+        if abs(rpm - rpm0) > max(V0_RPM_JUMP_ABS, V0_RPM_JUMP_REL * rpm0):
+            return "implausible_rpm"
+        if rpm > 0:
+            # the slot's rpm is the device's own last period: the gap between the edge times
+            # the host saw is a whole number of such periods (edges missed between polls)
+            k = ((t - t0) & wrap) * rpm / 60e6
+            if k < 0.8 or (k <= 6 and abs(k - round(k)) > 0.2):
+                return "implausible_period"
+    if f.t_adc_us == last.t_adc_us and f.adc_code != last.adc_code:
+        return "implausible_value"
+    if f.t_adc_us != last.t_adc_us and abs(f.adc_code - last.adc_code) > V0_ADC_JUMP_COUNTS:
+        return "implausible_adc"
+    return None
 
 
 def make_reader(protocol: str, transport: Transport):

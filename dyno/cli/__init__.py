@@ -85,7 +85,10 @@ def main(argv: list[str] | None = None) -> int:
             from dyno.rigconfig import add_rig_argument
 
             add_rig_argument(parser)
-        args = parser.parse_args(argv[1:])
+        try:
+            args = parser.parse_args(argv[1:])
+        except SystemExit as exc:  # --help, or a bad argument (already reported on one line)
+            return int(exc.code or 0)
         try:
             return int(mod.run(args) or 0)
         except ConfigError as exc:

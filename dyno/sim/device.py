@@ -39,6 +39,7 @@ class EmulatedFirmware:
         self.boot_count = 0
         self.debounce_us = {v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000}
         self.served: dict[int, bytes] = {}  # seq -> bytes last served (truth for audits)
+        self.served_v0: deque = deque(maxlen=512)  # v0: the frames last served (truth for audits)
         self.events_generated = 0  # accepted into the ring (truth)
         self.bounces_rejected = 0
         self._boot(0.0)
@@ -130,6 +131,7 @@ class EmulatedFirmware:
         if self.protocol == "v0":
             (rp, tp), (rs, ts), (adc, ta) = (self._legacy[c] for c in (1, 2, 3))
             out = v0.encode_legacy_frame(v0.LegacyFrame(rp, tp, rs, ts, adc, ta))
+            self.served_v0.append(out)  # truth for the corrupted-accepted audit
             return out[:n].ljust(n, b"\xff")
         if self.info_pending:
             self.info_pending = False

@@ -169,4 +169,6 @@ class SimRig:
 
     def audit(self, raw: bytes) -> bool:
         """True if ``raw`` is byte-for-byte a frame the device really served."""
+        if self.firmware.protocol == "v0":
+            return raw in self.firmware.served_v0
         return self.firmware.served.get(raw[3]) == raw
