@@ -120,19 +120,32 @@ def check_thermometer(report: Report, cfg, bus) -> None:
     report.add("thermometer", status, f"rotor {obj:.1f} C (limit {limit:.0f} C), sensor {amb:.1f} C")
 
 
-def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None) -> None:
-    """--toggle: claims the pins (driving them safe), pulses reset, steps the brake."""
-    from dyno.control.outputs import APPLY, RELEASE
-    from dyno.hw.outputs import GpioActuators
-    from dyno.hw.safety import SafetyGuard
+def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, bus=None, serial_port=None) -> None:
+    """--toggle: claims the pins (driving them safe), pulses reset, steps the brake.
 
+    The rig comes from the one composition root every entry point uses
+    (:class:`dyno.hw.rig.HardwareRig`): signal handlers that reach the safe state
+    first, the E-stop input if wired, and the watchdog on its own thread, so a hang
+    in a bus transfer while the brake moves still ends in the safe state.
+    """
+    from dyno.control.outputs import APPLY, RELEASE
+    from dyno.hw.rig import HardwareRig
+
+    hw = HardwareRig(cfg, pin_factory=pin_factory, clock=clock, bus=bus, serial_port=serial_port)
     try:
-        act = GpioActuators(cfg, pin_factory=pin_factory, clock=clock)
+        hw.__enter__()
     except Exception as exc:  # gpiozero raises a family of pin errors; report, don't crash
         report.add("gpio", FAIL, f"cannot claim pins {cfg.pins.as_dict()}: {exc}")
         return
-    with SafetyGuard(act, release_timeout_s=None):
-        report.add("gpio", OK, "pins claimed; throttle idle, engine killed, brake releasing")
+    try:
+        hw.watchdog.start_thread()
+        act = hw.actuators
+        report.add("gpio", OK, "pins claimed; throttle idle, engine killed, brake releasing; watchdog running")
+        if hw.estop is not None:
+            report.add("e-stop input", FAIL if hw.estop.is_open else OK,
+                       f"GPIO{hw.estop.bcm}: chain {'OPEN (stop)' if hw.estop.is_open else 'closed'}")
+            if hw.estop.is_open:
+                return
         if not act.finish_release():
             report.add("brake release", FAIL, "release stroke did not complete")
             return
@@ -148,8 +161,13 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None) 
             report.add("arduino reset", WARN, "pulsed; cannot confirm without a v1 INFO frame", essential=False)
         act.step(APPLY, cfg.actuator.step_s)
         act.step(RELEASE, cfg.actuator.step_s)
+        if hw.watchdog.tripped:
+            report.add("brake step", FAIL, "the watchdog tripped during the step")
+            return
         report.add("brake step", OK, f"{cfg.actuator.step_s:.2f} s out and back (watch the actuator move)",
                    essential=False)
+    finally:
+        hw.__exit__(None, None, None)  # release stroke finished, outputs de-energised, pins released
 
 
 def _boots(cfg, transport):
@@ -214,7 +232,8 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
         if transport is None:
             report.add("gpio", FAIL, "not toggled: no firmware link to confirm the reset")
         else:
-            check_outputs(report, cfg, transport, clock=clock, pin_factory=pin_factory)
+            check_outputs(report, cfg, transport, clock=clock, pin_factory=pin_factory, bus=bus,
+                          serial_port=serial_port)
     else:
         report.add("gpio", SKIP, "outputs not touched (use --toggle)", essential=False)
     return report

@@ -189,6 +189,7 @@ class GpioActuators:
                     if self._generation != gen or self.closed:
                         return
                     now = self.clock.now()
+                    self.last_tick_s = now  # this loop is the control loop while it runs
                     self._advance(now)
                     if self._moving == STOP and self._target == STOP:
                         return
@@ -208,6 +209,7 @@ class GpioActuators:
                 if self.closed:
                     return False
                 now = self.clock.now()
+                self.last_tick_s = now  # servicing the release: the control loop is alive
                 self._advance(now)
                 if self.released:
                     return True
