@@ -435,6 +435,10 @@ def summarize(ctx: RunContext) -> dict:
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
            "discarded": list(ctx.controller.discards),
            "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    go_s = ctx.controller.go_s
+    ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
+    # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
+    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else None
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))
@@ -477,7 +481,7 @@ def _finite(obj):
 
 
 POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",
-              "efficiency", "efficiency_sem", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
+              "efficiency", "efficiency_sem", "efficiency_ci95", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
               "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults")
 

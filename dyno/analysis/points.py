@@ -106,7 +106,8 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     point["torque_secondary_sem_nm"] = float(adc_sem / calibration.slope_counts_per_nm)
     rp, rs = point["rpm_primary"], point["rpm_secondary"]
     point["ratio"] = rp / rs if rs and rs > 0 and not math.isnan(rp) else math.nan
-    point.update(power_out_w=math.nan, power_in_w=math.nan, efficiency=math.nan, efficiency_sem=math.nan)
+    point.update(power_out_w=math.nan, power_in_w=math.nan, efficiency=math.nan, efficiency_sem=math.nan,
+                 efficiency_ci95=math.nan)
     if not any(math.isnan(x) for x in (rp, rs, torque)):
         point["power_out_w"] = torque * rs * 2 * math.pi / 60
         try:
@@ -117,9 +118,18 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
         else:
             point.update(power_out_w=eff["power_out_w"], power_in_w=eff["power_in_w"],
                          efficiency=eff["efficiency"], efficiency_sem=eff["efficiency_sem"])
+            # 95 % interval half-width: the standard error is from batch means (correlated samples),
+            # so Student's t with (batches - 1) degrees of freedom, not 1.96.
+            point["efficiency_ci95"] = float(_t975(_n_batches(t0_us, t1_us) - 1) * eff["efficiency_sem"])
     point["faults"] = faults
     point["valid"] = not any(f.get("severity", "error") == "error" for f in faults)
     return point
+
+
+def _t975(dof: int) -> float:
+    from scipy.stats import t
+
+    return float(t.ppf(0.975, max(1, dof)))
 
 
 def _nz(x: float) -> float:

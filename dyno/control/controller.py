@@ -118,6 +118,7 @@ class TestController:
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
+        self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
         poller.listeners.append(self._on_poll)
@@ -272,6 +273,7 @@ class TestController:
         if self.auto_go:
             self._go.set()
         await self._go.wait()
+        self.go_s = self._now()
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)

@@ -71,3 +71,18 @@ def test_point_statistics_are_complete(full_run):
         assert p[k] is not None and p[k] > 0 and math.isfinite(p[k])
     assert p["n_primary_edges"] > 100 and p["n_secondary_edges"] > 100 and p["n_adc"] > 300
     assert p["duration_s"] >= 3.0
+
+
+def test_points_carry_a_95pc_interval_that_covers_the_truth(full_run):
+    """efficiency_ci95: Student-t half-width from batch means (correlated samples), a fraction like efficiency."""
+    pts = full_run["points"]
+    assert pts
+    covered = 0
+    for p in pts:
+        ci = p["efficiency_ci95"]
+        assert ci is not None and 1.96 * p["efficiency_sem"] < ci < 4 * p["efficiency_sem"]
+        covered += abs(p["efficiency"] - p["efficiency_true"]) <= ci
+    assert covered / len(pts) >= 0.8  # nominal 95 %: the sim's truth inside the interval at most points
+    # test_time_s: from GO to the end of the last measurement, in simulated seconds
+    assert 0 < full_run["test_time_s"] <= full_run["sim_time_s"]
+    assert full_run["test_time_s"] >= sum(p["duration_s"] for p in pts)
