@@ -10,6 +10,7 @@ import csv
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -259,3 +260,43 @@ def test_entry_doctor_without_hardware_says_what_fails(work):
     proc = dyno("doctor", cwd=work)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr + proc.stdout
     assert "FAIL  i2c bus" in proc.stdout and "rig NOT ready" in proc.stdout
+
+
+# --- closed pipes and Ctrl+C ----------------------------------------------------------------------
+def _closed_pipe(*args, cwd: Path, timeout: float = 300):
+    """Run `dyno ARGS` with its stdout's reader gone before it writes (like `| head` that has had enough)."""
+    proc = subprocess.Popen([sys.executable, "-m", "dyno", *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=cwd, env=_env())
+    proc.stdout.close()
+    err = proc.stderr.read()
+    return proc.wait(timeout=timeout), err
+
+
+@pytest.mark.parametrize("args", [("arcvt",), ("model", "point", "--json"), ("doctor", "--sim"),
+                                  ("replay", "RUN", "--json")])
+def test_closed_pipe_ends_quietly_with_141(args, sim_run, work):
+    args = [sim_run[0] if a == "RUN" else a for a in args]
+    rc, err = _closed_pipe(*args, cwd=work)
+    assert rc == 141 and "Traceback" not in err and "BrokenPipe" not in err, (rc, err)
+
+
+def test_closed_pipe_keeps_a_runs_exit_code(work):
+    """`dyno run ... | head`: the test still runs to its end, on disk, and its exit code says how it ended."""
+    out = work / "piped-run"
+    rc, err = _closed_pipe("run", "--sim", "--headless", "--seed", 5, "--out", out, cwd=work)
+    assert rc == 0 and "Traceback" not in err and "BrokenPipe" not in err, (rc, err)
+    assert '"exit_status": "success"' in (out / "documents.jsonl").read_text()
+
+
+def test_ctrl_c_outside_a_test_is_one_line_and_130(work):
+    proc = subprocess.Popen([sys.executable, "-m", "dyno", "model", "sweep", "--points", "60"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=work, env=_env())
+    try:
+        first = proc.stderr.readline()  # the sweep's first solved ratio: well inside the command
+        assert first.startswith("ratio"), first
+        proc.send_signal(signal.SIGINT)
+        err = proc.stderr.read()
+        assert proc.wait(timeout=60) == 130
+    finally:
+        proc.kill()
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == "dyno model: interrupted", err[-1000:]
