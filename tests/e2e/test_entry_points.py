@@ -26,10 +26,10 @@ REPO = Path(__file__).resolve().parents[2]
 LEGACY_RUN = "2019-04-18_run2"
 needs_tmux = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
-#: commands this module starts as processes; `dyno ui --sim` is driven in tests/ui/test_ui_tmux.py
+#: commands this module starts as processes; the others are started as processes where named
 EXERCISED = {"run", "replay", "export", "import-legacy", "model", "firmware-sim", "calibrate", "doctor",
              "shift-curve", "design", "arcvt"}
-EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py"}
+EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py"}
 
 
 def _env(**extra: str) -> dict:
@@ -97,12 +97,9 @@ def work(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def sim_run(work):
-    """`dyno run --sim --headless --json` as a process: (run directory, its JSON document)."""
-    run_dir = work / "run"
-    proc = _ok(dyno("run", "--sim", "--headless", "--json", "--seed", 3, "--out", run_dir, cwd=work,
-                    timeout=300))
-    return run_dir, json.loads(proc.stdout)
+def sim_run(cli_run):
+    """`dyno run --sim --headless --json` as a process (tests/e2e/conftest.py): (run directory, its JSON)."""
+    return cli_run
 
 
 def test_every_command_is_started_as_a_process():
