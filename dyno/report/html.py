@@ -211,7 +211,8 @@ def _calibration(data: ReportData) -> str:
             ("slope", f"{_f(c.get('slope_counts_per_nm'), '.3f')} counts per N·m"),
             ("intercept", f"{_f(c.get('intercept_counts'), '.1f')} counts"), ("R²", _f(c.get("r2"), ".6f")),
             ("gear ratio brake / secondary", _f(c.get("gear_ratio_brake_per_secondary"), ".4f")),
-            ("lever arm", f"{_f(c.get('lever_arm_m'), '.4f')} m"), ("note", c.get("note", ""))]
+            ("lever arm", _f(c.get("lever_arm_m"), ".4f") + (" m" if _finite(c.get("lever_arm_m")) else "")),
+            ("note", c.get("note", ""))]
     return _kv(rows)
 
 
@@ -224,8 +225,8 @@ def _engine_map(data: ReportData) -> str:
     atmos = (f"SAE J1349 correction factor {cf:.4f} at {amb}" if amb else
              f"SAE J1349 correction factor {_f(cf, '.4f')}: the map is used as recorded "
              "(no ambient air conditions were logged with this run)")
-    rows = [("source", m.get("source") or data.meta.get("engine_map_source", "?")),
-            ("sha256", m.get("sha256") or data.meta.get("engine_map_sha256", "?")),
+    rows = [("source", data.meta.get("engine_map_source") or m.get("source") or "?"),
+            ("sha256", data.meta.get("engine_map_sha256") or m.get("sha256") or "?"),
             ("speed range", f"{_f(m['rpm'][0], '.0f')} … {_f(m['rpm'][-1], '.0f')} rpm"),
             ("atmospheric correction", atmos)]
     notes = "".join(f"<li>{escape(n)}</li>" for n in m.get("notes", []))
