@@ -67,7 +67,17 @@ def run(args) -> int:
 
         opts.tune_path = args.tune
         opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
-    result = run_test(opts)
+    from dyno.cli import progress as tty
+
+    bar = None
+    if tty.wanted(args.json):  # a person at a terminal: one live status line on stderr
+        bar = tty.TtyProgress()
+        opts.setup = bar.attach
+    try:
+        result = run_test(opts)
+    finally:
+        if bar is not None:
+            bar.finish()
     try:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
