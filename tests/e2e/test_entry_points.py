@@ -282,7 +282,9 @@ def test_closed_pipe_keeps_a_runs_exit_code(work):
     out = work / "piped-run"
     rc, err = _closed_pipe("run", "--sim", "--headless", "--seed", 5, "--out", out, cwd=work)
     assert rc == 0 and "Traceback" not in err and "BrokenPipe" not in err, (rc, err)
+    assert "ETA" not in err and "\r" not in err  # not a terminal: no progress line
     assert '"exit_status": "success"' in (out / "documents.jsonl").read_text()
+    assert (out / "report.html").is_file()
 
 
 def test_ctrl_c_outside_a_test_is_one_line_and_130(work):

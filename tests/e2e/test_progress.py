@@ -1,4 +1,5 @@
-"""Headless progress: a live status line on a terminal (state, point n/~N, ETA), nothing when piped."""
+"""Headless progress: a live status line on a terminal (state, point n/~N, ETA); nothing when piped
+(tests/e2e/test_entry_points.py::test_closed_pipe_keeps_a_runs_exit_code)."""
 
 from __future__ import annotations
 
@@ -59,20 +60,11 @@ def test_progress_draws_at_most_once_per_period_and_erases_itself():
     assert out.getvalue().endswith("\r\x1b[K")
 
 
-def test_no_progress_when_piped(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--seed", "6", "--out",
-                           str(tmp_path / "run")], capture_output=True, text=True, timeout=300, cwd=tmp_path,
-                          env=dict(os.environ, PYTHONPATH=str(REPO)))
-    assert proc.returncode == 0
-    assert "ETA" not in proc.stderr and "\r" not in proc.stderr and "\x1b" not in proc.stdout + proc.stderr
-    assert "report: " in proc.stdout
-
-
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 def test_progress_on_a_terminal(tmp_path):
     session = f"dyno-prog-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
-    cmd = f"{sys.executable} -m dyno run --sim --headless --speed 40 --out {run_dir} ; echo EXITED=$? ; sleep 30"
+    cmd = f"{sys.executable} -m dyno run --sim --headless --out {run_dir} ; echo EXITED=$? ; sleep 30"
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "30", "-s", session, cmd], check=True, timeout=20,
                    env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
                         "HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
@@ -87,7 +79,7 @@ def test_progress_on_a_terminal(tmp_path):
                     seen.add(line.split()[0])
                     if "/~" in line and "ETA —" not in line:
                         seen.add("eta")
-            time.sleep(0.2)
+            time.sleep(0.1)
     finally:
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     assert "EXITED=0" in screen, screen
