@@ -93,6 +93,8 @@ def collect(run_dir, *, full_model: bool = False, now_s: float | None = None) ->
     run_dir = Path(run_dir)
     run = load_run(run_dir, with_events=False)
     notes: list = []
+    if run.torn:  # killed mid-write: say what the readers dropped
+        notes.append(f"the run was killed mid-write; dropped a torn last record: {run.torn}")
     tune = run_dir / "tune.toml"
     return ReportData(
         run_dir=str(run_dir), meta=run.meta, documents=run.documents, calibration=run.calibration,
