@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Firmware figures: flash/RAM use, ISR cycle costs and interrupts-off windows measured
 in simavr, and simavr's simulated-to-wall time ratio.
 

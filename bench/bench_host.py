@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Host benchmarks for issue 2: decode+check+log throughput, simulation speed-up,
 and false accepts of corrupted frames at bit-error rates 1e-3 .. 5e-2.
 

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Belt-model benchmark: error against run time, stiff/extreme cases, performance figures.
 
 Run:  python bench/bench_model.py [--quick]

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Benchmark: a full predicted shift curve (50 load points) with the
 closed-form belt relations (target < 1 s).  Prints, never asserts.
 

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Speed of the simulated rig's physics against real time.
 
 Runs a test-like sequence on one core (pull start, idle, full throttle,

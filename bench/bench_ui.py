@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """UI benchmarks (issue 5): poll-interval jitter with and without the UI, start-up time and peak memory.
 
 Run:  python bench/bench_ui.py [--seconds S] [--quick]

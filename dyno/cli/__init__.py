@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from dyno.errors import ConfigError, DynoError
@@ -19,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("dyno.cli.run_cmd", "run a steady-state test (simulated rig with --sim)"),
     "replay": ("dyno.cli.replay_cmd", "re-process a logged run (viewer, or --json)"),
     "export": ("dyno.cli.export_cmd", "export a run's points and streams to CSV"),
+    "report": ("dyno.cli.report_cmd", "(re)build a run's report.html: plots, points, faults, calibration"),
     "import-legacy": ("dyno.cli.legacy_cmd", "import a folder of the thesis rig's logs"),
     "model": ("dyno.cli.model_cmd", "belt-model library: point, sweep, study"),
     "firmware-sim": ("dyno.cli.firmware_sim_cmd", "run the real firmware ELF in simavr against the host"),
@@ -72,8 +74,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: exit codes for a closed output pipe and Ctrl+C outside a test: 128 + the signal's number, as a shell reports
+EXIT_BROKEN_PIPE, EXIT_INTERRUPTED = 128 + 13, 128 + 2
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command.  `dyno ... | head` and Ctrl+C end quietly (one line at most), never with a traceback."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    name = argv[0] if argv and argv[0] in COMMANDS else None
+    try:
+        rc = _dispatch(argv)
+    except BrokenPipeError:  # the reader went away mid-output (`| head`): nothing more to say to it
+        _detach_stdout()
+        return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:  # Ctrl+C outside a test (a test handles its signals itself: safe state first)
+        _detach_stdout()
+        print(f"dyno{' ' + name if name else ''}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:  # the command did its job; only the tail of its output was not read
+        _detach_stdout()
+    return rc
+
+
+def _detach_stdout() -> None:
+    # Point stdout at /dev/null so the interpreter's own flush at exit cannot raise again (Python docs,
+    # "Note on SIGPIPE").
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] in COMMANDS and _available(argv[0]):
         name = argv[0]
         mod = importlib.import_module(COMMANDS[name][0])

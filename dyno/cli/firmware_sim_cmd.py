@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -187,6 +188,10 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
 
 
 def run(args) -> int:
+    from dyno.errors import ConfigError
+
+    if not Path(args.elf).is_file():  # bad input, not a harness failure: exit 2 with the build step
+        raise ConfigError(args.elf, "--elf", "no such firmware ELF (build it with `make -C firmware sim`)")
     report = simulate(args)
     if args.json:
         print(json.dumps(report, indent=2))

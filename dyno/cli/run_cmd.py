@@ -73,7 +73,17 @@ def run(args) -> int:
 
         opts.tune_path = args.tune
         opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
-    result = run_test(opts)
+    from dyno.cli import progress as tty
+
+    bar = None
+    if tty.wanted(args.json):  # a person at a terminal: one live status line on stderr
+        bar = tty.TtyProgress()
+        opts.setup = bar.attach
+    try:
+        result = run_test(opts)
+    finally:
+        if bar is not None:
+            bar.finish()
     try:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
@@ -85,7 +95,33 @@ def run(args) -> int:
     if result.get("log_error"):
         print(f"dyno run: {result['run_dir']}: {result['log_error']}: safe state reached; "
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
+    _write_report(result, announce=not args.json)
     return exit_code(result)
+
+
+def _write_report(result: dict, *, announce: bool) -> None:
+    """report.html into the run directory, last of all: a failure is one stderr line, never another exit code."""
+    run_dir = result.get("run_dir")
+    try:
+        if not run_dir or not Path(run_dir, "meta.json").is_file():
+            raise FileNotFoundError(f"no run directory at {run_dir}")
+        from dyno.report.writer import write_report
+
+        path = write_report(run_dir)
+    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  the test is on disk; its report is extra
+        why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
+        try:
+            print(f"dyno run: {run_dir}: report.html not written: {why} (`dyno report RUN` retries)",
+                  file=sys.stderr)
+        except OSError:
+            pass
+        return
+    if announce:
+        try:
+            print(f"report: {path}")
+            sys.stdout.flush()
+        except OSError:  # a closed pipe: the report is on disk all the same
+            pass
 
 
 def _print_table(result: dict) -> None:

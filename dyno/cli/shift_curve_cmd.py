@@ -10,7 +10,6 @@ from pathlib import Path
 from dyno.cli import number_in
 
 REPO = Path(__file__).resolve().parents[2]
-THESIS_ENGINE_MAP = Path("/work/shared/data/vt-cvt-dyno-2019/engine_power_RPM.csv")
 
 
 def add_arguments(parser) -> None:
@@ -35,7 +34,10 @@ def default_engine_map() -> Path | None:
     maps = sorted((REPO / "calibration" / "engine_maps").glob("*.csv"))
     if maps:
         return maps[0]
-    return THESIS_ENGINE_MAP if THESIS_ENGINE_MAP.exists() else None
+    from dyno.datapaths import legacy_data_dir
+
+    thesis_map = legacy_data_dir() / "engine_power_RPM.csv"
+    return thesis_map if thesis_map.exists() else None
 
 
 def measured_points(run_dir) -> list[dict]:

@@ -84,6 +84,27 @@ def _closed_form_result(params, op) -> dict:
     }
 
 
+def all_cached(
+    points,
+    params: ModelParams = TABLE_6_1,
+    *,
+    tier: str = "full",
+    variant: str = "corrected",
+    slack_tension_n: float = 100.0,
+    primary_axial_force_n: float | None = None,
+    slip_threshold_m_s: float = 1e-4,
+    tol: float = 1e-3,
+    cache_dir: str | os.PathLike | None = None,
+) -> bool:
+    """Whether :func:`predict_overlay` with the same arguments would answer every point from the cache."""
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    for item in points:
+        op = _as_point(item, slack_tension_n, primary_axial_force_n)
+        if not (cache / f"{point_key(params, op, tier, variant, slip_threshold_m_s, tol)}.json").is_file():
+            return False
+    return True
+
+
 def predict_overlay(
     points,
     params: ModelParams = TABLE_6_1,

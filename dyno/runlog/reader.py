@@ -35,7 +35,8 @@ class Run:
         return s[-1] if s else None
 
 
-def load_run(run_dir) -> Run:
+def load_run(run_dir, *, with_events: bool = True) -> Run:
+    """The run in ``run_dir``; ``with_events=False`` skips ``events.bin`` (the report needs only documents)."""
     run_dir = Path(run_dir)
     meta_path = run_dir / "meta.json"
     if not meta_path.is_file():
@@ -68,7 +69,7 @@ def load_run(run_dir) -> Run:
                 raise ConfigError(docs_path, f"line {i + 1}", "one JSON document per line") from exc
     streams = Streams()
     ev_path = run_dir / "events.bin"
-    if ev_path.exists():
+    if with_events and ev_path.exists():
         raw = ev_path.read_bytes()
         size = EVENT_RECORD.size
         whole = len(raw) - len(raw) % size

@@ -104,13 +104,14 @@ class ReplayApp(DynoApp):
 
     # --- view -----------------------------------------------------------------------------------
     @property
-    def run(self):
+    def current_run(self):
+        # not ``run``: that would shadow Textual's App.run() and crash ``dyno replay RUN`` at start
         return self.rs.runs[self.current]
 
     def _fill_table(self) -> None:
         table = self.query_one("#points", DataTable)
         table.clear()
-        for i, p in enumerate(self.run.points):
+        for i, p in enumerate(self.current_run.points):
             def f(k, spec, scale=1.0):
                 v = p.get(k)
                 return format(v * scale, spec) if finite(v) else "—"
@@ -118,7 +119,7 @@ class ReplayApp(DynoApp):
             table.add_row(f"{p.get('index', i)}{mark}", f("rpm_secondary", ".0f"), f("rpm_primary", ".0f"),
                           f("torque_secondary_nm", ".2f"), f("efficiency", ".1f", 100), f("efficiency_sem", ".1f", 100),
                           key=str(i))
-        rr = self.run
+        rr = self.current_run
         stop = rr.result.get("stop") or {}
         counts = rr.run.streams.counts()
         self.query_one("#runinfo", Static).update(
@@ -133,7 +134,7 @@ class ReplayApp(DynoApp):
 
     def _selected_point(self):
         table = self.query_one("#points", DataTable)
-        pts = self.run.points
+        pts = self.current_run.points
         if not pts:
             return None
         return pts[min(max(table.cursor_row, 0), len(pts) - 1)]
@@ -166,7 +167,7 @@ class ReplayApp(DynoApp):
         else:
             p = self._selected_point()
             if p is not None and "t_start_us" in p:
-                d = point_streams(self.run.run, p)
+                d = point_streams(self.current_run.run, p)
                 plt.title(f"point {p.get('index')}: rpm (left), ADC (right)")
                 if d["primary_t_s"]:
                     plt.scatter(d["primary_t_s"], d["primary_rpm"], marker="dot", color="yellow", label="engine")
@@ -219,10 +220,10 @@ class ReplayApp(DynoApp):
             self.say(f"re-processed with {what} {path}")
             self._fill_table()
 
-        self.push_screen(PathScreen(f"Re-process run {self.run.run_dir.name} with which {what} file?"), answered)
+        self.push_screen(PathScreen(f"Re-process run {self.current_run.run_dir.name} with which {what} file?"), answered)
 
     def action_export_csv(self) -> None:
-        files = export_csv(self.run)
+        files = export_csv(self.current_run)
         self.say(f"CSV: {len(files)} files in {files[0].parent}")
 
     def action_export_png(self) -> None:

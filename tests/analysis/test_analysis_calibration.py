@@ -11,11 +11,12 @@ from dyno.analysis.calibration import (
     HISTORY_COLUMNS, CalibrationEntry, CalibrationRejected, NoCalibration, append_entry,
     fit_calibration, latest, load_history, load_legacy_cal_values, torque_from_mass,
 )
+from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "calibration/torque_calibration.csv"
-LEGACY = Path("/work/shared/data/vt-cvt-dyno-2019/cal_values.csv")
+LEGACY = legacy_data_dir() / "cal_values.csv"
 
 TRUE_SLOPE, TRUE_INTERCEPT = 108.19, 35145.0  # thesis eq 9.1
 
@@ -147,7 +148,7 @@ def test_analysis_shipped_history_is_the_thesis_calibration():
     assert cur.gear_ratio_brake_per_secondary == pytest.approx(32 / 61)
 
 
-@pytest.mark.skipif(not LEGACY.exists(), reason="shared thesis data not present")
+@pytest.mark.skipif(not LEGACY.exists(), reason=legacy_data_missing() or f"{LEGACY} missing")
 def test_analysis_legacy_cal_values_match_shipped_history():
     legacy = load_legacy_cal_values(LEGACY)
     shipped = load_history(SHIPPED)

@@ -11,11 +11,12 @@ from dyno.analysis.engine_map import (
     W_PER_HP, EngineMap, OutOfMapRange, dry_air_pressure_kpa, j1349_correction_factor,
     load_engine_map, load_legacy_engine_map, saturation_vapour_pressure_kpa,
 )
+from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 REPRESENTATIVE = ROOT / "calibration/engine_maps/baja-10hp-representative.csv"
-LEGACY = Path("/work/shared/data/vt-cvt-dyno-2019/engine_power_RPM.csv")
+LEGACY = legacy_data_dir() / "engine_power_RPM.csv"
 
 RPM = np.array([1500, 2000, 2500, 3000, 3400, 3600, 3800.0])
 TORQUE = np.array([15.0, 17.5, 18.6, 18.0, 16.3, 13.0, 3.0])  # rise, plateau, governor droop
@@ -93,7 +94,7 @@ def test_analysis_load_shipped_representative_map():
     assert m.torque_nm(2400) == pytest.approx(18.6)
 
 
-@pytest.mark.skipif(not LEGACY.exists(), reason="shared thesis data not present")
+@pytest.mark.skipif(not LEGACY.exists(), reason=legacy_data_missing() or f"{LEGACY} missing")
 def test_analysis_load_legacy_thesis_map_in_place():
     before = LEGACY.read_bytes()
     m = load_legacy_engine_map(LEGACY)

@@ -1,4 +1,7 @@
 import json
+import os
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,3 +25,18 @@ def full_run(tmp_path_factory):
 def faulty_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "faulty"
     return run_test(RunOptions(sim=True, seed=1, fault_rate=0.05, out_dir=out))
+
+
+@pytest.fixture(scope="session")
+def cli_run(tmp_path_factory):
+    """`dyno run --sim --headless --json` as a real process, once: (run directory, its JSON document).
+
+    Shared by the entry-point and report tests (the run ends by writing report.html).
+    """
+    work = tmp_path_factory.mktemp("cli")
+    run_dir = work / "run"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--seed", "3",
+                           "--out", str(run_dir)], capture_output=True, text=True, timeout=300, cwd=work, env=env)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    return run_dir, json.loads(proc.stdout)

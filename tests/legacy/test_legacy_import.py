@@ -11,21 +11,21 @@ import pytest
 
 from dyno.app import public_point
 from dyno.cli import main
+from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 from dyno.replay import replay
 from dyno.runlog.legacy import import_legacy
 from dyno.runlog.reader import load_run
 
-DATA = Path(__file__).resolve().parents[3] / "shared/data/vt-cvt-dyno-2019"
+DATA = legacy_data_dir()
 RUNS = ("2019-04-18_run2", "2019-04-18_run3", "2019-04-18_run4")
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"thesis logs not present at {DATA} (they are read "
-                                                          "in place, never copied into the repository)")
+needs_data = pytest.mark.skipif(legacy_data_missing() is not None, reason=str(legacy_data_missing()))
 
 
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
-    if not DATA.is_dir():
-        pytest.skip(f"thesis logs not present at {DATA}")
+    if legacy_data_missing():
+        pytest.skip(legacy_data_missing())
     root = tmp_path_factory.mktemp("legacy")
     return {name: import_legacy(DATA / name, root / name) for name in RUNS}
 
@@ -205,3 +205,15 @@ def test_legacy_missing_calibration_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="cal_values.csv"):
         import_legacy(run, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_legacy_data_dir_from_env(monkeypatch, tmp_path):
+    from dyno import datapaths
+
+    monkeypatch.setenv("DYNO_LEGACY_DATA", str(tmp_path / "absent"))
+    assert datapaths.legacy_data_dir() == tmp_path / "absent"
+    assert "DYNO_LEGACY_DATA" in datapaths.legacy_data_missing() and "absent" in datapaths.legacy_data_missing()
+    monkeypatch.setenv("DYNO_LEGACY_DATA", str(tmp_path))
+    assert datapaths.legacy_data_missing() is None
+    monkeypatch.delenv("DYNO_LEGACY_DATA")
+    assert datapaths.legacy_data_dir() == datapaths.REPO.parent / "shared/data/vt-cvt-dyno-2019"

@@ -1,0 +1,29 @@
+"""Where the example data lives: the thesis rig's 2019 logs, read in place, never copied into the repository.
+
+``$DYNO_LEGACY_DATA`` names the folder (the one holding ``cal_values.csv``, ``engine_power_RPM.csv`` and the
+``2019-04-18_run*`` folders); without it, ``../shared/data/vt-cvt-dyno-2019`` next to the repository.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+LEGACY_DATA_ENV = "DYNO_LEGACY_DATA"
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_LEGACY_DATA = REPO.parent / "shared" / "data" / "vt-cvt-dyno-2019"
+
+
+def legacy_data_dir() -> Path:
+    """``$DYNO_LEGACY_DATA``, else ``../shared/data/vt-cvt-dyno-2019`` relative to the repository."""
+    env = os.environ.get(LEGACY_DATA_ENV)
+    return Path(env).expanduser() if env else DEFAULT_LEGACY_DATA
+
+
+def legacy_data_missing() -> str | None:
+    """Why the thesis logs cannot be used (a skip reason naming the variable), or None when they can."""
+    d = legacy_data_dir()
+    if d.is_dir():
+        return None
+    return (f"thesis rig logs not found at {d}: set {LEGACY_DATA_ENV} to the folder holding "
+            "cal_values.csv, engine_power_RPM.csv and the 2019-04-18_run* folders")
