@@ -39,6 +39,9 @@ def run(args) -> int:
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d, engine=False) for d in args.drill]
+    from dyno.rigconfig import load_rig
+
+    load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     history = args.history

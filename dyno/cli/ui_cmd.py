@@ -32,6 +32,9 @@ def run(args) -> int:
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d) for d in args.drill]
+    from dyno.rigconfig import load_rig
+
+    load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,

@@ -116,7 +116,7 @@ class CalibrateApp(DynoApp):
         try:
             self._start_acquisition()
         except DynoError as exc:
-            self.exit(2, message=f"dyno calibrate: error: {exc}")
+            self.exit(return_code=2, message=f"dyno calibrate: error: {exc}")
             return
         self.set_interval(0.25, self.refresh_view)
         self.query_one("#radius", Input).focus()
@@ -145,7 +145,8 @@ class CalibrateApp(DynoApp):
         self.refresh_view()
 
     def _install_signal_handlers(self, loop) -> None:
-        """SIGTERM/SIGHUP (systemd, a closed terminal): safe state, the calibration aborted, exit 128+N."""
+        """SIGTERM/SIGHUP/SIGINT (systemd, a closed terminal, kill -INT): safe state, calibration aborted,
+        exit 128+N.  (The Ctrl+C key is the E-STOP: in raw mode it arrives as a key, not as SIGINT.)"""
         import signal
 
         from dyno.control.safety import Trip
@@ -161,11 +162,12 @@ class CalibrateApp(DynoApp):
                 self.cal_ctx.hw.actuators.safe_state()
             loop.call_soon_threadsafe(on_loop, signum)
 
-        self._old_signals = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGHUP)}
+        self._old_signals = {sig: signal.signal(sig, handler)
+                             for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
 
     async def _quit_code(self, code: int) -> None:
         await self._shutdown()
-        self.exit(code)
+        self.exit(return_code=code)
 
     # --- view ----------------------------------------------------------------------------------
     def refresh_view(self) -> None:
@@ -341,7 +343,7 @@ class CalibrateApp(DynoApp):
 
     async def action_quit_safe(self) -> None:
         await self._shutdown()
-        self.exit(0)
+        self.exit(return_code=0)
 
     async def _shutdown(self) -> None:
         if self.poller is not None:

@@ -99,4 +99,4 @@ class DynoApp(App):
         self.say("E-STOP: no rig is attached to this screen")
 
     async def action_quit_safe(self) -> None:
-        self.exit(0)
+        self.exit(return_code=0)

@@ -81,7 +81,7 @@ class LiveApp(DynoApp):
         try:
             self.session = LiveSession(self.opts)
         except DynoError as exc:  # a bad config file or run directory: say which, leave cleanly
-            self.exit(2, message=f"dyno ui: error: {exc}")
+            self.exit(return_code=2, message=f"dyno ui: error: {exc}")
             return
         self._ideal_rpm = ideal_engine_rpm(self.session.controller.engine_map)
         self.session.on_signal = lambda code: self.call_later(self._quit, code)
@@ -305,7 +305,7 @@ class LiveApp(DynoApp):
     async def _quit(self, code: int = 0) -> None:
         if self.session is not None:
             await self.session.close("operator quit" if not code else "signal")
-        self.exit(code)
+        self.exit(return_code=code)
 
     async def on_unmount(self) -> None:
         if self.session is not None:  # any other way out: still safe state first

@@ -92,7 +92,7 @@ class ReplayApp(DynoApp):
         try:
             self.rs = ReplaySet.load(self.run_dirs, self.calibration_path, self.engine_map_path)
         except DynoError as exc:
-            self.exit(2, message=f"dyno replay: error: {exc}")
+            self.exit(return_code=2, message=f"dyno replay: error: {exc}")
             return
         self._ideal = ideal_rpm_for(self.rs.runs[0])
         self._predicted: dict = {}  # run_dir -> predicted shift curve (from the run's tune)

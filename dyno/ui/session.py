@@ -144,9 +144,9 @@ class LiveSession:
         self._install_signal_handlers()
 
     def _install_signal_handlers(self) -> None:
-        """SIGTERM (systemd, kill) and SIGHUP (terminal or SSH gone): safe state, abort record, exit 128+N.
-
-        SIGINT reaches a Textual app as the Ctrl+C key (raw mode) = E-STOP.
+        """SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone) and SIGINT sent by ``kill -INT``:
+        safe state, abort record, exit 128+N.  (The Ctrl+C *key* reaches a Textual app as a key in
+        raw mode, not as SIGINT: it is the E-STOP.)
         """
         import signal
         import threading
@@ -165,7 +165,7 @@ class LiveSession:
                 self.controller.act.safe_state()  # at once, whatever the loop is doing
             self.loop.call_soon_threadsafe(on_loop, signum)
 
-        for sig in (signal.SIGTERM, signal.SIGHUP):
+        for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
             self._old_signals[sig] = signal.signal(sig, handler)
 
     @property

@@ -99,12 +99,18 @@ def _cases(tmp: Path, run: Path):
         ("export bad meta", ["export", bad_meta], "meta.json"),
         ("import-legacy binary", ["import-legacy", a_dir], "a_dir"),
         ("calibrate radius", ["calibrate", "--sim", "--radius", "-1"], "--radius"),
+        ("calibrate bad rig", ["calibrate", "--sim", "--rig", _rig_with(tmp / "r3", "poll_hz = 150", "poll_hz = 0")],
+         "poll_hz"),
+        ("ui bad rig", ["ui", "--sim", "--rig", _rig_with(tmp / "r4", "watchdog_s = 0.5", "watchdog_s = nan")],
+         "actuator.watchdog_s"),
+        ("doctor bad rig", ["doctor", "--sim", "--rig", _rig_with(tmp / "r5", "comms_timeout_s = 0.25",
+                                                                  "comms_timeout_s = -1")], "limits.comms_timeout_s"),
         ("drill unknown", [*sim, "--drill", "nope@1"], "--drill"),
     ]
 
 
 def test_every_bad_input_is_one_line_exit_2_and_nothing_changes(tmp_path, good_run):
-    for d in ("r1", "r2"):
+    for d in ("r1", "r2", "r3", "r4", "r5"):
         (tmp_path / d).mkdir()
     cases = _cases(tmp_path, good_run)
     before = _snapshot(tmp_path)

@@ -125,3 +125,57 @@ def test_calibrate_tmux_space_estops_with_a_text_field_focused(tmp_path):
     finally:
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     assert not hist.exists()
+
+
+def test_ui_tmux_kill_int_mid_test_leaves_abort_record(tmp_path):
+    """SIGINT from outside (kill -INT, not the Ctrl+C key): safe state, abort + stop record, exit 130."""
+    import os
+    import signal
+
+    session = f"dyno-int-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    marker = tmp_path / "rc"
+    _start(session, f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo $? > {marker} ; sleep 30",
+           tmp_path)
+    try:
+        _wait_screen(session, "ARMED", 60)
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "Start the test?", 10)
+        _tmux("send-keys", "-t", session, "y")
+        _wait_screen(session, "GO: full throttle", 10)
+        pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"],
+                                 capture_output=True, text=True, timeout=20).stdout.split()[0])
+        os.kill(pid, signal.SIGINT)
+        docs_path = run_dir / "documents.jsonl"
+        t_end = time.monotonic() + 20
+        while time.monotonic() < t_end and not marker.exists():
+            time.sleep(0.2)
+        assert marker.exists() and marker.read_text().strip() == "130"  # 128 + SIGINT
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    docs = docs_path.read_text()
+    assert '"cause": "signal"' in docs and "SIGINT" in docs and '"type": "stop"' in docs
+
+
+def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path):
+    import os
+    import signal
+
+    session = f"dyno-cst-{uuid.uuid4().hex[:8]}"
+    hist = tmp_path / "h.csv"
+    marker = tmp_path / "rc"
+    _start(session, f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo $? > {marker} ; sleep 30",
+           tmp_path, size=("100", "30"))
+    try:
+        _wait_screen(session, "SETUP", 60)
+        # the python process itself, not the shell tmux runs it in
+        pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m dyno calibrate --sim --history {hist}"],
+                                 capture_output=True, text=True, timeout=20).stdout.split()[0])
+        os.kill(pid, signal.SIGTERM)
+        t_end = time.monotonic() + 20
+        while time.monotonic() < t_end and not marker.exists():
+            time.sleep(0.2)
+        assert marker.exists() and marker.read_text().strip() == "143"
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    assert not hist.exists()
