@@ -18,6 +18,7 @@ import numpy as np
 from dyno.acquisition.rpm import current_rpm
 from dyno.acquisition.streams import Streams
 from dyno.protocol import v1
+from dyno.protocol.v2 import cause_name
 
 
 @dataclass
@@ -110,8 +111,10 @@ class Poller:
             self._lost_seen = lost
         resets = r.stats.device_resets
         if resets > self._resets_seen:
+            cause = getattr(r, "reset_cause", None)  # v2 frames carry it
+            why = "" if cause is None else f", cause {cause_name(cause)}"
             self.disturbances.append({"host_t_s": now_s, "kind": "device_reset",
-                                      "detail": f"device reset ({resets - self._resets_seen})"})
+                                      "detail": f"device reset ({resets - self._resets_seen}{why})"})
             self._resets_seen = resets
         last = self._last_poll_s
         if last is not None and now_s - last > self._gap_limit_s():

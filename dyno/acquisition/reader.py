@@ -10,8 +10,8 @@ schedules them.
 from __future__ import annotations
 
 from dyno.errors import FrameError
-from dyno.protocol import v0, v1
-from dyno.protocol.session import LinkSession, LinkStats
+from dyno.protocol import v0, v1, v2
+from dyno.protocol.session import LinkSession, LinkStats, ProtocolMismatch, sniff_version
 from dyno.transports.base import Transport, TransportFault
 
 Event = v1.Event
@@ -56,14 +56,16 @@ class Unwrapper:
 
 
 class V1Reader:
-    """Reads our firmware's v1 frames with acknowledge/re-send."""
+    """Reads our firmware's framed protocol (v2 by default, or v1) with acknowledge/re-send."""
 
-    protocol = "v1"
     read_len = v1.FRAME_MAX
 
-    def __init__(self, transport: Transport) -> None:
+    def __init__(self, transport: Transport, version: int = 2) -> None:
         self.transport = transport
-        self.session = LinkSession()
+        self.version = version
+        self.protocol = f"v{version}"
+        self.proto = v2 if version == 2 else v1
+        self.session = LinkSession(version)
         self.unwrap = Unwrapper()
         self.events_lost = 0
         self.device_time_us: int | None = None  # latest unwrapped device time known
@@ -87,7 +89,8 @@ class V1Reader:
         if frame is None:
             self.more = False
             return []
-        if frame.flags & v1.FLAG_RESET and self._last_frame_s is not None:
+        new_boot = self.session.new_boot if self.version == 2 else frame.flags & v1.FLAG_RESET
+        if new_boot and self._last_frame_s is not None:
             self.unwrap.new_epoch(int((now_s - self._last_frame_s) * 1e6))
             self._dropped_last = None
         self._last_frame_s = now_s
@@ -104,6 +107,16 @@ class V1Reader:
             self.device_time_us = t_dev
         return out
 
+    @property
+    def boot_id(self) -> int | None:
+        """v2: the boot identity of the device's current boot (None before the first frame)."""
+        return self.session.boot_id
+
+    @property
+    def reset_cause(self) -> int | None:
+        """v2: the device's reset cause (MCUSR bits PORF, EXTRF, BORF, WDRF) for this boot."""
+        return self.session.reset_cause
+
     def command(self, request: bytes) -> None:
         """Send a command that gets no answer (SET_DEBOUNCE, CLEAR_COUNTERS)."""
         self.transport.write(request)
@@ -111,18 +124,19 @@ class V1Reader:
             self._dropped_last = None  # the device's counter restarts at 0: no jump in events_lost
 
     def clear_counters(self) -> None:
-        self.command(v1.encode_command(v1.OP_CLEAR_COUNTERS))
+        self.command(self.proto.encode_command(v1.OP_CLEAR_COUNTERS))
 
-    def read_info(self) -> v1.InfoFrame | None:
+    def read_info(self):
+        """One INFO exchange: the info frame (v1 or v2 class), or None if the read failed."""
         try:
-            buf = self.transport.transfer(v1.encode_command(v1.OP_INFO), self.read_len)
+            buf = self.transport.transfer(self.proto.encode_command(v1.OP_INFO), self.read_len)
         except TransportFault:
             return None
         try:
-            frame = v1.decode_frame(buf)
+            frame = self.proto.decode_frame(buf)
         except FrameError:
             return None
-        return frame if isinstance(frame, v1.InfoFrame) else None
+        return frame if isinstance(frame, self.proto.InfoFrame) else None
 
 
 class V0Reader:
@@ -160,6 +174,9 @@ class V0Reader:
         try:
             f = v0.decode_legacy_frame(buf)
         except FrameError as exc:
+            other = sniff_version(buf) if exc.cause == "checksum" else None
+            if other not in (None, "v0"):
+                raise ProtocolMismatch(other, "v0") from None
             st.rejected[exc.cause] += 1
             return []
         raw = bytes(buf[: v0.FRAME_LEN])
@@ -190,8 +207,10 @@ class V0Reader:
 
 
 def make_reader(protocol: str, transport: Transport):
+    if protocol == "v2":
+        return V1Reader(transport, 2)
     if protocol == "v1":
-        return V1Reader(transport)
+        return V1Reader(transport, 1)
     if protocol == "v0":
         return V0Reader(transport)
-    raise ValueError(f"protocol must be v1 or v0, not {protocol!r}")
+    raise ValueError(f"protocol must be v2, v1 or v0, not {protocol!r}")

@@ -16,7 +16,7 @@ def add_arguments(p) -> None:
     p.add_argument("--fault-rate", type=float, default=0.0,
                    help="fraction of bus transfers corrupted (bit errors, NACKs, truncation)")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
-    p.add_argument("--protocol", choices=("v1", "v0"), default=None)
+    p.add_argument("--protocol", choices=("v2", "v1", "v0"), default=None)
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,

@@ -140,7 +140,7 @@ class FixtureRig:
         from dyno.sim.device import EmulatedFirmware
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
-        self.firmware = EmulatedFirmware("v1")
+        self.firmware = EmulatedFirmware("v2")
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
 
     def hang(self, mass_kg: float, radius_m: float) -> float:
@@ -155,5 +155,5 @@ def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, addres
     from dyno.transports.base import I2CTransport
 
     rig = FixtureRig(now_s, seed=seed, **fixture_kw)
-    reader = make_reader("v1", I2CTransport(rig.bus, address))
+    reader = make_reader("v2", I2CTransport(rig.bus, address))
     return rig, Poller(reader, poll_hz=poll_hz)
