@@ -44,6 +44,8 @@ class EmulatedFirmware:
         self.boot_id = 1
         self.reset_cause = v2.CAUSE_PORF
         self.ack_from_old_boot = 0  # v2: ACK_POLLs naming another boot (ignored), for audits
+        self.first_served_s: dict[int, float] = {}  # boot_id -> sim time its first frame went out
+        self.retired_log: list | None = None  # set to [] to record (boot_id, raw) of every retired frame
         self.debounce_us = {v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000}
         self.served: dict[int, bytes] = {}  # seq -> bytes last served (truth for audits)
         self.events_generated = 0  # accepted into the ring (truth)
@@ -131,6 +133,8 @@ class EmulatedFirmware:
             else:
                 seq = cmd.args[0]
             if self.frame is not None and self.frame_sent and seq == self.seq:
+                if self.retired_log is not None:
+                    self.retired_log.append((self.boot_id, self.frame[: self.frame[1]]))
                 self.frame = None
                 self.frame_events = ()
                 self.frame_sent = False
@@ -166,6 +170,7 @@ class EmulatedFirmware:
         if not self.frame_sent:
             self._build(now_s)
         self.frame_sent = True
+        self.first_served_s.setdefault(self.boot_id, now_s)
         self.served[self.seq] = self.frame[: self.frame[1]]
         # A master reading past our buffer gets 0xFF (SDA released).
         return self.frame[:n].ljust(n, b"\xff")
