@@ -7,7 +7,8 @@ polled at 150 Hz of simulated time.  At the end the generators stop and the host
 polling until the device's queue is empty, so every edge and conversion the harness
 generated can be counted against what the host decoded.
 
-Exit status: 0 when the run completed (v1: and nothing was lost), 1 otherwise.
+Exit status: 0 when the run completed (v2/v1: and nothing was lost), 1 otherwise;
+2 when the device speaks another protocol version than ``--protocol``.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ import numpy as np
 from dyno.acquisition.reader import make_reader
 from dyno.acquisition.rpm import rpm_by_count
 from dyno.protocol import v1
+from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import FAULT_KINDS, SimavrTransport
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
-    parser.add_argument("--protocol", choices=("v1", "v0"), default="v1")
+    parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
     parser.add_argument("--primary-rpm", type=float, default=3800.0)
     parser.add_argument("--secondary-rpm", type=float, default=7600.0)
     parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
@@ -46,8 +48,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--i2c-khz", type=int, default=100)
     parser.add_argument("--drain-s", type=float, default=0.3,
                         help="keep polling this long after the signals stop")
-    parser.add_argument("--reset-at", type=float, default=None,
-                        help="reset the MCU at this simulated second (watchdog-like)")
+    parser.add_argument("--reset-at", type=float, action="append", default=None,
+                        help="reset the MCU at this simulated second (repeatable; watchdog cause)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
@@ -67,7 +69,7 @@ def simulate(args) -> dict:
         codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
         dt = 1.0 / args.poll_hz
         k = 0
-        reset_done = args.reset_at is None
+        resets = sorted(args.reset_at or [])
         # The signals start 50 ms after power-up; they run for args.seconds.
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
@@ -80,10 +82,9 @@ def simulate(args) -> dict:
                 tr.advance_to(t_stop)
                 tr.generators(False)
                 stopped = True
-            if not reset_done and t >= args.reset_at:
-                tr.advance_to(args.reset_at)
+            while resets and t >= resets[0]:
+                tr.advance_to(resets.pop(0))
                 tr.reset_device()
-                reset_done = True
             tr.advance_to(t)
             for ev in reader.poll(t):
                 times[ev.channel].append(ev.t_us)
@@ -93,7 +94,7 @@ def simulate(args) -> dict:
                 elif args.protocol == "v0":
                     slot_rpm[ev.channel].append(ev.code)
             k += 1
-        info = reader.read_info() if args.protocol == "v1" else None
+        info = reader.read_info() if args.protocol != "v0" else None
         hs = tr.harness_stats()
         faults = dict(tr.faults_injected)
     finally:
@@ -175,11 +176,20 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
             "secondary": float(np.mean(slot_rpm[v1.CH_SECONDARY])) if slot_rpm[v1.CH_SECONDARY] else None,
         }
     if info is not None:
-        out["device"] = {"fw_version": ".".join(map(str, info.fw_version)),
-                         "boot_count": info.boot_count, "uptime_ms": info.uptime_ms,
+        out["device"] = {"fw_version": ".".join(map(str, info.fw_version)), "uptime_ms": info.uptime_ms,
                          "debounce_primary_us": info.debounce_primary_us,
                          "debounce_secondary_us": info.debounce_secondary_us}
-    out["ok"] = bool(not hs["crashed"] and (args.protocol != "v1" or (
+        if args.protocol == "v2":
+            out["device"].update({"boot_id": info.boot_id, "reset_cause": cause_name(info.reset_cause),
+                                  "twi_timeouts": info.twi_timeouts, "bus_errors": info.bus_errors})
+            out["edges_rejected"] = {
+                name: {"lockout": info.lockout_rejected[k], "glitch": info.glitch_rejected[k]}
+                for k, name in enumerate(("primary", "secondary"))}
+        else:
+            out["device"]["boot_count"] = info.boot_count
+    if args.protocol == "v2":
+        out["boots"] = stats["boots"]
+    out["ok"] = bool(not hs["crashed"] and (args.protocol == "v0" or (
         reader.events_lost == 0 and all(ch["missing"] == 0 and ch["duplicates_or_disorder"] == 0
                                         for ch in events.values()))))
     return out

@@ -130,10 +130,10 @@ class SimavrTransport(Transport):
         if self._cmd("gen on" if on else "gen off") != "ok":
             raise HarnessError("gen")
 
-    def reset_device(self) -> None:
-        """Reset the MCU as the watchdog would (EEPROM, hence the boot counter, kept)."""
+    def reset_device(self, mcusr: int = 0x08) -> None:
+        """Reset the MCU (RAM kept, as on hardware) with this cause in MCUSR (default WDRF)."""
         self.sync()
-        if self._cmd("reset") != "ok":
+        if self._cmd(f"reset {mcusr & 0xFF:02x}") != "ok":
             raise HarnessError("reset")
 
     def harness_stats(self) -> dict:

@@ -26,7 +26,8 @@
  *                        poll), write bytes, repeated start, read n
  *                                                             -> "ok <hex|->" | "nack" | "timeout"
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
- *   reset                reset the MCU (watchdog-like; EEPROM kept)          -> "ok"
+ *   reset [mcusr]        reset the MCU; RAM kept, MCUSR set to the given hex cause
+ *                        (default 08 = WDRF, a watchdog reset; 02 = EXTRF)   -> "ok"
  *   stats                one JSON object
  *   quit
  */
@@ -51,6 +52,7 @@
 #define CYCLES_PER_US (F_CPU_HZ / 1000000ull)
 
 /* ATmega328P data-space addresses of the TWI registers. */
+#define MCUSR_ADDR 0x54  /* data-space address of MCUSR (reset cause) */
 #define REG_TWSR 0xB9
 #define REG_TWAR 0xBA
 #define REG_TWDR 0xBB
@@ -538,6 +540,7 @@ int main(int argc, char **argv)
     avr_init(avr);
     avr_load_firmware(avr, &fw);
     avr->log = LOG_WARNING;
+    avr->data[MCUSR_ADDR] = 0x01;  /* PORF: this is a power-on (RAM is zero in simavr) */
 
     /* The TWI peripheral is number 0 (not '0') on the mega328. */
     twi_vec = find_vector(TWI_VECTOR);
@@ -603,6 +606,8 @@ int main(int argc, char **argv)
             fprintf(proto_out, "ok\n");
         } else if (strcmp(cmd, "reset") == 0) {
             avr_reset(avr);
+            /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
+            avr->data[MCUSR_ADDR] = (uint8_t)(a1[0] ? strtoul(a1, NULL, 16) : 0x08);
             in_isr = -1;
             cli_start = 0;
             /* The rig keeps turning through the reset: restart the generators (their

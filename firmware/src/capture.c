@@ -5,6 +5,7 @@
 #include <avr/interrupt.h>
 #include "capture.h"
 #include "config.h"
+#include "counters.h"
 #include "pins.h"
 #include "ring.h"
 #include "tstamp.h"
@@ -13,7 +14,6 @@
 static volatile uint32_t t1_base_us;
 static volatile uint32_t last_primary_us, last_secondary_us;
 static volatile uint16_t lockout_primary_us, lockout_secondary_us;
-volatile uint16_t g_edges_rejected[2];
 
 ISR(TIMER1_OVF_vect)
 {
@@ -47,7 +47,7 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
     uint32_t since_us = t - *last_us;
     /* Lock-outs are u16: only the low half needs a compare (fewer registers to save). */
     if (!(uint16_t)(since_us >> 16) && (uint16_t)since_us < lockout_us) {
-        g_edges_rejected[ch]++;
+        g_counters.lockout[ch]++;
         return;
     }
     *last_us = t;

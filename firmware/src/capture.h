@@ -15,7 +15,7 @@ void capture_service(void);
 void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status);
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us);
 
-extern volatile uint16_t g_edges_rejected[2];  /* bounce counters, diagnostics */
+/* Rejected edges are counted per cause in g_counters (counters.h). */
 
 #ifdef __cplusplus
 }

@@ -2,8 +2,9 @@
 #ifndef DYNO_CONFIG_H
 #define DYNO_CONFIG_H
 
-/* Reported in the INFO frame; bump on any behaviour change the host may care about. */
-#define FW_VERSION_MAJOR 1
+/* Reported in the INFO frame; bump on any behaviour change the host may care about.
+ * The major version is the wire protocol's (v2). */
+#define FW_VERSION_MAJOR 2
 #define FW_VERSION_MINOR 0
 #define FW_VERSION_PATCH 0
 
@@ -32,8 +33,5 @@
 /* The thesis wiring has pull-ups on the Hall sensor boards; set to 1 for bare
  * open-collector sensors. */
 #define HALL_INTERNAL_PULLUP 0
-
-/* EEPROM byte address of the u16 boot counter. */
-#define EEPROM_BOOTCOUNT_ADDR 0u
 
 #endif

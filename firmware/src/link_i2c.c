@@ -1,4 +1,4 @@
-/* TWI slave for the v1 protocol: one combined transaction per poll,
+/* TWI slave for the v2 protocol: one combined transaction per poll,
  *   S addr+W <command> Sr addr+R <32 bytes> P
  *
  * Why not Wire: Wire's onRequest makes the sketch copy the reply into Wire's buffer
@@ -11,6 +11,7 @@
 #include <avr/interrupt.h>
 #include <util/twi.h>
 #include "cmd.h"
+#include "counters.h"
 #include "crc16.h"
 #include "frame.h"
 #include "link_i2c.h"
@@ -24,7 +25,6 @@ static uint8_t rx_len;
 static uint16_t rx_crc;
 static const uint8_t *tx_buf;
 static uint8_t tx_pos;
-volatile uint16_t g_i2c_bus_errors;
 
 void link_i2c_init(uint8_t address)
 {
@@ -72,7 +72,7 @@ ISR(TWI_vect)
         proto_end_read(&g_proto);
         break;
     case TW_BUS_ERROR:             /* 0x00 illegal START/STOP: release the bus */
-        g_i2c_bus_errors++;
+        g_counters.bus_errors++;
         TWCR = TWCR_ACK | _BV(TWSTO);
         return;
     default:

@@ -6,7 +6,6 @@
 extern "C" {
 #endif
 void link_i2c_init(uint8_t address);
-extern volatile uint16_t g_i2c_bus_errors;
 #ifdef __cplusplus
 }
 #endif

@@ -11,7 +11,7 @@ import pytest
 
 from dyno.acquisition.reader import make_reader
 from dyno.cli.firmware_sim_cmd import simulate
-from dyno.protocol import v1
+from dyno.protocol import v1, v2
 from dyno.transports.simavr import SimavrTransport
 
 pytestmark = pytest.mark.firmware
@@ -72,21 +72,30 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
     # The AD7171's error bit is kept and passed on, never acted on.
     assert rep["adc_error_flags"] == rep["events"]["adc"]["expected"] // 5
     dev = rep["device"]
-    assert dev["fw_version"] == "1.0.0" and dev["boot_count"] == 1
+    assert dev["fw_version"] == "2.0.0" and dev["reset_cause"] == "power-on"
     assert dev["debounce_primary_us"] == 10000 and dev["debounce_secondary_us"] == 6000
     assert 3500 < dev["uptime_ms"] < 5000
+    assert dev["bus_errors"] == 0 and dev["twi_timeouts"] == 0
+    assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
+                                     "secondary": {"lockout": 0, "glitch": 0}}
+    assert [b["cause_name"] for b in rep["boots"]] == ["power-on"]
 
 
-def test_firmware_fil_watchdog_style_reset(firmware_build, sim_args):
-    """After a reset the host sees RESET + a new boot count, starts a new time epoch and
-    carries on (events queued in the MCU at the reset are gone with its RAM)."""
+def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
+    """Watchdog-style resets of the real ELF, one within 20 ms of the first frame: each one is
+    a new boot id with cause "watchdog" (no EEPROM involved), the host starts a new time epoch
+    and carries on (events queued in the MCU at a reset are gone with its RAM)."""
     rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "3",
-                            "--reset-at", "1.5"))
-    assert rep["frames"]["device_resets"] == 1
-    assert rep["device"]["boot_count"] == 2
+                            "--reset-at", "0.015", "--reset-at", "1.5", "--reset-at", "2.2"))
+    assert rep["frames"]["device_resets"] == 3
+    boots = rep["boots"]
+    assert [b["cause_name"] for b in boots] == ["power-on", "watchdog", "watchdog", "watchdog"]
+    assert len({b["boot_id"] for b in boots}) == 4
+    assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
+    assert rep["device"]["reset_cause"] == "watchdog"
     for name, ch in rep["events"].items():
         assert ch["duplicates_or_disorder"] == 0, name
-        assert ch["expected"] - 5 <= ch["received"] <= ch["expected"], (name, ch)
+        assert ch["expected"] - 15 <= ch["received"] <= ch["expected"], (name, ch)
 
 
 def test_firmware_fil_set_debounce_from_host(firmware_build):
@@ -95,9 +104,9 @@ def test_firmware_fil_set_debounce_from_host(firmware_build):
     tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"], bounce=True,
                          primary_rpm=3000, secondary_rpm=3000, adc_hz=0)
     try:
-        reader = make_reader("v1", tr)
+        reader = make_reader("v2", tr)
         tr.advance_to(0.03)
-        reader.command(v1.encode_command(v1.OP_SET_DEBOUNCE, 100, 100))
+        reader.command(v2.encode_command(v2.OP_SET_DEBOUNCE, 100, 100))
         n = {1: 0, 2: 0}
         for k in range(5, 150 * 2):
             tr.advance_to(k / 150)
