@@ -158,6 +158,7 @@ class V0Reader:
         self.more = False
         self._last_bytes: bytes | None = None
         self._last: v0.LegacyFrame | None = None
+        self._foreign: str | None = None  # a valid frame of another version on the last read
 
     @property
     def stats(self) -> LinkStats:
@@ -175,10 +176,12 @@ class V0Reader:
             f = v0.decode_legacy_frame(buf)
         except FrameError as exc:
             other = sniff_version(buf) if exc.cause == "checksum" else None
-            if other not in (None, "v0"):
+            if other not in (None, "v0") and other == self._foreign:  # twice in a row: not noise
                 raise ProtocolMismatch(other, "v0") from None
+            self._foreign = other
             st.rejected[exc.cause] += 1
             return []
+        self._foreign = None
         raw = bytes(buf[: v0.FRAME_LEN])
         if raw == self._last_bytes:
             st.rejected["stale_repeat"] += 1

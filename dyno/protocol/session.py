@@ -44,8 +44,10 @@ def sniff_version(buf: bytes) -> str | None:
         except FrameError:
             pass
     try:
-        # A v0 sketch answers 20 bytes; a longer read gets 0xFF (SDA released) after them.
-        if len(buf) >= v0.FRAME_LEN and all(b == 0xFF for b in buf[v0.FRAME_LEN:]):
+        # A v0 sketch answers 20 bytes; a longer read gets 0xFF after them (SDA released),
+        # or zeros (simavr's TWI, which keeps shifting TWDR out).
+        tail = set(buf[v0.FRAME_LEN:])
+        if len(buf) >= v0.FRAME_LEN and (tail <= {0xFF} or tail <= {0x00}):
             v0.decode_legacy_frame(bytes(buf[: v0.FRAME_LEN]))
             return "v0"
     except FrameError:
@@ -97,6 +99,7 @@ class LinkSession:
         self._suspect: bytes | None = None  # a CRC-valid frame out of sequence
         self.info = None
         self.new_boot = False  # the last accepted frame started a new boot (v2) / had RESET (v1)
+        self._foreign: str | None = None  # another version seen on the last read
 
     def request(self) -> bytes:
         """The command to write before the next read."""
@@ -109,9 +112,15 @@ class LinkSession:
         self.stats.transport_errors[cause] += 1
 
     def _check_mismatch(self, buf: bytes) -> None:
+        # Twice in a row: a device of another version answers so on every read, while
+        # corruption that happens to pass the other version's checks does not repeat.
         other = sniff_version(buf)
         if other is not None and other != f"v{self.version}":
-            raise ProtocolMismatch(other, f"v{self.version}")
+            if other == self._foreign:
+                raise ProtocolMismatch(other, f"v{self.version}")
+            self._foreign = other
+            return
+        self._foreign = None
 
     def accept(self, buf: bytes):
         """Check one read; return the data frame if it is new and valid, else ``None``."""
@@ -121,8 +130,11 @@ class LinkSession:
         except FrameError as exc:
             if exc.cause in ("version", "length", "crc"):
                 self._check_mismatch(buf)
+            else:
+                self._foreign = None
             self.stats.rejected[exc.cause] += 1
             return None
+        self._foreign = None
         if isinstance(frame, (v1.InfoFrame, v2.InfoFrame)):
             self.info = frame
             return None

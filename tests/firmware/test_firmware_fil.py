@@ -139,3 +139,16 @@ def test_firmware_fil_v0_sketch_via_cli(firmware_build):
     assert rep["frames"]["accepted"] > 300
     assert rep["frames"]["rejected"].get("stale_repeat", 0) > 0  # slots repeat between edges
     assert rep["frames"]["rejected_total"] == rep["frames"]["rejected"]["stale_repeat"]
+
+
+@pytest.mark.parametrize("elf_key,protocol,device", [("v0_elf", "v2", "v0"), ("elf", "v1", "v2")])
+def test_firmware_fil_version_mismatch_refused(firmware_build, elf_key, protocol, device):
+    """A host set to one protocol meeting a device of another: one line naming both, exit 2."""
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf",
+                          str(firmware_build[elf_key]), "--protocol", protocol, "--seconds", "0.5", "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert f"speaks protocol {device}, the host is set to {protocol}" in lines[0]
+    assert res.stdout == ""

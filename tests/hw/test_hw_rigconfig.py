@@ -44,7 +44,7 @@ BAD = [
     ("missing table", lambda d: d.pop("pins"), "pins"),
     ("wrong type", lambda d: d.__setitem__("poll_hz", "fast"), "poll_hz"),
     ("unknown key", lambda d: d["actuator"].__setitem__("stepp_s", 1.0), "actuator.stepp_s"),
-    ("bad protocol", lambda d: d.__setitem__("protocol", "v2"), "protocol"),
+    ("bad protocol", lambda d: d.__setitem__("protocol", "v3"), "protocol"),
     ("servo in ms", lambda d: d["throttle"].__setitem__("idle_pulse_us", 2.2), "throttle.idle_pulse_us"),
 ]
 
