@@ -52,10 +52,12 @@ static uint8_t finish(uint8_t *out, uint8_t *p)
 
 uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boot_id,
                           uint16_t dropped, uint32_t now_us, frame_event_get_t get,
-                          const void *ctx, uint8_t n)
+                          const void *ctx, uint8_t n, uint8_t *n_done)
 {
     uint32_t t0 = n ? get(ctx, 0)->t_us : now_us;
     uint8_t *p = out;
+    uint8_t *const end = out + FRAME_MAX - FRAME_CRC_LEN;
+    uint8_t k;
     *p++ = FRAME_VERSION;
     *p++ = 0;  /* length, filled in by finish() */
     *p++ = KIND_DATA;
@@ -64,15 +66,20 @@ uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boo
     p = put_u16(p, boot_id);
     p = put_u16(p, dropped);
     p = put_u32(p, t0);
-    for (uint8_t k = 0; k < n; k++) {
+    for (k = 0; k < n; k++) {
         const dyno_event_t *e = get(ctx, k);
-        *p++ = e->tag;
+        uint8_t tag = e->tag;  /* read once: the size below and the byte written agree */
+        if (p + frame_event_len(tag) > end)
+            break;
+        *p++ = tag;
         p = put_u16(p, (uint16_t)(e->t_us - t0));  /* two's complement i16 */
-        if (e->tag == TAG_ADC) {
+        if (tag == TAG_ADC) {
             p = put_u16(p, e->code);
             *p++ = e->status;
         }
     }
+    if (n_done)
+        *n_done = k;
     return finish(out, p);
 }
 

@@ -38,11 +38,14 @@ static inline uint8_t frame_event_len(uint8_t tag) { return tag == TAG_ADC ? 6u 
 typedef const dyno_event_t *(*frame_event_get_t)(const void *ctx, uint8_t i);
 uint8_t frame_fit(frame_event_get_t get, const void *ctx, uint8_t n);
 
-/* Writes a full 32-byte data frame (zero padded) with the first n events (which must
- * fit); t0 = first event's time, or now_us when n == 0. Returns L. */
+/* Writes a full 32-byte data frame (zero padded) with the first n events (frame_fit's
+ * count); t0 = first event's time, or now_us when n == 0. Returns L. Bounded by
+ * construction: an event that would not fit the 32 bytes (events changing under a
+ * racing reader) ends the frame, never the buffer; *n_done (if not NULL) gets the
+ * number of events actually encoded. */
 uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boot_id,
                           uint16_t dropped, uint32_t now_us, frame_event_get_t get,
-                          const void *ctx, uint8_t n);
+                          const void *ctx, uint8_t n, uint8_t *n_done);
 
 uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info);
 

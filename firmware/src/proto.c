@@ -5,15 +5,17 @@
 
 proto_t g_proto;
 
+/* Events from a fixed ring index: a snapshot of the tail, never the live one (the TWI
+ * ISR may retire, i.e. move the tail, while the main loop encodes). */
 typedef struct {
     const ring_t *ring;
-    uint8_t offset;
+    uint8_t first;
 } ring_view_t;
 
 static const dyno_event_t *view_get(const void *ctx, uint8_t i)
 {
     const ring_view_t *v = (const ring_view_t *)ctx;
-    return ring_peek(v->ring, (uint8_t)(v->offset + i));
+    return &v->ring->ev[(uint8_t)(v->first + i) & RING_MASK];
 }
 
 /* A buffer with no role. With 5 buffers and at most 4 roles one always exists. */
@@ -25,24 +27,31 @@ static uint8_t free_buffer(const proto_t *p)
     return PROTO_NONE;  /* unreachable */
 }
 
-/* Encode the data frame that starts `offset` events after the ring tail. */
+/* Encode the data frame that starts `offset` events after the ring tail.
+ *
+ * Tail, head and the drop counters are taken together with interrupts off. If the ISR
+ * retires meanwhile, slots of this snapshot may be refilled by producers while we read
+ * them: the frame is then garbage, but `gen` changed, so the caller never publishes it,
+ * and the encoder is bounded by the buffer whatever it reads. */
 static uint8_t build(proto_t *p, uint8_t buf, uint8_t seq, uint8_t offset, uint8_t reset,
                      uint32_t now_us)
 {
     ring_t *r = p->ring;
-    uint8_t head = r->head;  /* one byte: a consistent snapshot */
+    uint8_t head, tail, overflow;
     uint16_t dropped;
-    uint8_t overflow;
     PORT_CRITICAL_BEGIN();
+    head = r->head;
+    tail = r->tail;
     dropped = r->dropped;
     overflow = r->overflow;
     PORT_CRITICAL_END();
-    uint8_t avail = (uint8_t)((uint8_t)(head - r->tail) - offset);
-    ring_view_t view = {r, offset};
+    uint8_t count = (uint8_t)(head - tail);
+    uint8_t avail = count > offset ? (uint8_t)(count - offset) : 0u;
+    ring_view_t view = {r, (uint8_t)(tail + offset)};
     uint8_t n = frame_fit(view_get, &view, avail);
     uint8_t flags = (uint8_t)((reset ? FLAG_RESET : 0u) | (avail > n ? FLAG_MORE : 0u) |
                               (overflow ? FLAG_OVERFLOW : 0u) | p->cause_flags);
-    frame_encode_data(p->pool[buf], seq, flags, p->boot_id, dropped, now_us, view_get, &view, n);
+    frame_encode_data(p->pool[buf], seq, flags, p->boot_id, dropped, now_us, view_get, &view, n, &n);
     proto_meta_t *m = &p->meta[buf];
     m->n = n;
     m->head = head;
@@ -148,7 +157,7 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
         PORT_CRITICAL_BEGIN();
         gen = p->gen;
         seq = (uint8_t)(p->cur_seq + 1u);
-        offset = p->meta[p->cur].n;
+        offset = p->cur_n;
         buf = free_buffer(p);
         PORT_CRITICAL_END();
         uint8_t n = build(p, buf, seq, offset, 0, now_us);

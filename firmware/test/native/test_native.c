@@ -105,7 +105,7 @@ static void test_vectors(const char *path)
             size_t wn = unhex(field(line, "hex="), want, sizeof want);
             CHECK(frame_fit(frame_array_get, ev, n) == n, "all events fit: %s", line);
             uint8_t len = frame_encode_data(got, (uint8_t)seq, (uint8_t)flags, (uint16_t)boot,
-                                            (uint16_t)dropped, (uint32_t)t0, frame_array_get, ev, n);
+                                            (uint16_t)dropped, (uint32_t)t0, frame_array_get, ev, n, NULL);
             CHECK(len == want[1], "frame length %u: %s", len, line);
             CHECK(memcmp(got, want, wn) == 0, "frame bytes: %s", line);
             /* Vectors may be stored without padding; the rest must be zero. */
@@ -203,6 +203,42 @@ static void test_frame_fit(void)
     ev[0].t_us = 0xFFFFFFF0u;
     ev[1].t_us = 0x00000010u;
     CHECK(frame_fit(frame_array_get, ev, 2) == 2, "wrap");
+}
+
+/* A reader racing producers: every event turns into a 6-byte ADC event once read, as if
+ * the slots were refilled between frame_fit and the encoder. */
+static dyno_event_t race_ev[8];
+static const dyno_event_t *racing_get(const void *ctx, uint8_t i)
+{
+    (void)ctx;
+    const dyno_event_t *e = &race_ev[i];
+    race_ev[i].tag = TAG_ADC;
+    return e;
+}
+
+static void test_encoder_bounded(void)
+{
+    uint8_t buf[FRAME_MAX + 8], n_done = 99;
+    memset(buf, 0xA5, sizeof buf);
+    for (int i = 0; i < 8; i++) {
+        race_ev[i].tag = TAG_PRIMARY;
+        race_ev[i].t_us = 100u + (uint32_t)i;
+    }
+    uint8_t n = frame_fit(frame_array_get, race_ev, 8);
+    CHECK(n == 5, "fit five hall edges");
+    uint8_t len = frame_encode_data(buf, 0, 0, 1, 0, 0, racing_get, NULL, n, &n_done);
+    CHECK(len <= FRAME_MAX && n_done == 2, "encoder stops at the buffer: L=%u, %u events", len, n_done);
+    int guard = 1;
+    for (unsigned i = FRAME_MAX; i < sizeof buf; i++)
+        guard &= buf[i] == 0xA5;
+    CHECK(guard, "nothing written past the 32-byte frame");
+    /* Even asked for 255 events of 6 bytes. */
+    memset(buf, 0xA5, sizeof buf);
+    len = frame_encode_data(buf, 0, 0, 1, 0, 0, frame_array_get, race_ev, 8, &n_done);
+    guard = 1;
+    for (unsigned i = FRAME_MAX; i < sizeof buf; i++)
+        guard &= buf[i] == 0xA5;
+    CHECK(guard && n_done == 2 && len == 13 + 12 + 4, "bounded with too many events asked");
 }
 
 static void test_ring(void)
@@ -510,6 +546,7 @@ int main(int argc, char **argv)
 {
     test_crc();
     test_frame_fit();
+    test_encoder_bounded();
     test_ring();
     test_tstamp();
     test_cobs();
