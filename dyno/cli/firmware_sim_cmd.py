@@ -38,13 +38,19 @@ def add_arguments(parser) -> None:
                         help="set the AD7171 error bit on every Nth conversion (0: never)")
     parser.add_argument("--adc-hz", type=float, default=125.0)
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds of signal")
-    parser.add_argument("--bounce", action="store_true", help="add two bounce edges per Hall pulse")
+    parser.add_argument("--bounce", action="store_true",
+                        help="the Hall line rings at release: two 40 us pulses 150 and 700 us after each pulse")
+    parser.add_argument("--glitch-hz", type=float, default=0.0,
+                        help="Poisson rate of glitches (ignition spikes) on each Hall line, per second")
+    parser.add_argument("--glitch-us", type=float, default=20.0, help="glitch width in us (default 20)")
     parser.add_argument("--fault-rate", type=float, default=0.0,
                         help="probability that a transfer is corrupted between harness and host")
     parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
                         help=f"comma list from {','.join(FAULT_KINDS)}")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--poll-hz", type=float, default=150.0)
+    parser.add_argument("--max-burst", type=int, default=8,
+                        help="reads per poll while the device says MORE (the Poller's default)")
     parser.add_argument("--i2c-khz", type=int, default=100)
     parser.add_argument("--drain-s", type=float, default=0.3,
                         help="keep polling this long after the signals stop")
@@ -62,6 +68,7 @@ def simulate(args) -> dict:
                          secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
                          adc_status=args.adc_status, adc_error_every=args.adc_error_every,
                          adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
+                         glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
                          fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
     try:
         reader = make_reader(args.protocol, tr)
@@ -86,13 +93,16 @@ def simulate(args) -> dict:
                 tr.advance_to(resets.pop(0))
                 tr.reset_device()
             tr.advance_to(t)
-            for ev in reader.poll(t):
-                times[ev.channel].append(ev.t_us)
-                if ev.channel == v1.CH_ADC:
-                    codes.append(ev.code)
-                    statuses.append(ev.status)
-                elif args.protocol == "v0":
-                    slot_rpm[ev.channel].append(ev.code)
+            for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
+                for ev in reader.poll(t):
+                    times[ev.channel].append(ev.t_us)
+                    if ev.channel == v1.CH_ADC:
+                        codes.append(ev.code)
+                        statuses.append(ev.status)
+                    elif args.protocol == "v0":
+                        slot_rpm[ev.channel].append(ev.code)
+                if not reader.more:
+                    break
             k += 1
         info = reader.read_info() if args.protocol != "v0" else None
         hs = tr.harness_stats()
@@ -162,6 +172,8 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
         "bounce": bool(args.bounce),
         "harness": {
             "bounce_edges": [hall[0]["bounce_edges"], hall[1]["bounce_edges"]],
+            "glitches": [hall[0].get("glitches", 0), hall[1].get("glitches", 0)],
+            "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
             "sim_s": hs["sim_s"],

@@ -56,7 +56,7 @@ class SimavrTransport(Transport):
                  adc_code: int = 35145, adc_status: int = 0x05, adc_error_every: int = 0,
                  adc_hz: float = 125.0, bounce: bool = False, i2c_khz: int = 100,
                  address: int = 0x03, start_us: float = 50_000.0, profile: bool = False,
-                 profile_from_us: float = 100_000.0,
+                 profile_from_us: float = 100_000.0, glitch_hz: float = 0.0, glitch_us: float = 20.0,
                  fault_rate: float = 0.0, fault_kinds=FAULT_KINDS, seed: int = 0) -> None:
         super().__init__()
         elf = Path(elf)
@@ -71,7 +71,8 @@ class SimavrTransport(Transport):
                 "--adc-error-every", str(int(adc_error_every)), "--adc-hz", repr(float(adc_hz)),
                 "--i2c-khz", str(int(i2c_khz)), "--addr", str(int(address)),
                 "--start-us", repr(float(start_us)),
-                "--profile-from-us", repr(float(profile_from_us))]
+                "--profile-from-us", repr(float(profile_from_us)),
+                "--glitch-hz", repr(float(glitch_hz)), "--glitch-us", repr(float(glitch_us))]
         if bounce:
             args.append("--bounce")
         if profile:

@@ -33,6 +33,7 @@
  */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -77,6 +78,9 @@ static int cfg_profile = 0;
 static double cfg_profile_from_us = 100000.0;
 
 /* ---- Hall generators ------------------------------------------------------------ */
+/* Each Hall line is a wired-AND of open-collector drivers over the pull-up: the sensor
+ * (low for the pulse) and, with --glitch-hz, a noise source (ignition spikes: low for
+ * --glitch-us at Poisson instants). The pin is driven only when the AND changes. */
 typedef struct {
     int ch;                      /* 0 primary (PD2), 1 secondary (PD3) */
     avr_irq_t *pin;
@@ -85,24 +89,44 @@ typedef struct {
     double t0_cycles;            /* time of edge 0 */
     int step;                    /* position in the pulse pattern */
     uint64_t edge_cycle;         /* cycle of the current true edge */
-    uint64_t generated, bounces;
+    uint64_t generated, bounces, glitches, glitches_masked;
     uint64_t first_cycle, last_cycle;
     int running;
+    int sensor_level, glitch_level, out_level;
+    uint64_t glitch_rng;
 } hall_t;
 static hall_t hall[2];
 static int gen_enabled = 1;
+static double cfg_glitch_hz = 0.0, cfg_glitch_us = 20.0;
+static double cfg_duty = 0.05;   /* pulse = this fraction of the period (magnet arc) ... */
 
-/* Pulse pattern after a true falling edge, as (offset us, level). With bounce, two
- * extra falling edges at 150 us and 700 us: well inside both lock-out windows (6 and
- * 10 ms) and well outside the pulse itself. */
-static const struct { double us; int level; } pattern_plain[] = {{0, 0}, {-1, 1}};
+static double pulse_us(const hall_t *h)
+{
+    double us = cfg_duty * h->period_cycles / CYCLES_PER_US;
+    return us > cfg_pulse_us ? cfg_pulse_us : us;  /* ... at most --pulse-us */
+}
+
+static void hall_drive(hall_t *h)
+{
+    int level = h->sensor_level && h->glitch_level;
+    if (level != h->out_level) {
+        h->out_level = level;
+        avr_raise_irq(h->pin, (uint32_t)level);
+    }
+}
+
+/* Pulse pattern after a true falling edge: (offset us from the pulse end or, for the
+ * first step, from the edge; level). With --bounce, the release rings: two 60 us
+ * pulses 150 us and 700 us after the pulse ends (inside any lock-out, longer than the
+ * firmware's 50 us minimum pulse width, so the lock-out has to reject them). */
+static const struct { double us; int level; } pattern_plain[] = {{0, 0}, {0, 1}};
 static const struct { double us; int level; } pattern_bounce[] = {
-    {0, 0}, {20, 1}, {150, 0}, {170, 1}, {700, 0}, {-1, 1}};
+    {0, 0}, {0, 1}, {150, 0}, {210, 1}, {700, 0}, {760, 1}};
 
-static double pattern_us(int step)
+static double pattern_us(const hall_t *h, int step)
 {
     double us = cfg_bounce ? pattern_bounce[step].us : pattern_plain[step].us;
-    return us < 0 ? cfg_pulse_us + (cfg_bounce ? 700.0 : 0.0) : us;
+    return step == 0 ? 0.0 : pulse_us(h) + us;
 }
 
 static avr_cycle_count_t hall_timer(avr_t *a, avr_cycle_count_t when, void *param)
@@ -124,17 +148,60 @@ static avr_cycle_count_t hall_timer(avr_t *a, avr_cycle_count_t when, void *para
     } else if (level == 0) {
         h->bounces++;
     }
-    avr_raise_irq(h->pin, (uint32_t)level);
+    h->sensor_level = level;
+    hall_drive(h);
     h->step++;
     if (h->step < n)
-        return h->edge_cycle + (avr_cycle_count_t)(pattern_us(h->step) * CYCLES_PER_US);
+        return h->edge_cycle + (avr_cycle_count_t)(pattern_us(h, h->step) * CYCLES_PER_US);
     h->step = 0;
     h->k++;
     return (avr_cycle_count_t)(h->t0_cycles + (double)h->k * h->period_cycles + 0.5);
 }
 
+/* xorshift64*: seeded per channel, so glitch times are reproducible. */
+static double glitch_uniform(hall_t *h)
+{
+    uint64_t x = h->glitch_rng;
+    x ^= x >> 12;
+    x ^= x << 25;
+    x ^= x >> 27;
+    h->glitch_rng = x;
+    return (double)((x * 0x2545F4914F6CDD1Dull) >> 11) / 9007199254740992.0;
+}
+
+static avr_cycle_count_t glitch_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a;
+    hall_t *h = param;
+    if (h->glitch_level) {  /* a spike starts: the line is pulled low for cfg_glitch_us */
+        if (!gen_enabled)
+            return 0;
+        if (h->sensor_level)
+            h->glitches++;
+        else
+            h->glitches_masked++;  /* the sensor already holds the line low */
+        h->glitch_level = 0;
+        hall_drive(h);
+        return when + (avr_cycle_count_t)(cfg_glitch_us * CYCLES_PER_US);
+    }
+    h->glitch_level = 1;
+    hall_drive(h);
+    double gap_s = -log(1.0 - glitch_uniform(h)) / cfg_glitch_hz;
+    return when + 1 + (avr_cycle_count_t)(gap_s * F_CPU_HZ);
+}
+
 static void hall_start(hall_t *h, uint64_t at_cycle)
 {
+    if (cfg_glitch_hz > 0 && !h->running) {
+        avr_cycle_timer_cancel(avr, glitch_timer, h);
+        h->glitch_level = 1;
+        hall_drive(h);
+        if (!h->glitch_rng)
+            h->glitch_rng = 0x9E3779B97F4A7C15ull * (uint64_t)(h->ch + 1);
+        h->glitch_level = 1;
+        double gap_s = -log(1.0 - glitch_uniform(h)) / cfg_glitch_hz;
+        avr_cycle_timer_register(avr, (avr_cycle_count_t)(gap_s * F_CPU_HZ) + 1, glitch_timer, h);
+    }
     if (cfg_rpm[h->ch] <= 0)
         return;
     h->period_cycles = 60.0 * (double)F_CPU_HZ / cfg_rpm[h->ch];
@@ -440,8 +507,11 @@ static void print_stats(void)
     fprintf(o, "\"hall\": [");
     for (int c = 0; c < 2; c++)
         fprintf(o, "%s{\"rpm\": %.6f, \"edges\": %llu, \"bounce_edges\": %llu, "
+                "\"glitches\": %llu, \"glitches_masked\": %llu, \"pulse_us\": %.3f, "
                 "\"first_us\": %.4f, \"last_us\": %.4f}", c ? ", " : "", cfg_rpm[c],
                 (unsigned long long)hall[c].generated, (unsigned long long)hall[c].bounces,
+                (unsigned long long)hall[c].glitches, (unsigned long long)hall[c].glitches_masked,
+                hall[c].period_cycles > 0 ? pulse_us(&hall[c]) : 0.0,
                 (double)hall[c].first_cycle / CYCLES_PER_US, (double)hall[c].last_cycle / CYCLES_PER_US);
     fprintf(o, "], \"adc\": {\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
             "\"overrun\": %llu, \"error_bit_set\": %llu, \"code\": %u, \"status\": %u}, ",
@@ -486,7 +556,8 @@ static void usage(void)
     fprintf(stderr,
             "usage: harness FIRMWARE.elf [--primary-rpm R] [--secondary-rpm R] [--adc-code C]\n"
             "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
-            "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--profile]\n"
+            "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--duty F]\n"
+            "       [--glitch-hz N] [--glitch-us W] [--profile]\n"
             "       [--profile-from-us T]\n");
     exit(2);
 }
@@ -508,6 +579,9 @@ int main(int argc, char **argv)
         else if (OPT("--addr")) cfg_addr = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--start-us")) cfg_start_us = atof(v);
         else if (OPT("--pulse-us")) cfg_pulse_us = atof(v);
+        else if (OPT("--duty")) cfg_duty = atof(v);
+        else if (OPT("--glitch-hz")) cfg_glitch_hz = atof(v);
+        else if (OPT("--glitch-us")) cfg_glitch_us = atof(v);
         else if (OPT("--profile-from-us")) cfg_profile_from_us = atof(v);
         else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
         else if (strcmp(a, "--profile") == 0) cfg_profile = 1;
@@ -555,6 +629,7 @@ int main(int argc, char **argv)
     for (int c = 0; c < 2; c++) {
         hall[c].ch = c;
         hall[c].pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2 + c);
+        hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
         avr_raise_irq(hall[c].pin, 1);  /* sensor output idles high */
     }
     pin_dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 5);
@@ -614,8 +689,10 @@ int main(int argc, char **argv)
              * timers may have been cleared with the MCU's) and the AD7171 idles. */
             for (int c = 0; c < 2; c++) {
                 avr_cycle_timer_cancel(avr, hall_timer, &hall[c]);
+                avr_cycle_timer_cancel(avr, glitch_timer, &hall[c]);
                 hall[c].running = 0;
                 hall[c].step = 0;
+                hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
                 avr_raise_irq(hall[c].pin, 1);
             }
             avr_cycle_timer_cancel(avr, adc_timer, NULL);

@@ -12,10 +12,21 @@
 #define I2C_ADDRESS 0x03
 #define SERIAL_BAUD 115200UL
 
-/* Hall lock-out windows after an accepted edge (thesis values: 10 ms primary, 6 ms
- * secondary). The host can change them with SET_DEBOUNCE. */
-#define DEBOUNCE_PRIMARY_US_DEFAULT 10000u
-#define DEBOUNCE_SECONDARY_US_DEFAULT 6000u
+/* Hall lock-out after the end of an accepted pulse: a quarter of the last accepted
+ * period, at least the floor, at most the cap. The thesis's fixed 10 ms / 6 ms from
+ * the edge dropped every other edge above 6,000 / 10,000 rpm; a quarter period leaves
+ * room for pulses up to 3/4 of a period and for speed doubling within a revolution
+ * (far beyond the rig's inertia). The floor (SET_DEBOUNCE sets it per channel) covers
+ * the first pulse, before a period is known: above the 0.74 ms of release ringing the
+ * harness models, below the 3.8 ms gap between pulses at 15,000 rpm. The cap: after
+ * a stop, pulses come back slower than 1,200 rpm. */
+#define DEBOUNCE_PRIMARY_US_DEFAULT 1000u
+#define DEBOUNCE_SECONDARY_US_DEFAULT 1000u
+#define LOCKOUT_CAP_US 50000u
+/* Minimum Hall pulse width: a shorter low pulse (an ignition spike) is a glitch,
+ * counted and dropped. Real pulses are >= ~100 us (magnet arc at 15,000 rpm); 50 us
+ * also rejects two overlapping 20 us spikes (up to 40 us low). */
+#define HALL_MIN_PULSE_US 50u
 
 /* Event ring: 64 x 8 B = 512 B holds ~0.2 s of events at 3800/7600 rpm + 125 Hz ADC
  * (~315 events/s; a poll retires up to 6), so a host that stalls for ~30 polls loses
