@@ -18,7 +18,9 @@ from dyno.errors import FrameError
 from dyno.protocol import v0, v1, v2
 
 CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
-FW_VERSION = (1, 0, 0)
+FW_VERSION = (2, 0, 0)
+LOCKOUT_FLOOR_US = 1000  # firmware config.h: DEBOUNCE_*_US_DEFAULT
+LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
 
 
 class EmulatedFirmware:
@@ -46,7 +48,9 @@ class EmulatedFirmware:
         self.ack_from_old_boot = 0  # v2: ACK_POLLs naming another boot (ignored), for audits
         self.first_served_s: dict[int, float] = {}  # boot_id -> sim time its first frame went out
         self.retired_log: list | None = None  # set to [] to record (boot_id, raw) of every retired frame
-        self.debounce_us = {v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000}
+        # v1: fixed lock-outs (the thesis's 10 / 6 ms); v2: the floor of the adaptive lock-out
+        self.debounce_us = ({v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000} if protocol == "v1"
+                            else {v1.CH_PRIMARY: LOCKOUT_FLOOR_US, v1.CH_SECONDARY: LOCKOUT_FLOOR_US})
         self.served: dict[int, bytes] = {}  # seq -> bytes last served (truth for audits)
         self.events_generated = 0  # accepted into the ring (truth)
         self.bounces_rejected = 0
@@ -66,8 +70,18 @@ class EmulatedFirmware:
         self.info_pending = False
         self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self.lockout_rejected = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}  # since boot, as on the device
+        self._period_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self._legacy = {v1.CH_PRIMARY: [100, 0], v1.CH_SECONDARY: [100, 0], v1.CH_ADC: [0, 0]}
         self._legacy_prev_t = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}
+
+    def _lockout_us(self, tag: int) -> int:
+        """v1: the fixed window; v2: a quarter of the last period within [floor, cap] (firmware capture.c;
+        the simulated Hall pulses have no width, so it runs from the accepted edge)."""
+        floor = self.debounce_us[tag]
+        period = self._period_us[tag]
+        if self.protocol != "v2" or period is None:
+            return floor
+        return max(floor, min(LOCKOUT_CAP_US, period >> 2))
 
     def reset(self, now_s: float, cause: int = v2.CAUSE_WDRF) -> None:
         """Watchdog (default) or other reset: counters and buffers restart, a new boot id."""
@@ -87,10 +101,12 @@ class EmulatedFirmware:
         t_us = self.device_us(t_s)
         if tag != v1.CH_ADC:
             last = self._last_edge_us[tag]
-            if last is not None and ((t_us - last) & 0xFFFFFFFF) < self.debounce_us[tag]:
+            if last is not None and ((t_us - last) & 0xFFFFFFFF) < self._lockout_us(tag):
                 self.bounces_rejected += 1
                 self.lockout_rejected[tag] = (self.lockout_rejected[tag] + 1) & 0xFFFF
                 return
+            if last is not None:
+                self._period_us[tag] = (t_us - last) & 0xFFFFFFFF
             self._last_edge_us[tag] = t_us
             code = status = 0  # a Hall edge carries only its time
         if self.protocol == "v0":

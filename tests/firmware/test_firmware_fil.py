@@ -73,7 +73,7 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
     assert rep["adc_error_flags"] == rep["events"]["adc"]["expected"] // 5
     dev = rep["device"]
     assert dev["fw_version"] == "2.0.0" and dev["reset_cause"] == "power-on"
-    assert dev["debounce_primary_us"] == 10000 and dev["debounce_secondary_us"] == 6000
+    assert dev["debounce_primary_us"] == 1000 and dev["debounce_secondary_us"] == 1000  # lock-out floors
     assert 3500 < dev["uptime_ms"] < 5000
     assert dev["bus_errors"] == 0 and dev["twi_timeouts"] == 0
     assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
@@ -99,14 +99,14 @@ def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
 
 
 def test_firmware_fil_set_debounce_from_host(firmware_build):
-    """SET_DEBOUNCE reaches the capture ISRs: with 100 us windows the bounce edges
-    (150 us and 700 us after each pulse) are no longer rejected."""
-    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"], bounce=True,
+    """SET_DEBOUNCE sets the lock-out floor: 30 ms at 3000 rpm (20 ms period) locks out every
+    other pulse, counted as lock-out rejections in INFO."""
+    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"],
                          primary_rpm=3000, secondary_rpm=3000, adc_hz=0)
     try:
         reader = make_reader("v2", tr)
         tr.advance_to(0.03)
-        reader.command(v2.encode_command(v2.OP_SET_DEBOUNCE, 100, 100))
+        reader.command(v2.encode_command(v2.OP_SET_DEBOUNCE, 30000, 30000))
         n = {1: 0, 2: 0}
         for k in range(5, 150 * 2):
             tr.advance_to(k / 150)
@@ -116,10 +116,42 @@ def test_firmware_fil_set_debounce_from_host(firmware_build):
         hs = tr.harness_stats()
     finally:
         tr.close()
-    assert info.debounce_primary_us == 100 and info.debounce_secondary_us == 100
+    assert info.debounce_primary_us == 30000 and info.debounce_secondary_us == 30000
     for ch, h in ((1, hs["hall"][0]), (2, hs["hall"][1])):
-        generated = h["edges"] + h["bounce_edges"]
-        assert generated - 6 <= n[ch] <= generated  # the last pulse may still be queued
+        assert abs(n[ch] - h["edges"] / 2) <= 3, (n, h)
+        assert abs(info.lockout_rejected[ch - 1] - h["edges"] / 2) <= 3
+    assert info.glitch_rejected == (0, 0)
+
+
+@pytest.mark.parametrize("rpm", [300, 3800, 12000, 15000])
+def test_firmware_fil_speeds_with_glitches_and_bounce(firmware_build, sim_args, rpm):
+    """The issue's range on both channels: every pulse delivered once, rpm within 0.05 %, while
+    200 Hz of 20 us spikes per line and release ringing are rejected and counted by cause."""
+    seconds = "4" if rpm == 300 else "2"
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", seconds,
+                            "--primary-rpm", str(rpm), "--secondary-rpm", str(rpm),
+                            "--bounce", "--glitch-hz", "200", "--glitch-us", "20"))
+    _assert_lossless(rep)
+    assert rep["events"]["primary"]["expected"] >= 10
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05
+    assert abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    rej = rep["edges_rejected"]
+    h = rep["harness"]
+    for c, name in enumerate(("primary", "secondary")):
+        # Every ringing pulse is locked out; spikes are glitches, or locked out when they fall
+        # inside a lock-out window (counted there), or merge with a pulse (never an event).
+        assert rej[name]["lockout"] >= h["bounce_edges"][c]
+        assert rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c] <= h["glitches"][c]
+        assert rej[name]["glitch"] >= 0.5 * h["glitches"][c] > 0
+
+
+def test_firmware_fil_clean_15000_rpm_nothing_rejected(firmware_build, sim_args):
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "2",
+                            "--primary-rpm", "15000", "--secondary-rpm", "15000"))
+    _assert_lossless(rep)
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
+                                     "secondary": {"lockout": 0, "glitch": 0}}
 
 
 def test_firmware_fil_v0_sketch_via_cli(firmware_build):

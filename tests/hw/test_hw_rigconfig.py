@@ -19,7 +19,7 @@ def test_hw_repo_rig_loads():
     rig = load_rig()
     assert rig.i2c.firmware_address == 0x03 and rig.i2c.thermometer_address == 0x5A
     assert rig.gear_ratio_brake_per_secondary == pytest.approx(32 / 61)
-    assert (rig.debounce_primary_us, rig.debounce_secondary_us) == (10000, 6000)
+    assert (rig.debounce_primary_us, rig.debounce_secondary_us) == (1000, 1000)  # v2 lock-out floors
     assert rig.poll_hz == 150 and rig.protocol in ("v2", "v1", "v0")
     assert len(set(rig.pins.as_dict().values())) == 5
 

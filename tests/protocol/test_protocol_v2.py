@@ -189,7 +189,7 @@ def test_version_mismatch_is_refused_naming_both_versions():
 def test_info_frame_from_the_emulated_device():
     fw = EmulatedFirmware()
     fw.capture("primary", 0.001)
-    fw.capture("primary", 0.002)  # inside the 10 ms lock-out: rejected and counted
+    fw.capture("primary", 0.0015)  # inside the 1 ms lock-out floor: rejected and counted
     fw.write(v2.encode_command(v2.OP_INFO), 0.5)
     info = v2.decode_frame(fw.read(32, 0.5))
     assert isinstance(info, v2.InfoFrame)
