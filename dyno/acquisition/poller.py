@@ -168,6 +168,16 @@ class Poller:
         edges = self.streams.last_edges(channel)
         if self.epoch_start_us is not None and len(edges) >= 2 and edges[-2] < self.epoch_start_us:
             return 0.0  # no two edges of this boot yet: no speed, never one across the reset
+        if len(edges) >= 2 and self.streams.edge_gap[channel][-1]:
+            # events were lost between the last two edges: the latest period without a loss
+            pair = self.streams.last_valid_pair(channel)
+            if pair is None:
+                return 0.0
+            period = int(pair[1]) - int(pair[0])
+            quiet = now - int(edges[-1])  # staleness judged from the newest edge
+            if period <= 0 or (quiet > min(500_000, 3 * period) and quiet > period):
+                return 0.0
+            return 60e6 / period
         return current_rpm(edges, now)
 
     def latest_adc(self) -> tuple[int, int] | None:

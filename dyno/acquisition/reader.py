@@ -101,7 +101,7 @@ class V1Reader:
         self._dropped_last = frame.events_dropped
         self.more = bool(frame.flags & v1.FLAG_MORE)
         unwrap = self.unwrap
-        out = [Event(e.channel, unwrap(e.t_us), e.code, e.status) for e in frame.events]
+        out = [Event(e.channel, unwrap(e.t_us), e.code, e.status, e.gap) for e in frame.events]
         t_dev = unwrap.peek(frame.t0_us) if not out else max(e.t_us for e in out)
         if self.device_time_us is None or t_dev > self.device_time_us:
             self.device_time_us = t_dev

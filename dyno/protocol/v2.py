@@ -16,7 +16,8 @@ Data frame (kind ``'D'``)::
     5-6    u16  boot_id: differs on every boot; echoed by ACK_POLL
     7-8    u16  events_dropped (ring saturation since boot or CLEAR_COUNTERS)
     9-12   u32  t0_us
-    13..   events (v1 layout)
+    13..   events (v1 layout; the tag's bit 7, TAG_GAP, marks the first event
+                after a ring saturation: events were lost just before it)
     L-4    u32  CRC-32C over bytes 0..L-5
     L..31       padding 0x00 (checked)
 
@@ -61,6 +62,7 @@ OP_INFO = v1.OP_INFO
 COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0}
 
 INFO_LEN = 32
+TAG_GAP = 0x80
 
 
 def cause_name(cause: int) -> str:
@@ -127,10 +129,11 @@ def encode_data_frame(seq: int, flags: int, boot_id: int, events_dropped: int, e
     body = bytearray()
     for ev in events:
         dt = v1._signed32((ev.t_us - t0) & 0xFFFFFFFF)
+        tag = ev.channel | (TAG_GAP if ev.gap else 0)
         if ev.channel == CH_ADC:
-            body += struct.pack(">BhHB", ev.channel, dt, ev.code & 0xFFFF, ev.status & 0xFF)
+            body += struct.pack(">BhHB", tag, dt, ev.code & 0xFFFF, ev.status & 0xFF)
         else:
-            body += struct.pack(">Bh", ev.channel, dt)
+            body += struct.pack(">Bh", tag, dt)
     length = HEADER_LEN + len(body) + CRC_LEN
     if length > FRAME_MAX:
         raise ValueError(f"{len(events)} events need {length} bytes > {FRAME_MAX}")
@@ -213,10 +216,12 @@ def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
     events = []
     i, end = HEADER_LEN, length - CRC_LEN
     while i < end:
-        tag = buf[i]
+        raw_tag = buf[i]
+        tag = raw_tag & ~TAG_GAP
+        gap = bool(raw_tag & TAG_GAP)
         size = EVENT_LEN.get(tag)
         if size is None:
-            raise FrameError("event_tag", f"0x{tag:02x} at byte {i}")
+            raise FrameError("event_tag", f"0x{raw_tag:02x} at byte {i}")
         if i + size > end:
             raise FrameError("event_length", f"event at byte {i} overruns")
         dt = buf[i + 1] << 8 | buf[i + 2]
@@ -224,9 +229,9 @@ def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
             dt -= 0x10000
         t = (t0 + dt) & 0xFFFFFFFF
         if tag == CH_ADC:
-            events.append(Event(tag, t, buf[i + 3] << 8 | buf[i + 4], buf[i + 5]))
+            events.append(Event(tag, t, buf[i + 3] << 8 | buf[i + 4], buf[i + 5], gap))
         else:
-            events.append(Event(tag, t))
+            events.append(Event(tag, t, gap=gap))
         i += size
     return DataFrame(seq, flags, boot, dropped, t0, tuple(events))
 

@@ -33,7 +33,8 @@ E = v1.Event
 
 
 def _ev(e: v1.Event) -> str:
-    return f"3@{e.t_us}:{e.code}:{e.status}" if e.channel == v1.CH_ADC else f"{e.channel}@{e.t_us}"
+    tag = e.channel | (v2.TAG_GAP if e.gap else 0)  # v2: the gap mark is the tag's bit 7
+    return f"{tag}@{e.t_us}:{e.code}:{e.status}" if e.channel == v1.CH_ADC else f"{tag}@{e.t_us}"
 
 
 def _frames():
@@ -101,6 +102,8 @@ def _frames_v2():
     yield "ext_brownout_boot", 0, v2.FLAG_RESET | ((v2.CAUSE_EXTRF | v2.CAUSE_BORF) << 4), 4, 0, [], 77
     yield "overflow_dropped", 200, v2.FLAG_OVERFLOW | v2.FLAG_MORE | wdt, 9, 513, [E(1, 123_456_789)], 0
     yield "seq_255", 255, wdt, 0x8000, 65535, [E(2, 0x7FFFFFFF), E(2, 0x80000000 + 0x7000)], 0
+    yield "gap_marks", 17, v2.FLAG_OVERFLOW | wdt, 9, 40, [E(1, 1000), E(2, 1200, gap=True),
+                                                           E(3, 1300, 321, 5, gap=True)], 0
 
 
 def _bad_v2():

@@ -62,6 +62,7 @@ class EmulatedFirmware:
         self.ring: deque = deque()
         self.events_dropped = 0
         self.overflow = False
+        self._gap = False
         self.seq = 0
         self.reset_flag = True
         self.frame: bytes | None = None
@@ -115,9 +116,11 @@ class EmulatedFirmware:
         if len(self.ring) >= self.ring_capacity:
             self.events_dropped = (self.events_dropped + 1) & 0xFFFF
             self.overflow = True
+            self._gap = self.protocol == "v2"  # v2 marks the next event that gets in
             return
         self.events_generated += 1
-        self.ring.append(v1.Event(tag, t_us, code, status))
+        self.ring.append(v1.Event(tag, t_us, code, status, self._gap))
+        self._gap = False
 
     def _capture_v0(self, tag: int, t_us: int, code: int, status: int) -> None:
         self.events_generated += 1

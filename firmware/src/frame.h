@@ -31,7 +31,10 @@ typedef struct {
     uint8_t twi_timeouts, bus_errors;
 } frame_info_t;
 
-static inline uint8_t frame_event_len(uint8_t tag) { return tag == TAG_ADC ? 6u : 3u; }
+static inline uint8_t frame_event_len(uint8_t tag)
+{
+    return (uint8_t)(tag & (uint8_t)~TAG_GAP) == TAG_ADC ? 6u : 3u;
+}
 
 /* How many of the n events (ev[i] from get(ctx, i)) fit one frame, by size and by the
  * i16 dt from the first event's time. */

@@ -195,3 +195,27 @@ def test_info_frame_from_the_emulated_device():
     assert isinstance(info, v2.InfoFrame)
     assert info.boot_id == 1 and info.reset_cause == v2.CAUSE_PORF and info.uptime_ms == 500
     assert info.lockout_rejected == (1, 0)
+
+
+def test_gap_mark_after_ring_saturation_and_rpm_by_pairs():
+    from dyno.acquisition.rpm import rpm_by_pairs
+    from dyno.acquisition.streams import Streams
+
+    fw = EmulatedFirmware(ring_capacity=4)
+    for k in range(10):  # 10 edges 10 ms apart into a 4-event ring: 6 dropped
+        fw.capture("primary", 0.01 * (k + 1))
+    s = LinkSession()
+    got = []
+    for k in range(12):
+        f = _xfer(s, fw, 0.2 + 0.01 * k)
+        if f:
+            got.extend(f.events)
+        if k == 1:  # room again: the next edge carries the gap mark
+            fw.capture("primary", 0.11)
+            fw.capture("primary", 0.12)
+    assert [e.gap for e in got] == [False, False, False, False, True, False]
+    st = Streams()
+    st.extend(got)
+    assert list(st.edge_gap[v1.CH_PRIMARY]) == [0, 0, 0, 0, 1, 0]
+    rpm, n = rpm_by_pairs(st.edges[v1.CH_PRIMARY], st.edge_gap[v1.CH_PRIMARY])
+    assert n == 4 and rpm == pytest.approx(6000.0, rel=1e-3)  # 10 ms periods only

@@ -265,6 +265,13 @@ static void test_ring(void)
     CHECK(!ring_push(&r, TAG_PRIMARY, 1000, 0, 0), "full ring refuses");
     CHECK(r.dropped == 2 && r.overflow, "drops counted");
     CHECK(ring_peek(&r, RING_SIZE - 1)->t_us == RING_SIZE - 1, "old events kept");
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == TAG_PRIMARY, "no gap mark before the drops");
+    ring_retire(&r, 1);
+    CHECK(ring_push(&r, TAG_SECONDARY, 2000, 0, 0), "room again");
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == (TAG_SECONDARY | TAG_GAP), "first event after drops marked");
+    ring_retire(&r, 1);
+    ring_push(&r, TAG_SECONDARY, 2001, 0, 0);
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == TAG_SECONDARY, "only the first one");
     r.dropped = 0xFFFF;
     ring_push(&r, TAG_PRIMARY, 0, 0, 0);
     CHECK(r.dropped == 0, "dropped wraps like the u16 on the wire");
