@@ -20,10 +20,11 @@ import time
 import numpy as np
 
 from dyno.acquisition.reader import make_reader
+from dyno.errors import ConfigError
 from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
 from dyno.protocol.v2 import cause_name
-from dyno.transports.simavr import FAULT_KINDS, SimavrTransport
+from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrTransport
 
 
 def add_arguments(parser) -> None:
@@ -46,7 +47,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fault-rate", type=float, default=0.0,
                         help="probability that a transfer is corrupted between harness and host")
     parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
-                        help=f"comma list from {','.join(FAULT_KINDS)}")
+                        help=f"comma list from {','.join(ALL_FAULT_KINDS)} (default: all but abort)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--poll-hz", type=float, default=150.0)
     parser.add_argument("--max-burst", type=int, default=8,
@@ -64,6 +65,10 @@ def simulate(args) -> dict:
     """Run one firmware-in-the-loop session; returns the report dictionary."""
     wall0 = time.perf_counter()
     kinds = tuple(k for k in args.fault_kinds.split(",") if k)
+    bad = [k for k in kinds if k not in ALL_FAULT_KINDS]
+    if bad:
+        raise ConfigError("command line", "--fault-kinds", f"{','.join(bad)} unknown; expected a comma list "
+                                                         f"from {','.join(ALL_FAULT_KINDS)}")
     tr = SimavrTransport(args.elf, harness=args.harness, primary_rpm=args.primary_rpm,
                          secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
                          adc_status=args.adc_status, adc_error_every=args.adc_error_every,
@@ -78,7 +83,7 @@ def simulate(args) -> dict:
         codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
         dt = 1.0 / args.poll_hz
         k = 0
-        resets = sorted(args.reset_at or [])
+        reset_times = sorted(args.reset_at or [])
         # The signals start 50 ms after power-up; they run for args.seconds.
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
@@ -91,14 +96,14 @@ def simulate(args) -> dict:
                 tr.advance_to(t_stop)
                 tr.generators(False)
                 stopped = True
-            while resets and t >= resets[0]:
-                tr.advance_to(resets.pop(0))
+            while reset_times and t >= reset_times[0]:
+                tr.advance_to(reset_times.pop(0))
                 tr.reset_device()
             tr.advance_to(t)
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
-                resets = reader.stats.device_resets
+                resets_before = reader.stats.device_resets
                 new = reader.poll(t)
-                if reader.stats.device_resets != resets:  # never a period across a reset
+                if reader.stats.device_resets != resets_before:  # never a period across a reset
                     pending = dict.fromkeys(pending, True)
                 for ev in new:
                     if ev.gap:

@@ -28,6 +28,9 @@ from dyno.errors import DynoError
 from dyno.transports.base import Transport, TransportFault
 
 FAULT_KINDS = ("read_bitflip", "cmd_bitflip", "truncate", "nack")
+# "abort": the master stops clocking halfway through the read (a killed host): the slave
+# holds SDA until its 25 ms timeout releases the bus (transfers meanwhile: bus_held).
+ALL_FAULT_KINDS = FAULT_KINDS + ("abort",)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_HARNESS = REPO_ROOT / "firmware" / "build" / "harness"
 
@@ -83,6 +86,10 @@ class SimavrTransport(Transport):
                                       stderr=self._stderr, text=True, bufsize=1)
         self.fault_rate = float(fault_rate)
         self.fault_kinds = tuple(fault_kinds)
+        bad = set(self.fault_kinds) - set(ALL_FAULT_KINDS)
+        if bad:
+            raise ValueError(f"unknown fault kinds {sorted(bad)}; known: {','.join(ALL_FAULT_KINDS)}")
+        self.bus_held = False
         self._rng = random.Random(seed)
         self.faults_injected: Counter = Counter()
         self.sim_time_us = 0.0
@@ -144,7 +151,7 @@ class SimavrTransport(Transport):
     # -- Transport ------------------------------------------------------------------
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         kind = None
-        if self.fault_rate and self._rng.random() < self.fault_rate:
+        if self.fault_rate and self._rng.random() < self.fault_rate and not self.bus_held:
             kind = self._rng.choice(self.fault_kinds)
             if kind == "cmd_bitflip" and not request:
                 kind = "read_bitflip"  # v0 writes nothing
@@ -153,7 +160,13 @@ class SimavrTransport(Transport):
             request = _flip(request, self._rng)
         at = "" if self._pending_us is None else f" {self._pending_us:.3f}"
         self._pending_us = None
-        reply = self._cmd(f"xfer {request.hex() or '-'} {int(read_len)}{at}")
+        verb = "abort" if kind == "abort" else "xfer"
+        reply = self._cmd(f"{verb} {request.hex() or '-'} {int(read_len)}{at}")
+        self.bus_held = kind == "abort" or reply == "busheld"
+        if kind == "abort":
+            raise TransportFault("timeout", "master aborted mid-read (injected)")
+        if reply == "busheld":
+            raise TransportFault("bus_held", "SDA held low since an aborted transfer")
         if reply == "nack":
             raise TransportFault("nack", "device did not acknowledge")
         if reply == "timeout":

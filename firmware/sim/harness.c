@@ -25,6 +25,9 @@
  *   xfer <hex|-> <n> [t_us]  (run until t_us first, if given: one pipe round trip per
  *                        poll), write bytes, repeated start, read n
  *                                                             -> "ok <hex|->" | "nack" | "timeout"
+ *   abort <hex|-> <n> [t_us]  like xfer, but the master stops clocking halfway through
+ *                        the read (no NACK, no STOP): the slave holds SDA until its
+ *                        timeout disables TWI; transfers meanwhile -> "busheld"
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
  *   reset [mcusr]        reset the MCU; RAM kept, MCUSR set to the given hex cause
  *                        (default 08 = WDRF, a watchdog reset; 02 = EXTRF)   -> "ok"
@@ -409,11 +412,20 @@ static int wait_twint_clear(void)
     return twint_written;
 }
 
+/* A master that gave up mid-read leaves the slave transmitter driving SDA: the bus is
+ * held until the slave disables its TWI unit (TWEN written 0: its timeout). */
+static int bus_held;
+static uint64_t bus_held_since, bus_release_cycles, bus_aborts;
+
 static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 {
     (void)a; (void)addr; (void)param;
     if (v & TWCR_TWINT)
         twint_written = 1;
+    if (bus_held && !(v & TWCR_TWEN)) {
+        bus_held = 0;
+        bus_release_cycles = avr->cycle - bus_held_since;
+    }
 }
 
 static void twi_event(uint8_t status)
@@ -431,9 +443,13 @@ static int slave_acks(uint8_t addr7)
     return (avr->data[REG_TWAR] >> 1) == addr7;
 }
 
-/* Returns 0 ok, 1 NACK, 2 timeout. */
-static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
+/* Returns 0 ok, 1 NACK, 2 timeout, 3 bus held (SDA low since an aborted transfer).
+ * abort_after >= 0: the master stops clocking after that many bytes of the read, with
+ * no NACK and no STOP (a crashed or killed host). */
+static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr, int abort_after)
 {
+    if (bus_held)
+        return 3;
     i2c_transfers++;
     /* simavr stores a 1 written to TWINT (silicon clears the flag), so TWINT can read
      * as set with nothing pending: only our own events count. */
@@ -466,6 +482,12 @@ static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
         if (!wait_twint_clear()) return 2;
         rd[0] = avr->data[REG_TWDR];
         for (int i = 1; i < nr; i++) {
+            if (abort_after >= 0 && i >= abort_after) {
+                bus_held = 1;
+                bus_held_since = avr->cycle;
+                bus_aborts++;
+                return 0;
+            }
             run_until(avr->cycle + byte_cycles);  /* byte i-1 out, master ACKs */
             twi_event(0xB8);
             if (!wait_twint_clear()) return 2;
@@ -519,10 +541,13 @@ static void print_stats(void)
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
     fprintf(o, "\"i2c\": {\"khz\": %u, \"transfers\": %llu, \"nacks\": %llu, \"timeouts\": %llu, "
-            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f}",
+            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f, \"aborts\": %llu, "
+            "\"bus_held\": %s, \"last_release_after_us\": %.1f}",
             cfg_i2c_khz, (unsigned long long)i2c_transfers, (unsigned long long)i2c_nacks,
             (unsigned long long)i2c_timeouts, (double)stretch_max / CYCLES_PER_US,
-            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0);
+            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0,
+            (unsigned long long)bus_aborts, bus_held ? "true" : "false",
+            (double)bus_release_cycles / CYCLES_PER_US);
     if (cfg_profile) {
         fprintf(o, ", \"isr\": {");
         int first = 1;
@@ -647,7 +672,8 @@ int main(int argc, char **argv)
             uint64_t target = (uint64_t)(atof(a1) * CYCLES_PER_US);
             run_until(target);
             fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
-        } else if (strcmp(cmd, "xfer") == 0) {
+        } else if (strcmp(cmd, "xfer") == 0 || strcmp(cmd, "abort") == 0) {
+            /* abort: like xfer, but the master stops clocking after n/2 bytes of the read */
             int nw = 0, nr = atoi(a2);
             if (a3[0])
                 run_until((uint64_t)(atof(a3) * CYCLES_PER_US));
@@ -659,8 +685,10 @@ int main(int argc, char **argv)
                 }
             if (nr < 0 || nr > (int)sizeof rd)
                 nr = 0;
-            int r = i2c_transfer(wr, nw, rd, nr);
-            if (r == 1) {
+            int r = i2c_transfer(wr, nw, rd, nr, strcmp(cmd, "abort") == 0 ? nr / 2 : -1);
+            if (r == 3) {
+                fprintf(proto_out, "busheld\n");
+            } else if (r == 1) {
                 i2c_nacks++;
                 fprintf(proto_out, "nack\n");
             } else if (r == 2) {

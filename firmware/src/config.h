@@ -10,6 +10,9 @@
 
 /* docs/protocol.md: the Pi addresses the Nano at 0x03 (the thesis rig's address). */
 #define I2C_ADDRESS 0x03
+/* A TWI transfer open this long without progress is aborted by the slave, so the bus is
+ * free within 25 ms like SMBus's (millis() ticks are 1.024 ms, hence 23 here). */
+#define I2C_SLAVE_TIMEOUT_MS 23u
 #define SERIAL_BAUD 115200UL
 
 /* Hall lock-out after the end of an accepted pulse: a quarter of the last accepted
@@ -40,6 +43,12 @@
 #define PROTO_EMPTY_REFRESH_US 2000u
 /* INFO frame (uptime) is rebuilt this often in the main loop, never in the ISR. */
 #define INFO_REFRESH_MS 50u
+
+/* 1 for Nanos with the old ATmegaBOOT bootloader (PlatformIO env nanoatmega328): no
+ * watchdog, which that bootloader would turn into a reset loop. */
+#ifndef DYNO_OLD_BOOTLOADER
+#define DYNO_OLD_BOOTLOADER 0
+#endif
 
 /* The thesis wiring has pull-ups on the Hall sensor boards; set to 1 for bare
  * open-collector sensors. */

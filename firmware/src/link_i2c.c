@@ -26,11 +26,49 @@ static uint16_t rx_crc;
 static const uint8_t *tx_buf;
 static uint8_t tx_pos;
 
+static uint8_t address_;
+
 void link_i2c_init(uint8_t address)
 {
+    address_ = address;
     TWAR = (uint8_t)(address << 1);  /* no general call */
     TWSR = 0;
     TWCR = TWCR_ACK;
+}
+
+/* Slave timeout (like SMBus's 25 ms): a master that stops clocking mid-transfer leaves
+ * a transmitting slave driving SDA (a 0 bit) for ever, and the bus dead. The main loop
+ * watches the transfer's progress (no cost in the ISR); 25 ms without a TWI event while
+ * a transfer is open disables the TWI unit (releasing SDA and SCL) and restarts it. The
+ * frame that was being read counts as sent: the host did not acknowledge it, so it is
+ * served again. */
+void link_i2c_service(uint16_t now_ms)
+{
+    static uint8_t seen_pos, seen_len, watching;
+    static uint16_t since_ms;
+    uint8_t busy = g_proto.tx != PROTO_NONE || rx_len != 0;
+    if (!busy) {
+        watching = 0;
+        return;
+    }
+    if (!watching || tx_pos != seen_pos || rx_len != seen_len) {
+        watching = 1;
+        seen_pos = tx_pos;
+        seen_len = rx_len;
+        since_ms = now_ms;
+        return;
+    }
+    if ((uint16_t)(now_ms - since_ms) < I2C_SLAVE_TIMEOUT_MS)
+        return;
+    uint8_t sreg = SREG;
+    cli();
+    TWCR = 0;  /* TWI off: SDA and SCL released */
+    rx_len = 0;
+    proto_end_read(&g_proto);
+    g_counters.twi_timeouts++;
+    link_i2c_init(address_);
+    SREG = sreg;
+    watching = 0;
 }
 
 ISR(TWI_vect)

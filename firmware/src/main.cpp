@@ -23,15 +23,20 @@ void setup()
     proto_service(&g_proto, capture_now_us(), millis());
     link_serial_init();
     link_i2c_init(I2C_ADDRESS);
+#if !DYNO_OLD_BOOTLOADER
     /* 500 ms: far above the longest loop pass (well under 1 ms), short enough that a
-     * hung MCU is back before the host's link-lost timeout. */
+     * hung MCU is back before the host's link-lost timeout. Not with the old ATmegaBOOT,
+     * which would loop on watchdog resets (platformio.ini, docs/firmware.md). */
     wdt_enable(WDTO_500MS);
+#endif
 }
 
 void loop()
 {
     uint16_t lock_p_us, lock_s_us;
+#if !DYNO_OLD_BOOTLOADER
     wdt_reset();
+#endif
     /* The ADC is read here, not in an ISR: clocking 24 bits takes ~25 us. Its time is
      * taken when RDY is seen, so it may be queued after a later Hall edge (the frame's
      * signed dt covers that). */
@@ -47,5 +52,6 @@ void loop()
     if (proto_take_debounce(&g_proto, &lock_p_us, &lock_s_us))
         capture_set_lockout(lock_p_us, lock_s_us);
     proto_service(&g_proto, capture_now_us(), millis());
+    link_i2c_service((uint16_t)millis());
     link_serial_service();
 }

@@ -217,3 +217,26 @@ def test_firmware_fil_slow_polling_rpm_from_adjacent_pairs(firmware_build, sim_a
     assert rep["events_lost"] > 1000 and rep["accounting"]["exact"]
     assert abs(rep["rpm_error_pct"]["primary"]) < 0.05
     assert abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+
+
+def test_firmware_fil_twi_master_abort_recovered(firmware_build, sim_args):
+    """A master that stops clocking halfway through a read (a killed host) leaves the slave
+    holding SDA; the firmware's slave timeout frees the bus within 25 ms, counts it, and the
+    frame is served again: nothing lost."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "6", "--bounce",
+                            "--fault-rate", "0.03", "--fault-kinds", "abort,read_bitflip", "--seed", "3"))
+    _assert_lossless(rep)
+    aborts = rep["faults_injected"]["abort"]
+    assert aborts >= 3
+    assert rep["device"]["twi_timeouts"] == aborts == rep["harness"]["i2c"]["aborts"]
+    assert not rep["harness"]["i2c"]["bus_held"]
+    assert 20_000 < rep["harness"]["i2c"]["last_release_after_us"] <= 25_000
+    assert rep["frames"]["transport_errors"].get("bus_held", 0) > 0  # the bus really was held
+
+
+def test_firmware_sim_bad_fault_kind_is_refused():
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", "x.elf",
+                          "--fault-kinds", "nack,bogus"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--fault-kinds" in lines[0] and "bogus" in lines[0]
