@@ -140,6 +140,23 @@ def _channel(ts) -> dict:
     }
 
 
+def _adc_time_error(times, hs) -> dict | None:
+    """ADC timestamps against the harness's RDY falling edges (us). The device clock is put
+    on the harness's by the primary Hall edges (median offset; the Hall ISR's latency is
+    similar to the RDY ISR's, so what remains is the extra latency of the ADC time)."""
+    adc, hall = hs["adc"], hs["hall"][0]
+    t_adc, t_p = times[v1.CH_ADC], times[v1.CH_PRIMARY]
+    if not t_adc or len(t_p) < 2 or not adc.get("period_us") or not hall.get("rpm"):
+        return None
+    period_p = 60e6 / hall["rpm"]
+    d = np.asarray(t_p, dtype=float)
+    k = np.round((d - d[0]) / period_p)
+    offset = float(np.median(d - hall["first_us"] - k * period_p))  # device minus harness time
+    t = np.asarray(t_adc, dtype=float) - offset - adc["rdy_t0_us"]
+    err = t - np.round(t / adc["period_us"]) * adc["period_us"]
+    return {"max_abs_us": float(np.max(np.abs(err))), "mean_us": float(np.mean(err))}
+
+
 def _accounting(events: dict, lost: int) -> dict:
     generated = (events["primary"]["expected"] + events["secondary"]["expected"]
                  + events["adc"]["read_by_device"])
@@ -198,6 +215,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
         # conversion the device read is either delivered or counted lost by the device.
         # (Events queued in the MCU at a reset vanish with its RAM: not exact across resets.)
         "accounting": _accounting(events, reader.events_lost),
+        "adc_time_error_us": _adc_time_error(times, hs) if stats["device_resets"] == 0 else None,
         "events": events,
         "faults_injected": faults,
         "bounce": bool(args.bounce),

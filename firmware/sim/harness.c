@@ -535,8 +535,10 @@ static void print_stats(void)
                 (unsigned long long)hall[c].glitches, (unsigned long long)hall[c].glitches_masked,
                 hall[c].period_cycles > 0 ? pulse_us(&hall[c]) : 0.0,
                 (double)hall[c].first_cycle / CYCLES_PER_US, (double)hall[c].last_cycle / CYCLES_PER_US);
-    fprintf(o, "], \"adc\": {\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
+    fprintf(o, "], \"adc\": {\"rdy_t0_us\": %.4f, \"period_us\": %.4f, "
+            "\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
             "\"overrun\": %llu, \"error_bit_set\": %llu, \"code\": %u, \"status\": %u}, ",
+            adc_t0_cycles / CYCLES_PER_US, adc_period_cycles / CYCLES_PER_US,
             (unsigned long long)adc_generated, (unsigned long long)adc_read,
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);

@@ -133,6 +133,41 @@ void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us)
     capture_service();
 }
 
+/* AD7171 RDY (DOUT/RDY falling on PD5 = PCINT21): time-stamped here, within the
+ * interrupt latency of the end of the conversion, instead of whenever the main loop
+ * notices (up to a loop pass later). The pin change interrupt is masked from RDY until
+ * the result has been clocked out: the data bits toggle the same pin. */
+static volatile uint32_t adc_rdy_us;
+static volatile uint8_t adc_rdy_seen;
+
+ISR(PCINT2_vect)
+{
+    if (PIND & _BV(PIN_ADC_DOUT_BIT))
+        return;
+    adc_rdy_us = now_us_locked();
+    adc_rdy_seen = 1;
+    PCMSK2 = 0;
+}
+
+uint32_t capture_adc_rdy_us(void)
+{
+    uint8_t sreg = SREG;
+    cli();
+    uint32_t t = adc_rdy_seen ? adc_rdy_us : now_us_locked();
+    adc_rdy_seen = 0;
+    SREG = sreg;
+    return t;
+}
+
+void capture_adc_rearm(void)
+{
+    uint8_t sreg = SREG;
+    cli();
+    PCIFR = _BV(PCIF2);  /* forget the data bits' changes */
+    PCMSK2 = _BV(PIN_ADC_DOUT_BIT);  /* PCINT21 is PD5 */
+    SREG = sreg;
+}
+
 void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status)
 {
     uint8_t sreg = SREG;
@@ -214,5 +249,10 @@ void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
     EICRA = _BV(ISC00) | _BV(ISC10);
     EIFR = _BV(INTF0) | _BV(INTF1);
     EIMSK = _BV(INT0) | _BV(INT1);
+    /* AD7171 RDY on PD5: pin change interrupt group 2. */
+    adc_rdy_seen = 0;
+    PCIFR = _BV(PCIF2);
+    PCMSK2 = _BV(PIN_ADC_DOUT_BIT);
+    PCICR |= _BV(PCIE2);
     SREG = sreg;
 }

@@ -38,13 +38,14 @@ void loop()
     wdt_reset();
 #endif
     /* The ADC is read here, not in an ISR: clocking 24 bits takes ~25 us. Its time is
-     * taken when RDY is seen, so it may be queued after a later Hall edge (the frame's
-     * signed dt covers that). */
+     * RDY's falling edge, taken by the pin change ISR, so it may be queued after a later
+     * Hall edge (the frame's signed dt covers that). */
     if (ad7171_ready()) {
-        uint32_t t_us = capture_now_us();
+        uint32_t t_us = capture_adc_rdy_us();
         uint16_t code;
         uint8_t status;
         ad7171_read(&code, &status);
+        capture_adc_rearm();
         capture_push_adc(t_us, code, status);
     }
     capture_service();
