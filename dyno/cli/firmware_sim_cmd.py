@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import time
 
 import numpy as np
@@ -50,6 +51,8 @@ def add_arguments(parser) -> None:
                         help=f"comma list from {','.join(ALL_FAULT_KINDS)} (default: all but abort)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--poll-hz", type=float, default=150.0)
+    parser.add_argument("--poll-jitter", type=float, default=0.0,
+                        help="poll at random intervals: each uniform within +-J of the period (0..1)")
     parser.add_argument("--max-burst", type=int, default=8,
                         help="reads per poll while the device says MORE (the Poller's default)")
     parser.add_argument("--i2c-khz", type=int, default=100)
@@ -64,6 +67,8 @@ def add_arguments(parser) -> None:
 def simulate(args) -> dict:
     """Run one firmware-in-the-loop session; returns the report dictionary."""
     wall0 = time.perf_counter()
+    if not 0.0 <= args.poll_jitter < 1.0:
+        raise ConfigError("command line", "--poll-jitter", f"{args.poll_jitter} is outside 0 <= J < 1")
     kinds = tuple(k for k in args.fault_kinds.split(",") if k)
     bad = [k for k in kinds if k not in ALL_FAULT_KINDS]
     if bad:
@@ -82,14 +87,18 @@ def simulate(args) -> dict:
         pending = {v1.CH_PRIMARY: True, v1.CH_SECONDARY: True}
         codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
         dt = 1.0 / args.poll_hz
-        k = 0
+        # Poll instants: regular, or with --poll-jitter J each interval uniform in
+        # [(1-J), (1+J)] x the period (a loaded host), seeded.
+        jitter_rng = random.Random(args.seed + 7919)
+        t_next = 0.0
         reset_times = sorted(args.reset_at or [])
         # The signals start 50 ms after power-up; they run for args.seconds.
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
         stopped = False
         while True:
-            t = k * dt
+            t = t_next
+            t_next += dt * (1.0 + args.poll_jitter * (2.0 * jitter_rng.random() - 1.0))
             if t > t_end:
                 break
             if not stopped and t >= t_stop:
@@ -119,7 +128,6 @@ def simulate(args) -> dict:
                         slot_rpm[ev.channel].append(ev.code)
                 if not reader.more:
                     break
-            k += 1
         info = reader.read_info() if args.protocol != "v0" else None
         hs = tr.harness_stats()
         faults = dict(tr.faults_injected)

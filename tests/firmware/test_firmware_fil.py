@@ -31,9 +31,10 @@ def _assert_lossless(rep):
 def test_firmware_fil_60s_bounce_and_corruption(firmware_build, sim_args):
     """The issue's acceptance run, once: 60 simulated s at 3800/7600 rpm with a 125 Hz
     ADC, bounce on both Hall channels, and 5 % of transfers corrupted between harness
-    and host (read bit flips, command bit flips, truncation, NACK after send)."""
+    and host (read bit flips, command bit flips, truncation, NACK after send), the host
+    polling at random intervals (150 Hz +- 50 %)."""
     rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "60",
-                            "--primary-rpm", "3800", "--secondary-rpm", "7600",
+                            "--primary-rpm", "3800", "--secondary-rpm", "7600", "--poll-jitter", "0.5",
                             "--adc-hz", "125", "--bounce", "--fault-rate", "0.05", "--seed", "4"))
     _assert_lossless(rep)
     # Counts: ~3800 + ~7600 edges and ~7500 conversions, every one delivered exactly once.
