@@ -25,12 +25,14 @@ from dyno.errors import ConfigError
 from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
 from dyno.protocol.v2 import cause_name
-from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrTransport
+from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
     parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
+    parser.add_argument("--transport", choices=("i2c", "serial"), default="i2c",
+                        help="the host's link to the MCU: I2C (TWI) or USB serial (UART0, COBS)")
     parser.add_argument("--primary-rpm", type=float, default=3800.0)
     parser.add_argument("--secondary-rpm", type=float, default=7600.0)
     parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
@@ -74,12 +76,17 @@ def simulate(args) -> dict:
     if bad:
         raise ConfigError("command line", "--fault-kinds", f"{','.join(bad)} unknown; expected a comma list "
                                                          f"from {','.join(ALL_FAULT_KINDS)}")
-    tr = SimavrTransport(args.elf, harness=args.harness, primary_rpm=args.primary_rpm,
-                         secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
-                         adc_status=args.adc_status, adc_error_every=args.adc_error_every,
-                         adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
-                         glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
-                         fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+    if args.transport == "serial" and args.fault_rate:
+        raise ConfigError("command line", "--fault-rate", "fault injection is for --transport i2c only")
+    kw = dict(harness=args.harness, primary_rpm=args.primary_rpm,
+              secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
+              adc_status=args.adc_status, adc_error_every=args.adc_error_every,
+              adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
+              glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
+              fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+    # The host's own transports: I2C (one combined transaction per poll) or USB serial
+    # (COBS packets, dyno.transports.serial) wired to the MCU's UART.
+    tr = SimavrSerialTransport(args.elf, **kw) if args.transport == "serial" else SimavrTransport(args.elf, **kw)
     try:
         reader = make_reader(args.protocol, tr)
         times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: []}
@@ -198,6 +205,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
     stats = reader.stats.as_dict()
     out = {
         "protocol": args.protocol,
+        "transport": args.transport,
         "elf": str(args.elf),
         "seconds": args.seconds,
         "poll_hz": args.poll_hz,

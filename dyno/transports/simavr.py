@@ -222,3 +222,79 @@ def toolchain_missing() -> str | None:
     if not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
         return "Arduino core not found (apt-get install arduino-core-avr)"
     return None
+
+
+class SimavrSerialPort:
+    """A pyserial-like port on the harness's UART0, in *simulated* time.
+
+    ``read(n)`` waits up to ``timeout`` simulated seconds for the MCU to finish a packet
+    (the harness runs the MCU meanwhile); ``now()`` is the simulated clock the serial
+    transport's deadlines use.
+    """
+
+    def __init__(self, harness: SimavrTransport) -> None:
+        self.h = harness
+        self.timeout = 0.05
+        self._buf = bytearray()
+
+    def now(self) -> float:  # the Clock protocol (dyno.clock): simulated seconds
+        return self.h.sim_time_us / 1e6
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._buf)
+
+    def write(self, data: bytes) -> int:
+        h = self.h
+        at = "" if h._pending_us is None else f" {h._pending_us:.3f}"
+        h._pending_us = None
+        if h._cmd(f"uwrite {bytes(data).hex() or '-'}{at}") != "ok":
+            raise HarnessError("uwrite")
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        if not self._buf and self.timeout and self.timeout > 0:
+            reply = self.h._cmd(f"uread {self.timeout * 1e6:.3f}")
+            if not reply.startswith("ok "):
+                raise HarnessError(f"uread: {reply}")
+            _, t_us, hexdata = reply.split()
+            self.h.sim_time_us = float(t_us)
+            if hexdata != "-":
+                self._buf += bytes.fromhex(hexdata)
+        out = bytes(self._buf[:n])
+        del self._buf[:n]
+        return out
+
+
+class SimavrSerialTransport(Transport):
+    """The host's :class:`~dyno.transports.serial.SerialTransport` (COBS over USB serial)
+    talking to the real firmware's UART in simavr; the harness controls as for I2C."""
+
+    name = "simavr-serial"
+
+    def __init__(self, elf, *, timeout_s: float = 0.05, **harness_kw) -> None:
+        super().__init__()
+        from dyno.transports.serial import SerialTransport
+
+        self.harness = SimavrTransport(elf, **harness_kw)
+        self.port = SimavrSerialPort(self.harness)
+        self.serial = SerialTransport(self.port, timeout_s=timeout_s, clock=self.port)
+        self.faults_injected = self.harness.faults_injected
+
+    def _transfer(self, request: bytes, read_len: int) -> bytes:
+        return self.serial.transfer(request, read_len)
+
+    def advance_to(self, t_s: float) -> None:
+        self.harness.advance_to(t_s)
+
+    def generators(self, on: bool) -> None:
+        self.harness.generators(on)
+
+    def reset_device(self, mcusr: int = 0x08) -> None:
+        self.harness.reset_device(mcusr)
+
+    def harness_stats(self) -> dict:
+        return self.harness.harness_stats()
+
+    def close(self) -> None:
+        self.harness.close()

@@ -28,6 +28,9 @@
  *   abort <hex|-> <n> [t_us]  like xfer, but the master stops clocking halfway through
  *                        the read (no NACK, no STOP): the slave holds SDA until its
  *                        timeout disables TWI; transfers meanwhile -> "busheld"
+ *   uwrite <hex|-> [t_us]  (run until t_us first) bytes into UART0   -> "ok"
+ *   uread <max_us>       run until the MCU sent a whole packet (a 0x00) or max_us
+ *                        passed; the bytes it sent             -> "ok <t_us> <hex|->"
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
  *   reset [mcusr]        reset the MCU; RAM kept, MCUSR set to the given hex cause
  *                        (default 08 = WDRF, a watchdog reset; 02 = EXTRF)   -> "ok"
@@ -49,6 +52,7 @@
 #include "sim_avr.h"
 #include "sim_cycle_timers.h"
 #include "sim_elf.h"
+#include "avr_uart.h"
 #include "sim_interrupts.h"
 #include "sim_irq.h"
 
@@ -501,6 +505,22 @@ static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr, int abor
     return 0;
 }
 
+/* ---- the host's USB serial (UART0, 115200 8N1 through the Nano's USB bridge) ----- */
+static avr_irq_t *uart_in;
+static uint8_t uart_rx[4096];   /* bytes the MCU sent, not yet handed to the host */
+static int uart_rx_n, uart_packet_end;
+static uint64_t uart_bytes_out, uart_bytes_in;
+
+static void uart_out_notify(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    uart_bytes_out++;
+    if (uart_rx_n < (int)sizeof uart_rx)
+        uart_rx[uart_rx_n++] = (uint8_t)value;
+    if ((uint8_t)value == 0)
+        uart_packet_end = 1;  /* COBS packets end with 0x00 */
+}
+
 /* ---- setup and command loop ------------------------------------------------------ */
 static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
 {
@@ -663,6 +683,9 @@ int main(int argc, char **argv)
     avr_raise_irq(pin_dout, 1);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 4),
                             adc_sclk_notify, NULL);
+    uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            uart_out_notify, NULL);
     start_generators((uint64_t)(cfg_start_us * CYCLES_PER_US));
 
     char line[512];
@@ -704,6 +727,36 @@ int main(int argc, char **argv)
                     fprintf(proto_out, "%02x", rd[i]);
                 fprintf(proto_out, "\n");
             }
+        } else if (strcmp(cmd, "uwrite") == 0) {
+            /* bytes from the host into UART0 (simavr paces them at the baud rate) */
+            if (a2[0])
+                run_until((uint64_t)(atof(a2) * CYCLES_PER_US));
+            if (strcmp(a1, "-") != 0)
+                for (const char *p = a1; p[0] && p[1]; p += 2) {
+                    unsigned b;
+                    sscanf(p, "%2x", &b);
+                    avr_raise_irq(uart_in, (uint32_t)b);
+                    uart_bytes_in++;
+                }
+            fprintf(proto_out, "ok\n");
+        } else if (strcmp(cmd, "uread") == 0) {
+            /* run until the MCU has sent a whole packet (0x00) or max_us passed; hand over
+             * whatever it sent: "ok <t_us> <hex|->" */
+            uint64_t limit = avr->cycle + (uint64_t)(atof(a1) * CYCLES_PER_US);
+            double w0 = now_s();
+            uint64_t c0 = avr->cycle;
+            while (!uart_packet_end && avr->cycle < limit && !crashed)
+                step();
+            wall_s += now_s() - w0;
+            wall_cycles += avr->cycle - c0;
+            fprintf(proto_out, "ok %.3f ", (double)avr->cycle / CYCLES_PER_US);
+            if (!uart_rx_n)
+                fprintf(proto_out, "-");
+            for (int i = 0; i < uart_rx_n; i++)
+                fprintf(proto_out, "%02x", uart_rx[i]);
+            fprintf(proto_out, "\n");
+            uart_rx_n = 0;
+            uart_packet_end = 0;
         } else if (strcmp(cmd, "gen") == 0) {
             gen_enabled = strcmp(a1, "off") != 0;
             if (gen_enabled)

@@ -254,3 +254,21 @@ def test_firmware_fil_adc_time_from_the_rdy_edge(firmware_build, sim_args):
     err = rep["adc_time_error_us"]
     assert abs(err["mean_us"]) < 2.0, err
     assert err["max_abs_us"] <= 26.0, err
+
+
+def test_firmware_fil_serial_transport_via_cli(firmware_build):
+    """`dyno firmware-sim --transport serial`: the host's COBS serial transport wired to the real
+    firmware's UART (115200 8N1), as a real process: as good as I2C (every event once, rpm
+    within 0.05 %), with ringing, glitches and randomly timed polls."""
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", str(firmware_build["elf"]),
+                          "--transport", "serial", "--seconds", "20", "--bounce", "--glitch-hz", "200",
+                          "--poll-jitter", "0.5", "--json"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    rep = json.loads(res.stdout)
+    assert rep["transport"] == "serial" and rep["ok"]
+    _assert_lossless(rep)
+    assert rep["accounting"]["exact"]
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    assert rep["frames"]["accepted"] > 20 * 100
+    assert rep["frames"]["transport_errors"].get("timeout", 0) <= 2  # only before Serial.begin()
+    assert rep["device"]["reset_cause"] == "power-on"
