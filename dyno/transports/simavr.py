@@ -60,6 +60,7 @@ class SimavrTransport(Transport):
                  adc_hz: float = 125.0, bounce: bool = False, i2c_khz: int = 100,
                  address: int = 0x03, start_us: float = 50_000.0, profile: bool = False,
                  profile_from_us: float = 100_000.0, glitch_hz: float = 0.0, glitch_us: float = 20.0,
+                 legacy_pullups: bool = False,
                  fault_rate: float = 0.0, fault_kinds=FAULT_KINDS, seed: int = 0) -> None:
         super().__init__()
         elf = Path(elf)
@@ -78,6 +79,8 @@ class SimavrTransport(Transport):
                 "--glitch-hz", repr(float(glitch_hz)), "--glitch-us", repr(float(glitch_us))]
         if bounce:
             args.append("--bounce")
+        if legacy_pullups:  # simavr's own pull-up handling, which stomps external drivers
+            args.append("--legacy-pullups")
         if profile:
             args.append("--profile")
         # stderr to a file, not a pipe: simavr's warnings must never block the harness.

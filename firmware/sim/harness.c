@@ -84,6 +84,30 @@ static double cfg_start_us = 50000.0, cfg_pulse_us = 200.0;
 static int cfg_profile = 0;
 static double cfg_profile_from_us = 100000.0;
 
+/* ---- external drivers on port D -------------------------------------------------- */
+/* The sensors drive PD2, PD3 (Hall, open collector over pull-ups) and PD5 (AD7171
+ * DOUT/RDY) from outside the MCU. simavr re-derives every input pin on each PORTD or
+ * DDRD write: a pin whose PORT bit is 1 (Arduino's INPUT_PULLUP) snaps back to 1 unless
+ * the port knows an external device drives it. So every level we drive is also
+ * registered as the port's "external" state (AVR_IOCTL_IOPORT_SET_EXTERNAL), which
+ * simavr then keeps; the MCU's pull-up only matters where nothing drives the line, as
+ * on hardware. --legacy-pullups restores the old behaviour (for the regression test). */
+static int cfg_legacy_pullups = 0;
+static avr_ioport_external_t portd_ext = {.name = 'D', .mask = 0, .value = 0};
+
+static void drive_pin(avr_irq_t *pin, int bit, int level)
+{
+    if (!cfg_legacy_pullups) {
+        portd_ext.mask |= (uint8_t)(1u << bit);
+        if (level)
+            portd_ext.value |= (uint8_t)(1u << bit);
+        else
+            portd_ext.value &= (uint8_t)~(1u << bit);
+        avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('D'), &portd_ext);
+    }
+    avr_raise_irq(pin, (uint32_t)level);
+}
+
 /* ---- Hall generators ------------------------------------------------------------ */
 /* Each Hall line is a wired-AND of open-collector drivers over the pull-up: the sensor
  * (low for the pulse) and, with --glitch-hz, a noise source (ignition spikes: low for
@@ -118,7 +142,7 @@ static void hall_drive(hall_t *h)
     int level = h->sensor_level && h->glitch_level;
     if (level != h->out_level) {
         h->out_level = level;
-        avr_raise_irq(h->pin, (uint32_t)level);
+        drive_pin(h->pin, 2 + h->ch, level);
     }
 }
 
@@ -233,7 +257,7 @@ static uint64_t adc_k;
 static avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)when; (void)param;
-    avr_raise_irq(pin_dout, 1);
+    drive_pin(pin_dout, 5, 1);
     return 0;
 }
 
@@ -258,7 +282,7 @@ static avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param
         adc_word = ((uint32_t)(cfg_adc_code & 0xFFFF) << 8) | status;
         adc_bit = 0;
         adc_ready = 1;
-        avr_raise_irq(pin_dout, 0);  /* RDY */
+        drive_pin(pin_dout, 5, 0);  /* RDY */
     }
     adc_k++;
     return (avr_cycle_count_t)(adc_t0_cycles + (double)adc_k * adc_period_cycles + 0.5);
@@ -275,7 +299,7 @@ static void adc_sclk_notify(avr_irq_t *irq, uint32_t value, void *param)
         return;
     if (level == 0 && adc_bit < 24) {
         /* Falling edge: the AD7171 shifts out the next bit, MSB first. */
-        avr_raise_irq(pin_dout, (adc_word >> (23 - adc_bit)) & 1u);
+        drive_pin(pin_dout, 5, (int)((adc_word >> (23 - adc_bit)) & 1u));
         adc_bit++;
     } else if (level == 1 && adc_bit == 24) {
         /* After the 24th rising edge DOUT/RDY returns high; 1 us later so the MCU's
@@ -631,6 +655,7 @@ int main(int argc, char **argv)
         else if (OPT("--glitch-us")) cfg_glitch_us = atof(v);
         else if (OPT("--profile-from-us")) cfg_profile_from_us = atof(v);
         else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
+        else if (strcmp(a, "--legacy-pullups") == 0) cfg_legacy_pullups = 1;
         else if (strcmp(a, "--profile") == 0) cfg_profile = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -677,10 +702,10 @@ int main(int argc, char **argv)
         hall[c].ch = c;
         hall[c].pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2 + c);
         hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
-        avr_raise_irq(hall[c].pin, 1);  /* sensor output idles high */
+        drive_pin(hall[c].pin, 2 + c, 1);  /* sensor output idles high */
     }
     pin_dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 5);
-    avr_raise_irq(pin_dout, 1);
+    drive_pin(pin_dout, 5, 1);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 4),
                             adc_sclk_notify, NULL);
     uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
@@ -776,14 +801,14 @@ int main(int argc, char **argv)
                 hall[c].running = 0;
                 hall[c].step = 0;
                 hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
-                avr_raise_irq(hall[c].pin, 1);
+                drive_pin(hall[c].pin, 2 + c, 1);
             }
             avr_cycle_timer_cancel(avr, adc_timer, NULL);
             avr_cycle_timer_cancel(avr, adc_rdy_high, NULL);
             adc_running = 0;
             adc_bit = 24;
             adc_ready = 0;
-            avr_raise_irq(pin_dout, 1);
+            drive_pin(pin_dout, 5, 1);
             if (gen_enabled)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");

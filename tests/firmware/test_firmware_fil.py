@@ -272,3 +272,23 @@ def test_firmware_fil_serial_transport_via_cli(firmware_build):
     assert rep["frames"]["accepted"] > 20 * 100
     assert rep["frames"]["transport_errors"].get("timeout", 0) <= 2  # only before Serial.begin()
     assert rep["device"]["reset_cause"] == "power-on"
+
+
+def test_firmware_fil_input_pullup_variant_reads_the_adc(firmware_build, sim_args):
+    """Firmware reading the AD7171 the common Arduino way (INPUT_PULLUP on DOUT, digitalRead)
+    works in the loop: the harness drives the sensors as external devices over the MCU's
+    pull-ups. With simavr's own pull-up handling (re-asserted on every PORTD write, as the
+    harness did before) the same ELF reads 0xFFFF forever."""
+    rep = simulate(sim_args("--elf", str(firmware_build["pullup_elf"]), "--seconds", "3", "--bounce"))
+    _assert_lossless(rep)
+    assert rep["adc_mean"] == 35145 and rep["accounting"]["exact"]
+    tr = SimavrTransport(firmware_build["pullup_elf"], harness=firmware_build["harness"], legacy_pullups=True)
+    try:
+        reader = make_reader("v2", tr)
+        codes = []
+        for k in range(1, 100):
+            tr.advance_to(k / 150)
+            codes += [e.code for e in reader.poll(k / 150) if e.channel == v1.CH_ADC]
+    finally:
+        tr.close()
+    assert codes and set(codes) == {0xFFFF}
