@@ -31,9 +31,22 @@ void setup()
 #endif
 }
 
+#ifdef DYNO_TEST_HANG_MS
+/* Test build only (make hang): hang once, DYNO_TEST_HANG_MS after power-up; the flag
+ * survives the watchdog reset in .noinit (zero at power-up in simavr). */
+static uint8_t test_hung __attribute__((section(".noinit")));
+#endif
+
 void loop()
 {
     uint16_t lock_p_us, lock_s_us;
+#ifdef DYNO_TEST_HANG_MS
+    if (!test_hung && millis() >= DYNO_TEST_HANG_MS) {
+        test_hung = 1;
+        for (;;) {
+        }
+    }
+#endif
 #if !DYNO_OLD_BOOTLOADER
     wdt_reset();
 #endif

@@ -312,3 +312,19 @@ def test_firmware_frames_are_the_simulated_devices_bytes(firmware_build):
         f = v2.decode_frame(raw.ljust(32, b"\0"))
         again = v2.encode_data_frame(f.seq, f.flags, f.boot_id, f.events_dropped, f.events, f.t0_us)
         assert again[: raw[1]] == raw
+
+
+def test_firmware_fil_real_watchdog_reset_recovered_once(firmware_build, sim_args):
+    """A firmware whose main loop hangs (test build, 1 s after power-up): simavr's watchdog
+    resets the MCU after 500 ms, the host sees the new boot with cause "watchdog", `.init3`
+    stops the still-running watchdog (no reset loop), and data flows again."""
+    rep = simulate(sim_args("--elf", str(firmware_build["hang_elf"]), "--seconds", "3"))
+    assert not rep["harness"]["crashed"]
+    assert rep["frames"]["device_resets"] == 1
+    assert [b["cause_name"] for b in rep["boots"]] == ["power-on", "watchdog"]
+    dev = rep["device"]
+    assert dev["reset_cause"] == "watchdog" and dev["boot_id"] == rep["boots"][1]["boot_id"]
+    assert 1500 < dev["uptime_ms"] < 2000  # one reset at ~1.5 s, none after
+    for name in ("primary", "secondary"):
+        assert abs(rep["rpm_error_pct"][name]) < 0.05  # no period across the reset
+        assert rep["events"][name]["received"] > 0.6 * rep["events"][name]["expected"]
