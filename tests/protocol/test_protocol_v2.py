@@ -219,3 +219,26 @@ def test_gap_mark_after_ring_saturation_and_rpm_by_pairs():
     assert list(st.edge_gap[v1.CH_PRIMARY]) == [0, 0, 0, 0, 1, 0]
     rpm, n = rpm_by_pairs(st.edges[v1.CH_PRIMARY], st.edge_gap[v1.CH_PRIMARY])
     assert n == 4 and rpm == pytest.approx(6000.0, rel=1e-3)  # 10 ms periods only
+
+
+def test_poller_rpm_never_spans_a_gap():
+    """Live speed: if events were lost between the last two edges, the latest period without a
+    loss is used (never the long one across the hole); a channel gone quiet still reads 0."""
+    from dyno.acquisition.poller import Poller
+
+    class Reader:
+        device_time_us = 0
+
+    p = Poller(Reader())
+    evs = [v1.Event(1, 10_000 * k) for k in range(1, 6)]  # 10 ms periods: 6000 rpm
+    evs.append(v1.Event(3, 55_000, 1, 0, gap=True))  # ring saturated: edges lost here
+    evs.append(v1.Event(1, 90_000))  # 40 ms after the last edge we got
+    p.streams.extend(evs)
+    p.reader.device_time_us = 91_000
+    assert list(p.streams.edge_gap[v1.CH_PRIMARY]) == [0, 0, 0, 0, 0, 1]
+    assert p.rpm(v1.CH_PRIMARY) == pytest.approx(6000.0)  # not 60e6 / 40 ms = 1500
+    p.reader.device_time_us = 90_000 + 600_000
+    assert p.rpm(v1.CH_PRIMARY) == 0.0  # quiet for 0.6 s
+    p.streams.extend([v1.Event(1, 700_000), v1.Event(1, 710_000)])
+    p.reader.device_time_us = 711_000
+    assert p.rpm(v1.CH_PRIMARY) == pytest.approx(6000.0)
