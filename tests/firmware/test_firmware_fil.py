@@ -83,20 +83,34 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
 
 
 def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
-    """Watchdog-style resets of the real ELF, one within 20 ms of the first frame: each one is
-    a new boot id with cause "watchdog" (no EEPROM involved), the host starts a new time epoch
-    and carries on (events queued in the MCU at a reset are gone with its RAM)."""
-    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "3",
-                            "--reset-at", "0.015", "--reset-at", "1.5", "--reset-at", "2.2"))
-    assert rep["frames"]["device_resets"] == 3
+    """20 watchdog-style resets of the real ELF at random instants, the first within 20 ms of
+    the first frame: each one is a new boot id with cause "watchdog" (no EEPROM involved),
+    the host starts a new time epoch, no period spans a reset, and it carries on (events
+    queued in the MCU at a reset are gone with its RAM)."""
+    import random
+
+    rng = random.Random(20)
+    at = [0.015]
+    while len(at) < 20:  # a boot must live past a poll to serve a frame at all: >= 50 ms apart
+        t = rng.uniform(0.1, 6.0)
+        if all(abs(t - u) >= 0.05 for u in at):
+            at.append(t)
+    at = [f"{t:.4f}" for t in sorted(at)]
+    argv = ["--elf", str(firmware_build["elf"]), "--seconds", "6"]
+    for t in at:
+        argv += ["--reset-at", t]
+    rep = simulate(sim_args(*argv))
+    assert rep["frames"]["device_resets"] == 20
     boots = rep["boots"]
-    assert [b["cause_name"] for b in boots] == ["power-on", "watchdog", "watchdog", "watchdog"]
-    assert len({b["boot_id"] for b in boots}) == 4
+    assert [b["cause_name"] for b in boots] == ["power-on"] + ["watchdog"] * 20
+    assert len({b["boot_id"] for b in boots}) == 21
     assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
     assert rep["device"]["reset_cause"] == "watchdog"
     for name, ch in rep["events"].items():
         assert ch["duplicates_or_disorder"] == 0, name
-        assert ch["expected"] - 15 <= ch["received"] <= ch["expected"], (name, ch)
+        assert ch["expected"] - 20 * 8 <= ch["received"] <= ch["expected"], (name, ch)
+    for name in ("primary", "secondary"):
+        assert abs(rep["rpm_error_pct"][name]) < 0.05  # no period across a reset
 
 
 def test_firmware_fil_set_debounce_from_host(firmware_build):
