@@ -15,7 +15,7 @@ double cfg_rpm[2] = {3800.0, 7600.0};
 unsigned cfg_adc_code = 35145, cfg_adc_status = 0x05, cfg_adc_err_every = 0;
 double cfg_adc_hz = 125.0;
 int cfg_bounce = 0;
-double cfg_pulse_us = 200.0;
+double cfg_pulse_us = 1e9;  /* no cap by default: the pulse is the magnet arc, 5 % of a turn */
 
 /* ---- external drivers on port D -------------------------------------------------- */
 /* The sensors drive PD2, PD3 (Hall, open collector over pull-ups) and PD5 (AD7171
@@ -49,7 +49,7 @@ void drive_pin(avr_irq_t *pin, int bit, int level)
 hall_t hall[2];
 int gen_enabled = 1;
 double cfg_glitch_hz = 0.0, cfg_glitch_us = 20.0;
-double cfg_duty = 0.05;   /* pulse = this fraction of the period (magnet arc) ... */
+double cfg_duty = 0.05;   /* pulse = this fraction of the period (magnet arc), like a real sensor ... */
 
 double pulse_us(const hall_t *h)
 {
