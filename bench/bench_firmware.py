@@ -61,7 +61,7 @@ def polled_run(seconds: float, profile: bool) -> dict:
     tr = SimavrTransport(ELF, profile=profile, bounce=True)
     wall0 = time.perf_counter()
     try:
-        reader = make_reader("v1", tr)
+        reader = make_reader("v2", tr)
         k, n_events = 0, 0
         while k / 150.0 <= seconds:
             t = k / 150.0

@@ -429,7 +429,8 @@ def summarize(ctx: RunContext) -> dict:
     frames = {"read": st.read, "accepted": st.accepted, "rejected": dict(sorted(st.rejected.items())),
               "rejected_total": sum(st.rejected.values()),
               "transport_errors": dict(sorted(st.transport_errors.items())),
-              "device_resets": st.device_resets, "resyncs": st.resyncs}
+              "device_resets": st.device_resets, "resyncs": st.resyncs,
+              "boots": list(getattr(st, "boots", []))}  # v2: each boot seen, with its reset cause
     aborts = [dict(a) for a in ctx.controller.aborts]
     out = {"run_dir": str(ctx.writer.run_dir), "state": ctx.controller.state.value,
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],

@@ -145,7 +145,7 @@ class ResetConfig:
 @dataclass(frozen=True)
 class RigConfig:
     path: str
-    protocol: str  # "v1" | "v0"
+    protocol: str  # "v2" | "v1" | "v0"
     transport: str  # "i2c" | "serial"
     poll_hz: float
     debounce_primary_us: int
@@ -398,7 +398,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
     return RigConfig(
         path=str(path),
-        protocol=r.string(data, "protocol", "", choices=("v1", "v0")),
+        protocol=r.string(data, "protocol", "", choices=("v2", "v1", "v0")),
         transport=r.string(data, "transport", "", choices=("i2c", "serial"), required=False, default="i2c"),
         poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0),
         debounce_primary_us=r.integer(data, "debounce_primary_us", "", lo=0, hi=65535),

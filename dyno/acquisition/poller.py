@@ -18,6 +18,7 @@ import numpy as np
 from dyno.acquisition.rpm import current_rpm
 from dyno.acquisition.streams import Streams
 from dyno.protocol import v1
+from dyno.protocol.v2 import cause_name
 
 
 @dataclass
@@ -110,8 +111,10 @@ class Poller:
             self._lost_seen = lost
         resets = r.stats.device_resets
         if resets > self._resets_seen:
+            cause = getattr(r, "reset_cause", None)  # v2 frames carry it
+            why = "" if cause is None else f", cause {cause_name(cause)}"
             self.disturbances.append({"host_t_s": now_s, "kind": "device_reset",
-                                      "detail": f"device reset ({resets - self._resets_seen})"})
+                                      "detail": f"device reset ({resets - self._resets_seen}{why})"})
             self._resets_seen = resets
         last = self._last_poll_s
         if last is not None and now_s - last > self._gap_limit_s():
@@ -176,6 +179,16 @@ class Poller:
             if quiet_us > min(500_000, 3.0 * period_us) and quiet_us > period_us:
                 return 0.0
             return slot_rpm
+        if len(edges) >= 2 and self.streams.edge_gap[channel][-1]:
+            # events were lost between the last two edges: the latest period without a loss
+            pair = self.streams.last_valid_pair(channel)
+            if pair is None:
+                return 0.0
+            period = int(pair[1]) - int(pair[0])
+            quiet = now - int(edges[-1])  # staleness judged from the newest edge
+            if period <= 0 or (quiet > min(500_000, 3 * period) and quiet > period):
+                return 0.0
+            return 60e6 / period
         return current_rpm(edges, now)
 
     def latest_adc(self) -> tuple[int, int] | None:

@@ -10,8 +10,8 @@ schedules them.
 from __future__ import annotations
 
 from dyno.errors import FrameError
-from dyno.protocol import v0, v1
-from dyno.protocol.session import LinkSession, LinkStats
+from dyno.protocol import v0, v1, v2
+from dyno.protocol.session import LinkSession, LinkStats, ProtocolMismatch, sniff_version
 from dyno.transports.base import Transport, TransportFault
 
 Event = v1.Event
@@ -56,14 +56,16 @@ class Unwrapper:
 
 
 class V1Reader:
-    """Reads our firmware's v1 frames with acknowledge/re-send."""
+    """Reads our firmware's framed protocol (v2 by default, or v1) with acknowledge/re-send."""
 
-    protocol = "v1"
     read_len = v1.FRAME_MAX
 
-    def __init__(self, transport: Transport) -> None:
+    def __init__(self, transport: Transport, version: int = 2) -> None:
         self.transport = transport
-        self.session = LinkSession()
+        self.version = version
+        self.protocol = f"v{version}"
+        self.proto = v2 if version == 2 else v1
+        self.session = LinkSession(version)
         self.unwrap = Unwrapper()
         self.events_lost = 0
         self.device_time_us: int | None = None  # latest unwrapped device time known
@@ -87,7 +89,8 @@ class V1Reader:
         if frame is None:
             self.more = False
             return []
-        if frame.flags & v1.FLAG_RESET and self._last_frame_s is not None:
+        new_boot = self.session.new_boot if self.version == 2 else frame.flags & v1.FLAG_RESET
+        if new_boot and self._last_frame_s is not None:
             self.unwrap.new_epoch(int((now_s - self._last_frame_s) * 1e6))
             self._dropped_last = None
         self._last_frame_s = now_s
@@ -98,11 +101,21 @@ class V1Reader:
         self._dropped_last = frame.events_dropped
         self.more = bool(frame.flags & v1.FLAG_MORE)
         unwrap = self.unwrap
-        out = [Event(e.channel, unwrap(e.t_us), e.code, e.status) for e in frame.events]
+        out = [Event(e.channel, unwrap(e.t_us), e.code, e.status, e.gap) for e in frame.events]
         t_dev = unwrap.peek(frame.t0_us) if not out else max(e.t_us for e in out)
         if self.device_time_us is None or t_dev > self.device_time_us:
             self.device_time_us = t_dev
         return out
+
+    @property
+    def boot_id(self) -> int | None:
+        """v2: the boot identity of the device's current boot (None before the first frame)."""
+        return self.session.boot_id
+
+    @property
+    def reset_cause(self) -> int | None:
+        """v2: the device's reset cause (MCUSR bits PORF, EXTRF, BORF, WDRF) for this boot."""
+        return self.session.reset_cause
 
     def command(self, request: bytes) -> None:
         """Send a command that gets no answer (SET_DEBOUNCE, CLEAR_COUNTERS)."""
@@ -111,18 +124,19 @@ class V1Reader:
             self._dropped_last = None  # the device's counter restarts at 0: no jump in events_lost
 
     def clear_counters(self) -> None:
-        self.command(v1.encode_command(v1.OP_CLEAR_COUNTERS))
+        self.command(self.proto.encode_command(v1.OP_CLEAR_COUNTERS))
 
-    def read_info(self) -> v1.InfoFrame | None:
+    def read_info(self):
+        """One INFO exchange: the info frame (v1 or v2 class), or None if the read failed."""
         try:
-            buf = self.transport.transfer(v1.encode_command(v1.OP_INFO), self.read_len)
+            buf = self.transport.transfer(self.proto.encode_command(v1.OP_INFO), self.read_len)
         except TransportFault:
             return None
         try:
-            frame = v1.decode_frame(buf)
+            frame = self.proto.decode_frame(buf)
         except FrameError:
             return None
-        return frame if isinstance(frame, v1.InfoFrame) else None
+        return frame if isinstance(frame, self.proto.InfoFrame) else None
 
 
 class V0Reader:
@@ -146,6 +160,7 @@ class V0Reader:
         self._last: v0.LegacyFrame | None = None
         self._last_now_s = 0.0
         self._pending = None  # (frame, raw, reason, now_s): implausible, awaiting its neighbour
+        self._foreign: str | None = None  # a valid frame of another version on the last read
 
     @property
     def stats(self) -> LinkStats:
@@ -162,8 +177,13 @@ class V0Reader:
         try:
             f = v0.decode_legacy_frame(buf)
         except FrameError as exc:
+            other = sniff_version(buf) if exc.cause == "checksum" else None
+            if other not in (None, "v0") and other == self._foreign:  # twice in a row: not noise
+                raise ProtocolMismatch(other, "v0") from None
+            self._foreign = other
             st.rejected[exc.cause] += 1
             return []
+        self._foreign = None
         raw = bytes(buf[: v0.FRAME_LEN])
         if raw == self._last_bytes:
             st.rejected["stale_repeat"] += 1
@@ -266,8 +286,10 @@ def implausible_v0(f: v0.LegacyFrame, last: v0.LegacyFrame, host_dt_s: float) ->
 
 
 def make_reader(protocol: str, transport: Transport):
+    if protocol == "v2":
+        return V1Reader(transport, 2)
     if protocol == "v1":
-        return V1Reader(transport)
+        return V1Reader(transport, 1)
     if protocol == "v0":
         return V0Reader(transport)
-    raise ValueError(f"protocol must be v1 or v0, not {protocol!r}")
+    raise ValueError(f"protocol must be v2, v1 or v0, not {protocol!r}")

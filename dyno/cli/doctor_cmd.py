@@ -83,7 +83,7 @@ def check_firmware(report: Report, cfg, transport) -> object | None:
             return None
         report.add("firmware", OK, f"v0 sketch answers (primary {f.rpm_primary} rpm, ADC code {f.adc_code})")
         return f
-    reader = make_reader("v1", transport)
+    reader = make_reader(cfg.protocol, transport)
     info = None
     for _ in range(3):  # the first read after a host restart may still be a data frame in flight
         info = reader.read_info()
@@ -92,11 +92,16 @@ def check_firmware(report: Report, cfg, transport) -> object | None:
     if info is None:
         fails = dict(transport.failures)
         report.add("firmware", FAIL, f"no valid INFO frame at 0x{cfg.i2c.firmware_address:02X} "
-                   f"({fails or 'answers, but not a v1 info frame'}): wrong address, v0 sketch, or not flashed?")
+                   f"({fails or f'answers, but not a {cfg.protocol} info frame'}): wrong address, v0 sketch, or not flashed?")
         return None
     major, minor, patch = info.fw_version
-    report.add("firmware", OK, f"v{major}.{minor}.{patch}, boot #{info.boot_count}, "
-               f"up {info.uptime_ms / 1000:.1f} s")
+    if cfg.protocol == "v2":
+        from dyno.protocol.v2 import cause_name
+
+        boot = f"boot id 0x{info.boot_id:04x} (reset cause: {cause_name(info.reset_cause)})"
+    else:
+        boot = f"boot #{info.boot_count}"
+    report.add("firmware", OK, f"v{major}.{minor}.{patch}, {boot}, up {info.uptime_ms / 1000:.1f} s")
     want = (cfg.debounce_primary_us, cfg.debounce_secondary_us)
     have = (info.debounce_primary_us, info.debounce_secondary_us)
     report.add("debounce", OK if have == want else WARN,
@@ -153,12 +158,13 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         before = _boots(cfg, transport)
         act.reset_arduino()
         after = _boots(cfg, transport)
-        if cfg.protocol == "v1" and before is not None:
+        if cfg.protocol in ("v1", "v2") and before is not None:
             moved = after is not None and after != before
+            what = "boot id" if cfg.protocol == "v2" else "boot count"
             report.add("arduino reset", OK if moved else FAIL,
-                       f"boot count {before} -> {after}" + ("" if moved else ": reset line not wired?"))
+                       f"{what} {before} -> {after}" + ("" if moved else ": reset line not wired?"))
         else:
-            report.add("arduino reset", WARN, "pulsed; cannot confirm without a v1 INFO frame", essential=False)
+            report.add("arduino reset", WARN, "pulsed; cannot confirm without an INFO frame", essential=False)
         act.step(APPLY, cfg.actuator.step_s)
         act.step(RELEASE, cfg.actuator.step_s)
         if hw.watchdog.tripped:
@@ -171,12 +177,15 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
 
 
 def _boots(cfg, transport):
-    if cfg.protocol != "v1":
+    """The device's boot identity: v2 boot id (new on every boot), v1 EEPROM boot count."""
+    if cfg.protocol not in ("v1", "v2"):
         return None
     from dyno.acquisition.reader import make_reader
 
-    info = make_reader("v1", transport).read_info()
-    return None if info is None else info.boot_count
+    info = make_reader(cfg.protocol, transport).read_info()
+    if info is None:
+        return None
+    return info.boot_id if cfg.protocol == "v2" else info.boot_count
 
 
 def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=False,

@@ -7,13 +7,15 @@ polled at 150 Hz of simulated time.  At the end the generators stop and the host
 polling until the device's queue is empty, so every edge and conversion the harness
 generated can be counted against what the host decoded.
 
-Exit status: 0 when the run completed (v1: and nothing was lost), 1 otherwise.
+Exit status: 0 when the run completed (v2/v1: and nothing was lost), 1 otherwise;
+2 when the device speaks another protocol version than ``--protocol``.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import random
 import time
 from pathlib import Path
 
@@ -21,14 +23,18 @@ import numpy as np
 
 from dyno.cli import number_in
 from dyno.acquisition.reader import make_reader
-from dyno.acquisition.rpm import rpm_by_count
+from dyno.errors import ConfigError
+from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
-from dyno.transports.simavr import FAULT_KINDS, SimavrTransport
+from dyno.protocol.v2 import cause_name
+from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
-    parser.add_argument("--protocol", choices=("v1", "v0"), default="v1")
+    parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
+    parser.add_argument("--transport", choices=("i2c", "serial"), default="i2c",
+                        help="the host's link to the MCU: I2C (TWI) or USB serial (UART0, COBS)")
     parser.add_argument("--primary-rpm", type=number_in(0.0, 30000.0), default=3800.0)
     parser.add_argument("--secondary-rpm", type=number_in(0.0, 30000.0), default=7600.0)
     parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
@@ -37,19 +43,29 @@ def add_arguments(parser) -> None:
     parser.add_argument("--adc-error-every", type=number_in(0, 1_000_000, integer=True), default=0,
                         help="set the AD7171 error bit on every Nth conversion (0: never)")
     parser.add_argument("--adc-hz", type=number_in(1.0, 1000.0), default=125.0)
-    parser.add_argument("--seconds", type=number_in(0.0, 3600.0, lo_open=True), default=5.0, help="simulated seconds of signal")
-    parser.add_argument("--bounce", action="store_true", help="add two bounce edges per Hall pulse")
+    parser.add_argument("--seconds", type=number_in(0.0, 3600.0, lo_open=True), default=5.0,
+                        help="simulated seconds of signal")
+    parser.add_argument("--bounce", action="store_true",
+                        help="the Hall line rings at release: two 40 us pulses 150 and 700 us after each pulse")
+    parser.add_argument("--glitch-hz", type=number_in(0.0, 100_000.0), default=0.0,
+                        help="Poisson rate of glitches (ignition spikes) on each Hall line, per second")
+    parser.add_argument("--glitch-us", type=number_in(0.0, 10_000.0, lo_open=True), default=20.0,
+                        help="glitch width in us (default 20)")
     parser.add_argument("--fault-rate", type=number_in(0.0, 0.5), default=0.0,
                         help="probability that a transfer is corrupted between harness and host")
     parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
-                        help=f"comma list from {','.join(FAULT_KINDS)}")
+                        help=f"comma list from {','.join(ALL_FAULT_KINDS)} (default: all but abort)")
     parser.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=1)
     parser.add_argument("--poll-hz", type=number_in(0.0, 2000.0, lo_open=True), default=150.0)
+    parser.add_argument("--poll-jitter", type=number_in(0.0, 1.0), default=0.0,
+                        help="poll at random intervals: each uniform within +-J of the period (0..1)")
+    parser.add_argument("--max-burst", type=number_in(1, 1000, integer=True), default=8,
+                        help="reads per poll while the device says MORE (the Poller's default)")
     parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100)
     parser.add_argument("--drain-s", type=number_in(0.0, 60.0), default=0.3,
                         help="keep polling this long after the signals stop")
-    parser.add_argument("--reset-at", type=number_in(0.0, 3600.0), default=None,
-                        help="reset the MCU at this simulated second (watchdog-like)")
+    parser.add_argument("--reset-at", type=number_in(0.0, 3600.0), action="append", default=None,
+                        help="reset the MCU at this simulated second (repeatable; watchdog cause)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
@@ -57,50 +73,78 @@ def add_arguments(parser) -> None:
 def simulate(args) -> dict:
     """Run one firmware-in-the-loop session; returns the report dictionary."""
     wall0 = time.perf_counter()
+    if not 0.0 <= args.poll_jitter < 1.0:
+        raise ConfigError("command line", "--poll-jitter", f"{args.poll_jitter} is outside 0 <= J < 1")
     kinds = tuple(k for k in args.fault_kinds.split(",") if k)
-    tr = SimavrTransport(args.elf, harness=args.harness, primary_rpm=args.primary_rpm,
-                         secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
-                         adc_status=args.adc_status, adc_error_every=args.adc_error_every,
-                         adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
-                         fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+    bad = [k for k in kinds if k not in ALL_FAULT_KINDS]
+    if bad:
+        raise ConfigError("command line", "--fault-kinds", f"{','.join(bad)} unknown; expected a comma list "
+                                                         f"from {','.join(ALL_FAULT_KINDS)}")
+    if args.transport == "serial" and args.fault_rate:
+        raise ConfigError("command line", "--fault-rate", "fault injection is for --transport i2c only")
+    kw = dict(harness=args.harness, primary_rpm=args.primary_rpm,
+              secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
+              adc_status=args.adc_status, adc_error_every=args.adc_error_every,
+              adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
+              glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
+              fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+    # The host's own transports: I2C (one combined transaction per poll) or USB serial
+    # (COBS packets, dyno.transports.serial) wired to the MCU's UART.
+    tr = SimavrSerialTransport(args.elf, **kw) if args.transport == "serial" else SimavrTransport(args.elf, **kw)
     try:
         reader = make_reader(args.protocol, tr)
         times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: []}
+        gaps = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}  # per edge: its period spans lost events
+        pending = {v1.CH_PRIMARY: True, v1.CH_SECONDARY: True}
         codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
         dt = 1.0 / args.poll_hz
-        k = 0
-        reset_done = args.reset_at is None
+        # Poll instants: regular, or with --poll-jitter J each interval uniform in
+        # [(1-J), (1+J)] x the period (a loaded host), seeded.
+        jitter_rng = random.Random(args.seed + 7919)
+        t_next = 0.0
+        reset_times = sorted(args.reset_at or [])
         # The signals start 50 ms after power-up; they run for args.seconds.
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
         stopped = False
         while True:
-            t = k * dt
+            t = t_next
+            t_next += dt * (1.0 + args.poll_jitter * (2.0 * jitter_rng.random() - 1.0))
             if t > t_end:
                 break
             if not stopped and t >= t_stop:
                 tr.advance_to(t_stop)
                 tr.generators(False)
                 stopped = True
-            if not reset_done and t >= args.reset_at:
-                tr.advance_to(args.reset_at)
+            while reset_times and t >= reset_times[0]:
+                tr.advance_to(reset_times.pop(0))
                 tr.reset_device()
-                reset_done = True
             tr.advance_to(t)
-            for ev in reader.poll(t):
-                times[ev.channel].append(ev.t_us)
-                if ev.channel == v1.CH_ADC:
-                    codes.append(ev.code)
-                    statuses.append(ev.status)
-                elif args.protocol == "v0":
-                    slot_rpm[ev.channel].append(ev.code)
-            k += 1
-        info = reader.read_info() if args.protocol == "v1" else None
+            for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
+                resets_before = reader.stats.device_resets
+                new = reader.poll(t)
+                if reader.stats.device_resets != resets_before:  # never a period across a reset
+                    pending = dict.fromkeys(pending, True)
+                for ev in new:
+                    if ev.gap:
+                        pending = dict.fromkeys(pending, True)
+                    if ev.channel in gaps:
+                        gaps[ev.channel].append(pending[ev.channel])
+                        pending[ev.channel] = False
+                    times[ev.channel].append(ev.t_us)
+                    if ev.channel == v1.CH_ADC:
+                        codes.append(ev.code)
+                        statuses.append(ev.status)
+                    elif args.protocol == "v0":
+                        slot_rpm[ev.channel].append(ev.code)
+                if not reader.more:
+                    break
+        info = reader.read_info() if args.protocol != "v0" else None
         hs = tr.harness_stats()
         faults = dict(tr.faults_injected)
     finally:
         tr.close()
-    return _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults,
+    return _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
                    time.perf_counter() - wall0)
 
 
@@ -115,9 +159,36 @@ def _channel(ts) -> dict:
     }
 
 
-def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wall_s) -> dict:
-    rp, _ = rpm_by_count(times[v1.CH_PRIMARY])
-    rs, _ = rpm_by_count(times[v1.CH_SECONDARY])
+def _adc_time_error(times, hs) -> dict | None:
+    """ADC timestamps against the harness's RDY falling edges (us). The device clock is put
+    on the harness's by the primary Hall edges (median offset; the Hall ISR's latency is
+    similar to the RDY ISR's, so what remains is the extra latency of the ADC time)."""
+    adc, hall = hs["adc"], hs["hall"][0]
+    t_adc, t_p = times[v1.CH_ADC], times[v1.CH_PRIMARY]
+    if not t_adc or len(t_p) < 2 or not adc.get("period_us") or not hall.get("rpm"):
+        return None
+    period_p = 60e6 / hall["rpm"]
+    d = np.asarray(t_p, dtype=float)
+    k = np.round((d - d[0]) / period_p)
+    offset = float(np.median(d - hall["first_us"] - k * period_p))  # device minus harness time
+    t = np.asarray(t_adc, dtype=float) - offset - adc["rdy_t0_us"]
+    err = t - np.round(t / adc["period_us"]) * adc["period_us"]
+    return {"max_abs_us": float(np.max(np.abs(err))), "mean_us": float(np.mean(err))}
+
+
+def _accounting(events: dict, lost: int) -> dict:
+    generated = (events["primary"]["expected"] + events["secondary"]["expected"]
+                 + events["adc"]["read_by_device"])
+    delivered = sum(ch["received"] for ch in events.values())
+    return {"generated": generated, "delivered": delivered, "reported_lost": lost,
+            "exact": delivered + lost == generated}
+
+
+def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults, wall_s) -> dict:
+    # Mean rpm over adjacent edge pairs only: a period spanning lost events (v2 marks them)
+    # or a reset is left out, never spread over.
+    rp, n_p = rpm_by_pairs(times[v1.CH_PRIMARY], gaps[v1.CH_PRIMARY])
+    rs, n_s = rpm_by_pairs(times[v1.CH_SECONDARY], gaps[v1.CH_SECONDARY])
 
     def err_pct(got, want):
         return None if not want or math.isnan(got) else 100.0 * (got - want) / want
@@ -138,6 +209,7 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
     stats = reader.stats.as_dict()
     out = {
         "protocol": args.protocol,
+        "transport": args.transport,
         "elf": str(args.elf),
         "seconds": args.seconds,
         "poll_hz": args.poll_hz,
@@ -158,11 +230,19 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
             "resyncs": stats["resyncs"],
         },
         "events_lost": reader.events_lost,
+        "rpm_periods": {"primary": n_p, "secondary": n_s},
+        # Loss accounting after the drain: every Hall pulse the harness generated and every
+        # conversion the device read is either delivered or counted lost by the device.
+        # (Events queued in the MCU at a reset vanish with its RAM: not exact across resets.)
+        "accounting": _accounting(events, reader.events_lost),
+        "adc_time_error_us": _adc_time_error(times, hs) if stats["device_resets"] == 0 else None,
         "events": events,
         "faults_injected": faults,
         "bounce": bool(args.bounce),
         "harness": {
             "bounce_edges": [hall[0]["bounce_edges"], hall[1]["bounce_edges"]],
+            "glitches": [hall[0].get("glitches", 0), hall[1].get("glitches", 0)],
+            "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
             "sim_s": hs["sim_s"],
@@ -177,11 +257,20 @@ def _report(args, reader, times, codes, statuses, slot_rpm, info, hs, faults, wa
             "secondary": float(np.mean(slot_rpm[v1.CH_SECONDARY])) if slot_rpm[v1.CH_SECONDARY] else None,
         }
     if info is not None:
-        out["device"] = {"fw_version": ".".join(map(str, info.fw_version)),
-                         "boot_count": info.boot_count, "uptime_ms": info.uptime_ms,
+        out["device"] = {"fw_version": ".".join(map(str, info.fw_version)), "uptime_ms": info.uptime_ms,
                          "debounce_primary_us": info.debounce_primary_us,
                          "debounce_secondary_us": info.debounce_secondary_us}
-    out["ok"] = bool(not hs["crashed"] and (args.protocol != "v1" or (
+        if args.protocol == "v2":
+            out["device"].update({"boot_id": info.boot_id, "reset_cause": cause_name(info.reset_cause),
+                                  "twi_timeouts": info.twi_timeouts, "bus_errors": info.bus_errors})
+            out["edges_rejected"] = {
+                name: {"lockout": info.lockout_rejected[k], "glitch": info.glitch_rejected[k]}
+                for k, name in enumerate(("primary", "secondary"))}
+        else:
+            out["device"]["boot_count"] = info.boot_count
+    if args.protocol == "v2":
+        out["boots"] = stats["boots"]
+    out["ok"] = bool(not hs["crashed"] and (args.protocol == "v0" or (
         reader.events_lost == 0 and all(ch["missing"] == 0 and ch["duplicates_or_disorder"] == 0
                                         for ch in events.values()))))
     return out

@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
                    help="with --sim: drive the simulated rig through the real-rig output code (gpiozero "
                         "devices on MockFactory); outputs then reports the pins' final states")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
-    p.add_argument("--protocol", choices=("v1", "v0"), default=None)
+    p.add_argument("--protocol", choices=("v2", "v1", "v0"), default=None)
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,

@@ -76,6 +76,7 @@ class Event:
     t_us: int
     code: int = 0
     status: int = 0
+    gap: bool = False  # v2: events were lost (ring saturated) just before this one
 
 
 @dataclass(frozen=True, slots=True)

@@ -4,8 +4,10 @@ It behaves as docs/protocol.md says the Nano does (ring buffer with an
 overflow counter, per-channel Hall debounce, frames frozen once sent and
 retired only by a matching ACK_POLL, RESET flag and a new time epoch after a
 reset) so the host decodes the simulated rig through exactly the path it uses
-on the real one.  ``protocol="v0"`` emulates the thesis sketch's 20-byte frame
-instead.
+on the real one.  It speaks v2 (default: boot identity echoed in ACK_POLL, reset
+cause, CRC-32C), v1, or ``protocol="v0"``, the thesis sketch's 20-byte frame.
+For the same events, boot and commands its v2 bytes are the firmware's
+(the golden vectors bind both to ``dyno.protocol.v2``).
 """
 
 from __future__ import annotations
@@ -13,10 +15,12 @@ from __future__ import annotations
 from collections import deque
 
 from dyno.errors import FrameError
-from dyno.protocol import v0, v1
+from dyno.protocol import v0, v1, v2
 
 CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
-FW_VERSION = (1, 0, 0)
+FW_VERSION = (2, 0, 0)
+LOCKOUT_FLOOR_US = 1000  # firmware config.h: DEBOUNCE_*_US_DEFAULT
+LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
 
 
 class EmulatedFirmware:
@@ -24,20 +28,29 @@ class EmulatedFirmware:
 
     Parameters
     ----------
-    protocol : "v1" or "v0"
+    protocol : "v2" (default), "v1" or "v0"
     ring_capacity : events the ring holds (the firmware's is 64)
     clock_offset_us : device counter value at boot; set near 2**32 to test the wrap
     clock_ppm : crystal error of the device's time base
     """
 
-    def __init__(self, protocol: str = "v1", ring_capacity: int = 64, clock_offset_us: int = 0,
+    def __init__(self, protocol: str = "v2", ring_capacity: int = 64, clock_offset_us: int = 0,
                  clock_ppm: float = 0.0) -> None:
         self.protocol = protocol
         self.ring_capacity = ring_capacity
         self.clock_offset_us = clock_offset_us
         self.clock_scale = 1.0 + clock_ppm * 1e-6
         self.boot_count = 0
-        self.debounce_us = {v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000}
+        # v2 boot identity: the firmware's .noinit counter, +1 on every boot (RAM survives
+        # a reset; simavr and this model start it at 0, so the first boot is 1).
+        self.boot_id = 1
+        self.reset_cause = v2.CAUSE_PORF
+        self.ack_from_old_boot = 0  # v2: ACK_POLLs naming another boot (ignored), for audits
+        self.first_served_s: dict[int, float] = {}  # boot_id -> sim time its first frame went out
+        self.retired_log: list | None = None  # set to [] to record (boot_id, raw) of every retired frame
+        # v1: fixed lock-outs (the thesis's 10 / 6 ms); v2: the floor of the adaptive lock-out
+        self.debounce_us = ({v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000} if protocol == "v1"
+                            else {v1.CH_PRIMARY: LOCKOUT_FLOOR_US, v1.CH_SECONDARY: LOCKOUT_FLOOR_US})
         self.served: dict[int, bytes] = {}  # seq -> bytes last served (truth for audits)
         self.served_v0: deque = deque(maxlen=512)  # v0: the frames last served (truth for audits)
         self.events_generated = 0  # accepted into the ring (truth)
@@ -50,6 +63,7 @@ class EmulatedFirmware:
         self.ring: deque = deque()
         self.events_dropped = 0
         self.overflow = False
+        self._gap = False
         self.seq = 0
         self.reset_flag = True
         self.frame: bytes | None = None
@@ -57,12 +71,25 @@ class EmulatedFirmware:
         self.frame_sent = False
         self.info_pending = False
         self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
+        self.lockout_rejected = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}  # since boot, as on the device
+        self._period_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self._legacy = {v1.CH_PRIMARY: [100, 0], v1.CH_SECONDARY: [100, 0], v1.CH_ADC: [0, 0]}
         self._legacy_prev_t = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}
 
-    def reset(self, now_s: float) -> None:
-        """Watchdog or power reset: counters and buffers restart."""
+    def _lockout_us(self, tag: int) -> int:
+        """v1: the fixed window; v2: a quarter of the last period within [floor, cap] (firmware capture.c;
+        the simulated Hall pulses have no width, so it runs from the accepted edge)."""
+        floor = self.debounce_us[tag]
+        period = self._period_us[tag]
+        if self.protocol != "v2" or period is None:
+            return floor
+        return max(floor, min(LOCKOUT_CAP_US, period >> 2))
+
+    def reset(self, now_s: float, cause: int = v2.CAUSE_WDRF) -> None:
+        """Watchdog (default) or other reset: counters and buffers restart, a new boot id."""
         self.boot_count += 1
+        self.boot_id = (self.boot_id + 1) & 0xFFFF
+        self.reset_cause = cause & 0x0F
         self._boot(now_s)
 
     def device_us(self, t_s: float) -> int:
@@ -76,9 +103,12 @@ class EmulatedFirmware:
         t_us = self.device_us(t_s)
         if tag != v1.CH_ADC:
             last = self._last_edge_us[tag]
-            if last is not None and ((t_us - last) & 0xFFFFFFFF) < self.debounce_us[tag]:
+            if last is not None and ((t_us - last) & 0xFFFFFFFF) < self._lockout_us(tag):
                 self.bounces_rejected += 1
+                self.lockout_rejected[tag] = (self.lockout_rejected[tag] + 1) & 0xFFFF
                 return
+            if last is not None:
+                self._period_us[tag] = (t_us - last) & 0xFFFFFFFF
             self._last_edge_us[tag] = t_us
             code = status = 0  # a Hall edge carries only its time
         if self.protocol == "v0":
@@ -87,9 +117,11 @@ class EmulatedFirmware:
         if len(self.ring) >= self.ring_capacity:
             self.events_dropped = (self.events_dropped + 1) & 0xFFFF
             self.overflow = True
+            self._gap = self.protocol == "v2"  # v2 marks the next event that gets in
             return
         self.events_generated += 1
-        self.ring.append(v1.Event(tag, t_us, code, status))
+        self.ring.append(v1.Event(tag, t_us, code, status, self._gap))
+        self._gap = False
 
     def _capture_v0(self, tag: int, t_us: int, code: int, status: int) -> None:
         self.events_generated += 1
@@ -107,12 +139,22 @@ class EmulatedFirmware:
         """The master wrote ``data`` (a command)."""
         if self.protocol == "v0" or not data:
             return
+        proto = v2 if self.protocol == "v2" else v1
         try:
-            cmd = v1.decode_command(bytes(data))
+            cmd = proto.decode_command(bytes(data))
         except FrameError:
             return  # ignored, as the firmware does: the current frame is served again
         if cmd.op == v1.OP_ACK_POLL:
-            if self.frame is not None and self.frame_sent and cmd.args[0] == self.seq:
+            if self.protocol == "v2":
+                boot, seq = cmd.args
+                if boot != self.boot_id:
+                    self.ack_from_old_boot += 1
+                    return
+            else:
+                seq = cmd.args[0]
+            if self.frame is not None and self.frame_sent and seq == self.seq:
+                if self.retired_log is not None:
+                    self.retired_log.append((self.boot_id, self.frame[: self.frame[1]]))
                 self.frame = None
                 self.frame_events = ()
                 self.frame_sent = False
@@ -133,6 +175,13 @@ class EmulatedFirmware:
             out = v0.encode_legacy_frame(v0.LegacyFrame(rp, tp, rs, ts, adc, ta))
             self.served_v0.append(out)  # truth for the corrupted-accepted audit
             return out[:n].ljust(n, b"\xff")
+        if self.info_pending and self.protocol == "v2":
+            self.info_pending = False
+            info2 = v2.InfoFrame(self.seq, self._flags(), self.boot_id, FW_VERSION,
+                                 int((now_s - self.boot_time_s) * 1000) & 0xFFFFFFFF,
+                                 self.debounce_us[v1.CH_PRIMARY], self.debounce_us[v1.CH_SECONDARY],
+                                 (self.lockout_rejected[v1.CH_PRIMARY], self.lockout_rejected[v1.CH_SECONDARY]))
+            return v2.encode_info_frame(info2)[:n].ljust(n, b"\xff")
         if self.info_pending:
             self.info_pending = False
             info = v1.InfoFrame(self.seq, self._flags(), FW_VERSION, self.boot_count,
@@ -142,12 +191,15 @@ class EmulatedFirmware:
         if not self.frame_sent:
             self._build(now_s)
         self.frame_sent = True
+        self.first_served_s.setdefault(self.boot_id, now_s)
         self.served[self.seq] = self.frame[: self.frame[1]]
         # A master reading past our buffer gets 0xFF (SDA released).
         return self.frame[:n].ljust(n, b"\xff")
 
     def _flags(self) -> int:
         f = v1.FLAG_RESET if self.reset_flag else 0
+        if self.protocol == "v2":
+            f |= self.reset_cause << v2.CAUSE_SHIFT
         return f | (v1.FLAG_OVERFLOW if self.overflow else 0)
 
     def _build(self, now_s: float) -> None:
@@ -155,8 +207,13 @@ class EmulatedFirmware:
         # Put the current frame's events back first: an unsent frame may be rebuilt.
         if self.frame_events:
             self.ring.extendleft(reversed(self.frame_events))
-        n = v1.fit_events(self.ring)
+        proto = v2 if self.protocol == "v2" else v1
+        n = proto.fit_events(self.ring)
         events = tuple(self.ring.popleft() for _ in range(n))
         flags = self._flags() | (v1.FLAG_MORE if self.ring else 0)
         self.frame_events = events
-        self.frame = v1.encode_data_frame(self.seq, flags, self.events_dropped, events, self.device_us(now_s))
+        if proto is v2:
+            self.frame = v2.encode_data_frame(self.seq, flags, self.boot_id, self.events_dropped, events,
+                                              self.device_us(now_s))
+        else:
+            self.frame = v1.encode_data_frame(self.seq, flags, self.events_dropped, events, self.device_us(now_s))

@@ -146,12 +146,12 @@ class SimRig:
     Parameters
     ----------
     now_s : the injected clock (the running loop's ``time``)
-    protocol : "v1" (our firmware) or "v0" (the thesis sketch)
+    protocol : "v2" (our firmware, default), "v1" (its previous protocol) or "v0" (the thesis sketch)
     faults : bus fault injection
     clock_offset_us : device counter at boot (near 2**32 to cross the wrap early)
     """
 
-    def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v1",
+    def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v2",
                  faults: BusFaults | None = None, clock_offset_us: int = 0, clock_ppm: float = 0.0,
                  full_stroke_s: float = 8.0) -> None:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating

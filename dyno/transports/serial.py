@@ -1,17 +1,17 @@
-"""The firmware over USB serial (pyserial): v1 frames as COBS packets ending in 0x00.
+"""The firmware over USB serial (pyserial): v2/v1 frames as COBS packets ending in 0x00.
 
-Framing (docs/protocol.md, "v1 over USB serial"): each command and each frame
+Framing (docs/protocol.md, "v1 and v2 over USB serial"): each command and each frame
 is COBS-encoded and terminated by one 0x00.  COBS output has no zero byte, so
 a 0x00 always ends a packet and a receiver resynchronises at the next 0x00.
 
 Garbage glued to the front of a packet (line noise, a reset mid-packet, a
 bootloader banner) is not separated from it by a 0x00.  :class:`CobsDeframer`
-therefore checks each packet with a validator (default: a v1 frame, whose
-length byte and CRC-16 must agree) and, if the whole packet fails, tries its
+therefore checks each packet with a validator (default: a v2 or v1 frame, whose
+length byte and CRC-32C / CRC-16 must agree) and, if the whole packet fails, tries its
 suffixes, so no complete frame is lost to garbage in front of it.
 
 Over serial, frames come without padding; the transport pads them to the
-asked length so the same v1 decoder (which checks padding) reads both links.
+asked length so the same decoder (which checks padding) reads both links.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import binascii
 from collections import Counter, deque
 
 from dyno.clock import MonotonicClock
+from dyno.protocol.crc import crc32c
 from dyno.transports.base import Transport, TransportFault
 
 DELIMITER = b"\x00"
@@ -80,15 +81,28 @@ def is_v1_frame(data: bytes) -> bool:
     return binascii.crc_hqx(data[:-2], 0xFFFF) == (data[-2] << 8 | data[-1])
 
 
+def is_v2_frame(data: bytes) -> bool:
+    """Length byte matches and CRC-32C checks (docs/protocol.md, v2)."""
+    n = len(data)
+    if n < 17 or n > FRAME_MAX or data[1] != n:
+        return False
+    return crc32c(data[:-4]) == int.from_bytes(data[-4:], "big")
+
+
+def is_frame(data: bytes) -> bool:
+    """A v2 or v1 packet: the session above decides which version it wants (and refuses the other)."""
+    return is_v2_frame(data) if data[:1] == b"\x02" else is_v1_frame(data)
+
+
 class CobsDeframer:
     """Byte stream in, decoded packets out; resynchronises after garbage.
 
-    ``validate(decoded) -> bool`` (default :func:`is_v1_frame`; ``None`` accepts
+    ``validate(decoded) -> bool`` (default :func:`is_frame`; ``None`` accepts
     any well-formed COBS packet).  Counters: ``packets``, ``garbage_bytes``,
     ``bad_packets`` (delimited chunks with no valid packet in them).
     """
 
-    def __init__(self, validate=is_v1_frame, max_encoded: int = ENCODED_MAX) -> None:
+    def __init__(self, validate=is_frame, max_encoded: int = ENCODED_MAX) -> None:
         self.validate = validate
         self.max_encoded = max_encoded
         self._buf = bytearray()
@@ -159,7 +173,7 @@ class SerialTransport(Transport):
 
     name = "serial"
 
-    def __init__(self, port, *, timeout_s: float = 0.05, clock=None, validate=is_v1_frame) -> None:
+    def __init__(self, port, *, timeout_s: float = 0.05, clock=None, validate=is_frame) -> None:
         super().__init__()
         self.port = port
         self.timeout_s = float(timeout_s)

@@ -28,6 +28,9 @@ from dyno.errors import DynoError
 from dyno.transports.base import Transport, TransportFault
 
 FAULT_KINDS = ("read_bitflip", "cmd_bitflip", "truncate", "nack")
+# "abort": the master stops clocking halfway through the read (a killed host): the slave
+# holds SDA until its 25 ms timeout releases the bus (transfers meanwhile: bus_held).
+ALL_FAULT_KINDS = FAULT_KINDS + ("abort",)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_HARNESS = REPO_ROOT / "firmware" / "build" / "harness"
 
@@ -56,7 +59,8 @@ class SimavrTransport(Transport):
                  adc_code: int = 35145, adc_status: int = 0x05, adc_error_every: int = 0,
                  adc_hz: float = 125.0, bounce: bool = False, i2c_khz: int = 100,
                  address: int = 0x03, start_us: float = 50_000.0, profile: bool = False,
-                 profile_from_us: float = 100_000.0,
+                 profile_from_us: float = 100_000.0, glitch_hz: float = 0.0, glitch_us: float = 20.0,
+                 legacy_pullups: bool = False,
                  fault_rate: float = 0.0, fault_kinds=FAULT_KINDS, seed: int = 0) -> None:
         super().__init__()
         elf = Path(elf)
@@ -71,9 +75,12 @@ class SimavrTransport(Transport):
                 "--adc-error-every", str(int(adc_error_every)), "--adc-hz", repr(float(adc_hz)),
                 "--i2c-khz", str(int(i2c_khz)), "--addr", str(int(address)),
                 "--start-us", repr(float(start_us)),
-                "--profile-from-us", repr(float(profile_from_us))]
+                "--profile-from-us", repr(float(profile_from_us)),
+                "--glitch-hz", repr(float(glitch_hz)), "--glitch-us", repr(float(glitch_us))]
         if bounce:
             args.append("--bounce")
+        if legacy_pullups:  # simavr's own pull-up handling, which stomps external drivers
+            args.append("--legacy-pullups")
         if profile:
             args.append("--profile")
         # stderr to a file, not a pipe: simavr's warnings must never block the harness.
@@ -82,6 +89,10 @@ class SimavrTransport(Transport):
                                       stderr=self._stderr, text=True, bufsize=1)
         self.fault_rate = float(fault_rate)
         self.fault_kinds = tuple(fault_kinds)
+        bad = set(self.fault_kinds) - set(ALL_FAULT_KINDS)
+        if bad:
+            raise ValueError(f"unknown fault kinds {sorted(bad)}; known: {','.join(ALL_FAULT_KINDS)}")
+        self.bus_held = False
         self._rng = random.Random(seed)
         self.faults_injected: Counter = Counter()
         self.sim_time_us = 0.0
@@ -130,10 +141,10 @@ class SimavrTransport(Transport):
         if self._cmd("gen on" if on else "gen off") != "ok":
             raise HarnessError("gen")
 
-    def reset_device(self) -> None:
-        """Reset the MCU as the watchdog would (EEPROM, hence the boot counter, kept)."""
+    def reset_device(self, mcusr: int = 0x08) -> None:
+        """Reset the MCU (RAM kept, as on hardware) with this cause in MCUSR (default WDRF)."""
         self.sync()
-        if self._cmd("reset") != "ok":
+        if self._cmd(f"reset {mcusr & 0xFF:02x}") != "ok":
             raise HarnessError("reset")
 
     def harness_stats(self) -> dict:
@@ -143,7 +154,7 @@ class SimavrTransport(Transport):
     # -- Transport ------------------------------------------------------------------
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         kind = None
-        if self.fault_rate and self._rng.random() < self.fault_rate:
+        if self.fault_rate and self._rng.random() < self.fault_rate and not self.bus_held:
             kind = self._rng.choice(self.fault_kinds)
             if kind == "cmd_bitflip" and not request:
                 kind = "read_bitflip"  # v0 writes nothing
@@ -152,7 +163,13 @@ class SimavrTransport(Transport):
             request = _flip(request, self._rng)
         at = "" if self._pending_us is None else f" {self._pending_us:.3f}"
         self._pending_us = None
-        reply = self._cmd(f"xfer {request.hex() or '-'} {int(read_len)}{at}")
+        verb = "abort" if kind == "abort" else "xfer"
+        reply = self._cmd(f"{verb} {request.hex() or '-'} {int(read_len)}{at}")
+        self.bus_held = kind == "abort" or reply == "busheld"
+        if kind == "abort":
+            raise TransportFault("timeout", "master aborted mid-read (injected)")
+        if reply == "busheld":
+            raise TransportFault("bus_held", "SDA held low since an aborted transfer")
         if reply == "nack":
             raise TransportFault("nack", "device did not acknowledge")
         if reply == "timeout":
@@ -208,3 +225,79 @@ def toolchain_missing() -> str | None:
     if not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
         return "Arduino core not found (apt-get install arduino-core-avr)"
     return None
+
+
+class SimavrSerialPort:
+    """A pyserial-like port on the harness's UART0, in *simulated* time.
+
+    ``read(n)`` waits up to ``timeout`` simulated seconds for the MCU to finish a packet
+    (the harness runs the MCU meanwhile); ``now()`` is the simulated clock the serial
+    transport's deadlines use.
+    """
+
+    def __init__(self, harness: SimavrTransport) -> None:
+        self.h = harness
+        self.timeout = 0.05
+        self._buf = bytearray()
+
+    def now(self) -> float:  # the Clock protocol (dyno.clock): simulated seconds
+        return self.h.sim_time_us / 1e6
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._buf)
+
+    def write(self, data: bytes) -> int:
+        h = self.h
+        at = "" if h._pending_us is None else f" {h._pending_us:.3f}"
+        h._pending_us = None
+        if h._cmd(f"uwrite {bytes(data).hex() or '-'}{at}") != "ok":
+            raise HarnessError("uwrite")
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        if not self._buf and self.timeout and self.timeout > 0:
+            reply = self.h._cmd(f"uread {self.timeout * 1e6:.3f}")
+            if not reply.startswith("ok "):
+                raise HarnessError(f"uread: {reply}")
+            _, t_us, hexdata = reply.split()
+            self.h.sim_time_us = float(t_us)
+            if hexdata != "-":
+                self._buf += bytes.fromhex(hexdata)
+        out = bytes(self._buf[:n])
+        del self._buf[:n]
+        return out
+
+
+class SimavrSerialTransport(Transport):
+    """The host's :class:`~dyno.transports.serial.SerialTransport` (COBS over USB serial)
+    talking to the real firmware's UART in simavr; the harness controls as for I2C."""
+
+    name = "simavr-serial"
+
+    def __init__(self, elf, *, timeout_s: float = 0.05, **harness_kw) -> None:
+        super().__init__()
+        from dyno.transports.serial import SerialTransport
+
+        self.harness = SimavrTransport(elf, **harness_kw)
+        self.port = SimavrSerialPort(self.harness)
+        self.serial = SerialTransport(self.port, timeout_s=timeout_s, clock=self.port)
+        self.faults_injected = self.harness.faults_injected
+
+    def _transfer(self, request: bytes, read_len: int) -> bytes:
+        return self.serial.transfer(request, read_len)
+
+    def advance_to(self, t_s: float) -> None:
+        self.harness.advance_to(t_s)
+
+    def generators(self, on: bool) -> None:
+        self.harness.generators(on)
+
+    def reset_device(self, mcusr: int = 0x08) -> None:
+        self.harness.reset_device(mcusr)
+
+    def harness_stats(self) -> dict:
+        return self.harness.harness_stats()
+
+    def close(self) -> None:
+        self.harness.close()

@@ -151,7 +151,7 @@ class FixtureRig:
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
         self.model = self.fixture  # what the drills act on (dyno.drills), as SimRig.model
-        self.firmware = EmulatedFirmware("v1")
+        self.firmware = EmulatedFirmware("v2")
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
 
     def hang(self, mass_kg: float, radius_m: float) -> float:
@@ -166,5 +166,5 @@ def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, addres
     from dyno.transports.base import I2CTransport
 
     rig = FixtureRig(now_s, seed=seed, **fixture_kw)
-    reader = make_reader("v1", I2CTransport(rig.bus, address))
+    reader = make_reader("v2", I2CTransport(rig.bus, address))
     return rig, Poller(reader, poll_hz=poll_hz)

@@ -2,11 +2,10 @@
  * 1.6) with the rig around it, and plays the I2C master for a host process that talks
  * to it over stdin/stdout.
  *
- *   - Hall sensors on PD2/PD3 (INT0/INT1): one falling edge per revolution at the given
- *     rpm, optionally followed by bounce edges inside the lock-out window.
- *   - AD7171 on PD4 (SCLK, input to us) / PD5 (DOUT/RDY, driven by us): a conversion
- *     every 1/adc_hz s pulls RDY low; each SCLK falling edge shifts out the next of
- *     16 data + 8 status bits.
+ *   - Hall sensors on PD2/PD3 (INT0/INT1) and the AD7171 on PD4/PD5 as external
+ *     drivers: sensors.c (one pulse per revolution, ringing, glitches; a conversion
+ *     every 1/adc_hz s, shifted out on SCLK).
+ *   - The host's USB serial on UART0 (uwrite/uread below).
  *   - I2C master at the bus's bit rate. simavr 1.6 cannot complete a slave-transmit
  *     (it never produces TWI status 0xB8/0xC0; fixed upstream in 2022), so this
  *     harness does not use simavr's TWI message IRQs at all: it is the bus. For every
@@ -25,13 +24,21 @@
  *   xfer <hex|-> <n> [t_us]  (run until t_us first, if given: one pipe round trip per
  *                        poll), write bytes, repeated start, read n
  *                                                             -> "ok <hex|->" | "nack" | "timeout"
+ *   abort <hex|-> <n> [t_us]  like xfer, but the master stops clocking halfway through
+ *                        the read (no NACK, no STOP): the slave holds SDA until its
+ *                        timeout disables TWI; transfers meanwhile -> "busheld"
+ *   uwrite <hex|-> [t_us]  (run until t_us first) bytes into UART0   -> "ok"
+ *   uread <max_us>       run until the MCU sent a whole packet (a 0x00) or max_us
+ *                        passed; the bytes it sent             -> "ok <t_us> <hex|->"
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
- *   reset                reset the MCU (watchdog-like; EEPROM kept)          -> "ok"
+ *   reset [mcusr]        reset the MCU; RAM kept, MCUSR set to the given hex cause
+ *                        (default 08 = WDRF, a watchdog reset; 02 = EXTRF)   -> "ok"
  *   stats                one JSON object
  *   quit
  */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -44,13 +51,14 @@
 #include "sim_avr.h"
 #include "sim_cycle_timers.h"
 #include "sim_elf.h"
+#include "avr_uart.h"
 #include "sim_interrupts.h"
 #include "sim_irq.h"
+#include "harness.h"
 
-#define F_CPU_HZ 16000000ull
-#define CYCLES_PER_US (F_CPU_HZ / 1000000ull)
 
 /* ATmega328P data-space addresses of the TWI registers. */
+#define MCUSR_ADDR 0x54  /* data-space address of MCUSR (reset cause) */
 #define REG_TWSR 0xB9
 #define REG_TWAR 0xBA
 #define REG_TWDR 0xBB
@@ -61,165 +69,14 @@
 #define TWI_VECTOR 24
 #define N_VECTORS 26
 
-static avr_t *avr;
+avr_t *avr;
 static FILE *proto_out;
 
 /* ---- configuration ------------------------------------------------------------ */
-static double cfg_rpm[2] = {3800.0, 7600.0};
-static unsigned cfg_adc_code = 35145, cfg_adc_status = 0x05, cfg_adc_err_every = 0;
-static double cfg_adc_hz = 125.0;
-static int cfg_bounce = 0;
 static unsigned cfg_i2c_khz = 100, cfg_addr = 0x03;
-static double cfg_start_us = 50000.0, cfg_pulse_us = 200.0;
+static double cfg_start_us = 50000.0;
 static int cfg_profile = 0;
 static double cfg_profile_from_us = 100000.0;
-
-/* ---- Hall generators ------------------------------------------------------------ */
-typedef struct {
-    int ch;                      /* 0 primary (PD2), 1 secondary (PD3) */
-    avr_irq_t *pin;
-    double period_cycles;
-    uint64_t k;                  /* index of the next true edge */
-    double t0_cycles;            /* time of edge 0 */
-    int step;                    /* position in the pulse pattern */
-    uint64_t edge_cycle;         /* cycle of the current true edge */
-    uint64_t generated, bounces;
-    uint64_t first_cycle, last_cycle;
-    int running;
-} hall_t;
-static hall_t hall[2];
-static int gen_enabled = 1;
-
-/* Pulse pattern after a true falling edge, as (offset us, level). With bounce, two
- * extra falling edges at 150 us and 700 us: well inside both lock-out windows (6 and
- * 10 ms) and well outside the pulse itself. */
-static const struct { double us; int level; } pattern_plain[] = {{0, 0}, {-1, 1}};
-static const struct { double us; int level; } pattern_bounce[] = {
-    {0, 0}, {20, 1}, {150, 0}, {170, 1}, {700, 0}, {-1, 1}};
-
-static double pattern_us(int step)
-{
-    double us = cfg_bounce ? pattern_bounce[step].us : pattern_plain[step].us;
-    return us < 0 ? cfg_pulse_us + (cfg_bounce ? 700.0 : 0.0) : us;
-}
-
-static avr_cycle_count_t hall_timer(avr_t *a, avr_cycle_count_t when, void *param)
-{
-    (void)a;
-    hall_t *h = param;
-    int n = cfg_bounce ? 6 : 2;
-    int level = cfg_bounce ? pattern_bounce[h->step].level : pattern_plain[h->step].level;
-    if (h->step == 0) {
-        if (!gen_enabled) {
-            h->running = 0;
-            return 0;
-        }
-        h->edge_cycle = when;
-        h->generated++;
-        if (!h->first_cycle)
-            h->first_cycle = when;
-        h->last_cycle = when;
-    } else if (level == 0) {
-        h->bounces++;
-    }
-    avr_raise_irq(h->pin, (uint32_t)level);
-    h->step++;
-    if (h->step < n)
-        return h->edge_cycle + (avr_cycle_count_t)(pattern_us(h->step) * CYCLES_PER_US);
-    h->step = 0;
-    h->k++;
-    return (avr_cycle_count_t)(h->t0_cycles + (double)h->k * h->period_cycles + 0.5);
-}
-
-static void hall_start(hall_t *h, uint64_t at_cycle)
-{
-    if (cfg_rpm[h->ch] <= 0)
-        return;
-    h->period_cycles = 60.0 * (double)F_CPU_HZ / cfg_rpm[h->ch];
-    h->t0_cycles = (double)at_cycle;
-    h->k = 0;
-    h->step = 0;
-    h->running = 1;
-    avr_cycle_timer_register(avr, at_cycle - avr->cycle, hall_timer, h);
-}
-
-/* ---- AD7171 --------------------------------------------------------------------- */
-static avr_irq_t *pin_dout;
-static int adc_bit = 24;         /* next bit to shift out; 24 = idle (RDY high) */
-static int adc_ready = 0;        /* RDY low, not yet clocked out */
-static uint32_t adc_word;        /* 16 data bits << 8 | status */
-static int sclk_level = 1;
-static uint64_t adc_generated, adc_read, adc_missed, adc_overrun, adc_errors_set;
-static int adc_running;
-static double adc_period_cycles, adc_t0_cycles;
-static uint64_t adc_k;
-
-static avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param)
-{
-    (void)a; (void)when; (void)param;
-    avr_raise_irq(pin_dout, 1);
-    return 0;
-}
-
-static avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param)
-{
-    (void)a; (void)when; (void)param;
-    if (!gen_enabled) {
-        adc_running = 0;
-        return 0;
-    }
-    if (adc_bit > 0 && adc_bit < 24) {
-        adc_overrun++;  /* a read in progress: the real part keeps the old result */
-    } else {
-        if (adc_ready)
-            adc_missed++;  /* previous result never read: overwritten */
-        unsigned status = cfg_adc_status & 0xFF;
-        adc_generated++;
-        if (cfg_adc_err_every && adc_generated % cfg_adc_err_every == 0) {
-            status |= 0x20;
-            adc_errors_set++;
-        }
-        adc_word = ((uint32_t)(cfg_adc_code & 0xFFFF) << 8) | status;
-        adc_bit = 0;
-        adc_ready = 1;
-        avr_raise_irq(pin_dout, 0);  /* RDY */
-    }
-    adc_k++;
-    return (avr_cycle_count_t)(adc_t0_cycles + (double)adc_k * adc_period_cycles + 0.5);
-}
-
-static void adc_sclk_notify(avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq; (void)param;
-    int level = value ? 1 : 0;
-    if (level == sclk_level)
-        return;
-    sclk_level = level;
-    if (!adc_ready)
-        return;
-    if (level == 0 && adc_bit < 24) {
-        /* Falling edge: the AD7171 shifts out the next bit, MSB first. */
-        avr_raise_irq(pin_dout, (adc_word >> (23 - adc_bit)) & 1u);
-        adc_bit++;
-    } else if (level == 1 && adc_bit == 24) {
-        /* After the 24th rising edge DOUT/RDY returns high; 1 us later so the MCU's
-         * sample of the last bit (a few cycles after the edge) still sees it. */
-        adc_ready = 0;
-        adc_read++;
-        avr_cycle_timer_register(avr, CYCLES_PER_US, adc_rdy_high, NULL);
-    }
-}
-
-static void adc_start(uint64_t at_cycle)
-{
-    if (cfg_adc_hz <= 0)
-        return;
-    adc_period_cycles = (double)F_CPU_HZ / cfg_adc_hz;
-    adc_t0_cycles = (double)at_cycle;
-    adc_k = 0;
-    adc_running = 1;
-    avr_cycle_timer_register(avr, at_cycle - avr->cycle, adc_timer, NULL);
-}
 
 /* ---- stepping, with optional ISR / interrupts-off profiling ---------------------- */
 typedef struct {
@@ -340,11 +197,20 @@ static int wait_twint_clear(void)
     return twint_written;
 }
 
+/* A master that gave up mid-read leaves the slave transmitter driving SDA: the bus is
+ * held until the slave disables its TWI unit (TWEN written 0: its timeout). */
+static int bus_held;
+static uint64_t bus_held_since, bus_release_cycles, bus_aborts;
+
 static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 {
     (void)a; (void)addr; (void)param;
     if (v & TWCR_TWINT)
         twint_written = 1;
+    if (bus_held && !(v & TWCR_TWEN)) {
+        bus_held = 0;
+        bus_release_cycles = avr->cycle - bus_held_since;
+    }
 }
 
 static void twi_event(uint8_t status)
@@ -362,9 +228,13 @@ static int slave_acks(uint8_t addr7)
     return (avr->data[REG_TWAR] >> 1) == addr7;
 }
 
-/* Returns 0 ok, 1 NACK, 2 timeout. */
-static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
+/* Returns 0 ok, 1 NACK, 2 timeout, 3 bus held (SDA low since an aborted transfer).
+ * abort_after >= 0: the master stops clocking after that many bytes of the read, with
+ * no NACK and no STOP (a crashed or killed host). */
+static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr, int abort_after)
 {
+    if (bus_held)
+        return 3;
     i2c_transfers++;
     /* simavr stores a 1 written to TWINT (silicon clears the flag), so TWINT can read
      * as set with nothing pending: only our own events count. */
@@ -397,6 +267,12 @@ static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
         if (!wait_twint_clear()) return 2;
         rd[0] = avr->data[REG_TWDR];
         for (int i = 1; i < nr; i++) {
+            if (abort_after >= 0 && i >= abort_after) {
+                bus_held = 1;
+                bus_held_since = avr->cycle;
+                bus_aborts++;
+                return 0;
+            }
             run_until(avr->cycle + byte_cycles);  /* byte i-1 out, master ACKs */
             twi_event(0xB8);
             if (!wait_twint_clear()) return 2;
@@ -408,6 +284,22 @@ static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr)
     }
     run_until(avr->cycle + bit_cycles);  /* STOP */
     return 0;
+}
+
+/* ---- the host's USB serial (UART0, 115200 8N1 through the Nano's USB bridge) ----- */
+static avr_irq_t *uart_in;
+static uint8_t uart_rx[4096];   /* bytes the MCU sent, not yet handed to the host */
+static int uart_rx_n, uart_packet_end;
+static uint64_t uart_bytes_out, uart_bytes_in;
+
+static void uart_out_notify(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    uart_bytes_out++;
+    if (uart_rx_n < (int)sizeof uart_rx)
+        uart_rx[uart_rx_n++] = (uint8_t)value;
+    if ((uint8_t)value == 0)
+        uart_packet_end = 1;  /* COBS packets end with 0x00 */
 }
 
 /* ---- setup and command loop ------------------------------------------------------ */
@@ -438,19 +330,27 @@ static void print_stats(void)
     fprintf(o, "\"hall\": [");
     for (int c = 0; c < 2; c++)
         fprintf(o, "%s{\"rpm\": %.6f, \"edges\": %llu, \"bounce_edges\": %llu, "
+                "\"glitches\": %llu, \"glitches_masked\": %llu, \"pulse_us\": %.3f, "
                 "\"first_us\": %.4f, \"last_us\": %.4f}", c ? ", " : "", cfg_rpm[c],
                 (unsigned long long)hall[c].generated, (unsigned long long)hall[c].bounces,
+                (unsigned long long)hall[c].glitches, (unsigned long long)hall[c].glitches_masked,
+                hall[c].period_cycles > 0 ? pulse_us(&hall[c]) : 0.0,
                 (double)hall[c].first_cycle / CYCLES_PER_US, (double)hall[c].last_cycle / CYCLES_PER_US);
-    fprintf(o, "], \"adc\": {\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
+    fprintf(o, "], \"adc\": {\"rdy_t0_us\": %.4f, \"period_us\": %.4f, "
+            "\"generated\": %llu, \"read\": %llu, \"missed\": %llu, "
             "\"overrun\": %llu, \"error_bit_set\": %llu, \"code\": %u, \"status\": %u}, ",
+            adc_t0_cycles / CYCLES_PER_US, adc_period_cycles / CYCLES_PER_US,
             (unsigned long long)adc_generated, (unsigned long long)adc_read,
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
     fprintf(o, "\"i2c\": {\"khz\": %u, \"transfers\": %llu, \"nacks\": %llu, \"timeouts\": %llu, "
-            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f}",
+            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f, \"aborts\": %llu, "
+            "\"bus_held\": %s, \"last_release_after_us\": %.1f}",
             cfg_i2c_khz, (unsigned long long)i2c_transfers, (unsigned long long)i2c_nacks,
             (unsigned long long)i2c_timeouts, (double)stretch_max / CYCLES_PER_US,
-            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0);
+            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0,
+            (unsigned long long)bus_aborts, bus_held ? "true" : "false",
+            (double)bus_release_cycles / CYCLES_PER_US);
     if (cfg_profile) {
         fprintf(o, ", \"isr\": {");
         int first = 1;
@@ -484,7 +384,8 @@ static void usage(void)
     fprintf(stderr,
             "usage: harness FIRMWARE.elf [--primary-rpm R] [--secondary-rpm R] [--adc-code C]\n"
             "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
-            "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--profile]\n"
+            "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--duty F]\n"
+            "       [--glitch-hz N] [--glitch-us W] [--profile]\n"
             "       [--profile-from-us T]\n");
     exit(2);
 }
@@ -506,8 +407,12 @@ int main(int argc, char **argv)
         else if (OPT("--addr")) cfg_addr = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--start-us")) cfg_start_us = atof(v);
         else if (OPT("--pulse-us")) cfg_pulse_us = atof(v);
+        else if (OPT("--duty")) cfg_duty = atof(v);
+        else if (OPT("--glitch-hz")) cfg_glitch_hz = atof(v);
+        else if (OPT("--glitch-us")) cfg_glitch_us = atof(v);
         else if (OPT("--profile-from-us")) cfg_profile_from_us = atof(v);
         else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
+        else if (strcmp(a, "--legacy-pullups") == 0) cfg_legacy_pullups = 1;
         else if (strcmp(a, "--profile") == 0) cfg_profile = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -538,6 +443,7 @@ int main(int argc, char **argv)
     avr_init(avr);
     avr_load_firmware(avr, &fw);
     avr->log = LOG_WARNING;
+    avr->data[MCUSR_ADDR] = 0x01;  /* PORF: this is a power-on (RAM is zero in simavr) */
 
     /* The TWI peripheral is number 0 (not '0') on the mega328. */
     twi_vec = find_vector(TWI_VECTOR);
@@ -552,12 +458,16 @@ int main(int argc, char **argv)
     for (int c = 0; c < 2; c++) {
         hall[c].ch = c;
         hall[c].pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2 + c);
-        avr_raise_irq(hall[c].pin, 1);  /* sensor output idles high */
+        hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
+        drive_pin(hall[c].pin, 2 + c, 1);  /* sensor output idles high */
     }
     pin_dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 5);
-    avr_raise_irq(pin_dout, 1);
+    drive_pin(pin_dout, 5, 1);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 4),
                             adc_sclk_notify, NULL);
+    uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            uart_out_notify, NULL);
     start_generators((uint64_t)(cfg_start_us * CYCLES_PER_US));
 
     char line[512];
@@ -569,7 +479,8 @@ int main(int argc, char **argv)
             uint64_t target = (uint64_t)(atof(a1) * CYCLES_PER_US);
             run_until(target);
             fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
-        } else if (strcmp(cmd, "xfer") == 0) {
+        } else if (strcmp(cmd, "xfer") == 0 || strcmp(cmd, "abort") == 0) {
+            /* abort: like xfer, but the master stops clocking after n/2 bytes of the read */
             int nw = 0, nr = atoi(a2);
             if (a3[0])
                 run_until((uint64_t)(atof(a3) * CYCLES_PER_US));
@@ -581,8 +492,10 @@ int main(int argc, char **argv)
                 }
             if (nr < 0 || nr > (int)sizeof rd)
                 nr = 0;
-            int r = i2c_transfer(wr, nw, rd, nr);
-            if (r == 1) {
+            int r = i2c_transfer(wr, nw, rd, nr, strcmp(cmd, "abort") == 0 ? nr / 2 : -1);
+            if (r == 3) {
+                fprintf(proto_out, "busheld\n");
+            } else if (r == 1) {
                 i2c_nacks++;
                 fprintf(proto_out, "nack\n");
             } else if (r == 2) {
@@ -596,6 +509,36 @@ int main(int argc, char **argv)
                     fprintf(proto_out, "%02x", rd[i]);
                 fprintf(proto_out, "\n");
             }
+        } else if (strcmp(cmd, "uwrite") == 0) {
+            /* bytes from the host into UART0 (simavr paces them at the baud rate) */
+            if (a2[0])
+                run_until((uint64_t)(atof(a2) * CYCLES_PER_US));
+            if (strcmp(a1, "-") != 0)
+                for (const char *p = a1; p[0] && p[1]; p += 2) {
+                    unsigned b;
+                    sscanf(p, "%2x", &b);
+                    avr_raise_irq(uart_in, (uint32_t)b);
+                    uart_bytes_in++;
+                }
+            fprintf(proto_out, "ok\n");
+        } else if (strcmp(cmd, "uread") == 0) {
+            /* run until the MCU has sent a whole packet (0x00) or max_us passed; hand over
+             * whatever it sent: "ok <t_us> <hex|->" */
+            uint64_t limit = avr->cycle + (uint64_t)(atof(a1) * CYCLES_PER_US);
+            double w0 = now_s();
+            uint64_t c0 = avr->cycle;
+            while (!uart_packet_end && avr->cycle < limit && !crashed)
+                step();
+            wall_s += now_s() - w0;
+            wall_cycles += avr->cycle - c0;
+            fprintf(proto_out, "ok %.3f ", (double)avr->cycle / CYCLES_PER_US);
+            if (!uart_rx_n)
+                fprintf(proto_out, "-");
+            for (int i = 0; i < uart_rx_n; i++)
+                fprintf(proto_out, "%02x", uart_rx[i]);
+            fprintf(proto_out, "\n");
+            uart_rx_n = 0;
+            uart_packet_end = 0;
         } else if (strcmp(cmd, "gen") == 0) {
             gen_enabled = strcmp(a1, "off") != 0;
             if (gen_enabled)
@@ -603,22 +546,26 @@ int main(int argc, char **argv)
             fprintf(proto_out, "ok\n");
         } else if (strcmp(cmd, "reset") == 0) {
             avr_reset(avr);
+            /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
+            avr->data[MCUSR_ADDR] = (uint8_t)(a1[0] ? strtoul(a1, NULL, 16) : 0x08);
             in_isr = -1;
             cli_start = 0;
             /* The rig keeps turning through the reset: restart the generators (their
              * timers may have been cleared with the MCU's) and the AD7171 idles. */
             for (int c = 0; c < 2; c++) {
                 avr_cycle_timer_cancel(avr, hall_timer, &hall[c]);
+                avr_cycle_timer_cancel(avr, glitch_timer, &hall[c]);
                 hall[c].running = 0;
                 hall[c].step = 0;
-                avr_raise_irq(hall[c].pin, 1);
+                hall[c].sensor_level = hall[c].glitch_level = hall[c].out_level = 1;
+                drive_pin(hall[c].pin, 2 + c, 1);
             }
             avr_cycle_timer_cancel(avr, adc_timer, NULL);
             avr_cycle_timer_cancel(avr, adc_rdy_high, NULL);
             adc_running = 0;
             adc_bit = 24;
             adc_ready = 0;
-            avr_raise_irq(pin_dout, 1);
+            drive_pin(pin_dout, 5, 1);
             if (gen_enabled)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");

@@ -9,6 +9,22 @@
 
 #define SCLK_LOW() (PORTD &= (uint8_t)~_BV(PIN_ADC_SCLK_BIT))
 #define SCLK_HIGH() (PORTD |= _BV(PIN_ADC_SCLK_BIT))
+
+#if AD7171_ARDUINO_PULLUP
+/* Build variant (make pullup): DOUT read the common Arduino way, INPUT_PULLUP and
+ * digitalRead(). Slower (~4 us a bit) but it must work, and it is what much Arduino
+ * code does: the simavr harness has to model the AD7171 as an external driver over the
+ * MCU's pull-up for this to read anything but 1 (docs/firmware.md). */
+#include <Arduino.h>
+#define DOUT() ((uint8_t)digitalRead(5))
+
+void ad7171_init(void)
+{
+    SCLK_HIGH();
+    DDRD |= _BV(PIN_ADC_SCLK_BIT);
+    pinMode(5, INPUT_PULLUP);  /* D5 = PD5 */
+}
+#else
 #define DOUT() ((PIND >> PIN_ADC_DOUT_BIT) & 1u)
 
 void ad7171_init(void)
@@ -19,6 +35,7 @@ void ad7171_init(void)
     /* DOUT/RDY is a push-pull output: no pull-up (and none to fight). */
     PORTD &= (uint8_t)~_BV(PIN_ADC_DOUT_BIT);
 }
+#endif
 
 uint8_t ad7171_ready(void) { return !DOUT(); }
 

@@ -1,19 +1,45 @@
-/* Hall ISRs: every accepted falling edge gets a 0.5 us-resolution timestamp (reported in
- * us) and goes into the ring. An edge within the channel's lock-out window after the
- * last *accepted* edge is contact/magnet bounce and is dropped here, never queued. */
+/* Hall ISRs: every Hall pulse gets a 0.5 us-resolution timestamp of its falling edge
+ * (reported in us) and goes into the ring if it is a real pulse:
+ *   - a glitch (low for less than HALL_MIN_PULSE_US: an ignition spike) is dropped;
+ *   - a pulse starting within the lock-out after the end of the last *accepted* one
+ *     (ringing at release, magnet bounce) is dropped;
+ * each counted per cause in g_counters. The pin interrupts on any change: the falling
+ * edge records the time, the rising edge decides (so an event is queued when its pulse
+ * ends, with the time it started). The lock-out adapts to the speed in the main loop
+ * (capture_service): a quarter of the last accepted period, within [floor, cap], counted
+ * from the end of the accepted pulse, so it fits any pulse width below 3/4 of a period. */
 #include <avr/io.h>
 #include <avr/interrupt.h>
 #include "capture.h"
 #include "config.h"
+#include "counters.h"
 #include "pins.h"
 #include "ring.h"
 #include "tstamp.h"
 
 /* us at the last Timer1 overflow; only the overflow ISR writes it. */
 static volatile uint32_t t1_base_us;
-static volatile uint32_t last_primary_us, last_secondary_us;
-static volatile uint16_t lockout_primary_us, lockout_secondary_us;
-volatile uint16_t g_edges_rejected[2];
+
+typedef struct {
+    uint32_t fall_us;        /* falling edge of the pulse in progress */
+    uint32_t last_us;        /* falling edge of the last accepted pulse */
+    uint16_t end_us16;       /* rising edge of the last accepted pulse, low 16 bits */
+    uint16_t lockout_us;     /* current lock-out (main loop writes, ISR reads) */
+    uint8_t state;           /* IDLE, PULSE (fall seen, deciding at the rise), LOCKED */
+    uint8_t accepted;        /* accepted pulses (wraps): the loop derives the period */
+} hall_ch_t;
+static volatile hall_ch_t hall[2];
+enum { HALL_IDLE = 0, HALL_PULSE = 1, HALL_LOCKED = 2 };
+
+/* Main-loop side of the adaptive lock-out (never touched by ISRs). */
+typedef struct {
+    uint32_t seen_last_us;
+    uint32_t period_us;
+    uint16_t floor_us;  /* SET_DEBOUNCE */
+    uint8_t seen_accepted;
+    uint8_t have_last, have_period;
+} hall_loop_t;
+static hall_loop_t hall_loop[2];
 
 ISR(TIMER1_OVF_vect)
 {
@@ -29,6 +55,18 @@ static inline __attribute__((always_inline)) uint32_t now_us_locked(void)
     return tstamp_extend(t1_base_us, tcnt, tov);
 }
 
+/* The low 16 bits of now_us_locked(), with 16-bit arithmetic only (the rising edge
+ * needs no more: widths and lock-outs are < 65.5 ms). */
+static inline __attribute__((always_inline)) uint16_t now_us16_locked(void)
+{
+    uint16_t tcnt = TCNT1;
+    uint8_t tov = TIFR1 & _BV(TOV1);
+    uint16_t t = (uint16_t)((uint16_t)t1_base_us + (uint16_t)(tcnt >> 1));
+    if (tov && !(tcnt & 0x8000u))
+        t = (uint16_t)(t + (uint16_t)TSTAMP_US_PER_OVERFLOW);
+    return t;
+}
+
 uint32_t capture_now_us(void)
 {
     uint8_t sreg = SREG;
@@ -38,31 +76,95 @@ uint32_t capture_now_us(void)
     return t;
 }
 
-/* Both Hall ISRs: timestamp first (latency matters), then the lock-out test against
- * the last *accepted* edge, then queue. Inlined into each vector, no calls. */
-static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatile uint32_t *last_us,
-                                                            uint16_t lockout_us, uint8_t ch)
+/* Both Hall ISRs, inlined into each vector (no calls); `low` is the pin level now. The
+ * work is split between the two edges of a pulse so neither ISR is long:
+ *   fall: timestamp; inside the lock-out (from the end of the last accepted pulse)?
+ *         -> LOCKED (counted once), else PULSE;
+ *   rise: PULSE shorter than the minimum width -> glitch, else the event (its fall time).
+ * Two changes closer than the ISR latency make one interrupt, and the level tells which
+ * was seen last: a rise missed between two lows merges two pulses into one (keeping the
+ * first fall: at most the latency early, never a real pulse lost); a fall missed between
+ * two highs was a pulse shorter than the latency: a glitch. Widths are taken mod 2^16 us:
+ * a pulse longer than 65.5 ms (below ~46 rpm at 5 % duty) is misjudged with probability
+ * 50/65536, the price of a short ISR. */
+static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatile hall_ch_t *h,
+                                                            uint8_t low, uint8_t ch)
 {
-    uint32_t t = now_us_locked();
-    uint32_t since_us = t - *last_us;
-    /* Lock-outs are u16: only the low half needs a compare (fewer registers to save). */
-    if (!(uint16_t)(since_us >> 16) && (uint16_t)since_us < lockout_us) {
-        g_edges_rejected[ch]++;
+    if (low) {
+        if (h->state != HALL_IDLE)
+            return;  /* the rise in between was missed: one longer pulse */
+        uint32_t t = now_us_locked();
+        if (!(uint16_t)((t - h->last_us) >> 16) &&
+            (uint16_t)((uint16_t)t - h->end_us16) < h->lockout_us) {
+            g_counters.lockout[ch]++;
+            h->state = HALL_LOCKED;
+            return;
+        }
+        h->fall_us = t;
+        h->state = HALL_PULSE;
         return;
     }
-    *last_us = t;
-    ring_push(&g_ring, tag, t, 0, 0);
+    uint8_t st = h->state;
+    h->state = HALL_IDLE;
+    if (st != HALL_PULSE) {
+        if (st == HALL_IDLE)  /* high again before we saw it low: shorter than the latency */
+            g_counters.glitch[ch]++;
+        return;
+    }
+    uint16_t t16 = now_us16_locked();
+    uint32_t fall = h->fall_us;
+    if ((uint16_t)(t16 - (uint16_t)fall) < HALL_MIN_PULSE_US) {
+        g_counters.glitch[ch]++;
+        return;
+    }
+    h->last_us = fall;
+    h->end_us16 = t16;
+    h->accepted++;
+    ring_push(&g_ring, tag, fall, 0, 0);
 }
 
-ISR(INT0_vect) { hall_edge(TAG_PRIMARY, &last_primary_us, lockout_primary_us, 0); }
-ISR(INT1_vect) { hall_edge(TAG_SECONDARY, &last_secondary_us, lockout_secondary_us, 1); }
+ISR(INT0_vect) { hall_edge(TAG_PRIMARY, &hall[0], !(PIND & _BV(PIN_HALL_PRIMARY_BIT)), 0); }
+ISR(INT1_vect) { hall_edge(TAG_SECONDARY, &hall[1], !(PIND & _BV(PIN_HALL_SECONDARY_BIT)), 1); }
 
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us)
 {
+    hall_loop[0].floor_us = primary_us;
+    hall_loop[1].floor_us = secondary_us;
+    capture_service();
+}
+
+/* AD7171 RDY (DOUT/RDY falling on PD5 = PCINT21): time-stamped here, within the
+ * interrupt latency of the end of the conversion, instead of whenever the main loop
+ * notices (up to a loop pass later). The pin change interrupt is masked from RDY until
+ * the result has been clocked out: the data bits toggle the same pin. */
+static volatile uint32_t adc_rdy_us;
+static volatile uint8_t adc_rdy_seen;
+
+ISR(PCINT2_vect)
+{
+    if (PIND & _BV(PIN_ADC_DOUT_BIT))
+        return;
+    adc_rdy_us = now_us_locked();
+    adc_rdy_seen = 1;
+    PCMSK2 = 0;
+}
+
+uint32_t capture_adc_rdy_us(void)
+{
     uint8_t sreg = SREG;
     cli();
-    lockout_primary_us = primary_us;
-    lockout_secondary_us = secondary_us;
+    uint32_t t = adc_rdy_seen ? adc_rdy_us : now_us_locked();
+    adc_rdy_seen = 0;
+    SREG = sreg;
+    return t;
+}
+
+void capture_adc_rearm(void)
+{
+    uint8_t sreg = SREG;
+    cli();
+    PCIFR = _BV(PCIF2);  /* forget the data bits' changes */
+    PCMSK2 = _BV(PIN_ADC_DOUT_BIT);  /* PCINT21 is PD5 */
     SREG = sreg;
 }
 
@@ -74,18 +176,41 @@ void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status)
     SREG = sreg;
 }
 
-/* A channel quiet for more than 2^31 us would see (t - last) wrap to a small number
- * and lose one genuine edge; keep `last` within reach. */
+/* Main loop: the adaptive lock-out (a quarter of the last period between two accepted
+ * pulses, within [floor, cap]), and the last accepted time kept within reach of the u32
+ * wrap (a channel quiet for more than 2^31 us would see (t - last) wrap small). The
+ * loop passes far more often than pulses come, so it sees every accepted pulse; if it
+ * ever missed one, that period is skipped. */
 void capture_service(void)
 {
-    uint8_t sreg = SREG;
-    cli();
-    uint32_t t = now_us_locked();
-    if ((uint32_t)(t - last_primary_us) > 0x40000000ul)
-        last_primary_us = t - 0x10000ul;
-    if ((uint32_t)(t - last_secondary_us) > 0x40000000ul)
-        last_secondary_us = t - 0x10000ul;
-    SREG = sreg;
+    for (uint8_t c = 0; c < 2; c++) {
+        volatile hall_ch_t *h = &hall[c];
+        hall_loop_t *l = &hall_loop[c];
+        uint8_t sreg = SREG;
+        cli();
+        uint32_t t = now_us_locked();
+        if ((uint32_t)(t - h->last_us) > 0x40000000ul)
+            h->last_us = t - 0x10000ul;  /* >= 65.5 ms ago: out of any lock-out */
+        uint8_t acc = h->accepted;
+        uint32_t last = h->last_us;
+        SREG = sreg;
+        if (acc != l->seen_accepted) {
+            if ((uint8_t)(acc - l->seen_accepted) == 1 && l->have_last) {
+                l->period_us = last - l->seen_last_us;
+                l->have_period = 1;
+            }
+            l->seen_accepted = acc;
+            l->seen_last_us = last;
+            l->have_last = 1;
+        }
+        uint32_t quarter = l->have_period ? l->period_us >> 2 : 0u;
+        uint16_t lock = quarter > LOCKOUT_CAP_US ? (uint16_t)LOCKOUT_CAP_US : (uint16_t)quarter;
+        if (lock < l->floor_us)
+            lock = l->floor_us;
+        cli();
+        h->lockout_us = lock;
+        SREG = sreg;
+    }
 }
 
 void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
@@ -102,10 +227,16 @@ void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
     TIFR1 = _BV(TOV1);
     TIMSK1 = _BV(TOIE1);
 
-    lockout_primary_us = lockout_primary;
-    lockout_secondary_us = lockout_secondary;
-    /* First edge always accepted: pretend the last one was 65.5 ms ago (> any window). */
-    last_primary_us = last_secondary_us = (uint32_t)0 - 0x10000ul;
+    for (uint8_t c = 0; c < 2; c++) {
+        hall_loop[c].floor_us = hall[c].lockout_us = c ? lockout_secondary : lockout_primary;
+        hall_loop[c].have_last = hall_loop[c].have_period = 0;
+        hall_loop[c].seen_accepted = 0;
+        hall[c].accepted = 0;
+        /* First pulse always accepted: the last one was 65.5 ms before boot. */
+        hall[c].last_us = (uint32_t)0 - 0x10000ul;
+        hall[c].end_us16 = 0;
+        hall[c].state = HALL_IDLE;
+    }
 
     DDRD &= (uint8_t)~(_BV(PIN_HALL_PRIMARY_BIT) | _BV(PIN_HALL_SECONDARY_BIT));
 #if HALL_INTERNAL_PULLUP
@@ -113,9 +244,15 @@ void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
 #else
     PORTD &= (uint8_t)~(_BV(PIN_HALL_PRIMARY_BIT) | _BV(PIN_HALL_SECONDARY_BIT));
 #endif
-    /* Falling edge on INT0 and INT1 (the magnet pulls the sensor output low). */
-    EICRA = _BV(ISC01) | _BV(ISC11);
+    /* Any change on INT0 and INT1: the falling edge (magnet pulls the output low) times
+     * the pulse, the rising edge measures its width. */
+    EICRA = _BV(ISC00) | _BV(ISC10);
     EIFR = _BV(INTF0) | _BV(INTF1);
     EIMSK = _BV(INT0) | _BV(INT1);
+    /* AD7171 RDY on PD5: pin change interrupt group 2. */
+    adc_rdy_seen = 0;
+    PCIFR = _BV(PCIF2);
+    PCMSK2 = _BV(PIN_ADC_DOUT_BIT);
+    PCICR |= _BV(PCIE2);
     SREG = sreg;
 }

@@ -11,11 +11,15 @@ void capture_init(uint16_t lockout_primary_us, uint16_t lockout_secondary_us);
 uint32_t capture_now_us(void);
 /* Main loop housekeeping (keeps the lock-out logic right across 2^32 us). */
 void capture_service(void);
+/* Time of the AD7171's last RDY falling edge (pin change ISR), or now if none was seen;
+ * then re-arm the RDY interrupt once the result was clocked out. */
+uint32_t capture_adc_rdy_us(void);
+void capture_adc_rearm(void);
 /* Enqueue an ADC conversion from the main loop (interrupts briefly off). */
 void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status);
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us);
 
-extern volatile uint16_t g_edges_rejected[2];  /* bounce counters, diagnostics */
+/* Rejected edges are counted per cause in g_counters (counters.h). */
 
 #ifdef __cplusplus
 }

@@ -18,7 +18,7 @@ static inline uint8_t cmd_length(uint8_t op)
 {
     switch (op) {
     case OP_POLL: case OP_CLEAR_COUNTERS: case OP_INFO: return 3;
-    case OP_ACK_POLL: return 4;
+    case OP_ACK_POLL: return 6;  /* v2: op, u16 boot_id, u8 seq, crc */
     case OP_SET_DEBOUNCE: return 7;
     default: return 0;
     }

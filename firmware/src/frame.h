@@ -1,17 +1,17 @@
-/* v1 frame encoding (docs/protocol.md). Pure C: compiled for the AVR and natively,
- * where test/native checks it byte for byte against dyno/protocol/vectors/v1.hex. */
+/* v2 frame encoding (docs/protocol.md). Pure C: compiled for the AVR and natively,
+ * where test/native checks it byte for byte against dyno/protocol/vectors/v2.hex. */
 #ifndef DYNO_FRAME_H
 #define DYNO_FRAME_H
 #include <stdint.h>
 #include "event.h"
 
-#define FRAME_VERSION 1u
+#define FRAME_VERSION 2u
 #define FRAME_MAX 32u          /* the Nano's Wire/TWI buffer: no read is longer */
-#define FRAME_HEADER_LEN 11u
-#define FRAME_CRC_LEN 2u
-#define FRAME_PAYLOAD_MAX (FRAME_MAX - FRAME_HEADER_LEN - FRAME_CRC_LEN)  /* 19 */
-#define FRAME_EVENTS_MAX 6u    /* 19 / 3: six Hall edges */
-#define FRAME_INFO_LEN 22u
+#define FRAME_HEADER_LEN 13u
+#define FRAME_CRC_LEN 4u       /* CRC-32C */
+#define FRAME_PAYLOAD_MAX (FRAME_MAX - FRAME_HEADER_LEN - FRAME_CRC_LEN)  /* 15 */
+#define FRAME_EVENTS_MAX 5u    /* 15 / 3: five Hall edges */
+#define FRAME_INFO_LEN 32u
 
 #define KIND_DATA 0x44u  /* 'D' */
 #define KIND_INFO 0x49u  /* 'I' */
@@ -19,26 +19,36 @@
 #define FLAG_RESET 0x01u     /* first frame since boot */
 #define FLAG_MORE 0x02u      /* events still queued behind this frame */
 #define FLAG_OVERFLOW 0x04u  /* ring overflowed since the last CLEAR_COUNTERS */
+#define FLAG_CAUSE_SHIFT 4u  /* bits 4..7: reset cause (MCUSR's PORF, EXTRF, BORF, WDRF) */
 
 typedef struct {
     uint8_t seq, flags;
+    uint16_t boot_id;
     uint8_t fw_major, fw_minor, fw_patch;
-    uint16_t boot_count;
     uint32_t uptime_ms;
     uint16_t debounce_primary_us, debounce_secondary_us;
+    uint16_t lockout[2], glitch[2];
+    uint8_t twi_timeouts, bus_errors;
 } frame_info_t;
 
-static inline uint8_t frame_event_len(uint8_t tag) { return tag == TAG_ADC ? 6u : 3u; }
+static inline uint8_t frame_event_len(uint8_t tag)
+{
+    return (uint8_t)(tag & (uint8_t)~TAG_GAP) == TAG_ADC ? 6u : 3u;
+}
 
 /* How many of the n events (ev[i] from get(ctx, i)) fit one frame, by size and by the
  * i16 dt from the first event's time. */
 typedef const dyno_event_t *(*frame_event_get_t)(const void *ctx, uint8_t i);
 uint8_t frame_fit(frame_event_get_t get, const void *ctx, uint8_t n);
 
-/* Writes a full 32-byte data frame (zero padded) with the first n events (which must
- * fit); t0 = first event's time, or now_us when n == 0. Returns L. */
-uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t dropped,
-                          uint32_t now_us, frame_event_get_t get, const void *ctx, uint8_t n);
+/* Writes a full 32-byte data frame (zero padded) with the first n events (frame_fit's
+ * count); t0 = first event's time, or now_us when n == 0. Returns L. Bounded by
+ * construction: an event that would not fit the 32 bytes (events changing under a
+ * racing reader) ends the frame, never the buffer; *n_done (if not NULL) gets the
+ * number of events actually encoded. */
+uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boot_id,
+                          uint16_t dropped, uint32_t now_us, frame_event_get_t get,
+                          const void *ctx, uint8_t n, uint8_t *n_done);
 
 uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info);
 

@@ -1,4 +1,4 @@
-/* TWI slave for the v1 protocol: one combined transaction per poll,
+/* TWI slave for the v2 protocol: one combined transaction per poll,
  *   S addr+W <command> Sr addr+R <32 bytes> P
  *
  * Why not Wire: Wire's onRequest makes the sketch copy the reply into Wire's buffer
@@ -11,6 +11,7 @@
 #include <avr/interrupt.h>
 #include <util/twi.h>
 #include "cmd.h"
+#include "counters.h"
 #include "crc16.h"
 #include "frame.h"
 #include "link_i2c.h"
@@ -24,13 +25,50 @@ static uint8_t rx_len;
 static uint16_t rx_crc;
 static const uint8_t *tx_buf;
 static uint8_t tx_pos;
-volatile uint16_t g_i2c_bus_errors;
+
+static uint8_t address_;
 
 void link_i2c_init(uint8_t address)
 {
+    address_ = address;
     TWAR = (uint8_t)(address << 1);  /* no general call */
     TWSR = 0;
     TWCR = TWCR_ACK;
+}
+
+/* Slave timeout (like SMBus's 25 ms): a master that stops clocking mid-transfer leaves
+ * a transmitting slave driving SDA (a 0 bit) for ever, and the bus dead. The main loop
+ * watches the transfer's progress (no cost in the ISR); 25 ms without a TWI event while
+ * a transfer is open disables the TWI unit (releasing SDA and SCL) and restarts it. The
+ * frame that was being read counts as sent: the host did not acknowledge it, so it is
+ * served again. */
+void link_i2c_service(uint16_t now_ms)
+{
+    static uint8_t seen_pos, seen_len, watching;
+    static uint16_t since_ms;
+    uint8_t busy = g_proto.tx != PROTO_NONE || rx_len != 0;
+    if (!busy) {
+        watching = 0;
+        return;
+    }
+    if (!watching || tx_pos != seen_pos || rx_len != seen_len) {
+        watching = 1;
+        seen_pos = tx_pos;
+        seen_len = rx_len;
+        since_ms = now_ms;
+        return;
+    }
+    if ((uint16_t)(now_ms - since_ms) < I2C_SLAVE_TIMEOUT_MS)
+        return;
+    uint8_t sreg = SREG;
+    cli();
+    TWCR = 0;  /* TWI off: SDA and SCL released */
+    rx_len = 0;
+    proto_end_read(&g_proto);
+    g_counters.twi_timeouts++;
+    link_i2c_init(address_);
+    SREG = sreg;
+    watching = 0;
 }
 
 ISR(TWI_vect)
@@ -72,7 +110,7 @@ ISR(TWI_vect)
         proto_end_read(&g_proto);
         break;
     case TW_BUS_ERROR:             /* 0x00 illegal START/STOP: release the bus */
-        g_i2c_bus_errors++;
+        g_counters.bus_errors++;
         TWCR = TWCR_ACK | _BV(TWSTO);
         return;
     default:

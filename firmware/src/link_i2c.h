@@ -6,7 +6,8 @@
 extern "C" {
 #endif
 void link_i2c_init(uint8_t address);
-extern volatile uint16_t g_i2c_bus_errors;
+/* Main loop: the 25 ms slave timeout (releases a bus a master left mid-transfer). */
+void link_i2c_service(uint16_t now_ms);
 #ifdef __cplusplus
 }
 #endif

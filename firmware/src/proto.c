@@ -5,15 +5,17 @@
 
 proto_t g_proto;
 
+/* Events from a fixed ring index: a snapshot of the tail, never the live one (the TWI
+ * ISR may retire, i.e. move the tail, while the main loop encodes). */
 typedef struct {
     const ring_t *ring;
-    uint8_t offset;
+    uint8_t first;
 } ring_view_t;
 
 static const dyno_event_t *view_get(const void *ctx, uint8_t i)
 {
     const ring_view_t *v = (const ring_view_t *)ctx;
-    return ring_peek(v->ring, (uint8_t)(v->offset + i));
+    return &v->ring->ev[(uint8_t)(v->first + i) & RING_MASK];
 }
 
 /* A buffer with no role. With 5 buffers and at most 4 roles one always exists. */
@@ -25,24 +27,31 @@ static uint8_t free_buffer(const proto_t *p)
     return PROTO_NONE;  /* unreachable */
 }
 
-/* Encode the data frame that starts `offset` events after the ring tail. */
+/* Encode the data frame that starts `offset` events after the ring tail.
+ *
+ * Tail, head and the drop counters are taken together with interrupts off. If the ISR
+ * retires meanwhile, slots of this snapshot may be refilled by producers while we read
+ * them: the frame is then garbage, but `gen` changed, so the caller never publishes it,
+ * and the encoder is bounded by the buffer whatever it reads. */
 static uint8_t build(proto_t *p, uint8_t buf, uint8_t seq, uint8_t offset, uint8_t reset,
                      uint32_t now_us)
 {
     ring_t *r = p->ring;
-    uint8_t head = r->head;  /* one byte: a consistent snapshot */
+    uint8_t head, tail, overflow;
     uint16_t dropped;
-    uint8_t overflow;
     PORT_CRITICAL_BEGIN();
+    head = r->head;
+    tail = r->tail;
     dropped = r->dropped;
     overflow = r->overflow;
     PORT_CRITICAL_END();
-    uint8_t avail = (uint8_t)((uint8_t)(head - r->tail) - offset);
-    ring_view_t view = {r, offset};
+    uint8_t count = (uint8_t)(head - tail);
+    uint8_t avail = count > offset ? (uint8_t)(count - offset) : 0u;
+    ring_view_t view = {r, (uint8_t)(tail + offset)};
     uint8_t n = frame_fit(view_get, &view, avail);
     uint8_t flags = (uint8_t)((reset ? FLAG_RESET : 0u) | (avail > n ? FLAG_MORE : 0u) |
-                              (overflow ? FLAG_OVERFLOW : 0u));
-    frame_encode_data(p->pool[buf], seq, flags, dropped, now_us, view_get, &view, n);
+                              (overflow ? FLAG_OVERFLOW : 0u) | p->cause_flags);
+    frame_encode_data(p->pool[buf], seq, flags, p->boot_id, dropped, now_us, view_get, &view, n, &n);
     proto_meta_t *m = &p->meta[buf];
     m->n = n;
     m->head = head;
@@ -53,45 +62,67 @@ static uint8_t build(proto_t *p, uint8_t buf, uint8_t seq, uint8_t offset, uint8
 
 static void build_info(proto_t *p, uint8_t buf, uint32_t uptime_ms)
 {
-    frame_info_t info = {p->cur_seq, 0, FW_VERSION_MAJOR, FW_VERSION_MINOR, FW_VERSION_PATCH,
-                         p->boot_count, uptime_ms, p->debounce_primary_us,
-                         p->debounce_secondary_us};
+    const dyno_counters_t *c = p->counters;
+    frame_info_t info;
+    info.seq = p->cur_seq;
+    info.flags = p->cause_flags;
+    info.boot_id = p->boot_id;
+    info.fw_major = FW_VERSION_MAJOR;
+    info.fw_minor = FW_VERSION_MINOR;
+    info.fw_patch = FW_VERSION_PATCH;
+    info.uptime_ms = uptime_ms;
+    info.debounce_primary_us = p->debounce_primary_us;
+    info.debounce_secondary_us = p->debounce_secondary_us;
+    PORT_CRITICAL_BEGIN();  /* u16 counters written by ISRs */
+    for (uint8_t k = 0; k < 2; k++) {
+        info.lockout[k] = c->lockout[k];
+        info.glitch[k] = c->glitch[k];
+    }
+    info.twi_timeouts = c->twi_timeouts;
+    info.bus_errors = c->bus_errors;
+    PORT_CRITICAL_END();
     frame_encode_info(p->pool[buf], &info);
 }
 
-void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us,
-                uint16_t deb_s_us, uint32_t now_us)
+void proto_init(proto_t *p, ring_t *ring, const dyno_counters_t *counters, uint16_t boot_id,
+                uint8_t reset_cause, uint16_t deb_p_us, uint16_t deb_s_us, uint32_t now_us)
 {
     uint8_t *raw = (uint8_t *)p;
     for (unsigned i = 0; i < sizeof *p; i++)
         raw[i] = 0;
     p->ring = ring;
-    p->boot_count = boot_count;
+    p->counters = counters;
+    p->boot_id = boot_id;
+    p->boot_hi = (uint8_t)(boot_id >> 8);
+    p->boot_lo = (uint8_t)boot_id;
+    p->cause_flags = (uint8_t)((reset_cause & 0x0Fu) << FLAG_CAUSE_SHIFT);
     p->debounce_primary_us = deb_p_us;
     p->debounce_secondary_us = deb_s_us;
     p->cur = 0;
     p->nxt = p->info = p->tx = PROTO_NONE;
-    build(p, 0, 0, 0, 1, now_us);
+    p->cur_n = build(p, 0, 0, 0, 1, now_us);
     p->info = 1;
     build_info(p, 1, 0);
+}
+
+uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondary_us)
+{
+    uint8_t pending;
+    PORT_CRITICAL_BEGIN();
+    pending = p->debounce_pending;
+    p->debounce_pending = 0;
+    *primary_us = p->debounce_primary_us;
+    *secondary_us = p->debounce_secondary_us;
+    PORT_CRITICAL_END();
+    if (pending)
+        p->info_dirty = 1;
+    return pending;
 }
 
 void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
 {
     ring_t *r = p->ring;
     uint8_t gen, seq, cur, buf, reset;
-
-    /* 0. A SET_DEBOUNCE from the ISR: apply it here (the hook may take its time). */
-    if (p->debounce_pending) {
-        uint16_t dp, ds;
-        PORT_CRITICAL_BEGIN();
-        p->debounce_pending = 0;
-        dp = p->debounce_primary_us;
-        ds = p->debounce_secondary_us;
-        PORT_CRITICAL_END();
-        proto_hook_set_debounce(dp, ds);
-        p->info_dirty = 1;
-    }
 
     /* 1. The unsent current frame takes any new events (or a fresh t0 when empty). */
     if (!p->cur_sent) {
@@ -105,10 +136,11 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
             reset = !p->retired_any;
             buf = free_buffer(p);
             PORT_CRITICAL_END();
-            build(p, buf, seq, 0, reset, now_us);
+            uint8_t n = build(p, buf, seq, 0, reset, now_us);
             PORT_CRITICAL_BEGIN();
             if (gen == p->gen && !p->cur_sent) {
                 p->cur = buf;
+                p->cur_n = n;
                 p->nxt = PROTO_NONE;  /* it followed the old cur's events */
                 p->nxt_valid = 0;
                 p->gen++;
@@ -125,13 +157,14 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
         PORT_CRITICAL_BEGIN();
         gen = p->gen;
         seq = (uint8_t)(p->cur_seq + 1u);
-        offset = p->meta[p->cur].n;
+        offset = p->cur_n;
         buf = free_buffer(p);
         PORT_CRITICAL_END();
-        build(p, buf, seq, offset, 0, now_us);
+        uint8_t n = build(p, buf, seq, offset, 0, now_us);
         PORT_CRITICAL_BEGIN();
         if (gen == p->gen) {  /* cur unchanged, so nxt still follows it */
             p->nxt = buf;
+            p->nxt_n = n;
             p->nxt_valid = 1;
         }
         PORT_CRITICAL_END();

@@ -1,4 +1,4 @@
-/* The v1 link state machine (docs/protocol.md "Acknowledge and re-send"). Pure C.
+/* The v2 link state machine (docs/protocol.md "Acknowledge and re-send"). Pure C.
  *
  * The device holds a *current* frame and a pre-built *next* frame, both encoded with
  * CRC in a small buffer pool. The link ISR never encodes anything: a read just points
@@ -17,6 +17,7 @@
 #define DYNO_PROTO_H
 #include <stdint.h>
 #include "cmd.h"
+#include "counters.h"
 #include "frame.h"
 #include "ring.h"
 
@@ -34,7 +35,12 @@ typedef struct {
     uint8_t pool[PROTO_NBUF][FRAME_MAX];
     proto_meta_t meta[PROTO_NBUF];
     ring_t *ring;
+    const dyno_counters_t *counters;
+    uint16_t boot_id;              /* this boot's identity: in every frame, echoed by ACK_POLL */
+    uint8_t boot_hi, boot_lo;      /* its bytes, for the ISR's compare */
+    uint8_t cause_flags;           /* reset cause, already shifted into flags bits 4..7 */
     volatile uint8_t cur, nxt, info, tx;
+    volatile uint8_t cur_n, nxt_n;  /* meta[cur].n, meta[nxt].n: the ISR retires without indexing */
     volatile uint8_t cur_seq;
     volatile uint8_t cur_sent;     /* a byte of cur has gone out: frozen */
     volatile uint8_t nxt_valid;
@@ -42,9 +48,8 @@ typedef struct {
     volatile uint8_t retired_any;  /* no RESET flag once the first frame was acknowledged */
     volatile uint8_t gen;          /* bumped whenever cur changes */
     volatile uint8_t info_dirty;
-    volatile uint8_t debounce_pending;  /* SET_DEBOUNCE seen in the ISR, applied by the loop */
+    volatile uint8_t debounce_pending;  /* SET_DEBOUNCE seen in the ISR, taken by the loop */
     uint16_t debounce_primary_us, debounce_secondary_us;  /* mirrored for INFO */
-    uint16_t boot_count;
     uint32_t info_built_ms;
     /* diagnostics, not on the wire: commands ignored (bad CRC/length/op) */
     uint8_t cmds_bad;
@@ -52,12 +57,12 @@ typedef struct {
 
 extern proto_t g_proto;
 
-/* Hook the firmware (or a test) provides: apply new Hall lock-out windows. Called
- * from proto_service() in the main loop, never from the ISR. */
-void proto_hook_set_debounce(uint16_t primary_us, uint16_t secondary_us);
+void proto_init(proto_t *p, ring_t *ring, const dyno_counters_t *counters, uint16_t boot_id,
+                uint8_t reset_cause, uint16_t deb_p_us, uint16_t deb_s_us, uint32_t now_us);
 
-void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us,
-                uint16_t deb_s_us, uint32_t now_us);
+/* Main loop: 1 and the new Hall lock-out windows if a SET_DEBOUNCE arrived since the
+ * last call (the caller applies them: proto does not know the capture module). */
+uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondary_us);
 
 /* The ISR-side functions below are inline and call nothing: in an AVR ISR any call
  * makes gcc save every call-clobbered register, on every TWI interrupt. */
@@ -66,7 +71,8 @@ void proto_init(proto_t *p, ring_t *ring, uint16_t boot_count, uint16_t deb_p_us
  * next frame becomes current. */
 static inline __attribute__((always_inline)) void proto_retire(proto_t *p)
 {
-    ring_retire(p->ring, p->meta[p->cur].n);
+    ring_retire(p->ring, p->cur_n);
+    p->cur_n = p->nxt_n;
     p->cur = p->nxt;
     p->nxt = PROTO_NONE;
     p->nxt_valid = 0;
@@ -87,9 +93,12 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
     }
     switch (buf[0]) {
     case OP_ACK_POLL:
-        /* Retire only what the host has seen; a next frame must be ready, or the host
-         * would have nothing new to read (it then gets a stale repeat and re-acks). */
-        if (buf[1] == p->cur_seq && p->cur_sent && p->nxt_valid)
+        /* Retire only what the host has seen of *this* boot (an ACK written to the boot
+         * before a reset must not retire the new boot's frame of the same seq); a next
+         * frame must be ready, or the host would have nothing new to read (it then gets
+         * a stale repeat and re-acks). */
+        if (!(uint8_t)((buf[1] ^ p->boot_hi) | (buf[2] ^ p->boot_lo) | (buf[3] ^ p->cur_seq)) &&
+            p->cur_sent && p->nxt_valid)
             proto_retire(p);
         break;
     case OP_SET_DEBOUNCE:

@@ -5,7 +5,9 @@
  * retires them by moving `tail`. Indices are free-running u8 (RING_SIZE <= 128 divides
  * 256), so count = head - tail needs no wrap test and every index access is one byte,
  * i.e. atomic on the AVR. A full ring drops the *new* event and counts it: old events
- * are never overwritten, so what the host already expects stays consistent. */
+ * are never overwritten, so what the host already expects stays consistent; the next
+ * event that gets in carries TAG_GAP, so the host knows exactly where the stream has a
+ * hole and never takes a period across it. */
 #ifndef DYNO_RING_H
 #define DYNO_RING_H
 #include <stdint.h>
@@ -23,6 +25,7 @@ typedef struct {
     volatile uint8_t tail;      /* oldest event not yet acknowledged by the host */
     volatile uint8_t overflow;  /* 1 once an event was dropped, until CLEAR_COUNTERS */
     volatile uint16_t dropped;  /* events dropped since boot or CLEAR_COUNTERS (wraps) */
+    volatile uint8_t gap;       /* TAG_GAP once an event was dropped, until the next push */
 } ring_t;
 
 extern ring_t g_ring;
@@ -38,13 +41,15 @@ static inline uint8_t ring_push(ring_t *r, uint8_t tag, uint32_t t_us, uint16_t 
     if ((uint8_t)(h - r->tail) >= RING_SIZE) {
         r->dropped++;
         r->overflow = 1;
+        r->gap = TAG_GAP;
         return 0;
     }
     dyno_event_t *e = &r->ev[h & RING_MASK];
     e->t_us = t_us;
     e->code = code;
     e->status = status;
-    e->tag = tag;
+    e->tag = (uint8_t)(tag | r->gap);
+    r->gap = 0;
     r->head = (uint8_t)(h + 1u);  /* publish only after the entry is complete */
     return 1;
 }

@@ -36,7 +36,7 @@ def test_72_minute_soak_crosses_the_wrap_without_a_glitch(tmp_path):
     async def soak():
         loop = asyncio.get_running_loop()
         rig = SimRig(loop.time, seed=7)
-        reader = make_reader("v1", I2CTransport(rig.bus, 0x03))
+        reader = make_reader("v2", I2CTransport(rig.bus, 0x03))
         poller = Poller(reader, poll_hz=100.0)
         writer = RunWriter(tmp_path / "soak", {"mode": "soak"})
         poller.listeners.append(writer.events)

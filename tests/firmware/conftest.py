@@ -33,10 +33,12 @@ def toolchain():
 
 @pytest.fixture(scope="session")
 def firmware_build(toolchain):
-    """Builds the firmware, the v0 sketch and the simavr harness; returns their paths."""
-    res = _make("firmware", "sim")
+    """Builds the firmware, its INPUT_PULLUP variant, the v0 sketch and the simavr harness;
+    returns their paths."""
+    res = _make("firmware", "sim", "pullup", "hang")
     assert res.returncode == 0, res.stdout + res.stderr
     return {"elf": BUILD / "dyno_nano.elf", "v0_elf": BUILD / "v0_sketch.elf",
+            "pullup_elf": BUILD / "dyno_nano_pullup.elf", "hang_elf": BUILD / "dyno_nano_hang.elf",
             "harness": BUILD / "harness", "make_output": res.stdout}
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from dyno.acquisition.reader import make_reader
 from dyno.cli.firmware_sim_cmd import simulate
-from dyno.protocol import v1
+from dyno.protocol import v1, v2
 from dyno.transports.simavr import SimavrTransport
 
 pytestmark = pytest.mark.firmware
@@ -31,9 +31,10 @@ def _assert_lossless(rep):
 def test_firmware_fil_60s_bounce_and_corruption(firmware_build, sim_args):
     """The issue's acceptance run, once: 60 simulated s at 3800/7600 rpm with a 125 Hz
     ADC, bounce on both Hall channels, and 5 % of transfers corrupted between harness
-    and host (read bit flips, command bit flips, truncation, NACK after send)."""
+    and host (read bit flips, command bit flips, truncation, NACK after send), the host
+    polling at random intervals (150 Hz +- 50 %)."""
     rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "60",
-                            "--primary-rpm", "3800", "--secondary-rpm", "7600",
+                            "--primary-rpm", "3800", "--secondary-rpm", "7600", "--poll-jitter", "0.5",
                             "--adc-hz", "125", "--bounce", "--fault-rate", "0.05", "--seed", "4"))
     _assert_lossless(rep)
     # Counts: ~3800 + ~7600 edges and ~7500 conversions, every one delivered exactly once.
@@ -72,32 +73,55 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
     # The AD7171's error bit is kept and passed on, never acted on.
     assert rep["adc_error_flags"] == rep["events"]["adc"]["expected"] // 5
     dev = rep["device"]
-    assert dev["fw_version"] == "1.0.0" and dev["boot_count"] == 1
-    assert dev["debounce_primary_us"] == 10000 and dev["debounce_secondary_us"] == 6000
+    assert dev["fw_version"] == "2.0.0" and dev["reset_cause"] == "power-on"
+    assert dev["debounce_primary_us"] == 1000 and dev["debounce_secondary_us"] == 1000  # lock-out floors
     assert 3500 < dev["uptime_ms"] < 5000
+    assert dev["bus_errors"] == 0 and dev["twi_timeouts"] == 0
+    assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
+                                     "secondary": {"lockout": 0, "glitch": 0}}
+    assert [b["cause_name"] for b in rep["boots"]] == ["power-on"]
 
 
-def test_firmware_fil_watchdog_style_reset(firmware_build, sim_args):
-    """After a reset the host sees RESET + a new boot count, starts a new time epoch and
-    carries on (events queued in the MCU at the reset are gone with its RAM)."""
-    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "3",
-                            "--reset-at", "1.5"))
-    assert rep["frames"]["device_resets"] == 1
-    assert rep["device"]["boot_count"] == 2
+def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
+    """20 watchdog-style resets of the real ELF at random instants, the first within 20 ms of
+    the first frame: each one is a new boot id with cause "watchdog" (no EEPROM involved),
+    the host starts a new time epoch, no period spans a reset, and it carries on (events
+    queued in the MCU at a reset are gone with its RAM)."""
+    import random
+
+    rng = random.Random(20)
+    at = [0.015]
+    while len(at) < 20:  # a boot must live past a poll to serve a frame at all: >= 50 ms apart
+        t = rng.uniform(0.1, 6.0)
+        if all(abs(t - u) >= 0.05 for u in at):
+            at.append(t)
+    at = [f"{t:.4f}" for t in sorted(at)]
+    argv = ["--elf", str(firmware_build["elf"]), "--seconds", "6"]
+    for t in at:
+        argv += ["--reset-at", t]
+    rep = simulate(sim_args(*argv))
+    assert rep["frames"]["device_resets"] == 20
+    boots = rep["boots"]
+    assert [b["cause_name"] for b in boots] == ["power-on"] + ["watchdog"] * 20
+    assert len({b["boot_id"] for b in boots}) == 21
+    assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
+    assert rep["device"]["reset_cause"] == "watchdog"
     for name, ch in rep["events"].items():
         assert ch["duplicates_or_disorder"] == 0, name
-        assert ch["expected"] - 5 <= ch["received"] <= ch["expected"], (name, ch)
+        assert ch["expected"] - 20 * 8 <= ch["received"] <= ch["expected"], (name, ch)
+    for name in ("primary", "secondary"):
+        assert abs(rep["rpm_error_pct"][name]) < 0.05  # no period across a reset
 
 
 def test_firmware_fil_set_debounce_from_host(firmware_build):
-    """SET_DEBOUNCE reaches the capture ISRs: with 100 us windows the bounce edges
-    (150 us and 700 us after each pulse) are no longer rejected."""
-    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"], bounce=True,
+    """SET_DEBOUNCE sets the lock-out floor: 30 ms at 3000 rpm (20 ms period) locks out every
+    other pulse, counted as lock-out rejections in INFO."""
+    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"],
                          primary_rpm=3000, secondary_rpm=3000, adc_hz=0)
     try:
-        reader = make_reader("v1", tr)
+        reader = make_reader("v2", tr)
         tr.advance_to(0.03)
-        reader.command(v1.encode_command(v1.OP_SET_DEBOUNCE, 100, 100))
+        reader.command(v2.encode_command(v2.OP_SET_DEBOUNCE, 30000, 30000))
         n = {1: 0, 2: 0}
         for k in range(5, 150 * 2):
             tr.advance_to(k / 150)
@@ -107,10 +131,42 @@ def test_firmware_fil_set_debounce_from_host(firmware_build):
         hs = tr.harness_stats()
     finally:
         tr.close()
-    assert info.debounce_primary_us == 100 and info.debounce_secondary_us == 100
+    assert info.debounce_primary_us == 30000 and info.debounce_secondary_us == 30000
     for ch, h in ((1, hs["hall"][0]), (2, hs["hall"][1])):
-        generated = h["edges"] + h["bounce_edges"]
-        assert generated - 6 <= n[ch] <= generated  # the last pulse may still be queued
+        assert abs(n[ch] - h["edges"] / 2) <= 3, (n, h)
+        assert abs(info.lockout_rejected[ch - 1] - h["edges"] / 2) <= 3
+    assert info.glitch_rejected == (0, 0)
+
+
+@pytest.mark.parametrize("rpm", [300, 3800, 12000, 15000])
+def test_firmware_fil_speeds_with_glitches_and_bounce(firmware_build, sim_args, rpm):
+    """The issue's range on both channels: every pulse delivered once, rpm within 0.05 %, while
+    200 Hz of 20 us spikes per line and release ringing are rejected and counted by cause."""
+    seconds = "4" if rpm == 300 else "2"
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", seconds,
+                            "--primary-rpm", str(rpm), "--secondary-rpm", str(rpm),
+                            "--bounce", "--glitch-hz", "200", "--glitch-us", "20"))
+    _assert_lossless(rep)
+    assert rep["events"]["primary"]["expected"] >= 10
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05
+    assert abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    rej = rep["edges_rejected"]
+    h = rep["harness"]
+    for c, name in enumerate(("primary", "secondary")):
+        # Every ringing pulse is locked out; spikes are glitches, or locked out when they fall
+        # inside a lock-out window (counted there), or merge with a pulse (never an event).
+        assert rej[name]["lockout"] >= h["bounce_edges"][c]
+        assert rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c] <= h["glitches"][c]
+        assert rej[name]["glitch"] >= 0.5 * h["glitches"][c] > 0
+
+
+def test_firmware_fil_clean_15000_rpm_nothing_rejected(firmware_build, sim_args):
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "2",
+                            "--primary-rpm", "15000", "--secondary-rpm", "15000"))
+    _assert_lossless(rep)
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
+                                     "secondary": {"lockout": 0, "glitch": 0}}
 
 
 def test_firmware_fil_v0_sketch_via_cli(firmware_build):
@@ -137,6 +193,75 @@ def test_firmware_fil_v0_sketch_via_cli(firmware_build):
     assert sum(rejected.values()) <= 3 and rep["frames"]["rejected_total"] == stale + sum(rejected.values())
 
 
+@pytest.mark.parametrize("elf_key,protocol,device", [("v0_elf", "v2", "v0"), ("elf", "v1", "v2")])
+def test_firmware_fil_version_mismatch_refused(firmware_build, elf_key, protocol, device):
+    """A host set to one protocol meeting a device of another: one line naming both, exit 2."""
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf",
+                          str(firmware_build[elf_key]), "--protocol", protocol, "--seconds", "0.5", "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert f"speaks protocol {device}, the host is set to {protocol}" in lines[0]
+    assert res.stdout == ""
+
+
+def test_firmware_fil_ring_saturation_link_survives_and_accounts_exactly(firmware_build, sim_args):
+    """Both channels at 15,000 rpm polled at 2 Hz for 60 s, 20 % of the acknowledgements
+    corrupted: the ring saturates all the time, the link never dies, delivered + reported
+    lost = generated exactly, and rpm from adjacent pairs (never across a marked gap) stays
+    within 0.5 %."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "60",
+                            "--primary-rpm", "15000", "--secondary-rpm", "15000", "--poll-hz", "2",
+                            "--drain-s", "3", "--fault-rate", "0.2", "--fault-kinds", "cmd_bitflip",
+                            "--seed", "7"))
+    assert not rep["harness"]["crashed"]
+    acc = rep["accounting"]
+    assert acc["exact"], acc
+    assert acc["reported_lost"] > 0.8 * acc["generated"]  # really saturated
+    assert rep["faults_injected"]["cmd_bitflip"] > 50
+    fr = rep["frames"]
+    assert fr["accepted"] >= 0.7 * 2 * 63  # the link kept serving frames to the end
+    assert rep["events"]["adc"]["received"] > 0
+    for name in ("primary", "secondary"):
+        assert abs(rep["rpm_error_pct"][name]) < 0.5
+        assert rep["rpm_periods"][name] > 100
+        assert rep["events"][name]["duplicates_or_disorder"] == 0
+
+
+def test_firmware_fil_slow_polling_rpm_from_adjacent_pairs(firmware_build, sim_args):
+    """The issue's case: --poll-hz 2 at 3,800 / 7,600 rpm used to read 242 / 428 rpm."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "10",
+                            "--primary-rpm", "3800", "--secondary-rpm", "7600", "--poll-hz", "2",
+                            "--drain-s", "3"))
+    assert rep["events_lost"] > 1000 and rep["accounting"]["exact"]
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05
+    assert abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+
+
+def test_firmware_fil_twi_master_abort_recovered(firmware_build, sim_args):
+    """A master that stops clocking halfway through a read (a killed host) leaves the slave
+    holding SDA; the firmware's slave timeout frees the bus within 25 ms, counts it, and the
+    frame is served again: nothing lost."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "6", "--bounce",
+                            "--fault-rate", "0.03", "--fault-kinds", "abort,read_bitflip", "--seed", "3"))
+    _assert_lossless(rep)
+    aborts = rep["faults_injected"]["abort"]
+    assert aborts >= 3
+    assert rep["device"]["twi_timeouts"] == aborts == rep["harness"]["i2c"]["aborts"]
+    assert not rep["harness"]["i2c"]["bus_held"]
+    assert 20_000 < rep["harness"]["i2c"]["last_release_after_us"] <= 25_000
+    assert rep["frames"]["transport_errors"].get("bus_held", 0) > 0  # the bus really was held
+
+
+def test_firmware_sim_bad_fault_kind_is_refused():
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", "x.elf",
+                          "--fault-kinds", "nack,bogus"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--fault-kinds" in lines[0] and "bogus" in lines[0]
+
+
 def test_firmware_fil_adc_time_from_the_rdy_edge(firmware_build, sim_args):
     """The ADC time is RDY's falling edge (pin change ISR), not when the main loop notices:
     typically within a microsecond of the harness's conversion time; the worst case is the
@@ -148,3 +273,77 @@ def test_firmware_fil_adc_time_from_the_rdy_edge(firmware_build, sim_args):
     err = rep["adc_time_error_us"]
     assert abs(err["mean_us"]) < 2.0, err
     assert err["max_abs_us"] <= 26.0, err
+
+
+def test_firmware_fil_serial_transport_via_cli(firmware_build):
+    """`dyno firmware-sim --transport serial`: the host's COBS serial transport wired to the real
+    firmware's UART (115200 8N1), as a real process: as good as I2C (every event once, rpm
+    within 0.05 %), with ringing, glitches and randomly timed polls."""
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", str(firmware_build["elf"]),
+                          "--transport", "serial", "--seconds", "20", "--bounce", "--glitch-hz", "200",
+                          "--poll-jitter", "0.5", "--json"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    rep = json.loads(res.stdout)
+    assert rep["transport"] == "serial" and rep["ok"]
+    _assert_lossless(rep)
+    assert rep["accounting"]["exact"]
+    assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
+    assert rep["frames"]["accepted"] > 20 * 100
+    assert rep["frames"]["transport_errors"].get("timeout", 0) <= 2  # only before Serial.begin()
+    assert rep["device"]["reset_cause"] == "power-on"
+
+
+def test_firmware_fil_input_pullup_variant_reads_the_adc(firmware_build, sim_args):
+    """Firmware reading the AD7171 the common Arduino way (INPUT_PULLUP on DOUT, digitalRead)
+    works in the loop: the harness drives the sensors as external devices over the MCU's
+    pull-ups. With simavr's own pull-up handling (re-asserted on every PORTD write, as the
+    harness did before) the same ELF reads 0xFFFF forever."""
+    rep = simulate(sim_args("--elf", str(firmware_build["pullup_elf"]), "--seconds", "3", "--bounce"))
+    _assert_lossless(rep)
+    assert rep["adc_mean"] == 35145 and rep["accounting"]["exact"]
+    tr = SimavrTransport(firmware_build["pullup_elf"], harness=firmware_build["harness"], legacy_pullups=True)
+    try:
+        reader = make_reader("v2", tr)
+        codes = []
+        for k in range(1, 100):
+            tr.advance_to(k / 150)
+            codes += [e.code for e in reader.poll(k / 150) if e.channel == v1.CH_ADC]
+    finally:
+        tr.close()
+    assert codes and set(codes) == {0xFFFF}
+
+
+def test_firmware_frames_are_the_simulated_devices_bytes(firmware_build):
+    """Every frame the real firmware served, decoded and re-encoded by dyno.protocol.v2 (the
+    encoder the simulated device uses), is the same bytes: the sim speaks v2 byte for byte."""
+    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"], bounce=True)
+    raws = []
+    try:
+        reader = make_reader("v2", tr)
+        reader.session.frame_listeners.append(raws.append)
+        for k in range(1, 300):
+            tr.advance_to(k / 150)
+            reader.poll(k / 150)
+    finally:
+        tr.close()
+    assert len(raws) > 250 and sum(1 for r in raws if r[1] > v2.HEADER_LEN + v2.CRC_LEN) > 100
+    for raw in raws:
+        f = v2.decode_frame(raw.ljust(32, b"\0"))
+        again = v2.encode_data_frame(f.seq, f.flags, f.boot_id, f.events_dropped, f.events, f.t0_us)
+        assert again[: raw[1]] == raw
+
+
+def test_firmware_fil_real_watchdog_reset_recovered_once(firmware_build, sim_args):
+    """A firmware whose main loop hangs (test build, 1 s after power-up): simavr's watchdog
+    resets the MCU after 500 ms, the host sees the new boot with cause "watchdog", `.init3`
+    stops the still-running watchdog (no reset loop), and data flows again."""
+    rep = simulate(sim_args("--elf", str(firmware_build["hang_elf"]), "--seconds", "3"))
+    assert not rep["harness"]["crashed"]
+    assert rep["frames"]["device_resets"] == 1
+    assert [b["cause_name"] for b in rep["boots"]] == ["power-on", "watchdog"]
+    dev = rep["device"]
+    assert dev["reset_cause"] == "watchdog" and dev["boot_id"] == rep["boots"][1]["boot_id"]
+    assert 1500 < dev["uptime_ms"] < 2000  # one reset at ~1.5 s, none after
+    for name in ("primary", "secondary"):
+        assert abs(rep["rpm_error_pct"][name]) < 0.05  # no period across the reset
+        assert rep["events"][name]["received"] > 0.6 * rep["events"][name]["expected"]

@@ -12,13 +12,13 @@ pytestmark = pytest.mark.firmware
 
 
 def test_firmware_native_unit_tests(toolchain):
-    # ring wrap/overflow, CRC, framing against dyno/protocol/vectors/v1.hex, timestamp
+    # ring wrap/overflow, CRC-16/CRC-32C, framing against dyno/protocol/vectors/v2.hex, timestamp
     # extension across timer overflow and 2^32, command checks, COBS, ack/re-send.
     res = make("test")
     out = res.stdout + res.stderr
     assert res.returncode == 0, out
     assert re.search(r"\b0 failures\b", out), out
-    assert re.search(r"vectors: \d+ crc, 1\d frames, 1 info, [6-9] cmd, [3-9] badcmd", out), out
+    assert re.search(r"vectors: 4 crc32c, 1\d frames, 1 info, [6-9] cmd, [4-9] badcmd", out), out
     assert "proto lossless" in out
 
 

@@ -51,7 +51,7 @@ def test_hw_doctor_sim_toggle_report(capsys):
     assert rc == 0, out
     for name in ("firmware", "thermometer", "arduino reset", "brake step"):
         assert any(line.split()[:1] == ["ok"] and name in line for line in out.splitlines()), (name, out)
-    assert "boot count 0 -> 1" in out and out.rstrip().endswith("rig OK")
+    assert "boot id 1 -> 2" in out and out.rstrip().endswith("rig OK")  # v2: a new boot id per boot
 
 
 def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):

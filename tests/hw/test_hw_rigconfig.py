@@ -19,8 +19,8 @@ def test_hw_repo_rig_loads():
     rig = load_rig()
     assert rig.i2c.firmware_address == 0x03 and rig.i2c.thermometer_address == 0x5A
     assert rig.gear_ratio_brake_per_secondary == pytest.approx(32 / 61)
-    assert (rig.debounce_primary_us, rig.debounce_secondary_us) == (10000, 6000)
-    assert rig.poll_hz == 150 and rig.protocol in ("v1", "v0")
+    assert (rig.debounce_primary_us, rig.debounce_secondary_us) == (1000, 1000)  # v2 lock-out floors
+    assert rig.poll_hz == 150 and rig.protocol in ("v2", "v1", "v0")
     assert len(set(rig.pins.as_dict().values())) == 5
 
 
@@ -44,7 +44,7 @@ BAD = [
     ("missing table", lambda d: d.pop("pins"), "pins"),
     ("wrong type", lambda d: d.__setitem__("poll_hz", "fast"), "poll_hz"),
     ("unknown key", lambda d: d["actuator"].__setitem__("stepp_s", 1.0), "actuator.stepp_s"),
-    ("bad protocol", lambda d: d.__setitem__("protocol", "v2"), "protocol"),
+    ("bad protocol", lambda d: d.__setitem__("protocol", "v3"), "protocol"),
     ("servo in ms", lambda d: d["throttle"].__setitem__("idle_pulse_us", 2.2), "throttle.idle_pulse_us"),
     # an infinite limit disables its trip; NaN compares false; inf polling hangs the loop
     ("inf limit", lambda d: d["limits"].__setitem__("rotor_temp_max_c", float("inf")), "limits.rotor_temp_max_c"),

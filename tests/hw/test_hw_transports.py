@@ -237,3 +237,18 @@ def test_hw_mlx90614_nack():
     with pytest.raises(ThermometerError) as exc:
         MLX90614(Dead()).object_c()
     assert exc.value.cause == "nack"
+
+
+def test_hw_serial_deframer_takes_v2_frames_after_garbage():
+    from dyno.protocol import v2
+    from dyno.transports.serial import is_frame, is_v2_frame
+
+    frames = [v2.encode_data_frame(k, 0x10, 7, 0, [v1.Event(1, 1000 * k)], 0)[:20] for k in range(5)]
+    assert all(is_v2_frame(f) and is_frame(f) for f in frames)
+    assert not is_v1_frame(frames[0])
+    bad = bytearray(frames[0])
+    bad[-1] ^= 1
+    assert not is_frame(bytes(bad))
+    d = CobsDeframer()
+    stream = b"\x13\x37garbage" + b"".join(cobs_encode(f) + b"\0" for f in frames)
+    assert d.feed(stream) == frames

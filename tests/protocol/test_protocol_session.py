@@ -3,7 +3,7 @@
 import random
 
 from dyno.acquisition.reader import Unwrapper
-from dyno.protocol import v1
+from dyno.protocol import v1, v2
 from dyno.protocol.session import LinkSession
 from dyno.sim.device import EmulatedFirmware
 
@@ -62,11 +62,12 @@ def test_device_reset_is_seen_and_accepted():
 
 
 def test_first_frame_after_reset_is_not_retired_by_a_stale_ack():
-    fw = EmulatedFirmware()
-    fw.capture("primary", 0.001)
-    fw.write(v1.poll(0), 0.002)  # ack 0 before frame 0 was ever sent
-    raw = fw.read(32, 0.003)
-    assert v1.decode_frame(raw).events  # still there
+    for proto, ack in ((v1, v1.poll(0)), (v2, v2.poll((1, 0)))):
+        fw = EmulatedFirmware(f"v{proto.VERSION}")
+        fw.capture("primary", 0.001)
+        fw.write(ack, 0.002)  # ack 0 before frame 0 was ever sent
+        raw = fw.read(32, 0.003)
+        assert proto.decode_frame(raw).events  # still there
 
 
 def test_unwrap_crosses_2_32():

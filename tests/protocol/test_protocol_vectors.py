@@ -35,11 +35,12 @@ def _events(spec):
     out = []
     for tok in spec.split(","):
         ch, rest = tok.split("@")
+        tag, gap = int(ch) & 0x7F, bool(int(ch) & 0x80)  # v2: bit 7 marks a gap before the event
         if ":" in rest:
             t, code, status = map(int, rest.split(":"))
-            out.append(v1.Event(int(ch), t, code, status))
+            out.append(v1.Event(tag, t, code, status, gap))
         else:
-            out.append(v1.Event(int(ch), int(rest)))
+            out.append(v1.Event(tag, int(rest), gap=gap))
     return tuple(out)
 
 

@@ -1,13 +1,15 @@
-/* Native unit tests of the firmware's pure-C modules (crc16, frame, cmd, ring, cobs,
- * tstamp, proto), run on the build machine by `make -C firmware test`.
+/* Native unit tests of the firmware's pure-C modules (crc16, crc32c, frame, cmd, ring,
+ * cobs, tstamp, proto), run on the build machine by `make -C firmware test`.
  * Frames and commands are checked byte for byte against the repository's golden
- * vectors (dyno/protocol/vectors/v1.hex), which the Python host tests check too. */
+ * vectors (dyno/protocol/vectors/v2.hex), which the Python host tests check too. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include "cmd.h"
 #include "cobs.h"
+#include "counters.h"
 #include "crc16.h"
+#include "crc32c.h"
 #include "frame.h"
 #include "proto.h"
 #include "ring.h"
@@ -17,9 +19,6 @@ static int failures, checks;
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
     printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
 
-/* proto.c's hook: record what the "capture" module would get. */
-static uint16_t hook_p, hook_s;
-void proto_hook_set_debounce(uint16_t p, uint16_t s) { hook_p = p; hook_s = s; }
 
 static size_t unhex(const char *s, uint8_t *out, size_t max)
 {
@@ -88,24 +87,25 @@ static void test_vectors(const char *path)
     int n_crc = 0, n_frame = 0, n_info = 0, n_cmd = 0, n_badcmd = 0;
     while (fgets(line, sizeof line, f)) {
         uint8_t want[64], got[64], data[64];
-        if (strncmp(line, "crc ", 4) == 0) {
+        if (strncmp(line, "crc32c ", 7) == 0) {
             char dhex[256];
-            unsigned c;
-            sscanf(line + 4, "%255s %x", dhex, &c);
+            unsigned long c;
+            sscanf(line + 7, "%255s %lx", dhex, &c);
             size_t n = unhex(dhex, data, sizeof data);
-            CHECK(crc16(data, (uint8_t)n) == c, "crc %s", dhex);
+            CHECK(crc32c(data, (uint8_t)n) == (uint32_t)c, "crc32c %s", dhex);
             n_crc++;
         } else if (strncmp(line, "frame ", 6) == 0) {
             dyno_event_t ev[8];
             unsigned seq = (unsigned)atoi(field(line, "seq="));
             unsigned flags = (unsigned)atoi(field(line, "flags="));
             unsigned dropped = (unsigned)atoi(field(line, "dropped="));
+            unsigned boot = (unsigned)atoi(field(line, "boot="));
             unsigned long t0 = strtoul(field(line, "t0="), NULL, 10);
             uint8_t n = parse_events(field(line, "events="), ev);
             size_t wn = unhex(field(line, "hex="), want, sizeof want);
             CHECK(frame_fit(frame_array_get, ev, n) == n, "all events fit: %s", line);
-            uint8_t len = frame_encode_data(got, (uint8_t)seq, (uint8_t)flags, (uint16_t)dropped,
-                                            (uint32_t)t0, frame_array_get, ev, n);
+            uint8_t len = frame_encode_data(got, (uint8_t)seq, (uint8_t)flags, (uint16_t)boot,
+                                            (uint16_t)dropped, (uint32_t)t0, frame_array_get, ev, n, NULL);
             CHECK(len == want[1], "frame length %u: %s", len, line);
             CHECK(memcmp(got, want, wn) == 0, "frame bytes: %s", line);
             /* Vectors may be stored without padding; the rest must be zero. */
@@ -113,14 +113,26 @@ static void test_vectors(const char *path)
                 CHECK(got[i] == 0, "padding at %zu", i);
             n_frame++;
         } else if (strncmp(line, "info ", 5) == 0) {
-            unsigned a, b, c;
+            unsigned a, b, c, l0, l1, g0, g1;
             sscanf(field(line, "fw="), "%u.%u.%u", &a, &b, &c);
-            frame_info_t info = {(uint8_t)atoi(field(line, "seq=")),
-                                 (uint8_t)atoi(field(line, "flags=")), (uint8_t)a, (uint8_t)b,
-                                 (uint8_t)c, (uint16_t)atoi(field(line, "boots=")),
-                                 (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10),
-                                 (uint16_t)atoi(field(line, "deb_p=")),
-                                 (uint16_t)atoi(field(line, "deb_s="))};
+            sscanf(field(line, "lock="), "%u,%u", &l0, &l1);
+            sscanf(field(line, "glitch="), "%u,%u", &g0, &g1);
+            frame_info_t info;
+            info.seq = (uint8_t)atoi(field(line, "seq="));
+            info.flags = (uint8_t)atoi(field(line, "flags="));
+            info.boot_id = (uint16_t)atoi(field(line, "boot="));
+            info.fw_major = (uint8_t)a;
+            info.fw_minor = (uint8_t)b;
+            info.fw_patch = (uint8_t)c;
+            info.uptime_ms = (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10);
+            info.debounce_primary_us = (uint16_t)atoi(field(line, "deb_p="));
+            info.debounce_secondary_us = (uint16_t)atoi(field(line, "deb_s="));
+            info.lockout[0] = (uint16_t)l0;
+            info.lockout[1] = (uint16_t)l1;
+            info.glitch[0] = (uint16_t)g0;
+            info.glitch[1] = (uint16_t)g1;
+            info.twi_timeouts = (uint8_t)atoi(field(line, "twi_timeouts="));
+            info.bus_errors = (uint8_t)atoi(field(line, "bus_errors="));
             size_t wn = unhex(field(line, "hex="), want, sizeof want);
             uint8_t len = frame_encode_info(got, &info);
             CHECK(len == FRAME_INFO_LEN, "info length %u", len);
@@ -146,10 +158,10 @@ static void test_vectors(const char *path)
         }
     }
     fclose(f);
-    CHECK(n_crc >= 4 && n_frame >= 10 && n_info >= 1 && n_cmd >= 6 && n_badcmd >= 3,
-          "vector counts crc=%d frame=%d info=%d cmd=%d badcmd=%d", n_crc, n_frame, n_info,
+    CHECK(n_crc >= 4 && n_frame >= 10 && n_info >= 1 && n_cmd >= 6 && n_badcmd >= 4,
+          "vector counts crc32c=%d frame=%d info=%d cmd=%d badcmd=%d", n_crc, n_frame, n_info,
           n_cmd, n_badcmd);
-    printf("vectors: %d crc, %d frames, %d info, %d cmd, %d badcmd\n", n_crc, n_frame, n_info,
+    printf("vectors: %d crc32c, %d frames, %d info, %d cmd, %d badcmd\n", n_crc, n_frame, n_info,
            n_cmd, n_badcmd);
 }
 
@@ -161,6 +173,7 @@ static void test_crc(void)
     for (int i = 0; i < 9; i++)
         c = crc16_update(c, s[i]);
     CHECK(c == 0x29B1, "incremental");
+    CHECK(crc32c(s, 9) == 0xE3069283u, "crc32c check value");
 }
 
 static void test_frame_fit(void)
@@ -171,9 +184,12 @@ static void test_frame_fit(void)
         ev[i].tag = TAG_PRIMARY;
         ev[i].t_us = 1000u + 10u * (uint32_t)i;
     }
-    CHECK(frame_fit(frame_array_get, ev, 8) == 6, "six 3-byte events fill 18 of 19 bytes");
-    ev[2].tag = TAG_ADC;  /* 3 + 3 + 6 + 3 + 3 = 18, the next one would make 21 */
-    CHECK(frame_fit(frame_array_get, ev, 8) == 5, "adc takes 6 bytes");
+    CHECK(frame_fit(frame_array_get, ev, 8) == 5, "five 3-byte events fill 15 bytes");
+    ev[2].tag = TAG_ADC;  /* 3 + 3 + 6 = 12, the next one would make 15 */
+    CHECK(frame_fit(frame_array_get, ev, 8) == 4, "adc takes 6 bytes");
+    ev[3].tag = TAG_ADC;
+    CHECK(frame_fit(frame_array_get, ev, 8) == 3, "two adc do not fit after two hall");
+    ev[3].tag = TAG_PRIMARY;
     ev[2].tag = TAG_PRIMARY;
     ev[3].t_us = 1000u + 32767u;
     CHECK(frame_fit(frame_array_get, ev, 4) == 4, "dt 32767 fits");
@@ -187,6 +203,42 @@ static void test_frame_fit(void)
     ev[0].t_us = 0xFFFFFFF0u;
     ev[1].t_us = 0x00000010u;
     CHECK(frame_fit(frame_array_get, ev, 2) == 2, "wrap");
+}
+
+/* A reader racing producers: every event turns into a 6-byte ADC event once read, as if
+ * the slots were refilled between frame_fit and the encoder. */
+static dyno_event_t race_ev[8];
+static const dyno_event_t *racing_get(const void *ctx, uint8_t i)
+{
+    (void)ctx;
+    const dyno_event_t *e = &race_ev[i];
+    race_ev[i].tag = TAG_ADC;
+    return e;
+}
+
+static void test_encoder_bounded(void)
+{
+    uint8_t buf[FRAME_MAX + 8], n_done = 99;
+    memset(buf, 0xA5, sizeof buf);
+    for (int i = 0; i < 8; i++) {
+        race_ev[i].tag = TAG_PRIMARY;
+        race_ev[i].t_us = 100u + (uint32_t)i;
+    }
+    uint8_t n = frame_fit(frame_array_get, race_ev, 8);
+    CHECK(n == 5, "fit five hall edges");
+    uint8_t len = frame_encode_data(buf, 0, 0, 1, 0, 0, racing_get, NULL, n, &n_done);
+    CHECK(len <= FRAME_MAX && n_done == 2, "encoder stops at the buffer: L=%u, %u events", len, n_done);
+    int guard = 1;
+    for (unsigned i = FRAME_MAX; i < sizeof buf; i++)
+        guard &= buf[i] == 0xA5;
+    CHECK(guard, "nothing written past the 32-byte frame");
+    /* Even asked for 255 events of 6 bytes. */
+    memset(buf, 0xA5, sizeof buf);
+    len = frame_encode_data(buf, 0, 0, 1, 0, 0, frame_array_get, race_ev, 8, &n_done);
+    guard = 1;
+    for (unsigned i = FRAME_MAX; i < sizeof buf; i++)
+        guard &= buf[i] == 0xA5;
+    CHECK(guard && n_done == 2 && len == 13 + 12 + 4, "bounded with too many events asked");
 }
 
 static void test_ring(void)
@@ -213,6 +265,13 @@ static void test_ring(void)
     CHECK(!ring_push(&r, TAG_PRIMARY, 1000, 0, 0), "full ring refuses");
     CHECK(r.dropped == 2 && r.overflow, "drops counted");
     CHECK(ring_peek(&r, RING_SIZE - 1)->t_us == RING_SIZE - 1, "old events kept");
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == TAG_PRIMARY, "no gap mark before the drops");
+    ring_retire(&r, 1);
+    CHECK(ring_push(&r, TAG_SECONDARY, 2000, 0, 0), "room again");
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == (TAG_SECONDARY | TAG_GAP), "first event after drops marked");
+    ring_retire(&r, 1);
+    ring_push(&r, TAG_SECONDARY, 2001, 0, 0);
+    CHECK(ring_peek(&r, RING_SIZE - 1)->tag == TAG_SECONDARY, "only the first one");
     r.dropped = 0xFFFF;
     ring_push(&r, TAG_PRIMARY, 0, 0, 0);
     CHECK(r.dropped == 0, "dropped wraps like the u16 on the wire");
@@ -303,75 +362,104 @@ static void read_frame(proto_t *p, uint8_t *out)
 static int frame_ok(const uint8_t *f)
 {
     uint8_t len = f[1];
-    if (f[0] != 1 || len < 13 || len > 32)
+    if (f[0] != FRAME_VERSION || len < FRAME_HEADER_LEN + FRAME_CRC_LEN || len > 32)
         return 0;
-    return crc16(f, len) == 0;
+    uint32_t want = (uint32_t)f[len - 4] << 24 | (uint32_t)f[len - 3] << 16 |
+                    (uint32_t)f[len - 2] << 8 | f[len - 1];
+    return crc32c(f, (uint8_t)(len - 4)) == want;
 }
+
+/* ACK_POLL(boot, seq) */
+static uint8_t mk_ack(uint8_t *out, uint16_t boot, uint8_t seq)
+{
+    uint8_t args[3] = {(uint8_t)(boot >> 8), (uint8_t)boot, seq};
+    return mk_cmd(out, OP_ACK_POLL, args, 3);
+}
+
+#define BOOT 0x1234u
 
 static void test_proto_basics(void)
 {
     static ring_t r;
     static proto_t p;
-    uint8_t c[8], f[32], f2[32], a;
+    static dyno_counters_t cnt;
+    uint8_t c[8], f[32], f2[32];
+    uint16_t dp = 0, ds = 0;
     ring_init(&r);
-    proto_init(&p, &r, 42, 10000, 6000, 1000);
+    memset(&cnt, 0, sizeof cnt);
+    proto_init(&p, &r, &cnt, BOOT, 0x8 /* WDRF */, 10000, 6000, 1000);
     proto_service(&p, 1000, 1);
     read_frame(&p, f);
-    CHECK(frame_ok(f) && f[2] == KIND_DATA && f[3] == 0 && f[4] == FLAG_RESET,
-          "first frame: seq 0, RESET");
+    CHECK(frame_ok(f) && f[2] == KIND_DATA && f[3] == 0 && f[4] == (FLAG_RESET | 0x80),
+          "first frame: seq 0, RESET, cause WDRF in bits 4..7 (0x%02x)", f[4]);
+    CHECK(f[5] == 0x12 && f[6] == 0x34, "boot id in the frame");
     /* New events while seq 0 is frozen go to the next frames, not into seq 0. */
     ring_push(&r, TAG_PRIMARY, 2000, 0, 0);
     proto_service(&p, 2100, 2);
     read_frame(&p, f2);
     CHECK(memcmp(f, f2, 32) == 0, "a sent frame is frozen");
     /* Wrong seq: no retire. */
-    a = 7;
-    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &a, 1));
+    send_cmd(&p, c, mk_ack(c, BOOT, 7));
     read_frame(&p, f2);
     CHECK(memcmp(f, f2, 32) == 0, "wrong ack -> same frame again");
+    /* Right seq, another boot's id (an ACK written before a reset): no retire. */
+    send_cmd(&p, c, mk_ack(c, BOOT - 1u, 0));
+    read_frame(&p, f2);
+    CHECK(memcmp(f, f2, 32) == 0, "ack of another boot retires nothing");
+    /* A v1 ACK_POLL (4 bytes) is a length error under v2. */
+    uint8_t one = 0;
+    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &one, 1));
+    read_frame(&p, f2);
+    CHECK(memcmp(f, f2, 32) == 0, "v1 ack ignored");
     /* Corrupted ack: ignored. */
-    a = 0;
-    uint8_t n = mk_cmd(c, OP_ACK_POLL, &a, 1);
+    uint8_t n = mk_ack(c, BOOT, 0);
     c[3] ^= 1;
     send_cmd(&p, c, n);
     read_frame(&p, f2);
     CHECK(memcmp(f, f2, 32) == 0, "corrupted ack ignored");
     /* Good ack: seq 1 with the event, no RESET. */
-    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &a, 1));
+    send_cmd(&p, c, mk_ack(c, BOOT, 0));
     read_frame(&p, f);
-    CHECK(frame_ok(f) && f[3] == 1 && !(f[4] & FLAG_RESET) && f[1] == 16 && f[11] == TAG_PRIMARY,
+    CHECK(frame_ok(f) && f[3] == 1 && !(f[4] & FLAG_RESET) && f[1] == 20 && f[13] == TAG_PRIMARY,
           "ack -> next frame with the event");
     /* Ack for seq 1 before the main loop pre-built seq 2: no retire (the host re-reads). */
-    a = 1;
-    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &a, 1));
+    send_cmd(&p, c, mk_ack(c, BOOT, 1));
     read_frame(&p, f2);
     CHECK(memcmp(f, f2, 32) == 0, "no next frame ready -> same frame");
     proto_service(&p, 3000, 3);
-    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &a, 1));
+    send_cmd(&p, c, mk_ack(c, BOOT, 1));
     read_frame(&p, f);
-    CHECK(frame_ok(f) && f[3] == 2 && f[1] == 13, "empty seq 2");
-    /* SET_DEBOUNCE reaches the hook and the info frame. */
+    CHECK(frame_ok(f) && f[3] == 2 && f[1] == 17, "empty seq 2");
+    /* SET_DEBOUNCE is taken by the main loop and shows in the info frame. */
+    CHECK(!proto_take_debounce(&p, &dp, &ds), "nothing pending");
     uint8_t d[4] = {0x13, 0x88, 0x0B, 0xB8};  /* 5000, 3000 */
     send_cmd(&p, c, mk_cmd(c, OP_SET_DEBOUNCE, d, 4));
+    CHECK(proto_take_debounce(&p, &dp, &ds) && dp == 5000 && ds == 3000, "debounce taken");
+    CHECK(!proto_take_debounce(&p, &dp, &ds), "taken once");
+    cnt.lockout[0] = 0x0102;
+    cnt.glitch[1] = 0x0304;
+    cnt.twi_timeouts = 5;
+    cnt.bus_errors = 6;
     proto_service(&p, 4000, 4);
-    CHECK(hook_p == 5000 && hook_s == 3000, "debounce hook");
     send_cmd(&p, c, mk_cmd(c, OP_INFO, NULL, 0));
     read_frame(&p, f2);
-    CHECK(frame_ok(f2) && f2[2] == KIND_INFO && f2[1] == 22, "info frame");
-    CHECK(f2[8] == 0 && f2[9] == 42, "boot count");
+    CHECK(frame_ok(f2) && f2[2] == KIND_INFO && f2[1] == 32, "info frame");
+    CHECK(f2[5] == 0x12 && f2[6] == 0x34 && f2[4] == 0x80, "boot id and cause in info");
+    CHECK(f2[7] == FW_VERSION_MAJOR, "fw major = protocol version");
     CHECK(f2[14] == 0x13 && f2[15] == 0x88 && f2[16] == 0x0B && f2[17] == 0xB8, "debounce in info");
+    CHECK(f2[18] == 1 && f2[19] == 2 && f2[24] == 3 && f2[25] == 4 && f2[26] == 5 && f2[27] == 6,
+          "counters in info");
     read_frame(&p, f2);
     CHECK(f2[2] == KIND_DATA && memcmp(f, f2, 32) == 0, "then data frames again");
     /* Overflow: flag + count, CLEAR_COUNTERS zeroes both. */
-    a = 2;
-    send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &a, 1));  /* retire seq 2 */
+    send_cmd(&p, c, mk_ack(c, BOOT, 2));  /* retire seq 2 */
     for (unsigned i = 0; i < RING_SIZE + 3; i++)
         ring_push(&r, TAG_SECONDARY, 5000 + i, 0, 0);
     proto_service(&p, 6000, 6);
     read_frame(&p, f);
     CHECK(frame_ok(f) && f[3] == 3, "seq 3");
     CHECK((f[4] & (FLAG_OVERFLOW | FLAG_MORE)) == (FLAG_OVERFLOW | FLAG_MORE), "overflow+more flags 0x%02x", f[4]);
-    CHECK(f[5] == 0 && f[6] >= 3, "dropped count %u", f[6]);
+    CHECK(f[7] == 0 && f[8] >= 3, "dropped count %u", f[8]);
     send_cmd(&p, c, mk_cmd(c, OP_CLEAR_COUNTERS, NULL, 0));
     CHECK(r.dropped == 0 && r.overflow == 0, "cleared");
 }
@@ -395,8 +483,8 @@ static void host_accept(host_t *h, const uint8_t *f)
     h->last_seq = seq;
     h->have_seq = 1;
     h->accepted++;
-    uint32_t t0 = (uint32_t)f[7] << 24 | (uint32_t)f[8] << 16 | (uint32_t)f[9] << 8 | f[10];
-    for (uint8_t i = 11; i < f[1] - 2;) {
+    uint32_t t0 = (uint32_t)f[9] << 24 | (uint32_t)f[10] << 16 | (uint32_t)f[11] << 8 | f[12];
+    for (uint8_t i = FRAME_HEADER_LEN; i < f[1] - FRAME_CRC_LEN;) {
         uint8_t tag = f[i];
         int16_t dt = (int16_t)(f[i + 1] << 8 | f[i + 2]);
         uint32_t udt = (uint32_t)(int32_t)dt;
@@ -418,7 +506,8 @@ static void test_proto_lossless(void)
     host_t h;
     memset(&h, 0, sizeof h);
     ring_init(&r);
-    proto_init(&p, &r, 1, 10000, 6000, 0);
+    static dyno_counters_t cnt;
+    proto_init(&p, &r, &cnt, BOOT, 1, 10000, 6000, 0);
     srand(7);
     uint32_t produced = 0;
     for (int step = 0; step < 200000; step++) {
@@ -430,7 +519,7 @@ static void test_proto_lossless(void)
         }
         proto_service(&p, produced, (uint32_t)step);
         uint8_t c[8], f[32];
-        uint8_t n = h.have_seq ? mk_cmd(c, OP_ACK_POLL, &h.last_seq, 1) : mk_cmd(c, OP_POLL, NULL, 0);
+        uint8_t n = h.have_seq ? mk_ack(c, BOOT, h.last_seq) : mk_cmd(c, OP_POLL, NULL, 0);
         if (rand() % 20 == 0)
             c[rand() % n] ^= (uint8_t)(1u << (rand() % 8));  /* corrupted command */
         send_cmd(&p, c, n);
@@ -448,7 +537,7 @@ static void test_proto_lossless(void)
     for (int step = 0; step < 1000; step++) {
         uint8_t c[8], f[32];
         proto_service(&p, produced, 0);
-        send_cmd(&p, c, mk_cmd(c, OP_ACK_POLL, &h.last_seq, 1));
+        send_cmd(&p, c, mk_ack(c, BOOT, h.last_seq));
         read_frame(&p, f);
         host_accept(&h, f);
     }
@@ -464,6 +553,7 @@ int main(int argc, char **argv)
 {
     test_crc();
     test_frame_fit();
+    test_encoder_bounded();
     test_ring();
     test_tstamp();
     test_cobs();

@@ -1,0 +1,204 @@
+"""Closed-loop speed hold on the brake actuator, and the steady test built on it.
+
+The plant seen from the controller: a linear actuator that *integrates* its command
+(it moves at a fixed speed while powered, through a direction relay and an enable),
+pushing a friction brake whose torque slows the CVT's secondary.  So the command is
+the actuator's velocity, in [-1, 1] of full speed, and a proportional law on the
+speed error is already integral action on the brake position::
+
+    e(t) = (n_s - n_set) / n_set                     (> 0: too fast, more brake)
+    u(t) = K_p e(t) + K_i ∫ e dt                     clipped to [-1, 1]
+
+``u`` becomes one actuator pulse per control period ``T``: APPLY (u > 0) or RELEASE
+for ``|u| T`` seconds, nothing inside the dead band or below the minimum pulse.  The
+relay's settle and dead time are the actuator driver's business (the real one,
+:class:`dyno.hw.outputs.GpioActuators`, holds the enable off while the relay moves),
+so short pulses cost more than their length: that is why ``min_pulse_s`` exists.
+Anti-windup: the integral is frozen while ``u`` is saturated in the error's
+direction.  The safety checks are unchanged: they run on every poll, whatever this
+loop is doing, and an abort cancels it.
+
+Speed is the mean over the last ``speed_window_s`` by edge count (immune to the
+firing ripple that makes single periods scatter).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from dataclasses import dataclass
+
+from dyno.acquisition.rpm import rpm_by_count
+from dyno.control.outputs import APPLY, RELEASE, STOP
+from dyno.protocol import v1
+
+
+@dataclass(frozen=True)
+class SpeedHoldGains:
+    kp: float = 6.0  # actuator speed fraction per unit relative speed error
+    ki_per_s: float = 1.0
+    period_s: float = 0.1  # one pulse decision per period
+    deadband_rel: float = 0.002  # |e| below this: no pulse (relay wear, hunting)
+    min_pulse_s: float = 0.02
+    speed_window_s: float = 0.3
+
+
+class SpeedHold:
+    """The PI law above (pure: no I/O, time passed in)."""
+
+    def __init__(self, gains: SpeedHoldGains = SpeedHoldGains()) -> None:
+        self.g = gains
+        self.integral = 0.0
+
+    def reset(self) -> None:
+        self.integral = 0.0
+
+    def update(self, rpm: float, setpoint_rpm: float, dt_s: float) -> float:
+        """Actuator command in [-1, 1] (+: apply more brake) for the measured ``rpm``."""
+        if not (rpm > 0 and setpoint_rpm > 0):
+            return 0.0
+        e = (rpm - setpoint_rpm) / setpoint_rpm
+        u = self.g.kp * e + self.g.ki_per_s * self.integral
+        saturated = abs(u) >= 1.0 and math.copysign(1.0, u) == math.copysign(1.0, e)
+        if not saturated:  # anti-windup: no integration into a saturated command
+            self.integral += e * dt_s
+        return max(-1.0, min(1.0, u))
+
+    def pulse(self, u: float, e_rel: float) -> tuple[int, float]:
+        """(direction, on-time in s) for command ``u`` over one period."""
+        if abs(e_rel) < self.g.deadband_rel:
+            return STOP, 0.0
+        on_s = abs(u) * self.g.period_s
+        if on_s < self.g.min_pulse_s:
+            return STOP, 0.0
+        return (APPLY if u > 0 else RELEASE), on_s
+
+
+@dataclass(frozen=True)
+class SpeedHoldPlan:
+    """The steady test under speed hold: setpoints from light load down the range."""
+
+    points: int = 20
+    low_rpm: float = 2000.0  # the last setpoint (secondary)
+    high_margin: float = 0.04  # the first setpoint: this fraction below the no-load speed
+    tolerance_rel: float = 0.0075  # "at the setpoint": within 0.75 % ...
+    in_band_s: float = 0.8  # ... for this long, then measure
+    max_approach_s: float = 8.0  # then: near the setpoint, measure (flagged); far from it, skip it
+    unholdable_rel: float = 0.02  # "far": the shift region, where a friction brake cannot hold a speed
+    contact_drop_rel: float = 0.01  # contact search: full-speed apply until the secondary drops 1 %
+    contact_timeout_s: float = 10.0
+
+
+def secondary_rpm(ctrl, window_s: float) -> float:
+    now = ctrl.poller.device_now_us()
+    if now is None:
+        return math.nan
+    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(v1.CH_SECONDARY, now - int(window_s * 1e6), now))
+    return rpm
+
+
+async def _hold_loop(ctrl, hold: SpeedHold, target: dict) -> None:
+    """Background task: one actuator pulse per period towards ``target['rpm']``."""
+    g = hold.g
+    while True:
+        await ctrl._resume.wait()
+        if target.get("frozen"):
+            await ctrl._sleep(g.period_s)
+            continue
+        rpm = secondary_rpm(ctrl, g.speed_window_s)
+        sp = target["rpm"]
+        u = hold.update(rpm, sp, g.period_s)
+        direction, on_s = hold.pulse(u, (rpm - sp) / sp if rpm > 0 else 0.0)
+        target["last_rpm"] = rpm
+        if direction == STOP:
+            await ctrl._sleep(g.period_s)
+            continue
+        ctrl.act.brake(direction)
+        try:
+            await ctrl._sleep(on_s)
+        finally:
+            ctrl.act.brake(STOP)
+        await ctrl._sleep(max(0.0, g.period_s - on_s))
+
+
+async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHoldGains | None = None) -> None:
+    """After the warm-up: hold each setpoint, measure while holding, record the point.
+
+    Uses the controller's own measurement (uncertainty target, discards) and states:
+    STEP = moving to the next setpoint, SETTLE = holding until in band, MEASURE.
+    """
+    from dyno.control.controller import State
+
+    p = ctrl.plan
+    sh = sh or getattr(ctrl, "speed_hold_plan", None) or SpeedHoldPlan()
+    hold = SpeedHold(gains or getattr(ctrl, "speed_hold_gains", None) or SpeedHoldGains())
+    no_load = secondary_rpm(ctrl, 1.0)
+    high = no_load * (1.0 - sh.high_margin)
+    low = max(sh.low_rpm, p.min_secondary_rpm * 1.05)
+    if not (high > low):
+        ctrl.abort("error", f"speed hold: no-load secondary {no_load:.0f} rpm leaves no range above {low:.0f} rpm")
+        return
+    setpoints = [high + (low - high) * i / max(1, sh.points - 1) for i in range(sh.points)]
+    # Contact search first: the pads start clear of the rotor (free travel), and creeping
+    # across it at a fraction of full speed wastes seconds. Full-speed apply until it bites.
+    ctrl._enter(State.STEP, "speed hold: finding the brake's contact point")
+    t_c = ctrl._now()
+    ctrl.act.brake(APPLY)
+    try:
+        while secondary_rpm(ctrl, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
+            if ctrl._now() - t_c > sh.contact_timeout_s:
+                ctrl.abort("error", f"speed hold: the brake did not slow the secondary in {sh.contact_timeout_s:g} s")
+                return
+            await ctrl._sleep(0.02)
+    finally:
+        ctrl.act.brake(STOP)
+    ctrl._log("contact", after_s=ctrl._now() - t_c)
+    target = {"rpm": setpoints[0], "last_rpm": math.nan}
+    loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="speed-hold")
+    try:
+        for sp in setpoints:
+            if secondary_rpm(ctrl, hold.g.speed_window_s) < sp * (1.0 - sh.unholdable_rel) and sp != setpoints[-1]:
+                continue  # already below it (the CVT jumped past): next setpoint
+            target["rpm"] = sp
+            ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
+            t0 = ctrl._now()
+            ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
+            in_band_since = None
+            settled_by = "held"
+            while True:
+                await ctrl._sleep(0.05)
+                if loop_task.done():
+                    loop_task.result()  # re-raise: the control task failed
+                rpm = secondary_rpm(ctrl, hold.g.speed_window_s)
+                if abs(rpm - sp) <= sh.tolerance_rel * sp:
+                    in_band_since = in_band_since if in_band_since is not None else ctrl._now()
+                    if ctrl._now() - in_band_since >= sh.in_band_s:
+                        break
+                else:
+                    in_band_since = None
+                if ctrl._now() - t0 > sh.max_approach_s:
+                    settled_by = "timeout"
+                    break
+            settle_s = ctrl._now() - t0
+            if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
+                ctrl._log("skip", reason=f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after "
+                                         f"{settle_s:.1f} s): the CVT's shift region")
+                continue
+            # Measure with the brake where the hold put it: corrections during the window would
+            # move the torque and the shift under the average (measured: CI 4-10x wider).
+            target["frozen"] = True
+            try:
+                point, host_t0, host_t1 = await ctrl._measure()
+            finally:
+                target["frozen"] = False
+            point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
+            if point["torque_secondary_nm"] >= p.min_point_torque_nm:
+                ctrl._record_point(point, host_t0, host_t1)
+            else:
+                ctrl._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
+                                         f"{p.min_point_torque_nm} N m at {sp:.0f} rpm")
+        ctrl._enter(State.DONE, f"speed hold: {len(setpoints)} setpoints")
+    finally:
+        loop_task.cancel()
+        await asyncio.gather(loop_task, return_exceptions=True)
+        ctrl.act.brake(STOP)

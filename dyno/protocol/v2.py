@@ -1,0 +1,255 @@
+"""Protocol v2: v1's acknowledged frames plus a boot identity, the reset cause,
+CRC-32C and the device's rejection counters (specified in docs/protocol.md).
+
+Pure functions, no I/O.  Events, tags and the event layout are v1's
+(:class:`dyno.protocol.v1.Event`).  Everything is big-endian.
+
+Data frame (kind ``'D'``)::
+
+    0      u8   version = 2
+    1      u8   length L of the frame in bytes, CRC included (17..32)
+    2      u8   kind: 0x44 'D' data, 0x49 'I' info
+    3      u8   seq (wraps at 256; 0 is the first frame of a boot)
+    4      u8   flags: bit0 RESET (no frame of this boot retired yet), bit1 MORE,
+                bit2 OVERFLOW, bit3 zero, bits4..7 reset cause (MCUSR: PORF,
+                EXTRF, BORF, WDRF as saved at boot)
+    5-6    u16  boot_id: differs on every boot; echoed by ACK_POLL
+    7-8    u16  events_dropped (ring saturation since boot or CLEAR_COUNTERS)
+    9-12   u32  t0_us
+    13..   events (v1 layout; the tag's bit 7, TAG_GAP, marks the first event
+                after a ring saturation: events were lost just before it)
+    L-4    u32  CRC-32C over bytes 0..L-5
+    L..31       padding 0x00 (checked)
+
+ACK_POLL carries the boot id: a device retires its current frame only if both
+the boot id and the seq are its own, so an acknowledgement written to a device
+that has since rebooted never retires a frame of the new boot.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+
+from dyno.errors import FrameError
+from dyno.protocol import v1
+from dyno.protocol.crc import crc16, crc32c
+from dyno.protocol.v1 import (ADC_STATUS_ERR, CH_ADC, CH_PRIMARY, CH_SECONDARY, CHANNEL_NAMES,  # noqa: F401
+                              DT_MAX, DT_MIN, EVENT_LEN, KIND_DATA, KIND_INFO, Event)
+
+VERSION = 2
+FRAME_MAX = 32
+HEADER_LEN = 13
+CRC_LEN = 4
+PAYLOAD_MAX = FRAME_MAX - HEADER_LEN - CRC_LEN  # 15 bytes: five Hall edges, or three + one ADC
+
+FLAG_RESET = 0x01
+FLAG_MORE = 0x02
+FLAG_OVERFLOW = 0x04
+FLAGS_KNOWN = FLAG_RESET | FLAG_MORE | FLAG_OVERFLOW | 0xF0
+CAUSE_SHIFT = 4
+
+# MCUSR bits of the ATmega328P, as carried in flags bits 4..7.
+CAUSE_PORF, CAUSE_EXTRF, CAUSE_BORF, CAUSE_WDRF = 0x1, 0x2, 0x4, 0x8
+CAUSE_NAMES = ((CAUSE_WDRF, "watchdog"), (CAUSE_BORF, "brown-out"), (CAUSE_EXTRF, "external"),
+               (CAUSE_PORF, "power-on"))
+
+OP_POLL = v1.OP_POLL
+OP_ACK_POLL = v1.OP_ACK_POLL  # u16 boot_id, u8 seq
+OP_SET_DEBOUNCE = v1.OP_SET_DEBOUNCE
+OP_CLEAR_COUNTERS = v1.OP_CLEAR_COUNTERS
+OP_INFO = v1.OP_INFO
+COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0}
+
+INFO_LEN = 32
+TAG_GAP = 0x80
+
+
+def cause_name(cause: int) -> str:
+    """Human name of a reset cause nibble ("watchdog+external", "none" when 0)."""
+    names = [n for bit, n in CAUSE_NAMES if cause & bit]
+    return "+".join(names) if names else "none"
+
+
+@dataclass(frozen=True, slots=True)
+class DataFrame:
+    seq: int
+    flags: int
+    boot_id: int
+    events_dropped: int
+    t0_us: int
+    events: tuple[Event, ...] = field(default_factory=tuple)
+
+    @property
+    def reset_cause(self) -> int:
+        return self.flags >> CAUSE_SHIFT
+
+
+@dataclass(frozen=True, slots=True)
+class InfoFrame:
+    """Identity, uptime, lock-out settings and the device's rejection counters.
+
+    The u16 counters wrap at 2**16, the u8 bus counters at 256 (rare events:
+    the host takes differences).
+    """
+
+    seq: int
+    flags: int
+    boot_id: int
+    fw_version: tuple[int, int, int]
+    uptime_ms: int
+    debounce_primary_us: int
+    debounce_secondary_us: int
+    lockout_rejected: tuple[int, int] = (0, 0)   # edges inside the lock-out, primary/secondary
+    glitch_rejected: tuple[int, int] = (0, 0)    # pulses shorter than the minimum width
+    twi_timeouts: int = 0                        # TWI transfers aborted by the slave timeout
+    bus_errors: int = 0                          # TWI bus errors (illegal START/STOP)
+
+    @property
+    def reset_cause(self) -> int:
+        return self.flags >> CAUSE_SHIFT
+
+
+# --- encoding -----------------------------------------------------------------------
+
+def fit_events(events, t0_us: int | None = None) -> int:
+    """How many leading ``events`` fit one v2 frame (size and i16 time offset)."""
+    return v1.fit_events(events, t0_us, payload_max=PAYLOAD_MAX)
+
+
+def _finish(body: bytes) -> bytes:
+    return (body + struct.pack(">I", crc32c(body))).ljust(FRAME_MAX, b"\x00")
+
+
+def encode_data_frame(seq: int, flags: int, boot_id: int, events_dropped: int, events,
+                      now_us: int = 0) -> bytes:
+    """Encode a data frame, padded to 32 bytes (``events`` must fit)."""
+    events = tuple(events)
+    t0 = events[0].t_us if events else now_us & 0xFFFFFFFF
+    body = bytearray()
+    for ev in events:
+        dt = v1._signed32((ev.t_us - t0) & 0xFFFFFFFF)
+        tag = ev.channel | (TAG_GAP if ev.gap else 0)
+        if ev.channel == CH_ADC:
+            body += struct.pack(">BhHB", tag, dt, ev.code & 0xFFFF, ev.status & 0xFF)
+        else:
+            body += struct.pack(">Bh", tag, dt)
+    length = HEADER_LEN + len(body) + CRC_LEN
+    if length > FRAME_MAX:
+        raise ValueError(f"{len(events)} events need {length} bytes > {FRAME_MAX}")
+    head = struct.pack(">BBBBBHHI", VERSION, length, KIND_DATA, seq & 0xFF, flags & 0xFF,
+                       boot_id & 0xFFFF, events_dropped & 0xFFFF, t0)
+    return _finish(head + bytes(body))
+
+
+_INFO = struct.Struct(">BBBBBHBBBIHHHHHHBB")
+
+
+def encode_info_frame(info: InfoFrame) -> bytes:
+    major, minor, patch = info.fw_version
+    body = _INFO.pack(VERSION, INFO_LEN, KIND_INFO, info.seq & 0xFF, info.flags & 0xFF,
+                      info.boot_id & 0xFFFF, major, minor, patch, info.uptime_ms & 0xFFFFFFFF,
+                      info.debounce_primary_us, info.debounce_secondary_us,
+                      *(x & 0xFFFF for x in info.lockout_rejected), *(x & 0xFFFF for x in info.glitch_rejected),
+                      info.twi_timeouts & 0xFF, info.bus_errors & 0xFF)
+    return _finish(body)
+
+
+def encode_command(op: int, *args: int) -> bytes:
+    """Commands keep v1's CRC-16 (checked byte by byte in the TWI ISR)."""
+    if op not in COMMAND_ARGS:
+        raise ValueError(f"unknown command op 0x{op:02x}")
+    if op == OP_SET_DEBOUNCE:
+        body = struct.pack(">BHH", op, *args)
+    elif op == OP_ACK_POLL:
+        boot_id, seq = args
+        body = struct.pack(">BHB", op, boot_id & 0xFFFF, seq & 0xFF)
+    else:
+        if args:
+            raise ValueError(f"op 0x{op:02x} takes no args")
+        body = bytes([op])
+    return body + struct.pack(">H", crc16(body))
+
+
+def poll(ack: tuple[int, int] | None = None) -> bytes:
+    """POLL, or ACK_POLL(boot_id, seq) once a frame of that boot was accepted."""
+    return encode_command(OP_POLL) if ack is None else encode_command(OP_ACK_POLL, *ack)
+
+
+# --- decoding -----------------------------------------------------------------------
+
+_HEAD = struct.Struct(">BBBBBHHI")
+
+
+def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
+    """Check and decode one read; raises :class:`FrameError` with a cause (v1's causes)."""
+    n = len(buf)
+    if n < HEADER_LEN + CRC_LEN:
+        raise FrameError("short", f"{n} bytes")
+    if not any(buf):
+        raise FrameError("all_zero")
+    if buf.count(0xFF) == n:
+        raise FrameError("all_ff")
+    if buf[0] != VERSION:
+        raise FrameError("version", f"got {buf[0]}")
+    length = buf[1]
+    if not HEADER_LEN + CRC_LEN <= length <= min(n, FRAME_MAX):
+        raise FrameError("length", f"{length} with {n} bytes read")
+    if crc32c(buf[: length - CRC_LEN]) != int.from_bytes(buf[length - CRC_LEN: length], "big"):
+        raise FrameError("crc")
+    if any(buf[length:]):
+        raise FrameError("padding")
+    kind = buf[2]
+    flags = buf[4]
+    if flags & ~FLAGS_KNOWN & 0xFF:
+        raise FrameError("flags", f"0x{flags:02x}")
+    if kind == KIND_INFO:
+        if length != INFO_LEN:
+            raise FrameError("length", f"info frame of {length} bytes")
+        (_, _, _, seq, flags, boot, major, minor, patch, uptime, dbp, dbs, lp, ls, gp, gs, tmo,
+         berr) = _INFO.unpack_from(buf)
+        return InfoFrame(seq, flags, boot, (major, minor, patch), uptime, dbp, dbs, (lp, ls), (gp, gs),
+                         tmo, berr)
+    if kind != KIND_DATA:
+        raise FrameError("kind", f"0x{kind:02x}")
+    _, _, _, seq, flags, boot, dropped, t0 = _HEAD.unpack_from(buf)
+    events = []
+    i, end = HEADER_LEN, length - CRC_LEN
+    while i < end:
+        raw_tag = buf[i]
+        tag = raw_tag & ~TAG_GAP
+        gap = bool(raw_tag & TAG_GAP)
+        size = EVENT_LEN.get(tag)
+        if size is None:
+            raise FrameError("event_tag", f"0x{raw_tag:02x} at byte {i}")
+        if i + size > end:
+            raise FrameError("event_length", f"event at byte {i} overruns")
+        dt = buf[i + 1] << 8 | buf[i + 2]
+        if dt >= 0x8000:
+            dt -= 0x10000
+        t = (t0 + dt) & 0xFFFFFFFF
+        if tag == CH_ADC:
+            events.append(Event(tag, t, buf[i + 3] << 8 | buf[i + 4], buf[i + 5], gap))
+        else:
+            events.append(Event(tag, t, gap=gap))
+        i += size
+    return DataFrame(seq, flags, boot, dropped, t0, tuple(events))
+
+
+def decode_command(buf: bytes) -> v1.Command:
+    """Check and decode a host command (the device's side, mirrored for the sim)."""
+    if len(buf) < 3:
+        raise FrameError("short", f"command of {len(buf)} bytes")
+    op = buf[0]
+    if op not in COMMAND_ARGS:
+        raise FrameError("op", f"0x{op:02x}")
+    size = 1 + COMMAND_ARGS[op] + 2
+    if len(buf) != size:
+        raise FrameError("length", f"command 0x{op:02x} of {len(buf)} bytes, expected {size}")
+    if crc16(buf[:-2]) != (buf[-2] << 8 | buf[-1]):
+        raise FrameError("crc", "command")
+    if op == OP_SET_DEBOUNCE:
+        return v1.Command(op, struct.unpack(">HH", buf[1:5]))
+    if op == OP_ACK_POLL:
+        return v1.Command(op, struct.unpack(">HB", buf[1:4]))
+    return v1.Command(op, ())

@@ -1,0 +1,52 @@
+/* Shared between the simavr harness (harness.c: MCU, I2C master, UART, host protocol)
+ * and its sensors (sensors.c: Hall sensors and AD7171 as external drivers on port D). */
+#ifndef DYNO_HARNESS_H
+#define DYNO_HARNESS_H
+#include <stdint.h>
+#include "sim_avr.h"
+#include "sim_irq.h"
+
+#define F_CPU_HZ 16000000ull
+#define CYCLES_PER_US (F_CPU_HZ / 1000000ull)
+
+extern avr_t *avr;
+
+/* sensor configuration (command line) */
+extern double cfg_rpm[2];
+extern unsigned cfg_adc_code, cfg_adc_status, cfg_adc_err_every;
+extern double cfg_adc_hz, cfg_pulse_us, cfg_duty, cfg_glitch_hz, cfg_glitch_us;
+extern int cfg_bounce, cfg_legacy_pullups;
+
+typedef struct {
+    int ch;                      /* 0 primary (PD2), 1 secondary (PD3) */
+    avr_irq_t *pin;
+    double period_cycles;
+    uint64_t k;                  /* index of the next true edge */
+    double t0_cycles;            /* time of edge 0 */
+    int step;                    /* position in the pulse pattern */
+    uint64_t edge_cycle;         /* cycle of the current true edge */
+    uint64_t generated, bounces, glitches, glitches_masked;
+    uint64_t first_cycle, last_cycle;
+    int running;
+    int sensor_level, glitch_level, out_level;
+    uint64_t glitch_rng;
+} hall_t;
+extern hall_t hall[2];
+extern int gen_enabled;
+
+extern avr_irq_t *pin_dout;
+extern int adc_bit, adc_ready, adc_running;
+extern uint64_t adc_generated, adc_read, adc_missed, adc_overrun, adc_errors_set;
+extern double adc_period_cycles, adc_t0_cycles;
+
+void drive_pin(avr_irq_t *pin, int bit, int level);
+double pulse_us(const hall_t *h);
+void hall_start(hall_t *h, uint64_t at_cycle);
+void adc_start(uint64_t at_cycle);
+avr_cycle_count_t hall_timer(avr_t *a, avr_cycle_count_t when, void *param);
+avr_cycle_count_t glitch_timer(avr_t *a, avr_cycle_count_t when, void *param);
+avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param);
+avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param);
+void adc_sclk_notify(avr_irq_t *irq, uint32_t value, void *param);
+
+#endif

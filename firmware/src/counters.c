@@ -1,0 +1,3 @@
+#include "counters.h"
+
+dyno_counters_t g_counters;
