@@ -28,6 +28,9 @@ def add_arguments(p) -> None:
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
     p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
                    help="settling: detected from the data, or the thesis's fixed 4 s")
+    p.add_argument("--plan", choices=sorted(PLANS), default="thesis-step",
+                   help="thesis-step: the thesis's open-loop brake steps (default); speed-hold: closed-loop "
+                        "secondary-speed setpoints, each point measured to a 95 %% CI of +-1 pp (docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
@@ -37,6 +40,16 @@ def add_arguments(p) -> None:
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
+
+
+#: the shipped plans, by name (dyno.control.plans)
+PLANS = ("thesis-step", "speed-hold")
+
+
+def plan_named(name: str, **overrides):
+    from dyno.control.plans import plan_named as _plan_named
+
+    return _plan_named(name, **overrides)
 
 
 #: exit codes (docs/safety.md): 0 done, 2 bad input, 3 aborted to the safe state, 128+N signal N
@@ -50,10 +63,7 @@ def exit_code(result: dict) -> int:
 
 
 def run(args) -> int:
-    from dataclasses import replace
-
     from dyno.app import RunOptions, run_test
-    from dyno.control.controller import TestPlan
     from dyno.drills import parse_drill
 
     if not args.sim:
@@ -62,7 +72,7 @@ def run(args) -> int:
     drills = [parse_drill(d) for d in args.drill]
     opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=replace(TestPlan(), settle_mode=args.settle), drills=drills, handle_signals=True,
+                      plan=plan_named(args.plan, settle_mode=args.settle), drills=drills, handle_signals=True,
                       mock_pins=args.mock_pins)
     if args.calibration:
         opts.calibration_path = args.calibration

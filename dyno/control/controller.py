@@ -44,8 +44,8 @@ TRANSITIONS: dict[State, set[State]] = {
     State.WAIT_ENGINE: {State.ARMED},
     State.ARMED: {State.WARMUP},
     State.WARMUP: {State.STEP},
-    State.STEP: {State.SETTLE},
-    State.SETTLE: {State.MEASURE, State.DONE},
+    State.STEP: {State.SETTLE, State.STEP, State.DONE},  # (speed hold: next setpoint, or none left)
+    State.SETTLE: {State.MEASURE, State.DONE, State.STEP},  # (speed hold: a setpoint it cannot hold)
     State.MEASURE: {State.STEP, State.DONE, State.MEASURE},
     State.DONE: set(),
     State.ABORTED: set(),
@@ -69,9 +69,11 @@ class TestPlan:
     target_points: int = 20  # adapt the step so the run gives about this many points
     measure_s: float = 3.0  # the thesis's 3 s average (the minimum)
     target_efficiency_sem: float = 0.0012  # extend the average until the standard error is this small ...
+    target_efficiency_ci95: float | None = None  # ... or, if set, until the 95 % half-width is this small ...
     max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
     min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
+    mode: str = "step"  # "step" (the thesis's open-loop steps) or "speed-hold" (dyno.control.speed_hold)
     settle: SettleCriteria = field(default_factory=SettleCriteria)
     min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
     max_points: int = 60
@@ -277,6 +279,11 @@ class TestController:
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)
+        if p.mode == "speed-hold":
+            from dyno.control.speed_hold import run_speed_hold
+
+            await run_speed_hold(self)
+            return
         last_rs = self.poller.rpm(v1.CH_SECONDARY)
         while True:
             await self._resume.wait()
@@ -289,49 +296,14 @@ class TestController:
             if await self._secondary_below(p.min_secondary_rpm):
                 self._enter(State.DONE, f"secondary below {p.min_secondary_rpm:.0f} rpm")
                 return
-            for attempt in range(MAX_REMEASURE + 1):
-                self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
-                host_t0, dev_t0 = self._now(), self.poller.device_now_us()
-                await self._sleep(p.measure_s)
-                while True:
-                    host_t1, dev_t1 = self._now(), self.poller.device_now_us()
-                    point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
-                                         index=len(self.points))
-                    sem = point["efficiency_sem"]
-                    remaining_s = p.max_measure_s - (host_t1 - host_t0)
-                    if not (sem > p.target_efficiency_sem) or remaining_s < 0.05:
-                        break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
-                    await self._sleep(min(1.0, remaining_s))
-                # Let the poller look once more: a loss or reset at the window's end is reported late.
-                await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
-                disturbed = self.poller.disturbances_between(host_t0, self._now())
-                if not await self._sensors_alive():
-                    disturbed.append({"detail": "a Hall channel went silent at the window's end"})
-                if not disturbed:
-                    break
-                why = "; ".join(d["detail"] for d in disturbed)
-                entry = {"index": len(self.points), "host_t_start_s": host_t0, "host_t_end_s": host_t1,
-                         "reason": why, "attempt": attempt + 1}
-                self.discards.append(entry)
-                self._log("discard", **entry)
-                for fn in self.listeners:
-                    fn(self)
-                if attempt == MAX_REMEASURE:
-                    point["valid"] = False
-                    point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
+            point, host_t0, host_t1 = await self._measure()
             if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
                 self._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
                                          f"{p.min_point_torque_nm} N m: brake not yet loading")
                 self._adapt_step(math.nan, math.nan)
                 continue
-            point.update(settled_by=settled_by, settle_s=settle_s, host_t_start_s=host_t0, host_t_end_s=host_t1,
-                         step_s=self._step_s)
-            for hook in self.point_hooks:
-                hook(point, host_t0, host_t1)
-            self.points.append(point)
-            self._log("point", **point)
-            for fn in self.listeners:
-                fn(self)
+            point.update(settled_by=settled_by, settle_s=settle_s, step_s=self._step_s)
+            self._record_point(point, host_t0, host_t1)
             rs = point["rpm_secondary"]
             self._adapt_step(last_rs, rs)
             last_rs = rs
@@ -341,6 +313,57 @@ class TestController:
             if len(self.points) >= p.max_points:
                 self._enter(State.DONE, f"{p.max_points} points")
                 return
+
+    async def _measure(self) -> tuple[dict, float, float]:
+        """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
+        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).
+
+        Returns the reduced point and the window's host start and end times.
+        """
+        p = self.plan
+        for attempt in range(MAX_REMEASURE + 1):
+            self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
+            host_t0, dev_t0 = self._now(), self.poller.device_now_us()
+            await self._sleep(p.measure_s)
+            while True:
+                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
+                point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
+                                     index=len(self.points))
+                if p.target_efficiency_ci95 is not None:
+                    unsure = point["efficiency_ci95"] > p.target_efficiency_ci95
+                else:
+                    unsure = point["efficiency_sem"] > p.target_efficiency_sem
+                remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                if not unsure or remaining_s < 0.05:
+                    break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
+                await self._sleep(min(1.0, remaining_s))
+            # Let the poller look once more: a loss or reset at the window's end is reported late.
+            await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
+            disturbed = self.poller.disturbances_between(host_t0, self._now())
+            if not await self._sensors_alive():
+                disturbed.append({"detail": "a Hall channel went silent at the window's end"})
+            if not disturbed:
+                break
+            why = "; ".join(d["detail"] for d in disturbed)
+            entry = {"index": len(self.points), "host_t_start_s": host_t0, "host_t_end_s": host_t1,
+                     "reason": why, "attempt": attempt + 1}
+            self.discards.append(entry)
+            self._log("discard", **entry)
+            for fn in self.listeners:
+                fn(self)
+            if attempt == MAX_REMEASURE:
+                point["valid"] = False
+                point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
+        return point, host_t0, host_t1
+
+    def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
+        point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)
+        for hook in self.point_hooks:
+            hook(point, host_t0, host_t1)
+        self.points.append(point)
+        self._log("point", **point)
+        for fn in self.listeners:
+            fn(self)
 
     def _channel_quiet_s(self, channel: int) -> float:
         e = self.poller.streams.edges[channel]

@@ -1,0 +1,41 @@
+"""The speed-hold law (pure): sign, sigma-delta pulses, dead band, anti-windup."""
+
+from dyno.control.outputs import APPLY, RELEASE, STOP
+from dyno.control.speed_hold import SpeedHold, SpeedHoldGains
+
+
+def test_too_fast_applies_too_slow_releases():
+    h = SpeedHold(SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02))
+    u = h.update(3300.0, 3000.0, 0.05)  # 10 % too fast: more brake
+    assert u > 0
+    # 0.015 s of travel a period: the first period owes it, the second gives a 0.03 s pulse
+    assert h.pulse(u, 0.1) == (STOP, 0.0)
+    direction, on_s = h.pulse(u, 0.1)
+    assert direction == APPLY and abs(on_s - 2 * 0.05 * u) < 1e-12
+    h = SpeedHold(SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02))
+    u = h.update(2700.0, 3000.0, 0.05)
+    assert u < 0 and [h.pulse(u, -0.1)[0] for _ in range(2)] == [STOP, RELEASE]
+
+
+def test_small_commands_accumulate_into_minimum_pulses():
+    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.001)
+    h = SpeedHold(g)
+    e = 0.01  # u = 0.03: 1.5 ms of travel a period, far below the 20 ms minimum pulse
+    out = [h.pulse(h.update(3000 * (1 + e), 3000.0, 0.05), e) for _ in range(40)]
+    pulses = [o for o in out if o[0] != STOP]
+    assert pulses and all(on >= g.min_pulse_s for _, on in pulses)
+    # the travel given equals the travel asked for, within one minimum pulse
+    assert abs(sum(on for _, on in pulses) - 40 * 0.03 * 0.05) <= g.min_pulse_s
+
+
+def test_dead_band_and_no_speed_mean_no_motion():
+    h = SpeedHold(SpeedHoldGains(deadband_rel=0.004))
+    assert h.pulse(h.update(3006.0, 3000.0, 0.05), 0.002) == (STOP, 0.0)
+    assert h.update(float("nan"), 3000.0, 0.05) == 0.0 and h.update(0.0, 3000.0, 0.05) == 0.0
+
+
+def test_integral_does_not_wind_up_while_saturated():
+    h = SpeedHold(SpeedHoldGains(kp=3.0, ki_per_s=1.0))
+    for _ in range(100):  # 50 % too fast for 5 s: the command saturates at +1
+        assert h.update(4500.0, 3000.0, 0.05) == 1.0
+    assert h.integral == 0.0

@@ -1,0 +1,58 @@
+"""`dyno run --plan speed-hold`: closed-loop speed setpoints on the simulated rig (its actuator, relay and
+CVT keep the real ones' limits), points to a 95 % CI of +-1 pp, the sim's truth inside it."""
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dyno.app import RunOptions, run_test
+from dyno.control.plans import plan_named
+from dyno.drills import parse_drill
+from dyno.replay import replay
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def hold_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hold") / "run"
+    r = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--seed", "2",
+                        "--plan", "speed-hold", "--out", str(out)], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_speed_hold_steady_test_figures(hold_run):
+    r = hold_run
+    assert r["state"] == "done" and not r["aborts"]
+    pts = r["points"]
+    assert len(pts) >= 15
+    assert r["test_time_s"] <= 180.0  # GO to the end of the last measurement, simulated seconds
+    assert all(p["efficiency_ci95"] <= 0.0101 for p in pts)
+    inside = sum(abs(p["efficiency"] - p["efficiency_true"]) <= p["efficiency_ci95"] for p in pts)
+    assert inside / len(pts) >= 0.85
+    assert statistics.median(abs(p["efficiency"] - p["efficiency_true"]) for p in pts) <= 0.005
+    rs = [p["rpm_secondary"] for p in pts]
+    assert max(rs) - min(rs) > 2500  # over the range, light load to the low end
+
+
+def test_speed_hold_replays_exactly(hold_run):
+    again = replay(hold_run["run_dir"])["points"]
+    assert len(again) == len(hold_run["points"])
+    for live, rep in zip(hold_run["points"], again):
+        assert rep["efficiency"] == pytest.approx(live["efficiency"], rel=1e-12)
+
+
+def test_a_drill_during_a_hold_still_trips_within_its_bound(tmp_path):
+    r = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"),
+                            drills=[parse_drill("bus-lost@40")], handle_signals=True))
+    assert r["state"] == "aborted"
+    a = r["aborts"][0]
+    assert a["cause"] == "comms_lost" and a["latency_s"] <= 0.35 and r["rig_safe"]
+    assert len(r["points"]) >= 2  # points were being taken under the hold
