@@ -74,6 +74,7 @@ def run(args) -> int:
         opts.tune_path = args.tune
         opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
     result = run_test(opts)
+    _index(result)
     try:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
@@ -86,6 +87,14 @@ def run(args) -> int:
         print(f"dyno run: {result['run_dir']}: {result['log_error']}: safe state reached; "
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
     return exit_code(result)
+
+
+def _index(result: dict) -> None:
+    """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
+    from dyno.library.index import index_after_run
+
+    if result.get("run_dir"):
+        index_after_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
 
 
 def _print_table(result: dict) -> None:
