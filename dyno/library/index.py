@@ -37,15 +37,21 @@ def key(run_dir) -> str:
 
 
 def _create(conn: sqlite3.Connection) -> None:
+    """Create the tables; idempotent, in one write transaction (two runs may end at once)."""
     cols = ", ".join(f"{n} {t}" for n, t in RUN_COLUMNS)
     pcols = ", ".join(f"{n} {t}" for n, t in POINT_COLUMNS)
-    conn.executescript(f"""
-        CREATE TABLE runs ({cols});
-        CREATE TABLE points ({pcols}, PRIMARY KEY (run_path, idx));
-        CREATE INDEX runs_tune ON runs (tune_name);
-        CREATE INDEX runs_created ON runs (created_utc);
-        PRAGMA user_version = {SCHEMA_VERSION};
-    """)
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for stmt in (f"CREATE TABLE IF NOT EXISTS runs ({cols})",
+                     f"CREATE TABLE IF NOT EXISTS points ({pcols}, PRIMARY KEY (run_path, idx))",
+                     "CREATE INDEX IF NOT EXISTS runs_tune ON runs (tune_name)",
+                     "CREATE INDEX IF NOT EXISTS runs_created ON runs (created_utc)",
+                     f"PRAGMA user_version = {SCHEMA_VERSION}"):
+            conn.execute(stmt)
+        conn.commit()
+    except BaseException:
+        conn.rollback()
+        raise
 
 
 def connect(db_path: Path) -> sqlite3.Connection:
@@ -57,8 +63,7 @@ def connect(db_path: Path) -> sqlite3.Connection:
         version = conn.execute("PRAGMA user_version").fetchone()[0]
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if version == 0 and not tables:
-            with conn:
-                _create(conn)
+            _create(conn)
         elif version != SCHEMA_VERSION or not {"runs", "points"} <= tables:
             raise IndexUnusable(f"schema version {version}, expected {SCHEMA_VERSION}")
         else:
@@ -93,6 +98,8 @@ def open_library(root=None, warn=None) -> sqlite3.Connection:
     try:
         return connect(db_path)
     except (sqlite3.DatabaseError, IndexUnusable) as exc:
+        if isinstance(exc, sqlite3.OperationalError) and "locked" in str(exc):
+            raise  # busy, not broken: never delete an index another process is writing
         if warn is not None:
             warn(f"{db_path}: not a usable run index ({exc}): rebuilt from the run directories in {root}")
         _remove(db_path)

@@ -156,3 +156,28 @@ def test_deleted_run_directory_leaves_the_listing(tmp_path):
     shutil.rmtree(root / "a")
     assert lib.sync(conn, root) == 1 and lib.query(conn) == []
     conn.close()
+
+
+def test_two_processes_indexing_at_once(library, tmp_path):
+    """Runs ending together (two processes, a fresh index): every run indexed, nothing reported broken."""
+    import shutil
+
+    src = Path(library["results"][0]["run_dir"])
+    dirs = []
+    for k in range(24):
+        d = tmp_path / "elsewhere" / f"r{k:02d}"
+        shutil.copytree(src, d)
+        dirs.append(str(d))
+    root = tmp_path / "runs"
+    script = ("import sys\nfrom dyno.library.index import index_after_run\n"
+              "for d in sys.argv[1:]:\n"
+              "    assert index_after_run(d, lambda line: print(line, file=sys.stderr))\n")
+    env = dict(os.environ, DYNO_RUNS_DIR=str(root), PYTHONPATH=str(REPO))
+    procs = [subprocess.Popen([sys.executable, "-c", script, *dirs[i::2]], env=env, stderr=subprocess.PIPE, text=True)
+             for i in range(2)]
+    for p in procs:
+        _, err = p.communicate(timeout=120)
+        assert p.returncode == 0 and err == "", err
+    conn = lib.connect(root / lib.INDEX_NAME)
+    assert sorted(r["path"] for r in lib.query(conn)) == sorted(str(Path(d).resolve()) for d in dirs)
+    conn.close()
