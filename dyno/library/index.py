@@ -220,16 +220,21 @@ def dump(conn: sqlite3.Connection) -> dict:
 def index_after_run(run_dir, warn) -> bool:
     """The end-of-run hook: index ``run_dir`` in the runs directory's library.
 
-    Never raises: a failure is one line to ``warn`` (the run itself is on disk and
-    ``dyno runs reindex`` picks it up later).
+    ``run_dir=None``: the run went to the runs directory under a name the caller does
+    not know (``dyno ui``): index whatever is new there.  Never raises: a failure is one
+    line to ``warn`` (the run itself is on disk and ``dyno runs reindex`` picks it up later).
     """
     try:
         conn = open_library(warn=warn)
         try:
-            index_run(conn, run_dir)
+            if run_dir is None:
+                sync(conn, runs_dir())
+            else:
+                index_run(conn, run_dir)
         finally:
             conn.close()
         return True
     except Exception as exc:  # noqa: BLE001 - indexing must never change how a run ends
-        warn(f"run library: {run_dir} not indexed ({type(exc).__name__}: {exc}); `dyno runs reindex` retries")
+        warn(f"run library: {run_dir or runs_dir()} not indexed ({type(exc).__name__}: {exc}); "
+             "`dyno runs reindex` retries")
         return False
