@@ -181,3 +181,36 @@ def test_two_processes_indexing_at_once(library, tmp_path):
     conn = lib.connect(root / lib.INDEX_NAME)
     assert sorted(r["path"] for r in lib.query(conn)) == sorted(str(Path(d).resolve()) for d in dirs)
     conn.close()
+
+
+LEGACY = REPO.parent / "shared" / "data" / "vt-cvt-dyno-2019" / "2019-04-18_run2"
+
+
+@pytest.mark.skipif(not LEGACY.is_dir(), reason=f"thesis logs not present at {LEGACY}")
+def test_import_legacy_is_indexed(tmp_path):
+    root = tmp_path / "runs"
+    r = _dyno("import-legacy", LEGACY, "--json", runs_dir=root)  # default --out: the runs directory
+    assert r.returncode == 0, r.stderr
+    run_dir = Path(json.loads(r.stdout)["run_dir"])
+    assert run_dir.parent.resolve() == root.resolve()
+    conn = lib.connect(root / lib.INDEX_NAME)  # indexed by the command itself, no sync
+    (row,) = lib.query(conn)
+    conn.close()
+    assert row["mode"] == "legacy-import" and row["state"] in ("done", "success") and row["n_points"] > 0
+    assert row["path"] == str(run_dir.resolve())
+
+
+def test_ui_hook_indexes_what_is_new(library, tmp_path, monkeypatch):
+    import shutil
+
+    from dyno.cli.ui_cmd import _index
+
+    root = tmp_path / "runs"
+    shutil.copytree(library["root"] / "quick", root / "20260101-000000")
+    monkeypatch.setenv("DYNO_RUNS_DIR", str(root))
+    _index(None)  # the UI's run went to the runs directory under a name only the session knew
+    _index(tmp_path / "never-started")  # no run there: nothing to do, nothing created
+    conn = lib.connect(root / lib.INDEX_NAME)
+    assert [r["name"] for r in lib.query(conn)] == ["20260101-000000"]
+    conn.close()
+    assert not (tmp_path / "never-started").exists()
