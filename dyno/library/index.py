@@ -90,16 +90,23 @@ def _remove(db_path: Path) -> None:
 def open_library(root=None, warn=None) -> sqlite3.Connection:
     """The index of the runs directory ``root``, rebuilt from the run directories if unusable.
 
-    ``warn(line)`` gets one line when the index had to be rebuilt.
+    ``warn(line)`` gets one line when the index had to be rebuilt.  An index that cannot
+    be opened or written at all (a busy one past the timeout, a read-only directory) is
+    a ConfigError, never deleted.
     """
+    from dyno.errors import ConfigError
+
     root = Path(root) if root is not None else runs_dir()
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(root, "runs directory", f"a directory dyno can create and write ({exc.strerror})") from None
     db_path = root / INDEX_NAME
     try:
         return connect(db_path)
+    except sqlite3.OperationalError as exc:  # busy, read-only, cannot open: not broken
+        raise ConfigError(db_path, "run index", f"an index dyno can open and write ({exc})") from None
     except (sqlite3.DatabaseError, IndexUnusable) as exc:
-        if isinstance(exc, sqlite3.OperationalError) and "locked" in str(exc):
-            raise  # busy, not broken: never delete an index another process is writing
         if warn is not None:
             warn(f"{db_path}: not a usable run index ({exc}): rebuilt from the run directories in {root}")
         _remove(db_path)
@@ -234,7 +241,7 @@ def index_after_run(run_dir, warn) -> bool:
         finally:
             conn.close()
         return True
-    except Exception as exc:  # noqa: BLE001 - indexing must never change how a run ends
+    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - indexing must never change how a run ends
         warn(f"run library: {run_dir or runs_dir()} not indexed ({type(exc).__name__}: {exc}); "
              "`dyno runs reindex` retries")
         return False

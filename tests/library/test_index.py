@@ -143,6 +143,10 @@ def test_bad_input_is_one_line_exit_2(tmp_path):
         assert r.returncode == 2, (args, r.stderr)
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / lib.INDEX_NAME).exists()  # refused before anything is written
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    r = _dyno("runs", runs_dir=a_file)  # the runs directory is a file
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
 def test_deleted_run_directory_leaves_the_listing(tmp_path):
