@@ -52,7 +52,11 @@ class RunOptions:
     mock_pins: bool = False  # sim: drive the physics through the real-rig output code (dyno.hw.mockpins)
 
 
-def default_run_dir(root: Path = Path("runs")) -> Path:
+def default_run_dir(root: Path | None = None) -> Path:
+    if root is None:
+        from dyno.runlog.files import runs_root
+
+        root = runs_root()  # $DYNO_RUNS_DIR, else runs/
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     path = root / stamp
     n = 1

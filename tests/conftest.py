@@ -17,3 +17,21 @@ def belt_table_built():
 
     belt_table()
     yield
+
+
+@pytest.fixture(scope="session", autouse=True)
+def runs_library_dir(tmp_path_factory):
+    """Runs and the run library go to a temporary directory, never the checkout's runs/.
+
+    ``dyno run`` indexes every run in ``$DYNO_RUNS_DIR`` (docs/library.md); commands
+    started as subprocesses inherit this.
+    """
+    import os
+
+    old = os.environ.get("DYNO_RUNS_DIR")
+    os.environ["DYNO_RUNS_DIR"] = str(tmp_path_factory.mktemp("runs-library"))
+    yield
+    if old is None:
+        os.environ.pop("DYNO_RUNS_DIR", None)
+    else:
+        os.environ["DYNO_RUNS_DIR"] = old

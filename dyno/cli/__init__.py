@@ -21,6 +21,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("dyno.cli.replay_cmd", "re-process a logged run (viewer, or --json)"),
     "export": ("dyno.cli.export_cmd", "export a run's points and streams to CSV"),
     "report": ("dyno.cli.report_cmd", "(re)build a run's report.html: plots, points, faults, calibration"),
+    "runs": ("dyno.cli.runs_cmd", "the run library: list and filter runs (reindex rebuilds the index)"),
+    "compare": ("dyno.cli.compare_cmd", "compare runs side by side: curves, differences, tune diff"),
     "import-legacy": ("dyno.cli.legacy_cmd", "import a folder of the thesis rig's logs"),
     "model": ("dyno.cli.model_cmd", "belt-model library: point, sweep, study"),
     "firmware-sim": ("dyno.cli.firmware_sim_cmd", "run the real firmware ELF in simavr against the host"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 
@@ -26,6 +27,9 @@ def run(args) -> int:
 
     result = import_legacy(args.dir, args.out, calibration_path=args.calibration,
                            engine_map_path=args.engine_map, discard=args.discard)
+    from dyno.library.index import index_after_run
+
+    index_after_run(result["run_dir"], lambda line: print(f"dyno import-legacy: {line}", file=sys.stderr))
     points = [{**public_point(p), "legacy_point": p["legacy_point"], "discarded": p["discarded"]}
               for p in result["points"]]
     faults = [{k: f[k] for k in ("point", "channel", "severity", "reason", "source")} for f in result["faults"]]

@@ -94,6 +94,7 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.finish()
+    _index(result)
     try:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
@@ -132,6 +133,14 @@ def _write_report(result: dict, *, announce: bool) -> None:
             sys.stdout.flush()
         except OSError:  # a closed pipe: the report is on disk all the same
             pass
+
+
+def _index(result: dict) -> None:
+    """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
+    from dyno.library.index import index_after_run
+
+    if result.get("run_dir"):
+        index_after_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
 
 
 def _print_table(result: dict) -> None:

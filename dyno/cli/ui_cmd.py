@@ -40,4 +40,17 @@ def run(args) -> int:
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
                        engine_map_path=args.engine_map, drills=drills)
-    return main(opts)
+    rc = main(opts)
+    _index(args.out)
+    return rc
+
+
+def _index(out) -> None:
+    """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
+    import sys
+
+    from dyno.library.index import index_after_run
+
+    if out is not None and not (Path(out) / "meta.json").is_file():
+        return  # the session never started a run there
+    index_after_run(out, lambda line: print(f"dyno ui: {line}", file=sys.stderr))

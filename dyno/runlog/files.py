@@ -38,3 +38,10 @@ def finite(obj):
 
 def dumps(obj) -> str:
     return json.dumps(finite(obj), sort_keys=True, default=_jsonable, allow_nan=False)
+
+
+def runs_root() -> Path:
+    """Where runs go by default and where the run library lives: ``$DYNO_RUNS_DIR``, else ``runs``."""
+    import os
+
+    return Path(os.environ.get("DYNO_RUNS_DIR") or "runs")

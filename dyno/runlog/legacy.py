@@ -491,7 +491,11 @@ def point_faults(p: LegacyPoint, nominal_s: float, calibration, engine_map) -> l
 # the import
 
 
-def default_out_dir(folder: Path, root: Path = Path("runs")) -> Path:
+def default_out_dir(folder: Path, root: Path | None = None) -> Path:
+    if root is None:
+        from dyno.runlog.files import runs_root
+
+        root = runs_root()  # $DYNO_RUNS_DIR, else runs/
     path = root / f"legacy-{folder.name}"
     n = 1
     while path.exists():

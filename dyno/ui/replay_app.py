@@ -17,12 +17,13 @@ from textual.widgets import DataTable, Input, Static
 from textual_plotext import PlotextPlot
 
 from dyno.ui.common import DynoApp, EstopSafeInput, bottom_lines
-from dyno.ui.replay_model import (ReplaySet, efficiency_series, export_csv, export_png, finite, ideal_rpm_for,
-                                  point_streams, predicted_shift_series, shift_series)
+from dyno.ui.replay_model import (ReplaySet, compare_with_first, efficiency_series, export_csv, export_png, finite,
+                                  ideal_rpm_for, point_streams, predicted_shift_series, shift_series)
 
-HELP = "↑↓ point  n run  1-3 plot  c cal  e map  x CSV  s PNG  q quit │ ^C E-STOP"
+HELP = "↑↓ point  n run  1-4 plot  c cal  e map  x CSV  s PNG  q quit │ ^C E-STOP"
 COLOURS = ("cyan", "magenta", "yellow", "green", "red", "blue")
-PLOTS = {"1": "efficiency (all runs)", "2": "shift curve (all runs)", "3": "raw streams of the point"}
+PLOTS = {"1": "efficiency (all runs)", "2": "shift curve (all runs)", "3": "raw streams of the point",
+         "4": "efficiency difference from run 1 (95 %)"}
 
 REPLAY_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
@@ -64,6 +65,7 @@ class ReplayApp(DynoApp):
     BINDINGS = DynoApp.BINDINGS + [
         Binding("n", "next_run", "next run"), Binding("1", "plot('1')", show=False),
         Binding("2", "plot('2')", show=False), Binding("3", "plot('3')", show=False),
+        Binding("4", "plot('4')", show=False),
         Binding("c", "reprocess('calibration')", "calibration"), Binding("e", "reprocess('engine map')", "map"),
         Binding("x", "export_csv", "CSV"), Binding("s", "export_png", "PNG"), Binding("q", "quit_safe", "quit"),
     ]
@@ -164,6 +166,8 @@ class ReplayApp(DynoApp):
             if math.isfinite(self._ideal):
                 plt.hline(self._ideal, color="green")
             plt.xlabel("secondary rpm")
+        elif self.plot_key == "4":
+            self._draw_difference(plt)
         else:
             p = self._selected_point()
             if p is not None and "t_start_us" in p:
@@ -182,6 +186,36 @@ class ReplayApp(DynoApp):
             else:
                 plt.title("no point selected")
         w.refresh()
+
+    def _draw_difference(self, plt) -> None:
+        """This run's efficiency minus run 1's on a common rpm grid, ±1.96 s.e. band (docs/library.md)."""
+        if self.current == 0:
+            plt.title("difference: run 1 is the reference; n = next run")
+            return
+        try:
+            res = compare_with_first(self.rs, self.current)
+        except ValueError as exc:
+            plt.title(f"no difference: {exc}"[:70])
+            return
+        d = res["differences"][0]
+        q = d["quantities"]["efficiency"]
+        rows = [(g, v * 100, s * 100, sig) for g, v, s, sig in
+                zip(res["grid_rpm_secondary"], q["difference"], q["sem"], q["significant"]) if v is not None]
+        if not rows:
+            plt.title("no difference: no common grid speed")
+            return
+        x = [r[0] for r in rows]
+        plt.plot(x, [1.96 * r[2] for r in rows], color="gray")
+        plt.plot(x, [-1.96 * r[2] for r in rows], color="gray", label="±1.96 s.e.")
+        plt.hline(0.0, color="gray")
+        sig = [r for r in rows if r[3]]
+        if sig:
+            plt.scatter([r[0] for r in sig], [r[1] for r in sig], marker="dot", color="red", label="significant")
+        plt.scatter([r[0] for r in rows if not r[3]], [r[1] for r in rows if not r[3]], marker="dot", color="cyan")
+        plt.title(f"Δeff % vs run 1: {len(sig)}/{len(rows)} sig. 95 %")  # short: plotext drops a long one
+        plt.xlabel("secondary rpm")
+        tune = ", ".join(f"{t['key']} {t['from']}→{t['to']}" for t in d["tune_diff"] if t["key"] != "notes")
+        self.say(f"tune: {tune or 'same as run 1'}")
 
     def _predict_work(self) -> None:
         """Predicted shift curves from each run's stored tune, off the UI thread."""

@@ -170,3 +170,21 @@ def predicted_shift_series(run_dir, n_points: int = 30):
         return None
     a = curve.arrays()
     return a["secondary_rpm"].tolist(), a["engine_rpm"].tolist()
+
+
+def compare_with_first(rs: ReplaySet, i: int, step_rpm: float = 200.0) -> dict:
+    """Run ``i`` against run 0 as ``dyno compare`` does (:func:`dyno.library.compare.compare`).
+
+    Uses the viewer's (possibly re-processed) points. Raises ValueError when the two
+    runs cannot be compared (too few points, no common secondary-speed range).
+    """
+    from dyno.library.compare import compare
+    from dyno.library.index import key
+    from dyno.library.summary import read_run_files, run_row
+
+    runs = []
+    for rr in (rs.runs[0], rs.runs[i]):
+        files = read_run_files(rr.run_dir)
+        runs.append({"name": rr.label, "row": run_row(files, key(rr.run_dir)), "points": rr.points,
+                     "tune": files["tune"]["data"] if files["tune"] else None})
+    return compare(runs, step_rpm=step_rpm)

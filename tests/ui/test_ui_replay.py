@@ -78,6 +78,12 @@ def test_ui_replay_app_browse_overlay_export(two_runs, tmp_path):
             await pilot.press("n")
             await pilot.pause(0.2)
             shots["run2"] = screen_text(app)
+            await pilot.press("4")
+            for _ in range(25):  # the comparison is computed on the UI thread: wait for the redraw
+                await pilot.pause(0.2)
+                shots["diff"] = screen_text(app)
+                if "vs run 1" in shots["diff"]:
+                    break
             await pilot.press("x")
             await pilot.pause(0.5)
             await pilot.press("s")
@@ -100,12 +106,13 @@ def test_ui_replay_app_browse_overlay_export(two_runs, tmp_path):
     for name, text in shots.items():
         lines = text.splitlines()
         assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
-        assert "E-STOP" in lines[-1] and "n run  1-3 plot  c cal  e map  x CSV  s PNG  q quit" in lines[-1], name
+        assert "E-STOP" in lines[-1] and "n run  1-4 plot  c cal  e map  x CSV  s PNG  q quit" in lines[-1], name
     assert "run 1/2: run0" in shots["eff"] and "efficiency vs secondary rpm" in shots["eff"]
     assert "T Nm" in shots["eff"] and "eff %" in shots["eff"]
     assert "shift curve" in shots["shift"] and "run0" in shots["shift"] and "run1" in shots["shift"]
     assert "point 1: rpm (left), ADC (right)" in shots["raw"]
     assert "run 2/2: run1" in shots["run2"]
+    assert "Δeff % vs run 1: 0/3 sig. 95 %" in shots["diff"] and "tune: same as run 1" in shots["diff"]
     assert "which engine map file?" in shots["ask"]
     assert running and "no rig is attached" in shots["estop"]
     assert (two_runs[1] / "export" / "points.csv").exists() and (two_runs[1] / "export" / "adc.csv").exists()

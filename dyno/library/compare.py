@@ -1,0 +1,193 @@
+"""Compare runs: curves on a common secondary-rpm grid, differences with their uncertainty, tune diff.
+
+Pure (no I/O): the inputs are what :func:`dyno.library.summary.read_run_files` reads.
+
+Each run's steady points are a sampled curve ``y(n_s)`` with a standard error per
+point.  To compare two runs whose points fall at different secondary speeds, both
+are interpolated linearly onto a common grid inside the speed range they share.
+The interpolated value's uncertainty has two parts, added in quadrature:
+
+* the points' own standard errors carried through the interpolation weights,
+  ``s^2 = (1-w)^2 s_i^2 + w^2 s_{i+1}^2``;
+* the interpolation error of a curved curve: the linear interpolant misses
+  ``f'' (x - x_i)(x_{i+1} - x) / 2`` (the remainder of linear interpolation), with
+  ``f''`` estimated from the neighbouring points' second divided differences.
+
+The difference ``d = y_B - y_A`` has ``s_d = sqrt(s_A^2 + s_B^2)`` (independent runs) and
+is called significant at 95 % when ``|d| > 1.96 s_d``.  Neighbouring grid points share
+points, so their verdicts are correlated: read a run of significant grid points as one
+finding.  No atmospheric correction is applied (dyno runs record no ambient conditions
+yet; the engine map is used as each run recorded it): the report says so.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+Z95 = 1.959964  # two-sided 95 % normal quantile
+
+#: compared quantity -> (point key, standard-error key or None, unit, label, sim truth key)
+QUANTITIES = {
+    "efficiency": ("efficiency", "efficiency_sem", "", "efficiency", "efficiency_true"),
+    "torque_secondary_nm": ("torque_secondary_nm", "torque_secondary_sem_nm", "N·m", "secondary torque",
+                            "torque_secondary_true_nm"),
+    "power_out_w": ("power_out_w", None, "W", "output power", "power_out_true_w"),
+    "rpm_primary": ("rpm_primary", "rpm_primary_sem", "rpm", "primary speed (shift curve)", "rpm_primary_true"),
+}
+SETUP_FIELDS = ("mode", "seed", "tune_name", "tune_sha256", "calibration_date", "calibration_slope_counts_per_nm",
+                "engine_map_sha256", "plan_sha256", "settle_mode", "protocol", "firmware_version",
+                "software_version", "atm_pressure_kpa", "atm_temperature_c", "atm_humidity_pct")
+ATMOSPHERE_NOTE = ("atmospheric correction: not applied (the runs record no ambient pressure, temperature or "
+                   "humidity; input power is each run's engine map as recorded)")
+
+
+def _f(x):
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else math.nan
+
+
+def power_sem(p: dict) -> float:
+    """Standard error of P = T * 2 pi n / 60 from the torque's and the speed's (independent)."""
+    t, st = _f(p.get("torque_secondary_nm")), _f(p.get("torque_secondary_sem_nm"))
+    n, sn = _f(p.get("rpm_secondary")), _f(p.get("rpm_secondary_sem"))
+    pw = _f(p.get("power_out_w"))
+    if not (t and n) or math.isnan(pw):
+        return math.nan
+    rel = math.hypot(st / t if not math.isnan(st) else 0.0, sn / n if not math.isnan(sn) else 0.0)
+    return abs(pw) * rel
+
+
+def series(points: list[dict]) -> dict:
+    """The valid points as sorted arrays: ``rpm_secondary`` and, per quantity, value/sem/truth."""
+    good = [p for p in points if p.get("valid") and not math.isnan(_f(p.get("rpm_secondary")))
+            and not math.isnan(_f(p.get("efficiency")))]
+    good.sort(key=lambda p: _f(p["rpm_secondary"]))
+    out = {"rpm_secondary": np.array([_f(p["rpm_secondary"]) for p in good])}
+    for q, (k, sk, *_rest, tk) in QUANTITIES.items():
+        out[q] = np.array([_f(p.get(k)) for p in good])
+        sems = [power_sem(p) if sk is None else _f(p.get(sk)) for p in good]
+        out[q + "_sem"] = np.array([0.0 if math.isnan(s) else s for s in sems])
+        out[q + "_true"] = np.array([_f(p.get(tk)) for p in good])
+    return out
+
+
+def interpolate(x: np.ndarray, y: np.ndarray, sem: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear interpolation of ``y(x) ± sem`` onto ``grid`` with the uncertainty described above.
+
+    Grid values outside ``[x[0], x[-1]]`` are NaN.  ``x`` sorted; repeated speeds are averaged.
+    """
+    x, inv = np.unique(x, return_inverse=True)
+    if len(x) < 2:
+        return np.full(grid.shape, np.nan), np.full(grid.shape, np.nan)
+    cnt = np.bincount(inv)
+    y = np.bincount(inv, weights=y) / cnt
+    sem = np.sqrt(np.bincount(inv, weights=sem ** 2)) / cnt
+    # second divided differences at interior points, then per interval the larger neighbour
+    curv = np.zeros(len(x))
+    if len(x) >= 3:
+        d1 = np.diff(y) / np.diff(x)
+        curv[1:-1] = np.abs(2.0 * np.diff(d1) / (x[2:] - x[:-2]))
+        curv[0], curv[-1] = curv[1], curv[-2]
+    val = np.full(grid.shape, np.nan)
+    err = np.full(grid.shape, np.nan)
+    inside = (grid >= x[0]) & (grid <= x[-1])
+    g = grid[inside]
+    i = np.clip(np.searchsorted(x, g, side="right") - 1, 0, len(x) - 2)
+    h = x[i + 1] - x[i]
+    w = (g - x[i]) / h
+    val[inside] = (1 - w) * y[i] + w * y[i + 1]
+    stat = np.sqrt(((1 - w) * sem[i]) ** 2 + (w * sem[i + 1]) ** 2)
+    fpp = np.maximum(curv[i], curv[i + 1])
+    interp_err = fpp * (g - x[i]) * (x[i + 1] - g) / 2.0
+    err[inside] = np.hypot(stat, interp_err)
+    return val, err
+
+
+def common_grid(all_series: list[dict], step_rpm: float) -> np.ndarray:
+    lo = max(s["rpm_secondary"][0] for s in all_series)
+    hi = min(s["rpm_secondary"][-1] for s in all_series)
+    if not hi > lo:
+        return np.array([])
+    start = math.ceil(lo / step_rpm) * step_rpm
+    return np.arange(start, hi + 1e-9, step_rpm)
+
+
+def flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(flatten(v, name + "."))
+        else:
+            out[name] = v
+    return out
+
+
+def dict_diff(a: dict, b: dict) -> list[dict]:
+    """Which dotted keys differ between two nested mappings: ``{"key", "from", "to"}`` (None = absent)."""
+    fa, fb = flatten(a or {}), flatten(b or {})
+    return [{"key": k, "from": fa.get(k), "to": fb.get(k)} for k in sorted(set(fa) | set(fb)) if fa.get(k) != fb.get(k)]
+
+
+def compare(runs: list[dict], step_rpm: float = 200.0) -> dict:
+    """Compare ``runs`` (each ``{"name", "row", "points", "tune"}``) against the first.
+
+    Returns the grid, each run's curve on it, per other run the differences with
+    their uncertainty and 95 % verdicts, the tune diff and the setup diff; every
+    number as a plain list (JSON-ready, NaN as None).
+    """
+    ser = [series(r["points"]) for r in runs]
+    for r, s in zip(runs, ser):
+        if len(s["rpm_secondary"]) < 2:
+            raise ValueError(f"{r['name']}: fewer than two valid points to draw a curve from")
+    grid = common_grid(ser, step_rpm)
+    if grid.size == 0:
+        raise ValueError("the runs share no secondary-rpm range")
+    curves = []
+    for r, s in zip(runs, ser):
+        c = {"name": r["name"], "points": {q: {"rpm_secondary": s["rpm_secondary"], "value": s[q], "sem": s[q + "_sem"]}
+                                            for q in QUANTITIES}}
+        for q in QUANTITIES:
+            v, e = interpolate(s["rpm_secondary"], s[q], s[q + "_sem"], grid)
+            c[q] = {"value": v, "sem": e}
+            t = s[q + "_true"]
+            if np.isfinite(t).sum() >= 2:
+                ok = np.isfinite(t)
+                c[q]["truth"] = interpolate(s["rpm_secondary"][ok], t[ok], np.zeros(ok.sum()), grid)[0]
+        curves.append(c)
+    ref = curves[0]
+    diffs = []
+    for r, c in zip(runs[1:], curves[1:]):
+        entry = {"name": c["name"], "reference": ref["name"], "quantities": {}}
+        for q in QUANTITIES:
+            d = c[q]["value"] - ref[q]["value"]
+            sd = np.hypot(c[q]["sem"], ref[q]["sem"])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                z = d / sd
+            qd = {"difference": d, "sem": sd, "z": z, "significant": np.abs(z) > Z95}
+            if "truth" in c[q] and "truth" in ref[q]:
+                qd["truth_difference"] = c[q]["truth"] - ref[q]["truth"]
+            entry["quantities"][q] = qd
+        entry["tune_diff"] = dict_diff((runs[0].get("tune") or {}), (r.get("tune") or {}))
+        entry["setup_diff"] = [{"key": k, "from": runs[0]["row"].get(k), "to": r["row"].get(k)} for k in SETUP_FIELDS
+                               if runs[0]["row"].get(k) != r["row"].get(k)]
+        diffs.append(entry)
+    return _plain({"grid_rpm_secondary": grid, "step_rpm": step_rpm, "confidence": 0.95, "curves": curves,
+                   "differences": diffs, "atmosphere": ATMOSPHERE_NOTE,
+                   "runs": [{"name": r["name"], **{k: r["row"].get(k) for k in ("path", "state", "n_points")}}
+                            for r in runs]})
+
+
+def _plain(obj):
+    if isinstance(obj, np.ndarray):
+        return [_plain(x) for x in obj.tolist()]
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj

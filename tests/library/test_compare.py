@@ -1,0 +1,110 @@
+"""dyno compare on simulated runs of two tunes: tune diff, and differences significant where the truths differ.
+
+Seeded: stock tune seed 1 (reference), heavy flyweights seed 2, stock tune seed 3.
+The simulated rig records the true efficiency and torque of every point, so the
+verdicts can be checked against what really differs.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dyno.library.compare import interpolate
+
+REPO = Path(__file__).resolve().parents[2]
+TUNES = REPO / "calibration" / "tunes"
+
+
+def _dyno(*args, runs_dir):
+    env = dict(os.environ, DYNO_RUNS_DIR=str(runs_dir), PYTHONPATH=str(REPO))
+    return subprocess.run([sys.executable, "-m", "dyno", *map(str, args)], capture_output=True, text=True,
+                          cwd=REPO, env=env, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cmp") / "runs"
+    runs = []
+    for name, tune, seed in (("stock-1", "cvtech-stock", 1), ("heavy-2", "heavy-flyweights", 2),
+                             ("stock-3", "cvtech-stock", 3)):
+        r = _dyno("run", "--sim", "--headless", "--seed", seed, "--tune", TUNES / f"{tune}.toml",
+                  "--out", root / name, runs_dir=root)
+        assert r.returncode == 0, r.stderr
+        runs.append(root / name)
+    html = root.parent / "report.html"
+    r = _dyno("compare", "--json", *runs, "--html", html, runs_dir=root)
+    assert r.returncode == 0, r.stderr
+    table = _dyno("compare", "--no-html", "stock-1", "heavy-2", runs_dir=root)  # by name in the runs directory
+    assert table.returncode == 0, table.stderr
+    return {"result": json.loads(r.stdout), "html": html, "table": table.stdout, "root": root}
+
+
+def _arr(x):
+    return np.array([np.nan if v is None else v for v in x], dtype=float)
+
+
+def test_tune_diff_names_the_changed_parameter(compared):
+    heavy, same = compared["result"]["differences"]
+    changed = {t["key"]: (t["from"], t["to"]) for t in heavy["tune_diff"]}
+    assert changed["primary.flyweights.mass_each_kg"] == (0.228, 0.262)
+    assert changed["name"] == ("cvtech-stock", "heavy-flyweights")
+    assert not any(k.startswith(("secondary.", "drive.")) for k in changed)
+    assert same["tune_diff"] == []
+    assert "primary.flyweights.mass_each_kg: 0.228 -> 0.262" in compared["table"]
+
+
+@pytest.mark.parametrize("quantity", ["efficiency", "torque_secondary_nm"])
+def test_significant_where_the_truths_differ(compared, quantity):
+    heavy = compared["result"]["differences"][0]["quantities"][quantity]
+    d, s, truth = _arr(heavy["difference"]), _arr(heavy["sem"]), _arr(heavy["truth_difference"])
+    sig = np.array(heavy["significant"], dtype=bool)
+    real = np.abs(truth) > 3 * s  # the tune really changes it, by more than 3 s.e.
+    assert real.sum() >= 3, "the heavier flyweights change the curve over part of the range"
+    assert sig[real].all(), "every clear true difference is found"
+    assert (np.sign(d[sig]) == np.sign(truth[sig])).all(), "and with the right sign"
+    # the verdict agrees with the truth at most grid speeds (95 %: a few borderline ones may not)
+    agree = sig == (np.abs(truth) > 1.96 * s)
+    assert agree.mean() >= 0.8
+
+
+@pytest.mark.parametrize("quantity", ["efficiency", "torque_secondary_nm", "power_out_w", "rpm_primary"])
+def test_not_significant_where_the_truths_do_not_differ(compared, quantity):
+    same = compared["result"]["differences"][1]["quantities"][quantity]
+    truth = _arr(same["truth_difference"])
+    s = _arr(same["sem"])
+    ok = np.isfinite(truth)
+    assert (np.abs(truth[ok]) < 0.5 * s[ok]).all()  # same tune, other seed: the truths agree
+    assert not any(same["significant"]), "no difference claimed between two runs of the same tune"
+
+
+def test_html_report_is_self_contained(compared):
+    text = compared["html"].read_text()
+    assert text.count("<svg") >= 3  # curves + one difference figure per compared run
+    assert "mass_each_kg" in text and "atmospheric correction: not applied" in text
+    assert " src=" not in text and "<link" not in text  # nothing fetched from elsewhere
+
+
+def test_interpolation_uncertainty_covers_curvature():
+    x = np.array([0.0, 1.0, 2.0, 3.0])
+    y = x ** 2  # exact, curved: linear interpolation errs by up to 1/4 at the mid-points
+    v, e = interpolate(x, y, np.zeros(4), np.array([0.5, 1.5, 2.5, 1.0]))
+    assert np.all(np.abs(v[:3] - np.array([0.25, 2.25, 6.25])) <= e[:3] + 1e-12)
+    assert v[3] == 1.0 and e[3] == 0.0  # on a point: its own error only
+    v, e = interpolate(x, 2 * x, np.full(4, 0.1), np.array([0.5, 9.0]))
+    assert v[0] == pytest.approx(1.0) and e[0] == pytest.approx(np.hypot(0.05, 0.05))
+    assert np.isnan(v[1]) and np.isnan(e[1])  # outside the run's range: no value
+
+
+def test_bad_input_one_line_exit_2(compared, tmp_path):
+    root = compared["root"]
+    for args in (["stock-1"], ["stock-1", tmp_path / "nope"], ["stock-1", "heavy-2", "--grid-rpm", "-5"],
+                 ["stock-1", "heavy-2", "--html", tmp_path / "no" / "dir.html"]):
+        r = _dyno("compare", *args, runs_dir=root)
+        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not (tmp_path / "no").exists()
