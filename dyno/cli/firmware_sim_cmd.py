@@ -70,9 +70,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
-def simulate(args) -> dict:
-    """Run one firmware-in-the-loop session; returns the report dictionary."""
-    wall0 = time.perf_counter()
+def _check_arguments(args) -> tuple:
+    """Bad arguments: one line naming the option (before anything else, the ELF included); the fault kinds."""
     if not 0.0 <= args.poll_jitter < 1.0:
         raise ConfigError("command line", "--poll-jitter", f"{args.poll_jitter} is outside 0 <= J < 1")
     kinds = tuple(k for k in args.fault_kinds.split(",") if k)
@@ -82,6 +81,13 @@ def simulate(args) -> dict:
                                                          f"from {','.join(ALL_FAULT_KINDS)}")
     if args.transport == "serial" and args.fault_rate:
         raise ConfigError("command line", "--fault-rate", "fault injection is for --transport i2c only")
+    return kinds
+
+
+def simulate(args) -> dict:
+    """Run one firmware-in-the-loop session; returns the report dictionary."""
+    wall0 = time.perf_counter()
+    kinds = _check_arguments(args)
     kw = dict(harness=args.harness, primary_rpm=args.primary_rpm,
               secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
               adc_status=args.adc_status, adc_error_every=args.adc_error_every,
@@ -279,6 +285,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
 def run(args) -> int:
     from dyno.errors import ConfigError
 
+    _check_arguments(args)
     if not Path(args.elf).is_file():  # bad input, not a harness failure: exit 2 with the build step
         raise ConfigError(args.elf, "--elf", "no such firmware ELF (build it with `make -C firmware sim`)")
     report = simulate(args)
