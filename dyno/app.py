@@ -460,7 +460,9 @@ def summarize(ctx: RunContext) -> dict:
         from dyno.drills import true_latencies
 
         true_latencies(ctx, aborts)
-    return _finite(out)
+    from dyno.runlog.files import finite  # JSON-safe: NaN and infinities become null
+
+    return finite(out)
 
 
 def rig_outputs(ctx: RunContext) -> dict:
@@ -472,17 +474,6 @@ def rig_outputs(ctx: RunContext) -> dict:
     if ctx.sim is not None:
         return ctx.sim.actuators.output_states()
     return {}
-
-
-def _finite(obj):
-    """JSON-safe: NaN and infinities become None (null) everywhere in a result."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",

@@ -29,6 +29,15 @@ def _wait_screen(session: str, needle: str, timeout_s: float) -> str:
     raise AssertionError(f"{needle!r} not on screen after {timeout_s} s:\n{screen}")
 
 
+def _go(session: str) -> None:
+    """Wait for ARMED, press g, confirm: the test runs."""
+    _wait_screen(session, "ARMED", 60)
+    _tmux("send-keys", "-t", session, "g")
+    _wait_screen(session, "Start the test?", 10)
+    _tmux("send-keys", "-t", session, "y")
+    _wait_screen(session, "GO: full throttle", 10)
+
+
 def test_ui_tmux_dyno_ui_sim(tmp_path):
     session = f"dyno-ui-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
@@ -64,11 +73,7 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
                    timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
                                     "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
     try:
-        _wait_screen(session, "ARMED", 60)
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "Start the test?", 10)
-        _tmux("send-keys", "-t", session, "y")
-        _wait_screen(session, "GO: full throttle", 10)
+        _go(session)
     finally:
         # closing the terminal sends SIGHUP to the program in it
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
@@ -138,11 +143,7 @@ def test_ui_tmux_kill_int_mid_test_leaves_abort_record(tmp_path):
     _start(session, f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo $? > {marker} ; sleep 30",
            tmp_path)
     try:
-        _wait_screen(session, "ARMED", 60)
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "Start the test?", 10)
-        _tmux("send-keys", "-t", session, "y")
-        _wait_screen(session, "GO: full throttle", 10)
+        _go(session)
         pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"],
                                  capture_output=True, text=True, timeout=20).stdout.split()[0])
         os.kill(pid, signal.SIGINT)
