@@ -121,6 +121,11 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
             # 95 % interval half-width: the standard error is from batch means (correlated samples),
             # so Student's t with (batches - 1) degrees of freedom, not 1.96.
             point["efficiency_ci95"] = float(_t975(_n_batches(t0_us, t1_us) - 1) * eff["efficiency_sem"])
+    eff = point["efficiency"]
+    if math.isfinite(eff) and not 0.0 <= eff <= 1.0:
+        # No drive train makes power: a calibration or an engine map that does not fit this run.
+        faults.append({"channel": "efficiency", "reason": f"efficiency {eff:.3f} outside 0..1: the torque "
+                       "calibration or the engine map does not fit this run"})
     point["faults"] = faults
     point["valid"] = not any(f.get("severity", "error") == "error" for f in faults)
     return point

@@ -65,5 +65,5 @@ def run(args) -> int:
     if trace:
         print(f"  trace {args.trace} ({args.rotation}): max |shift rate| {trace['max_abs_shift_rate_m_s'] * 1e3:.1f} mm/s, "
               f"max power {trace['max_actuation_power_w']:.0f} W, max |torque| "
-              f"{trace['max_abs_actuation_torque_nm']:.0f} N m, max arm speed {trace['max_arm_speed_rad_s']:.2f} rad/s")
+              f"{trace['max_abs_actuation_torque_nm']:.0f} N·m, max arm speed {trace['max_arm_speed_rad_s']:.2f} rad/s")
     return 0

@@ -38,12 +38,12 @@ def run(args) -> int:
                           "faults": faults, "summary": result["summary"]}, indent=1, default=str))
         return 0
     print(f"{result['source']} -> {result['run_dir']}")
-    print(f"{'N':>3} {'rpm_p':>6} {'rpm_s':>6} {'T_s N·m':>8} {'eta':>6}  note")
+    print(f"{'N':>3} {'rpm_p':>6} {'rpm_s':>6} {'T_s N·m':>8} {'eff %':>6}  note")
     for p in points:
         eta = p.get("efficiency")
         note = "discarded" if p["discarded"] else ("" if p.get("valid") else "no efficiency")
         print(f"{p['legacy_point']:>3} {_f(p.get('rpm_primary'), 0):>6} {_f(p.get('rpm_secondary'), 0):>6} "
-              f"{_f(p.get('torque_secondary_nm'), 2):>8} {_f(eta, 3):>6}  {note}")
+              f"{_f(p.get('torque_secondary_nm'), 2):>8} {_f(None if eta is None else 100 * eta, 1):>6}  {note}")
     s = result["summary"]
     print(f"{s['n_valid']} valid of {s['n_points']} points; faults: "
           + (", ".join(f"{n} {k}" for k, n in sorted(s["faults_by_severity"].items())) or "none"))

@@ -145,7 +145,7 @@ def _index(result: dict) -> None:
 
 def _print_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
-    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s Nm':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5}")
+    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5}")
     for p in result["points"]:
         def f(k, scale=1.0, fmt="{:.0f}"):
             v = p.get(k)

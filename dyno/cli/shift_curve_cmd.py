@@ -109,7 +109,7 @@ def run(args) -> int:
     print(f"  engagement   {curve.engagement_rpm:8.0f} rpm")
     print(f"  shift-out    {curve.shift_out_rpm:8.0f} rpm   (upshift starts, ratio {curve.ratio_low_stop:.2f})")
     print(f"  full shift   {curve.full_shift_rpm:8.0f} rpm   (ratio {curve.ratio_high_stop:.2f})")
-    print(f"  {'segment':<10}{'ratio':>7}{'engine rpm':>12}{'sec rpm':>10}{'sec N m':>9}{'eff':>8}")
+    print(f"  {'segment':<10}{'ratio':>7}{'engine rpm':>12}{'sec rpm':>10}{'sec N·m':>9}{'eff':>8}")
     step = max(1, len(curve.points) // 15)
     for p in curve.points[::step]:
         print(f"  {p.segment:<10}{p.ratio:7.3f}{p.engine_rpm:12.0f}{p.secondary_rpm:10.0f}"

@@ -194,7 +194,7 @@ class CalibrateApp(DynoApp):
 
     def _steps_text(self) -> Text:
         w = self.wizard
-        t = Text("  # pass     kg    N m    mean     sd   n\n", style="bold")
+        t = Text("  # pass     kg    N·m    mean     sd   n\n", style="bold")
         for i, s in enumerate(w.steps):
             mark = ">" if i == w.index and w.phase in COLLECTING_PHASES else " "
             pas = {1: "load", -1: "unld", 0: "tare"}[s.direction]
@@ -210,7 +210,7 @@ class CalibrateApp(DynoApp):
         mean = float(np.mean(codes[-125:]))
         txt = f"ADC now {mean:8.1f} counts"
         if self.calibration_in_force is not None:
-            txt += f" = {self.calibration_in_force.torque_secondary_nm(mean):+.2f} N m (cal. in force)"
+            txt += f" = {self.calibration_in_force.torque_secondary_nm(mean):+.2f} N·m (cal. in force)"
         return txt
 
     def _draw_residuals(self) -> None:
@@ -234,7 +234,7 @@ class CalibrateApp(DynoApp):
                 if xs:
                     plt.scatter(xs, ys, color=colour, label=label)
             plt.hline(0.0, color="gray")
-            plt.title("residual counts vs N m")
+            plt.title("residual counts vs N·m")
         plot.refresh()
 
     # --- acquisition callbacks ---------------------------------------------------------------------

@@ -223,7 +223,7 @@ class CalibrationWizard:
                 return f"{where}: zero check {which}. {todo}; then collect."
             verb = "Add masses to" if s.direction > 0 else "Remove masses down to"
             return (f"{where} ({s.phase.value}): {verb} a total of {s.mass_kg:g} kg "
-                    f"(T = {s.torque_nm:.2f} N m at the secondary); wait until it hangs still, then collect.")
+                    f"(T = {s.torque_nm:.2f} N·m at the secondary); wait until it hangs still, then collect.")
         if self.phase is Phase.REVIEW:
             return "Review the fit: accept to append it to the history, or reject."
         if self.phase is Phase.ACCEPTED:
@@ -311,7 +311,7 @@ class CalibrationWizard:
         return self.tare_after.mean_counts - self.tare_before.mean_counts
 
     def previous_zero_offset_nm(self) -> float | None:
-        """The tare before against the calibration in force, in N m (None without one)."""
+        """The tare before against the calibration in force, in N·m (None without one)."""
         if self.previous is None or not self.steps or not self.tare_before.n:
             return None
         return float(self.previous.torque_secondary_nm(self.tare_before.mean_counts))
@@ -328,8 +328,8 @@ class CalibrationWizard:
             return
         drift_nm = self.zero_drift_counts() / self.fit.slope_counts_per_nm
         if abs(drift_nm) > self.zero_drift_max_nm:
-            self.rejection = (f"zero drifted by {drift_nm:+.3f} N m between the tare before and after "
-                              f"(limit {self.zero_drift_max_nm} N m): bridge drift, a rope left on, or the "
+            self.rejection = (f"zero drifted by {drift_nm:+.3f} N·m between the tare before and after "
+                              f"(limit {self.zero_drift_max_nm} N·m): bridge drift, a rope left on, or the "
                               f"secondary lock slipped; repeat the calibration")
         else:
             self.rejection = None
@@ -344,15 +344,15 @@ class CalibrationWizard:
         lines = []
         if f is not None:
             drift = self.zero_drift_counts()
-            lines += [f"slope  {f.slope_counts_per_nm:.3f} ± {f.slope_se_counts_per_nm:.3f} counts/N m",
+            lines += [f"slope  {f.slope_counts_per_nm:.3f} ± {f.slope_se_counts_per_nm:.3f} counts/N·m",
                       f"icpt   {f.intercept_counts:.1f} ± {f.intercept_se_counts:.1f} counts",
                       f"R²     {f.r2:.6f} (min {self.r2_min})",
                       f"non-lin {f.nonlinearity_pct_fs:.3f} %FS"
                       + (f"  hyst {f.hysteresis_pct_fs:.3f} %FS" if f.hysteresis_pct_fs is not None else ""),
-                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} N m)"]
+                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} N·m)"]
         prev = self.previous_zero_offset_nm()
         if prev is not None:
-            lines.append(f"tare vs cal. in force {prev:+.3f} N m")
+            lines.append(f"tare vs cal. in force {prev:+.3f} N·m")
         if self.rejection:
             lines.append(f"REFUSED: {self.rejection}")
         return lines

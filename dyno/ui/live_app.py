@@ -132,7 +132,7 @@ class LiveApp(DynoApp):
         row("engine", fmt(v.rpm_primary, ".0f", " rpm"))
         row("secondary", fmt(v.rpm_secondary, ".0f", " rpm"))
         row("ratio", fmt(v.ratio, ".2f"))
-        row("torque", fmt(v.torque_secondary_nm, ".2f", " N m"))
+        row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
         row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
         # The map is full throttle: the efficiency means something only while the test holds it there.
@@ -188,7 +188,7 @@ class LiveApp(DynoApp):
                 plt.hline(self._ideal_rpm, color="green")  # the flat engine speed a perfect CVT would hold
         else:
             h = self.history
-            plt.title("last 30 s: rpm (left), torque N m (right)")
+            plt.title("last 30 s: rpm (left), torque N·m (right)")
             t = list(h.t)
             if t:
                 plt.plot(t, [x if math.isfinite(x) else 0 for x in h.rpm_primary], color="yellow", label="engine")

@@ -100,7 +100,7 @@ class ReplayApp(DynoApp):
         self._predicted: dict = {}  # run_dir -> predicted shift curve (from the run's tune)
         self.run_worker(self._predict_work, thread=True, exclusive=False)
         table = self.query_one("#points", DataTable)
-        table.add_columns("#", "n_s", "n_e", "T Nm", "eff %", "±")
+        table.add_columns("#", "n_s", "n_e", "T N·m", "eff %", "±")
         self._fill_table()
         table.focus()
 

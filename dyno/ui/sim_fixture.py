@@ -9,7 +9,7 @@ reader as a test run; only the physics is replaced.
 
 Signal chain (the same model as ``RigModel._adc_event``)::
 
-    T_sec = m g r * 32/61                          (the applied load, N m)
+    T_sec = m g r * 32/61                          (the applied load, N·m)
     T_sig = T_sec + (T_prev - T_sec) exp(-t/tau)    (rope swing + lock-in filter settling)
     code  = round(offset + gain * T_sig + (sigma0 + sigma1 |T_sig|) n),  n ~ N(0, 1)
 
@@ -102,7 +102,7 @@ class CalibrationFixture:
 
     # --- the simulated operator -----------------------------------------------------
     def hang(self, mass_kg: float, radius_m: float) -> float:
-        """Hang ``mass_kg`` on the rope at ``radius_m``; returns the true secondary torque (N m)."""
+        """Hang ``mass_kg`` on the rope at ``radius_m``; returns the true secondary torque (N·m)."""
         torque_nm = mass_kg * self.g_m_per_s2 * radius_m * self.gear_ratio
         self._from_nm = self.signal_nm(self.t_s)
         self._target_nm = torque_nm

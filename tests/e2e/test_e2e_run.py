@@ -1,6 +1,8 @@
 """The whole chain on the simulated rig: bytes on a bus -> efficiency points on disk."""
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -86,3 +88,24 @@ def test_points_carry_a_95pc_interval_that_covers_the_truth(full_run):
     # test_time_s: from GO to the end of the last measurement, in simulated seconds
     assert 0 < full_run["test_time_s"] <= full_run["sim_time_s"]
     assert full_run["test_time_s"] >= sum(p["duration_s"] for p in pts)
+
+
+def test_efficiency_over_one_is_flagged_not_accepted(full_run, tmp_path):
+    """Reprocessed with a calibration whose slope is 40 % too low, torque and efficiency come out 1.7x:
+    every point over 100 % is marked invalid with the reason, never passed off as a result."""
+    from dyno.analysis.calibration import latest, load_history
+    from dyno.replay import replay
+
+    meta_cal = json.loads((Path(full_run["run_dir"]) / "calibration.json").read_text())
+    bad = tmp_path / "cal.csv"
+    bad.write_text("date,slope_counts_per_nm,intercept_counts,r2,n_samples,lever_arm_m,"
+                   "gear_ratio_brake_per_secondary,note\n"
+                   f"2026-01-01,{meta_cal['slope_counts_per_nm'] * 0.6},{meta_cal['intercept_counts']},0.999,0,,"
+                   f"{meta_cal['gear_ratio_brake_per_secondary']},too low a slope\n")
+    assert latest(load_history(bad)).slope_counts_per_nm > 0
+    pts = replay(full_run["run_dir"], calibration_path=bad)["points"]
+    over = [p for p in pts if p["efficiency"] is not None and p["efficiency"] > 1.0]
+    assert over, "the doctored calibration should push some points over 100 %"
+    for p in over:
+        assert p["valid"] is False
+        assert any("outside 0..1" in f["reason"] for f in p["faults"])

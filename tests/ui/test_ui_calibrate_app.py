@@ -68,7 +68,7 @@ def test_ui_calibrate_full_procedure_accept_appends(tmp_path):
     assert "SETUP" in shots["setup"] and "5,10,20,30,40" in shots["setup"]
     assert "TARE BEFORE" in shots["tare"] and "NO mass hanging" in shots["tare"]
     assert " 6 load   40.0  30.87" in shots["tare"] and "11 tare" in shots["tare"]
-    for label in ("slope", "icpt", "R²", "non-lin", "hyst", "zero drift", "residual counts vs N m"):
+    for label in ("slope", "icpt", "R²", "non-lin", "hyst", "zero drift", "residual counts vs N·m"):
         assert label in shots["review"], label
     assert "Append this calibration" in shots["confirm"]
     assert "ACCEPTED" in shots["accepted"]

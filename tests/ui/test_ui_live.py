@@ -216,7 +216,7 @@ def test_ui_live_model_pieces():
     assert c.startswith("#ff") and m == " HOT"
     assert temp_colour(301.0, 300.0)[1] == " OVER LIMIT"
     assert temp_colour(math.nan, 300.0)[1] == " (no reading)"
-    assert fmt(math.nan) == "—" and fmt(12.345, ".1f", " N m") == "12.3 N m"
+    assert fmt(math.nan) == "—" and fmt(12.345, ".1f", " N·m") == "12.3 N·m"
     r = RateMeter(window_s=1.0)
     r.update(0.0, 0)
     assert r.update(0.5, 75) == pytest.approx(150.0)

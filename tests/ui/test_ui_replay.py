@@ -108,7 +108,7 @@ def test_ui_replay_app_browse_overlay_export(two_runs, tmp_path):
         assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
         assert "E-STOP" in lines[-1] and "n run  1-4 plot  c cal  e map  x CSV  s PNG  q quit" in lines[-1], name
     assert "run 1/2: run0" in shots["eff"] and "efficiency vs secondary rpm" in shots["eff"]
-    assert "T Nm" in shots["eff"] and "eff %" in shots["eff"]
+    assert "T N·m" in shots["eff"] and "eff %" in shots["eff"]
     assert "shift curve" in shots["shift"] and "run0" in shots["shift"] and "run1" in shots["shift"]
     assert "point 1: rpm (left), ADC (right)" in shots["raw"]
     assert "run 2/2: run1" in shots["run2"]
