@@ -64,8 +64,10 @@ class CalibrateOptions:
 class CalibrateApp(DynoApp):
     CSS = DynoApp.CSS + CAL_CSS
     BINDINGS = DynoApp.BINDINGS + [
-        Binding("c", "collect", "collect"), Binding("enter", "collect", show=False), Binding("r", "redo", "redo"),
-        Binding("a", "accept", "accept"), Binding("x", "reject", "reject"), Binding("q", "quit_safe", "quit"),
+        # priority: they act even while a number field has the focus (EstopSafeInput declines letters)
+        Binding("c", "collect", "collect", priority=True), Binding("enter", "collect", show=False),
+        Binding("r", "redo", "redo", priority=True), Binding("a", "accept", "accept", priority=True),
+        Binding("x", "reject", "reject", priority=True), Binding("q", "quit_safe", "quit", priority=True),
         Binding("escape", "leave_input", show=False),
     ]
 
@@ -89,8 +91,10 @@ class CalibrateApp(DynoApp):
         yield Static("", id="phase")
         yield Static("", id="instruction")
         with Horizontal(id="setup"):
-            yield EstopSafeInput(str(self.opts.radius_m), placeholder="rope radius m", id="radius")
-            yield EstopSafeInput(self.opts.masses, placeholder="masses kg, comma-separated", id="masses")
+            yield EstopSafeInput(str(self.opts.radius_m), placeholder="rope radius m", id="radius",
+                                 restrict=r"[0-9.eE+-]*")
+            yield EstopSafeInput(self.opts.masses, placeholder="masses kg, comma-separated", id="masses",
+                                 restrict=r"[0-9.,eE+-]*")
         yield ProgressBar(total=1.0, show_eta=False, id="progress")
         with Horizontal(id="body"):
             yield Static("", id="steps")
@@ -272,6 +276,15 @@ class CalibrateApp(DynoApp):
         self.say(f"{len(w.steps)} steps planned: tare, {len(w.masses_kg)} loading, "
                  f"{len(w.masses_kg) - 1} unloading, tare")
         self.refresh_view()
+        return True
+
+    def check_action(self, action: str, parameters) -> bool | None:
+        # The wizard's keys are priority bindings (so a number field cannot eat them); while a
+        # dialog asks a question they must not act behind it.
+        from textual.screen import ModalScreen
+
+        if action in ("collect", "redo", "accept", "reject") and isinstance(self.screen, ModalScreen):
+            return False
         return True
 
     def action_collect(self) -> None:

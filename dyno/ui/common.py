@@ -53,6 +53,11 @@ class EstopSafeInput(Input):
     def check_consume_key(self, key: str, character: str | None) -> bool:
         if key in ESTOP_KEY_NAMES:
             return False
+        if character is not None and character.isprintable() and self.restrict is not None:
+            import re
+
+            if not re.fullmatch(self.restrict, character):
+                return False  # not for this field (e.g. "c" in a number): the screen's key acts
         return super().check_consume_key(key, character)
 
 

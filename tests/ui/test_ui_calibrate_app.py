@@ -121,3 +121,19 @@ def test_ui_calibrate_space_with_the_field_focused_is_estop(tmp_path):
     focused, value, aborted = asyncio.run(scenario())
     assert focused == "radius" and value == "0.15"  # nothing typed into the field
     assert aborted is not None and aborted[0] == "estop"
+
+
+def test_ui_calibrate_c_in_a_number_field_acts_instead_of_typing(tmp_path):
+    async def scenario():
+        app = CalibrateApp(_opts(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.pause(0.3)
+            await pilot.press("c")  # the radius field has the focus: "c" is no number, it is "collect"
+            await pilot.pause(0.3)
+            value = app.query_one("#radius").value
+            phase = app.wizard.phase
+            await pilot.press("q")
+        return value, phase
+
+    value, phase = asyncio.run(scenario())
+    assert value == "0.15" and phase is not Phase.SETUP
