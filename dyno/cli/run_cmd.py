@@ -89,11 +89,15 @@ def run(args) -> int:
     if tty.wanted(args.json):  # a person at a terminal: one live status line on stderr
         bar = tty.TtyProgress()
         opts.setup = bar.attach
+    import time
+
+    wall0_s = time.monotonic()
     try:
         result = run_test(opts)
     finally:
         if bar is not None:
             bar.finish()
+    _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
         if args.json:
@@ -133,6 +137,17 @@ def _write_report(result: dict, *, announce: bool) -> None:
             sys.stdout.flush()
         except OSError:  # a closed pipe: the report is on disk all the same
             pass
+
+
+def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
+    """--speed N is a pace, not a promise: if this machine could not keep it, say so (one line)."""
+    sim_s = result.get("sim_time_s")
+    if asked is None or not sim_s or wall_s <= 0:
+        return
+    got = sim_s / wall_s
+    if got < 0.8 * asked:
+        print(f"dyno run: --speed {asked:g} not reached: the simulation ran at {got:.1f}x real time on this "
+              "machine (CPU-bound); the results do not depend on it", file=sys.stderr)
 
 
 def _index(result: dict) -> None:

@@ -160,3 +160,11 @@ def test_second_process_on_the_same_out_refuses_and_the_first_is_unharmed(tmp_pa
     assert oct(out.stat().st_mode & 0o777) == "0o755"
     for p in out.iterdir():
         assert oct(p.stat().st_mode & 0o777) == "0o644", p
+
+
+def test_a_speed_the_machine_cannot_reach_is_said_in_one_line(tmp_path):
+    r = _dyno("run", "--sim", "--headless", "--speed", "1000", "--drill", "overspeed@4", "--out", tmp_path / "run",
+              cwd=tmp_path)
+    assert r.returncode == 3  # the drill's abort: the pace changes nothing else
+    lines = [ln for ln in r.stderr.splitlines() if "not reached" in ln]
+    assert len(lines) == 1 and "--speed 1000" in lines[0] and "Traceback" not in r.stderr
