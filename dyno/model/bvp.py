@@ -231,18 +231,58 @@ def contact_terms(case: Case, t_n, th, th1, th2, x_m, x1_m, radius_m, phi, omega
     ei = case.ei_nm2
     r = radius_m
     x2_m = phi * (x1_m * tn - r_loc * th1 * sec2)
-    shear = -ei / (r * r * phi * phi) * th2 + ei / (r**3 * phi) * x1_m
-    d_t = 2.0 * phi * press * r_loc * (-sb * tn + mu * cbs * (tn * cos_g + sin_g)) + (th1 - phi) * shear
     normal = (2.0 * press / t_n) * r_loc * (sb - mu * cbs * (cos_g - sin_g * tn))
-    d_th3 = (t_n * r**3 * phi**3) / (ei * (r + 2.0 * x_m)) * (
-        th1 / phi - 1.0 + normal + ei * x2_m / (t_n * r**3 * phi * phi)
-    )
+    if case.variant == "as_published":
+        # Linearised shear (3.38) and the printed (R + 2x) factor of its derivative (3.40).
+        shear = -ei / (r * r * phi * phi) * th2 + ei / (r**3 * phi) * x1_m
+        d_th3 = (t_n * r**3 * phi**3) / (ei * (r + 2.0 * x_m)) * (
+            th1 / phi - 1.0 + normal + ei * x2_m / (t_n * r**3 * phi * phi)
+        )
+    else:
+        # Exact Q = dM/ds and its exact derivative: the linearised 3.38 is ~2.5 % low and
+        # breaks the power balance (docs/belt-model.md, "Balances").
+        shear, a_q, b_q = exact_shear(ei, th, th1, th2, x_m, x1_m, x2_m, radius_m, phi)
+        # normal balance (code sign): T (th'/Phi - 1 + normal) + (dQ/dt)/Phi = 0, dQ/dt = a_q + b_q th'''
+        d_th3 = -(phi * t_n * (th1 / phi - 1.0 + normal) + a_q) / b_q
+    d_t = 2.0 * phi * press * r_loc * (-sb * tn + mu * cbs * (tn * cos_g + sin_g)) + (th1 - phi) * shear
     arc = phi * r_loc / c  # ds / dt
     d_m = 2.0 * mu * press * cbs * sin_g * r_loc * arc
     d_a = 0.5 * case.k_n_m2 * x_m * arc
     extras = {"sliding_speed_m_s": v_mag, "sliding_angle_rad": np.arctan2(sin_g, cos_g), "mu": mu, "pressure_n_m": press,
               "belt_speed_m_s": v_belt, "arc_m": arc}
     return d_t, d_th3, x2_m, d_m, d_a, extras
+
+
+def exact_shear(ei, th, th1, th2, x_m, x1_m, x2_m, radius_m, phi):
+    """Exact contact shear Q = dM/ds and its t-derivative dQ/dt = a + b * (third t-derivative of theta).
+
+    M = EI cos(theta) (1 - th1/Phi)/(R - x) (eq 3.32 in t), ds/dt = Phi (R - x)/cos(theta);
+    th1, th2, x1_m, x2_m are derivatives with respect to the normalised coordinate t.
+    Returns ``(Q, a, b)``.
+    """
+    c, s = np.cos(th), np.sin(th)
+    u = radius_m - x_m
+    w = 1.0 - th1 / phi
+    d = -s * th1 * w / u - c * th2 / (phi * u) + c * w * x1_m / (u * u)  # (dM/dt)/EI
+    q = ei * c * d / (phi * u)
+    # dd/dt without its third-derivative term (-c th3/(Phi u)), term by term of d
+    a_d = (-c * th1 * th1 * w / u - s * th2 * w / u + s * th1 * th2 / (phi * u) - s * th1 * w * x1_m / (u * u)
+           + s * th1 * th2 / (phi * u) - c * th2 * x1_m / (phi * u * u)
+           - s * th1 * w * x1_m / (u * u) - c * th2 * x1_m / (phi * u * u) + c * w * x2_m / (u * u)
+           + 2.0 * c * w * x1_m * x1_m / u**3)
+    dcu = -s * th1 / u + c * x1_m / (u * u)  # d(cos(theta)/(R - x))/dt
+    a = ei * (dcu * d / phi + c * a_d / (phi * u))
+    b = -ei * c * c / (phi * phi * u * u)
+    return q, a, b
+
+
+def contact_shear(case: Case, th, th1, th2, x_m, x1_m, radius_m, phi):
+    """The shear the variant's contact equations carry: exact dM/ds (corrected) or eq 3.38 (as published)."""
+    if case.variant == "as_published":
+        r = radius_m
+        return -case.ei_nm2 / (r * r * phi * phi) * th2 + case.ei_nm2 / (r**3 * phi) * x1_m
+    x2_m = phi * (x1_m * np.tan(th) - (radius_m - x_m) * th1 / np.cos(th) ** 2)
+    return exact_shear(case.ei_nm2, th, th1, th2, x_m, x1_m, x2_m, radius_m, phi)[0]
 
 
 def friction_shape(u, corner: float = 0.0):
@@ -395,6 +435,8 @@ def make_fun_jac(case: Case, fun=None):
 
 def make_bc(case: Case):
     """The ``bc(ya, yb, p)`` of solve_bvp for ``case`` (34 residuals, O(1) scaled)."""
+    from dyno.model import balance  # imports this module: bound at call time
+
     r_s, r_p, lc = case.r_secondary_m, case.r_primary_m, case.centre_distance_m
     published = case.variant == "as_published"
 
@@ -418,10 +460,18 @@ def make_bc(case: Case):
         def curvature(th, th1, x_m, radius, phi):
             return math.cos(th) / (radius - x_m) * (1.0 - th1 / phi)
 
-        def shear(th2, x1_scaled, radius, phi):
+        def shear(th2, x1_scaled, radius, phi, th=0.0, th1=0.0, x_scaled=0.0):
             x1 = x1_scaled * PENETRATION_REF_M
-            return -th2 + (x1 / radius if published else phi * x1 / radius)
+            if published:
+                return -th2 + x1 / radius
+            # exact dM/ds = 0, times Phi (R - x)/(EI cos(theta)): -th2 + Phi x1/R when linearised
+            w = 1.0 - th1 / phi
+            return -math.tan(th) * th1 * w * phi - th2 + phi * w * x1 / (radius - x_scaled * PENETRATION_REF_M)
 
+        torque_points = 0.0
+        if not published:
+            # The interface point loads act on the pulley too: the imposed torque is the total.
+            torque_points = balance.point_load_torque_nm(balance.interface_loads_at_ends(case, ya, yb, p), "primary")
         if case.bc == "slack_tension":
             level = yb[P_T] - case.slack_tension_n / TENSION_REF_N
         else:
@@ -430,7 +480,7 @@ def make_bc(case: Case):
             ya[S_X],
             yb[S_X],
             (ya[S_X1] * PENETRATION_REF_M + phi_s * (r_s - xs0) * math.tan(ya[S_TH])) / PENETRATION_REF_M,
-            yb[P_M] + case.torque_nm / TORQUE_REF_NM,
+            yb[P_M] + (case.torque_nm - torque_points) / TORQUE_REF_NM,
             level,
             ya[P_X],
             yb[P_X],
@@ -453,10 +503,10 @@ def make_bc(case: Case):
             r_p * (curvature(ya[P_TH], ya[P_TH1], xp0, r_p, phi_p) - yb[T_V1] / l_t),
             r_p * (curvature(yb[P_TH], yb[P_TH1], xp1, r_p, phi_p) - ya[L_V1] / l_s),
             # zero shear (5.43-5.46); as published, bc(26) reads the entry x'.
-            shear(ya[S_TH2], ya[S_X1], r_s, phi_s),
-            shear(yb[S_TH2], yb[S_X1], r_s, phi_s),
-            shear(ya[P_TH2], ya[P_X1], r_p, phi_p),
-            shear(yb[P_TH2], ya[P_X1] if published else yb[P_X1], r_p, phi_p),
+            shear(ya[S_TH2], ya[S_X1], r_s, phi_s, ya[S_TH], ya[S_TH1], ya[S_X]),
+            shear(yb[S_TH2], yb[S_X1], r_s, phi_s, yb[S_TH], yb[S_TH1], yb[S_X]),
+            shear(ya[P_TH2], ya[P_X1], r_p, phi_p, ya[P_TH], ya[P_TH1], ya[P_X]),
+            shear(yb[P_TH2], ya[P_X1] if published else yb[P_X1], r_p, phi_p, yb[P_TH], yb[P_TH1], yb[P_X]),
             # position continuity (5.27-5.34), in mm
             (pts["st"][0] - ya[T_XP] * l_t) / POSITION_BC_REF_M,
             (pts["st"][1] - ya[T_YP] * l_t) / POSITION_BC_REF_M,
