@@ -1087,9 +1087,26 @@ def solve_case(
         v_start = max(start_slip_m_s, case.slip_threshold_m_s)
         c0 = replace(case, slip_threshold_m_s=v_start)
         res, rms, bc_res, ok = attempt(c0, t, y, p, "geometric guess")
-        if not ok:
-            fail("first solve from the geometric initial guess failed")
-        best = (c0, res, rms, bc_res)
+        if ok:
+            best = (c0, res, rms, bc_res)
+        else:
+            # Unequal radii: the straight-span guess is far off (the arching differs a lot between a
+            # small and a large pulley).  Solve at equal radii (same belt length) with the smooth
+            # friction law, then continue in the radii to the target.
+            lc = case.centre_distance_m
+            r_eq = geometry.equal_radius_m(geometry.belt_length_m(case.r_primary_m, case.r_secondary_m, lc), lc)
+            # The geometric guess is fragile in the torque too (it may fail at one torque and work at
+            # twice or half of it): try a few anchor torques; the march below moves torque and radii.
+            for torque_nm in (case.torque_nm, 1.8 * case.torque_nm, 0.5 * case.torque_nm):
+                anchor = replace(c0, r_primary_m=r_eq, r_secondary_m=r_eq, torque_nm=torque_nm)
+                t, y, p = initial_guess(anchor, nodes)
+                res, rms, bc_res, ok = attempt(anchor, t, y, p, f"geometric guess at equal radii, {torque_nm:g} N*m")
+                if ok:
+                    break
+            else:
+                fail("first solve from the geometric initial guess failed (also at equal radii, torque x1, x1.8, x0.5)")
+            best = march(anchor, c0, res.x, res.y, res.p, 0.25, "ratio continuation", rms=res.rms_residuals)
+            res = best[1]
         if v_start > case.slip_threshold_m_s:
             n_steps = math.log(v_start / case.slip_threshold_m_s) / -math.log(slip_factor)
             frac = 1.0 / max(n_steps, 1.0)

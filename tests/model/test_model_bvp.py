@@ -54,11 +54,17 @@ def test_torque_balance_on_both_pulleys(table_6_1):
     With x = 0 at both ends the tension acts at arm R cos(theta); bending adds
     EI times the end curvature difference; shear is zero there by the BCs.
     """
+    from dyno.model import balance
+
     raw, s = table_6_1.raw, table_6_1.summary
     y, p, case = raw.y, raw.p, raw.case
+    loads = balance.interface_loads(raw)
+    # The summary's torques include the interface point loads' moments; the arc's own (distributed) torque is:
     for which, i_t, i_th, i_th1, k_phi, radius, torque in (
-        ("primary", bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.K_PHIP, case.r_primary_m, -s["torque_nm"]["primary"]),
-        ("secondary", bvp.S_T, bvp.S_TH, bvp.S_TH1, bvp.K_PHIS, case.r_secondary_m, s["torque_nm"]["secondary"]),
+        ("primary", bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.K_PHIP, case.r_primary_m,
+         -(s["torque_nm"]["primary"] - balance.point_load_torque_nm(loads, "primary"))),
+        ("secondary", bvp.S_T, bvp.S_TH, bvp.S_TH1, bvp.K_PHIS, case.r_secondary_m,
+         s["torque_nm"]["secondary"] + balance.point_load_torque_nm(loads, "secondary")),
     ):
         t_in, t_out = y[i_t, 0] * 100, y[i_t, -1] * 100
         arm_in, arm_out = radius * math.cos(y[i_th, 0]), radius * math.cos(y[i_th, -1])
