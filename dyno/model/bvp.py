@@ -93,7 +93,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from dyno.errors import DidNotConverge
+from dyno.errors import DidNotConverge, GrossSlip
 from dyno.model import geometry
 from dyno.model.params import VARIANTS, ModelParams, OperatingPoint, TABLE_6_1, TABLE_6_1_POINT, bad_input
 
@@ -1024,6 +1024,11 @@ def solve_case(
         return res, rms, bc_res, ok
 
     def fail(reason: str):
+        if "gross slip" in reason or "gross slip" in last["msg"]:
+            raise GrossSlip(
+                f"gross slip: the belt cannot transmit {case.torque_nm:g} N*m at this tension level for {case.name()} "
+                f"(no steady solution: {reason}; last step: {last['msg']})"
+            )
         raise DidNotConverge(
             f"belt model did not converge for {case.name()}: {reason} at continuation step {last['step']} "
             f"(last residual {last['rms']:.3g}, tol {tol:g}; {last['msg']})"

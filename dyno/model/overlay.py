@@ -26,7 +26,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from dyno.errors import DidNotConverge
+from dyno.errors import MODEL_FAILURES
 from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, bad_input
 
 MODEL_VERSION = "1"
@@ -138,17 +138,18 @@ def predict_overlay(
             try:
                 sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
                                   guess=guess, time_limit_s=time_limit_s)
-            except DidNotConverge as exc:
+            except MODEL_FAILURES as exc:
                 if guess is not None:
                     try:  # a far neighbour can be a worse start than none
                         sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
                                           time_limit_s=time_limit_s)
-                    except DidNotConverge as exc2:
+                    except MODEL_FAILURES as exc2:
                         sol, exc = None, exc2
                 else:
                     sol = None
                 if sol is None:
-                    res = {"converged": False, "tier": "full", "error": str(exc)}
+                    res = {"converged": False, "tier": "full", "error": str(exc),
+                           "state": "gross_slip" if type(exc).__name__ == "GrossSlip" else "failed"}
             if sol is not None:
                 guess = sol
                 s = sol.summary

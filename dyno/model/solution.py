@@ -178,6 +178,7 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
 
     summary = {
         "variant": case.variant,
+        "state": "steady",
         "converged": True,
         "residual_max": raw.residual_max,
         "bc_residual_max": raw.bc_residual_max,

@@ -1,0 +1,99 @@
+"""Global force, moment and power balances (dyno.model.balance) and cold starts at any ratio.
+
+The full grid (ratio x torque x variant) runs in bench/bench_model.py; here a representative subset.
+"""
+
+import json
+import subprocess
+import sys
+import time
+from dataclasses import replace
+
+import pytest
+
+from dyno.model import balance
+from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
+from dyno.model.solution import solve_point
+
+LIMIT = 5e-3  # 0.5 % of the largest term of each balance
+
+
+def test_corrected_closes_every_balance_at_table_6_1(table_6_1):
+    s = table_6_1.summary
+    assert set(s["balance"]) == {"force_rel", "moment_rel", "power_rel"}
+    assert max(s["balance"].values()) < LIMIT, s["balance"]
+    pw = s["power_w"]
+    # input - output = friction dissipation + work of the normal forces (the belt stores no energy)
+    assert pw["input"] - pw["output"] == pytest.approx(pw["friction_w"] + pw["normal_work_w"], abs=LIMIT * pw["input"])
+    assert pw["friction_w"] > 0
+    # The interface point loads are real (tens to a hundred N) and carried.
+    loads = s["interface_point_load_n"]
+    assert loads["carried"] is True
+    assert all(20.0 < loads[k] < 300.0 for k in ("primary_entry", "primary_exit", "secondary_entry", "secondary_exit"))
+    # The imposed torque is the pulley's total (distributed friction + point loads).
+    assert s["torque_nm"]["primary"] == pytest.approx(18.0, rel=1e-6)
+
+
+def test_balance_sees_the_point_loads_when_they_are_dropped(table_6_1, monkeypatch):
+    """Without the point loads the same solution is out of force balance by the shear jumps (~1 %)."""
+    monkeypatch.setattr(balance, "carries_point_loads", lambda case: False)
+    b = balance.balances(table_6_1.raw)
+    assert b["force_rel"] > 2 * LIMIT
+    assert b["moment_rel"] > LIMIT
+
+
+def test_as_published_reports_its_balances_and_warns():
+    pub = solve_point(TABLE_6_1, TABLE_6_1_POINT, variant="as_published", slip_threshold_m_s=1e-2, time_limit_s=120)
+    s = pub.summary
+    assert s["interface_point_load_n"]["carried"] is False
+    assert s["balance"]["force_rel"] > LIMIT  # the shear jumps nobody carries
+    pw = s["power_w"]
+    loss = pw["input"] - pw["output"]
+    # Most of its loss is the bending energy lost at the EI -> EI*L^4 jump, not friction.
+    assert pw["residual"] > 0.5 * loss > 0
+    assert s["balance"]["power_rel"] > LIMIT
+    assert "artefact" in s["warning"]
+
+
+def test_corrected_balances_hold_at_half_and_double_ei(table_6_1):
+    for factor in (0.5, 2.0):
+        params = TABLE_6_1.with_belt(bending_stiffness_nm2=TABLE_6_1.belt.bending_stiffness_nm2 * factor)
+        sol = solve_point(params, TABLE_6_1_POINT, guess=table_6_1, slip_threshold_m_s=1e-4)
+        assert max(sol.summary["balance"].values()) < LIMIT, (factor, sol.summary["balance"])
+
+
+@pytest.mark.parametrize("ratio,torque_nm", [(0.9, 5.0), (2.0, 10.0), (3.5, 18.0)])
+def test_cold_start_at_any_ratio_solves_and_balances(ratio, torque_nm):
+    """Ratios >= 1.5 used to fail from the geometric guess: now continued from equal radii."""
+    t0 = time.perf_counter()
+    sol = solve_point(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=ratio, primary_torque_nm=torque_nm), time_limit_s=60)
+    s = sol.summary
+    assert s["state"] == "steady"
+    assert s["ratio"] == pytest.approx(ratio, rel=1e-9)
+    assert s["torque_nm"]["primary"] == pytest.approx(torque_nm, rel=1e-6)
+    assert max(s["balance"].values()) < LIMIT, s["balance"]
+    assert 0.5 < s["efficiency"]["overall"] < 1.05
+    assert time.perf_counter() - t0 < 60
+
+
+def _dyno(*args, timeout=180):
+    return subprocess.run([sys.executable, "-m", "dyno", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_cli_point_reports_balance_for_both_variants():
+    out = _dyno("model", "point", "--json", "--slip-threshold", "1e-2")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    assert max(s["balance"].values()) < LIMIT and "warning" not in s
+    out = _dyno("model", "point", "--json", "--slip-threshold", "1e-2", "--variant", "as_published")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    assert set(s["balance"]) == {"force_rel", "moment_rel", "power_rel"} and s["balance"]["power_rel"] > LIMIT
+    assert "as_published" in s["warning"]
+
+
+def test_cli_cold_point_at_ratio_3_5():
+    out = _dyno("model", "point", "--json", "--ratio", "3.5", "--slip-threshold", "1e-3")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    assert s["state"] == "steady" and s["ratio"] == pytest.approx(3.5)
