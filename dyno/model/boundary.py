@@ -3,7 +3,8 @@
 Zero penetration at every contact end (5.51); eq 3.24 at each entry (5.52,
 5.53); zero torque and axial force at the primary entry (5.61, 5.62);
 continuity of tension, direction, curvature and position between regions;
-zero shear on the pulley side of the four contact ends; and the operating
+at the four contact ends the shear: continuous into the span (corrected;
+zero on the pulley side as published, 5.43-5.46); and the operating
 point (primary torque, plus the slack tension or the primary axial force).
 """
 
@@ -23,6 +24,7 @@ from dyno.model.equations import (  # the state layout and scales
     K_PHIP,
     K_PHIS,
     L_TAU,
+    L_V2,
     L_V,
     L_V1,
     L_XP,
@@ -48,6 +50,7 @@ from dyno.model.equations import (  # the state layout and scales
     T_TAU,
     T_V,
     T_V1,
+    T_V2,
     T_XP,
     T_YP,
 )
@@ -78,6 +81,17 @@ def make_bc(case: Case):
 
         def curvature(th, th1, x_m, radius, phi):
             return math.cos(th) / (radius - x_m) * (1.0 - th1 / phi)
+
+        def span_shear(v2, length, th, radius, phi):
+            """Span-side shear V in the units of ``shear``: corrected, the shear is continuous (Q = -V).
+
+            The contact is an elastic foundation (finite pressure k x): it cannot supply the point
+            load a jump would need (docs/belt-model.md, Balances).  As published: zero shear.
+            """
+            if published:
+                return 0.0
+            v = -case.ei_nm2 * v2 / length**2
+            return v * phi * phi * radius * radius / (case.ei_nm2 * math.cos(th) ** 2)
 
         def shear(th2, x1_scaled, radius, phi, th=0.0, th1=0.0, x_scaled=0.0):
             x1 = x1_scaled * PENETRATION_REF_M
@@ -121,11 +135,16 @@ def make_bc(case: Case):
             r_s * (curvature(yb[S_TH], yb[S_TH1], xs1, r_s, phi_s) - ya[T_V1] / l_t),
             r_p * (curvature(ya[P_TH], ya[P_TH1], xp0, r_p, phi_p) - yb[T_V1] / l_t),
             r_p * (curvature(yb[P_TH], yb[P_TH1], xp1, r_p, phi_p) - ya[L_V1] / l_s),
-            # zero shear (5.43-5.46); as published, bc(26) reads the entry x'.
-            shear(ya[S_TH2], ya[S_X1], r_s, phi_s, ya[S_TH], ya[S_TH1], ya[S_X]),
-            shear(yb[S_TH2], yb[S_X1], r_s, phi_s, yb[S_TH], yb[S_TH1], yb[S_X]),
-            shear(ya[P_TH2], ya[P_X1], r_p, phi_p, ya[P_TH], ya[P_TH1], ya[P_X]),
-            shear(yb[P_TH2], ya[P_X1] if published else yb[P_X1], r_p, phi_p, yb[P_TH], yb[P_TH1], yb[P_X]),
+            # shear at the contact ends: continuous (corrected) or zero (5.43-5.46, as published;
+            # its bc(26) reads the entry x').
+            shear(ya[S_TH2], ya[S_X1], r_s, phi_s, ya[S_TH], ya[S_TH1], ya[S_X])
+            + span_shear(yb[L_V2], l_s, ya[S_TH], r_s, phi_s),
+            shear(yb[S_TH2], yb[S_X1], r_s, phi_s, yb[S_TH], yb[S_TH1], yb[S_X])
+            + span_shear(ya[T_V2], l_t, yb[S_TH], r_s, phi_s),
+            shear(ya[P_TH2], ya[P_X1], r_p, phi_p, ya[P_TH], ya[P_TH1], ya[P_X])
+            + span_shear(yb[T_V2], l_t, ya[P_TH], r_p, phi_p),
+            shear(yb[P_TH2], ya[P_X1] if published else yb[P_X1], r_p, phi_p, yb[P_TH], yb[P_TH1], yb[P_X])
+            + span_shear(ya[L_V2], l_s, yb[P_TH], r_p, phi_p),
             # position continuity (5.27-5.34), in mm
             (pts["st"][0] - ya[T_XP] * l_t) / POSITION_BC_REF_M,
             (pts["st"][1] - ya[T_YP] * l_t) / POSITION_BC_REF_M,

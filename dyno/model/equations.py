@@ -44,6 +44,11 @@ With :math:`Q = -EI\hat\theta''/(R^2\Phi^2) + EI\hat x'/(R^3\Phi)` (3.38) and
 
 (eq 3.39/5.5 and eq 5.6 with the Q' sign of the appendix code, which the
 errata show is the right one: tension then gives a decaying bending response).
+That is the ``as_published`` variant.  ``corrected`` carries the exact
+:math:`Q = dM/ds` of :math:`M = EI\cos\theta(1 - \theta')/(R - x)` (3.32) in
+:math:`\hat T'` and its exact derivative :math:`\hat Q' = a + b\hat\theta'''`
+in the normal balance (:func:`exact_shear`), solved for the third derivative;
+linearised, the factor is R where 3.40/3.41 print (R + 2x).
 Integrated torque and axial force (5.54, 5.60):
 :math:`\hat M' = 2\Phi\mu p\cos\beta_s\sin\gamma (R-x)^2/\cos\theta`,
 :math:`\hat A' = \Phi (k x / 2)(R - x)/\cos\theta`.
@@ -72,8 +77,10 @@ Zero penetration at every contact end (5.51); eq 3.24 at each entry (5.52,
 5.53); zero torque and axial force at the primary entry (5.61, 5.62);
 continuity of tension (5.47-5.50), direction (5.35-5.38 with 5.21-5.24,
 5.23 with :math:`-\theta_{S1}`), curvature (5.39-5.42) and position
-(5.27-5.34, exit/entry labels as in the code); zero shear at the four contact
-ends (5.43-5.46, :math:`-\hat\theta'' + \Phi\hat x'/R = 0`); and the
+(5.27-5.34, exit/entry labels as in the code); the shear at the four contact
+ends: continuous into the spans (corrected: the elastic contact cannot take a
+point load; docs/belt-model.md, Balances) or zero on the pulley side (5.43-5.46,
+as published); and the
 operating point: primary torque plus either the slack-span tractive tension
 at the primary exit or the primary axial force.
 

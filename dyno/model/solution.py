@@ -158,11 +158,11 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         f_eff = _effective_tension(case, tau, g)
         spans[which] = float(np.sum(w * p[l_idx] / (1.0 + f_eff / case.ea_n)))
 
-    # Interface point loads (carried by the corrected variant) add to each pulley's torque and thrust.
+    # Point loads at the contact ends (shear jumps) would add to the pulleys' torques; the corrected
+    # variant makes the shear continuous, so they vanish there (computed anyway: the balances check it).
     loads = balance.interface_loads(raw)
     torque_in = -float(y_mesh[bvp.P_M, -1] * bvp.TORQUE_REF_NM) + balance.point_load_torque_nm(loads, "primary")
     torque_out = res["secondary"]["torque_nm"] - balance.point_load_torque_nm(loads, "secondary")
-    thrust_points = {w: balance.point_load_thrust_n(case, loads, w) for w in ("primary", "secondary")}
     bal = balance.balances(raw)
     eta_speed = omega_s / (case.omega_primary_rad_s * case.r_primary_m / case.r_secondary_m)
     eta_torque = (torque_out / torque_in) / ratio_geom
@@ -220,8 +220,6 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         "balance": {k: bal[k] for k in ("force_rel", "moment_rel", "power_rel")},
         "power_w": bal["detail"]["power_w"],
         "interface_point_load_n": {**bal["detail"]["point_load_n"], "carried": bal["detail"]["point_loads_carried"]},
-        # not in axial_force_n: the friction state at the edge is unknown (balance.point_load_thrust_n)
-        "interface_thrust_frictionless_n": thrust_points,
     }
     if case.variant == "as_published":
         summary["warning"] = AS_PUBLISHED_WARNING
