@@ -11,9 +11,9 @@ the sheave force per length on the belt; at an interface the belt receives
 the point load ``P = F(upstream) - F(downstream)`` (the bending-shear jump:
 both tension and direction are continuous there).
 
-The ``corrected`` variant carries these point loads (they act on the pulley
-like any contact force: its torque and axial thrust include them); the
-``as_published`` model does not, so its force balance misses them.
+The ``corrected`` variant makes the shear continuous, so these jumps vanish
+(computed anyway, and carried in the torques if they ever appear); the
+``as_published`` model's zero-shear ends leave jumps nobody carries.
 
 Power: input - output = friction dissipation + work of the normal force on
 the sliding, i.e. the sheaves' forces do no net work on a belt that stores no
@@ -137,24 +137,6 @@ def interface_loads_at_ends(case: bvp.Case, ya, yb, p) -> dict:
 def point_load_torque_nm(loads: dict, which: str) -> float:
     """Torque on the belt about the pulley centre from the point loads at its two ends."""
     return sum(_cross(loads[(which, e)]["position_m"], loads[(which, e)]["point_load_n"]) for e in ("entry", "exit"))
-
-
-def point_load_thrust_n(case: bvp.Case, loads: dict, which: str) -> float:
-    """Axial thrust of one pulley's point loads if the flanks carried them without friction.
-
-    radial/(2 tan beta), as for the distributed load with mu = 0.  With sliding
-    friction at the edge the ratio depends on the slip direction (near an exit the
-    belt unseats and flank friction pulls inwards, so an outward point load cannot
-    come from sliding flanks at all): this is an estimate, reported beside
-    ``axial_force_n``, not added to it (docs/belt-model.md, Balances).
-    """
-    if not carries_point_loads(case):
-        return 0.0
-    total = 0.0
-    for end in ("entry", "exit"):
-        ld = loads[(which, end)]
-        total += float(np.dot(ld["point_load_n"], _unit(ld["alpha_rad"])))
-    return total / (2.0 * math.tan(case.beta_rad))
 
 
 def _distributed(raw: bvp.RawSolution, which: str):
