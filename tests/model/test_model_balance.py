@@ -98,3 +98,14 @@ def test_cli_cold_point_at_ratio_3_5():
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
     assert s["state"] == "steady" and s["ratio"] == pytest.approx(3.5)
+
+
+def test_as_published_unchanged_by_the_corrections():
+    """as_published stays exactly as published: its Table 6.1 figures at v_th 1e-2 m/s are those of the
+    code before issue 14's changes (commit b46eb54), to 1e-5 (the continuation path may differ).  The
+    thesis's own 1:1 numbers are withheld in the source text, so the code as ported is the reference."""
+    s = solve_point(TABLE_6_1, TABLE_6_1_POINT, variant="as_published", slip_threshold_m_s=1e-2).summary
+    before = (969.8414538629208, 574.9244044311654, 0.8997246864612167, 183.48470642613728, 183.9382273824825)
+    now = (s["axial_force_n"]["primary"], s["axial_force_n"]["secondary"], s["efficiency"]["overall"],
+           s["wrap_deg"]["primary"], s["wrap_deg"]["secondary"])
+    assert now == pytest.approx(before, rel=1e-5)
