@@ -174,13 +174,31 @@ def _slip_diagnosis(case: Case, y: np.ndarray, p: np.ndarray) -> str:
         return ""
 
 
-def _at_least_as_heavy(target: Case, c: Case) -> bool:
-    """The target asks at least as much of the belt as ``c``: same radii, torque >= and tension level <=.
+def _pulleys_at_bound(case: Case, y: np.ndarray, p: np.ndarray, share: float = 0.95) -> set:
+    """Pulleys whose tension ratio uses at least ``share`` of their capstan/Gerbert bound."""
+    from dyno.model.capstan import max_tension_ratio
+
+    out = set()
+    for name, i_t, k_phi in (("primary", P_T, K_PHIP), ("secondary", S_T, K_PHIS)):
+        t_n = y[i_t]
+        if t_n.min() > 0 and t_n.max() / t_n.min() >= share * max_tension_ratio(p[k_phi], case.mu, case.beta_rad):
+            out.add(name)
+    return out
+
+
+def _at_least_as_heavy(target: Case, c: Case, at_bound: set = frozenset()) -> bool:
+    """The target asks at least as much of the belt as ``c``: torque >=, tension level <=, and the same
+    radii, or (only the primary at its bound) a primary radius <= (a smaller driver under the same
+    load has a larger tension difference M/R and a shorter wrap).
 
     Past gross slip at ``c`` then means past it at the target too.
     """
-    if target.bc != c.bc or not (math.isclose(target.r_primary_m, c.r_primary_m, rel_tol=1e-9)
-                                 and math.isclose(target.r_secondary_m, c.r_secondary_m, rel_tol=1e-9)):
+    if target.bc != c.bc:
+        return False
+    same_radii = (math.isclose(target.r_primary_m, c.r_primary_m, rel_tol=1e-9)
+                  and math.isclose(target.r_secondary_m, c.r_secondary_m, rel_tol=1e-9))
+    smaller_driver = at_bound == {"primary"} and target.r_primary_m <= c.r_primary_m * (1 + 1e-9)
+    if not (same_radii or smaller_driver):
         return False
     level = "slack_tension_n" if target.bc == "slack_tension" else "axial_force_n"
     tiny = 1e-9
@@ -289,7 +307,8 @@ def solve_case(
                 halvings += 1
                 ds = 0.5 * min(ds, 1.0 - s)  # a grown ds may have been clipped at 1: halve the step tried
                 if halvings > max_halvings or ds < min_fraction:
-                    fail(f"{what} stalled at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p), _at_least_as_heavy(target, c))
+                    fail(f"{what} stalled at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p),
+                         _at_least_as_heavy(case, c_prev, _pulleys_at_bound(c_prev, y, p)))
         return best
 
     if guess is not None:
