@@ -109,3 +109,33 @@ def test_as_published_unchanged_by_the_corrections():
     now = (s["axial_force_n"]["primary"], s["axial_force_n"]["secondary"], s["efficiency"]["overall"],
            s["wrap_deg"]["primary"], s["wrap_deg"]["secondary"])
     assert now == pytest.approx(before, rel=1e-5)
+
+
+def _stock_clamp_n(ratio):
+    from pathlib import Path
+
+    from dyno.model import geometry
+    from dyno.tuning import actuators
+    from dyno.tuning.tune import load_tune
+
+    tune = load_tune(Path(__file__).resolve().parents[2] / "calibration" / "tunes" / "cvtech-stock.toml")
+    r_p, _ = geometry.radii_for_ratio(ratio, TABLE_6_1.belt.pitch_length_m, TABLE_6_1.drive.centre_distance_m)
+    return float(actuators.primary_axial_force_n(tune, TABLE_6_1_POINT.primary_speed_rpm, r_p))
+
+
+def test_stock_clamp_carries_10_but_not_18_nm_at_ratio_2():
+    """At the stock tune's clamp (spring + flyweights, 3400 rpm) the full model carries 10 N*m at ratio 2 and
+    reports 18 N*m as gross slip (the primary at its capstan bound), fast, as a state."""
+    from dyno.errors import DidNotConverge, GrossSlip
+
+    clamp = _stock_clamp_n(2.0)
+    op = replace(TABLE_6_1_POINT, ratio=2.0, slack_tension_n=None, primary_axial_force_n=clamp)
+    s = solve_point(TABLE_6_1, replace(op, primary_torque_nm=10.0), time_limit_s=60).summary
+    assert s["state"] == "steady" and s["axial_force_n"]["primary"] == pytest.approx(clamp, rel=1e-6)
+    assert max(s["balance"].values()) < LIMIT
+    t0 = time.perf_counter()
+    with pytest.raises(GrossSlip) as info:
+        solve_point(TABLE_6_1, op, time_limit_s=60)
+    assert not isinstance(info.value, DidNotConverge)
+    assert "primary" in str(info.value) and "capstan bound" in str(info.value)
+    assert time.perf_counter() - t0 < 30
