@@ -205,7 +205,8 @@ def balances(raw: bvp.RawSolution) -> dict:
         point_work = 0.0
         for end in (entry, exit_):
             e_c = _unit(end["alpha_rad"] + math.pi / 2)
-            point_work += float(np.dot(end["point_load_n"], e_c)) * float(np.hypot(*end["position_m"])) * dist["omega_rad_s"]
+            surface_speed = float(np.hypot(*end["position_m"])) * dist["omega_rad_s"]
+            point_work += float(np.dot(end["point_load_n"], e_c)) * surface_speed
         power_terms["friction_w"] += dist["friction_w"]
         power_terms["normal_work_w"] += dist["normal_work_w"] + point_work
         force_rel = max(force_rel, float(np.hypot(*f_sum)) / f_scale)
