@@ -11,7 +11,11 @@ Prints (does not assert):
 2. the stiff/extreme-case table (converged and verified, or the
    DidNotConverge message);
 3. the performance figures of issue 3: Table 6.1 from no starting solution,
-   from a neighbouring solution, a 20-point sweep, closed form per point.
+   from a neighbouring solution, a 20-point sweep, closed form per point;
+4. the cold-start grid (issue 14): ratio {0.9 ... 3.5} x torque {5, 10, 18} N*m x
+   both variants, each solved from no starting solution: time, state (steady /
+   gross_slip / failed with its reason), force/moment/power balances, efficiency
+   (``--only grid`` for this table alone).
 """
 
 from __future__ import annotations
@@ -190,12 +194,66 @@ def table_performance(base):
         pass
 
 
+GRID_RATIOS = (0.9, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5)
+GRID_TORQUES_NM = (5.0, 10.0, 18.0)
+
+
+def _stock_tune_clamp_n(ratio: float) -> float:
+    """The stock tune's primary clamping force at 3400 rpm and this ratio's primary radius (spring + flyweights)."""
+    from dyno.model import geometry
+    from dyno.tuning import actuators
+    from dyno.tuning.tune import load_tune
+
+    tune = load_tune(Path(__file__).resolve().parents[1] / "calibration" / "tunes" / "cvtech-stock.toml")
+    r_p, _ = geometry.radii_for_ratio(ratio, TABLE_6_1.belt.pitch_length_m, TABLE_6_1.drive.centre_distance_m)
+    return float(actuators.primary_axial_force_n(tune, TABLE_6_1_POINT.primary_speed_rpm, r_p))
+
+
+def table_grid(variants=("corrected", "as_published")):
+    """Cold solve (no starting solution) at every grid point: time, state, balances, efficiency."""
+    print("\n== 4. Cold start on the grid: ratio R_S/R_P x primary torque x {slack 100 N, stock tune's clamp at "
+          "3400 rpm}, v_th 1e-4 m/s, tol 1e-3 ==")
+    print(f"{'variant':<13}{'level':>14}{'ratio':>6}{'torque':>7}{'time s':>8}  {'state':<11}{'force':>9}{'moment':>9}"
+          f"{'power':>9}{'eta':>8}  reason")
+    worst = {}
+    for variant in variants:
+        for level in ("slack 100 N", "stock clamp"):
+            for ratio in GRID_RATIOS:
+                for torque in GRID_TORQUES_NM:
+                    op = replace(TABLE_6_1_POINT, ratio=ratio, primary_torque_nm=torque)
+                    label = level
+                    if level == "stock clamp":
+                        clamp = _stock_tune_clamp_n(ratio)
+                        op = replace(op, slack_tension_n=None, primary_axial_force_n=clamp)
+                        label = f"F_P={clamp:.0f} N"
+                    t0 = time.perf_counter()
+                    try:
+                        s = solve_point(TABLE_6_1, op, variant=variant, time_limit_s=60).summary
+                        dt = time.perf_counter() - t0
+                        b = s["balance"]
+                        print(f"{variant:<13}{label:>14}{ratio:>6.2f}{torque:>7.1f}{dt:>8.2f}  {s['state']:<11}"
+                              f"{b['force_rel']:>9.1e}{b['moment_rel']:>9.1e}{b['power_rel']:>9.1e}"
+                              f"{s['efficiency']['overall']:>8.4f}")
+                    except Exception as exc:  # noqa: BLE001  (the table reports every outcome)
+                        dt = time.perf_counter() - t0
+                        state = "gross_slip" if type(exc).__name__ == "GrossSlip" else "failed"
+                        print(f"{variant:<13}{label:>14}{ratio:>6.2f}{torque:>7.1f}{dt:>8.2f}  {state:<11}{'':>35}  "
+                              f"{str(exc)[-200:]}")
+                    key = (variant, level)
+                    worst[key] = max(worst.get(key, 0.0), dt)
+    for (variant, level), dt in worst.items():
+        print(f"max cold solve time, {variant}, {level}: {dt:.1f} s (goal <= 5 s)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer tolerance/threshold combinations")
-    ap.add_argument("--only", choices=("errors", "extremes", "performance"), default=None)
+    ap.add_argument("--only", choices=("errors", "extremes", "performance", "grid"), default=None)
     args = ap.parse_args()
     base = None
+    if args.only == "grid":
+        table_grid()
+        return 0
     if args.only in (None, "errors"):
         base = table_error_vs_time(args.quick)
     if base is None:
@@ -204,6 +262,8 @@ def main() -> int:
         table_extremes(base)
     if args.only in (None, "performance"):
         table_performance(base)
+    if args.only is None:
+        table_grid()
     return 0
 
 

@@ -41,3 +41,15 @@ class SafetyAbort(DynoError, RuntimeError):
 
 class DidNotConverge(DynoError, ArithmeticError):
     """A numerical model failed to converge; the message names the case."""
+
+
+class GrossSlip(DynoError):
+    """A physical state, not a numerical failure: the belt cannot transmit the load (no steady solution).
+
+    The message names the case and the pulley whose tension ratio reached its
+    capstan/Gerbert bound (or whose speed collapsed).
+    """
+
+
+# What a belt-model solve can raise besides bad input: callers that tolerate a failed point catch both.
+MODEL_FAILURES = (DidNotConverge, GrossSlip)

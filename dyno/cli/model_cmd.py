@@ -112,7 +112,14 @@ def _run_point(args) -> int:
         return 0
     from dyno.model.solution import solve_point
 
-    sol = solve_point(params, op, variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol)
+    from dyno.errors import GrossSlip
+
+    try:
+        sol = solve_point(params, op, variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol)
+    except GrossSlip as exc:
+        # A physical answer, not a numerical failure: say it as a state (exit 1: no steady point).
+        _print({"state": "gross_slip", "converged": False, "variant": args.variant, "reason": str(exc)}, args.json)
+        return 1
     if args.profiles is not None:
         _write_profiles(sol.profiles(), args.profiles)
     _print(sol.as_dict(), args.json)

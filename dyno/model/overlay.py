@@ -9,16 +9,19 @@ torque); two tiers answer:
   from the previously solved one (points are visited in ratio order).
 
 Every result is stored as one small JSON file named by the SHA-256 of its
-inputs (parameters, variant, tier, tolerances, the point, and a model
-version), so a replay or a UI refresh never solves the same point twice.
-Failures are cached too, with their message, and come back with
-``converged: false`` rather than a number.  Cache directory: the
+inputs (parameters, variant, tier, tolerances, the point) and of the model's
+source code (:func:`model_code_hash`), so a replay or a UI refresh never
+solves the same point twice, and a change of the model's code invalidates
+every entry.  Failures are cached too, with their message, and come back with
+``converged: false`` rather than a number (retried once the code changes).
+Full-tier results carry the balances; ``as_published`` ones a ``warning``.  Cache directory: the
 ``cache_dir`` argument, else ``$DYNO_MODEL_CACHE``, else
 ``~/.cache/dyno/model``.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -26,11 +29,31 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from dyno.errors import DidNotConverge
+from dyno.errors import MODEL_FAILURES
 from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, bad_input
 
-MODEL_VERSION = "1"
 TIERS = ("closed_form", "full")
+# Every module a prediction depends on: the cache key hashes their source, so a code change (a fix, a
+# new boundary condition) invalidates old entries and retries cached failures, with no version to bump.
+_MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
+                  "bvp", "balance", "solution", "overlay")
+
+
+@functools.lru_cache(maxsize=1)
+def model_code_hash() -> str:
+    """SHA-256 of the model's source files (and scipy's version, whose solver the full tier runs)."""
+    h = hashlib.sha256()
+    here = Path(__file__).resolve().parent
+    for name in _MODEL_MODULES:
+        h.update(name.encode())
+        h.update((here / f"{name}.py").read_bytes())
+    try:
+        from importlib.metadata import version
+
+        h.update(version("scipy").encode())
+    except Exception:  # noqa: BLE001  (no metadata: the source hash alone)
+        pass
+    return h.hexdigest()
 
 
 def default_cache_dir() -> Path:
@@ -40,7 +63,7 @@ def default_cache_dir() -> Path:
 
 def point_key(params: ModelParams, op: OperatingPoint, tier: str, variant: str, slip_threshold_m_s: float, tol: float) -> str:
     payload = {
-        "v": MODEL_VERSION,
+        "code": model_code_hash(),
         "params": params.as_dict(),
         "op": asdict(op),
         "tier": tier,
@@ -159,17 +182,18 @@ def predict_overlay(
             try:
                 sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
                                   guess=guess, time_limit_s=time_limit_s)
-            except DidNotConverge as exc:
+            except MODEL_FAILURES as exc:
                 if guess is not None:
                     try:  # a far neighbour can be a worse start than none
                         sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
                                           time_limit_s=time_limit_s)
-                    except DidNotConverge as exc2:
+                    except MODEL_FAILURES as exc2:
                         sol, exc = None, exc2
                 else:
                     sol = None
                 if sol is None:
-                    res = {"converged": False, "tier": "full", "error": str(exc)}
+                    res = {"converged": False, "tier": "full", "error": str(exc),
+                           "state": "gross_slip" if type(exc).__name__ == "GrossSlip" else "failed"}
             if sol is not None:
                 guess = sol
                 s = sol.summary
@@ -182,7 +206,10 @@ def predict_overlay(
                     "residual_max": s["residual_max"],
                     "slip_threshold_m_s": s["slip_threshold_m_s"],
                     "solve_s": s["solve_s"],
+                    "balance": s["balance"],
                 }
+                if "warning" in s:
+                    res["warning"] = s["warning"]
         res.update(ratio=op.ratio, primary_speed_rpm=op.primary_speed_rpm, primary_torque_nm=op.primary_torque_nm,
                    variant=variant)
         if use_cache:

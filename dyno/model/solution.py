@@ -21,7 +21,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dyno.model import bvp
+from dyno.model import balance, bvp
+
+AS_PUBLISHED_WARNING = (
+    "as_published reproduces the thesis's code, which is out of energy balance: bending energy vanishes where "
+    "the pulley (EI) meets the span (EI*L^4), so most of its loss (see power_w.residual) is an artefact; its "
+    "efficiency is not a prediction (docs/belt-model.md, Balances)"
+)
 
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(3)
 
@@ -152,14 +158,19 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         f_eff = _effective_tension(case, tau, g)
         spans[which] = float(np.sum(w * p[l_idx] / (1.0 + f_eff / case.ea_n)))
 
-    torque_in = -float(y_mesh[bvp.P_M, -1] * bvp.TORQUE_REF_NM)
-    torque_out = res["secondary"]["torque_nm"]
+    # Point loads at the contact ends (shear jumps) would add to the pulleys' torques; the corrected
+    # variant makes the shear continuous, so they vanish there (computed anyway: the balances check it).
+    loads = balance.interface_loads(raw)
+    torque_in = -float(y_mesh[bvp.P_M, -1] * bvp.TORQUE_REF_NM) + balance.point_load_torque_nm(loads, "primary")
+    torque_out = res["secondary"]["torque_nm"] - balance.point_load_torque_nm(loads, "secondary")
+    bal = balance.balances(raw)
     eta_speed = omega_s / (case.omega_primary_rad_s * case.r_primary_m / case.r_secondary_m)
     eta_torque = (torque_out / torque_in) / ratio_geom
     t_tight = float(y_mesh[bvp.P_T, 0] * bvp.TENSION_REF_N)
     t_slack = float(y_mesh[bvp.P_T, -1] * bvp.TENSION_REF_N)
     unstretched_total = sum(r["unstretched_m"] for r in res.values()) + sum(spans.values())
     a_p = float(y_mesh[bvp.P_A, -1] * bvp.AXIAL_REF_N)
+    a_s = res["secondary"]["axial_force_n"]
 
     def moment(which, force):
         xb, yb = res[which]["resultant_m"]
@@ -167,6 +178,7 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
 
     summary = {
         "variant": case.variant,
+        "state": "steady",
         "converged": True,
         "residual_max": raw.residual_max,
         "bc_residual_max": raw.bc_residual_max,
@@ -195,9 +207,9 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         "span_length_m": {"tight": float(p[bvp.K_LT]), "slack": float(p[bvp.K_LS])},
         "mass_flow_kg_s": g,
         "torque_nm": {"primary": torque_in, "secondary": torque_out},
-        "axial_force_n": {"primary": a_p, "secondary": res["secondary"]["axial_force_n"]},
+        "axial_force_n": {"primary": a_p, "secondary": a_s},
         "axial_resultant_m": {k: list(v["resultant_m"]) for k, v in res.items()},
-        "binding_moment_nm": {"primary": moment("primary", a_p), "secondary": moment("secondary", res["secondary"]["axial_force_n"])},
+        "binding_moment_nm": {"primary": moment("primary", a_p), "secondary": moment("secondary", a_s)},
         "efficiency": {"speed": eta_speed, "torque": eta_torque, "overall": eta_speed * eta_torque},
         "min_sliding_speed_m_s": {k: v["min_sliding_m_s"] for k, v in res.items()},
         "adhesion_fraction": {k: v["adhesion_fraction"] for k, v in res.items()},
@@ -205,7 +217,12 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         "unstretched_length_m": unstretched_total,
         "pitch_length_m": pitch_length_m,
         "solve_s": raw.solve_s,
+        "balance": {k: bal[k] for k in ("force_rel", "moment_rel", "power_rel")},
+        "power_w": bal["detail"]["power_w"],
+        "interface_point_load_n": {**bal["detail"]["point_load_n"], "carried": bal["detail"]["point_loads_carried"]},
     }
+    if case.variant == "as_published":
+        summary["warning"] = AS_PUBLISHED_WARNING
     return BeltSolution(raw=raw, variant=case.variant, summary=summary)
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from dyno.errors import DidNotConverge
+from dyno.errors import MODEL_FAILURES
 from dyno.model import sweep
 from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, TABLE_6_1_POINT, bad_input
 
@@ -59,7 +59,7 @@ def run_study(
     try:
         base = solve_point(base_params, replace(op, ratio=1.0), variant=variant,
                            slip_threshold_m_s=slip_threshold_m_s, tol=tol)
-    except DidNotConverge:
+    except MODEL_FAILURES:
         base = None  # each value then starts from its own geometric guess
     series = {}
     for value in values:
@@ -69,7 +69,7 @@ def run_study(
             try:
                 start = solve_point(params_v, replace(op_v, ratio=1.0), variant=variant,
                                     slip_threshold_m_s=slip_threshold_m_s, tol=tol, guess=base)
-            except DidNotConverge:
+            except MODEL_FAILURES:
                 start = None
         if log:
             log(f"{name}={value:g}")

@@ -23,7 +23,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from dyno.errors import DidNotConverge
+from dyno.errors import MODEL_FAILURES
 from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, TABLE_6_1_POINT
 
 DEFAULT_RATIO_RANGE = (1.74, 0.72)
@@ -132,7 +132,7 @@ def sweep_ratios(
         try:
             s = solve_point(params, op_i, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol, guess=guess,
                             friction_corner=friction_corner)
-        except DidNotConverge as exc:
+        except MODEL_FAILURES as exc:
             rows[i] = failed_row(op_i, variant, slip_threshold_m_s, str(exc))
             if log:
                 log(f"ratio {ratios[i]:.4f}: FAILED after {time.perf_counter() - t0:.1f} s")

@@ -156,7 +156,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
     ``solve(op, guess)`` replaces :func:`dyno.model.solution.solve_point` (tests).
     """
-    from dyno.errors import ConfigError, DidNotConverge
+    from dyno.errors import MODEL_FAILURES, ConfigError
     from dyno.model.overlay import default_cache_dir, point_key
     from dyno.model.params import TABLE_6_1, OperatingPoint
 
@@ -207,7 +207,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
             try:
                 sol = solve(op, guess)
                 break
-            except (DidNotConverge, ConfigError) as exc:   # infeasible input: a failed cell too
+            except (*MODEL_FAILURES, ConfigError) as exc:   # infeasible input or gross slip: a failed cell too
                 err = exc
         solved += 1
         if sol is None:

@@ -274,7 +274,7 @@ class CVT:
 
     def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
         """Re-evaluate the belt thrust ratio ``kappa`` and creep at this state."""
-        from dyno.errors import ConfigError, DidNotConverge
+        from dyno.errors import MODEL_FAILURES, ConfigError
         from dyno.model.closed_form import closed_form_point
         from dyno.model.params import OperatingPoint
 
@@ -286,7 +286,7 @@ class CVT:
                             primary_axial_force_n=f_p)
         try:
             res = closed_form_point(self._belt_params, op)
-        except (ConfigError, DidNotConverge):
+        except (ConfigError, *MODEL_FAILURES):
             # The clamp cannot carry the torque: the secondary wins (as in
             # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
             self._kappa = 0.0

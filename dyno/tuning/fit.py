@@ -45,7 +45,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from dyno.errors import ConfigError, DidNotConverge
+from dyno.errors import MODEL_FAILURES, ConfigError
 from dyno.model.closed_form import closed_form_point
 from dyno.model.params import BeltParams, OperatingPoint
 from dyno.tuning import actuators as act
@@ -164,7 +164,7 @@ def _force_residual_n(solver: Solver, engine_rpm: float, secondary_rpm: float, s
                         slack_tension_n=None, primary_axial_force_n=f_p)
     try:
         res = closed_form_point(solver.params, op)
-    except (ConfigError, DidNotConverge):
+    except (ConfigError, *MODEL_FAILURES):
         return 1e6, creep_eta
     helix_torque_nm = secondary_torque_nm + solver.secondary_friction_torque_nm
     f_s_act = float(act.secondary_axial_force_n(solver.tune, helix_torque_nm, res.r_secondary_m,

@@ -82,3 +82,32 @@ def test_model_import_is_cheap():
     code = "import sys, dyno.model.solution, dyno.model.overlay; print('scipy.integrate' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_cache_key_covers_the_model_code_and_failures_are_retried_after_a_change(tmp_path, monkeypatch):
+    from dyno.errors import DidNotConverge
+    from dyno.model import solution
+
+    calls = []
+
+    def failing(params, op, **kwargs):
+        calls.append(op)
+        raise DidNotConverge("stalled")
+
+    monkeypatch.setattr(solution, "solve_point", failing)
+    first = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
+    assert not first[0]["converged"] and first[0]["state"] == "failed" and len(calls) == 1
+    again = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
+    assert again[0]["cached"] and len(calls) == 1  # same code: the failure is remembered
+    assert len(overlay.model_code_hash()) == 64
+    monkeypatch.setattr(overlay, "model_code_hash", lambda: "0" * 64)  # the model's code changed
+    retried = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
+    assert not retried[0]["cached"] and len(calls) == 2
+
+
+def test_model_code_hash_reads_every_model_module():
+    from pathlib import Path
+
+    here = Path(overlay.__file__).resolve().parent
+    on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies"}
+    assert on_disk <= set(overlay._MODEL_MODULES), on_disk - set(overlay._MODEL_MODULES)

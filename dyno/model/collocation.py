@@ -1,0 +1,118 @@
+"""scipy's ``solve_bvp`` with this model's linear algebra, invisible to every other caller.
+
+``solve_bvp`` has no options for its collocation Jacobian or its sparse LU,
+and it looks both up as globals of ``scipy.integrate._bvp``.  Instead of
+swapping those globals during our calls (which any other thread's
+``solve_bvp`` would see), :func:`_private_bvp_module` loads a second,
+private copy of that module from scipy's own file and sets the two names in
+the copy only: scipy's module, and everybody else's ``solve_bvp``, are
+untouched.  Same Newton iterates to rounding (tested against scipy's).
+
+* ``construct_global_jac`` -> :func:`_block_global_jac` (the rhs Jacobian is
+  block-diagonal by region: 1/15 of the flops, only structural non-zeros);
+* ``splu``: natural order, threshold pivoting 0.1, explicit zeros dropped
+  (the collocation Jacobian is block-bidiagonal with diagonal blocks near -I:
+  less fill-in than after COLAMD, 3-5x faster at 1550 nodes).
+
+If scipy ever renames those module globals, the copy's ``solve_bvp`` is
+scipy's unchanged (correct, ~2x slower).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from dyno.model.equations import _BLOCKS, N_STATES
+
+_LOAD_LOCK = threading.Lock()
+_PRIVATE = {}
+
+
+def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_dp_middle, dbc_dya, dbc_dyb, dbc_dp):
+    """scipy's ``construct_global_jac`` for this model, exploiting the block-diagonal rhs Jacobian.
+
+    Same formulas (Kierzenka & Shampine's Lobatto IIIA collocation blocks)
+    as ``scipy.integrate._bvp.construct_global_jac``, but the n x n products
+    are formed region by region (6, 8, 6, 6 states: 1/15 of the flops) and
+    only structurally non-zero entries enter the sparse matrix (~1/3).
+    """
+    from scipy.sparse import coo_matrix
+
+    h3 = h[:, None, None]
+    rows, cols, vals = [], [], []
+    base = (np.arange(m - 1) * n)[:, None, None]
+    for blk in _BLOCKS:
+        idx = np.asarray(blk)
+        b = idx.size
+        a = np.transpose(df_dy[idx[:, None], idx[None, :], :], (2, 0, 1))
+        a_mid = np.transpose(df_dy_middle[idx[:, None], idx[None, :], :], (2, 0, 1))
+        eye = np.identity(b)
+        d0 = -eye - h3 / 6 * (a[:-1] + 2 * a_mid) - h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[:-1])
+        d1 = eye - h3 / 6 * (a[1:] + 2 * a_mid) + h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[1:])
+        r = np.broadcast_to(base + idx[None, :, None], (m - 1, b, b))
+        c = np.broadcast_to(base + idx[None, None, :], (m - 1, b, b))
+        rows += [r.ravel(), r.ravel()]
+        cols += [c.ravel(), (c + n).ravel()]
+        vals += [d0.ravel(), d1.ravel()]
+    # boundary conditions on ya, yb
+    bc_r = (m - 1) * n + np.arange(n + k)[:, None]
+    rows += [np.broadcast_to(bc_r, (n + k, n)).ravel()] * 2
+    cols += [np.broadcast_to(np.arange(n)[None, :], (n + k, n)).ravel(),
+             np.broadcast_to((m - 1) * n + np.arange(n)[None, :], (n + k, n)).ravel()]
+    vals += [dbc_dya.ravel(), dbc_dyb.ravel()]
+    if k > 0:
+        fp = np.transpose(df_dp, (2, 0, 1))
+        fp_mid = np.transpose(df_dp_middle, (2, 0, 1)).copy()
+        a_mid_full = np.transpose(df_dy_middle, (2, 0, 1))
+        diff = fp[:-1] - fp[1:]
+        for blk in _BLOCKS:
+            idx = np.asarray(blk)
+            fp_mid[:, idx, :] += 0.125 * h3 * np.einsum("...ij,...jk->...ik", a_mid_full[:, idx[:, None], idx[None, :]],
+                                                       diff[:, idx, :])
+        d_p = -h3 / 6 * (fp[:-1] + fp[1:] + 4 * fp_mid)
+        rows += [np.broadcast_to((base[:, :, 0] + np.arange(n)[None, :])[:, :, None], (m - 1, n, k)).ravel(),
+                 np.broadcast_to(bc_r, (n + k, k)).ravel()]
+        cols += [np.broadcast_to(n * m + np.arange(k)[None, None, :], (m - 1, n, k)).ravel(),
+                 np.broadcast_to(n * m + np.arange(k)[None, :], (n + k, k)).ravel()]
+        vals += [d_p.ravel(), dbc_dp.ravel()]
+    size = n * m + k
+    jac = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+    return jac.tocsc()
+
+
+def _private_bvp_module():
+    """A private copy of ``scipy.integrate._bvp`` with our two functions (loaded once, thread-safe)."""
+    with _LOAD_LOCK:
+        mod = _PRIVATE.get("module")
+        if mod is not None:
+            return mod
+        import importlib.util
+
+        import scipy.integrate._bvp as scipy_bvp
+
+        spec = importlib.util.spec_from_file_location("dyno.model._scipy_bvp_private", scipy_bvp.__file__)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        original_splu = getattr(mod, "splu", None)
+        original_jac = getattr(mod, "construct_global_jac", None)
+        if original_splu is not None and original_jac is not None:
+
+            def splu_natural(a, *args, **kwargs):
+                a.eliminate_zeros()
+                kwargs.setdefault("permc_spec", "NATURAL")
+                kwargs.setdefault("diag_pivot_thresh", 0.1)
+                return original_splu(a, *args, **kwargs)
+
+            def global_jac(n, *args):
+                return _block_global_jac(n, *args) if n == N_STATES else original_jac(n, *args)
+
+            mod.splu, mod.construct_global_jac = splu_natural, global_jac
+        _PRIVATE["module"] = mod
+        return mod
+
+
+def solve_bvp_fast(fun, bc, x, y, p=None, **kwargs):
+    """``scipy.integrate.solve_bvp`` (same arguments and result) with this model's linear algebra."""
+    return _private_bvp_module().solve_bvp(fun, bc, x, y, p, **kwargs)
