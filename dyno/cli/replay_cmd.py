@@ -19,7 +19,11 @@ def run(args) -> int:
     from dyno.replay import replay
 
     if not args.json and importlib.util.find_spec("dyno.ui.replay_app") is not None:
+        from dyno.runlog.reader import load_run
         from dyno.ui.replay_app import main as viewer
+
+        for r in args.run:  # a bad path or run is one line here, before the screen is taken over
+            load_run(r, with_events=False)
 
         return viewer(args)
     results = [replay(r, args.calibration, args.engine_map) for r in args.run]

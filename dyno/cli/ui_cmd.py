@@ -23,7 +23,7 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from dyno.ui.live_app import main
+    from dyno.ui.live_app import LiveApp
     from dyno.ui.session import LiveOptions
 
     if not args.speed > 0:
@@ -40,8 +40,20 @@ def run(args) -> int:
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
                        engine_map_path=args.engine_map, drills=drills)
-    rc = main(opts)
-    _index(args.out)
+    app = LiveApp(opts)
+    app.run()
+    rc = app.return_code or 0
+    session = getattr(app, "session", None)
+    run_dir = session.ctx.writer.run_dir if session is not None and getattr(session, "ctx", None) else args.out
+    _index(run_dir)
+    if run_dir is not None and (Path(run_dir) / "meta.json").is_file():
+        from dyno.cli.run_cmd import _write_report
+
+        _write_report({"run_dir": str(run_dir)}, announce=True)  # "report: <path>" (or one line why not)
+        try:
+            print(f"run: {run_dir}")
+        except OSError:
+            pass
     return rc
 
 

@@ -95,6 +95,8 @@ def _cases(tmp: Path, run: Path):
         ("replay meta list", ["replay", meta_list, "--json"], "meta.json"),
         ("replay binary docs", ["replay", bin_docs, "--json"], "documents.jsonl"),
         ("replay missing dir", ["replay", tmp / "nowhere", "--json"], "nowhere"),
+        ("replay viewer missing dir", ["replay", tmp / "nowhere"], "nowhere"),
+        ("replay viewer bad meta", ["replay", bad_meta], "meta.json"),
         ("replay bad calibration", ["replay", run, "--json", "--calibration", cal], "cal.csv"),
         ("export bad meta", ["export", bad_meta], "meta.json"),
         ("import-legacy binary", ["import-legacy", a_dir], "a_dir"),
