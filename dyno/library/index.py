@@ -87,6 +87,25 @@ def _remove(db_path: Path) -> None:
             pass
 
 
+def _locked_retry(fn, attempts: int = 20):
+    """Call ``fn``, retrying while SQLite says "database is locked".
+
+    SQLite returns that at once, without its busy timeout, where waiting could deadlock
+    (two fresh connections switching a new file to WAL, or upgrading a read to a write):
+    two runs ending together hit it.  A short randomised back-off then succeeds.
+    """
+    import random
+    import time
+
+    for k in range(attempts):
+        try:
+            return fn()
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or k == attempts - 1:
+                raise
+            time.sleep(0.01 + random.random() * 0.05 * (k + 1))
+
+
 def open_library(root=None, warn=None) -> sqlite3.Connection:
     """The index of the runs directory ``root``, rebuilt from the run directories if unusable.
 
@@ -103,7 +122,7 @@ def open_library(root=None, warn=None) -> sqlite3.Connection:
         raise ConfigError(root, "runs directory", f"a directory dyno can create and write ({exc.strerror})") from None
     db_path = root / INDEX_NAME
     try:
-        return connect(db_path)
+        return _locked_retry(lambda: connect(db_path))
     except sqlite3.OperationalError as exc:  # busy, read-only, cannot open: not broken
         raise ConfigError(db_path, "run index", f"an index dyno can open and write ({exc})") from None
     except (sqlite3.DatabaseError, IndexUnusable) as exc:
@@ -148,8 +167,11 @@ def _write_run(conn: sqlite3.Connection, run_dir: Path) -> None:
 
 def index_run(conn: sqlite3.Connection, run_dir) -> None:
     """Add or refresh one run (ConfigError if ``run_dir`` is not a run directory)."""
-    with conn:
-        _write_run(conn, Path(run_dir))
+    def write():
+        with conn:
+            _write_run(conn, Path(run_dir))
+
+    _locked_retry(write)
 
 
 def reindex(conn: sqlite3.Connection, root) -> int:
@@ -235,7 +257,7 @@ def index_after_run(run_dir, warn) -> bool:
         conn = open_library(warn=warn)
         try:
             if run_dir is None:
-                sync(conn, runs_dir())
+                _locked_retry(lambda: sync(conn, runs_dir()))
             else:
                 index_run(conn, run_dir)
         finally:

@@ -239,8 +239,9 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
                 et[a, b], es[a, b], ok[a, b] = eff["torque"], eff["speed"], True
             else:
                 errors[(float(r), float(t))] = res.get("error", f"unphysical efficiency {eff!r}")
-                log.warning("belt table: ratio %.3f, %.1f N m did not converge, the loss model is used there: %s",
-                            r, t, errors[(float(r), float(t))])
+                # recorded in BeltTable.errors; not a warning on every run's stderr (one-line outputs)
+                log.info("belt table: ratio %.3f, %.1f N m did not converge, the loss model is used there: %s",
+                         r, t, errors[(float(r), float(t))])
     return BeltTable(ratios=ratios, torques_nm=torques, eta_torque=et, eta_speed=es, ok=ok, errors=errors,
                      build_s=time.perf_counter() - t0, solved=solved)
 

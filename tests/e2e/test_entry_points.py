@@ -29,7 +29,8 @@ needs_tmux = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is no
 #: commands this module starts as processes; the others are started as processes where named
 EXERCISED = {"run", "replay", "export", "import-legacy", "model", "firmware-sim", "calibrate", "doctor",
              "shift-curve", "design", "arcvt"}
-EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py"}
+EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py",
+                       "runs": "tests/library/test_index.py", "compare": "tests/library/test_compare.py"}
 
 
 def _env(**extra: str) -> dict:
@@ -136,7 +137,7 @@ def test_entry_replay_viewer_shows_the_points_table(sim_run, work):
     run_dir, doc = sim_run
     term = Terminal(["replay", run_dir], cwd=work)
     try:
-        screen = term.wait(["T Nm", "eff %", "efficiency vs secondary rpm"], 60)
+        screen = term.wait(["T N·m", "eff %", "efficiency vs secondary rpm"], 60)
         assert f"{len(doc['points'])} points" in screen and "run 1/1" in screen
         # every point's secondary rpm and efficiency as the table prints them (38 rows fit in 40 lines)
         for p in doc["points"]:

@@ -72,7 +72,7 @@ def test_row_holds_what_the_run_recorded(library):
     aborted = by_name["heavy-out"]
     assert aborted["state"] == "aborted" and aborted["exit_status"] == "abort"
     assert aborted["abort_cause"] == "overspeed"
-    assert aborted["seed"] == 3 and aborted["mode"] == "sim" and aborted["protocol"] == "v1"
+    assert aborted["seed"] == 3 and aborted["mode"] == "sim" and aborted["protocol"] == "v2"
     assert aborted["calibration_date"] and aborted["calibration_slope_counts_per_nm"] > 0
     assert aborted["plan"]["max_points"] == Plan().max_points
     quick = by_name["quick"]
