@@ -187,10 +187,12 @@ def test_two_processes_indexing_at_once(library, tmp_path):
     conn.close()
 
 
-LEGACY = REPO.parent / "shared" / "data" / "vt-cvt-dyno-2019" / "2019-04-18_run2"
+from dyno.datapaths import legacy_data_dir, legacy_data_missing  # noqa: E402
+
+LEGACY = legacy_data_dir() / "2019-04-18_run2"
 
 
-@pytest.mark.skipif(not LEGACY.is_dir(), reason=f"thesis logs not present at {LEGACY}")
+@pytest.mark.skipif(legacy_data_missing() is not None, reason=str(legacy_data_missing()))
 def test_import_legacy_is_indexed(tmp_path):
     root = tmp_path / "runs"
     r = _dyno("import-legacy", LEGACY, "--json", runs_dir=root)  # default --out: the runs directory
