@@ -29,7 +29,7 @@ HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE
 
 LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
-#state { height: 2; }
+#state { height: auto; max-height: 5; }  /* an abort's cause wraps, never cut */
 #main { height: 1fr; }
 #fields { width: 30; padding: 0 1; }
 #plot { width: 1fr; }
@@ -118,8 +118,8 @@ class LiveApp(DynoApp):
         if v.state == "aborted" or v.abort_cause:
             safe = getattr(self.session.actuators, "is_safe", None)
             safe_txt = {True: "rig SAFE", False: "rig NOT SAFE", None: "safe state commanded"}[safe]
-            t.append(f"\n {safe_txt}: throttle idle, engine killed, brake released │ cause: "
-                     f"{v.abort_cause}: {v.abort_detail}", style="bold")
+            t.append(f"\n {safe_txt}: throttle idle, engine killed, brake released", style="bold")
+            t.append(f"\n cause: {v.abort_cause}: {v.abort_detail}", style="bold")
         return t
 
     def _fields_text(self, v) -> Text:

@@ -165,6 +165,7 @@ def test_ui_live_snapshots_80x24(tmp_path):
     assert "last 30 s" in shots["3"]
     assert "Start the test?" in shots["confirm"] and "y / Enter = yes" in shots["confirm"]
     assert "Start the test?" not in shots["aborted"] and "cause: estop" in shots["aborted"]
+    assert "Ctrl+C)" in shots["aborted"]  # the cause's detail wraps at 80 columns, its end is not cut off
 
 
 OVERLAY_SCRIPT = r"""
