@@ -85,7 +85,7 @@ class CalibrateApp(DynoApp):
         self._drawn = None
 
     def compose(self) -> ComposeResult:
-        mode = f"SIM seed {self.opts.seed}" if self.opts.sim else "RIG"
+        mode = f"SIM x{self.opts.speed:g} seed {self.opts.seed}" if self.opts.sim else "RIG"
         yield Static(f" dyno calibrate │ {mode} │ history: {self.opts.history_path}", id="title")
         yield Static(f" E-STOP: {ESTOP_KEYS} (always active)", id="estop")
         yield Static("", id="phase")
