@@ -36,6 +36,20 @@ QUANTITIES = {
     "power_out_w": ("power_out_w", None, "W", "output power", "power_out_true_w"),
     "rpm_primary": ("rpm_primary", "rpm_primary_sem", "rpm", "primary speed (shift curve)", "rpm_primary_true"),
 }
+def _setup_value(row: dict, k: str):
+    """What a person can read: a plan by its mode (step / speed-hold) beside its hash."""
+    v = row.get(k)
+    if k == "plan_sha256" and v and row.get("plan_json"):
+        import json
+
+        try:
+            mode = json.loads(row["plan_json"]).get("mode", "step")
+        except (ValueError, AttributeError):
+            return v
+        return f"{mode} ({v[:8]})"
+    return v
+
+
 SETUP_FIELDS = ("mode", "seed", "tune_name", "tune_sha256", "calibration_date", "calibration_slope_counts_per_nm",
                 "engine_map_sha256", "plan_sha256", "settle_mode", "protocol", "firmware_version",
                 "software_version", "atm_pressure_kpa", "atm_temperature_c", "atm_humidity_pct")
@@ -170,8 +184,8 @@ def compare(runs: list[dict], step_rpm: float = 200.0) -> dict:
                 qd["truth_difference"] = c[q]["truth"] - ref[q]["truth"]
             entry["quantities"][q] = qd
         entry["tune_diff"] = dict_diff((runs[0].get("tune") or {}), (r.get("tune") or {}))
-        entry["setup_diff"] = [{"key": k, "from": runs[0]["row"].get(k), "to": r["row"].get(k)} for k in SETUP_FIELDS
-                               if runs[0]["row"].get(k) != r["row"].get(k)]
+        entry["setup_diff"] = [{"key": k, "from": _setup_value(runs[0]["row"], k), "to": _setup_value(r["row"], k)}
+                               for k in SETUP_FIELDS if runs[0]["row"].get(k) != r["row"].get(k)]
         diffs.append(entry)
     return _plain({"grid_rpm_secondary": grid, "step_rpm": step_rpm, "confidence": 0.95, "curves": curves,
                    "differences": diffs, "atmosphere": ATMOSPHERE_NOTE,

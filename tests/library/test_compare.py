@@ -108,3 +108,14 @@ def test_bad_input_one_line_exit_2(compared, tmp_path):
         assert r.returncode == 2, (args, r.stdout, r.stderr)
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / "no").exists()
+
+
+def test_a_plan_difference_is_named_by_its_mode():
+    import json as _json
+
+    from dyno.library.compare import _setup_value
+
+    row = {"plan_sha256": "abcdef0123456789", "plan_json": _json.dumps({"mode": "speed-hold"})}
+    assert _setup_value(row, "plan_sha256") == "speed-hold (abcdef01)"
+    old = {"plan_sha256": "0123456789abcdef", "plan_json": _json.dumps({"measure_s": 3.0})}  # before plans had modes
+    assert _setup_value(old, "plan_sha256") == "step (01234567)"
