@@ -88,6 +88,7 @@ class LiveSession:
         if opts.engine_map_path:
             run_opts.engine_map_path = opts.engine_map_path
         self.guard = None
+        self.run_dir_removed = False  # set by close() when a simulated session never started a test
         if opts.sim:
             self.ctx = build(run_opts, self.sim_now)
             self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
@@ -284,3 +285,16 @@ class LiveSession:
                               events_lost=self.poller.reader.events_lost)
         if self.guard is not None:  # pragma: no cover - rig only
             self.guard.__exit__(None, None, None)
+        if self._nothing_ran():
+            # A simulated session closed before GO records nothing worth keeping: no empty run
+            # directory left behind.  (On the rig the directory always stays: it is where an
+            # abort would have been recorded, and the engine may have run.)
+            import shutil
+
+            shutil.rmtree(self.ctx.writer.run_dir, ignore_errors=True)
+            self.run_dir_removed = True
+
+    def _nothing_ran(self) -> bool:
+        c = self.controller
+        return (self.opts.sim and c.go_s is None and all(a.get("cause") == "quit" for a in c.aborts)
+                and not (self.ctx.drills is not None and self.ctx.drills.fired))

@@ -233,3 +233,21 @@ def test_ui_live_model_pieces():
     from dyno.app import DEFAULT_ENGINE_MAP
 
     assert 2800 < ideal_engine_rpm(load_engine_map(DEFAULT_ENGINE_MAP)) < 4000
+
+
+def test_ui_live_session_without_go_leaves_no_run_directory(tmp_path):
+    """`dyno ui --sim` started and quit before GO: nothing ran, nothing left behind."""
+    async def scenario():
+        app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=1, out_dir=tmp_path / "run"))
+        async with app.run_test(size=SIZE) as pilot:
+            assert await wait_for(pilot, lambda: app.session is not None
+                                  and app.session.controller.state is State.ARMED, 30)
+            assert (tmp_path / "run" / "meta.json").exists()  # live, it has one to record an abort in
+            await pilot.press("q")
+            await wait_for(pilot, lambda: "Quit?" in screen_text(app), 10)
+            await pilot.press("y")
+            await pilot.pause(0.5)
+        return app.session
+
+    session = asyncio.run(scenario())
+    assert session.run_dir_removed and not (tmp_path / "run").exists()
