@@ -182,28 +182,39 @@ _HEAD = struct.Struct(">BBBBBHI")
 _INFO = struct.Struct(">BBBBBBBBHIHH")
 
 
+def check_envelope(buf: bytes, version: int, header_len: int, crc_len: int, crc) -> int:
+    """The checks every framed version shares (v1 and v2): returns the frame's length.
+
+    A read that is too short, all 0x00 (a released bus) or all 0xFF (nobody answered),
+    of another version, of an impossible length, failing its check (``crc`` over the
+    bytes before it, big-endian), or with non-zero padding raises :class:`FrameError`.
+    """
+    n = len(buf)
+    if n < header_len + crc_len:
+        raise FrameError("short", f"{n} bytes")
+    if not any(buf):
+        raise FrameError("all_zero")
+    if buf.count(0xFF) == n:
+        raise FrameError("all_ff")
+    if buf[0] != version:
+        raise FrameError("version", f"got {buf[0]}")
+    length = buf[1]
+    if not header_len + crc_len <= length <= min(n, FRAME_MAX):
+        raise FrameError("length", f"{length} with {n} bytes read")
+    if crc(buf[: length - crc_len]) != int.from_bytes(buf[length - crc_len: length], "big"):
+        raise FrameError("crc")
+    if any(buf[length:]):
+        raise FrameError("padding")
+    return length
+
+
 def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
     """Check and decode one read.  Raises :class:`FrameError` with a cause.
 
     Causes: ``short``, ``all_zero``, ``all_ff``, ``version``, ``length``,
     ``crc``, ``kind``, ``flags``, ``event_tag``, ``event_length``, ``padding``.
     """
-    n = len(buf)
-    if n < HEADER_LEN + CRC_LEN:
-        raise FrameError("short", f"{n} bytes")
-    if not any(buf):
-        raise FrameError("all_zero")
-    if buf.count(0xFF) == n:
-        raise FrameError("all_ff")
-    if buf[0] != VERSION:
-        raise FrameError("version", f"got {buf[0]}")
-    length = buf[1]
-    if not HEADER_LEN + CRC_LEN <= length <= min(n, FRAME_MAX):
-        raise FrameError("length", f"{length} with {n} bytes read")
-    if crc16(buf[: length - 2]) != (buf[length - 2] << 8 | buf[length - 1]):
-        raise FrameError("crc")
-    if any(buf[length:]):
-        raise FrameError("padding")
+    length = check_envelope(buf, VERSION, HEADER_LEN, CRC_LEN, crc16)
     kind = buf[2]
     if kind == KIND_INFO:
         if length != INFO_LEN:

@@ -183,22 +183,7 @@ _HEAD = struct.Struct(">BBBBBHHI")
 
 def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
     """Check and decode one read; raises :class:`FrameError` with a cause (v1's causes)."""
-    n = len(buf)
-    if n < HEADER_LEN + CRC_LEN:
-        raise FrameError("short", f"{n} bytes")
-    if not any(buf):
-        raise FrameError("all_zero")
-    if buf.count(0xFF) == n:
-        raise FrameError("all_ff")
-    if buf[0] != VERSION:
-        raise FrameError("version", f"got {buf[0]}")
-    length = buf[1]
-    if not HEADER_LEN + CRC_LEN <= length <= min(n, FRAME_MAX):
-        raise FrameError("length", f"{length} with {n} bytes read")
-    if crc32c(buf[: length - CRC_LEN]) != int.from_bytes(buf[length - CRC_LEN: length], "big"):
-        raise FrameError("crc")
-    if any(buf[length:]):
-        raise FrameError("padding")
+    length = v1.check_envelope(buf, VERSION, HEADER_LEN, CRC_LEN, crc32c)
     kind = buf[2]
     flags = buf[4]
     if flags & ~FLAGS_KNOWN & 0xFF:
