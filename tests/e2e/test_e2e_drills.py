@@ -266,3 +266,24 @@ def test_disk_full_drill_as_a_real_process(tmp_path):
     rep = replay(out)  # what is on disk stays readable
     assert len(rep["points"]) == len(r["points"]) >= 2
     assert not any(isinstance(v, float) and math.isnan(v) for v in r.values())
+
+
+def test_mock_pins_drill_as_a_real_process(tmp_path):
+    """`dyno run --sim --mock-pins --drill ...` as a user types it: the real-rig output code ends safe."""
+    r = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--mock-pins",
+                        "--drill", "bus-lost@30", "--out", str(tmp_path / "run")], capture_output=True, text=True,
+                       timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert r.returncode == 3, r.stderr
+    out = json.loads(r.stdout)
+    a = out["aborts"][0]
+    assert a["cause"] == "comms_lost" and a["latency_s"] <= 0.35
+    assert out["rig_safe"] is True and out["outputs"]["brake_actuator"] == "stopped"
+    assert "brake_position" in out["outputs"]  # read back from GpioActuators, not the simulator's mm
+
+
+def test_doctor_toggle_on_the_sim_as_a_real_process(tmp_path):
+    """`dyno doctor --sim --toggle`: the outputs through HardwareRig (watchdog running), report OK."""
+    r = subprocess.run([sys.executable, "-m", "dyno", "doctor", "--sim", "--toggle"], capture_output=True,
+                       text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)}, cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "watchdog running" in r.stdout and "brake step" in r.stdout and "rig OK" in r.stdout
