@@ -208,6 +208,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
+    controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
@@ -216,6 +217,9 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
+        from dyno.sim.driven import results_truth_hook
+
+        controller.result_hooks.append(results_truth_hook(sim.model))
 
         def audit(raw: bytes) -> None:
             if not sim.audit(raw):
@@ -440,10 +444,11 @@ def summarize(ctx: RunContext) -> dict:
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
            "discarded": list(ctx.controller.discards),
            "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
     go_s = ctx.controller.go_s
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
     # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
-    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else None
+    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))

@@ -43,7 +43,7 @@ def add_arguments(p) -> None:
 
 
 #: the shipped plans, by name (dyno.control.plans)
-PLANS = ("thesis-step", "speed-hold")
+PLANS = ("thesis-step", "speed-hold", "engagement", "coast-down")
 
 
 def plan_named(name: str, **overrides):

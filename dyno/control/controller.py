@@ -80,6 +80,18 @@ class TestPlan:
     expected_secondary_span_rpm: float = 4500.0  # light load to min, for the step adaptation
 
 
+def _characterisation_runner(mode: str):
+    if mode == "engagement":
+        from dyno.control.characterise import run_engagement
+
+        return run_engagement
+    if mode == "coast-down":
+        from dyno.control.coastdown import run_coast_down
+
+        return run_coast_down
+    return None
+
+
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
 _ENGINE_STATES = _LOADED_STATES | {State.ARMED}
 MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most this often
@@ -120,6 +132,8 @@ class TestController:
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
+        self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
+        self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
@@ -222,7 +236,7 @@ class TestController:
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
         if self.state is State.DONE:
             self.act.safe_state()  # end of test: same safe state, not an abort
-            if not self.points:
+            if not self.points and not self.results:
                 # A test that measured nothing is not a success, whatever the plan's end says.
                 self.abort("no_points", "the test ended without a single accepted point", after_done=True)
         return self.state
@@ -276,6 +290,10 @@ class TestController:
             self._go.set()
         await self._go.wait()
         self.go_s = self._now()
+        runner = _characterisation_runner(p.mode)
+        if runner is not None:  # characterisations start from idle: no full-throttle warm-up
+            await runner(self)
+            return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)
@@ -355,6 +373,12 @@ class TestController:
                 point["valid"] = False
                 point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
         return point, host_t0, host_t1
+
+    def _set_results(self, results: dict, *, hooks: bool = True) -> None:
+        for hook in self.result_hooks if hooks else ():
+            hook(results)
+        self.results = results
+        self._log("characterisation", **results)
 
     def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
         point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)

@@ -15,6 +15,8 @@ from dyno.control.controller import TestPlan
 PLANS = {
     "thesis-step": TestPlan(),
     "speed-hold": TestPlan(mode="speed-hold", target_efficiency_ci95=0.01, measure_s=2.0, max_measure_s=10.0),
+    "engagement": TestPlan(mode="engagement"),  # dyno.control.characterise
+    "coast-down": TestPlan(mode="coast-down"),  # dyno.control.coastdown
 }
 
 
