@@ -208,6 +208,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
+    controller.rig = rig_cfg
     controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
     writer.on_error = lambda exc: controller.abort(

@@ -26,6 +26,11 @@ def add_arguments(p) -> None:
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
+    p.add_argument("--sim-driven-loss", default=None, metavar="A,B,C",
+                   help="with --sim: the simulated rig's driven-side parasitic loss a + b w + c w^2 (N m, w in "
+                        "rad/s of the secondary; off by default), the truth a coast-down recovers")
+    p.add_argument("--sim-zero-drift", type=float, default=None, metavar="NM_PER_MIN",
+                   help="with --sim: the torque channel's zero drifts by this many N m (secondary) per minute")
     p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
                    help="settling: detected from the data, or the thesis's fixed 4 s")
     p.add_argument("--plan", choices=sorted(PLANS), default="thesis-step",
@@ -78,11 +83,26 @@ def run(args) -> int:
         opts.calibration_path = args.calibration
     if args.engine_map:
         opts.engine_map_path = args.engine_map
+    sim_kw = {}
     if args.tune:
+        opts.tune_path = args.tune
+        sim_kw["cvt_tune_path"] = str(args.tune)
+    if args.sim_driven_loss is not None:
+        try:
+            coeffs = tuple(float(v) for v in args.sim_driven_loss.split(","))
+            if len(coeffs) != 3 or not all(c >= 0 for c in coeffs):
+                raise ValueError
+        except ValueError:
+            print(f"dyno run: --sim-driven-loss: expected three numbers >= 0 as A,B,C, got "
+                  f"{args.sim_driven_loss!r}", file=sys.stderr)
+            return 2
+        sim_kw["driven_loss_nm"] = coeffs
+    if args.sim_zero_drift is not None:
+        sim_kw["adc_zero_drift_nm_per_min"] = float(args.sim_zero_drift)
+    if sim_kw:
         from dyno.sim.physics import RigParams
 
-        opts.tune_path = args.tune
-        opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
+        opts.sim_params = RigParams(**sim_kw)
     from dyno.cli import progress as tty
 
     bar = None

@@ -132,6 +132,7 @@ class TestController:
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
+        self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
         self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
@@ -464,8 +465,8 @@ class TestController:
         self._checking = True
         try:
             now = self._now() if now_s is None else now_s
-            trip = self.monitor.check(now, loaded=self.state in _LOADED_STATES,
-                                      engine_expected=self.state in _ENGINE_STATES)
+            trip = self.monitor.check(now, loaded=self.state in _LOADED_STATES and not self.engine_cut,
+                                      engine_expected=self.state in _ENGINE_STATES and not self.engine_cut)
         except Exception as exc:  # a broken check must not leave the rig unmonitored
             self._checking = False
             self.abort("safety_error", f"safety check failed: {type(exc).__name__}: {exc}")
