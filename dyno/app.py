@@ -342,8 +342,15 @@ async def run_test_async(opts: RunOptions) -> dict:
             ctx.controller.abort("timeout", f"run exceeded {opts.max_sim_s:.0f} s")
             state = ctx.controller.state
         status = "success" if state.value == "done" else "abort"
+        zero_task = None
+        if state.value == "done" and opts.finish_release:  # the zero at rest after the last point
+            from dyno.control.zero_check import after_test
+
+            zero_task = asyncio.create_task(after_test(ctx.controller), name="torque-zero")
         if opts.finish_release:
             await _finish_release(ctx)
+        if zero_task is not None:
+            await zero_task
     finally:
         if ctx.drills is not None:
             ctx.drills.cancel()
@@ -445,6 +452,14 @@ def summarize(ctx: RunContext) -> dict:
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
            "discarded": list(ctx.controller.discards),
            "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    zc = getattr(ctx.controller, "zero_check", None)
+    if zc is not None:
+        out["torque_zero"] = zc
+        if zc.get("correct"):
+            from dyno.analysis.zero_check import corrected_point_keys
+
+            for pub, p in zip(out["points"], ctx.controller.points):
+                pub.update(corrected_point_keys(p, zc))
     out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
     go_s = ctx.controller.go_s
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]

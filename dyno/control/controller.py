@@ -287,6 +287,9 @@ class TestController:
             else:
                 since = None
         self._enter(State.ARMED, "engine running; press GO to start")
+        from dyno.control.zero_check import read_zero
+
+        self.zero_before = await read_zero(self)  # torque zero at rest (idle is below engagement)
         if self.auto_go:
             self._go.set()
         await self._go.wait()

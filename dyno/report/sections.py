@@ -1,0 +1,74 @@
+"""Report sections for the characterisation plans, the coast-down and the torque-zero check."""
+
+from __future__ import annotations
+
+import math
+from html import escape
+
+
+def _f(v, spec: str, scale: float = 1.0) -> str:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    return format(v * scale, spec) if ok else "—"
+
+
+def _table(head, rows) -> str:
+    th = "".join(f"<th>{escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{th}</tr>{body}</table>"
+
+
+def characterisation(docs: list) -> str:
+    """Engagement / shift-out / full-shift figures, or the coast-down's loss, with their 95 % intervals."""
+    if not docs:
+        return ""
+    c = docs[-1]
+    out = []
+    if "engagement_rpm" in c:
+        rows = []
+        pred = c.get("predicted") or {}
+        for key, label, spec in (("engagement_rpm", "engagement (secondary starts to turn), engine rpm", ".0f"),
+                                 ("lockup_rpm", "lock-up (belt stops slipping), engine rpm", ".0f"),
+                                 ("shift_out_rpm", "shift-out (ratio leaves low gear), engine rpm", ".0f"),
+                                 ("low_ratio", "low-gear speed ratio", ".4f"),
+                                 ("full_shift_ratio", "full-shift speed ratio", ".4f")):
+            rows.append([escape(label), _f(c.get(key), spec), "± " + _f(c.get(f"{key}_ci95"), spec),
+                         _f(c.get(f"{key}_true"), spec), _f(pred.get(key), spec)])
+        out.append(_table(["quantity", "measured", "95 %", "sim truth", "tune predicts"], rows))
+        if pred.get("shift_out_rpm_full_load"):
+            out.append(f"<p>The tune predicts a shift-out of {_f(pred['shift_out_rpm_full_load'], '.0f')} rpm at "
+                       "full load (the light-load ramp shifts out lower: the helix adds the load torque to the "
+                       "secondary clamp).</p>")
+        bs = c.get("back_shift") or {}
+        if bs:
+            out.append(f"<p>Back-shift under a load step: ratio {_f(bs.get('ratio_before'), '.3f')} → "
+                       f"{_f(bs.get('ratio_after'), '.3f')}, 63 % after {_f(bs.get('t63_s'), '.1f')} s.</p>")
+    if "loss_fit" in c:
+        f = c["loss_fit"]
+        co = f["coefficients"]
+        out.append(f"<p>Driven-side loss torque (secondary) from the coast-down, fitted over "
+                   f"{_f(f['rpm_min'], '.0f')}–{_f(f['rpm_max'], '.0f')} rpm ({f['n_revolutions']} revolutions, "
+                   f"inertia {f['inertia_kg_m2']:g} kg·m² ± {100 * f['inertia_rel_unc']:.0f} %): "
+                   f"T = {co['a_nm']:.4f} + {co['b_nm_per_rad_s']:.3e}·ω + {co['c_nm_per_rad_s2']:.3e}·ω² N·m.</p>")
+        true = c.get("loss_torque_true_nm") or [None] * len(f["rpm_grid"])
+        rows = [[_f(r, ".0f"), _f(t, ".4f"), "± " + _f(s, ".4f"), "± " + _f(y, ".4f"), _f(tt, ".4f")]
+                for r, t, s, y, tt in zip(f["rpm_grid"], f["torque_nm"], f["torque_ci95_nm"],
+                                          f["torque_sys95_nm"], true)]
+        out.append(_table(["secondary rpm", "loss N·m", "statistical 95 %", "inertia 95 %", "sim truth N·m"], rows))
+        out.append(f"<p>Seen by the torque gauge (beyond it: pad drag): {_f(c.get('seen_nm'), '.3f')} ± "
+                   f"{_f(c.get('seen_ci95_nm'), '.3f')} N·m; the rest is the loss to add back to efficiency "
+                   "(<code>driven_loss.json</code>).</p>")
+    return "".join(out)
+
+
+def torque_zero(docs: list) -> str:
+    if not docs:
+        return ""
+    z = docs[-1]
+    b, a = z.get("before") or {}, z.get("after") or {}
+    cls = "bad" if z.get("flagged") else "ok"
+    verdict = escape(z.get("note") or "within the limit")
+    return (f"<p>Zero at rest before GO {_f(b.get('torque_nm'), '.3f')} ± {_f(b.get('ci95_nm'), '.3f')} N·m, "
+            f"after the last point {_f(a.get('torque_nm'), '.3f')} ± {_f(a.get('ci95_nm'), '.3f')} N·m: drift "
+            f"{_f(z.get('drift_nm'), '+.3f')} ± {_f(z.get('drift_ci95_nm'), '.3f')} N·m (limit "
+            f"{_f(z.get('drift_max_nm'), 'g')} N·m) — <span class=\"{cls}\">{verdict}</span>"
+            f"{'; drift-corrected efficiencies are in the run JSON' if z.get('correct') else ''}.</p>")
