@@ -94,3 +94,65 @@ def split_seen(gauge_mean_nm: float, gauge_sem_nm: float, zero_nm: float, zero_s
     """
     seen = gauge_mean_nm - zero_nm - inertia_beyond_gauge_kg_m2 * mean_alpha_rad_s2
     return {"seen_nm": float(seen), "seen_ci95_nm": float(1.96 * math.hypot(gauge_sem_nm, zero_sem_nm))}
+
+
+def loss_band(fit: dict, rpm: float) -> tuple[float, float]:
+    """The fitted loss (N m) at secondary ``rpm`` and its 95 % half-width (fit covariance and inertia).
+
+    Beyond the fitted speeds the quadratic is extrapolated and its covariance with it: the
+    band then widens as fast as the data leave ``b`` and ``c`` undetermined (honest, not pretty).
+    """
+    c = fit["coefficients"]
+    w = rpm * RAD_PER_RPM
+    g = np.array([1.0, w, w * w])
+    t = c["a_nm"] + c["b_nm_per_rad_s"] * w + c["c_nm_per_rad_s2"] * w * w
+    stat = 1.96 * math.sqrt(max(0.0, float(g @ np.asarray(fit["covariance"]) @ g)))
+    return float(t), math.hypot(stat, 2.0 * fit.get("inertia_rel_unc", 0.0) * abs(t))
+
+
+def driven_loss_keys(point: dict, loss: dict) -> dict:
+    """A point's efficiency with the driven-side loss the gauge does not see added back (extra keys)."""
+    from dyno.analysis.efficiency import add_back_loss
+
+    rs, eta, ci, p_in = (point.get(k) for k in ("rpm_secondary", "efficiency", "efficiency_ci95", "power_in_w"))
+    if any(v is None or not math.isfinite(v) for v in (rs, eta, p_in)) or p_in <= 0:
+        return {}
+    total, total_ci = loss_band(loss["loss_fit"], rs)
+    unseen = total - loss.get("seen_nm", 0.0)
+    unseen_ci = math.hypot(total_ci, loss.get("seen_ci95_nm", 0.0))
+    e, e_ci = add_back_loss(eta, ci if ci is not None and math.isfinite(ci) else 0.0, p_in, rs, unseen, unseen_ci)
+    fit = loss["loss_fit"]
+    return {"driven_loss_nm": unseen, "driven_loss_ci95_nm": unseen_ci, "efficiency_loss_corrected": e,
+            "efficiency_loss_corrected_ci95": e_ci,
+            "driven_loss_extrapolated": not fit["rpm_min"] <= rs <= fit["rpm_max"]}
+
+
+def load_driven_loss(path) -> dict:
+    """Read a ``driven_loss.json`` (ConfigError naming file and field on bad input)."""
+    import json
+    from pathlib import Path
+
+    from dyno.errors import ConfigError
+
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text())
+    except OSError as exc:
+        raise ConfigError(str(p), "file", f"a readable driven_loss.json ({exc.strerror or exc})") from None
+    except ValueError:
+        raise ConfigError(str(p), "file", "JSON (a coast-down's driven_loss.json)") from None
+    if not isinstance(doc, dict) or doc.get("schema") != "dyno.driven_loss/1":
+        raise ConfigError(str(p), "schema", "'dyno.driven_loss/1'")
+    fit = doc.get("loss_fit")
+    try:
+        co = fit["coefficients"]
+        vals = [float(co[k]) for k in ("a_nm", "b_nm_per_rad_s", "c_nm_per_rad_s2")]
+        cov = np.asarray(fit["covariance"], dtype=float)
+        rng = (float(fit["rpm_min"]), float(fit["rpm_max"]))
+        seen = float(doc.get("seen_nm", 0.0)), float(doc.get("seen_ci95_nm", 0.0))
+    except (TypeError, KeyError, ValueError):
+        raise ConfigError(str(p), "loss_fit", "coefficients a_nm/b_nm_per_rad_s/c_nm_per_rad_s2, covariance, "
+                          "rpm_min, rpm_max") from None
+    if cov.shape != (3, 3) or not all(math.isfinite(v) for v in [*vals, *rng, *seen]) or not np.isfinite(cov).all():
+        raise ConfigError(str(p), "loss_fit", "finite coefficients and a 3 x 3 covariance")
+    return doc

@@ -26,6 +26,10 @@ def add_arguments(p) -> None:
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
+    p.add_argument("--driven-loss", type=Path, default=None, metavar="FILE",
+                   help="a coast-down's driven_loss.json: every point also gets its efficiency with the driven-side "
+                        "loss the gauge does not see added back, uncertainty propagated (default: rig.toml "
+                        "[driven] loss_file)")
     p.add_argument("--sim-driven-loss", default=None, metavar="A,B,C",
                    help="with --sim: the simulated rig's driven-side parasitic loss a + b w + c w^2 (N m, w in "
                         "rad/s of the secondary; off by default), the truth a coast-down recovers")
@@ -79,6 +83,7 @@ def run(args) -> int:
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
                       plan=plan_named(args.plan, settle_mode=args.settle), drills=drills, handle_signals=True,
                       mock_pins=args.mock_pins)
+    driven_loss = _driven_loss(args)  # a bad file: one line, exit 2, before anything is written
     if args.calibration:
         opts.calibration_path = args.calibration
     if args.engine_map:
@@ -117,6 +122,11 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.finish()
+    if driven_loss is not None:
+        from dyno.analysis.coastdown import driven_loss_keys
+
+        for p in result["points"]:
+            p.update(driven_loss_keys(p, driven_loss))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
@@ -132,6 +142,18 @@ def run(args) -> int:
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
     _write_report(result, announce=not args.json)
     return exit_code(result)
+
+
+def _driven_loss(args):
+    """The --driven-loss file, else rig.toml [driven] loss_file, loaded and checked (None: none asked)."""
+    from dyno.analysis.coastdown import load_driven_loss
+
+    path = args.driven_loss
+    if path is None:
+        from dyno.rigconfig import load_rig
+
+        path = load_rig(getattr(args, "rig", None)).driven.loss_file
+    return None if path is None else load_driven_loss(path)
 
 
 def _write_report(result: dict, *, announce: bool) -> None:

@@ -62,3 +62,39 @@ def test_coast_down_recovers_the_parasitic_loss(tmp_path):
         assert abs(f - t) <= s + y
     stored = json.loads((tmp_path / "run" / "driven_loss.json").read_text())
     assert stored["loss_fit"]["coefficients"] == fit["coefficients"]
+
+
+def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
+    """A rig with a loss the gauge does not see reads efficiency low; the coast-down's loss, added back
+    with its uncertainty, brings the points back to the CVT's own (the sim's truth)."""
+    from dataclasses import replace
+
+    from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
+    from dyno.app import RunOptions, run_test
+    from dyno.control.controller import TestPlan
+    from dyno.control.plans import plan_named
+    from dyno.sim.physics import RigParams
+
+    params = RigParams(driven_loss_nm=(0.10, 4e-4, 1.2e-6))
+    cd = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
+                             sim_params=params))
+    assert cd["state"] == "done"
+    loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
+    run = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", sim_params=params,
+                              plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
+    inside = 0
+    for p in run["points"]:
+        k = driven_loss_keys(p, loss)
+        raw, fixed = p["efficiency"] - p["efficiency_true"], k["efficiency_loss_corrected"] - p["efficiency_true"]
+        assert raw < -0.01  # the unseen loss makes the measured efficiency low
+        assert abs(fixed) < abs(raw)
+        inside += abs(fixed) <= k["efficiency_loss_corrected_ci95"]
+    assert inside >= 0.8 * len(run["points"])
+    # a bad loss file: one line naming the file and field, exit 2, nothing written
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"schema": "dyno.driven_loss/1", "loss_fit": {}}')
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--driven-loss", str(bad), "--out",
+                           str(tmp_path / "never")], capture_output=True, text=True, timeout=120,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 2 and "bad.json: loss_fit" in proc.stderr and len(proc.stderr.splitlines()) == 1
+    assert not (tmp_path / "never").exists()
