@@ -26,11 +26,14 @@ def test_drift_is_measured_flagged_and_corrected(tmp_path):
     true_drift = drift_per_min * (zc["after"]["t_mid_s"] - zc["before"]["t_mid_s"]) / 60.0
     assert abs(zc["drift_nm"] - true_drift) <= zc["drift_ci95_nm"]
     assert zc["flagged"] and "drifted" in zc["note"]
-    # the linear correction removes the drift's error from every point
+    # the linear correction removes the drift's error from every point, down to the zero readings' own
+    # uncertainty (each 4 s reading: +-0.09 N m, 95 %) carried into the point's torque
+    zci = max(zc["before"]["ci95_nm"], zc["after"]["ci95_nm"])
     for p in res["points"]:
         raw = abs(p["efficiency"] - p["efficiency_true"])
         fixed = abs(p["efficiency_zero_corrected"] - p["efficiency_true"])
-        assert fixed < raw and fixed < 0.01, (raw, fixed)
+        allowed = p["efficiency_ci95"] + p["efficiency"] * zci / p["torque_secondary_nm"]
+        assert fixed < 0.5 * raw and fixed <= allowed, (raw, fixed, allowed)
     docs = [json.loads(x) for x in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()]
     assert [d for d in docs if d.get("type") == "torque_zero"]
 
