@@ -171,6 +171,7 @@ def ratio_events(series: dict, t_engaged_us: float, *, lock_tol: float = 0.01, s
             j = j + 1 + int(nxt[0])
         if j < ratio.size:
             out["shift_out_rpm"] = float(rp[j])
+            out["shift_out_t_us"] = int(t[j])
             # the onset's sharpness: where the ratio crossed half and twice the threshold
             j_half = j
             while j_half > 0 and ratio[j_half - 1] < low * (1 - shift_tol / 2):
@@ -193,3 +194,20 @@ def _step_ci(rp: np.ndarray, i: int) -> float:
     """Half the engine-speed change between neighbouring windows: the detection's time resolution."""
     lo, hi = max(0, i - 1), min(rp.size - 1, i + 1)
     return 0.5 * abs(float(rp[hi]) - float(rp[lo]))
+
+
+def flatness(loads_nm, shift_out_rpm) -> dict:
+    """Shift-out rpm against the secondary load: the straight line's slope (rpm per N m) and its 95 %
+    half-width, and the spread (max - min) -- a flat shift-out holds one engine speed whatever the load."""
+    x = np.asarray(loads_nm, dtype=float)
+    y = np.asarray(shift_out_rpm, dtype=float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    out = {"n": int(x.size), "spread_rpm": float(y.max() - y.min()) if y.size else math.nan,
+           "slope_rpm_per_nm": math.nan, "slope_ci95_rpm_per_nm": math.nan}
+    if x.size >= 2 and np.ptp(x) > 0:
+        fit = stats.linregress(x, y)
+        out["slope_rpm_per_nm"] = float(fit.slope)
+        if x.size >= 3:
+            out["slope_ci95_rpm_per_nm"] = _t975(x.size - 2) * float(fit.stderr)
+    return out

@@ -37,6 +37,11 @@ class EngagementPlan:
     back_shift: bool = True  # a brake step at full shift, the ratio's response
     back_shift_step_s: float = 2.0  # actuator on-time of the load step
     back_shift_watch_s: float = 4.0
+    # Shift-out flatness across load: more ramps with the brake preset by these actuator on-times from
+    # released (light loads: a load that holds the secondary past the 2,300 rpm safety check would trip it).
+    flatness_apply_s: tuple = (0.5, 1.0)
+    release_s: float = 9.0  # a full release stroke (8 s) and margin between ramps
+    check_margin_rpm: float = 60.0  # no heavier load once engagement is this close to the Hall check speed
 
 
 def _live_ratio(ctrl, window_s: float = 0.3) -> float:
@@ -61,6 +66,35 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
         ctrl.abort("error", f"engagement: the secondary turns at idle ({ctrl.poller.rpm(v1.CH_PRIMARY):.0f} rpm "
                             "engine): the clutch engages below idle, nothing to characterise")
         return
+    p, s, t0_dev, t1_dev, ended = await _ramp(ctrl, ep)
+    res = characterise_ramp(p, s, t0_dev, t1_dev)
+    res["ramp_ended"] = ended
+    res["throttle_rate_per_s"] = ep.throttle_rate_per_s
+    res["shift_out_torque_nm"] = _torque_near(ctrl, res.get("shift_out_t_us"))
+    for hook in ctrl.result_hooks:  # the sim's truths for the ramp's load, before the back-shift step
+        hook(res)
+    if ep.back_shift and math.isfinite(res.get("full_shift_ratio", math.nan)):
+        res["back_shift"] = await _back_shift(ctrl, ep, res)
+    if ep.flatness_apply_s:
+        res["shift_out_vs_load"] = [_load_row(res)] + await _flatness(ctrl, ep, res.get("engagement_rpm", math.nan))
+        rows = res["shift_out_vs_load"]
+        res["shift_out_flatness"] = se.flatness([r["torque_secondary_nm"] for r in rows],
+                                                [r["shift_out_rpm"] for r in rows])
+        if all("shift_out_rpm_true" in r for r in rows):
+            res["shift_out_flatness_true"] = se.flatness([r["torque_secondary_nm"] for r in rows],
+                                                         [r["shift_out_rpm_true"] for r in rows])
+    res.update(predicted_from_tune(ctrl))
+    ctrl.act.throttle(0.0)
+    res["test_time_s"] = ctrl._now() - ctrl.go_s
+    ctrl._set_results(res, hooks=False)
+    ctrl._enter(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
+                else "engagement not found in the ramp")
+
+
+async def _ramp(ctrl, ep: EngagementPlan):
+    """From idle with the secondary at rest: the throttle ramp; returns the ramp's edges and times."""
+    from dyno.control.controller import State
+
     ctrl._enter(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
     t0_host = ctrl._now()
     t0_dev = ctrl.poller.device_now_us()
@@ -98,19 +132,69 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
     st = ctrl.poller.streams
     p = st.edge_window(v1.CH_PRIMARY, t0_dev - 2_000_000, t1_dev)
     s = st.edge_window(v1.CH_SECONDARY, t0_dev - 2_000_000, t1_dev)
-    res = characterise_ramp(p, s, t0_dev, t1_dev)
-    res["ramp_ended"] = ended
-    res["throttle_rate_per_s"] = ep.throttle_rate_per_s
-    for hook in ctrl.result_hooks:  # the sim's truths for the ramp's load, before the back-shift step
-        hook(res)
-    if ep.back_shift and math.isfinite(res.get("full_shift_ratio", math.nan)):
-        res["back_shift"] = await _back_shift(ctrl, ep, res)
-    res.update(predicted_from_tune(ctrl))
+    return p, s, t0_dev, t1_dev, ended
+
+
+def _torque_near(ctrl, t_us, half_s: float = 0.5) -> float:
+    """Mean secondary torque (N m) through the calibration over +- ``half_s`` around ``t_us``."""
+    if t_us is None:
+        return math.nan
+    _, codes, status = ctrl.poller.streams.adc_window(int(t_us - half_s * 1e6), int(t_us + half_s * 1e6))
+    good = codes[(status & v1.ADC_STATUS_ERR) == 0]
+    return float(ctrl.calibration.torque_secondary_nm(float(good.mean()))) if good.size else math.nan
+
+
+def _load_row(r: dict) -> dict:
+    row = {"torque_secondary_nm": r.get("shift_out_torque_nm", math.nan), "shift_out_rpm": r.get("shift_out_rpm"),
+           "shift_out_rpm_ci95": r.get("shift_out_rpm_ci95"), "engagement_rpm": r.get("engagement_rpm")}
+    for k in ("shift_out_rpm_true", "engagement_rpm_true"):
+        if k in r:
+            row[k] = r[k]
+    return row
+
+
+async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
+    """More ramps, each with the brake preset a little further: shift-out against load."""
+    from dyno.control.controller import State
+    from dyno.control.outputs import RELEASE
+
+    rows = []
+    check_rpm = getattr(ctrl.limits, "secondary_check_primary_rpm", math.inf)
+    for apply_s in ep.flatness_apply_s:
+        # A heavier load engages higher: keep the engagement clear of the safety check's "the secondary
+        # must turn" speed, which would (rightly) trip while the brake holds the secondary there.
+        if not math.isfinite(last_eng) or last_eng > check_rpm - ep.check_margin_rpm:
+            ctrl._log("skip", reason=f"shift-out flatness: engagement {last_eng:.0f} rpm within "
+                                     f"{ep.check_margin_rpm:g} rpm of the safety check at {check_rpm:.0f} rpm: "
+                                     "no heavier load")
+            break
+        ctrl._enter(State.STEP, f"shift-out flatness: brake preset {apply_s:g} s, back to idle")
+        ctrl.act.throttle(0.0)
+        ctrl.act.brake(RELEASE)
+        try:
+            await ctrl._sleep(ep.release_s)
+        finally:
+            ctrl.act.brake(STOP)
+        ctrl.act.brake(APPLY)
+        try:
+            await ctrl._sleep(apply_s)
+        finally:
+            ctrl.act.brake(STOP)
+        t0 = ctrl._now()
+        while ctrl.poller.rpm(v1.CH_SECONDARY) > 0 and ctrl._now() - t0 < 30.0:
+            await ctrl._sleep(0.1)
+        await ctrl._sleep(1.0)
+        p, s, t0_dev, t1_dev, ended = await _ramp(ctrl, ep)
+        r = characterise_ramp(p, s, t0_dev, t1_dev)
+        r["shift_out_torque_nm"] = _torque_near(ctrl, r.get("shift_out_t_us"))
+        for hook in ctrl.result_hooks:
+            hook(r)
+        row = _load_row(r)
+        row.update(brake_apply_s=apply_s, ramp_ended=ended)
+        rows.append(row)
+        last_eng = r.get("engagement_rpm", math.nan)
     ctrl.act.throttle(0.0)
-    res["test_time_s"] = ctrl._now() - ctrl.go_s
-    ctrl._set_results(res, hooks=False)
-    ctrl._enter(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
-                else "engagement not found in the ramp")
+    return rows
 
 
 def characterise_ramp(p_edges, s_edges, t0_us: int, t1_us: int) -> dict:

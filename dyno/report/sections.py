@@ -38,6 +38,16 @@ def characterisation(docs: list) -> str:
             out.append(f"<p>The tune predicts a shift-out of {_f(pred['shift_out_rpm_full_load'], '.0f')} rpm at "
                        "full load (the light-load ramp shifts out lower: the helix adds the load torque to the "
                        "secondary clamp).</p>")
+        rows = c.get("shift_out_vs_load") or []
+        if rows:
+            out.append(_table(["secondary load N·m", "engagement rpm", "shift-out rpm", "95 %", "sim truth rpm"],
+                              [[_f(r.get("torque_secondary_nm"), ".2f"), _f(r.get("engagement_rpm"), ".0f"),
+                                _f(r.get("shift_out_rpm"), ".0f"), "± " + _f(r.get("shift_out_rpm_ci95"), ".0f"),
+                                _f(r.get("shift_out_rpm_true"), ".0f")] for r in rows]))
+            fl = c.get("shift_out_flatness") or {}
+            out.append(f"<p>Shift-out flatness: {_f(fl.get('slope_rpm_per_nm'), '.1f')} ± "
+                       f"{_f(fl.get('slope_ci95_rpm_per_nm'), '.1f')} rpm per N·m of load, spread "
+                       f"{_f(fl.get('spread_rpm'), '.0f')} rpm over the loads (0 = perfectly flat).</p>")
         bs = c.get("back_shift") or {}
         if bs:
             out.append(f"<p>Back-shift under a load step: ratio {_f(bs.get('ratio_before'), '.3f')} → "
