@@ -39,7 +39,9 @@ def add_arguments(p) -> None:
                    help="settling: detected from the data, or the thesis's fixed 4 s")
     p.add_argument("--plan", choices=sorted(PLANS), default="thesis-step",
                    help="thesis-step: the thesis's open-loop brake steps (default); speed-hold: closed-loop "
-                        "secondary-speed setpoints, each point measured to a 95 %% CI of +-1 pp (docs/control.md)")
+                        "secondary-speed setpoints, each point measured to a 95 %% CI of +-1 pp; engagement: "
+                        "throttle ramps -> engagement, lock-up, shift-out (vs load), full-shift ratio; coast-down: "
+                        "the driven side's parasitic loss (docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "

@@ -34,6 +34,19 @@ def test_engagement_plan_recovers_the_simulated_cvt(tmp_path, tune):
     assert d["tune"] == tune and d["predicted"]["engagement_rpm"] > 0
     assert d["back_shift"]["ratio_after"] > d["back_shift"]["ratio_before"]  # a load step back-shifts
     assert 0 < d["test_time_s"] < 300
+    # the figures are reproduced exactly from the raw events on disk (as a replay would)
+    from dyno.control.characterise import characterise_ramp
+    from dyno.protocol import v1
+    from dyno.runlog.reader import load_run
+
+    run = load_run(tmp_path / "run")
+    ramp = run.docs("ramp")[0]
+    st = run.streams
+    t0, t1 = ramp["t_start_us"], ramp["t_end_us"]
+    again = characterise_ramp(st.edge_window(v1.CH_PRIMARY, t0 - 2_000_000, t1),
+                              st.edge_window(v1.CH_SECONDARY, t0 - 2_000_000, t1), t0, t1)
+    for key in ("engagement_rpm", "lockup_rpm", "shift_out_rpm", "full_shift_ratio", "full_shift_ratio_ci95"):
+        assert again[key] == d[key]
     # shift-out flatness across load: three ramps, heavier loads shift out higher (the helix), each as the truth
     rows = d["shift_out_vs_load"]
     if d["engagement_rpm"] > 2300 - 60:

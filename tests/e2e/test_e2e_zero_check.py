@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from dyno.app import RunOptions, run_test
-from dyno.control.controller import TestPlan
+from dyno.control.controller import TestPlan as StepPlan
 from dyno.sim.physics import RigParams
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -19,7 +19,7 @@ def test_drift_is_measured_flagged_and_corrected(tmp_path):
     rig.write_text((ROOT / "hardware" / "rig.toml").read_text().replace("correct = false", "correct = true"))
     drift_per_min = 2.0
     res = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", rig_path=rig,
-                              plan=replace(TestPlan(), max_points=5, max_measure_s=4.0),
+                              plan=replace(StepPlan(), max_points=5, max_measure_s=4.0),
                               sim_params=RigParams(adc_zero_drift_nm_per_min=drift_per_min)))
     assert res["state"] == "done"
     zc = res["torque_zero"]
