@@ -14,7 +14,11 @@ rest, with a light, constant load.  Definitions (docs/control.md, "Characterisat
 * ``lockup_rpm`` -- engine rpm at which the belt stops slipping: the speed ratio
   first comes within ``lock_tol`` of its low-gear plateau.
 * ``shift_out_rpm`` -- engine rpm at which the ratio starts to fall from the
-  plateau: first below ``plateau (1 - shift_tol)`` for good.
+  plateau.  Found where it is below ``plateau (1 - shift_tol)`` for good, then taken
+  back to the onset: the sheave moves at a speed that grows with the force imbalance,
+  which grows linearly on a ramp, so the ratio's departure grows as (t - t0)^2 and
+  ``t0`` is the zero of a line through its square root (its first 3 %), as for
+  engagement; the 95 % interval from that fit.
 * ``full_shift_ratio`` -- the speed ratio (rpm_primary / rpm_secondary, creep
   included, as in the points) on the plateau at the high stop, with its 95 % interval
   from batch means.
@@ -35,6 +39,30 @@ from dyno.acquisition.rpm import rpm_per_period
 
 def _t975(dof: int) -> float:
     return float(stats.t.ppf(0.975, max(1, dof)))
+
+
+def _sqrt_root(x_s: np.ndarray, y: np.ndarray) -> tuple[float, float, int]:
+    """Zero of a straight line through sqrt(y) against time: a quantity growing as (t - t0)^2 from t0.
+
+    Returns ``(t0, sd_t0, n)`` (NaN when the fit cannot say); ``sd_t0`` by the delta method on the
+    line's covariance.
+    """
+    n = int(x_s.size)
+    if n < 3:
+        return math.nan, math.nan, n
+    z = np.sqrt(np.maximum(y, 0.0))
+    fit = stats.linregress(x_s, z)
+    if not fit.slope > 0:
+        return math.nan, math.nan, n
+    resid = z - (fit.intercept + fit.slope * x_s)
+    s2 = float(resid @ resid) / max(1, n - 2)
+    sxx = float(((x_s - x_s.mean()) ** 2).sum())
+    var_a = s2 * (1.0 / n + x_s.mean() ** 2 / sxx)
+    var_b = s2 / sxx
+    cov_ab = -x_s.mean() * s2 / sxx
+    g_a, g_b = -1.0 / fit.slope, fit.intercept / fit.slope ** 2
+    sd = math.sqrt(max(0.0, g_a * g_a * var_a + g_b * g_b * var_b + 2 * g_a * g_b * cov_ab))
+    return -fit.intercept / fit.slope, sd, n
 
 
 def rpm_at(edges_us: np.ndarray, t_us: float, half_window_us: float = 150_000) -> float:
@@ -89,33 +117,24 @@ def engagement(p_edges_us, s_edges_us, t_from_us: int, *, max_periods: int = 12,
     n = int(min(keep.sum(), max_periods))
     if n >= 3:
         x = (t_mid[:n] - t_mid[0]) / 1e6
-        y = np.sqrt(rpm[:n])
-        fit = stats.linregress(x, y)
-        if fit.slope > 0:
-            t0 = -fit.intercept / fit.slope  # s after the first period's middle
-            # delta method on the root of a + b x: var(t0) from the fit's covariance
-            resid = y - (fit.intercept + fit.slope * x)
-            s2 = float(resid @ resid) / max(1, n - 2)
-            sxx = float(((x - x.mean()) ** 2).sum())
-            var_a = s2 * (1.0 / n + x.mean() ** 2 / sxx)
-            var_b = s2 / sxx
-            cov_ab = -x.mean() * s2 / sxx
-            g_a, g_b = -1.0 / fit.slope, fit.intercept / fit.slope ** 2
-            sd_t0 = math.sqrt(max(0.0, g_a * g_a * var_a + g_b * g_b * var_b + 2 * g_a * g_b * cov_ab))
-            t0_us = float(t_mid[0] + t0 * 1e6)
+        t0, sd_t0, _ = _sqrt_root(x, rpm[:n])
+        if math.isfinite(t0):
             # never later than the first edge (the shaft turned before it)
-            t0_us = min(t0_us, float(s[0]))
-            t_half = _t975(n - 2) * sd_t0
+            t0_us = min(float(t_mid[0] + t0 * 1e6), float(s[0]))
             r0 = rpm_at(p, t0_us, 250_000)
-            slope = (rpm_at(p, t0_us + 1e6, 250_000) - rpm_at(p, t0_us - 1e6, 250_000)) / 2.0  # rpm/s
             out.update(engagement_rpm=r0, engagement_t_us=int(t0_us), engagement_periods=n,
-                       engagement_rpm_ci95=abs(slope) * t_half + _rpm_noise(p, t0_us))
+                       engagement_rpm_ci95=abs(_ramp_rate(p, t0_us)) * _t975(n - 2) * sd_t0 + _rpm_noise(p, t0_us))
             return out
     # too few slipping periods: the first edge bounds it (the shaft turned before it)
     r1 = rpm_at(p, float(s[0]), 250_000)
     out.update(engagement_rpm=r1, engagement_t_us=int(s[0]), engagement_periods=n,
                engagement_rpm_ci95=math.nan)
     return out
+
+
+def _ramp_rate(p: np.ndarray, t_us: float) -> float:
+    """Engine speed's rate of change (rpm/s) over +-1 s."""
+    return (rpm_at(p, t_us + 1e6, 250_000) - rpm_at(p, t_us - 1e6, 250_000)) / 2.0
 
 
 def _rpm_noise(p: np.ndarray, t_us: float) -> float:
@@ -170,13 +189,22 @@ def ratio_events(series: dict, t_engaged_us: float, *, lock_tol: float = 0.01, s
                 break
             j = j + 1 + int(nxt[0])
         if j < ratio.size:
+            # The threshold crossing comes late: the sheave starts moving as soon as the forces cross,
+            # at a speed that grows with the imbalance, so the ratio's departure grows as (t - t0)^2.
+            # t0 is the zero of sqrt(departure) over its first few percent (as for engagement).
             out["shift_out_rpm"] = float(rp[j])
             out["shift_out_t_us"] = int(t[j])
-            # the onset's sharpness: where the ratio crossed half and twice the threshold
-            j_half = j
-            while j_half > 0 and ratio[j_half - 1] < low * (1 - shift_tol / 2):
-                j_half -= 1
-            out["shift_out_rpm_ci95"] = abs(float(rp[j]) - float(rp[j_half])) + _step_ci(rp, j)
+            out["shift_out_rpm_ci95"] = _step_ci(rp, j)
+            dev = (low - ratio) / low
+            sel = (t >= t[j] - 2e6) & (t <= t[j] + 1.5e6) & (dev > 0.0005) & (dev < 0.03)
+            t0, sd_t0, n_fit = _sqrt_root(t[sel] / 1e6, dev[sel])
+            if math.isfinite(t0) and t[j] - 3e6 < t0 * 1e6 <= t[j]:
+                k = int(np.argmin(np.abs(t - t0 * 1e6)))
+                rate = (rp[min(k + 10, rp.size - 1)] - rp[max(k - 10, 0)]) / ((t[min(k + 10, rp.size - 1)]
+                                                                             - t[max(k - 10, 0)]) / 1e6)
+                out["shift_out_rpm"] = float(np.interp(t0 * 1e6, t, rp))
+                out["shift_out_t_us"] = int(t0 * 1e6)
+                out["shift_out_rpm_ci95"] = abs(rate) * _t975(n_fit - 2) * sd_t0 + _step_ci(rp, k)
             # Full shift: the lowest ratio's plateau after the shift
             after = ratio[j:]
             r_min = float(np.percentile(after, 2))
