@@ -83,7 +83,8 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
         if all("shift_out_rpm_true" in r for r in rows):
             res["shift_out_flatness_true"] = se.flatness([r["torque_secondary_nm"] for r in rows],
                                                          [r["shift_out_rpm_true"] for r in rows])
-    res.update(predicted_from_tune(ctrl))
+    res.update(predicted_from_tune(ctrl, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
+                                   or [res.get("shift_out_torque_nm", math.nan)]))
     ctrl.act.throttle(0.0)
     res["test_time_s"] = ctrl._now() - ctrl.go_s
     ctrl._set_results(res, hooks=False)
@@ -236,7 +237,7 @@ async def _back_shift(ctrl, ep: EngagementPlan, res: dict) -> dict:
     return out
 
 
-def predicted_from_tune(ctrl) -> dict:
+def predicted_from_tune(ctrl, loads_nm=()) -> dict:
     """The tune's predicted engagement and shift-out (dyno.tuning) and the measured minus predicted."""
     tune_path = getattr(ctrl, "tune_path", None)
     src = getattr(ctrl.engine_map, "source", None)
@@ -251,6 +252,21 @@ def predicted_from_tune(ctrl) -> dict:
         pred = {"engagement_rpm": solver.engagement_rpm(),
                 "shift_out_rpm_full_load": solver.balance_rpm(solver.ratio_low_stop),
                 "ratio_low_stop": solver.ratio_low_stop, "ratio_high_stop": solver.ratio_high_stop}
+        if loads_nm:
+            pred["shift_out_rpm_at_load"] = [shift_out_at_load_rpm(tune, t) for t in loads_nm]
+            pred["shift_out_rpm"] = pred["shift_out_rpm_at_load"][0]  # at the first (lightest) ramp's load
     except Exception as exc:  # noqa: BLE001  a prediction that fails is noted, the measurement stands
         return {"predicted": {"error": f"{type(exc).__name__}: {exc}"}}
     return {"predicted": pred, "tune": tune.name}
+
+
+def shift_out_at_load_rpm(tune, torque_secondary_nm: float) -> float:
+    """The tune's shift-out at a (light) measured load: flyweights against spring and secondary clamp at
+    the tune's low stop, the belt passing the clamp unchanged (dyno.tuning.actuators)."""
+    from dyno.tuning import actuators as act
+
+    if not math.isfinite(torque_secondary_nm):
+        return math.nan
+    rp = tune.drive.primary_radius_min_m
+    f_s = act.secondary_axial_force_n(tune, max(0.0, torque_secondary_nm), act.secondary_radius_closed_m(tune))
+    return float(act.primary_speed_for_force_rpm(tune, f_s, rp))

@@ -40,10 +40,13 @@ def characterisation(docs: list) -> str:
                        "secondary clamp).</p>")
         rows = c.get("shift_out_vs_load") or []
         if rows:
-            out.append(_table(["secondary load N·m", "engagement rpm", "shift-out rpm", "95 %", "sim truth rpm"],
+            at_load = pred.get("shift_out_rpm_at_load") or [None] * len(rows)
+            out.append(_table(["secondary load N·m", "engagement rpm", "shift-out rpm", "95 %", "sim truth rpm",
+                               "tune predicts rpm"],
                               [[_f(r.get("torque_secondary_nm"), ".2f"), _f(r.get("engagement_rpm"), ".0f"),
                                 _f(r.get("shift_out_rpm"), ".0f"), "± " + _f(r.get("shift_out_rpm_ci95"), ".0f"),
-                                _f(r.get("shift_out_rpm_true"), ".0f")] for r in rows]))
+                                _f(r.get("shift_out_rpm_true"), ".0f"), _f(pl, ".0f")]
+                               for r, pl in zip(rows, at_load)]))
             fl = c.get("shift_out_flatness") or {}
             out.append(f"<p>Shift-out flatness: {_f(fl.get('slope_rpm_per_nm'), '.1f')} ± "
                        f"{_f(fl.get('slope_ci95_rpm_per_nm'), '.1f')} rpm per N·m of load, spread "
