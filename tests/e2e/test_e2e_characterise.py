@@ -128,3 +128,18 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
                           env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert proc.returncode == 2 and "bad.json: loss_fit" in proc.stderr and len(proc.stderr.splitlines()) == 1
     assert not (tmp_path / "never").exists()
+
+
+def test_a_clutch_engaging_below_idle_is_refused_safely(tmp_path):
+    """Flyweights so heavy the secondary already turns at idle: nothing to characterise, said in one line."""
+    from dyno.app import RunOptions, run_test
+    from dyno.control.plans import plan_named
+    from dyno.sim.physics import RigParams
+
+    tune = tmp_path / "very-heavy.toml"
+    tune.write_text((ROOT / "calibration" / "tunes" / "cvtech-stock.toml").read_text()
+                    .replace("mass_each_kg = 0.228", "mass_each_kg = 0.400"))
+    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run", plan=plan_named("engagement"),
+                            tune_path=tune, sim_params=RigParams(cvt_tune_path=str(tune))))
+    assert r["state"] == "aborted" and r["rig_safe"]
+    assert "engages below idle" in r["aborts"][0]["detail"]
