@@ -26,13 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from dyno.analysis import coastdown as cd
-from dyno.analysis.efficiency import batch_mean
 from dyno.protocol import v1
 
 
 @dataclass(frozen=True)
 class CoastDownPlan:
-    zero_s: float = 3.0  # torque zero read at rest, before and after
+    zero_s: float = 4.0  # torque zero read at rest, before and after
     spin_up_s: float = 6.0  # full throttle, brake released: full shift
     uncoupled_primary_rpm: float = 1500.0  # below any engagement: the belt no longer drives
     uncoupled_ratio_drop: float = 0.03  # ... or the speed ratio falls this far below its coupled maximum
@@ -46,14 +45,14 @@ class CoastDownPlan:
 
 
 def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
-    """Mean torque (secondary N m) and its standard error over a window at rest."""
+    """Mean torque (secondary N m) and its standard error over a window (16 batch means)."""
+    from dyno.analysis.zero_check import zero_reading
+
     _, codes, status = ctrl.poller.streams.adc_window(t0_us, t1_us)
-    good = codes[(status & v1.ADC_STATUS_ERR) == 0].astype(float)
-    if good.size < 12:
-        return math.nan, math.nan
-    cal = ctrl.calibration
-    mean, sem = batch_mean(good, 6)
-    return float(cal.torque_secondary_nm(mean)), float(sem / cal.slope_counts_per_nm)
+    z = zero_reading(codes, status, ctrl.calibration)
+    from scipy import stats
+
+    return z["torque_nm"], z["ci95_nm"] / float(stats.t.ppf(0.975, 15))
 
 
 async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
