@@ -191,7 +191,7 @@ async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
         for hook in ctrl.result_hooks:
             hook(r)
         row = _load_row(r)
-        row.update(brake_apply_s=apply_s, ramp_ended=ended)
+        row.update(brake_apply_s=apply_s, ramp_ended=ended, curve=r.get("curve"))
         rows.append(row)
         last_eng = r.get("engagement_rpm", math.nan)
     ctrl.act.throttle(0.0)
@@ -209,6 +209,12 @@ def characterise_ramp(p_edges, s_edges, t0_us: int, t1_us: int) -> dict:
     ev = se.ratio_events(series, t_eng)
     out = {k: v for k, v in eng.items() if k != "engagement_t_us"}
     out.update(ev)
+    # the ramp's shift curve for the report: every 3rd window (0.3 s), the slipping start left out
+    rp, ratio = series["rpm_primary"][::3], series["ratio"][::3]
+    ok = np.isfinite(rp) & np.isfinite(ratio) & (ratio < 2.0 * ev["low_ratio"] if math.isfinite(ev["low_ratio"])
+                                                 else np.isfinite(ratio))
+    out["curve"] = {"rpm_primary": [round(float(v), 1) for v in rp[ok]],
+                    "ratio": [round(float(v), 4) for v in ratio[ok]]}
     return out
 
 

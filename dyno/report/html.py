@@ -277,6 +277,8 @@ def render_report(data: ReportData) -> str:
     if data.model:
         model_note = f"<p>Belt model: {escape(data.model.get('label', ''))}.</p>"
     notes = "".join(f'<li class="warn">{escape(n)}</li>' for n in data.notes)
+    # a characterisation (engagement, coast-down) has no steady points: its own section, not empty plots
+    characterisation_only = bool(data.docs("characterisation")) and not data.docs("point")
     body = [
         f"<h1>dyno run report: {escape(name)}</h1>",
         "<h2>Summary</h2>", _summary(data),
@@ -284,14 +286,15 @@ def render_report(data: ReportData) -> str:
         ("<h2>Characterisation</h2>" + sections.characterisation(data.docs("characterisation")))
         if data.docs("characterisation") else "",
         ("<h2>Torque zero</h2>" + sections.torque_zero(data.docs("torque_zero"))) if data.docs("torque_zero") else "",
-        "<h2>Efficiency</h2>",
-        _img(figures.efficiency_svg(series["efficiency"]), "efficiency vs secondary speed", "fig-efficiency"),
-        model_note,
-        "<h2>Shift curve</h2>",
-        _img(figures.shift_svg(series["shift"]), "ratio vs engine speed", "fig-shift"),
-        "<h2>Torque and power</h2>",
-        _img(figures.torque_power_svg(series["torque_power"]), "torque and power vs secondary speed",
-             "fig-torque-power"),
+        *([] if characterisation_only else [
+            "<h2>Efficiency</h2>",
+            _img(figures.efficiency_svg(series["efficiency"]), "efficiency vs secondary speed", "fig-efficiency"),
+            model_note,
+            "<h2>Shift curve</h2>",
+            _img(figures.shift_svg(series["shift"]), "ratio vs engine speed", "fig-shift"),
+            "<h2>Torque and power</h2>",
+            _img(figures.torque_power_svg(series["torque_power"]), "torque and power vs secondary speed",
+                 "fig-torque-power")]),
         "<h2>Points</h2>", _points_table(data),
         "<h2>Aborts, faults and discarded points</h2>", _faults(data),
         "<h2>Calibration</h2>", _calibration(data),

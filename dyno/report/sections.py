@@ -17,6 +17,31 @@ def _table(head, rows) -> str:
     return f"<table><tr>{th}</tr>{body}</table>"
 
 
+def ramp_svg(doc: dict) -> str:
+    """Ratio vs engine speed over each throttle ramp, with the engagement and shift-out found."""
+    from dyno.report.figures import _figure, _legend, _render, _svg
+
+    def draw() -> str:
+        fig, (ax,) = _figure()
+        rows = [doc] + [r for r in (doc.get("shift_out_vs_load") or [])[1:]]
+        for k, r in enumerate(rows):
+            c = r.get("curve") or {}
+            if not c.get("rpm_primary"):
+                continue
+            load = r.get("shift_out_torque_nm", r.get("torque_secondary_nm"))
+            ax.plot(c["rpm_primary"], c["ratio"], "-", lw=1.0, color=f"C{k}",
+                    label=f"ramp {k + 1} (load {_f(load, '.1f')} N·m)", gid=f"ramp-{k + 1}")
+            for key, mark in (("engagement_rpm", "v"), ("shift_out_rpm", "o")):
+                if isinstance(r.get(key), (int, float)) and math.isfinite(r[key]):
+                    ax.axvline(r[key], color=f"C{k}", ls=":" if mark == "v" else "--", lw=0.8)
+        ax.set(xlabel="engine speed, rpm", ylabel="ratio (engine / secondary speed)",
+               title="throttle ramps: engagement (dotted), shift-out (dashed)")
+        _legend(ax)
+        return _svg(fig)
+
+    return _render(draw)
+
+
 def characterisation(docs: list) -> str:
     """Engagement / shift-out / full-shift figures, or the coast-down's loss, with their 95 % intervals."""
     if not docs:
@@ -24,6 +49,11 @@ def characterisation(docs: list) -> str:
     c = docs[-1]
     out = []
     if "engagement_rpm" in c:
+        import base64
+
+        svg = ramp_svg(c)
+        out.append(f'<img class="fig" id="fig-ramps" alt="ratio vs engine speed over the throttle ramps" '
+                   f'src="data:image/svg+xml;base64,{base64.b64encode(svg.encode()).decode()}">')
         rows = []
         pred = c.get("predicted") or {}
         for key, label, spec in (("engagement_rpm", "engagement (secondary starts to turn), engine rpm", ".0f"),
