@@ -42,6 +42,35 @@ def ramp_svg(doc: dict) -> str:
     return _render(draw)
 
 
+def loss_svg(doc: dict) -> str:
+    """The coast-down's loss torque vs secondary speed: the fit, its 95 % band, the sim's truth."""
+    from dyno.report.figures import _figure, _legend, _render, _svg
+
+    def draw() -> str:
+        fig, (ax,) = _figure()
+        f = doc["loss_fit"]
+        r, t = f["rpm_grid"], f["torque_nm"]
+        band = [math.hypot(a, b) for a, b in zip(f["torque_ci95_nm"], f["torque_sys95_nm"])]
+        ax.fill_between(r, [x - b for x, b in zip(t, band)], [x + b for x, b in zip(t, band)], color="C0",
+                        alpha=0.25, label="95 % (fit and inertia)")
+        ax.plot(r, t, "-", color="C0", label="fitted a + bω + cω²", gid="loss-fit")
+        if doc.get("loss_torque_true_nm"):
+            ax.plot(r, doc["loss_torque_true_nm"], "--", color="C3", label="simulated truth", gid="loss-true")
+        ax.set(xlabel="secondary speed, rpm", ylabel="loss torque at the secondary, N·m",
+               title="driven-side loss from the coast-down")
+        _legend(ax)
+        return _svg(fig)
+
+    return _render(draw)
+
+
+def _embed(svg: str, fig_id: str, alt: str) -> str:
+    import base64
+
+    return (f'<img class="fig" id="{fig_id}" alt="{escape(alt)}" '
+            f'src="data:image/svg+xml;base64,{base64.b64encode(svg.encode()).decode()}">')
+
+
 def characterisation(docs: list) -> str:
     """Engagement / shift-out / full-shift figures, or the coast-down's loss, with their 95 % intervals."""
     if not docs:
@@ -49,11 +78,7 @@ def characterisation(docs: list) -> str:
     c = docs[-1]
     out = []
     if "engagement_rpm" in c:
-        import base64
-
-        svg = ramp_svg(c)
-        out.append(f'<img class="fig" id="fig-ramps" alt="ratio vs engine speed over the throttle ramps" '
-                   f'src="data:image/svg+xml;base64,{base64.b64encode(svg.encode()).decode()}">')
+        out.append(_embed(ramp_svg(c), "fig-ramps", "ratio vs engine speed over the throttle ramps"))
         rows = []
         pred = c.get("predicted") or {}
         for key, label, spec in (("engagement_rpm", "engagement (secondary starts to turn), engine rpm", ".0f"),
@@ -88,6 +113,7 @@ def characterisation(docs: list) -> str:
     if "loss_fit" in c:
         f = c["loss_fit"]
         co = f["coefficients"]
+        out.append(_embed(loss_svg(c), "fig-loss", "loss torque vs secondary speed"))
         out.append(f"<p>Driven-side loss torque (secondary) from the coast-down, fitted over "
                    f"{_f(f['rpm_min'], '.0f')}–{_f(f['rpm_max'], '.0f')} rpm ({f['n_revolutions']} revolutions, "
                    f"inertia {f['inertia_kg_m2']:g} kg·m² ± {100 * f['inertia_rel_unc']:.0f} %): "

@@ -91,6 +91,7 @@ def test_coast_down_recovers_the_parasitic_loss(tmp_path):
     # the fitted curve's band covers the truth
     for f, t, s, y in zip(fit["torque_nm"], d["loss_torque_true_nm"], fit["torque_ci95_nm"], fit["torque_sys95_nm"]):
         assert abs(f - t) <= s + y
+    assert 'id="fig-loss"' in (tmp_path / "run" / "report.html").read_text()
     stored = json.loads((tmp_path / "run" / "driven_loss.json").read_text())
     assert stored["loss_fit"]["coefficients"] == fit["coefficients"]
 
