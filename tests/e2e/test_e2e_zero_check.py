@@ -40,7 +40,7 @@ def test_drift_is_measured_flagged_and_corrected(tmp_path):
 
 def test_no_drift_no_flag_as_a_real_process(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--json", "--plan", "engagement", "--out",
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--json", "--plan", "coast-down", "--out",
                            str(tmp_path / "run")], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
     assert proc.returncode == 0, proc.stderr
     zc = json.loads(proc.stdout)["torque_zero"]
