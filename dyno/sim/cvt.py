@@ -216,6 +216,7 @@ class CVT:
         self._belt_creep = None
         self._belt_every = max(int(belt_update_cells), 1)
         self._belt_count = 0
+        self._creep_params = None
         if belt_friction_coefficient is not None:
             if tune is None:
                 raise ValueError("belt_friction_coefficient needs a CVT tune (the belt geometry)")
@@ -223,7 +224,13 @@ class CVT:
             from dyno.tuning.shift_curve import model_params_for
 
             self._belt_params = model_params_for(tune, BeltParams(friction_coefficient=belt_friction_coefficient))
+            self._creep_params = self._belt_params
             self.source += f", closed-form belt thrusts (f = {belt_friction_coefficient:g})"
+        elif tune is not None:
+            from dyno.tuning.shift_curve import model_params_for
+
+            # The belt's slip at the tune's clamp (see "Slip" in the module docstring).
+            self._creep_params = model_params_for(tune)
         # Force scale of the lag: the springs' force change over the travel.
         self.k_ref_n = float(max(abs((s_p[-1] + s_s[-1]) - (s_p[0] + s_s[0])), 1.0))
 
@@ -273,23 +280,25 @@ class CVT:
         return (c[j] + f * (c[j + 1] - c[j])) * rpm_primary * rpm_primary - (sp[j] + f * (sp[j + 1] - sp[j]))
 
     def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
-        """Re-evaluate the belt thrust ratio ``kappa`` and creep at this state."""
+        """Re-evaluate the belt's slip (and, in belt mode, the thrust ratio ``kappa``) at this state."""
         from dyno.errors import MODEL_FAILURES, ConfigError
         from dyno.model.closed_form import closed_form_point
         from dyno.model.params import OperatingPoint
 
         f_p = self.primary_force_n(rpm_primary, x)
         if f_p <= 0.0 or rpm_primary <= 0.0:
+            self._belt_creep = None  # no clamp (clutch open): the loss model's slip
             return  # no clamp: kappa does not enter (see force_imbalance_n)
         op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
                             primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
                             primary_axial_force_n=f_p)
         try:
-            res = closed_form_point(self._belt_params, op)
+            res = closed_form_point(self._creep_params, op)
         except (ConfigError, *MODEL_FAILURES):
             # The clamp cannot carry the torque: the secondary wins (as in
             # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
             self._kappa = 0.0
+            self._belt_creep = None
             return
         self._kappa = res.axial_force_secondary_n / f_p
         self._belt_creep = 1.0 - res.efficiency_speed
@@ -300,7 +309,7 @@ class CVT:
 
         ``torque_primary_nm`` (belt input torque) only matters in belt mode.
         """
-        if self._belt_params is not None:
+        if self._creep_params is not None:
             if self._belt_count % self._belt_every == 0:
                 self.update_belt(x, rpm_primary, torque_primary_nm)
             self._belt_count += 1
@@ -331,17 +340,26 @@ class CVT:
 
     # -- losses ----------------------------------------------------------
     def creep_slip(self, torque_primary_nm: float) -> float:
-        """Speed loss fraction ``s`` (belt mode: the closed form's elastic creep)."""
-        if self._belt_creep is not None:
-            return self._belt_creep
+        """Speed loss fraction ``s`` of the simple loss model."""
         return self.s0 + self.s1 * abs(torque_primary_nm)
 
     def losses(self, ratio: float, torque_primary_nm: float) -> tuple[float, float]:
-        """``(eps, s)``: torque loss fraction and creep at this ratio and belt torque.
+        """``(eps, s)``: torque loss fraction and slip at this ratio and belt torque.
 
         Simple loss model, or belt-model share + parasitic remainder when a
-        belt table is attached (see the module docstring).
+        belt table is attached (see the module docstring).  With a tune the
+        slip is the belt's (closed-form creep at the tune's clamp, see "Slip")
+        and the rest of the speed loss moves into the torque loss: the
+        product (1 - eps)(1 - s), the overall efficiency, is unchanged.
         """
+        eps, s = self._losses_before_slip(ratio, torque_primary_nm)
+        creep = self._belt_creep
+        if creep is not None and creep < 1.0:
+            eps = 1.0 - (1.0 - eps) * (1.0 - s) / (1.0 - creep)
+            s = creep
+        return eps, s
+
+    def _losses_before_slip(self, ratio: float, torque_primary_nm: float) -> tuple[float, float]:
         tab = self.belt_table
         if tab is not None:
             t = abs(torque_primary_nm)
@@ -352,8 +370,6 @@ class CVT:
                 s_par = self.s0 + self.s1 * self.t_ref - (1.0 - ref[1])
                 eps = (1.0 - here[0]) + (eps_par if eps_par > 0.0 else 0.0)
                 s = (1.0 - here[1]) + (s_par if s_par > 0.0 else 0.0)
-                if self._belt_creep is not None:
-                    s = self._belt_creep
                 return eps, s
         return self.empirical_loss_frac(ratio), self.creep_slip(torque_primary_nm)
 

@@ -290,6 +290,7 @@ class Truth:
     brake_mu: float = 0.0
     brake_torque_capacity_nm: float = 0.0
     clutch_locked: bool = False
+    belt_slip: float = 0.0         # 1 - belt speed efficiency: omega_s = (1 - slip) omega_p / ratio_geometric
 
 
 class RigModel:
@@ -311,6 +312,7 @@ class RigModel:
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
+        tune = _load_tune(p.cvt_tune_path)
         self.cvt = CVT(ratio_low=p.cvt_ratio_low, ratio_high=p.cvt_ratio_high,
                        primary_radius_max_m=p.cvt_primary_radius_max_m,
                        sheave_half_angle_deg=p.cvt_sheave_half_angle_deg,
@@ -320,7 +322,7 @@ class RigModel:
                        secondary_spring_preload_n=p.cvt_secondary_spring_preload_n,
                        secondary_spring_rate_n_per_m=p.cvt_secondary_spring_rate_n_per_m,
                        helix_gain_n_per_nm=p.cvt_helix_gain_n_per_nm,
-                       shift_time_constant_s=p.cvt_shift_time_constant_s, tune=_load_tune(p.cvt_tune_path),
+                       shift_time_constant_s=p.cvt_shift_time_constant_s, tune=tune,
                        engage_start_rpm=p.cvt_engage_start_rpm,
                        engage_full_rpm=p.cvt_engage_full_rpm, clutch_capacity_nm=p.cvt_clutch_capacity_nm,
                        slip_base_frac=p.cvt_slip_base_frac, slip_per_20nm_frac=p.cvt_slip_per_20nm_frac,
@@ -329,7 +331,7 @@ class RigModel:
                        bending_drag_nm=p.cvt_bending_drag_nm,
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       belt_table=_belt_table_for(p))
+                       belt_table=_belt_table_for(p, tune))
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
                            master_cylinder_bore_mm=p.master_cylinder_bore_mm,
@@ -761,18 +763,19 @@ class RigModel:
             brake_mu=self.brake.mu(self._rotor_c),
             brake_torque_capacity_nm=self._t_brake_cap,
             clutch_locked=self._locked,
+            belt_slip=self._slip,
         )
 
 
-def _belt_table_for(p: RigParams):
-    """The belt-model efficiency table when ``belt_efficiency_source == "belt_model"``."""
+def _belt_table_for(p: RigParams, tune=None):
+    """The belt-model efficiency table (at ``tune``'s clamp) when ``belt_efficiency_source == "belt_model"``."""
     if p.belt_efficiency_source == "loss_model":
         return None
     if p.belt_efficiency_source != "belt_model":
         raise ValueError(f"belt_efficiency_source: 'belt_model' or 'loss_model', got {p.belt_efficiency_source!r}")
     from dyno.sim.belt_table import belt_table
 
-    return belt_table(p.belt_table_cache_dir)
+    return belt_table(p.belt_table_cache_dir, tune)
 
 
 def _after_drag(torque_nm: float, drag_nm: float) -> float:
