@@ -186,6 +186,8 @@ def invert_speed_ratio(speed_ratio: float, primary_speed_rpm: float, primary_tor
             return OperatingPoint(ratio=i, primary_speed_rpm=rpm, primary_torque_nm=max(torque, 0.0),
                                   slack_tension_n=slack_tension_n), math.nan
         f = float(clamp(i)) if callable(clamp) else float(clamp)
+        if not f > 0.0:
+            return None, f
         return OperatingPoint(ratio=i, primary_speed_rpm=rpm, primary_torque_nm=max(torque, 0.0),
                               slack_tension_n=None, primary_axial_force_n=f), f
 
@@ -193,7 +195,7 @@ def invert_speed_ratio(speed_ratio: float, primary_speed_rpm: float, primary_tor
     f = math.nan
     for it in range(1, max_iter + 1):
         op, f = op_at(i)
-        if slack_tension_n is None and not f > 0.0:
+        if op is None:
             return failed("no_clamp", f"the tune's clamp at ratio {i:.3f}, {rpm:.0f} rpm is {f:.0f} N: "
                           "the spring holds the primary open", i, f, it)
         try:

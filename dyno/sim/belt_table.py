@@ -163,12 +163,9 @@ def tune_clamp_n(tune, rpm: float, ratio: float) -> float:
     length gives for this ratio on the tune's drive.  The same function feeds
     the inverse of the overlay (:mod:`dyno.model.inverse`).
     """
-    from dyno.model.geometry import radii_for_ratio
-    from dyno.tuning.actuators import primary_axial_force_n
+    from dyno.model.inverse import clamp_from_tune
 
-    d = tune.drive
-    r_p, _ = radii_for_ratio(float(ratio), d.belt_pitch_length_m, d.centre_distance_m)
-    return float(primary_axial_force_n(tune, float(rpm), r_p))
+    return clamp_from_tune(tune, rpm)(ratio)
 
 
 def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, cache_dir=None,

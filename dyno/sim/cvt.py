@@ -289,6 +289,9 @@ class CVT:
         if f_p <= 0.0 or rpm_primary <= 0.0:
             self._belt_creep = None  # no clamp (clutch open): the loss model's slip
             return  # no clamp: kappa does not enter (see force_imbalance_n)
+        if not torque_primary_nm > 1e-6:
+            self._belt_creep = 0.0  # no torque, no tension difference, no creep; kappa kept
+            return
         op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
                             primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
                             primary_axial_force_n=f_p)
