@@ -167,7 +167,11 @@ class CVT:
                  loss_frac_high_ratio: float, loss_frac_low_ratio: float, ratio_best_eff: float,
                  bending_drag_nm: float, tune=None, n_table: int = 400,
                  belt_friction_coefficient: float | None = None, flyweight_radius_offset_m: float = 0.0,
-                 belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0):
+                 belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0,
+                 belt_thrust_model: str = "capstan"):
+        if belt_thrust_model not in ("capstan", "closed_form"):
+            raise ValueError(f"belt_thrust_model: 'capstan' or 'closed_form', got {belt_thrust_model!r}")
+        self.belt_thrust_model = belt_thrust_model
         self.belt_table = belt_table
         self.t_ref = belt_reference_torque_nm
         self.tau_shift_s = shift_time_constant_s
@@ -225,7 +229,7 @@ class CVT:
 
             self._belt_params = model_params_for(tune, BeltParams(friction_coefficient=belt_friction_coefficient))
             self._creep_params = self._belt_params
-            self.source += f", closed-form belt thrusts (f = {belt_friction_coefficient:g})"
+            self.source += f", {belt_thrust_model} belt thrusts (f = {belt_friction_coefficient:g})"
         elif tune is not None:
             from dyno.tuning.shift_curve import model_params_for
 
@@ -303,8 +307,20 @@ class CVT:
             self._kappa = 0.0
             self._belt_creep = None
             return
-        self._kappa = res.axial_force_secondary_n / f_p
         self._belt_creep = 1.0 - res.efficiency_speed
+        if self._belt_params is None:
+            return
+        if self.belt_thrust_model == "capstan":
+            from dyno.model.capstan import capstan_point
+
+            try:
+                cap = capstan_point(self._belt_params, op)
+            except (ConfigError, ValueError, *MODEL_FAILURES):
+                self._kappa = 0.0
+                return
+            self._kappa = 0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n
+            return
+        self._kappa = res.axial_force_secondary_n / f_p
 
     def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float,
               torque_primary_nm: float = 0.0) -> float:

@@ -200,6 +200,10 @@ class RigParams:
     # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
     cvt_belt_friction_coefficient: float | None = None
     cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
+    # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
+    # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
+    # against itself; "closed_form" reproduces the fitted model (circular: for comparison only).
+    cvt_belt_thrust_model: str = "capstan"
     # Bearing/seal drag on the secondary shaft after the helix: the helix feels
     # the belt torque, the torque gauge (and the brake) that minus this.
     cvt_secondary_friction_torque_nm: float = 0.0
@@ -330,6 +334,7 @@ class RigModel:
                        loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
                        bending_drag_nm=p.cvt_bending_drag_nm,
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
+                       belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
                        belt_table=_belt_table_for(p, tune))
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
