@@ -31,19 +31,32 @@ Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
 -------------------------------------------------------------
 By default the belt passes the primary clamp to the secondary unchanged
 (``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
-tune) the balance is the one :mod:`dyno.tuning.shift_curve` predicts: the
-primary clamp sets the belt tensions and the belt then *requires* a
-secondary thrust ``F_s,belt`` (Sorge & Cammalleri eqs. 17-18 via
-:func:`dyno.model.closed_form.closed_form_point`), so the imbalance is
-``F_s,belt - F_s``.  ``F_s,belt = kappa F_p`` with the thrust ratio
-``kappa(x, T_p, F_p; f)`` re-evaluated every ``belt_update_cells`` calls of
-:meth:`CVT.shift` (a closed-form call costs ~0.4 ms, ~20x a physics cell;
-kappa varies slowly next to the 0.4 s shift lag, and at a steady point it is
-evaluated at that point, so the steady ratio is exact).  The belt's elastic
-creep of the same call replaces the loss model's creep.  Together with
-``flyweight_radius_offset_m`` (added to the tune's flyweight radius table)
-these are the rig's hidden "true" parameters that the fit of
-:mod:`dyno.tuning.fit` estimates.
+tune) the primary clamp sets the belt tensions and the belt then *requires* a
+secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
+``F_s,belt = kappa F_p`` with the thrust ratio ``kappa(x, T_p, F_p; f)``
+re-evaluated every ``belt_update_cells`` calls of :meth:`CVT.shift` (kappa
+varies slowly next to the 0.4 s shift lag, and at a steady point it is
+evaluated at that point, so the steady ratio is exact).  The true kappa comes
+from ``belt_thrust_model``: ``"capstan"`` (default: Gerbert's V-belt,
+:func:`dyno.model.capstan.capstan_point`, which is *not* the closed form that
+:mod:`dyno.tuning.fit` fits, so the fit is not validated against itself) or
+``"closed_form"`` (Sorge & Cammalleri eqs. 17-18, the fitted model itself:
+circular, for comparison only).  Together with ``flyweight_radius_offset_m``
+(added to the tune's flyweight radius table) these are the rig's hidden
+"true" parameters that the fit estimates.
+
+Slip
+----
+With a tune the belt's slip (``omega_s = (1 - s) omega_p / i``) is the closed
+form's elastic creep at the tune's clamp ``F_p(x, n)`` and the belt torque
+(0.03-0.2 %), re-evaluated with kappa; the rest of the loss model's speed loss
+moves into the torque loss so the overall efficiency is unchanged.  The
+closed form is the belt tier that carries the tune's loads (the full model
+finds gross slip at the stock clamp from ~10 N m, see
+:mod:`dyno.sim.belt_table`); it is what the overlay's slip-consistent inverse
+(:mod:`dyno.model.inverse`) inverts, and the truth records ``belt_slip`` and
+the geometric ratio per point.  Without a tune, or below engagement, the loss
+model's slip ``s_0 + s_1 |T_p|`` applies.
 
 Engagement
 ----------
@@ -91,10 +104,10 @@ bending is elastic).  At ``T_ref`` the overall efficiency equals the loss
 model's (it stays in the thesis's measured range); away from it, the torque
 dependence of the belt's share (creep grows with load, the seating loss is a
 larger fraction at light load) is the belt model's.  The table covers the
-thesis's solved ratios 0.72-1.75 at 8 and 18 N m (3400 rpm, 100 N slack
-tension); ratio and torque are clamped to that range (at ratios above 1.75
-the belt share is held at its 1.75 value).  A cell where the belt model did
-not converge falls back to the loss model.
+simulated CVT's whole ratio range 0.72-2.4 at 8 and 18 N m, at the tune's
+clamp at 3150 rpm (100 N slack without a tune); torque is clamped to that
+range.  A cell where the belt model did not converge (at the stock tune's
+clamp: gross slip at 18 N m at every ratio) falls back to the loss model.
 """
 
 from __future__ import annotations
