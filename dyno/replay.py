@@ -17,7 +17,7 @@ from dyno.runlog.reader import load_run
 
 PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "step_s", "efficiency_true",
                 "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
-                "power_out_true_w", "legacy_point", "discarded", "legacy_faults", "thesis_torque_nm",
+                "power_out_true_w", "ratio_geometric_true", "belt_slip_true", "legacy_point", "discarded", "legacy_faults", "thesis_torque_nm",
                 "legacy_channels")
 # Fields a fault found at import/acquisition time withholds (the raw data cannot support them).
 WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
