@@ -135,3 +135,28 @@ def test_overlay_inputs_use_the_inverse(sim_run):
         assert op.ratio == pytest.approx(p["ratio_geometric_true"], rel=2e-4) and op.ratio < p["ratio"]
         assert op.slack_tension_n is None
         assert op.primary_axial_force_n == pytest.approx(inv.clamp_from_tune(tune, p["rpm_primary"])(op.ratio))
+
+
+def test_cli_model_inverse_reports_ratio_and_slip(sim_run, tmp_path):
+    """`dyno model inverse RUN` as a real process: both numbers per point, the truth alongside."""
+    run_dir, points = sim_run
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, "-m", "dyno", "model", "inverse", str(run_dir), "--json"], cwd=ROOT,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["clamp"] == "tune 'cvtech-stock'" and data["tier"] == "closed_form"
+    rows = data["points"]
+    assert len(rows) == sum(bool(p.get("valid", True)) for p in points)
+    for r in rows:
+        assert r["state"] == "steady"
+        assert r["geometric_ratio"] == pytest.approx(r["ratio_geometric_true"], rel=2e-4)
+        assert r["slip"] == pytest.approx(r["belt_slip_true"], abs=2e-4)
+        assert r["speed_ratio"] == pytest.approx(r["geometric_ratio"] / (1 - r["slip"]), rel=1e-9)
+    text = subprocess.run([sys.executable, "-m", "dyno", "model", "inverse", str(run_dir)], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert text.returncode == 0 and "geometric" in text.stdout and "slip %" in text.stdout
+    bad = subprocess.run([sys.executable, "-m", "dyno", "model", "inverse", str(tmp_path / "nothing")], cwd=ROOT,
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "meta.json" in bad.stderr and "Traceback" not in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
