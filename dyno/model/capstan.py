@@ -126,6 +126,8 @@ def capstan_point(params: ModelParams, op: OperatingPoint) -> CapstanResult:
         lo, hi = 1e-6, max(target / phi_p, 1.0) * 2
         if resid(lo) > 0:
             raise bad_input("primary_axial_force_n", f"large enough to transmit {op.primary_torque_nm:g} N*m")
+        while resid(hi) < 0:  # the thrust grows without bound with the tension level
+            hi *= 2.0
         t_slack = brentq(resid, lo, hi, xtol=1e-9)
     t_tight = t_slack + delta_t
     ln_ratio = math.log(t_tight / t_slack)
