@@ -33,18 +33,21 @@ The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 fallback with ``cvt_tune_path=None``), between the end stops
 ``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  Optional
 hidden "true" parameters for the shift-model fit (``cvt_belt_friction_coefficient``:
-closed-form belt thrusts in the balance; ``cvt_flyweight_radius_offset_m``;
+belt thrusts in the balance, from the capstan tier by default (``cvt_belt_thrust_model``:
+not the closed form the fit uses); ``cvt_flyweight_radius_offset_m``;
 ``cvt_secondary_friction_torque_nm``: shaft drag between the helix and the
 torque gauge, added to the load) are off by default.
 
 Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
 CVT loss into the full belt model's share, from a ratio x torque table solved
 once per machine into the belt model's overlay cache (:mod:`dyno.sim.belt_table`,
-~20 s from an empty cache), and a documented parasitic remainder (the simple
+at the tune's clamp, ~60 s from an empty cache), and a documented parasitic remainder (the simple
 loss model minus the belt's share at 18 N m: bearings, clutch, sheave friction,
 hysteresis), so the overall efficiency stays in the thesis's measured
 80-92 %; "loss_model" is the simple loss model alone (see :mod:`dyno.sim.cvt`).
-The truth's efficiency is always the model's own power balance.
+The truth's efficiency is always the model's own power balance.  With a tune the
+belt's slip is its closed-form creep at the tune's clamp (the truth records it as
+``belt_slip`` with ``ratio_geometric``; see "Slip" in :mod:`dyno.sim.cvt`).
 
 The torque gauge sits on the brake shaft between the gear and the rotor, so
 it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
