@@ -213,6 +213,22 @@ static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param
     }
 }
 
+/* PCIFR's flags clear when a 1 is written to them (silicon); simavr 1.6 stores the 1
+ * instead, so a flag "cleared" that way stays set and its interrupt stays pending. */
+#define REG_PCIFR 0x3B
+static avr_int_vector_t *pcint_vec[3];
+
+static void pcifr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)param;
+    for (int b = 0; b < 3; b++)
+        if (v & (1u << b)) {
+            a->data[addr] &= (uint8_t)~(1u << b);
+            if (pcint_vec[b])
+                pcint_vec[b]->pending = 0;  /* simavr drops a queued vector that is not pending */
+        }
+}
+
 static void twi_event(uint8_t status)
 {
     twint_written = 0;
@@ -452,6 +468,9 @@ int main(int argc, char **argv)
         return 1;
     }
     avr_register_io_write(avr, REG_TWCR, twcr_write_hook, NULL);
+    for (int b = 0; b < 3; b++)
+        pcint_vec[b] = find_vector(3 + b);  /* PCINT0..2 are vectors 3..5 */
+    avr_register_io_write(avr, REG_PCIFR, pcifr_write_hook, NULL);
     bit_cycles = F_CPU_HZ / (cfg_i2c_khz * 1000ull);
     byte_cycles = 9 * bit_cycles;
 
