@@ -251,6 +251,9 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
+            # The ring's guard bytes, checked by the harness after every command: a write
+            # outside the ring shows as a violation (null for sketches without the ring).
+            "ring_guard": hs.get("ring_guard") if hs.get("ring_guard", {}).get("found") else None,
             "sim_s": hs["sim_s"],
             "sim_per_wall": hs["sim_per_wall"],
             "crashed": hs["crashed"],
@@ -276,7 +279,8 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             out["device"]["boot_count"] = info.boot_count
     if args.protocol == "v2":
         out["boots"] = stats["boots"]
-    out["ok"] = bool(not hs["crashed"] and (args.protocol == "v0" or (
+    guard_ok = not hs.get("ring_guard", {}).get("violations")
+    out["ok"] = bool(not hs["crashed"] and guard_ok and (args.protocol == "v0" or (
         reader.events_lost == 0 and all(ch["missing"] == 0 and ch["duplicates_or_disorder"] == 0
                                         for ch in events.values()))))
     return out

@@ -151,6 +151,12 @@ class SimavrTransport(Transport):
         self.sync()
         return json.loads(self._cmd("stats"))
 
+    def poke(self, addr: int, value: int) -> None:
+        """Write one SRAM byte behind the firmware's back (tests of the harness's checks)."""
+        self.sync()
+        if self._cmd(f"poke {addr:x} {value & 0xFF:02x}") != "ok":
+            raise HarnessError("poke")
+
     # -- Transport ------------------------------------------------------------------
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         kind = None

@@ -17,8 +17,16 @@ from dyno.transports.simavr import SimavrTransport
 pytestmark = pytest.mark.firmware
 
 
+def _assert_guard_intact(rep):
+    """The harness checked the guard bytes around the firmware's ring after every command."""
+    g = rep["harness"]["ring_guard"]
+    assert g["found"] and g["armed"] and g["checks"] > 10, g
+    assert g["violations"] == 0, g
+
+
 def _assert_lossless(rep):
     assert not rep["harness"]["crashed"]
+    _assert_guard_intact(rep)
     assert rep["events_lost"] == 0
     for name, ch in rep["events"].items():
         assert ch["expected"] > 0, name
@@ -216,6 +224,7 @@ def test_firmware_fil_ring_saturation_link_survives_and_accounts_exactly(firmwar
                             "--drain-s", "3", "--fault-rate", "0.2", "--fault-kinds", "cmd_bitflip",
                             "--seed", "7"))
     assert not rep["harness"]["crashed"]
+    _assert_guard_intact(rep)  # saturated all the time, never a write outside the ring
     acc = rep["accounting"]
     assert acc["exact"], acc
     assert acc["reported_lost"] > 0.8 * acc["generated"]  # really saturated
@@ -252,6 +261,29 @@ def test_firmware_fil_twi_master_abort_recovered(firmware_build, sim_args):
     assert not rep["harness"]["i2c"]["bus_held"]
     assert 20_000 < rep["harness"]["i2c"]["last_release_after_us"] <= 25_000
     assert rep["frames"]["transport_errors"].get("bus_held", 0) > 0  # the bus really was held
+
+
+def test_firmware_fil_ring_guard_check_sees_a_stray_write(firmware_build):
+    """The guard check can fail: one byte written just past the ring's last entry (as an
+    overrun would) is reported as a violation at the next command."""
+    out = subprocess.run(["avr-nm", str(firmware_build["elf"])], capture_output=True, text=True,
+                         check=True).stdout
+    addr = next(int(ln.split()[0], 16) & 0xFFFF for ln in out.splitlines() if ln.endswith(" g_ring"))
+    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"])
+    try:
+        reader = make_reader("v2", tr)
+        for k in range(1, 20):
+            tr.advance_to(k / 150)
+            reader.poll(k / 150)
+        before = tr.harness_stats()["ring_guard"]
+        tr.poke(addr + 4 + 8 * 64, 0x00)  # guard_lo (4 B), 64 entries of 8 B, then guard_hi
+        tr.advance_to(0.2)
+        reader.poll(0.2)
+        after = tr.harness_stats()["ring_guard"]
+    finally:
+        tr.close()
+    assert before["armed"] and before["violations"] == 0, before
+    assert after["violations"] == 1 and 0.12e6 < after["first_violation_us"] < 0.2e6, after
 
 
 def test_firmware_sim_bad_fault_kind_is_refused():
