@@ -113,6 +113,7 @@ def simulate(args) -> dict:
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
         stopped = False
+        first_frame_s = None  # poll time of the first accepted frame
         while True:
             t = t_next
             t_next += dt * (1.0 + args.poll_jitter * (2.0 * jitter_rng.random() - 1.0))
@@ -129,6 +130,8 @@ def simulate(args) -> dict:
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)
+                if first_frame_s is None and reader.stats.accepted:
+                    first_frame_s = t
                 if reader.stats.device_resets != resets_before:  # never a period across a reset
                     pending = dict.fromkeys(pending, True)
                 for ev in new:
@@ -150,8 +153,10 @@ def simulate(args) -> dict:
         faults = dict(tr.faults_injected)
     finally:
         tr.close()
-    return _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
-                   time.perf_counter() - wall0)
+    out = _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
+                  time.perf_counter() - wall0)
+    out["first_frame_s"] = first_frame_s
+    return out
 
 
 def _channel(ts) -> dict:
@@ -254,6 +259,9 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             # The ring's guard bytes, checked by the harness after every command: a write
             # outside the ring shows as a violation (null for sketches without the ring).
             "ring_guard": hs.get("ring_guard") if hs.get("ring_guard", {}).get("found") else None,
+            # WDTCSR as the firmware left it: WDE (0x08) set = the watchdog resets the MCU.
+            "watchdog_enabled": bool(hs.get("wdtcsr", 0) & 0x08),
+            "eeprom_writes": hs.get("eeprom_writes"),
             "sim_s": hs["sim_s"],
             "sim_per_wall": hs["sim_per_wall"],
             "crashed": hs["crashed"],

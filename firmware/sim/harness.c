@@ -89,6 +89,9 @@ static void print_stats(void)
             (unsigned long long)adc_generated, (unsigned long long)adc_read,
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
+    /* WDTCSR as the firmware left it (WDE 0x08: the watchdog resets the MCU) */
+    fprintf(o, "\"wdtcsr\": %u, \"eeprom_writes\": %llu, ", avr->data[REG_WDTCSR],
+            (unsigned long long)eeprom_writes);
     print_i2c(o);
     fprintf(o, ", ");
     print_guard(o);

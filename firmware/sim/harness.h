@@ -29,6 +29,8 @@ double now_s(void);
 avr_int_vector_t *find_vector(int num);
 void print_profile(FILE *o);
 void guard_check(void);
+extern uint64_t eeprom_writes;
+#define REG_WDTCSR 0x60
 void print_guard(FILE *o);
 
 /* twi_master.c */

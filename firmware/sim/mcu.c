@@ -154,6 +154,20 @@ static void pcifr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *para
         }
 }
 
+/* ---- EEPROM writes (wear: the firmware must not write per boot) ------------------- */
+/* Counted at the write strobe (EEPE set in EECR); simavr's EEPROM module, registered on
+ * the same address first, still performs the write. */
+#define REG_EECR 0x3F
+#define EECR_EEPE 0x02
+uint64_t eeprom_writes;
+
+static void eecr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)a; (void)addr; (void)param;
+    if (v & EECR_EEPE)
+        eeprom_writes++;
+}
+
 /* ---- guard bytes around the firmware's event ring ---------------------------------- */
 /* The ELF's g_ring (found in its symbol table) starts with RING_GUARD_LEN guard bytes
  * before the entries and has as many right after them (src/ring.h: the same offsets on
@@ -264,6 +278,7 @@ int mcu_load(const char *elf)
     for (int b = 0; b < 3; b++)
         pcint_vec[b] = find_vector(3 + b);  /* PCINT0..2 are vectors 3..5 */
     avr_register_io_write(avr, REG_PCIFR, pcifr_write_hook, NULL);
+    avr_register_io_write(avr, REG_EECR, eecr_write_hook, NULL);
     guard_init(elf);
     return 1;
 }

@@ -108,9 +108,11 @@ def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
     for t in at:
         argv += ["--reset-at", t]
     rep = simulate(sim_args(*argv))
+    assert 0 < float(at[0]) - rep["first_frame_s"] < 0.020  # the first reset within 20 ms of the first frame
     assert rep["frames"]["device_resets"] == 20
     boots = rep["boots"]
     assert [b["cause_name"] for b in boots] == ["power-on"] + ["watchdog"] * 20
+    assert rep["harness"]["eeprom_writes"] == 0  # boot ids without EEPROM wear
     assert len({b["boot_id"] for b in boots}) == 21
     assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
     assert rep["device"]["reset_cause"] == "watchdog"
@@ -163,15 +165,22 @@ def test_firmware_fil_speeds_with_glitches_and_bounce(firmware_build, sim_args, 
     for c, name in enumerate(("primary", "secondary")):
         # Every ringing pulse is locked out; spikes are glitches, or locked out when they fall
         # inside a lock-out window (counted there), or merge with a pulse (never an event).
+        # A spike that overlaps the start of a real pulse merges with it (that pulse starts up to
+        # 20 us early), and two overlapping spikes are one: a few percent at most.
         assert rej[name]["lockout"] >= h["bounce_edges"][c]
-        assert rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c] <= h["glitches"][c]
+        spikes_rejected = rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c]
+        assert 0.95 * h["glitches"][c] <= spikes_rejected <= h["glitches"][c], (name, rej, h)
         assert rej[name]["glitch"] >= 0.5 * h["glitches"][c] > 0
 
 
-def test_firmware_fil_clean_15000_rpm_nothing_rejected(firmware_build, sim_args):
-    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "2",
-                            "--primary-rpm", "15000", "--secondary-rpm", "15000"))
+@pytest.mark.parametrize("rpm", [300, 3800, 12000, 15000])
+def test_firmware_fil_clean_speeds_nothing_rejected(firmware_build, sim_args, rpm):
+    """Clean signals over the issue's range on both channels: every pulse once, rpm within
+    0.05 %, 0 events lost, 0 edges rejected (the adaptive lock-out never eats a real pulse)."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "4" if rpm == 300 else "2",
+                            "--primary-rpm", str(rpm), "--secondary-rpm", str(rpm)))
     _assert_lossless(rep)
+    assert rep["events"]["primary"]["expected"] >= 19
     assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
     assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
                                      "secondary": {"lockout": 0, "glitch": 0}}
@@ -230,6 +239,7 @@ def test_firmware_fil_ring_saturation_link_survives_and_accounts_exactly(firmwar
     assert acc["reported_lost"] > 0.8 * acc["generated"]  # really saturated
     assert rep["faults_injected"]["cmd_bitflip"] > 50
     fr = rep["frames"]
+    assert fr["device_resets"] == 0 and fr["resyncs"] == 0
     assert fr["accepted"] >= 0.7 * 2 * 63  # the link kept serving frames to the end
     assert rep["events"]["adc"]["received"] > 0
     for name in ("primary", "secondary"):
@@ -322,6 +332,7 @@ def test_firmware_fil_serial_transport_via_cli(firmware_build):
     rep = json.loads(res.stdout)
     assert rep["transport"] == "serial" and rep["ok"]
     _assert_lossless(rep)
+    assert rep["adc_time_error_us"]["max_abs_us"] <= 20.0  # RDY's time as on I2C
     assert rep["accounting"]["exact"]
     assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
     assert rep["frames"]["accepted"] > 20 * 100
@@ -377,6 +388,7 @@ def test_firmware_fil_real_watchdog_reset_recovered_once(firmware_build, sim_arg
     assert not rep["harness"]["crashed"]
     assert rep["frames"]["device_resets"] == 1
     assert [b["cause_name"] for b in rep["boots"]] == ["power-on", "watchdog"]
+    assert rep["harness"]["watchdog_enabled"] and rep["harness"]["eeprom_writes"] == 0
     dev = rep["device"]
     assert dev["reset_cause"] == "watchdog" and dev["boot_id"] == rep["boots"][1]["boot_id"]
     assert 1500 < dev["uptime_ms"] < 2000  # one reset at ~1.5 s, none after
