@@ -30,6 +30,21 @@ from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 
 
+# MCUSR bits the harness sets for a reset at --reset-at S:CAUSE.
+RESET_CAUSES = {"watchdog": 0x08, "external": 0x02, "brown-out": 0x04}
+
+
+def _reset_at(text: str) -> tuple:
+    """--reset-at S[:CAUSE] -> (seconds, MCUSR)."""
+    import argparse
+
+    t, _, cause = text.partition(":")
+    cause = cause or "watchdog"
+    if cause not in RESET_CAUSES:
+        raise argparse.ArgumentTypeError(f"cause {cause!r} unknown; expected one of {', '.join(RESET_CAUSES)}")
+    return number_in(0.0, 3600.0)(t), RESET_CAUSES[cause]
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
     parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
@@ -64,8 +79,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100)
     parser.add_argument("--drain-s", type=number_in(0.0, 60.0), default=0.3,
                         help="keep polling this long after the signals stop")
-    parser.add_argument("--reset-at", type=number_in(0.0, 3600.0), action="append", default=None,
-                        help="reset the MCU at this simulated second (repeatable; watchdog cause)")
+    parser.add_argument("--reset-at", type=_reset_at, action="append", default=None, metavar="S[:CAUSE]",
+                        help="reset the MCU at this simulated second, cause watchdog (default), external or "
+                             "brown-out (repeatable)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
@@ -123,9 +139,10 @@ def simulate(args) -> dict:
                 tr.advance_to(t_stop)
                 tr.generators(False)
                 stopped = True
-            while reset_times and t >= reset_times[0]:
-                tr.advance_to(reset_times.pop(0))
-                tr.reset_device()
+            while reset_times and t >= reset_times[0][0]:
+                at, mcusr = reset_times.pop(0)
+                tr.advance_to(at)
+                tr.reset_device(mcusr)
             tr.advance_to(t)
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets

@@ -91,10 +91,10 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
 
 
 def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
-    """20 watchdog-style resets of the real ELF at random instants, the first within 20 ms of
-    the first frame: each one is a new boot id with cause "watchdog" (no EEPROM involved),
-    the host starts a new time epoch, no period spans a reset, and it carries on (events
-    queued in the MCU at a reset are gone with its RAM)."""
+    """20 resets of the real ELF at random instants, the first within 20 ms of the first frame,
+    with random causes (watchdog, RESET line, brown-out): each one is a new boot id with its own
+    cause (no EEPROM involved), the host starts a new time epoch, no period spans a reset, and
+    it carries on (events queued in the MCU at a reset are gone with its RAM)."""
     import random
 
     rng = random.Random(20)
@@ -103,19 +103,21 @@ def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
         t = rng.uniform(0.1, 6.0)
         if all(abs(t - u) >= 0.05 for u in at):
             at.append(t)
-    at = [f"{t:.4f}" for t in sorted(at)]
+    at.sort()
+    causes = [rng.choice(["watchdog", "external", "brown-out"]) for _ in at]
     argv = ["--elf", str(firmware_build["elf"]), "--seconds", "6"]
-    for t in at:
-        argv += ["--reset-at", t]
+    for t, cause in zip(at, causes):
+        argv += ["--reset-at", f"{t:.4f}:{cause}"]
     rep = simulate(sim_args(*argv))
-    assert 0 < float(at[0]) - rep["first_frame_s"] < 0.020  # the first reset within 20 ms of the first frame
+    assert 0 < at[0] - rep["first_frame_s"] < 0.020  # the first reset within 20 ms of the first frame
+    assert len(set(causes)) == 3
     assert rep["frames"]["device_resets"] == 20
     boots = rep["boots"]
-    assert [b["cause_name"] for b in boots] == ["power-on"] + ["watchdog"] * 20
+    assert [b["cause_name"] for b in boots] == ["power-on"] + causes
     assert rep["harness"]["eeprom_writes"] == 0  # boot ids without EEPROM wear
     assert len({b["boot_id"] for b in boots}) == 21
     assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
-    assert rep["device"]["reset_cause"] == "watchdog"
+    assert rep["device"]["reset_cause"] == causes[-1]
     for name, ch in rep["events"].items():
         assert ch["duplicates_or_disorder"] == 0, name
         assert ch["expected"] - 20 * 8 <= ch["received"] <= ch["expected"], (name, ch)
@@ -294,6 +296,14 @@ def test_firmware_fil_ring_guard_check_sees_a_stray_write(firmware_build):
         tr.close()
     assert before["armed"] and before["violations"] == 0, before
     assert after["violations"] == 1 and 0.12e6 < after["first_violation_us"] < 0.2e6, after
+
+
+def test_firmware_sim_bad_reset_cause_is_refused():
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", "x.elf",
+                          "--reset-at", "0.5:lightning"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--reset-at" in lines[0] and "lightning" in lines[0], res.stderr
 
 
 def test_firmware_sim_bad_fault_kind_is_refused():
