@@ -34,7 +34,7 @@ class RunOptions:
     rig_path: Path | None = None
     calibration_path: Path = DEFAULT_CALIBRATION
     engine_map_path: Path = DEFAULT_ENGINE_MAP
-    plan: TestPlan = field(default_factory=TestPlan)
+    plan: TestPlan = field(default_factory=TestPlan)  # (the CLI's default is the speed-hold plan file)
     limits: SafetyLimits | None = None
     clock_offset_us: int = 0
     sim_params: object = None
@@ -183,7 +183,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "calibration_source": str(opts.calibration_path),
         "engine_map_source": str(engine_map.source),
         "engine_map_sha256": engine_map.sha256,
-        "plan": _asdict(opts.plan),
+        "plan": plan_meta(opts.plan),
         "limits": _asdict(limits),
     }
     tune_path = opts.tune_path
@@ -202,12 +202,21 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         tune_text = Path(tune_path).read_text()
         meta["tune_source"] = str(tune_path)
         meta["tune_sha256"] = hashlib.sha256(tune_text.encode()).hexdigest()
+    plan_text = opts.plan.text or None
+    if plan_text:
+        import hashlib
+
+        meta["plan_source"] = opts.plan.source
+        meta["plan_text_sha256"] = hashlib.sha256(plan_text.encode()).hexdigest()
     writer = RunWriter(out, meta, calibration=calibration.to_dict(),
-                       engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text)
+                       engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text,
+                       plan_text=plan_text)
     poller.listeners.append(writer.events)
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
+    controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
+    controller.inertia = rig_cfg.inertia
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
@@ -308,6 +317,13 @@ def _thermometer(bus, address: int):
     return sensor.object_c
 
 
+def plan_meta(plan) -> dict:
+    """The plan as meta.json keeps it (its file's text is stored beside, as plan.toml)."""
+    d = _asdict(plan)
+    d.pop("text", None)
+    return d
+
+
 def _asdict(obj):
     import dataclasses
 
@@ -315,6 +331,8 @@ def _asdict(obj):
         return {f.name: _asdict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, (list, tuple)):
         return [_asdict(x) for x in obj]
+    if isinstance(obj, dict):
+        return {k: _asdict(v) for k, v in obj.items()}
     if isinstance(obj, Path):
         return str(obj)
     return obj

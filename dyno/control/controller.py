@@ -73,11 +73,18 @@ class TestPlan:
     max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
     min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
-    mode: str = "step"  # "step" (the thesis's open-loop steps) or "speed-hold" (dyno.control.speed_hold)
+    mode: str = "step"  # "step" (the thesis's open-loop steps) or a runner in dyno.control.plans.RUNNERS
     settle: SettleCriteria = field(default_factory=SettleCriteria)
     min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
     max_points: int = 60
     expected_secondary_span_rpm: float = 4500.0  # light load to min, for the step adaptation
+    # A plan file's identity and its mode's own parameters (dyno.control.planfile): the name it was
+    # chosen by, the mode's table (e.g. [speed_hold]) and, for mode "steps", the [[step]] list.
+    name: str = ""
+    params: dict = field(default_factory=dict, hash=False)
+    steps: tuple = ()
+    source: str = ""  # the plan file it came from ("" for a plan built in code)
+    text: str = field(default="", repr=False, compare=False)  # that file's text (stored as plan.toml)
 
 
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
@@ -279,10 +286,10 @@ class TestController:
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)
-        if p.mode == "speed-hold":
-            from dyno.control.speed_hold import run_speed_hold
+        if p.mode != "step":
+            from dyno.control.plans import runner_for
 
-            await run_speed_hold(self)
+            await runner_for(p.mode)(self)
             return
         last_rs = self.poller.rpm(v1.CH_SECONDARY)
         while True:
