@@ -250,6 +250,17 @@ class TestController:
         if task is not None and not task.done():
             task.cancel()
 
+    #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
+    #: runners' own durations (hold periods, approach times) must shrink like the plan's
+    time_scale: float = 1.0
+
+    def rig_now(self) -> float:
+        """The controller's time in rig seconds (see :attr:`time_scale`)."""
+        return self._now() / self.time_scale
+
+    async def rig_sleep(self, dt_s: float) -> None:
+        await self._sleep(dt_s * self.time_scale)
+
     async def _sleep(self, dt_s: float) -> None:
         await asyncio.sleep(dt_s)
         if self.fault_injection is not None:

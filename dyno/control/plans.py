@@ -18,8 +18,8 @@ from dataclasses import replace
 
 from dyno.control.controller import TestPlan
 
-#: mode -> "module:coroutine"; the coroutine takes the controller after the warm-up
-RUNNERS: dict[str, str] = {
+#: mode -> "module:coroutine" (or the coroutine function itself); it takes the controller after the warm-up
+RUNNERS: dict[str, object] = {
     "speed-hold": "dyno.control.speed_hold:run_speed_hold",
     "steps": "dyno.control.steps:run_steps",
 }
@@ -34,6 +34,8 @@ def runner_for(mode: str):
 
     if mode not in RUNNERS:
         raise ConfigError("plan", "mode", f"one of step, {', '.join(sorted(RUNNERS))}, got {mode!r}")
+    if callable(RUNNERS[mode]):
+        return RUNNERS[mode]
     module, _, fn = RUNNERS[mode].partition(":")
     return getattr(importlib.import_module(module), fn)
 

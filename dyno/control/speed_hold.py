@@ -90,7 +90,7 @@ class SpeedHold:
             return 0.0
         u = self.g.kp * e + self.g.ki_per_s * self.integral
         saturated = abs(u) >= 1.0 and math.copysign(1.0, u) == math.copysign(1.0, e)
-        if not saturated:  # anti-windup: no integration into a saturated command
+        if self.g.ki_per_s and not saturated:  # anti-windup: no integration into a saturated command
             self.integral += e * dt_s
         return max(-1.0, min(1.0, u))
 
@@ -124,6 +124,7 @@ class SpeedHoldPlan:
     in_band_s: float = 0.8  # ... for this long, then measure
     max_approach_s: float = 8.0  # then: near the setpoint, measure (flagged); far from it, skip it
     unholdable_rel: float = 0.02  # "far": the shift region, where a friction brake cannot hold a speed
+    drift_rel: float = 0.02  # a window whose mean speed ends farther than this from the setpoint is no point
     spacing: float = 1.0  # setpoint i of n at high - (high - low) (i/(n-1))**spacing: < 1 spaces the light-load
     # (shift) region wider, where the torque hardly changes, and the cheap low-speed points closer
     contact_drop_rel: float = 0.01  # contact search: full-speed apply until the secondary drops 1 %
@@ -182,7 +183,7 @@ async def _hold_loop(ctrl, hold: SpeedHold, target: dict, variable: str = "secon
     while True:
         await ctrl._resume.wait()
         if target.get("frozen"):
-            await ctrl._sleep(g.period_s)
+            await ctrl.rig_sleep(g.period_s)
             continue
         sp = target["rpm"]
         sign = target.get("sign", VARIABLES[variable][1])
@@ -194,14 +195,14 @@ async def _hold_loop(ctrl, hold: SpeedHold, target: dict, variable: str = "secon
         direction, on_s = hold.pulse(u, e)
         target["last_rpm"] = x
         if direction == STOP:
-            await ctrl._sleep(g.period_s)
+            await ctrl.rig_sleep(g.period_s)
             continue
         ctrl.act.brake(direction)
         try:
-            await ctrl._sleep(on_s)
+            await ctrl.rig_sleep(on_s)
         finally:
             ctrl.act.brake(STOP)
-        await ctrl._sleep(max(0.0, g.period_s - on_s))
+        await ctrl.rig_sleep(max(0.0, g.period_s - on_s))
 
 
 async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHoldGains | None = None) -> None:
@@ -225,17 +226,17 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     # Contact search first: the pads start clear of the rotor (free travel), and creeping
     # across it at a fraction of full speed wastes seconds. Full-speed apply until it bites.
     ctrl._enter(State.STEP, "speed hold: finding the brake's contact point")
-    t_c = ctrl._now()
+    t_c = ctrl.rig_now()
     ctrl.act.brake(APPLY)
     try:
         while secondary_rpm(ctrl, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
-            if ctrl._now() - t_c > sh.contact_timeout_s:
+            if ctrl.rig_now() - t_c > sh.contact_timeout_s:
                 ctrl.abort("error", f"speed hold: the brake did not slow the secondary in {sh.contact_timeout_s:g} s")
                 return
-            await ctrl._sleep(0.02)
+            await ctrl.rig_sleep(0.02)
     finally:
         ctrl.act.brake(STOP)
-    ctrl._log("contact", after_s=ctrl._now() - t_c)
+    ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
     target = {"rpm": setpoints[0], "last_rpm": math.nan}
     loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="speed-hold")
     try:
@@ -244,25 +245,25 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
                 continue  # already below it (the CVT jumped past): next setpoint
             target["rpm"] = sp
             ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
-            t0 = ctrl._now()
+            t0 = ctrl.rig_now()
             ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
             in_band_since = None
             settled_by = "held"
             while True:
-                await ctrl._sleep(0.05)
+                await ctrl.rig_sleep(0.05)
                 if loop_task.done():
                     loop_task.result()  # re-raise: the control task failed
                 rpm = secondary_rpm(ctrl, hold.g.speed_window_s)
                 if abs(rpm - sp) <= sh.tolerance_rel * sp:
-                    in_band_since = in_band_since if in_band_since is not None else ctrl._now()
-                    if ctrl._now() - in_band_since >= sh.in_band_s:
+                    in_band_since = in_band_since if in_band_since is not None else ctrl.rig_now()
+                    if ctrl.rig_now() - in_band_since >= sh.in_band_s:
                         break
                 else:
                     in_band_since = None
-                if ctrl._now() - t0 > sh.max_approach_s:
+                if ctrl.rig_now() - t0 > sh.max_approach_s:
                     settled_by = "timeout"
                     break
-            settle_s = ctrl._now() - t0
+            settle_s = ctrl.rig_now() - t0
             if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
                 ctrl._log("skip", reason=f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after "
                                          f"{settle_s:.1f} s): the CVT's shift region")
@@ -275,6 +276,12 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
             finally:
                 target["frozen"] = False
             point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
+            if not abs(point["rpm_secondary"] - sp) <= sh.drift_rel * sp:
+                # The frozen brake let the CVT shift under the window (its hysteresis): the average
+                # is of a transient, not a steady point; the truth check showed errors of 3 pp.
+                ctrl._log("skip", reason=f"secondary drifted to {point['rpm_secondary']:.0f} rpm while "
+                                         f"measuring at {sp:.0f} rpm: not a steady point")
+                continue
             if point["torque_secondary_nm"] >= p.min_point_torque_nm:
                 ctrl._record_point(point, host_t0, host_t1)
             else:

@@ -97,11 +97,11 @@ async def run_steps(ctrl) -> None:
     for i, st in enumerate(ctrl.plan.steps):
         task = asyncio.create_task(_run_step(ctrl, st), name=f"step-{i + 1}")
         why = None
-        t0 = ctrl._now()
+        t0 = ctrl.rig_now()
         try:
             while not task.done():
                 await asyncio.wait({task}, timeout=0.05)
-                why = None if task.done() else _limit_passed(ctrl, st, ctrl._now() - t0)
+                why = None if task.done() else _limit_passed(ctrl, st, ctrl.rig_now() - t0)
                 if why:
                     task.cancel()
                     await asyncio.gather(task, return_exceptions=True)
@@ -151,14 +151,14 @@ async def _run_step(ctrl, st: dict) -> None:
     if ctrl.state is State.WARMUP or ctrl.state is State.MEASURE:
         ctrl._enter(State.STEP, f"plan step: {kind}")
     if kind == "wait":
-        await ctrl._sleep(st["s"])
+        await ctrl.rig_sleep(st["s"])
     elif kind == "throttle":
         ctrl.act.throttle(st["fraction"])
-        await ctrl._sleep(0.05)
+        await ctrl.rig_sleep(0.05)
     elif kind == "brake":
         ctrl.act.brake(APPLY if st["direction"] == "apply" else RELEASE)
         try:
-            await ctrl._sleep(st["s"])
+            await ctrl.rig_sleep(st["s"])
         finally:
             ctrl.act.brake(STOP)
     elif kind == "contact":
@@ -174,17 +174,17 @@ async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) ->
     from dyno.control.speed_hold import secondary_rpm
 
     no_load = secondary_rpm(ctrl, 1.0)
-    t_c = ctrl._now()
+    t_c = ctrl.rig_now()
     ctrl.act.brake(APPLY)
     try:
         while secondary_rpm(ctrl, 0.15) > no_load * (1.0 - drop_rel):
-            if ctrl._now() - t_c > timeout_s:
+            if ctrl.rig_now() - t_c > timeout_s:
                 ctrl.abort("error", f"the brake did not slow the secondary in {timeout_s:g} s")
                 return False
-            await ctrl._sleep(0.02)
+            await ctrl.rig_sleep(0.02)
     finally:
         ctrl.act.brake(STOP)
-    ctrl._log("contact", after_s=ctrl._now() - t_c)
+    ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
     return True
 
 
@@ -223,25 +223,26 @@ async def _hold_step(ctrl, st: dict) -> None:
             if ctrl.state is not State.STEP:
                 ctrl._enter(State.STEP, f"hold {variable} at {sp:g}")
             ctrl._enter(State.SETTLE, f"holding {variable} at {sp:g} until within {tol:.1%}")
-            t0, since, by = ctrl._now(), None, "held"
+            t0, since, by = ctrl.rig_now(), None, "held"
             while True:
-                await ctrl._sleep(0.05)
+                await ctrl.rig_sleep(0.05)
                 if task.done():
                     task.result()
                 x = measured(ctrl, variable, gains.speed_window_s)
                 if abs(x - sp) <= tol * sp:
-                    since = since if since is not None else ctrl._now()
-                    if ctrl._now() - since >= st.get("in_band_s", 0.8):
+                    since = since if since is not None else ctrl.rig_now()
+                    if ctrl.rig_now() - since >= st.get("in_band_s", 0.8):
                         break
                 else:
                     since = None
-                if ctrl._now() - t0 > st.get("max_approach_s", 8.0):
+                if ctrl.rig_now() - t0 > st.get("max_approach_s", 8.0):
                     by = "timeout"
                     break
             if by == "timeout" and not abs(x - sp) <= 2 * tol * sp:
                 ctrl._log("skip", reason=f"cannot hold {variable} at {sp:g} (at {x:.1f} after "
-                                         f"{ctrl._now() - t0:.1f} s)")
+                                         f"{ctrl.rig_now() - t0:.1f} s)")
                 continue
+            settle_s = ctrl.rig_now() - t0
             target["frozen"] = True
             saved, ctrl.plan = ctrl.plan, measure_plan
             try:
@@ -249,7 +250,7 @@ async def _hold_step(ctrl, st: dict) -> None:
             finally:
                 ctrl.plan = saved
                 target["frozen"] = False
-            point.update(settled_by=by, settle_s=h0 - t0, setpoint=sp, hold_variable=variable)
+            point.update(settled_by=by, settle_s=settle_s, setpoint=sp, hold_variable=variable)
             ctrl._record_point(point, h0, h1)
     finally:
         task.cancel()
@@ -280,20 +281,20 @@ async def _ramp_step(ctrl, st: dict) -> None:
         if ctrl.state is not State.STEP:
             ctrl._enter(State.STEP, f"ramp {variable} {a:.0f} -> {b:.0f} rpm at {abs(rate):g} rpm/s")
         ctrl._enter(State.SETTLE, f"ramp: reaching {a:.0f} rpm")
-        t0 = ctrl._now()
-        while abs(measured(ctrl, variable, gains.speed_window_s) - a) > 0.01 * a and ctrl._now() - t0 < 8.0:
-            await ctrl._sleep(0.05)
+        t0 = ctrl.rig_now()
+        while abs(measured(ctrl, variable, gains.speed_window_s) - a) > 0.01 * a and ctrl.rig_now() - t0 < 8.0:
+            await ctrl.rig_sleep(0.05)
         ctrl._enter(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
-        t_start = ctrl._now()
+        t_start = ctrl.rig_now()
         duration = abs(b - a) / abs(rate)
-        while ctrl._now() - t_start < duration - 1e-9:
-            h0, d0 = ctrl._now(), ctrl.poller.device_now_us()
-            t_end = min(h0 + point_s, t_start + duration)
-            while ctrl._now() < t_end - 1e-9:
-                await ctrl._sleep(0.05)
+        while ctrl.rig_now() - t_start < duration - 1e-9:
+            h0, d0, r0 = ctrl._now(), ctrl.poller.device_now_us(), ctrl.rig_now()
+            t_end = min(r0 + point_s, t_start + duration)
+            while ctrl.rig_now() < t_end - 1e-9:
+                await ctrl.rig_sleep(0.05)
                 if task.done():
                     task.result()
-                target["rpm"] = a + rate * (ctrl._now() - t_start)
+                target["rpm"] = a + rate * (ctrl.rig_now() - t_start)
             h1, d1 = ctrl._now(), ctrl.poller.device_now_us()
             point = reduce_point(ctrl.poller.streams, d0, d1, ctrl.calibration, ctrl.engine_map,
                                  index=len(ctrl.points))
