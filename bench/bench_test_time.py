@@ -106,7 +106,7 @@ def main() -> int:
                                                 out_dir=tmp / f"{plan}-{seed}")))
                 rows.append(s)
                 print(f"| {plan} | {seed} | {s['points']} | {s['test_time_s']:.0f} | {s['per_point_s']:.1f} | "
-                      f"{s['max_ci95']:.4f} | {s['covered']:.0%} | {s['median_err']:.4f} |", flush=True)
+                      f"{s['max_ci95']:.5f} | {s['covered']:.0%} | {s['median_err']:.4f} |", flush=True)
             if rows:
                 allpts = sum(r["points"] for r in rows)
                 cov = sum(r["covered"] * r["points"] for r in rows) / allpts
@@ -114,7 +114,7 @@ def main() -> int:
                       f"{max(r['points'] for r in rows)} | {min(r['test_time_s'] for r in rows):.0f}-"
                       f"{max(r['test_time_s'] for r in rows):.0f} | "
                       f"{statistics.mean(r['per_point_s'] for r in rows):.1f} | "
-                      f"{max(r['max_ci95'] for r in rows):.4f} | {cov:.0%} of {allpts} | "
+                      f"{max(r['max_ci95'] for r in rows):.5f} | {cov:.0%} of {allpts} | "
                       f"{statistics.median(e for r in rows for e in r['errs']):.4f} |", flush=True)
     return 0
 
