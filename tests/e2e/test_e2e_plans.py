@@ -103,3 +103,43 @@ def test_an_unknown_plan_name_is_one_line_listing_the_plans(tmp_path):
     line = r.stderr.strip()
     assert "\n" not in line and "--plan" in line and "speed-hold" in line and "thesis-step" in line
     assert not (tmp_path / "run").exists()
+
+
+def test_the_ui_runs_a_closed_loop_plan_paced(tmp_path):
+    """`dyno ui --plan torque-hold` (its session, driven by Textual's pilot at 8x): GO, torque points held
+    at their setpoints (the runners' periods scale with the pace), the plan stored with the run."""
+    import asyncio
+    import time
+
+    from dyno.control.controller import State
+    from dyno.control.plans import plan_named
+    from dyno.ui.live_app import LiveApp
+    from dyno.ui.session import LiveOptions
+
+    async def scenario():
+        app = LiveApp(LiveOptions(sim=True, speed=8.0, seed=0, out_dir=tmp_path / "run",
+                                  plan=plan_named("torque-hold")))
+        async with app.run_test(size=(80, 24)) as pilot:
+            async def wait_for(cond, timeout_s):
+                t_end = time.monotonic() + timeout_s
+                while time.monotonic() < t_end and not cond():
+                    await pilot.pause(0.2)
+                return cond()
+
+            assert await wait_for(lambda: app.session is not None, 5)
+            s = app.session
+            assert await wait_for(lambda: s.controller.state is State.ARMED, 30)
+            assert s.controller.time_scale == pytest.approx(1 / 8)
+            await pilot.press("g")
+            await pilot.pause(0.1)
+            await pilot.press("y")
+            assert await wait_for(lambda: len(s.controller.points) >= 2, 90), s.controller.reason
+            pts = list(s.controller.points)
+            await pilot.press("space")
+            await pilot.pause(0.3)
+            return pts
+
+    pts = asyncio.run(scenario())
+    for p in pts:
+        assert p["hold_variable"] == "torque" and abs(p["torque_secondary_nm"] - p["setpoint"]) <= 0.1 * p["setpoint"]
+    assert (tmp_path / "run" / "plan.toml").read_text() == shipped_plans()["torque-hold"].read_text()
