@@ -78,6 +78,16 @@ def load_inputs(opts: RunOptions):
     return rig_cfg, calibration, engine_map
 
 
+def systematic_terms(opts: RunOptions, rig_cfg, calibration) -> dict:
+    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them)."""
+    from dyno.analysis.calibration import load_history
+    from dyno.analysis.systematic import calibration_rel_u
+
+    history = load_history(opts.calibration_path)
+    return {"torque_calibration_rel": calibration_rel_u(history, calibration),
+            "engine_map_rel": rig_cfg.uncertainty.engine_map_rel, "calibration_entries": len(history)}
+
+
 def limits_from_config(rig_cfg) -> SafetyLimits:
     lim = rig_cfg.limits
     return SafetyLimits(rotor_temp_max_c=lim.rotor_temp_max_c, overspeed_primary_rpm=lim.overspeed_primary_rpm,
@@ -130,7 +140,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
-    holder: dict = {}
+    holder: dict = {"uncertainty": systematic_terms(opts, rig_cfg, calibration)}
     try:
         return _build(opts, now_s, rig_cfg, calibration, engine_map, holder)
     except BaseException:
@@ -184,6 +194,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "engine_map_source": str(engine_map.source),
         "engine_map_sha256": engine_map.sha256,
         "plan": plan_meta(opts.plan),
+        "uncertainty": holder["uncertainty"],
         "limits": _asdict(limits),
     }
     tune_path = opts.tune_path
@@ -222,6 +233,12 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
     _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
+    unc = holder["uncertainty"]
+    if unc:
+        from dyno.analysis.systematic import point_systematic
+
+        controller.point_hooks.append(lambda point, t0, t1: point.update(
+            point_systematic(point, unc["torque_calibration_rel"], unc["engine_map_rel"])))
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -462,6 +479,7 @@ def summarize(ctx: RunContext) -> dict:
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
     # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
     out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else None
+    out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))
@@ -500,7 +518,9 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_sec
               "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
               # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
               "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
-              "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected")
+              "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
+              # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
+              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map")
 
 
 def public_point(p: dict) -> dict:

@@ -49,6 +49,11 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
         for k in PASS_THROUGH:
             if k in doc:
                 p[k] = doc[k]
+        unc = run.meta.get("uncertainty")
+        if unc and "efficiency_sys95" in doc:  # the run's stated systematic terms, on the re-processed point
+            from dyno.analysis.systematic import point_systematic
+
+            p.update(point_systematic(p, unc["torque_calibration_rel"], unc["engine_map_rel"]))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still

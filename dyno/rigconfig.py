@@ -155,6 +155,13 @@ class InertiaConfig:
 
 
 @dataclass(frozen=True)
+class UncertaintyConfig:
+    """Systematic uncertainties stated beside each point's CI (dyno/analysis/systematic.py)."""
+
+    engine_map_rel: float = 0.05  # engine map torque, relative standard uncertainty (representative map)
+
+
+@dataclass(frozen=True)
 class ControlConfig:
     """Load-control gains (docs/control.md has the identification procedure).
 
@@ -189,6 +196,7 @@ class RigConfig:
     reset: ResetConfig
     inertia: InertiaConfig = InertiaConfig()
     control: ControlConfig = ControlConfig()
+    uncertainty: UncertaintyConfig = UncertaintyConfig()
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -300,7 +308,8 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
-             "actuator", "throttle", "reset", "inertia", "control"}
+             "actuator", "throttle", "reset", "inertia", "control",
+             "uncertainty"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -444,6 +453,12 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     control = ControlConfig(**{k: r.number(t, k, "control.", lo=lo, hi=hi, required=False,
                                            default=getattr(ControlConfig, k))
                                for k, (lo, hi) in ranges.items()})
+    t = data.get("uncertainty", {})
+    if not isinstance(t, Mapping):
+        raise r.err("uncertainty", f"expected a table [uncertainty], got {type(t).__name__}")
+    r.no_extra(t, {"engine_map_rel"}, "uncertainty.")
+    uncertainty = UncertaintyConfig(engine_map_rel=r.number(t, "engine_map_rel", "uncertainty.", lo=0.0, hi=1.0,
+                                                            required=False, default=UncertaintyConfig.engine_map_rel))
     if control.min_pulse_s > control.period_s:
         raise r.err("control.min_pulse_s", f"expected <= control.period_s ({control.period_s})")
 
@@ -457,6 +472,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
+        uncertainty=uncertainty,
     )
 
 

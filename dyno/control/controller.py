@@ -63,6 +63,9 @@ class TestPlan:
     # Hall sensor is dead (an engine running unseen would be blind to over-speed): abort.
     engine_start_timeout_s: float = 60.0
     warmup_s: float = 3.0  # full throttle, no brake: let it stabilise
+    # Warm-up criterion: no point is measured before the brake has loaded the CVT this long (belt and
+    # clutch warm-up; the rig has no belt-temperature channel, only the rotor's). Recorded with the run.
+    warmup_at_load_s: float = 0.0
     step_s: float = 0.25  # brake actuator on-time per step (adapted, see below)
     step_min_s: float = 0.08
     step_max_s: float = 1.0
@@ -128,6 +131,8 @@ class TestController:
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
+        self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
+        self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
         poller.listeners.append(self._on_poll)
@@ -309,6 +314,8 @@ class TestController:
             self.act.brake(APPLY)
             await self._sleep(self._step_s)
             self.act.brake(STOP)
+            if self.load_since_s is None:
+                self.load_since_s = self.rig_now()
             self._enter(State.SETTLE, "waiting for steady state")
             settled_by, settle_s = await self._settle()
             if await self._secondary_below(p.min_secondary_rpm):
@@ -339,6 +346,7 @@ class TestController:
         Returns the reduced point and the window's host start and end times.
         """
         p = self.plan
+        await self._warm_up_at_load()
         for attempt in range(MAX_REMEASURE + 1):
             self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
             host_t0, dev_t0 = self._now(), self.poller.device_now_us()
@@ -373,6 +381,21 @@ class TestController:
                 point["valid"] = False
                 point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
         return point, host_t0, host_t1
+
+    async def _warm_up_at_load(self) -> None:
+        """Before the first point: the plan's time at load (``warmup_at_load_s``), waited out if short."""
+        need = self.plan.warmup_at_load_s
+        if self.warmup is not None or need <= 0:
+            return
+        if self.load_since_s is None:
+            self.load_since_s = self.rig_now()
+        left = need - (self.rig_now() - self.load_since_s)
+        if left > 0:
+            self._log("warmup_wait", wait_s=left)
+            await self.rig_sleep(left)
+        self.warmup = {"criterion": "time at load", "required_s": need,
+                       "at_load_s": self.rig_now() - self.load_since_s}
+        self._log("warmup", **self.warmup)
 
     def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
         point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)

@@ -237,6 +237,7 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     finally:
         ctrl.act.brake(STOP)
     ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
+    ctrl.load_since_s = ctrl.rig_now()  # the pads bite: the CVT is loaded from here (warm-up criterion)
     target = {"rpm": setpoints[0], "last_rpm": math.nan}
     loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="speed-hold")
     try:

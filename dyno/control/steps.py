@@ -185,6 +185,8 @@ async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) ->
     finally:
         ctrl.act.brake(STOP)
     ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
+    if ctrl.load_since_s is None:
+        ctrl.load_since_s = ctrl.rig_now()  # the CVT is loaded from here (warm-up criterion)
     return True
 
 
@@ -288,6 +290,7 @@ async def _ramp_step(ctrl, st: dict) -> None:
         t0 = ctrl.rig_now()
         while abs(measured(ctrl, variable, gains.speed_window_s) - a) > 0.01 * a and ctrl.rig_now() - t0 < 8.0:
             await ctrl.rig_sleep(0.05)
+        await ctrl._warm_up_at_load()
         ctrl._enter(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
         t_start = ctrl.rig_now()
         duration = abs(b - a) / abs(rate)

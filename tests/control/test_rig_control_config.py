@@ -25,7 +25,7 @@ def test_gains_and_inertias_from_rig_toml(base):
     assert SpeedHoldGains.from_config(rig.control, "secondary").kp == 4.5
     assert SpeedHoldGains.from_config(rig.control, "torque").kp == 0.7
     assert rig.inertia.secondary_kg_m2 == 0.02
-    for k in ("control", "inertia"):  # optional tables: defaults without them
+    for k in ("control", "inertia", "uncertainty"):  # optional tables: defaults without them
         d.pop(k)
     rig = rig_from_dict(d, "r.toml")
     assert rig.control == ControlConfig() and rig.inertia == InertiaConfig()
@@ -34,7 +34,7 @@ def test_gains_and_inertias_from_rig_toml(base):
 @pytest.mark.parametrize("table, key, value", [
     ("control", "kp_speed", 0.0), ("control", "kp_speed", float("nan")), ("control", "period_s", 5.0),
     ("control", "min_pulse_s", 0.08), ("control", "kp_sped", 3.0), ("inertia", "engine_kg_m2", -0.1),
-    ("inertia", "engine_kg_m2", "heavy"),
+    ("inertia", "engine_kg_m2", "heavy"), ("uncertainty", "engine_map_rel", 1.5), ("uncertainty", "map", 0.1),
 ])
 def test_bad_control_or_inertia_names_its_field(base, table, key, value):
     d = copy.deepcopy(base)
