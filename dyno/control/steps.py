@@ -7,7 +7,8 @@ Step kinds (keys; every time in s, speeds in rpm, torque in N·m):
   (or ``setpoint``, or ``from``/``to``/``count``), and measure a point at each: at least ``min_s``, until
   ``ci95`` or ``max_s`` (defaults: the plan's [test] values); ``tolerance_rel``, ``in_band_s``,
   ``max_approach_s`` say when a setpoint is reached or given up; ``load_raises_speed`` = true where more
-  brake raises the held speed (the engine while the CVT back-shifts at heavy load).
+  brake raises the held speed (the engine while the CVT back-shifts at heavy load); ``measure`` = false
+  only moves there (no point), e.g. to enter a region before another hold.
 * ``ramp``: move the setpoint of ``variable`` (secondary | engine) from ``from`` to ``to`` at ``rate_rpm_s``
   under the hold, a point every ``point_s``, each corrected for I·alpha (:mod:`dyno.analysis.inertia`).
 * ``brake``: ``direction`` = "apply" | "release" for ``s``.
@@ -32,7 +33,7 @@ KINDS = {
     "hold": {"variable": ("secondary", "engine", "torque"), "setpoint": (0.0, 1e5), "setpoints": "list",
              "from": (0.0, 1e5), "to": (0.0, 1e5), "count": (1, 200), "min_s": (0.0, 600.0),
              "ci95": (0.0, 1.0), "max_s": (0.0, 600.0), "tolerance_rel": (0.0, 0.5), "in_band_s": (0.0, 60.0),
-             "max_approach_s": (0.0, 600.0), "load_raises_speed": "bool"},
+             "max_approach_s": (0.0, 600.0), "load_raises_speed": "bool", "measure": "bool"},
     "ramp": {"variable": ("secondary", "engine"), "from": (0.0, 1e5), "to": (0.0, 1e5),
              "rate_rpm_s": (1.0, 1e4), "point_s": (0.2, 60.0)},
     "brake": {"direction": ("apply", "release"), "s": (0.0, 60.0)},
@@ -245,6 +246,8 @@ async def _hold_step(ctrl, st: dict) -> None:
                                          f"{ctrl.rig_now() - t0:.1f} s)")
                 continue
             settle_s = ctrl.rig_now() - t0
+            if not st.get("measure", True):  # a "go to" hold: reach the setpoint, take no point
+                continue
             target["frozen"] = True
             saved, ctrl.plan = ctrl.plan, measure_plan
             try:
