@@ -27,7 +27,7 @@ def add_arguments(p) -> None:
     p.add_argument("--tune", type=Path, default=None,
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
     p.add_argument("--settle", choices=("detect", "fixed"), default=None,
-                   help="settling: detected from the data, or the thesis's fixed 4 s")
+                   help="step plans' settling: detected from the data, or the thesis's fixed 4 s (default: the plan's)")
     p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
                    help="a shipped plan (speed-hold: closed-loop secondary-speed setpoints, each point to a 95 %% "
                         "CI of +-1 pp, the default; thesis-step: the thesis's open-loop brake steps; sweep; "

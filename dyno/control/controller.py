@@ -339,9 +339,11 @@ class TestController:
                 self._enter(State.DONE, f"{p.max_points} points")
                 return
 
-    async def _measure(self) -> tuple[dict, float, float]:
+    async def _measure(self, give_up=None) -> tuple[dict, float, float]:
         """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
-        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).
+        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).  ``give_up``
+        (a callable, checked each second) ends a window that cannot become a point early: the point
+        comes back with ``gave_up`` set (a closed-loop plan's drifting speed).
 
         Returns the reduced point and the window's host start and end times.
         """
@@ -360,6 +362,9 @@ class TestController:
                 else:
                     unsure = point["efficiency_sem"] > p.target_efficiency_sem
                 remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                if unsure and give_up is not None and give_up():
+                    point["gave_up"] = True
+                    break
                 if not unsure or remaining_s < 0.05:
                     break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
                 await self._sleep(min(1.0, remaining_s))

@@ -251,13 +251,14 @@ async def _hold_step(ctrl, st: dict) -> None:
             target["frozen"] = True
             saved, ctrl.plan = ctrl.plan, measure_plan
             try:
-                point, h0, h1 = await ctrl._measure()
+                point, h0, h1 = await ctrl._measure(give_up=lambda: not abs(
+                    measured(ctrl, variable, 0.5) - sp) <= max(0.02, 2 * tol) * sp)
             finally:
                 ctrl.plan = saved
                 target["frozen"] = False
             point.update(settled_by=by, settle_s=settle_s, setpoint=sp, hold_variable=variable)
             mean = point[{"secondary": "rpm_secondary", "engine": "rpm_primary", "torque": "torque_secondary_nm"}[variable]]
-            if not abs(mean - sp) <= max(0.02, 2 * tol) * sp:  # the CVT shifted under the frozen brake
+            if point.get("gave_up") or not abs(mean - sp) <= max(0.02, 2 * tol) * sp:  # shifted under the brake
                 ctrl._log("skip", reason=f"{variable} drifted to {mean:.1f} while measuring at {sp:g}: not steady")
                 continue
             ctrl._record_point(point, h0, h1)
