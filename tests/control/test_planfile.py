@@ -24,7 +24,7 @@ def test_shipped_plans_load_by_name():
     # the shipped thesis plan is the thesis test the code always ran (only identity fields differ)
     assert replace(step, name="", source="", text="") == Plan()
     hold = plan_named("speed-hold")
-    assert hold.mode == "speed-hold" and hold.target_efficiency_ci95 == 0.01
+    assert hold.mode == "speed-hold" and hold.target_efficiency_ci95 <= 0.01 and hold.warmup_at_load_s > 0
     assert isinstance(speed_hold_plan_of(hold), SpeedHoldPlan)
     assert speed_hold_plan_of(hold).points == hold.params["points"]
     sweep = plan_named("sweep")
