@@ -43,7 +43,8 @@ def test_sweep_is_stored_with_its_plan_and_corrected_for_inertia(sweep_run):
     assert rs == sorted(rs, reverse=True) and rs[0] - rs[-1] > 2000  # a sweep down the range
     # The secondary decelerates ~150 rpm/s all along: the I·alpha terms are not negligible, and the
     # corrected efficiency is closer to the sim's truth than the gauge-and-map one.
-    assert all(p["alpha_secondary_rad_s2"] < -5 for p in pts)
+    alphas = [p["alpha_secondary_rad_s2"] for p in pts]
+    assert statistics.median(alphas) < -10 and sum(a < -5 for a in alphas) >= len(pts) - 2  # (the ramp's start)
     err = [abs(p["efficiency"] - p["efficiency_true"]) for p in pts]
     err_raw = [abs(p["efficiency_uncorrected"] - p["efficiency_true"]) for p in pts]
     assert statistics.median(err) < 0.6 * statistics.median(err_raw), (statistics.median(err), statistics.median(err_raw))
@@ -154,7 +155,7 @@ def test_step_limits_end_a_step_or_abort_safely(tmp_path):
     head = ('schema = "dyno.plan/1"\nname = "limits"\nmode = "steps"\n[[step]]\nkind = "contact"\n'
             '[[step]]\nkind = "brake"\ndirection = "apply"\ns = 6.0\nlimit_min_secondary_rpm = 3000.0\n')
     ok = plan_from_text(head + '[[step]]\nkind = "brake"\ndirection = "release"\ns = 1.0\n'
-                        '[[step]]\nkind = "hold"\nvariable = "torque"\nsetpoint = 10.0\n', "ok.toml")
+                        '[[step]]\nkind = "hold"\nvariable = "torque"\nsetpoint = 16.0\n', "ok.toml")
     r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "ok", plan=ok))
     assert r["state"] == "done" and len(r["points"]) == 1
     docs = load_run(tmp_path / "ok", with_events=False).docs("limit")

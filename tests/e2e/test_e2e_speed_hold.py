@@ -41,7 +41,7 @@ def test_speed_hold_steady_test_figures(hold_run):
     assert inside / len(pts) >= 0.85  # (>= 90 % over 10 seeds: bench/bench_test_time.py)
     assert statistics.median(abs(p["efficiency"] - p["efficiency_true"]) for p in pts) <= 0.005
     # warm-up criterion met and recorded; the systematic part stated beside the CI (and larger than it)
-    assert r["warmup"]["criterion"] == "time at load" and r["warmup"]["at_load_s"] >= 8.0
+    assert r["warmup"]["criterion"] == "time at load" and r["warmup"]["at_load_s"] >= r["warmup"]["required_s"] - 1e-6 > 0
     assert all(p["efficiency_sys95"] > p["efficiency_ci95"] for p in pts)
     assert all(p["efficiency_sys95_calibration"] > 0 and p["efficiency_sys95_engine_map"] > 0 for p in pts)
     rs = [p["rpm_secondary"] for p in pts]
