@@ -12,6 +12,8 @@ Step kinds (keys; every time in s, speeds in rpm, torque in N·m):
 * ``ramp``: move the setpoint of ``variable`` (secondary | engine) from ``from`` to ``to`` at ``rate_rpm_s``
   under the hold, a point every ``point_s``, each corrected for I·alpha (:mod:`dyno.analysis.inertia`).
 * ``brake``: ``direction`` = "apply" | "release" for ``s``.
+* ``identify``: the speed hold's auto-tune at ``setpoint`` (:mod:`dyno.control.autotune`): ``pulse_s``,
+  ``repeats``, ``apply`` (use the identified ``kp`` for the rest of the run; default true).
 * ``throttle``: ``fraction`` 0..1.
 * ``wait``: ``s``.
 
@@ -37,10 +39,11 @@ KINDS = {
     "ramp": {"variable": ("secondary", "engine"), "from": (0.0, 1e5), "to": (0.0, 1e5),
              "rate_rpm_s": (1.0, 1e4), "point_s": (0.2, 60.0)},
     "brake": {"direction": ("apply", "release"), "s": (0.0, 60.0)},
+    "identify": {"setpoint": (100.0, 1e5), "pulse_s": (0.05, 1.0), "repeats": (1, 10), "apply": "bool"},
     "throttle": {"fraction": (0.0, 1.0)},
     "wait": {"s": (0.0, 3600.0)},
 }
-REQUIRED = {"ramp": {"to", "rate_rpm_s"}, "brake": {"direction", "s"}, "throttle": {"fraction"}, "wait": {"s"}}
+REQUIRED = {"identify": {"setpoint"}, "ramp": {"to", "rate_rpm_s"}, "brake": {"direction", "s"}, "throttle": {"fraction"}, "wait": {"s"}}
 LIMITS = {"limit_s": (0.0, 3600.0), "limit_min_secondary_rpm": (0.0, 1e5), "limit_max_secondary_rpm": (0.0, 1e5),
           "limit_max_torque_nm": (0.0, 1e4), "on_limit": ("next", "abort")}
 
@@ -168,6 +171,11 @@ async def _run_step(ctrl, st: dict) -> None:
         await _hold_step(ctrl, st)
     elif kind == "ramp":
         await _ramp_step(ctrl, st)
+    elif kind == "identify":
+        from dyno.control.autotune import identify_speed_gain
+
+        await identify_speed_gain(ctrl, st["setpoint"], pulse_s=st.get("pulse_s", 0.2),
+                                  repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
 
 
 async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
