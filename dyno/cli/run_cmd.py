@@ -26,11 +26,12 @@ def add_arguments(p) -> None:
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
-    p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
-                   help="settling: detected from the data, or the thesis's fixed 4 s")
-    p.add_argument("--plan", choices=sorted(PLANS), default="thesis-step",
-                   help="thesis-step: the thesis's open-loop brake steps (default); speed-hold: closed-loop "
-                        "secondary-speed setpoints, each point measured to a 95 %% CI of +-1 pp (docs/control.md)")
+    p.add_argument("--settle", choices=("detect", "fixed"), default=None,
+                   help="step plans' settling: detected from the data, or the thesis's fixed 4 s (default: the plan's)")
+    p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
+                   help="a shipped plan (speed-hold: closed-loop secondary-speed setpoints, each point to a 95 %% "
+                        "CI of +-1 pp, the default; thesis-step: the thesis's open-loop brake steps; sweep; "
+                        "torque-hold; engine-hold; ...) or a plan file (a path ending in .toml; docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
@@ -42,11 +43,8 @@ def add_arguments(p) -> None:
     add_rig_argument(p)
 
 
-#: the shipped plans, by name (dyno.control.plans)
-PLANS = ("thesis-step", "speed-hold")
-
-
 def plan_named(name: str, **overrides):
+    """A shipped plan by name, a code plan, or a plan file (dyno.control.plans); bad ones raise ConfigError."""
     from dyno.control.plans import plan_named as _plan_named
 
     return _plan_named(name, **overrides)
@@ -72,7 +70,7 @@ def run(args) -> int:
     drills = [parse_drill(d) for d in args.drill]
     opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=plan_named(args.plan, settle_mode=args.settle), drills=drills, handle_signals=True,
+                      plan=_plan(args), drills=drills, handle_signals=True,
                       mock_pins=args.mock_pins)
     if args.calibration:
         opts.calibration_path = args.calibration
@@ -112,6 +110,12 @@ def run(args) -> int:
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
     _write_report(result, announce=not args.json)
     return exit_code(result)
+
+
+def _plan(args):
+    """The plan ``--plan`` names; ``--settle`` overrides its settle mode only when given."""
+    over = {"settle_mode": args.settle} if args.settle is not None else {}
+    return plan_named(args.plan, **over)
 
 
 def _write_report(result: dict, *, announce: bool) -> None:
