@@ -34,7 +34,7 @@ class RunOptions:
     rig_path: Path | None = None
     calibration_path: Path = DEFAULT_CALIBRATION
     engine_map_path: Path = DEFAULT_ENGINE_MAP
-    plan: TestPlan = field(default_factory=TestPlan)
+    plan: TestPlan = field(default_factory=TestPlan)  # (the CLI's default is the speed-hold plan file)
     limits: SafetyLimits | None = None
     clock_offset_us: int = 0
     sim_params: object = None
@@ -76,6 +76,16 @@ def load_inputs(opts: RunOptions):
     calibration = latest(load_history(opts.calibration_path))
     engine_map = load_engine_map(opts.engine_map_path)
     return rig_cfg, calibration, engine_map
+
+
+def systematic_terms(opts: RunOptions, rig_cfg, calibration) -> dict:
+    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them)."""
+    from dyno.analysis.calibration import load_history
+    from dyno.analysis.systematic import calibration_rel_u
+
+    history = load_history(opts.calibration_path)
+    return {"torque_calibration_rel": calibration_rel_u(history, calibration),
+            "engine_map_rel": rig_cfg.uncertainty.engine_map_rel, "calibration_entries": len(history)}
 
 
 def limits_from_config(rig_cfg) -> SafetyLimits:
@@ -130,7 +140,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
-    holder: dict = {}
+    holder: dict = {"uncertainty": systematic_terms(opts, rig_cfg, calibration)}
     try:
         return _build(opts, now_s, rig_cfg, calibration, engine_map, holder)
     except BaseException:
@@ -183,7 +193,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "calibration_source": str(opts.calibration_path),
         "engine_map_source": str(engine_map.source),
         "engine_map_sha256": engine_map.sha256,
-        "plan": _asdict(opts.plan),
+        "plan": plan_meta(opts.plan),
+        "uncertainty": holder["uncertainty"],
         "limits": _asdict(limits),
     }
     tune_path = opts.tune_path
@@ -202,19 +213,34 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         tune_text = Path(tune_path).read_text()
         meta["tune_source"] = str(tune_path)
         meta["tune_sha256"] = hashlib.sha256(tune_text.encode()).hexdigest()
+    plan_text = opts.plan.text or None
+    if plan_text:
+        import hashlib
+
+        meta["plan_source"] = opts.plan.source
+        meta["plan_text_sha256"] = hashlib.sha256(plan_text.encode()).hexdigest()
     writer = RunWriter(out, meta, calibration=calibration.to_dict(),
-                       engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text)
+                       engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text,
+                       plan_text=plan_text)
     poller.listeners.append(writer.events)
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
     controller.rig = rig_cfg
     controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
+    controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
+    controller.inertia = rig_cfg.inertia
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
     _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
+    unc = holder["uncertainty"]
+    if unc:
+        from dyno.analysis.systematic import point_systematic
+
+        controller.point_hooks.append(lambda point, t0, t1: point.update(
+            point_systematic(point, unc["torque_calibration_rel"], unc["engine_map_rel"])))
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -313,6 +339,13 @@ def _thermometer(bus, address: int):
     return sensor.object_c
 
 
+def plan_meta(plan) -> dict:
+    """The plan as meta.json keeps it (its file's text is stored beside, as plan.toml)."""
+    d = _asdict(plan)
+    d.pop("text", None)
+    return d
+
+
 def _asdict(obj):
     import dataclasses
 
@@ -320,6 +353,8 @@ def _asdict(obj):
         return {f.name: _asdict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, (list, tuple)):
         return [_asdict(x) for x in obj]
+    if isinstance(obj, dict):
+        return {k: _asdict(v) for k, v in obj.items()}
     if isinstance(obj, Path):
         return str(obj)
     return obj
@@ -465,6 +500,7 @@ def summarize(ctx: RunContext) -> dict:
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
     # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
     out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
+    out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))
@@ -498,10 +534,14 @@ def rig_outputs(ctx: RunContext) -> dict:
 
 
 POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",
-              "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_sys95",
-              "efficiency_sys95_calibration", "efficiency_sys95_engine_map", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
+              "efficiency", "efficiency_sem", "efficiency_ci95", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
-              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults")
+              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
+              # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
+              "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
+              "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
+              # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
+              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map")
 
 
 def public_point(p: dict) -> dict:

@@ -17,8 +17,9 @@ from dyno.runlog.reader import load_run
 
 PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "step_s", "efficiency_true",
                 "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
-                "power_out_true_w", "legacy_point", "discarded", "legacy_faults", "thesis_torque_nm",
-                "legacy_channels")
+                "power_out_true_w", "ratio_geometric_true", "belt_slip_true", "legacy_point", "discarded",
+                "legacy_faults", "thesis_torque_nm", "legacy_channels", "setpoint_rpm", "setpoint", "hold_variable",
+                "ramp_rate_rpm_s")
 # Fields a fault found at import/acquisition time withholds (the raw data cannot support them).
 WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 
@@ -41,9 +42,19 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
     for doc in run.points:
         p = reduce_point(run.streams, doc["t_start_us"], doc["t_end_us"], calibration, engine_map,
                          index=doc.get("index"))
+        if "inertia_engine_kg_m2" in doc:  # a ramp point (plan step "ramp"): the same I·alpha correction
+            from dyno.analysis.inertia import correct_inertia
+
+            p = correct_inertia(p, run.streams, engine_map, doc["inertia_engine_kg_m2"],
+                                doc["inertia_secondary_kg_m2"])
         for k in PASS_THROUGH:
             if k in doc:
                 p[k] = doc[k]
+        unc = run.meta.get("uncertainty")
+        if unc and "efficiency_sys95" in doc:  # the run's stated systematic terms, on the re-processed point
+            from dyno.analysis.systematic import point_systematic
+
+            p.update(point_systematic(p, unc["torque_calibration_rel"], unc["engine_map_rel"]))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still
@@ -55,7 +66,9 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
                                          for f in fatal]
             p["withheld_by_import"] = True
         points.append(p)
+    plan_path = run.path / "plan.toml"
     return {"run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
+            "plan": run.meta.get("plan"), "plan_text": plan_path.read_text() if plan_path.is_file() else None,
             "aborts": run.docs("abort"), "meta": run.meta, "calibration": calibration.to_dict(),
             "engine_map": str(engine_map.source)}
 

@@ -162,6 +162,41 @@ class TorqueZeroConfig:
 
 
 @dataclass(frozen=True)
+class InertiaConfig:
+    """Rotating inertias for the I·alpha correction of sweeps and ramps (docs/control.md).
+
+    ``engine_kg_m2``: crank, flywheel and primary pulley (the map's torque minus ``J alpha`` enters the
+    CVT).  ``secondary_kg_m2``: secondary pulley, shaft and drive sprocket, the part *upstream* of the
+    torque gauge (the gauge already reads the brake shaft's own inertia torque)."""
+
+    engine_kg_m2: float = 0.045
+    secondary_kg_m2: float = 0.013
+
+
+@dataclass(frozen=True)
+class UncertaintyConfig:
+    """Systematic uncertainties stated beside each point's CI (dyno/analysis/systematic.py)."""
+
+    engine_map_rel: float = 0.05  # engine map torque, relative standard uncertainty (representative map)
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    """Load-control gains (docs/control.md has the identification procedure).
+
+    Each ``kp_*`` is actuator speed (fraction of full speed) per unit relative error; ``ff_*_s`` is the
+    full-speed travel (s) given at once per unit relative setpoint change (feed-forward)."""
+
+    kp_speed: float = 3.0
+    ff_speed_s: float = 0.0
+    kp_engine: float = 3.0
+    kp_torque: float = 1.0
+    deadband_rel: float = 0.004
+    period_s: float = 0.05
+    min_pulse_s: float = 0.02
+
+
+@dataclass(frozen=True)
 class RigConfig:
     path: str
     protocol: str  # "v2" | "v1" | "v0"
@@ -180,6 +215,9 @@ class RigConfig:
     reset: ResetConfig
     driven: DrivenConfig = DrivenConfig()
     torque_zero: TorqueZeroConfig = TorqueZeroConfig()
+    inertia: InertiaConfig = InertiaConfig()
+    control: ControlConfig = ControlConfig()
+    uncertainty: UncertaintyConfig = UncertaintyConfig()
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -291,7 +329,8 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
-             "actuator", "throttle", "reset", "driven", "torque_zero"}
+             "actuator", "throttle", "reset", "inertia", "control",
+             "uncertainty", "driven", "torque_zero"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -446,6 +485,33 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         correct=r.boolean(t, "correct", "torque_zero.", default=tz.correct),
     )
 
+    # inertia, control (optional tables; defaults are the thesis rig's, as identified on the sim)
+    t = data.get("inertia", {})
+    if not isinstance(t, Mapping):
+        raise r.err("inertia", f"expected a table [inertia], got {type(t).__name__}")
+    r.no_extra(t, {"engine_kg_m2", "secondary_kg_m2"}, "inertia.")
+    inertia = InertiaConfig(**{k: r.number(t, k, "inertia.", lo=0.0, hi=10.0, required=False,
+                                           default=getattr(InertiaConfig, k))
+                               for k in ("engine_kg_m2", "secondary_kg_m2")})
+    t = data.get("control", {})
+    if not isinstance(t, Mapping):
+        raise r.err("control", f"expected a table [control], got {type(t).__name__}")
+    ranges = {"kp_speed": (0.01, 100.0), "ff_speed_s": (0.0, 20.0), "kp_engine": (0.01, 100.0),
+              "kp_torque": (0.01, 100.0), "deadband_rel": (0.0, 0.2), "period_s": (0.005, 1.0),
+              "min_pulse_s": (0.0, 1.0)}
+    r.no_extra(t, set(ranges), "control.")
+    control = ControlConfig(**{k: r.number(t, k, "control.", lo=lo, hi=hi, required=False,
+                                           default=getattr(ControlConfig, k))
+                               for k, (lo, hi) in ranges.items()})
+    t = data.get("uncertainty", {})
+    if not isinstance(t, Mapping):
+        raise r.err("uncertainty", f"expected a table [uncertainty], got {type(t).__name__}")
+    r.no_extra(t, {"engine_map_rel"}, "uncertainty.")
+    uncertainty = UncertaintyConfig(engine_map_rel=r.number(t, "engine_map_rel", "uncertainty.", lo=0.0, hi=1.0,
+                                                            required=False, default=UncertaintyConfig.engine_map_rel))
+    if control.min_pulse_s > control.period_s:
+        raise r.err("control.min_pulse_s", f"expected <= control.period_s ({control.period_s})")
+
     return RigConfig(
         path=str(path),
         protocol=r.string(data, "protocol", "", choices=("v2", "v1", "v0")),
@@ -455,7 +521,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         debounce_secondary_us=r.integer(data, "debounce_secondary_us", "", lo=0, hi=65535),
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
-        actuator=actuator, throttle=throttle, reset=reset, driven=driven, torque_zero=torque_zero,
+        actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
+        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero,
     )
 
 

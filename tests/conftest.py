@@ -8,14 +8,15 @@ def belt_table_built():
     """Build the simulated CVT's belt-model efficiency table once, before any test.
 
     The simulated rig reads it from the belt model's disk cache; on a fresh
-    machine the first rig would otherwise build it (about 20 s) inside whatever
+    machine the first rig would otherwise build it (about 60 s) inside whatever
     test happens to come first, and a UI test that checks *when* the belt
     solver gets imported would see the simulator's import instead of the UI's.
     Parallel workers share the cache; a lock file makes one of them build.
     """
     from dyno.sim.belt_table import belt_table
+    from dyno.sim.physics import DEFAULT_TUNE, _load_tune
 
-    belt_table()
+    belt_table(None, _load_tune(DEFAULT_TUNE))  # the default sim's table: at the stock tune's clamp
     yield
 
 

@@ -158,46 +158,6 @@ def point_efficiency(rpm_primary, rpm_primary_sem, rpm_secondary, rpm_secondary_
     }
 
 
-#: The engine map's stated 95 % relative uncertainty on power when the map carries none:
-#: a dynamometer-measured, J1349-corrected map repeats to a few percent; the shipped
-#: representative map is not a measurement at all, so this is a floor, not a claim.
-DEFAULT_MAP_POWER_REL_UNC95 = 0.05
-
-
-def calibration_slope_rel_unc95(calibration) -> float:
-    """95 % relative uncertainty of the torque calibration's slope (systematic for every point).
-
-    From the fit's own figure when it has one (``slope_se_counts_per_nm``); else from its
-    r^2 and sample count, ``se(a)/a = sqrt((1/r^2 - 1)/(n - 2))``, with ``n - 2 = 1`` (the
-    most conservative) when the count is unknown, as for the imported thesis calibrations.
-    """
-    se = getattr(calibration, "slope_se_counts_per_nm", None)
-    slope = getattr(calibration, "slope_counts_per_nm", None)
-    if se is not None and slope:
-        return 2.0 * abs(se / slope)
-    r2 = getattr(calibration, "r2", None)
-    if r2 is None or not 0 < r2 <= 1:
-        return math.nan
-    n = getattr(calibration, "n_samples", 0) or 0
-    return 2.0 * math.sqrt(max(0.0, 1.0 / r2 - 1.0) / max(1, n - 2))
-
-
-def efficiency_systematic95(efficiency: float, calibration, engine_map) -> dict:
-    """The systematic part of a point's 95 % uncertainty, by source, and combined.
-
-    Torque calibration slope and engine-map power are each shared by every point of a
-    run (they do not average down): ``eta`` scales with the torque (slope) and inversely
-    with the map power, so each enters as the same relative uncertainty of ``eta``.
-    """
-    cal = calibration_slope_rel_unc95(calibration)
-    emap = getattr(engine_map, "power_rel_unc95", None)
-    emap = DEFAULT_MAP_POWER_REL_UNC95 if emap is None else float(emap)
-    e = abs(float(efficiency))
-    out = {"efficiency_sys95_calibration": e * cal, "efficiency_sys95_engine_map": e * emap}
-    out["efficiency_sys95"] = math.hypot(out["efficiency_sys95_calibration"], out["efficiency_sys95_engine_map"])
-    return out
-
-
 def add_back_loss(efficiency: float, efficiency_ci95: float, power_in_w: float, rpm_secondary: float,
                   loss_nm: float, loss_ci95_nm: float) -> tuple[float, float]:
     """Efficiency with a driven-side loss the gauge does not see added back, and its 95 % half-width

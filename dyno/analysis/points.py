@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
-from dyno.analysis.efficiency import batch_mean, efficiency_systematic95, point_efficiency
+from dyno.analysis.efficiency import batch_mean, point_efficiency
 from dyno.analysis.engine_map import OutOfMapRange
 from dyno.protocol import v1
 
@@ -121,8 +121,6 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
             # 95 % interval half-width: the standard error is from batch means (correlated samples),
             # so Student's t with (batches - 1) degrees of freedom, not 1.96.
             point["efficiency_ci95"] = float(_t975(_n_batches(t0_us, t1_us) - 1) * eff["efficiency_sem"])
-            # beside the statistical CI: the systematic part (calibration slope, engine map), by source
-            point.update(efficiency_systematic95(eff["efficiency"], calibration, engine_map))
     eff = point["efficiency"]
     if math.isfinite(eff) and not 0.0 <= eff <= 1.0:
         # No drive train makes power: a calibration or an engine map that does not fit this run.

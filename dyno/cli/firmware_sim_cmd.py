@@ -30,6 +30,21 @@ from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 
 
+# MCUSR bits the harness sets for a reset at --reset-at S:CAUSE.
+RESET_CAUSES = {"watchdog": 0x08, "external": 0x02, "brown-out": 0x04}
+
+
+def _reset_at(text: str) -> tuple:
+    """--reset-at S[:CAUSE] -> (seconds, MCUSR)."""
+    import argparse
+
+    t, _, cause = text.partition(":")
+    cause = cause or "watchdog"
+    if cause not in RESET_CAUSES:
+        raise argparse.ArgumentTypeError(f"cause {cause!r} unknown; expected one of {', '.join(RESET_CAUSES)}")
+    return number_in(0.0, 3600.0)(t), RESET_CAUSES[cause]
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
     parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
@@ -64,8 +79,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100)
     parser.add_argument("--drain-s", type=number_in(0.0, 60.0), default=0.3,
                         help="keep polling this long after the signals stop")
-    parser.add_argument("--reset-at", type=number_in(0.0, 3600.0), action="append", default=None,
-                        help="reset the MCU at this simulated second (repeatable; watchdog cause)")
+    parser.add_argument("--reset-at", type=_reset_at, action="append", default=None, metavar="S[:CAUSE]",
+                        help="reset the MCU at this simulated second, cause watchdog (default), external or "
+                             "brown-out (repeatable)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
@@ -113,6 +129,7 @@ def simulate(args) -> dict:
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
         stopped = False
+        first_frame_s = None  # poll time of the first accepted frame
         while True:
             t = t_next
             t_next += dt * (1.0 + args.poll_jitter * (2.0 * jitter_rng.random() - 1.0))
@@ -122,13 +139,16 @@ def simulate(args) -> dict:
                 tr.advance_to(t_stop)
                 tr.generators(False)
                 stopped = True
-            while reset_times and t >= reset_times[0]:
-                tr.advance_to(reset_times.pop(0))
-                tr.reset_device()
+            while reset_times and t >= reset_times[0][0]:
+                at, mcusr = reset_times.pop(0)
+                tr.advance_to(at)
+                tr.reset_device(mcusr)
             tr.advance_to(t)
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)
+                if first_frame_s is None and reader.stats.accepted:
+                    first_frame_s = t
                 if reader.stats.device_resets != resets_before:  # never a period across a reset
                     pending = dict.fromkeys(pending, True)
                 for ev in new:
@@ -150,8 +170,10 @@ def simulate(args) -> dict:
         faults = dict(tr.faults_injected)
     finally:
         tr.close()
-    return _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
-                   time.perf_counter() - wall0)
+    out = _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
+                  time.perf_counter() - wall0)
+    out["first_frame_s"] = first_frame_s
+    return out
 
 
 def _channel(ts) -> dict:
@@ -251,6 +273,12 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
+            # The ring's guard bytes, checked by the harness after every command: a write
+            # outside the ring shows as a violation (null for sketches without the ring).
+            "ring_guard": hs.get("ring_guard") if hs.get("ring_guard", {}).get("found") else None,
+            # WDTCSR as the firmware left it: WDE (0x08) set = the watchdog resets the MCU.
+            "watchdog_enabled": bool(hs.get("wdtcsr", 0) & 0x08),
+            "eeprom_writes": hs.get("eeprom_writes"),
             "sim_s": hs["sim_s"],
             "sim_per_wall": hs["sim_per_wall"],
             "crashed": hs["crashed"],
@@ -276,7 +304,8 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             out["device"]["boot_count"] = info.boot_count
     if args.protocol == "v2":
         out["boots"] = stats["boots"]
-    out["ok"] = bool(not hs["crashed"] and (args.protocol == "v0" or (
+    guard_ok = not hs.get("ring_guard", {}).get("violations")
+    out["ok"] = bool(not hs["crashed"] and guard_ok and (args.protocol == "v0" or (
         reader.events_lost == 0 and all(ch["missing"] == 0 and ch["duplicates_or_disorder"] == 0
                                         for ch in events.values()))))
     return out

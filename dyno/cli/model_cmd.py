@@ -1,7 +1,9 @@
-"""``dyno model point|sweep|study``: the belt-model library from the command line.
+"""``dyno model point|sweep|study|inverse``: the belt-model library from the command line.
 
 ``dyno model point --json`` with no other argument solves the thesis's
 Table 6.1 case.  Sweeps and studies write a CSV and a PNG into ``--out``.
+``dyno model inverse RUN`` gives each point's geometric ratio and belt slip
+(the slip-consistent inverse, :mod:`dyno.model.inverse`) at the run's tune.
 """
 
 from __future__ import annotations
@@ -25,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     point = sub.add_parser("point", help="solve one operating point (default: thesis Table 6.1)")
     sweep = sub.add_parser("sweep", help="operating-range sweep by continuation")
     study = sub.add_parser("study", help="thesis Section 7 parameter study")
+    inverse = sub.add_parser("inverse", help="geometric ratio and belt slip of each point of a run")
+    inverse.add_argument("run_dir", type=Path, metavar="RUN", help="run directory (its tune.toml sets the clamp)")
+    inverse.add_argument("--tune", type=Path, default=None, help="tune TOML instead of RUN/tune.toml")
+    inverse.add_argument("--tier", choices=("closed_form", "full"), default="closed_form",
+                         help="slip tier (full: the BVP, seconds per point)")
+    inverse.add_argument("--json", action="store_true", help="print JSON instead of text")
     study.add_argument("name", choices=STUDIES)
     study.add_argument("--values", type=number_in(-1e12, 1e12), nargs="+", help="parameter values (default: the thesis's)")
     for p in (point, sweep, study):
@@ -178,7 +186,44 @@ def _run_study(args) -> int:
     return 0 if n_ok == n_all else 1
 
 
+def _run_inverse(args) -> int:
+    from dyno.model.inverse import invert_points
+    from dyno.runlog.reader import load_run
+    from dyno.tuning.tune import load_tune
+
+    run = load_run(args.run_dir, with_events=False)
+    tune_path = args.tune if args.tune is not None else args.run_dir / "tune.toml"
+    tune = load_tune(tune_path) if args.tune is not None or tune_path.is_file() else None
+    points = [p for p in run.points if p.get("valid", True)]
+    rows = []
+    for p, (_, res) in zip(points, invert_points(points, tune, tier=args.tier)):
+        row = {"index": p.get("index"), "rpm_primary": p["rpm_primary"], "speed_ratio": res.speed_ratio,
+               "geometric_ratio": res.geometric_ratio, "slip": res.slip,
+               "primary_axial_force_n": res.primary_axial_force_n, "primary_torque_nm": res.primary_torque_nm,
+               "state": res.state, "tier": res.tier}
+        if res.reason:
+            row["reason"] = res.reason
+        for k in ("ratio_geometric_true", "belt_slip_true"):  # a simulated run's truth
+            if k in p:
+                row[k] = p[k]
+        rows.append(row)
+    level = f"tune {tune.name!r}" if tune is not None else "no tune: Table 6.1 drive at 100 N slack"
+    if args.json:
+        print(json.dumps({"run": str(args.run_dir), "clamp": level, "tier": args.tier, "points": rows},
+                         default=float))
+    else:
+        print(f"{args.run_dir}: {len(rows)} points, clamp from {level}, slip tier {args.tier}")
+        print("  #   rpm_p  speed_ratio  geometric  slip %   clamp N  state")
+        for r in rows:
+            print(f"{r['index'] if r['index'] is not None else '':>3} {r['rpm_primary']:7.0f} {r['speed_ratio']:12.5f} "
+                  f"{r['geometric_ratio']:10.5f} {100 * r['slip']:7.3f} {r['primary_axial_force_n']:9.0f}  "
+                  f"{r['state']}{'  ' + r['reason'][:80] if 'reason' in r else ''}")
+    return 0
+
+
 def run(args) -> int:
+    if args.action == "inverse":
+        return _run_inverse(args)
     _check_numbers(args)
     if args.action == "point":
         return _run_point(args)

@@ -35,13 +35,14 @@ def add_arguments(p) -> None:
                         "rad/s of the secondary; off by default), the truth a coast-down recovers")
     p.add_argument("--sim-zero-drift", type=float, default=None, metavar="NM_PER_MIN",
                    help="with --sim: the torque channel's zero drifts by this many N m (secondary) per minute")
-    p.add_argument("--settle", choices=("detect", "fixed"), default="detect",
-                   help="settling: detected from the data, or the thesis's fixed 4 s")
-    p.add_argument("--plan", choices=sorted(PLANS), default="thesis-step",
-                   help="thesis-step: the thesis's open-loop brake steps (default); speed-hold: closed-loop "
-                        "secondary-speed setpoints, each point measured to a 95 %% CI of +-1 pp; engagement: "
-                        "throttle ramps -> engagement, lock-up, shift-out (vs load), full-shift ratio; coast-down: "
-                        "the driven side's parasitic loss (docs/control.md)")
+    p.add_argument("--settle", choices=("detect", "fixed"), default=None,
+                   help="step plans' settling: detected from the data, or the thesis's fixed 4 s (default: the plan's)")
+    p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
+                   help="a shipped plan (speed-hold: closed-loop secondary-speed setpoints, each point to a 95 %% "
+                        "CI of +-1 pp, the default; thesis-step: the thesis's open-loop brake steps; sweep; "
+                        "torque-hold; engine-hold; engagement: throttle ramps -> engagement, lock-up, shift-out "
+                        "(vs load), full-shift ratio; coast-down: the driven side's parasitic loss; ...) or a plan "
+                        "file (a path ending in .toml; docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
@@ -53,11 +54,8 @@ def add_arguments(p) -> None:
     add_rig_argument(p)
 
 
-#: the shipped plans, by name (dyno.control.plans)
-PLANS = ("thesis-step", "speed-hold", "engagement", "coast-down")
-
-
 def plan_named(name: str, **overrides):
+    """A shipped plan by name, a code plan, or a plan file (dyno.control.plans); bad ones raise ConfigError."""
     from dyno.control.plans import plan_named as _plan_named
 
     return _plan_named(name, **overrides)
@@ -83,7 +81,7 @@ def run(args) -> int:
     drills = [parse_drill(d) for d in args.drill]
     opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=plan_named(args.plan, settle_mode=args.settle), drills=drills, handle_signals=True,
+                      plan=_plan(args), drills=drills, handle_signals=True,
                       mock_pins=args.mock_pins)
     driven_loss = _driven_loss(args)  # a bad file: one line, exit 2, before anything is written
     if args.calibration:
@@ -156,6 +154,12 @@ def _driven_loss(args):
 
         path = load_rig(getattr(args, "rig", None)).driven.loss_file
     return None if path is None else load_driven_loss(path)
+
+
+def _plan(args):
+    """The plan ``--plan`` names; ``--settle`` overrides its settle mode only when given."""
+    over = {"settle_mode": args.settle} if args.settle is not None else {}
+    return plan_named(args.plan, **over)
 
 
 def _write_report(result: dict, *, announce: bool) -> None:

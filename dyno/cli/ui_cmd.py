@@ -15,6 +15,9 @@ def add_arguments(p) -> None:
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
+    p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
+                   help="the test plan: a shipped name (speed-hold, the default; thesis-step; sweep; torque-hold; "
+                        "engine-hold; ...) or a plan file (a path ending in .toml; docs/control.md)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only; docs/safety.md)")
     from dyno.rigconfig import add_rig_argument
@@ -32,14 +35,16 @@ def run(args) -> int:
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d) for d in args.drill]
+    from dyno.control.plans import plan_named
     from dyno.rigconfig import load_rig
 
+    plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
     load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
-                       engine_map_path=args.engine_map, drills=drills)
+                       engine_map_path=args.engine_map, drills=drills, plan=plan)
     app = LiveApp(opts)
     app.run()
     rc = app.return_code or 0

@@ -63,6 +63,9 @@ class TestPlan:
     # Hall sensor is dead (an engine running unseen would be blind to over-speed): abort.
     engine_start_timeout_s: float = 60.0
     warmup_s: float = 3.0  # full throttle, no brake: let it stabilise
+    # Warm-up criterion: no point is measured before the brake has loaded the CVT this long (belt and
+    # clutch warm-up; the rig has no belt-temperature channel, only the rotor's). Recorded with the run.
+    warmup_at_load_s: float = 0.0
     step_s: float = 0.25  # brake actuator on-time per step (adapted, see below)
     step_min_s: float = 0.08
     step_max_s: float = 1.0
@@ -73,23 +76,18 @@ class TestPlan:
     max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
     min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
-    mode: str = "step"  # "step" (the thesis's open-loop steps) or "speed-hold" (dyno.control.speed_hold)
+    mode: str = "step"  # "step" (the thesis's open-loop steps) or a runner in dyno.control.plans.RUNNERS
     settle: SettleCriteria = field(default_factory=SettleCriteria)
     min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
     max_points: int = 60
     expected_secondary_span_rpm: float = 4500.0  # light load to min, for the step adaptation
-
-
-def _characterisation_runner(mode: str):
-    if mode == "engagement":
-        from dyno.control.characterise import run_engagement
-
-        return run_engagement
-    if mode == "coast-down":
-        from dyno.control.coastdown import run_coast_down
-
-        return run_coast_down
-    return None
+    # A plan file's identity and its mode's own parameters (dyno.control.planfile): the name it was
+    # chosen by, the mode's table (e.g. [speed_hold]) and, for mode "steps", the [[step]] list.
+    name: str = ""
+    params: dict = field(default_factory=dict, hash=False)
+    steps: tuple = ()
+    source: str = ""  # the plan file it came from ("" for a plan built in code)
+    text: str = field(default="", repr=False, compare=False)  # that file's text (stored as plan.toml)
 
 
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
@@ -136,6 +134,8 @@ class TestController:
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
         self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
+        self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
+        self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
         poller.listeners.append(self._on_poll)
@@ -258,6 +258,17 @@ class TestController:
         if task is not None and not task.done():
             task.cancel()
 
+    #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
+    #: runners' own durations (hold periods, approach times) must shrink like the plan's
+    time_scale: float = 1.0
+
+    def rig_now(self) -> float:
+        """The controller's time in rig seconds (see :attr:`time_scale`)."""
+        return self._now() / self.time_scale
+
+    async def rig_sleep(self, dt_s: float) -> None:
+        await self._sleep(dt_s * self.time_scale)
+
     async def _sleep(self, dt_s: float) -> None:
         await asyncio.sleep(dt_s)
         if self.fault_injection is not None:
@@ -294,17 +305,18 @@ class TestController:
             self._go.set()
         await self._go.wait()
         self.go_s = self._now()
-        runner = _characterisation_runner(p.mode)
-        if runner is not None:  # characterisations start from idle: no full-throttle warm-up
-            await runner(self)
+        from dyno.control.plans import FROM_IDLE, runner_for
+
+        if p.mode in FROM_IDLE:  # characterisations start from idle: no full-throttle warm-up
+            await runner_for(p.mode)(self)
             return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)
-        if p.mode == "speed-hold":
-            from dyno.control.speed_hold import run_speed_hold
+        if p.mode != "step":
+            from dyno.control.plans import runner_for
 
-            await run_speed_hold(self)
+            await runner_for(p.mode)(self)
             return
         last_rs = self.poller.rpm(v1.CH_SECONDARY)
         while True:
@@ -313,6 +325,8 @@ class TestController:
             self.act.brake(APPLY)
             await self._sleep(self._step_s)
             self.act.brake(STOP)
+            if self.load_since_s is None:
+                self.load_since_s = self.rig_now()
             self._enter(State.SETTLE, "waiting for steady state")
             settled_by, settle_s = await self._settle()
             if await self._secondary_below(p.min_secondary_rpm):
@@ -336,13 +350,16 @@ class TestController:
                 self._enter(State.DONE, f"{p.max_points} points")
                 return
 
-    async def _measure(self) -> tuple[dict, float, float]:
+    async def _measure(self, give_up=None) -> tuple[dict, float, float]:
         """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
-        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).
+        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).  ``give_up``
+        (a callable, checked each second) ends a window that cannot become a point early: the point
+        comes back with ``gave_up`` set (a closed-loop plan's drifting speed).
 
         Returns the reduced point and the window's host start and end times.
         """
         p = self.plan
+        await self._warm_up_at_load()
         for attempt in range(MAX_REMEASURE + 1):
             self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
             host_t0, dev_t0 = self._now(), self.poller.device_now_us()
@@ -356,6 +373,9 @@ class TestController:
                 else:
                     unsure = point["efficiency_sem"] > p.target_efficiency_sem
                 remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                if unsure and give_up is not None and give_up():
+                    point["gave_up"] = True
+                    break
                 if not unsure or remaining_s < 0.05:
                     break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
                 await self._sleep(min(1.0, remaining_s))
@@ -383,6 +403,21 @@ class TestController:
             hook(results)
         self.results = results
         self._log("characterisation", **results)
+
+    async def _warm_up_at_load(self) -> None:
+        """Before the first point: the plan's time at load (``warmup_at_load_s``), waited out if short."""
+        need = self.plan.warmup_at_load_s
+        if self.warmup is not None or need <= 0:
+            return
+        if self.load_since_s is None:
+            self.load_since_s = self.rig_now()
+        left = need - (self.rig_now() - self.load_since_s)
+        if left > 0:
+            self._log("warmup_wait", wait_s=left)
+            await self.rig_sleep(left)
+        self.warmup = {"criterion": "time at load", "required_s": need,
+                       "at_load_s": self.rig_now() - self.load_since_s}
+        self._log("warmup", **self.warmup)
 
     def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
         point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)

@@ -49,6 +49,15 @@ class SpeedHoldGains:
     deadband_rel: float = 0.004  # |e| below this: no pulse (relay wear, hunting)
     min_pulse_s: float = 0.02
     speed_window_s: float = 0.15
+    ff_s: float = 0.0  # feed-forward: full-speed travel (s) per unit relative setpoint change
+
+    @classmethod
+    def from_config(cls, control, variable: str = "secondary") -> "SpeedHoldGains":
+        """The gains ``rig.toml``'s ``[control]`` gives for ``variable`` (secondary | engine | torque)."""
+        kp = {"secondary": control.kp_speed, "engine": control.kp_engine, "torque": control.kp_torque}[variable]
+        return cls(kp=kp, period_s=control.period_s, deadband_rel=control.deadband_rel,
+                   min_pulse_s=control.min_pulse_s, ff_s=control.ff_speed_s if variable == "secondary" else 0.0,
+                   speed_window_s=0.2 if variable == "torque" else cls.speed_window_s)
 
 
 class SpeedHold:
@@ -67,10 +76,21 @@ class SpeedHold:
         """Actuator command in [-1, 1] (+: apply more brake) for the measured ``rpm``."""
         if not (rpm > 0 and setpoint_rpm > 0):
             return 0.0
-        e = (rpm - setpoint_rpm) / setpoint_rpm
+        return self.command((rpm - setpoint_rpm) / setpoint_rpm, dt_s)
+
+    def feed_forward(self, old_setpoint: float, new_setpoint: float, sign: float = -1.0) -> None:
+        """A setpoint change: owe the travel the plant's gain says it needs at once (``ff_s`` per unit
+        relative change; ``sign`` -1 for speeds: a lower speed needs more brake; +1 for torque)."""
+        if self.g.ff_s > 0 and old_setpoint > 0 and new_setpoint > 0:
+            self.owed_s += sign * self.g.ff_s * (new_setpoint - old_setpoint) / old_setpoint
+
+    def command(self, e: float, dt_s: float) -> float:
+        """Actuator command in [-1, 1] for the relative error ``e`` (+: apply more brake)."""
+        if not math.isfinite(e):
+            return 0.0
         u = self.g.kp * e + self.g.ki_per_s * self.integral
         saturated = abs(u) >= 1.0 and math.copysign(1.0, u) == math.copysign(1.0, e)
-        if not saturated:  # anti-windup: no integration into a saturated command
+        if self.g.ki_per_s and not saturated:  # anti-windup: no integration into a saturated command
             self.integral += e * dt_s
         return max(-1.0, min(1.0, u))
 
@@ -81,7 +101,7 @@ class SpeedHold:
         least ``min_pulse_s``, so a small command still moves the brake (slowly) instead
         of being lost under the minimum pulse.
         """
-        if abs(e_rel) < self.g.deadband_rel:
+        if abs(e_rel) < self.g.deadband_rel or not math.isfinite(e_rel):
             self.owed_s = 0.0
             return STOP, 0.0
         self.owed_s += u * self.g.period_s
@@ -104,6 +124,9 @@ class SpeedHoldPlan:
     in_band_s: float = 0.8  # ... for this long, then measure
     max_approach_s: float = 8.0  # then: near the setpoint, measure (flagged); far from it, skip it
     unholdable_rel: float = 0.02  # "far": the shift region, where a friction brake cannot hold a speed
+    drift_rel: float = 0.02  # a window whose mean speed ends farther than this from the setpoint is no point
+    spacing: float = 1.0  # setpoint i of n at high - (high - low) (i/(n-1))**spacing: < 1 spaces the light-load
+    # (shift) region wider, where the torque hardly changes, and the cheap low-speed points closer
     contact_drop_rel: float = 0.01  # contact search: full-speed apply until the secondary drops 1 %
     contact_timeout_s: float = 10.0
 
@@ -116,28 +139,70 @@ def secondary_rpm(ctrl, window_s: float) -> float:
     return rpm
 
 
-async def _hold_loop(ctrl, hold: SpeedHold, target: dict) -> None:
-    """Background task: one actuator pulse per period towards ``target['rpm']``."""
+def engine_rpm(ctrl, window_s: float) -> float:
+    now = ctrl.poller.device_now_us()
+    if now is None:
+        return math.nan
+    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(v1.CH_PRIMARY, now - int(window_s * 1e6), now))
+    return rpm
+
+
+def brake_torque_nm(ctrl, window_s: float) -> float:
+    """Secondary torque from the ADC mean over the last ``window_s`` (error-bit conversions left out)."""
+    now = ctrl.poller.device_now_us()
+    cal = ctrl.calibration
+    if now is None or cal is None:
+        return math.nan
+    _, codes, status = ctrl.poller.streams.adc_window(now - int(window_s * 1e6), now)
+    codes = codes[(status & v1.ADC_STATUS_ERR) == 0]
+    return float(cal.torque_secondary_nm(codes.mean())) if codes.size else math.nan
+
+
+#: what a hold can hold: (reader, sign of the error: + means "apply more brake")
+VARIABLES = {"secondary": (secondary_rpm, 1.0), "engine": (engine_rpm, 1.0), "torque": (brake_torque_nm, -1.0)}
+
+
+def measured(ctrl, variable: str, window_s: float) -> float:
+    return VARIABLES[variable][0](ctrl, window_s)
+
+
+def hold_error(ctrl, variable: str, setpoint: float, window_s: float, sign: float | None = None) -> tuple[float, float]:
+    """(measured value, relative error: + means the brake must apply) for ``variable``; ``sign`` -1 where
+    more load raises the variable (the engine while the CVT back-shifts)."""
+    x = measured(ctrl, variable, window_s)
+    if not (setpoint > 0) or not math.isfinite(x) or (variable != "torque" and not x > 0):
+        return x, math.nan
+    return x, (VARIABLES[variable][1] if sign is None else sign) * (x - setpoint) / setpoint
+
+
+async def _hold_loop(ctrl, hold: SpeedHold, target: dict, variable: str = "secondary") -> None:
+    """Background task: one actuator pulse per period towards ``target['rpm']`` (the setpoint of
+    ``variable``: secondary or engine rpm, or torque in N·m)."""
     g = hold.g
+    last_sp = target["rpm"]
     while True:
         await ctrl._resume.wait()
         if target.get("frozen"):
-            await ctrl._sleep(g.period_s)
+            await ctrl.rig_sleep(g.period_s)
             continue
-        rpm = secondary_rpm(ctrl, g.speed_window_s)
         sp = target["rpm"]
-        u = hold.update(rpm, sp, g.period_s)
-        direction, on_s = hold.pulse(u, (rpm - sp) / sp if rpm > 0 else 0.0)
-        target["last_rpm"] = rpm
+        sign = target.get("sign", VARIABLES[variable][1])
+        if sp != last_sp:
+            hold.feed_forward(last_sp, sp, -sign)
+            last_sp = sp
+        x, e = hold_error(ctrl, variable, sp, g.speed_window_s, sign)
+        u = hold.command(e, g.period_s)
+        direction, on_s = hold.pulse(u, e)
+        target["last_rpm"] = x
         if direction == STOP:
-            await ctrl._sleep(g.period_s)
+            await ctrl.rig_sleep(g.period_s)
             continue
         ctrl.act.brake(direction)
         try:
-            await ctrl._sleep(on_s)
+            await ctrl.rig_sleep(on_s)
         finally:
             ctrl.act.brake(STOP)
-        await ctrl._sleep(max(0.0, g.period_s - on_s))
+        await ctrl.rig_sleep(max(0.0, g.period_s - on_s))
 
 
 async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHoldGains | None = None) -> None:
@@ -149,29 +214,30 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     from dyno.control.controller import State
 
     p = ctrl.plan
-    sh = sh or getattr(ctrl, "speed_hold_plan", None) or SpeedHoldPlan()
-    hold = SpeedHold(gains or getattr(ctrl, "speed_hold_gains", None) or SpeedHoldGains())
+    sh = sh or getattr(ctrl, "speed_hold_plan", None) or speed_hold_plan_of(p)
+    hold = SpeedHold(gains or getattr(ctrl, "speed_hold_gains", None) or gains_for(ctrl, "secondary"))
     no_load = secondary_rpm(ctrl, 1.0)
     high = no_load * (1.0 - sh.high_margin)
     low = max(sh.low_rpm, p.min_secondary_rpm * 1.05)
     if not (high > low):
         ctrl.abort("error", f"speed hold: no-load secondary {no_load:.0f} rpm leaves no range above {low:.0f} rpm")
         return
-    setpoints = [high + (low - high) * i / max(1, sh.points - 1) for i in range(sh.points)]
+    setpoints = [high + (low - high) * (i / max(1, sh.points - 1)) ** sh.spacing for i in range(sh.points)]
     # Contact search first: the pads start clear of the rotor (free travel), and creeping
     # across it at a fraction of full speed wastes seconds. Full-speed apply until it bites.
     ctrl._enter(State.STEP, "speed hold: finding the brake's contact point")
-    t_c = ctrl._now()
+    t_c = ctrl.rig_now()
     ctrl.act.brake(APPLY)
     try:
         while secondary_rpm(ctrl, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
-            if ctrl._now() - t_c > sh.contact_timeout_s:
+            if ctrl.rig_now() - t_c > sh.contact_timeout_s:
                 ctrl.abort("error", f"speed hold: the brake did not slow the secondary in {sh.contact_timeout_s:g} s")
                 return
-            await ctrl._sleep(0.02)
+            await ctrl.rig_sleep(0.02)
     finally:
         ctrl.act.brake(STOP)
-    ctrl._log("contact", after_s=ctrl._now() - t_c)
+    ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
+    ctrl.load_since_s = ctrl.rig_now()  # the pads bite: the CVT is loaded from here (warm-up criterion)
     target = {"rpm": setpoints[0], "last_rpm": math.nan}
     loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="speed-hold")
     try:
@@ -180,25 +246,25 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
                 continue  # already below it (the CVT jumped past): next setpoint
             target["rpm"] = sp
             ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
-            t0 = ctrl._now()
+            t0 = ctrl.rig_now()
             ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
             in_band_since = None
             settled_by = "held"
             while True:
-                await ctrl._sleep(0.05)
+                await ctrl.rig_sleep(0.05)
                 if loop_task.done():
                     loop_task.result()  # re-raise: the control task failed
                 rpm = secondary_rpm(ctrl, hold.g.speed_window_s)
                 if abs(rpm - sp) <= sh.tolerance_rel * sp:
-                    in_band_since = in_band_since if in_band_since is not None else ctrl._now()
-                    if ctrl._now() - in_band_since >= sh.in_band_s:
+                    in_band_since = in_band_since if in_band_since is not None else ctrl.rig_now()
+                    if ctrl.rig_now() - in_band_since >= sh.in_band_s:
                         break
                 else:
                     in_band_since = None
-                if ctrl._now() - t0 > sh.max_approach_s:
+                if ctrl.rig_now() - t0 > sh.max_approach_s:
                     settled_by = "timeout"
                     break
-            settle_s = ctrl._now() - t0
+            settle_s = ctrl.rig_now() - t0
             if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
                 ctrl._log("skip", reason=f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after "
                                          f"{settle_s:.1f} s): the CVT's shift region")
@@ -207,10 +273,17 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
             # move the torque and the shift under the average (measured: CI 4-10x wider).
             target["frozen"] = True
             try:
-                point, host_t0, host_t1 = await ctrl._measure()
+                point, host_t0, host_t1 = await ctrl._measure(
+                    give_up=lambda: not abs(secondary_rpm(ctrl, 0.5) - sp) <= sh.drift_rel * sp)
             finally:
                 target["frozen"] = False
             point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
+            if point.get("gave_up") or not abs(point["rpm_secondary"] - sp) <= sh.drift_rel * sp:
+                # The frozen brake let the CVT shift under the window (its hysteresis): the average
+                # is of a transient, not a steady point; the truth check showed errors of 3 pp.
+                ctrl._log("skip", reason=f"secondary drifted to {point['rpm_secondary']:.0f} rpm while "
+                                         f"measuring at {sp:.0f} rpm: not a steady point")
+                continue
             if point["torque_secondary_nm"] >= p.min_point_torque_nm:
                 ctrl._record_point(point, host_t0, host_t1)
             else:
@@ -221,3 +294,15 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
         loop_task.cancel()
         await asyncio.gather(loop_task, return_exceptions=True)
         ctrl.act.brake(STOP)
+
+
+def speed_hold_plan_of(plan) -> SpeedHoldPlan:
+    """The [speed_hold] table of a plan (file) as a :class:`SpeedHoldPlan` (defaults otherwise)."""
+    params = dict(getattr(plan, "params", None) or {})
+    return SpeedHoldPlan(**params)
+
+
+def gains_for(ctrl, variable: str) -> SpeedHoldGains:
+    """The rig's gains (``rig.toml`` [control], set on the controller by the app), else the defaults."""
+    control = getattr(ctrl, "control", None)
+    return SpeedHoldGains.from_config(control, variable) if control is not None else SpeedHoldGains()

@@ -9,10 +9,23 @@ Thesis Section 2.1:
 The tractive tension T = F - F_c is what the full model calls T, so every
 function here takes tractive tensions.  :func:`capstan_point` adds Gerbert's
 adhesion/sliding split (constant tension over the entry arc, exponential over
-the sliding arc at the exit), the frictionless-wedge axial thrust
-``dF_z = T dphi / (2 tan beta)`` and Reynolds' elastic creep for the speed
-loss.  It has no seating or bending, so its torque efficiency is 1: an upper
-bound used as a baseline.
+the sliding arc at the exit), Gerbert's wedge thrust and Reynolds' elastic
+creep for the speed loss.  It has no seating or bending, so its torque
+efficiency is 1: an upper bound used as a baseline.
+
+Axial thrust.  A flank's friction, at angle gamma to the circumferential
+direction, tilts the wedge: per unit wrap angle ``dF_z = T dphi / (2 tan(beta
++ rho'))`` with ``tan rho' = mu sin gamma``.  In the sliding arc the belt slides
+circumferentially (gamma = 0, the arc where ``dT/dphi = mu_v T``): the
+frictionless wedge ``T dphi / (2 tan beta)``.  In the arc without
+circumferential sliding the belt is not stuck: it enters the groove and is
+wedged in radially (Gerbert), so there the friction is radial (gamma = 90 deg)
+and ``dF_z = T dphi / (2 tan(beta + atan mu))`` -- the same factor as the
+closed form's driver thrust at rho = 0.  The frictionless wedge over the whole
+wrap (as before) put the thrusts at 1.96-2.61x (primary) and 1.24-1.60x
+(secondary) the full model's (corrected, 100 N slack, ratio 0.72-1.75,
+8/18 N m, 3400 rpm); with the radial friction they are 0.73-1.13x and
+0.60-0.79x, the thrust ratio F_s/F_p 0.59-0.95x the full model's (docs/belt-model.md).
 """
 
 from __future__ import annotations
@@ -50,6 +63,19 @@ def max_tension_ratio(
     return math.exp(mu * wrap_rad)
 
 
+def wedge_thrust_n(entry_tension_n: float, held_arc_rad: float, tension_change_n: float, mu_v: float,
+                   sheave_half_angle_rad: float, friction_coefficient: float) -> float:
+    """Axial thrust of one pulley: radial-friction wedge over the held arc, frictionless over the sliding one.
+
+    The held arc carries the entry tension (the belt wedges in radially there:
+    friction radial); over the sliding arc ``int T dphi = dT / mu_v``
+    (circumferential sliding: no radial friction).  See the module docstring.
+    """
+    held = entry_tension_n * held_arc_rad / (2.0 * math.tan(sheave_half_angle_rad + math.atan(friction_coefficient)))
+    sliding = tension_change_n / mu_v / (2.0 * math.tan(sheave_half_angle_rad))
+    return held + sliding
+
+
 @dataclass(frozen=True)
 class CapstanResult:
     """Outputs of the flat-belt tier, same names as the full model where they overlap."""
@@ -85,20 +111,23 @@ def capstan_point(params: ModelParams, op: OperatingPoint) -> CapstanResult:
     if op.slack_tension_n is not None:
         t_slack = op.slack_tension_n
     else:
-        # Driver: adhesion at the tight entry, so F_z (2 tan beta) = T_t (Phi - phi_s) + (T_t - T_s)/mu_v
-        # with T_t = T_s + dT and phi_s = ln(T_t/T_s)/mu_v; monotonic in T_s, solve by bisection.
+        # Driver: no circumferential sliding from the tight entry, so F_z = wedge thrust of T_t over
+        # (Phi - phi_s) + of the sliding arc, with T_t = T_s + dT and phi_s = ln(T_t/T_s)/mu_v;
+        # monotonic in T_s, solve by bisection.
         from scipy.optimize import brentq
 
-        target = op.primary_axial_force_n * 2.0 * math.tan(beta)
+        target = op.primary_axial_force_n
 
         def resid(ts):
             tt = ts + delta_t
             phi_slide = min(math.log(tt / ts) / mu_v, phi_p)
-            return tt * (phi_p - phi_slide) + (tt - ts) / mu_v - target
+            return wedge_thrust_n(tt, phi_p - phi_slide, tt - ts, mu_v, beta, belt.friction_coefficient) - target
 
         lo, hi = 1e-6, max(target / phi_p, 1.0) * 2
         if resid(lo) > 0:
             raise bad_input("primary_axial_force_n", f"large enough to transmit {op.primary_torque_nm:g} N*m")
+        while resid(hi) < 0:  # the thrust grows without bound with the tension level
+            hi *= 2.0
         t_slack = brentq(resid, lo, hi, xtol=1e-9)
     t_tight = t_slack + delta_t
     ln_ratio = math.log(t_tight / t_slack)
@@ -106,10 +135,10 @@ def capstan_point(params: ModelParams, op: OperatingPoint) -> CapstanResult:
     slide_s = ln_ratio / mu_v
     gross_slip = slide_p > phi_p or slide_s > phi_s
     slide_p, slide_s = min(slide_p, phi_p), min(slide_s, phi_s)
-    two_tan = 2.0 * math.tan(beta)
-    # Driver: tight entry held over the adhesion arc; driven: slack entry held.
-    fz_p = (t_tight * (phi_p - slide_p) + (t_tight - t_slack) / mu_v) / two_tan
-    fz_s = (t_slack * (phi_s - slide_s) + (t_tight - t_slack) / mu_v) / two_tan
+    # Driver: tight entry held over the arc without circumferential sliding; driven: slack entry held.
+    mu = belt.friction_coefficient
+    fz_p = wedge_thrust_n(t_tight, phi_p - slide_p, t_tight - t_slack, mu_v, beta, mu)
+    fz_s = wedge_thrust_n(t_slack, phi_s - slide_s, t_tight - t_slack, mu_v, beta, mu)
     v = op.primary_speed_rad_s * r_p
     fc = belt.mass_per_length_kg_m * v * v
     ea = belt.axial_stiffness_n

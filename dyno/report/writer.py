@@ -36,15 +36,24 @@ def _engine_map(path: Path, notes: list) -> dict | None:
             "j1349_factor": m.j1349_factor, "notes": comments}
 
 
-def _model(points: list, notes: list, full: bool = False) -> dict | None:
+def _model(points: list, notes: list, full: bool = False, tune_path: Path | None = None) -> dict | None:
     """The belt model at each plotted point: the full model (thesis BVP) when asked or already in the model
-    cache, else its closed form (instant, creep loss only: an upper bound)."""
-    ops, rpm_s = [], []
-    for p in points:
-        if exclusion_reason(p) or not (p.get("power_in_w") or 0) > 0:
-            continue
-        ops.append((p["ratio"], p["rpm_primary"], p["power_in_w"] / (p["rpm_primary"] * RAD_S_PER_RPM)))
-        rpm_s.append(p["rpm_secondary"])
+    cache, else its closed form (instant, creep loss only: an upper bound).  Each point's input is the
+    slip-consistent inverse's (geometric ratio and the run's tune's clamp, ``overlay_inputs``)."""
+    from dyno.ui.live_model import overlay_inputs
+
+    kept = [p for p in points if not exclusion_reason(p) and (p.get("power_in_w") or 0) > 0]
+    tune = tune_path if tune_path is not None and tune_path.is_file() else None
+    try:
+        pairs = overlay_inputs(kept, tune)
+    except _OPTIONAL_ERRORS as exc:
+        notes.append(f"belt-model overlay not shown: {exc}")
+        return None
+    if len(pairs) < len(kept):
+        notes.append(f"belt model: {len(kept) - len(pairs)} of {len(kept)} points have no steady belt at the "
+                     "tune's clamp (inverse: gross slip or no clamp)")
+    rpm_s = [x for x, _ in pairs]
+    ops = [op for _, op in pairs]
     if not ops:
         return None
     from dyno.model.overlay import all_cached, predict_overlay
@@ -100,7 +109,7 @@ def collect(run_dir, *, full_model: bool = False, now_s: float | None = None) ->
         run_dir=str(run_dir), meta=run.meta, documents=run.documents, calibration=run.calibration,
         engine_map=_engine_map(run.engine_map_path, notes) if run.engine_map_path else None,
         tune_text=tune.read_text(encoding="utf-8") if tune.exists() else None,
-        model=_model(run.points, notes, full_model), predicted_shift=_predicted_shift(run_dir, notes),
+        model=_model(run.points, notes, full_model, Path(run_dir) / "tune.toml"), predicted_shift=_predicted_shift(run_dir, notes),
         generator_version=__version__, generated_unix_s=time.time() if now_s is None else now_s, notes=notes)
 
 

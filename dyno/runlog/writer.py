@@ -34,7 +34,8 @@ LOCK_NAME = ".dyno-lock"  # present while a process writes the run (see RunWrite
 
 class RunWriter:
     def __init__(self, run_dir: Path, meta: dict, calibration: dict | None = None,
-                 engine_map_text: str | None = None, tune_text: str | None = None) -> None:
+                 engine_map_text: str | None = None, tune_text: str | None = None,
+                 plan_text: str | None = None) -> None:
         from dyno.errors import ConfigError
 
         self.run_dir = Path(run_dir)
@@ -65,6 +66,8 @@ class RunWriter:
             write_atomic(self.run_dir / "engine_map.csv", engine_map_text)
         if tune_text is not None:
             write_atomic(self.run_dir / "tune.toml", tune_text)
+        if plan_text is not None:  # the plan file as run (meta.json keeps its canonical form)
+            write_atomic(self.run_dir / "plan.toml", plan_text)
         write_json_atomic(self.run_dir / "meta.json", meta)
         self._docs = open(self.run_dir / "documents.jsonl", "a", encoding="utf-8")
         self._events = open(self.run_dir / "events.bin", "ab")

@@ -1,10 +1,14 @@
 """Belt-model efficiency table for the simulated CVT.
 
-The full belt model (:mod:`dyno.model`, thesis Table 6.1 belt) is solved once
-on a small grid of geometric ratios x primary torques (3400 rpm, 100 N slack
-tension), by continuation: a cold solve at the Table 6.1 point (ratio 1,
-18 N m), warm starts outward in ratio at the reference torque, then each other
-torque warm-started from the same ratio.  Every result is stored in the
+The full belt model (:mod:`dyno.model`, thesis Table 6.1 belt on the tune's
+drive geometry) is solved once on a grid of geometric ratios x primary torques
+covering the simulated CVT's whole ratio range (0.72 .. 2.4), at the clamping
+force the CVT tune puts on the belt there (:func:`tune_clamp_n`: flyweights
+minus spring, Messick eq. 9.3, at :data:`TABLE_RPM`), by continuation: a cold
+solve at ratio 1, 18 N m, warm starts outward in ratio at the reference
+torque, then each other torque warm-started from the same ratio.  Without a
+tune (the sim's closed-form CVT) the tension level is a fixed 100 N slack
+tension, as before.  Every result is stored in the
 overlay's disk cache (:func:`dyno.model.overlay.point_key`, same JSON entries
 as :func:`~dyno.model.overlay.predict_overlay` writes), so the table is
 computed once per machine and read back in milliseconds afterwards.
@@ -31,14 +35,15 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-#: Default grid: the thesis's solved ratio range (Fig. 6.20: 0.72 overdrive .. 1.74 low) and two
-#: torques.  The sim's CVT reaches 2.4; there the lookup is clamped to the 1.75 values: with a fixed
-#: 100 N slack tension the belt model approaches gross slip beyond ~2 (creep 5-7 % at 2.2-2.4 and
-#: 18 N m, measured), while the rig's helix raises the clamp with the torque.
-DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75)
+#: Default grid: the simulated CVT's whole geometric ratio range (0.72 overdrive .. 2.4 low, the
+#: ratio the 2019 logs reached) and two torques.  Cells where the belt model finds gross slip at the
+#: tune's clamp are failed cells (the loss model answers there).
+DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75, 1.95, 2.15, 2.4)
 DEFAULT_TORQUES_NM = (8.0, 18.0)
 REFERENCE_TORQUE_NM = 18.0
-TABLE_RPM = 3400.0
+#: Engine speed of the table's clamp: the middle of the 3000-3300 rpm the stock tune holds on the
+#: sim and the thesis logs (the flyweights' clamp goes as rpm^2: +-5 % over that band).
+TABLE_RPM = 3150.0
 SLACK_TENSION_N = 100.0
 _DENSE = 200
 
@@ -55,6 +60,8 @@ class BeltTable:
     errors: dict = field(default_factory=dict)   # (ratio, torque) -> message
     build_s: float = 0.0
     solved: int = 0                    # cells solved now (not from the cache)
+    rpm: float = TABLE_RPM             # engine speed of the cells (and of the tune's clamp)
+    clamp_n: tuple = ()                # primary clamp per ratio (NaN: fixed slack tension)
     _dense: tuple | None = None
 
     def __post_init__(self):
@@ -149,11 +156,26 @@ def _store(cache: Path, key: str, res: dict) -> None:
         pass  # a read-only cache must not break the sim
 
 
+def tune_clamp_n(tune, rpm: float, ratio: float) -> float:
+    """Primary clamping force (N) the tune puts on the belt at a geometric ratio and engine speed.
+
+    Flyweights minus spring (Messick eq. 9.3) at the primary radius the belt
+    length gives for this ratio on the tune's drive.  The same function feeds
+    the inverse of the overlay (:mod:`dyno.model.inverse`).
+    """
+    from dyno.model.inverse import clamp_from_tune
+
+    return clamp_from_tune(tune, rpm)(ratio)
+
+
 def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, cache_dir=None,
-                     rpm: float = TABLE_RPM, slack_tension_n: float = SLACK_TENSION_N,
+                     rpm: float = TABLE_RPM, slack_tension_n: float = SLACK_TENSION_N, tune=None,
                      time_limit_s: float = 30.0, solve=None) -> BeltTable:
     """Build (or read back from the overlay cache) the belt-model efficiency table.
 
+    With ``tune`` every cell is solved at the tune's clamping force
+    (:func:`tune_clamp_n` at ``rpm``) on the tune's drive geometry; without,
+    at ``slack_tension_n`` on Table 6.1.
     ``solve(op, guess)`` replaces :func:`dyno.model.solution.solve_point` (tests).
     """
     from dyno.errors import MODEL_FAILURES, ConfigError
@@ -161,7 +183,12 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
     from dyno.model.params import TABLE_6_1, OperatingPoint
 
     t0 = time.perf_counter()
-    params = TABLE_6_1
+    if tune is not None:
+        from dyno.tuning.shift_curve import model_params_for
+
+        params = model_params_for(tune)
+    else:
+        params = TABLE_6_1
     variant, slip, tol = "corrected", 1e-4, 1e-3
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     ratios = np.array(sorted(float(r) for r in ratios))
@@ -175,6 +202,13 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
                                time_limit_s=time_limit_s)
 
     def op_of(r, t):
+        if tune is not None:
+            clamp = tune_clamp_n(tune, rpm, r)
+            if not clamp > 0.0:
+                raise ConfigError("<tune>", "primary", f"a positive clamp at {rpm:g} rpm, ratio {r:g} "
+                                  f"(got {clamp:.0f} N: the flyweights do not overcome the spring)")
+            return OperatingPoint(ratio=float(r), primary_speed_rpm=rpm, primary_torque_nm=float(t),
+                                  slack_tension_n=None, primary_axial_force_n=clamp)
         return OperatingPoint(ratio=float(r), primary_speed_rpm=rpm, primary_torque_nm=float(t),
                               slack_tension_n=slack_tension_n)
 
@@ -211,7 +245,8 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
                 err = exc
         solved += 1
         if sol is None:
-            res = {"converged": False, "tier": "full", "error": str(err)}
+            res = {"converged": False, "tier": "full", "error": str(err),
+                   "state": "gross_slip" if type(err).__name__ == "GrossSlip" else "failed"}
         else:
             s = sol.summary
             sols[(r, t)] = sol
@@ -243,21 +278,23 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
                 log.info("belt table: ratio %.3f, %.1f N m did not converge, the loss model is used there: %s",
                          r, t, errors[(float(r), float(t))])
     return BeltTable(ratios=ratios, torques_nm=torques, eta_torque=et, eta_speed=es, ok=ok, errors=errors,
-                     build_s=time.perf_counter() - t0, solved=solved)
+                     build_s=time.perf_counter() - t0, solved=solved, rpm=float(rpm),
+                     clamp_n=tuple(float(op_of(r, torques[0]).primary_axial_force_n or math.nan) for r in ratios))
 
 
 _TABLES: dict = {}
 
 
-def belt_table(cache_dir=None) -> BeltTable:
-    """The default table, built once per process (and once per machine via the cache).
+def belt_table(cache_dir=None, tune=None) -> BeltTable:
+    """The default table for ``tune`` (None: 100 N slack), built once per process (and once per
+    machine via the cache).
 
     Concurrent processes (e.g. pytest-xdist workers) serialise on a lock file in
     the cache directory: the first builds, the others then read its entries.
     """
     from dyno.model.overlay import default_cache_dir
 
-    key = str(cache_dir)
+    key = (str(cache_dir), None if tune is None else json.dumps(tune.to_dict(), sort_keys=True, default=str))
     if key not in _TABLES:
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         lock = None
@@ -270,7 +307,7 @@ def belt_table(cache_dir=None) -> BeltTable:
         except (ImportError, OSError):
             lock = None  # no locking available: build anyway (entries are written atomically)
         try:
-            _TABLES[key] = build_belt_table(cache_dir=cache)
+            _TABLES[key] = build_belt_table(cache_dir=cache, tune=tune)
         finally:
             if lock is not None:
                 lock.close()

@@ -31,19 +31,32 @@ Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
 -------------------------------------------------------------
 By default the belt passes the primary clamp to the secondary unchanged
 (``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
-tune) the balance is the one :mod:`dyno.tuning.shift_curve` predicts: the
-primary clamp sets the belt tensions and the belt then *requires* a
-secondary thrust ``F_s,belt`` (Sorge & Cammalleri eqs. 17-18 via
-:func:`dyno.model.closed_form.closed_form_point`), so the imbalance is
-``F_s,belt - F_s``.  ``F_s,belt = kappa F_p`` with the thrust ratio
-``kappa(x, T_p, F_p; f)`` re-evaluated every ``belt_update_cells`` calls of
-:meth:`CVT.shift` (a closed-form call costs ~0.4 ms, ~20x a physics cell;
-kappa varies slowly next to the 0.4 s shift lag, and at a steady point it is
-evaluated at that point, so the steady ratio is exact).  The belt's elastic
-creep of the same call replaces the loss model's creep.  Together with
-``flyweight_radius_offset_m`` (added to the tune's flyweight radius table)
-these are the rig's hidden "true" parameters that the fit of
-:mod:`dyno.tuning.fit` estimates.
+tune) the primary clamp sets the belt tensions and the belt then *requires* a
+secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
+``F_s,belt = kappa F_p`` with the thrust ratio ``kappa(x, T_p, F_p; f)``
+re-evaluated every ``belt_update_cells`` calls of :meth:`CVT.shift` (kappa
+varies slowly next to the 0.4 s shift lag, and at a steady point it is
+evaluated at that point, so the steady ratio is exact).  The true kappa comes
+from ``belt_thrust_model``: ``"capstan"`` (default: Gerbert's V-belt,
+:func:`dyno.model.capstan.capstan_point`, which is *not* the closed form that
+:mod:`dyno.tuning.fit` fits, so the fit is not validated against itself) or
+``"closed_form"`` (Sorge & Cammalleri eqs. 17-18, the fitted model itself:
+circular, for comparison only).  Together with ``flyweight_radius_offset_m``
+(added to the tune's flyweight radius table) these are the rig's hidden
+"true" parameters that the fit estimates.
+
+Slip
+----
+With a tune the belt's slip (``omega_s = (1 - s) omega_p / i``) is the closed
+form's elastic creep at the tune's clamp ``F_p(x, n)`` and the belt torque
+(0.03-0.2 %), re-evaluated with kappa; the rest of the loss model's speed loss
+moves into the torque loss so the overall efficiency is unchanged.  The
+closed form is the belt tier that carries the tune's loads (the full model
+finds gross slip at the stock clamp from ~10 N m, see
+:mod:`dyno.sim.belt_table`); it is what the overlay's slip-consistent inverse
+(:mod:`dyno.model.inverse`) inverts, and the truth records ``belt_slip`` and
+the geometric ratio per point.  Without a tune, or below engagement, the loss
+model's slip ``s_0 + s_1 |T_p|`` applies.
 
 Engagement
 ----------
@@ -94,10 +107,10 @@ bending is elastic).  At ``T_ref`` the overall efficiency equals the loss
 model's (it stays in the thesis's measured range); away from it, the torque
 dependence of the belt's share (creep grows with load, the seating loss is a
 larger fraction at light load) is the belt model's.  The table covers the
-thesis's solved ratios 0.72-1.75 at 8 and 18 N m (3400 rpm, 100 N slack
-tension); ratio and torque are clamped to that range (at ratios above 1.75
-the belt share is held at its 1.75 value).  A cell where the belt model did
-not converge falls back to the loss model.
+simulated CVT's whole ratio range 0.72-2.4 at 8 and 18 N m, at the tune's
+clamp at 3150 rpm (100 N slack without a tune); torque is clamped to that
+range.  A cell where the belt model did not converge (at the stock tune's
+clamp: gross slip at 18 N m at every ratio) falls back to the loss model.
 """
 
 from __future__ import annotations
@@ -170,7 +183,11 @@ class CVT:
                  loss_frac_high_ratio: float, loss_frac_low_ratio: float, ratio_best_eff: float,
                  bending_drag_nm: float, tune=None, n_table: int = 400,
                  belt_friction_coefficient: float | None = None, flyweight_radius_offset_m: float = 0.0,
-                 belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0):
+                 belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0,
+                 belt_thrust_model: str = "capstan"):
+        if belt_thrust_model not in ("capstan", "closed_form"):
+            raise ValueError(f"belt_thrust_model: 'capstan' or 'closed_form', got {belt_thrust_model!r}")
+        self.belt_thrust_model = belt_thrust_model
         self.belt_table = belt_table
         self.t_ref = belt_reference_torque_nm
         self.tau_shift_s = shift_time_constant_s
@@ -219,6 +236,7 @@ class CVT:
         self._belt_creep = None
         self._belt_every = max(int(belt_update_cells), 1)
         self._belt_count = 0
+        self._creep_params = None
         if belt_friction_coefficient is not None:
             if tune is None:
                 raise ValueError("belt_friction_coefficient needs a CVT tune (the belt geometry)")
@@ -226,7 +244,13 @@ class CVT:
             from dyno.tuning.shift_curve import model_params_for
 
             self._belt_params = model_params_for(tune, BeltParams(friction_coefficient=belt_friction_coefficient))
-            self.source += f", closed-form belt thrusts (f = {belt_friction_coefficient:g})"
+            self._creep_params = self._belt_params
+            self.source += f", {belt_thrust_model} belt thrusts (f = {belt_friction_coefficient:g})"
+        elif tune is not None:
+            from dyno.tuning.shift_curve import model_params_for
+
+            # The belt's slip at the tune's clamp (see "Slip" in the module docstring).
+            self._creep_params = model_params_for(tune)
         # Force scale of the lag: the springs' force change over the travel.
         self.k_ref_n = float(max(abs((s_p[-1] + s_s[-1]) - (s_p[0] + s_s[0])), 1.0))
 
@@ -276,26 +300,43 @@ class CVT:
         return (c[j] + f * (c[j + 1] - c[j])) * rpm_primary * rpm_primary - (sp[j] + f * (sp[j + 1] - sp[j]))
 
     def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
-        """Re-evaluate the belt thrust ratio ``kappa`` and creep at this state."""
+        """Re-evaluate the belt's slip (and, in belt mode, the thrust ratio ``kappa``) at this state."""
         from dyno.errors import MODEL_FAILURES, ConfigError
         from dyno.model.closed_form import closed_form_point
         from dyno.model.params import OperatingPoint
 
         f_p = self.primary_force_n(rpm_primary, x)
         if f_p <= 0.0 or rpm_primary <= 0.0:
+            self._belt_creep = None  # no clamp (clutch open): the loss model's slip
             return  # no clamp: kappa does not enter (see force_imbalance_n)
+        if not torque_primary_nm > 1e-6:
+            self._belt_creep = 0.0  # no torque, no tension difference, no creep; kappa kept
+            return
         op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
                             primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
                             primary_axial_force_n=f_p)
         try:
-            res = closed_form_point(self._belt_params, op)
+            res = closed_form_point(self._creep_params, op)
         except (ConfigError, *MODEL_FAILURES):
             # The clamp cannot carry the torque: the secondary wins (as in
             # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
             self._kappa = 0.0
+            self._belt_creep = None
+            return
+        self._belt_creep = 1.0 - res.efficiency_speed
+        if self._belt_params is None:
+            return
+        if self.belt_thrust_model == "capstan":
+            from dyno.model.capstan import capstan_point
+
+            try:
+                cap = capstan_point(self._belt_params, op)
+            except (ConfigError, ValueError, *MODEL_FAILURES):
+                self._kappa = 0.0
+                return
+            self._kappa = 0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n
             return
         self._kappa = res.axial_force_secondary_n / f_p
-        self._belt_creep = 1.0 - res.efficiency_speed
 
     def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float,
               torque_primary_nm: float = 0.0) -> float:
@@ -303,7 +344,7 @@ class CVT:
 
         ``torque_primary_nm`` (belt input torque) only matters in belt mode.
         """
-        if self._belt_params is not None:
+        if self._creep_params is not None:
             if self._belt_count % self._belt_every == 0:
                 self.update_belt(x, rpm_primary, torque_primary_nm)
             self._belt_count += 1
@@ -334,17 +375,26 @@ class CVT:
 
     # -- losses ----------------------------------------------------------
     def creep_slip(self, torque_primary_nm: float) -> float:
-        """Speed loss fraction ``s`` (belt mode: the closed form's elastic creep)."""
-        if self._belt_creep is not None:
-            return self._belt_creep
+        """Speed loss fraction ``s`` of the simple loss model."""
         return self.s0 + self.s1 * abs(torque_primary_nm)
 
     def losses(self, ratio: float, torque_primary_nm: float) -> tuple[float, float]:
-        """``(eps, s)``: torque loss fraction and creep at this ratio and belt torque.
+        """``(eps, s)``: torque loss fraction and slip at this ratio and belt torque.
 
         Simple loss model, or belt-model share + parasitic remainder when a
-        belt table is attached (see the module docstring).
+        belt table is attached (see the module docstring).  With a tune the
+        slip is the belt's (closed-form creep at the tune's clamp, see "Slip")
+        and the rest of the speed loss moves into the torque loss: the
+        product (1 - eps)(1 - s), the overall efficiency, is unchanged.
         """
+        eps, s = self._losses_before_slip(ratio, torque_primary_nm)
+        creep = self._belt_creep
+        if creep is not None and creep < 1.0:
+            eps = 1.0 - (1.0 - eps) * (1.0 - s) / (1.0 - creep)
+            s = creep
+        return eps, s
+
+    def _losses_before_slip(self, ratio: float, torque_primary_nm: float) -> tuple[float, float]:
         tab = self.belt_table
         if tab is not None:
             t = abs(torque_primary_nm)
@@ -355,8 +405,6 @@ class CVT:
                 s_par = self.s0 + self.s1 * self.t_ref - (1.0 - ref[1])
                 eps = (1.0 - here[0]) + (eps_par if eps_par > 0.0 else 0.0)
                 s = (1.0 - here[1]) + (s_par if s_par > 0.0 else 0.0)
-                if self._belt_creep is not None:
-                    s = self._belt_creep
                 return eps, s
         return self.empirical_loss_frac(ratio), self.creep_slip(torque_primary_nm)
 

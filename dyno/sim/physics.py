@@ -33,18 +33,21 @@ The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 fallback with ``cvt_tune_path=None``), between the end stops
 ``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  Optional
 hidden "true" parameters for the shift-model fit (``cvt_belt_friction_coefficient``:
-closed-form belt thrusts in the balance; ``cvt_flyweight_radius_offset_m``;
+belt thrusts in the balance, from the capstan tier by default (``cvt_belt_thrust_model``:
+not the closed form the fit uses); ``cvt_flyweight_radius_offset_m``;
 ``cvt_secondary_friction_torque_nm``: shaft drag between the helix and the
 torque gauge, added to the load) are off by default.
 
 Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
 CVT loss into the full belt model's share, from a ratio x torque table solved
 once per machine into the belt model's overlay cache (:mod:`dyno.sim.belt_table`,
-~20 s from an empty cache), and a documented parasitic remainder (the simple
+at the tune's clamp, ~60 s from an empty cache), and a documented parasitic remainder (the simple
 loss model minus the belt's share at 18 N m: bearings, clutch, sheave friction,
 hysteresis), so the overall efficiency stays in the thesis's measured
 80-92 %; "loss_model" is the simple loss model alone (see :mod:`dyno.sim.cvt`).
-The truth's efficiency is always the model's own power balance.
+The truth's efficiency is always the model's own power balance.  With a tune the
+belt's slip is its closed-form creep at the tune's clamp (the truth records it as
+``belt_slip`` with ``ratio_geometric``; see "Slip" in :mod:`dyno.sim.cvt`).
 
 The torque gauge sits on the brake shaft between the gear and the rotor, so
 it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
@@ -206,6 +209,10 @@ class RigParams:
     # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
     cvt_belt_friction_coefficient: float | None = None
     cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
+    # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
+    # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
+    # against itself; "closed_form" reproduces the fitted model (circular: for comparison only).
+    cvt_belt_thrust_model: str = "capstan"
     # Bearing/seal drag on the secondary shaft after the helix: the helix feels
     # the belt torque, the torque gauge (and the brake) that minus this.
     cvt_secondary_friction_torque_nm: float = 0.0
@@ -301,6 +308,7 @@ class Truth:
     brake_torque_capacity_nm: float = 0.0
     clutch_locked: bool = False
     clutch_capacity_nm: float = 0.0  # torque the primary can pass now (engagement)
+    belt_slip: float = 0.0         # 1 - belt speed efficiency: omega_s = (1 - slip) omega_p / ratio_geometric
 
 
 class RigModel:
@@ -322,6 +330,7 @@ class RigModel:
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
+        tune = _load_tune(p.cvt_tune_path)
         self.cvt = CVT(ratio_low=p.cvt_ratio_low, ratio_high=p.cvt_ratio_high,
                        primary_radius_max_m=p.cvt_primary_radius_max_m,
                        sheave_half_angle_deg=p.cvt_sheave_half_angle_deg,
@@ -331,7 +340,7 @@ class RigModel:
                        secondary_spring_preload_n=p.cvt_secondary_spring_preload_n,
                        secondary_spring_rate_n_per_m=p.cvt_secondary_spring_rate_n_per_m,
                        helix_gain_n_per_nm=p.cvt_helix_gain_n_per_nm,
-                       shift_time_constant_s=p.cvt_shift_time_constant_s, tune=_load_tune(p.cvt_tune_path),
+                       shift_time_constant_s=p.cvt_shift_time_constant_s, tune=tune,
                        engage_start_rpm=p.cvt_engage_start_rpm,
                        engage_full_rpm=p.cvt_engage_full_rpm, clutch_capacity_nm=p.cvt_clutch_capacity_nm,
                        slip_base_frac=p.cvt_slip_base_frac, slip_per_20nm_frac=p.cvt_slip_per_20nm_frac,
@@ -339,8 +348,9 @@ class RigModel:
                        loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
                        bending_drag_nm=p.cvt_bending_drag_nm,
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
+                       belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       belt_table=_belt_table_for(p))
+                       belt_table=_belt_table_for(p, tune))
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
         self.engagement = None
@@ -792,18 +802,19 @@ class RigModel:
             brake_torque_capacity_nm=self._t_brake_cap,
             clutch_locked=self._locked,
             clutch_capacity_nm=self._cap,
+            belt_slip=self._slip,
         )
 
 
-def _belt_table_for(p: RigParams):
-    """The belt-model efficiency table when ``belt_efficiency_source == "belt_model"``."""
+def _belt_table_for(p: RigParams, tune=None):
+    """The belt-model efficiency table (at ``tune``'s clamp) when ``belt_efficiency_source == "belt_model"``."""
     if p.belt_efficiency_source == "loss_model":
         return None
     if p.belt_efficiency_source != "belt_model":
         raise ValueError(f"belt_efficiency_source: 'belt_model' or 'loss_model', got {p.belt_efficiency_source!r}")
     from dyno.sim.belt_table import belt_table
 
-    return belt_table(p.belt_table_cache_dir)
+    return belt_table(p.belt_table_cache_dir, tune)
 
 
 def _after_drag(torque_nm: float, drag_nm: float) -> float:

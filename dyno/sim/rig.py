@@ -89,12 +89,13 @@ class SimActuators:
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
-    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c")
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip")
 
     def __init__(self, model) -> None:
         self.model = model
         self.t = array("d")
-        self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c = (array("d") for _ in self.FIELDS)
+        (self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c, self.ratio_geo,
+         self.slip) = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -105,6 +106,8 @@ class TruthRecorder:
         self.rs.append(tr.rpm_secondary)
         self.tq.append(tr.torque_secondary_nm)
         self.rotor_c.append(tr.rotor_temp_c)
+        self.ratio_geo.append(tr.ratio_geometric)
+        self.slip.append(tr.belt_slip)
 
     def crossing_s(self, field: str, level: float, after_s: float = 0.0) -> float | None:
         """First time (linear interpolation between samples) ``field`` rises above ``level``."""
@@ -134,7 +137,9 @@ class TruthRecorder:
         p_in, p_out = mean(self.p_in), mean(self.p_out)
         return {"efficiency_true": p_out / p_in if p_in > 0 else math.nan,
                 "rpm_primary_true": mean(self.rp), "rpm_secondary_true": mean(self.rs),
-                "torque_secondary_true_nm": mean(self.tq), "power_in_true_w": p_in, "power_out_true_w": p_out}
+                "torque_secondary_true_nm": mean(self.tq), "power_in_true_w": p_in, "power_out_true_w": p_out,
+                # the belt's truth for the slip-consistent inverse (dyno.model.inverse)
+                "ratio_geometric_true": mean(self.ratio_geo), "belt_slip_true": mean(self.slip)}
 
     def point_hook(self, point: dict, t0_s: float, t1_s: float) -> None:
         point.update(self.window(t0_s, t1_s))

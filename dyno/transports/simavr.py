@@ -151,6 +151,12 @@ class SimavrTransport(Transport):
         self.sync()
         return json.loads(self._cmd("stats"))
 
+    def poke(self, addr: int, value: int) -> None:
+        """Write one SRAM byte behind the firmware's back (tests of the harness's checks)."""
+        self.sync()
+        if self._cmd(f"poke {addr:x} {value & 0xFF:02x}") != "ok":
+            raise HarnessError("poke")
+
     # -- Transport ------------------------------------------------------------------
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         kind = None
@@ -222,6 +228,8 @@ def toolchain_missing() -> str | None:
             return f"{tool} not found (apt-get install gcc-avr avr-libc binutils-avr make gcc)"
     if not Path("/usr/include/simavr/sim_avr.h").is_file():
         return "libsimavr headers not found (apt-get install libsimavr-dev libelf-dev)"
+    if not Path("/usr/include/gelf.h").is_file():  # the harness reads the ELF's symbols
+        return "libelf headers not found (apt-get install libelf-dev)"
     if not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
         return "Arduino core not found (apt-get install arduino-core-avr)"
     return None

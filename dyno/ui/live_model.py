@@ -151,19 +151,23 @@ class History:
                 d.popleft()
 
 
-def overlay_inputs(points) -> list[tuple[float, tuple[float, float, float]]]:
-    """(secondary rpm, (ratio, primary rpm, primary torque)) of each valid point.
+def overlay_inputs(points, tune=None, *, tier: str = "closed_form") -> list:
+    """(secondary rpm, operating point) of each valid point, for :func:`dyno.model.overlay.predict_overlay`.
 
-    The triple is what :func:`dyno.model.overlay.predict_overlay` takes; the
-    secondary rpm places the prediction on the efficiency plot.
-
-    The primary torque is the engine-map torque the efficiency was computed with
-    (power_in / omega_primary).
+    The operating point is the slip-consistent inverse's (:mod:`dyno.model.inverse`): the geometric
+    ratio and clamp that reproduce the measured speed ratio at the measured primary speed and torque,
+    with ``tune`` (a :class:`~dyno.tuning.tune.Tune` or a TOML path, e.g. the run's ``tune.toml``)
+    giving the clamp (flyweights minus spring at the measured rpm).  Without a tune: the thesis's
+    Table 6.1 drive at 100 N of slack tension.  The primary torque is the engine-map torque the
+    efficiency was computed with (power_in / omega_primary); the secondary rpm places the
+    prediction on the efficiency plot.  Points whose inverse finds no steady belt (gross slip at
+    the tune's clamp, spring holding the sheave open) are left out.  ``tier``: the inverse's slip,
+    ``closed_form`` (microseconds per point) or ``full`` (seconds per point).
     """
-    out = []
-    for p in points:
-        rp, ratio, p_in = p.get("rpm_primary"), p.get("ratio"), p.get("power_in_w")
-        if any(v is None or not math.isfinite(v) for v in (rp, ratio, p_in)) or rp <= 0:
-            continue
-        out.append((float(p["rpm_secondary"]), (float(ratio), float(rp), float(p_in) / (rp * RAD_S_PER_RPM))))
-    return out
+    from dyno.model.inverse import invert_points
+
+    from dyno.tuning.tune import Tune, load_tune
+
+    if tune is not None and not isinstance(tune, Tune):
+        tune = load_tune(tune)
+    return [(rs, res.operating_point()) for rs, res in invert_points(points, tune, tier=tier) if res.ok]

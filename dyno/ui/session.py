@@ -91,6 +91,8 @@ class LiveSession:
         self.run_dir_removed = False  # set by close() when a simulated session never started a test
         if opts.sim:
             self.ctx = build(run_opts, self.sim_now)
+            # the plan runners' own durations (hold periods, approach times) shrink like the plan's
+            self.ctx.controller.time_scale = 1.0 / self.speed
             self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
             # Each real-time poll spans `speed` x more rig time: let it drain that many more frames.
             self.ctx.poller.max_burst = max(8, math.ceil(8 * self.speed))

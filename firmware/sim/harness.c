@@ -6,15 +6,9 @@
  *     drivers: sensors.c (one pulse per revolution, ringing, glitches; a conversion
  *     every 1/adc_hz s, shifted out on SCLK).
  *   - The host's USB serial on UART0 (uwrite/uread below).
- *   - I2C master at the bus's bit rate. simavr 1.6 cannot complete a slave-transmit
- *     (it never produces TWI status 0xB8/0xC0; fixed upstream in 2022), so this
- *     harness does not use simavr's TWI message IRQs at all: it is the bus. For every
- *     bus event it waits one byte time (9 SCL clocks), writes the TWI status the real
- *     hardware would produce into TWSR (keeping the prescaler bits), puts received
- *     data into TWDR, raises the TWI vector, and waits for the ISR to clear TWINT --
- *     the time SCL is held low, i.e. clock stretching, which it measures. Transmitted
- *     bytes are taken from TWDR after the ISR. Any slave (our driver, or Arduino's
- *     Wire for the v0 sketch) sees the same register behaviour as on silicon.
+ *   - The Pi's I2C master at the bus's bit rate, with clock stretching: twi_master.c.
+ *   - The MCU itself (ELF, stepping and profiling, register fixes for simavr 1.6, guard
+ *     bytes around the firmware's event ring): mcu.c.
  *
  * Simulated time paces everything; the host advances it explicitly.
  *
@@ -33,258 +27,27 @@
  *   gen off|on           stop/restart generating Hall edges and conversions -> "ok"
  *   reset [mcusr]        reset the MCU; RAM kept, MCUSR set to the given hex cause
  *                        (default 08 = WDRF, a watchdog reset; 02 = EXTRF)   -> "ok"
- *   stats                one JSON object
+ *   poke <addr> <byte>   write one byte of data space (hex; tests of the guard check) -> "ok"
+ *   stats                one JSON object (after every command the ring's guard bytes
+ *                        are checked: "ring_guard" counts violations)
  *   quit
  */
 #define _POSIX_C_SOURCE 200809L
-#include <errno.h>
-#include <math.h>
-#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "avr_ioport.h"
+#include "avr_uart.h"
 #include "sim_avr.h"
 #include "sim_cycle_timers.h"
-#include "sim_elf.h"
-#include "avr_uart.h"
-#include "sim_interrupts.h"
 #include "sim_irq.h"
 #include "harness.h"
 
-
-/* ATmega328P data-space addresses of the TWI registers. */
-#define MCUSR_ADDR 0x54  /* data-space address of MCUSR (reset cause) */
-#define REG_TWSR 0xB9
-#define REG_TWAR 0xBA
-#define REG_TWDR 0xBB
-#define REG_TWCR 0xBC
-#define TWCR_TWINT 0x80
-#define TWCR_TWEA 0x40
-#define TWCR_TWEN 0x04
-#define TWI_VECTOR 24
-#define N_VECTORS 26
-
-avr_t *avr;
 static FILE *proto_out;
-
-/* ---- configuration ------------------------------------------------------------ */
-static unsigned cfg_i2c_khz = 100, cfg_addr = 0x03;
 static double cfg_start_us = 50000.0;
-static int cfg_profile = 0;
-static double cfg_profile_from_us = 100000.0;
-
-/* ---- stepping, with optional ISR / interrupts-off profiling ---------------------- */
-typedef struct {
-    uint64_t count, total, max, min;
-} isr_stat_t;
-static isr_stat_t isr_stat[N_VECTORS];
-static int in_isr = -1;
-static uint64_t isr_start;
-static uint64_t cli_start, cli_max, cli_max_at;
-static int crashed;
-static double wall_s;
-static uint64_t wall_cycles;
-
-static inline void step(void)
-{
-    if (!cfg_profile) {
-        int st = avr_run(avr);
-        if (st == cpu_Crashed || st == cpu_Done)
-            crashed = 1;
-        return;
-    }
-    uint32_t pc = avr->pc;
-    uint16_t op = (uint16_t)(avr->flash[pc] | avr->flash[pc + 1] << 8);
-    uint64_t before = avr->cycle;
-    int st = avr_run(avr);
-    if (st == cpu_Crashed || st == cpu_Done)
-        crashed = 1;
-    int armed = avr->cycle >= (uint64_t)(cfg_profile_from_us * CYCLES_PER_US);
-    if (in_isr >= 0) {
-        if (op == 0x9518) {  /* RETI */
-            uint64_t d = avr->cycle - isr_start;
-            isr_stat_t *s = &isr_stat[in_isr];
-            if (armed) {
-                s->count++;
-                s->total += d;
-                if (d > s->max) s->max = d;
-                if (!s->min || d < s->min) s->min = d;
-            }
-            in_isr = -1;
-        }
-        return;
-    }
-    uint32_t npc = avr->pc;
-    if (npc && npc < N_VECTORS * 4 && !(npc & 3)) {
-        in_isr = (int)(npc / 4);
-        isr_start = before;  /* includes the interrupted instruction: an upper bound */
-        cli_start = 0;
-        return;
-    }
-    /* Interrupts-off windows in the main program (cli ... sei / SREG restore). */
-    if (!avr->sreg[S_I]) {
-        if (!cli_start)
-            cli_start = before;
-    } else if (cli_start) {
-        uint64_t d = avr->cycle - cli_start;
-        if (armed && d > cli_max) {
-            cli_max = d;
-            cli_max_at = cli_start;
-        }
-        cli_start = 0;
-    }
-}
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void run_until(uint64_t cycle)
-{
-    double w0 = now_s();
-    uint64_t c0 = avr->cycle;
-    while (avr->cycle < cycle && !crashed)
-        step();
-    wall_s += now_s() - w0;
-    wall_cycles += avr->cycle - c0;
-}
-
-/* ---- I2C master ------------------------------------------------------------------- */
-static avr_int_vector_t *twi_vec;
-static uint64_t i2c_transfers, i2c_nacks, i2c_timeouts, stretch_max, stretch_total, stretch_n;
-static uint64_t byte_cycles, bit_cycles;
-
-/* simavr 1.6 does not clear TWINT when the ISR writes 1 to it (TWI's vector is
- * "sticky"), so "the slave released SCL" is detected from the write itself. */
-static int twint_written;
-
-static avr_int_vector_t *find_vector(int num)
-{
-    for (int i = 0; i < avr->interrupts.vector_count; i++)
-        if (avr->interrupts.vector[i] && avr->interrupts.vector[i]->vector == num)
-            return avr->interrupts.vector[i];
-    return NULL;
-}
-
-/* The slave's ISR holds SCL low from TWINT until it clears it. Real masters wait (clock
- * stretching); a stuck slave times the transfer out. */
-static int wait_twint_clear(void)
-{
-    uint64_t t0 = avr->cycle, limit = t0 + 25000ull * CYCLES_PER_US;
-    double w0 = now_s();
-    while (!twint_written && avr->cycle < limit && !crashed)
-        step();
-    if (twint_written)
-        avr->data[REG_TWCR] &= (uint8_t)~TWCR_TWINT;
-    wall_s += now_s() - w0;
-    wall_cycles += avr->cycle - t0;
-    uint64_t d = avr->cycle - t0;
-    if (getenv("HARNESS_DEBUG") && !twint_written)
-        fprintf(stderr, "harness: TWINT stuck: TWCR %02x TWSR %02x pending %d I %d pc %04x\n",
-                avr->data[REG_TWCR], avr->data[REG_TWSR], twi_vec->pending, avr->sreg[S_I], avr->pc);
-    stretch_total += d;
-    stretch_n++;
-    if (d > stretch_max)
-        stretch_max = d;
-    return twint_written;
-}
-
-/* A master that gave up mid-read leaves the slave transmitter driving SDA: the bus is
- * held until the slave disables its TWI unit (TWEN written 0: its timeout). */
-static int bus_held;
-static uint64_t bus_held_since, bus_release_cycles, bus_aborts;
-
-static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
-{
-    (void)a; (void)addr; (void)param;
-    if (v & TWCR_TWINT)
-        twint_written = 1;
-    if (bus_held && !(v & TWCR_TWEN)) {
-        bus_held = 0;
-        bus_release_cycles = avr->cycle - bus_held_since;
-    }
-}
-
-static void twi_event(uint8_t status)
-{
-    twint_written = 0;
-    avr->data[REG_TWSR] = (uint8_t)((avr->data[REG_TWSR] & 0x03) | status);
-    avr_raise_interrupt(avr, twi_vec);
-}
-
-static int slave_acks(uint8_t addr7)
-{
-    uint8_t twcr = avr->data[REG_TWCR];
-    if (!(twcr & TWCR_TWEN) || !(twcr & TWCR_TWEA))
-        return 0;
-    return (avr->data[REG_TWAR] >> 1) == addr7;
-}
-
-/* Returns 0 ok, 1 NACK, 2 timeout, 3 bus held (SDA low since an aborted transfer).
- * abort_after >= 0: the master stops clocking after that many bytes of the read, with
- * no NACK and no STOP (a crashed or killed host). */
-static int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr, int abort_after)
-{
-    if (bus_held)
-        return 3;
-    i2c_transfers++;
-    /* simavr stores a 1 written to TWINT (silicon clears the flag), so TWINT can read
-     * as set with nothing pending: only our own events count. */
-    if ((avr->data[REG_TWCR] & TWCR_TWINT) && !twi_vec->pending)
-        avr->data[REG_TWCR] &= (uint8_t)~TWCR_TWINT;
-    run_until(avr->cycle + bit_cycles);  /* START */
-    if (nw > 0) {
-        run_until(avr->cycle + byte_cycles);  /* SLA+W */
-        if (!slave_acks((uint8_t)cfg_addr))
-            return 1;
-        twi_event(0x60);
-        if (!wait_twint_clear()) return 2;
-        for (int i = 0; i < nw; i++) {
-            run_until(avr->cycle + byte_cycles);
-            if (!(avr->data[REG_TWCR] & TWCR_TWEA))
-                return 1;  /* slave stopped acknowledging */
-            avr->data[REG_TWDR] = wr[i];
-            twi_event(0x80);
-            if (!wait_twint_clear()) return 2;
-        }
-        run_until(avr->cycle + bit_cycles);  /* repeated START, or STOP */
-        twi_event(0xA0);
-        if (!wait_twint_clear()) return 2;
-    }
-    if (nr > 0) {
-        run_until(avr->cycle + byte_cycles);  /* SLA+R */
-        if (!slave_acks((uint8_t)cfg_addr))
-            return 1;
-        twi_event(0xA8);
-        if (!wait_twint_clear()) return 2;
-        rd[0] = avr->data[REG_TWDR];
-        for (int i = 1; i < nr; i++) {
-            if (abort_after >= 0 && i >= abort_after) {
-                bus_held = 1;
-                bus_held_since = avr->cycle;
-                bus_aborts++;
-                return 0;
-            }
-            run_until(avr->cycle + byte_cycles);  /* byte i-1 out, master ACKs */
-            twi_event(0xB8);
-            if (!wait_twint_clear()) return 2;
-            rd[i] = avr->data[REG_TWDR];
-        }
-        run_until(avr->cycle + byte_cycles);  /* last byte out, master NACKs */
-        twi_event(0xC0);
-        if (!wait_twint_clear()) return 2;
-    }
-    run_until(avr->cycle + bit_cycles);  /* STOP */
-    return 0;
-}
 
 /* ---- the host's USB serial (UART0, 115200 8N1 through the Nano's USB bridge) ----- */
 static avr_irq_t *uart_in;
@@ -302,24 +65,7 @@ static void uart_out_notify(struct avr_irq_t *irq, uint32_t value, void *param)
         uart_packet_end = 1;  /* COBS packets end with 0x00 */
 }
 
-/* ---- setup and command loop ------------------------------------------------------ */
-static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
-{
-    (void)a;
-    if (level <= LOG_WARNING)
-        vfprintf(stderr, fmt, ap);
-}
-
-static const char *vector_name(int v)
-{
-    static const char *names[N_VECTORS] = {
-        "RESET", "INT0", "INT1", "PCINT0", "PCINT1", "PCINT2", "WDT", "TIMER2_COMPA",
-        "TIMER2_COMPB", "TIMER2_OVF", "TIMER1_CAPT", "TIMER1_COMPA", "TIMER1_COMPB",
-        "TIMER1_OVF", "TIMER0_COMPA", "TIMER0_COMPB", "TIMER0_OVF", "SPI_STC", "USART_RX",
-        "USART_UDRE", "USART_TX", "ADC", "EE_READY", "ANALOG_COMP", "TWI", "SPM_READY"};
-    return names[v];
-}
-
+/* ---- stats and command loop ------------------------------------------------------ */
 static void print_stats(void)
 {
     FILE *o = proto_out;
@@ -343,30 +89,14 @@ static void print_stats(void)
             (unsigned long long)adc_generated, (unsigned long long)adc_read,
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
-    fprintf(o, "\"i2c\": {\"khz\": %u, \"transfers\": %llu, \"nacks\": %llu, \"timeouts\": %llu, "
-            "\"stretch_max_us\": %.3f, \"stretch_mean_us\": %.3f, \"aborts\": %llu, "
-            "\"bus_held\": %s, \"last_release_after_us\": %.1f}",
-            cfg_i2c_khz, (unsigned long long)i2c_transfers, (unsigned long long)i2c_nacks,
-            (unsigned long long)i2c_timeouts, (double)stretch_max / CYCLES_PER_US,
-            stretch_n ? (double)stretch_total / (double)stretch_n / CYCLES_PER_US : 0.0,
-            (unsigned long long)bus_aborts, bus_held ? "true" : "false",
-            (double)bus_release_cycles / CYCLES_PER_US);
-    if (cfg_profile) {
-        fprintf(o, ", \"isr\": {");
-        int first = 1;
-        for (int v = 1; v < N_VECTORS; v++) {
-            isr_stat_t *s = &isr_stat[v];
-            if (!s->count)
-                continue;
-            fprintf(o, "%s\"%s\": {\"count\": %llu, \"mean_cycles\": %.1f, \"max_cycles\": %llu, "
-                    "\"min_cycles\": %llu}", first ? "" : ", ", vector_name(v),
-                    (unsigned long long)s->count, (double)s->total / (double)s->count,
-                    (unsigned long long)s->max, (unsigned long long)s->min);
-            first = 0;
-        }
-        fprintf(o, "}, \"cli_max_cycles\": %llu, \"cli_max_at_us\": %.1f",
-                (unsigned long long)cli_max, (double)cli_max_at / CYCLES_PER_US);
-    }
+    /* WDTCSR as the firmware left it (WDE 0x08: the watchdog resets the MCU) */
+    fprintf(o, "\"wdtcsr\": %u, \"eeprom_writes\": %llu, ", avr->data[REG_WDTCSR],
+            (unsigned long long)eeprom_writes);
+    print_i2c(o);
+    fprintf(o, ", ");
+    print_guard(o);
+    if (cfg_profile)
+        print_profile(o);
     fprintf(o, "}\n");
 }
 
@@ -425,35 +155,8 @@ int main(int argc, char **argv)
     int fd = dup(1);
     dup2(2, 1);
     proto_out = fdopen(fd, "w");
-    avr_global_logger_set(logger);
-
-    static elf_firmware_t fw;
-    if (elf_read_firmware(elf, &fw) != 0) {
-        fprintf(stderr, "harness: cannot read %s\n", elf);
+    if (!mcu_load(elf) || !i2c_init())
         return 1;
-    }
-    /* Arduino ELFs carry no .mmcu section. */
-    strcpy(fw.mmcu, "atmega328p");
-    fw.frequency = (uint32_t)F_CPU_HZ;
-    avr = avr_make_mcu_by_name(fw.mmcu);
-    if (!avr) {
-        fprintf(stderr, "harness: no atmega328p in libsimavr\n");
-        return 1;
-    }
-    avr_init(avr);
-    avr_load_firmware(avr, &fw);
-    avr->log = LOG_WARNING;
-    avr->data[MCUSR_ADDR] = 0x01;  /* PORF: this is a power-on (RAM is zero in simavr) */
-
-    /* The TWI peripheral is number 0 (not '0') on the mega328. */
-    twi_vec = find_vector(TWI_VECTOR);
-    if (!twi_vec) {
-        fprintf(stderr, "harness: TWI vector not found\n");
-        return 1;
-    }
-    avr_register_io_write(avr, REG_TWCR, twcr_write_hook, NULL);
-    bit_cycles = F_CPU_HZ / (cfg_i2c_khz * 1000ull);
-    byte_cycles = 9 * bit_cycles;
 
     for (int c = 0; c < 2; c++) {
         hall[c].ch = c;
@@ -545,11 +248,7 @@ int main(int argc, char **argv)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");
         } else if (strcmp(cmd, "reset") == 0) {
-            avr_reset(avr);
-            /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
-            avr->data[MCUSR_ADDR] = (uint8_t)(a1[0] ? strtoul(a1, NULL, 16) : 0x08);
-            in_isr = -1;
-            cli_start = 0;
+            mcu_reset((uint8_t)(a1[0] ? strtoul(a1, NULL, 16) : 0x08));
             /* The rig keeps turning through the reset: restart the generators (their
              * timers may have been cleared with the MCU's) and the AD7171 idles. */
             for (int c = 0; c < 2; c++) {
@@ -569,6 +268,11 @@ int main(int argc, char **argv)
             if (gen_enabled)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");
+        } else if (strcmp(cmd, "poke") == 0) {
+            unsigned long addr = strtoul(a1, NULL, 16);
+            if (addr >= 0x100 && addr < 0x900)  /* the 2 KiB of SRAM */
+                avr->data[addr] = (uint8_t)strtoul(a2, NULL, 16);
+            fprintf(proto_out, "ok\n");
         } else if (strcmp(cmd, "stats") == 0) {
             print_stats();
         } else if (strcmp(cmd, "quit") == 0) {
@@ -576,6 +280,7 @@ int main(int argc, char **argv)
         } else {
             fprintf(proto_out, "error unknown command\n");
         }
+        guard_check();
         fflush(proto_out);
         if (crashed) {
             fprintf(stderr, "harness: firmware crashed at cycle %llu pc 0x%x\n",

@@ -1,15 +1,44 @@
-/* Shared between the simavr harness (harness.c: MCU, I2C master, UART, host protocol)
- * and its sensors (sensors.c: Hall sensors and AD7171 as external drivers on port D). */
+/* Shared between the parts of the simavr harness: harness.c (UART, host line protocol,
+ * stats), mcu.c (ELF, stepping/profiling, simavr register fixes, ring guard bytes),
+ * twi_master.c (the Pi's I2C master) and sensors.c (Hall sensors and AD7171 as external
+ * drivers on port D). */
 #ifndef DYNO_HARNESS_H
 #define DYNO_HARNESS_H
 #include <stdint.h>
+#include <stdio.h>
 #include "sim_avr.h"
 #include "sim_irq.h"
+#include "sim_interrupts.h"
 
 #define F_CPU_HZ 16000000ull
 #define CYCLES_PER_US (F_CPU_HZ / 1000000ull)
 
+#define MCUSR_ADDR 0x54  /* data-space address of MCUSR (reset cause) */
+#define N_VECTORS 26
+
+/* mcu.c */
 extern avr_t *avr;
+extern int crashed, cfg_profile;
+extern double cfg_profile_from_us, wall_s;
+extern uint64_t wall_cycles;
+int mcu_load(const char *elf);
+void mcu_reset(uint8_t mcusr);
+void step(void);
+void run_until(uint64_t cycle);
+double now_s(void);
+avr_int_vector_t *find_vector(int num);
+void print_profile(FILE *o);
+void guard_check(void);
+extern uint64_t eeprom_writes;
+#define REG_WDTCSR 0x60
+void print_guard(FILE *o);
+
+/* twi_master.c */
+extern unsigned cfg_i2c_khz, cfg_addr;
+extern uint64_t i2c_transfers, i2c_nacks, i2c_timeouts;
+int i2c_init(void);
+int i2c_transfer(const uint8_t *wr, int nw, uint8_t *rd, int nr, int abort_after);
+void print_i2c(FILE *o);
 
 /* sensor configuration (command line) */
 extern double cfg_rpm[2];

@@ -55,14 +55,15 @@ static inline __attribute__((always_inline)) uint32_t now_us_locked(void)
     return tstamp_extend(t1_base_us, tcnt, tov);
 }
 
-/* The low 16 bits of now_us_locked(), with 16-bit arithmetic only (the rising edge
- * needs no more: widths and lock-outs are < 65.5 ms). */
-static inline __attribute__((always_inline)) uint16_t now_us16_locked(void)
+/* The low 16 bits of tstamp_extend(t1_base_us, tcnt, tov), with 16-bit arithmetic only
+ * (the rising edge needs no more: widths and lock-outs are < 65.5 ms). */
+static inline __attribute__((always_inline)) uint16_t us16_of(uint16_t tcnt, uint8_t tov)
 {
-    uint16_t tcnt = TCNT1;
-    uint8_t tov = TIFR1 & _BV(TOV1);
-    uint16_t t = (uint16_t)((uint16_t)t1_base_us + (uint16_t)(tcnt >> 1));
-    if (tov && !(tcnt & 0x8000u))
+    /* Only the base's low half (the AVR is little-endian): a volatile u32 read would
+     * load all four bytes. */
+    uint16_t base16 = *(volatile uint16_t *)&t1_base_us;
+    uint16_t t = (uint16_t)(base16 + (uint16_t)(tcnt >> 1));
+    if ((tov & _BV(TOV1)) && !(tcnt & 0x8000u))
         t = (uint16_t)(t + (uint16_t)TSTAMP_US_PER_OVERFLOW);
     return t;
 }
@@ -88,12 +89,13 @@ uint32_t capture_now_us(void)
  * a pulse longer than 65.5 ms (below ~46 rpm at 5 % duty) is misjudged with probability
  * 50/65536, the price of a short ISR. */
 static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatile hall_ch_t *h,
-                                                            uint8_t low, uint8_t ch)
+                                                            uint8_t low, uint8_t ch,
+                                                            uint16_t tcnt, uint8_t tov)
 {
     if (low) {
         if (h->state != HALL_IDLE)
             return;  /* the rise in between was missed: one longer pulse */
-        uint32_t t = now_us_locked();
+        uint32_t t = tstamp_extend(t1_base_us, tcnt, tov & _BV(TOV1));
         if (!(uint16_t)((t - h->last_us) >> 16) &&
             (uint16_t)((uint16_t)t - h->end_us16) < h->lockout_us) {
             g_counters.lockout[ch]++;
@@ -111,7 +113,7 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
             g_counters.glitch[ch]++;
         return;
     }
-    uint16_t t16 = now_us16_locked();
+    uint16_t t16 = us16_of(tcnt, tov);
     uint32_t fall = h->fall_us;
     if ((uint16_t)(t16 - (uint16_t)fall) < HALL_MIN_PULSE_US) {
         g_counters.glitch[ch]++;
@@ -123,8 +125,47 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
     ring_push(&g_ring, tag, fall, 0, 0);
 }
 
-ISR(INT0_vect) { hall_edge(TAG_PRIMARY, &hall[0], !(PIND & _BV(PIN_HALL_PRIMARY_BIT)), 0); }
-ISR(INT1_vect) { hall_edge(TAG_SECONDARY, &hall[1], !(PIND & _BV(PIN_HALL_SECONDARY_BIT)), 1); }
+/* AD7171 RDY (DOUT/RDY falling on PD5 = PCINT21): its time is Timer1 read first thing
+ * in whichever ISR runs first after the fall -- the pin change ISR, or a Hall ISR that
+ * finds the pin change flag set (INT0/INT1 outrank PCINT2, and a Hall ISR would otherwise
+ * delay RDY's timestamp by its whole length, twice with both channels). So the stamp is
+ * late by at most one ISR already running when RDY fell (TWI's, <= 200 cycles) plus an
+ * ISR's entry, not by a stack of ISRs. A Hall ISR keeps the raw count (tcnt, tov); the
+ * pin change ISR, which runs right after it (it outranks the overflow ISR, so the base
+ * has not moved), extends it to us. The pin change interrupt is masked from RDY until
+ * the result has been clocked out: the data bits toggle the same pin. */
+/* "A Hall ISR kept RDY's raw count" is a bit of GPIOR0 (an I/O register: tested and set
+ * in one cycle each, which keeps the Hall ISRs under 200 cycles; nothing else uses it). */
+#define RDY_RAW_BIT 0
+static volatile uint8_t adc_rdy_seen;  /* the pin change ISR stamped adc_rdy_us */
+static volatile uint16_t adc_rdy_tcnt;
+static volatile uint8_t adc_rdy_tov;
+static volatile uint32_t adc_rdy_us;
+
+static inline __attribute__((always_inline)) void rdy_snapshot(uint16_t tcnt, uint8_t tov)
+{
+    if ((PCIFR & _BV(PCIF2)) && !(GPIOR0 & _BV(RDY_RAW_BIT))) {
+        adc_rdy_tcnt = tcnt;
+        adc_rdy_tov = tov;
+        GPIOR0 |= _BV(RDY_RAW_BIT);
+    }
+}
+
+/* Timer1 first (counter, then its overflow flag: tstamp.h), then the pin. */
+ISR(INT0_vect)
+{
+    uint16_t tcnt = TCNT1;
+    uint8_t tov = TIFR1;  /* TOV1 is masked where used (saves a cycle on every path) */
+    rdy_snapshot(tcnt, tov);
+    hall_edge(TAG_PRIMARY, &hall[0], !(PIND & _BV(PIN_HALL_PRIMARY_BIT)), 0, tcnt, tov);
+}
+ISR(INT1_vect)
+{
+    uint16_t tcnt = TCNT1;
+    uint8_t tov = TIFR1;  /* TOV1 is masked where used (saves a cycle on every path) */
+    rdy_snapshot(tcnt, tov);
+    hall_edge(TAG_SECONDARY, &hall[1], !(PIND & _BV(PIN_HALL_SECONDARY_BIT)), 1, tcnt, tov);
+}
 
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us)
 {
@@ -133,18 +174,18 @@ void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us)
     capture_service();
 }
 
-/* AD7171 RDY (DOUT/RDY falling on PD5 = PCINT21): time-stamped here, within the
- * interrupt latency of the end of the conversion, instead of whenever the main loop
- * notices (up to a loop pass later). The pin change interrupt is masked from RDY until
- * the result has been clocked out: the data bits toggle the same pin. */
-static volatile uint32_t adc_rdy_us;
-static volatile uint8_t adc_rdy_seen;
-
 ISR(PCINT2_vect)
 {
+    uint16_t tcnt = TCNT1;
+    uint8_t tov = TIFR1 & _BV(TOV1);
+    if (GPIOR0 & _BV(RDY_RAW_BIT)) {  /* a Hall ISR ran first and kept the count */
+        tcnt = adc_rdy_tcnt;
+        tov = adc_rdy_tov;
+        GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
+    }
     if (PIND & _BV(PIN_ADC_DOUT_BIT))
-        return;
-    adc_rdy_us = now_us_locked();
+        return;  /* not RDY (a change that undid itself) */
+    adc_rdy_us = tstamp_extend(t1_base_us, tcnt, tov & _BV(TOV1));
     adc_rdy_seen = 1;
     PCMSK2 = 0;
 }
@@ -153,7 +194,17 @@ uint32_t capture_adc_rdy_us(void)
 {
     uint8_t sreg = SREG;
     cli();
-    uint32_t t = adc_rdy_seen ? adc_rdy_us : now_us_locked();
+    uint32_t t;
+    if (adc_rdy_seen)
+        t = adc_rdy_us;
+    else if (GPIOR0 & _BV(RDY_RAW_BIT))  /* the pin change ISR has not run yet: same base */
+        t = tstamp_extend(t1_base_us, adc_rdy_tcnt, adc_rdy_tov & _BV(TOV1));
+    else
+        t = now_us_locked();  /* RDY seen before any ISR could stamp it */
+    /* The result is clocked out next: its data bits must not look like RDY. */
+    PCMSK2 = 0;
+    PCIFR = _BV(PCIF2);
+    GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
     adc_rdy_seen = 0;
     SREG = sreg;
     return t;
@@ -164,6 +215,8 @@ void capture_adc_rearm(void)
     uint8_t sreg = SREG;
     cli();
     PCIFR = _BV(PCIF2);  /* forget the data bits' changes */
+    GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
+    adc_rdy_seen = 0;
     PCMSK2 = _BV(PIN_ADC_DOUT_BIT);  /* PCINT21 is PD5 */
     SREG = sreg;
 }
@@ -251,6 +304,7 @@ void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
     EIMSK = _BV(INT0) | _BV(INT1);
     /* AD7171 RDY on PD5: pin change interrupt group 2. */
     adc_rdy_seen = 0;
+    GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
     PCIFR = _BV(PCIF2);
     PCMSK2 = _BV(PIN_ADC_DOUT_BIT);
     PCICR |= _BV(PCIE2);

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.app import RunOptions, public_point, run_test
 from dyno.control.plans import plan_named
 from dyno.drills import parse_drill
 from dyno.replay import replay
@@ -21,10 +21,12 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def hold_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("hold") / "run"
+    # no --plan: speed-hold is the default plan
     r = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--seed", "2",
-                        "--plan", "speed-hold", "--out", str(out)], capture_output=True, text=True, timeout=600,
+                        "--out", str(out)], capture_output=True, text=True, timeout=600,
                        env={**os.environ, "PYTHONPATH": str(REPO)})
     assert r.returncode == 0, r.stderr
+    assert json.loads((out / "meta.json").read_text())["plan"]["name"] == "speed-hold"
     return json.loads(r.stdout)
 
 
@@ -34,13 +36,14 @@ def test_speed_hold_steady_test_figures(hold_run):
     pts = r["points"]
     assert len(pts) >= 15
     assert r["test_time_s"] <= 180.0  # GO to the end of the last measurement, simulated seconds
-    # the +-1 pp target is met where the brake can hold a speed; a point or two at the 10 s cap in the
-    # shift region end a little wider (docs/control.md: widest 0.0116 over 10 seeds)
-    assert sum(p["efficiency_ci95"] <= 0.0101 for p in pts) >= 0.9 * len(pts)
-    assert max(p["efficiency_ci95"] for p in pts) <= 0.015
+    assert all(p["efficiency_ci95"] <= 0.01 for p in pts)  # every point to +-1 pp (95 %)
     inside = sum(abs(p["efficiency"] - p["efficiency_true"]) <= p["efficiency_ci95"] for p in pts)
-    assert inside / len(pts) >= 0.85
+    assert inside / len(pts) >= 0.85  # (>= 90 % over 10 seeds: bench/bench_test_time.py)
     assert statistics.median(abs(p["efficiency"] - p["efficiency_true"]) for p in pts) <= 0.005
+    # warm-up criterion met and recorded; the systematic part stated beside the CI (and larger than it)
+    assert r["warmup"]["criterion"] == "time at load" and r["warmup"]["at_load_s"] >= r["warmup"]["required_s"] - 1e-6 > 0
+    assert all(p["efficiency_sys95"] > p["efficiency_ci95"] for p in pts)
+    assert all(p["efficiency_sys95_calibration"] > 0 and p["efficiency_sys95_engine_map"] > 0 for p in pts)
     rs = [p["rpm_secondary"] for p in pts]
     assert max(rs) - min(rs) > 2500  # over the range, light load to the low end
 
@@ -49,13 +52,13 @@ def test_speed_hold_replays_exactly(hold_run):
     again = replay(hold_run["run_dir"])["points"]
     assert len(again) == len(hold_run["points"])
     for live, rep in zip(hold_run["points"], again):
-        assert rep["efficiency"] == pytest.approx(live["efficiency"], rel=1e-12)
+        assert public_point(rep) == live  # every public key, exactly
 
 
 def test_a_drill_during_a_hold_still_trips_within_its_bound(tmp_path):
     r = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"),
-                            drills=[parse_drill("bus-lost@40")], handle_signals=True))
+                            drills=[parse_drill("bus-lost@70")], handle_signals=True))
     assert r["state"] == "aborted"
     a = r["aborts"][0]
     assert a["cause"] == "comms_lost" and a["latency_s"] <= 0.35 and r["rig_safe"]
-    assert len(r["points"]) >= 2  # points were being taken under the hold
+    assert len(r["points"]) >= 2 and a["state"] in ("step", "settle", "measure")  # under the hold

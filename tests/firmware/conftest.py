@@ -33,12 +33,14 @@ def toolchain():
 
 @pytest.fixture(scope="session")
 def firmware_build(toolchain):
-    """Builds the firmware, its INPUT_PULLUP variant, the v0 sketch and the simavr harness;
+    """Builds the firmware, its INPUT_PULLUP, hang and old-bootloader variants, the v0 sketch
+    and the simavr harness;
     returns their paths."""
-    res = _make("firmware", "sim", "pullup", "hang")
+    res = _make("firmware", "sim", "pullup", "hang", "oldboot")
     assert res.returncode == 0, res.stdout + res.stderr
     return {"elf": BUILD / "dyno_nano.elf", "v0_elf": BUILD / "v0_sketch.elf",
             "pullup_elf": BUILD / "dyno_nano_pullup.elf", "hang_elf": BUILD / "dyno_nano_hang.elf",
+            "oldboot_elf": BUILD / "dyno_nano_oldboot.elf",
             "harness": BUILD / "harness", "make_output": res.stdout}
 
 

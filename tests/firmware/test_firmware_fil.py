@@ -17,8 +17,16 @@ from dyno.transports.simavr import SimavrTransport
 pytestmark = pytest.mark.firmware
 
 
+def _assert_guard_intact(rep):
+    """The harness checked the guard bytes around the firmware's ring after every command."""
+    g = rep["harness"]["ring_guard"]
+    assert g["found"] and g["armed"] and g["checks"] > 10, g
+    assert g["violations"] == 0, g
+
+
 def _assert_lossless(rep):
     assert not rep["harness"]["crashed"]
+    _assert_guard_intact(rep)
     assert rep["events_lost"] == 0
     for name, ch in rep["events"].items():
         assert ch["expected"] > 0, name
@@ -83,10 +91,10 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
 
 
 def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
-    """20 watchdog-style resets of the real ELF at random instants, the first within 20 ms of
-    the first frame: each one is a new boot id with cause "watchdog" (no EEPROM involved),
-    the host starts a new time epoch, no period spans a reset, and it carries on (events
-    queued in the MCU at a reset are gone with its RAM)."""
+    """20 resets of the real ELF at random instants, the first within 20 ms of the first frame,
+    with random causes (watchdog, RESET line, brown-out): each one is a new boot id with its own
+    cause (no EEPROM involved), the host starts a new time epoch, no period spans a reset, and
+    it carries on (events queued in the MCU at a reset are gone with its RAM)."""
     import random
 
     rng = random.Random(20)
@@ -95,17 +103,21 @@ def test_firmware_fil_resets_each_seen_with_its_cause(firmware_build, sim_args):
         t = rng.uniform(0.1, 6.0)
         if all(abs(t - u) >= 0.05 for u in at):
             at.append(t)
-    at = [f"{t:.4f}" for t in sorted(at)]
+    at.sort()
+    causes = [rng.choice(["watchdog", "external", "brown-out"]) for _ in at]
     argv = ["--elf", str(firmware_build["elf"]), "--seconds", "6"]
-    for t in at:
-        argv += ["--reset-at", t]
+    for t, cause in zip(at, causes):
+        argv += ["--reset-at", f"{t:.4f}:{cause}"]
     rep = simulate(sim_args(*argv))
+    assert 0 < at[0] - rep["first_frame_s"] < 0.020  # the first reset within 20 ms of the first frame
+    assert len(set(causes)) == 3
     assert rep["frames"]["device_resets"] == 20
     boots = rep["boots"]
-    assert [b["cause_name"] for b in boots] == ["power-on"] + ["watchdog"] * 20
+    assert [b["cause_name"] for b in boots] == ["power-on"] + causes
+    assert rep["harness"]["eeprom_writes"] == 0  # boot ids without EEPROM wear
     assert len({b["boot_id"] for b in boots}) == 21
     assert rep["device"]["boot_id"] == boots[-1]["boot_id"]
-    assert rep["device"]["reset_cause"] == "watchdog"
+    assert rep["device"]["reset_cause"] == causes[-1]
     for name, ch in rep["events"].items():
         assert ch["duplicates_or_disorder"] == 0, name
         assert ch["expected"] - 20 * 8 <= ch["received"] <= ch["expected"], (name, ch)
@@ -155,15 +167,22 @@ def test_firmware_fil_speeds_with_glitches_and_bounce(firmware_build, sim_args, 
     for c, name in enumerate(("primary", "secondary")):
         # Every ringing pulse is locked out; spikes are glitches, or locked out when they fall
         # inside a lock-out window (counted there), or merge with a pulse (never an event).
+        # A spike that overlaps the start of a real pulse merges with it (that pulse starts up to
+        # 20 us early), and two overlapping spikes are one: a few percent at most.
         assert rej[name]["lockout"] >= h["bounce_edges"][c]
-        assert rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c] <= h["glitches"][c]
+        spikes_rejected = rej[name]["glitch"] + rej[name]["lockout"] - h["bounce_edges"][c]
+        assert 0.95 * h["glitches"][c] <= spikes_rejected <= h["glitches"][c], (name, rej, h)
         assert rej[name]["glitch"] >= 0.5 * h["glitches"][c] > 0
 
 
-def test_firmware_fil_clean_15000_rpm_nothing_rejected(firmware_build, sim_args):
-    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "2",
-                            "--primary-rpm", "15000", "--secondary-rpm", "15000"))
+@pytest.mark.parametrize("rpm", [300, 3800, 12000, 15000])
+def test_firmware_fil_clean_speeds_nothing_rejected(firmware_build, sim_args, rpm):
+    """Clean signals over the issue's range on both channels: every pulse once, rpm within
+    0.05 %, 0 events lost, 0 edges rejected (the adaptive lock-out never eats a real pulse)."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "4" if rpm == 300 else "2",
+                            "--primary-rpm", str(rpm), "--secondary-rpm", str(rpm)))
     _assert_lossless(rep)
+    assert rep["events"]["primary"]["expected"] >= 19
     assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
     assert rep["edges_rejected"] == {"primary": {"lockout": 0, "glitch": 0},
                                      "secondary": {"lockout": 0, "glitch": 0}}
@@ -216,11 +235,13 @@ def test_firmware_fil_ring_saturation_link_survives_and_accounts_exactly(firmwar
                             "--drain-s", "3", "--fault-rate", "0.2", "--fault-kinds", "cmd_bitflip",
                             "--seed", "7"))
     assert not rep["harness"]["crashed"]
+    _assert_guard_intact(rep)  # saturated all the time, never a write outside the ring
     acc = rep["accounting"]
     assert acc["exact"], acc
     assert acc["reported_lost"] > 0.8 * acc["generated"]  # really saturated
     assert rep["faults_injected"]["cmd_bitflip"] > 50
     fr = rep["frames"]
+    assert fr["device_resets"] == 0 and fr["resyncs"] == 0
     assert fr["accepted"] >= 0.7 * 2 * 63  # the link kept serving frames to the end
     assert rep["events"]["adc"]["received"] > 0
     for name in ("primary", "secondary"):
@@ -254,6 +275,37 @@ def test_firmware_fil_twi_master_abort_recovered(firmware_build, sim_args):
     assert rep["frames"]["transport_errors"].get("bus_held", 0) > 0  # the bus really was held
 
 
+def test_firmware_fil_ring_guard_check_sees_a_stray_write(firmware_build):
+    """The guard check can fail: one byte written just past the ring's last entry (as an
+    overrun would) is reported as a violation at the next command."""
+    out = subprocess.run(["avr-nm", str(firmware_build["elf"])], capture_output=True, text=True,
+                         check=True).stdout
+    addr = next(int(ln.split()[0], 16) & 0xFFFF for ln in out.splitlines() if ln.endswith(" g_ring"))
+    tr = SimavrTransport(firmware_build["elf"], harness=firmware_build["harness"])
+    try:
+        reader = make_reader("v2", tr)
+        for k in range(1, 20):
+            tr.advance_to(k / 150)
+            reader.poll(k / 150)
+        before = tr.harness_stats()["ring_guard"]
+        tr.poke(addr + 4 + 8 * 64, 0x00)  # guard_lo (4 B), 64 entries of 8 B, then guard_hi
+        tr.advance_to(0.2)
+        reader.poll(0.2)
+        after = tr.harness_stats()["ring_guard"]
+    finally:
+        tr.close()
+    assert before["armed"] and before["violations"] == 0, before
+    assert after["violations"] == 1 and 0.12e6 < after["first_violation_us"] < 0.2e6, after
+
+
+def test_firmware_sim_bad_reset_cause_is_refused():
+    res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", "x.elf",
+                          "--reset-at", "0.5:lightning"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--reset-at" in lines[0] and "lightning" in lines[0], res.stderr
+
+
 def test_firmware_sim_bad_fault_kind_is_refused():
     res = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", "x.elf",
                           "--fault-kinds", "nack,bogus"], capture_output=True, text=True, timeout=60)
@@ -263,16 +315,20 @@ def test_firmware_sim_bad_fault_kind_is_refused():
 
 
 def test_firmware_fil_adc_time_from_the_rdy_edge(firmware_build, sim_args):
-    """The ADC time is RDY's falling edge (pin change ISR), not when the main loop notices:
-    typically within a microsecond of the harness's conversion time; the worst case is the
-    ISRs ahead of it (both Hall channels and a TWI event at once, ~25 us). The main-loop
-    timestamp it replaces was off by up to ~250 us."""
-    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "4",
-                            "--primary-rpm", "3800", "--secondary-rpm", "7600"))
+    """The ADC time is RDY's falling edge, taken first thing in whichever ISR runs first
+    after it (the pin change ISR, or a Hall ISR that finds its flag set): within 20 us of the
+    harness's conversion time in the worst case, with both Hall channels at 15,000 rpm,
+    ringing, 200 Hz of spikes and jittered polls keeping the ISRs busy. (Taken in the pin
+    change ISR alone it queued behind both Hall ISRs and a TWI ISR: ~25 us; taken in the main
+    loop, up to ~250 us.)"""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "10",
+                            "--primary-rpm", "15000", "--secondary-rpm", "14000", "--bounce",
+                            "--glitch-hz", "200", "--poll-jitter", "0.5", "--seed", "5"))
     _assert_lossless(rep)
     err = rep["adc_time_error_us"]
+    assert rep["events"]["adc"]["received"] > 1200
     assert abs(err["mean_us"]) < 2.0, err
-    assert err["max_abs_us"] <= 26.0, err
+    assert err["max_abs_us"] <= 20.0, err
 
 
 def test_firmware_fil_serial_transport_via_cli(firmware_build):
@@ -286,6 +342,7 @@ def test_firmware_fil_serial_transport_via_cli(firmware_build):
     rep = json.loads(res.stdout)
     assert rep["transport"] == "serial" and rep["ok"]
     _assert_lossless(rep)
+    assert rep["adc_time_error_us"]["max_abs_us"] <= 20.0  # RDY's time as on I2C
     assert rep["accounting"]["exact"]
     assert abs(rep["rpm_error_pct"]["primary"]) < 0.05 and abs(rep["rpm_error_pct"]["secondary"]) < 0.05
     assert rep["frames"]["accepted"] > 20 * 100
@@ -341,6 +398,7 @@ def test_firmware_fil_real_watchdog_reset_recovered_once(firmware_build, sim_arg
     assert not rep["harness"]["crashed"]
     assert rep["frames"]["device_resets"] == 1
     assert [b["cause_name"] for b in rep["boots"]] == ["power-on", "watchdog"]
+    assert rep["harness"]["watchdog_enabled"] and rep["harness"]["eeprom_writes"] == 0
     dev = rep["device"]
     assert dev["reset_cause"] == "watchdog" and dev["boot_id"] == rep["boots"][1]["boot_id"]
     assert 1500 < dev["uptime_ms"] < 2000  # one reset at ~1.5 s, none after

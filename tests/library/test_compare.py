@@ -32,8 +32,10 @@ def compared(tmp_path_factory):
     runs = []
     for name, tune, seed in (("stock-1", "cvtech-stock", 1), ("heavy-2", "heavy-flyweights", 2),
                              ("stock-3", "cvtech-stock", 3)):
+        # thesis-step: points dense over the whole range (speed-hold, the default, leaves the shift region
+        # sparse, and the common grid would interpolate across it: docs/control.md)
         r = _dyno("run", "--sim", "--headless", "--seed", seed, "--tune", TUNES / f"{tune}.toml",
-                  "--out", root / name, runs_dir=root)
+                  "--plan", "thesis-step", "--out", root / name, runs_dir=root)
         assert r.returncode == 0, r.stderr
         runs.append(root / name)
     html = root.parent / "report.html"

@@ -97,3 +97,20 @@ def test_closed_form_is_fast():
     for _ in range(200):
         cf.closed_form_point(TABLE_6_1, TABLE_6_1_POINT)
     assert (time.perf_counter() - t0) / 200 < 0.01
+
+
+def test_capstan_thrust_against_the_full_model(table_6_1):
+    """Gerbert's wedge (radial friction where the belt wedges in, none where it slides round) puts the
+    capstan tier's thrusts near the full model's; the frictionless wedge everywhere was 2.3x / 1.35x."""
+    full = table_6_1.summary["axial_force_n"]
+    r = capstan.capstan_point(TABLE_6_1, TABLE_6_1_POINT)
+    assert 0.85 < r.axial_force_primary_n / full["primary"] < 1.0     # measured 0.93
+    assert 0.7 < r.axial_force_secondary_n / full["secondary"] < 0.8  # measured 0.76
+    beta, mu = math.radians(12), 0.4
+    frictionless = (r.tight_tension_n * (r.wrap_primary_rad - r.sliding_arc_primary_rad)
+                    + (r.tight_tension_n - r.slack_tension_n) * math.sin(beta) / mu) / (2 * math.tan(beta))
+    assert frictionless / full["primary"] > 2.2   # the old tier: "2.6x too high" at ratio 1.75
+    # the held arc alone is the closed form's rho = 0 driver factor
+    held = r.tight_tension_n * (r.wrap_primary_rad - r.sliding_arc_primary_rad) / (2 * math.tan(beta + math.atan(mu)))
+    assert r.axial_force_primary_n - held == pytest.approx(
+        (r.tight_tension_n - r.slack_tension_n) * math.sin(beta) / mu / (2 * math.tan(beta)))

@@ -109,5 +109,6 @@ def test_model_code_hash_reads_every_model_module():
     from pathlib import Path
 
     here = Path(overlay.__file__).resolve().parent
-    on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies"}
+    # inverse.py builds a prediction's inputs (they are in the key), it is not part of the prediction
+    on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies", "inverse"}
     assert on_disk <= set(overlay._MODEL_MODULES), on_disk - set(overlay._MODEL_MODULES)

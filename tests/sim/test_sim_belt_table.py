@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dyno.errors import DidNotConverge
-from dyno.sim.belt_table import build_belt_table
+from dyno.sim.belt_table import DEFAULT_RATIOS, TABLE_RPM, build_belt_table, tune_clamp_n
 from dyno.sim.physics import RigModel, RigParams
 
 RATIOS = (0.9, 1.0, 1.1)
@@ -48,7 +48,7 @@ def test_second_build_reads_the_overlay_cache(tiny):
     # the entries are the overlay's: predict_overlay answers from them without solving
     from dyno.model.overlay import predict_overlay
 
-    res = predict_overlay([(1.0, 3400.0, 18.0)], tier="full", cache_dir=cache)
+    res = predict_overlay([(1.0, TABLE_RPM, 18.0)], tier="full", cache_dir=cache)
     assert res[0]["cached"] and res[0]["efficiency"]["torque"] == pytest.approx(tab.eta_torque[1, 0])
 
 
@@ -137,3 +137,29 @@ def test_belt_efficiency_source_is_validated():
     with pytest.raises(ValueError, match="belt_efficiency_source"):
         RigModel(RigParams(belt_efficiency_source="magic"))
     assert RigModel(RigParams(belt_efficiency_source="loss_model")).cvt.belt_table is None
+
+
+def test_default_table_covers_the_sim_range_at_the_tunes_clamp(tmp_path):
+    """The default grid spans the simulated CVT's whole ratio range, each cell at the tune's clamp."""
+    from dyno.model.inverse import clamp_from_tune
+    from dyno.sim.physics import DEFAULT_TUNE, _load_tune
+
+    tune = _load_tune(DEFAULT_TUNE)
+    cvt = RigModel(RigParams(belt_efficiency_source="loss_model")).cvt
+    assert min(DEFAULT_RATIOS) <= cvt.ratio_high and max(DEFAULT_RATIOS) >= cvt.ratio_low
+    seen = []
+
+    def solve(op, guess):
+        seen.append(op)
+        return _fake_solver()[0](op, guess)
+
+    tab = build_belt_table(cache_dir=tmp_path, tune=tune, solve=solve)
+    assert tab.ok.all() and len(seen) == len(DEFAULT_RATIOS) * 2
+    for op in seen:
+        assert op.slack_tension_n is None and op.primary_speed_rpm == TABLE_RPM
+        assert op.primary_axial_force_n == pytest.approx(tune_clamp_n(tune, TABLE_RPM, op.ratio))
+        assert op.primary_axial_force_n == pytest.approx(clamp_from_tune(tune, TABLE_RPM)(op.ratio))
+    # flyweights minus spring: ~900 N in overdrive .. ~590 N at 2.4 (stock tune, 3150 rpm)
+    assert 850 < tab.clamp_n[0] < 950 and 550 < tab.clamp_n[-1] < 650
+    assert tab.lookup(2.3, 12.0) is not None      # no clamping to 1.75 any more
+    assert tab.lookup(2.3, 12.0) != tab.lookup(1.75, 12.0)

@@ -1,12 +1,13 @@
-"""Fit to the rig (issue 7 part E) on the simulated rig.
+"""Fit to the rig (issue 7 part E) on the simulated rig, validated against a different model.
 
-The simulated CVT (dyno.sim.cvt, belt mode) balances the same forces the
-shift model predicts -- flyweights minus spring (Messick eq. 9.3), the belt's
-closed-form thrusts (Sorge & Cammalleri eqs. 17-18), springs plus helix
-(Sorge eq. 22) -- but with hidden "true" values of the three uncertain
-parameters, and the measured points come through the whole chain (sensor
-noise, firmware protocol, host averaging, settling detection).  The fit
-starts from the nominal values and must find the hidden ones.
+The simulated CVT (dyno.sim.cvt, belt mode) balances flyweights minus spring
+(Messick eq. 9.3) against springs plus helix (Sorge eq. 22) with hidden "true"
+values of the three uncertain parameters, but its belt thrust ratio comes from
+the capstan tier (Gerbert's V-belt, dyno.model.capstan), NOT from the closed
+form (Sorge & Cammalleri eqs. 17-18) that the fit uses: the fit is not
+validated against itself.  The measured points come through the whole chain
+(sensor noise, firmware protocol, host averaging, settling detection).  The
+bounds below are what was measured (seeds 11-13); docs/tuning.md states them.
 """
 
 import json
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.tuning.fit import NOMINAL, PARAMETERS, fit_runs, load_fit_run, solver_for
+from dyno.tuning.fit import PARAMETERS, fit_runs, load_fit_run, solver_for
 from dyno.tuning.shift_curve import compare_to_measured, predict_shift_curve
 from dyno.tuning.tune import dumps_tune, load_tune
 
@@ -60,7 +61,8 @@ def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
                     cvt_ratio_high=stops.ratio_high_stop,
                     cvt_belt_friction_coefficient=TRUE["belt_friction_coefficient"],
                     cvt_flyweight_radius_offset_m=TRUE["flyweight_radius_offset_m"],
-                    cvt_secondary_friction_torque_nm=TRUE["secondary_friction_torque_nm"])
+                    cvt_secondary_friction_torque_nm=TRUE["secondary_friction_torque_nm"],
+                    cvt_belt_thrust_model="capstan")
     out = Path(root) / name
 
     def save_tune(ctx):
@@ -98,38 +100,35 @@ def test_runs_cover_the_shift(runs):
         assert min(ratios) < 0.75 and max(ratios) > 1.8  # from the high stop well into the shift
 
 
-def test_fit_recovers_the_hidden_parameters_within_2_sigma(fit):
-    for name in PARAMETERS:
-        est, sig, true = fit.parameters[name], fit.sigma[name], TRUE[name]
-        assert abs(est - true) <= 2.0 * sig, (name, est, sig, true)
-    # ... and the sigmas mean something: each true value is many sigma from the
-    # nominal starting value, so the fit has really resolved it.
-    for name, nominal in zip(PARAMETERS, NOMINAL):
-        assert abs(TRUE[name] - nominal) > 5.0 * fit.sigma[name], (name, fit.sigma[name])
-    assert fit.sigma["belt_friction_coefficient"] < 0.01
-    assert fit.sigma["flyweight_radius_offset_m"] < 0.3e-3
-    assert fit.sigma["secondary_friction_torque_nm"] < 0.25
+def test_recovered_parameter_error_against_a_different_truth_model(fit):
+    """Measured (seeds 11-13, 53 points off the stops): f 1.00 (its upper bound; true 0.33),
+    dr -9.56 mm (true +1.5), T_fr -1.86 N m (true +0.8).  The closed form's thrust ratio is not the
+    capstan truth's (it differs in level and in its ratio/torque shape), and the fit absorbs the
+    difference into effective parameter values: they are not the physical ones."""
+    p, sig = fit.parameters, fit.sigma
+    assert abs(p["belt_friction_coefficient"] - TRUE["belt_friction_coefficient"]) <= 0.7
+    assert abs(p["flyweight_radius_offset_m"] - TRUE["flyweight_radius_offset_m"]) <= 12e-3
+    assert abs(p["secondary_friction_torque_nm"] - TRUE["secondary_friction_torque_nm"]) <= 4.0
+    # the fit's sigma is a noise bar, not a model-error bar: dr's error is many sigma (measured 7)
+    err_dr = abs(p["flyweight_radius_offset_m"] - TRUE["flyweight_radius_offset_m"])
+    assert err_dr > 3.0 * sig["flyweight_radius_offset_m"]
     assert np.allclose(np.diag(fit.correlation), 1.0)
     assert fit.dof == fit.n_points_fit - 3
 
 
-def test_residuals_smaller_after_the_fit(fit):
-    assert fit.after["rms_rpm"] < 0.2 * fit.before["rms_rpm"]
-    assert fit.after["max_abs_rpm"] < fit.before["max_abs_rpm"]
-    assert fit.before["rms_rpm"] > 20.0  # the nominal model is visibly off
-    # The fitted residual scatter is the measurement's (a few rpm), not model error.
-    assert fit.residual_std_rpm < 5.0
+def test_model_error_shows_in_the_residuals(fit):
+    # measured: rms 266 rpm at nominal -> 89 rpm fitted (max 253); at the TRUE parameters the closed
+    # form is off by 299 rpm rms: the fitted values buy a better fit with unphysical parameters
+    assert fit.after["rms_rpm"] < 0.5 * fit.before["rms_rpm"]
+    assert fit.before["rms_rpm"] > 150.0
+    # the residual scatter (90 rpm) is model error, ~60x the measurement's (1.5 rpm with a circular truth)
+    assert 30.0 < fit.residual_std_rpm < 150.0
+    assert fit.after["max_abs_rpm"] <= 300.0
 
 
-def test_predicted_shift_curve_matches_measured_within_50_rpm(runs, fit):
-    # (1) Prediction at each measured secondary rpm and load (what the fit uses):
-    after = fit.after  # residual_summary(runs, fitted parameters)
-    assert after["n"] == sum(len(r.points) for r in runs)
-    assert after["max_abs_rpm"] <= 50.0
-    # (2) The engine-map shift curve (predict_shift_curve, 50 load points), fitted
-    # parameters: the closed form has no belt torque loss (the rig loses 4-11 %),
-    # so its helix torque is a little high and its curve sits ~20-40 rpm above the
-    # measured one -- still inside 50 rpm at every measured point.
+def test_predicted_shift_curve_against_the_measured_points(runs, fit):
+    """The engine-map shift curve with the fitted parameters: measured 169-220 rpm worst point per run
+    (the 50 rpm target of issue 7 holds only against the circular truth)."""
     for run in runs:
         solver = solver_for(run.tune, run.engine, list(fit.parameters.values()))
         curve = predict_shift_curve(run.tune, run.engine, params=solver.params,
@@ -137,7 +136,7 @@ def test_predicted_shift_curve_matches_measured_within_50_rpm(runs, fit):
                                     flyweight_radius_offset_m=solver.flyweight_radius_offset_m)
         cmp = compare_to_measured(curve, [{"engine_rpm": p.engine_rpm, "secondary_rpm": p.secondary_rpm}
                                           for p in run.points])
-        assert cmp["max_abs_rpm"] <= 50.0, (run.name, cmp)
+        assert cmp["max_abs_rpm"] <= 300.0, (run.name, cmp)
 
 
 def test_cli_shift_curve_fit(run_dirs, capsys):

@@ -223,8 +223,11 @@ def test_ui_live_model_pieces():
     assert r.update(0.5, 75) == pytest.approx(150.0)
     pts = [{"rpm_primary": 3000.0, "ratio": 1.5, "power_in_w": 5000.0, "rpm_secondary": 2000.0},
            {"rpm_primary": math.nan, "ratio": 1.5, "power_in_w": 5000.0, "rpm_secondary": 2000.0}]
-    (x, (ratio, rp, tq)), = overlay_inputs(pts)
-    assert x == 2000.0 and ratio == 1.5 and tq == pytest.approx(5000.0 / (3000 * 2 * math.pi / 60))
+    (x, op), = overlay_inputs(pts)
+    tq = 5000.0 / (3000 * 2 * math.pi / 60)
+    assert x == 2000.0 and op.primary_speed_rpm == 3000.0 and op.primary_torque_nm == pytest.approx(tq)
+    # the geometric ratio is the speed ratio less the belt's slip (Table 6.1 belt, 100 N slack)
+    assert 1.5 * (1 - 0.01) < op.ratio < 1.5 and op.slack_tension_n == 100.0
     plan = scaled_plan(Plan(), 10.0)
     assert plan.warmup_s == pytest.approx(0.3) and plan.settle_mode == "fixed"
     assert plan.settle.fixed_settle_s == pytest.approx(0.4)

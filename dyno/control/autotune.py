@@ -1,0 +1,93 @@
+"""Auto-tune of the speed hold: identify the plant's gain with brake pulses, scale ``kp`` to it.
+
+At a held secondary speed the brake is frozen, then pulsed at full speed for ``pulse_s`` (APPLY, then
+RELEASE back), and the speed read before and 1.5 s after each pulse (long after the ~0.3 s lag)::
+
+    g = |Δn| / n / pulse_s          (relative speed change per second of full-speed travel)
+
+The loop's gain ``kp·g`` is what sets its damping, so ``kp = LOOP_GAIN_PER_S / g``; ``LOOP_GAIN_PER_S``
+is the simulated rig's tuned loop (kp = 3 on g ≈ 0.33 /s near 3,000 rpm through the real output code).  The result is
+used only if the pulses agree (spread ≤ ``MAX_SPREAD``) and ``kp`` lands in a sane range; otherwise the
+rig.toml gain stays and an ``identify`` document says why.  Either way it is recorded with the run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import statistics
+from dataclasses import replace
+
+from dyno.control.outputs import APPLY, RELEASE, STOP
+
+LOOP_GAIN_PER_S = 1.0
+MAX_SPREAD = 0.5  # (max - min) / mean of the pulses' gains
+KP_RANGE = (0.3, 30.0)
+
+
+async def _reach(ctrl, hold_loop_target: dict, setpoint: float, timeout_s: float = 10.0) -> bool:
+    from dyno.control.speed_hold import secondary_rpm
+
+    t0, since = ctrl.rig_now(), None
+    while ctrl.rig_now() - t0 < timeout_s:
+        await ctrl.rig_sleep(0.05)
+        if abs(secondary_rpm(ctrl, 0.15) - setpoint) <= 0.0075 * setpoint:
+            since = since if since is not None else ctrl.rig_now()
+            if ctrl.rig_now() - since >= 1.0:
+                return True
+        else:
+            since = None
+    return False
+
+
+async def _pulse(ctrl, direction: int, pulse_s: float) -> None:
+    ctrl.act.brake(direction)
+    try:
+        await ctrl.rig_sleep(pulse_s)
+    finally:
+        ctrl.act.brake(STOP)
+
+
+async def identify_speed_gain(ctrl, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
+                              apply: bool = True) -> dict:
+    """Identify ``g`` at ``setpoint`` (secondary rpm); returns (and logs) what was found and done."""
+    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, secondary_rpm
+
+    hold = SpeedHold(gains_for(ctrl, "secondary"))
+    target = {"rpm": setpoint}
+    task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="identify-hold")
+    gains = []
+    try:
+        if not await _reach(ctrl, target, setpoint):
+            result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify"}
+        else:
+            target["frozen"] = True
+            await ctrl.rig_sleep(1.0)
+            for _ in range(repeats):
+                for direction in (APPLY, RELEASE):
+                    n0 = secondary_rpm(ctrl, 0.5)
+                    await _pulse(ctrl, direction, pulse_s)
+                    await ctrl.rig_sleep(1.5)
+                    n1 = secondary_rpm(ctrl, 0.5)
+                    gains.append(abs(n1 - n0) / n0 / pulse_s)
+            g = statistics.fmean(gains)
+            spread = (max(gains) - min(gains)) / g if g > 0 else math.inf
+            kp = LOOP_GAIN_PER_S / g if g > 0 else math.inf
+            ok = spread <= MAX_SPREAD and KP_RANGE[0] <= kp <= KP_RANGE[1]
+            result = {"ok": ok, "gain_rel_per_s": g, "pulse_gains_rel_per_s": gains, "spread": spread,
+                      "kp_identified": kp}
+            if not ok:
+                result["reason"] = (f"pulses disagree (spread {spread:.0%})" if spread > MAX_SPREAD
+                                    else f"kp {kp:.2f} outside {KP_RANGE[0]}..{KP_RANGE[1]}")
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        ctrl.act.brake(STOP)
+    control = getattr(ctrl, "control", None)
+    result.update(setpoint_rpm=setpoint, kp_before=getattr(control, "kp_speed", None), applied=False)
+    if result["ok"] and apply and control is not None:
+        ctrl.control = replace(control, kp_speed=result["kp_identified"])
+        result["applied"] = True
+    ctrl._log("identify", **result)
+    ctrl.identified = result
+    return result

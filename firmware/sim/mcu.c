@@ -1,0 +1,294 @@
+/* The MCU side of the simavr harness: loading the ELF, stepping (with optional ISR and
+ * interrupts-off profiling), the register behaviour simavr 1.6 gets wrong, and the
+ * guard bytes around the firmware's event ring. */
+#define _POSIX_C_SOURCE 200809L
+#include <fcntl.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <gelf.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "sim_avr.h"
+#include "sim_elf.h"
+#include "sim_interrupts.h"
+#include "harness.h"
+#include "ring.h"  /* the firmware's ring layout: guard offsets are the same on the AVR */
+
+avr_t *avr;
+int crashed;
+int cfg_profile = 0;
+double cfg_profile_from_us = 100000.0;
+double wall_s;
+uint64_t wall_cycles;
+
+/* ---- stepping, with optional ISR / interrupts-off profiling ---------------------- */
+typedef struct {
+    uint64_t count, total, max, min;
+} isr_stat_t;
+static isr_stat_t isr_stat[N_VECTORS];
+static int in_isr = -1;
+static uint64_t isr_start;
+static uint64_t cli_start, cli_max, cli_max_at;
+
+void step(void)
+{
+    if (!cfg_profile) {
+        int st = avr_run(avr);
+        if (st == cpu_Crashed || st == cpu_Done)
+            crashed = 1;
+        return;
+    }
+    uint32_t pc = avr->pc;
+    uint16_t op = (uint16_t)(avr->flash[pc] | avr->flash[pc + 1] << 8);
+    uint64_t before = avr->cycle;
+    int st = avr_run(avr);
+    if (st == cpu_Crashed || st == cpu_Done)
+        crashed = 1;
+    int armed = avr->cycle >= (uint64_t)(cfg_profile_from_us * CYCLES_PER_US);
+    if (in_isr >= 0) {
+        if (op == 0x9518) {  /* RETI */
+            uint64_t d = avr->cycle - isr_start;
+            isr_stat_t *s = &isr_stat[in_isr];
+            if (armed) {
+                s->count++;
+                s->total += d;
+                if (d > s->max) s->max = d;
+                if (!s->min || d < s->min) s->min = d;
+            }
+            in_isr = -1;
+        }
+        return;
+    }
+    uint32_t npc = avr->pc;
+    if (npc && npc < N_VECTORS * 4 && !(npc & 3)) {
+        in_isr = (int)(npc / 4);
+        isr_start = before;  /* includes the interrupted instruction: an upper bound */
+        cli_start = 0;
+        return;
+    }
+    /* Interrupts-off windows in the main program (cli ... sei / SREG restore). */
+    if (!avr->sreg[S_I]) {
+        if (!cli_start)
+            cli_start = before;
+    } else if (cli_start) {
+        uint64_t d = avr->cycle - cli_start;
+        if (armed && d > cli_max) {
+            cli_max = d;
+            cli_max_at = cli_start;
+        }
+        cli_start = 0;
+    }
+}
+
+double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+void run_until(uint64_t cycle)
+{
+    double w0 = now_s();
+    uint64_t c0 = avr->cycle;
+    while (avr->cycle < cycle && !crashed)
+        step();
+    wall_s += now_s() - w0;
+    wall_cycles += avr->cycle - c0;
+}
+
+avr_int_vector_t *find_vector(int num)
+{
+    for (int i = 0; i < avr->interrupts.vector_count; i++)
+        if (avr->interrupts.vector[i] && avr->interrupts.vector[i]->vector == num)
+            return avr->interrupts.vector[i];
+    return NULL;
+}
+
+static const char *vector_name(int v)
+{
+    static const char *names[N_VECTORS] = {
+        "RESET", "INT0", "INT1", "PCINT0", "PCINT1", "PCINT2", "WDT", "TIMER2_COMPA",
+        "TIMER2_COMPB", "TIMER2_OVF", "TIMER1_CAPT", "TIMER1_COMPA", "TIMER1_COMPB",
+        "TIMER1_OVF", "TIMER0_COMPA", "TIMER0_COMPB", "TIMER0_OVF", "SPI_STC", "USART_RX",
+        "USART_UDRE", "USART_TX", "ADC", "EE_READY", "ANALOG_COMP", "TWI", "SPM_READY"};
+    return names[v];
+}
+
+void print_profile(FILE *o)
+{
+    fprintf(o, ", \"isr\": {");
+    int first = 1;
+    for (int v = 1; v < N_VECTORS; v++) {
+        isr_stat_t *s = &isr_stat[v];
+        if (!s->count)
+            continue;
+        fprintf(o, "%s\"%s\": {\"count\": %llu, \"mean_cycles\": %.1f, \"max_cycles\": %llu, "
+                "\"min_cycles\": %llu}", first ? "" : ", ", vector_name(v),
+                (unsigned long long)s->count, (double)s->total / (double)s->count,
+                (unsigned long long)s->max, (unsigned long long)s->min);
+        first = 0;
+    }
+    fprintf(o, "}, \"cli_max_cycles\": %llu, \"cli_max_at_us\": %.1f",
+            (unsigned long long)cli_max, (double)cli_max_at / CYCLES_PER_US);
+}
+
+/* ---- register behaviour simavr 1.6 lacks ------------------------------------------ */
+/* PCIFR's flags clear when a 1 is written to them (silicon); simavr 1.6 stores the 1
+ * instead, so a flag "cleared" that way stays set and its interrupt stays pending. */
+#define REG_PCIFR 0x3B
+static avr_int_vector_t *pcint_vec[3];
+
+static void pcifr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)param;
+    for (int b = 0; b < 3; b++)
+        if (v & (1u << b)) {
+            a->data[addr] &= (uint8_t)~(1u << b);
+            if (pcint_vec[b])
+                pcint_vec[b]->pending = 0;  /* simavr drops a queued vector that is not pending */
+        }
+}
+
+/* ---- EEPROM writes (wear: the firmware must not write per boot) ------------------- */
+/* Counted at the write strobe (EEPE set in EECR); simavr's EEPROM module, registered on
+ * the same address first, still performs the write. */
+#define REG_EECR 0x3F
+#define EECR_EEPE 0x02
+uint64_t eeprom_writes;
+
+static void eecr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)a; (void)addr; (void)param;
+    if (v & EECR_EEPE)
+        eeprom_writes++;
+}
+
+/* ---- guard bytes around the firmware's event ring ---------------------------------- */
+/* The ELF's g_ring (found in its symbol table) starts with RING_GUARD_LEN guard bytes
+ * before the entries and has as many right after them (src/ring.h: the same offsets on
+ * the AVR and here, the entries being 8 bytes). Checked after every command once the
+ * firmware has written them after a boot; any other value is a write outside the ring. */
+static const uint8_t guard_pattern[RING_GUARD_LEN] = RING_GUARD_BYTES;
+static uint32_t guard_addr[2];
+static int guard_found, guard_armed;
+static uint64_t guard_checks, guard_violations, guard_first_cycle;
+
+static int elf_symbol(const char *path, const char *name, uint32_t *value, uint32_t *size)
+{
+    int fd = open(path, O_RDONLY), found = 0;
+    if (fd < 0 || elf_version(EV_CURRENT) == EV_NONE)
+        return 0;
+    Elf *e = elf_begin(fd, ELF_C_READ, NULL);
+    Elf_Scn *scn = NULL;
+    while (e && !found && (scn = elf_nextscn(e, scn))) {
+        GElf_Shdr sh;
+        if (!gelf_getshdr(scn, &sh) || sh.sh_type != SHT_SYMTAB)
+            continue;
+        Elf_Data *d = elf_getdata(scn, NULL);
+        for (size_t i = 0; d && i < sh.sh_size / sh.sh_entsize; i++) {
+            GElf_Sym sym;
+            gelf_getsym(d, (int)i, &sym);
+            const char *n = elf_strptr(e, sh.sh_link, sym.st_name);
+            if (n && strcmp(n, name) == 0) {
+                *value = (uint32_t)sym.st_value;
+                *size = (uint32_t)sym.st_size;
+                found = 1;
+                break;
+            }
+        }
+    }
+    if (e)
+        elf_end(e);
+    close(fd);
+    return found;
+}
+
+static void guard_init(const char *elf)
+{
+    uint32_t addr, size;
+    size_t hi = offsetof(ring_t, guard_hi);
+    if (!elf_symbol(elf, "g_ring", &addr, &size) || size < hi + RING_GUARD_LEN)
+        return;  /* another sketch (the v0 one): nothing to check */
+    addr &= 0xFFFFu;  /* data addresses are 0x800000 + RAM address in AVR ELFs */
+    guard_addr[0] = addr + (uint32_t)offsetof(ring_t, guard_lo);
+    guard_addr[1] = addr + (uint32_t)hi;
+    guard_found = 1;
+}
+
+void guard_check(void)
+{
+    if (!guard_found)
+        return;
+    int ok = memcmp(avr->data + guard_addr[0], guard_pattern, RING_GUARD_LEN) == 0 &&
+             memcmp(avr->data + guard_addr[1], guard_pattern, RING_GUARD_LEN) == 0;
+    if (!guard_armed) {
+        guard_armed = ok;  /* ring_init has run */
+        return;
+    }
+    guard_checks++;
+    if (!ok) {
+        if (!guard_violations++)
+            guard_first_cycle = avr->cycle;
+        guard_armed = 0;  /* count each corruption once, re-arm if the firmware rewrites them */
+    }
+}
+
+void print_guard(FILE *o)
+{
+    fprintf(o, "\"ring_guard\": {\"found\": %s, \"armed\": %s, \"checks\": %llu, "
+            "\"violations\": %llu, \"first_violation_us\": %.1f}",
+            guard_found ? "true" : "false", guard_armed ? "true" : "false",
+            (unsigned long long)guard_checks, (unsigned long long)guard_violations,
+            (double)guard_first_cycle / CYCLES_PER_US);
+}
+
+/* ---- load and reset --------------------------------------------------------------- */
+static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
+{
+    (void)a;
+    if (level <= LOG_WARNING)
+        vfprintf(stderr, fmt, ap);
+}
+
+int mcu_load(const char *elf)
+{
+    avr_global_logger_set(logger);
+    static elf_firmware_t fw;
+    if (elf_read_firmware(elf, &fw) != 0) {
+        fprintf(stderr, "harness: cannot read %s\n", elf);
+        return 0;
+    }
+    /* Arduino ELFs carry no .mmcu section. */
+    strcpy(fw.mmcu, "atmega328p");
+    fw.frequency = (uint32_t)F_CPU_HZ;
+    avr = avr_make_mcu_by_name(fw.mmcu);
+    if (!avr) {
+        fprintf(stderr, "harness: no atmega328p in libsimavr\n");
+        return 0;
+    }
+    avr_init(avr);
+    avr_load_firmware(avr, &fw);
+    avr->log = LOG_WARNING;
+    avr->data[MCUSR_ADDR] = 0x01;  /* PORF: this is a power-on (RAM is zero in simavr) */
+    for (int b = 0; b < 3; b++)
+        pcint_vec[b] = find_vector(3 + b);  /* PCINT0..2 are vectors 3..5 */
+    avr_register_io_write(avr, REG_PCIFR, pcifr_write_hook, NULL);
+    avr_register_io_write(avr, REG_EECR, eecr_write_hook, NULL);
+    guard_init(elf);
+    return 1;
+}
+
+void mcu_reset(uint8_t mcusr)
+{
+    avr_reset(avr);
+    /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
+    avr->data[MCUSR_ADDR] = mcusr;
+    in_isr = -1;
+    cli_start = 0;
+    guard_armed = 0;  /* RAM is kept; the new boot's ring_init rewrites the guards */
+}

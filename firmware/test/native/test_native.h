@@ -1,0 +1,13 @@
+/* Shared by the native unit tests (make -C firmware test): the check counter. */
+#ifndef DYNO_TEST_NATIVE_H
+#define DYNO_TEST_NATIVE_H
+#include <stdio.h>
+
+extern int failures, checks;
+#define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
+    printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
+
+void test_proto_basics(void);
+void test_proto_lossless(void);
+
+#endif

@@ -1,0 +1,86 @@
+"""The speed hold on the simulated rig through the real-rig output code (relay settle of rig.toml):
+a 5 % setpoint step settles within +-0.5 % in <= 2 s with <= 3 % overshoot and <= 0.3 % sd, and
+holding against the release end stop does not wind up (the next setpoint is reached as fast as from
+contact).  Simulated time: deterministic, not a wall-clock assertion."""
+
+import asyncio
+import statistics
+
+import pytest
+
+from dyno.app import RunOptions, run_test
+from dyno.control import plans as plans_mod
+from dyno.control import speed_hold as sh
+from dyno.control.controller import State, TestPlan as Plan
+from dyno.control.steps import find_contact
+
+
+def _trace(ctrl, sp: float, seconds: float):
+    async def go():
+        t0, out = ctrl.rig_now(), []
+        while ctrl.rig_now() - t0 < seconds:
+            await ctrl.rig_sleep(0.05)
+            out.append((ctrl.rig_now() - t0, sh.secondary_rpm(ctrl, 0.1)))
+        return out
+    return go()
+
+
+def _figures(trace, sp: float, start: float) -> dict:
+    outside = [t for t, r in trace if abs(r - sp) > 0.005 * sp]
+    beyond = [(r - sp) * (1 if sp > start else -1) for _, r in trace]
+    return {"settle_s": max(outside) if outside else 0.0, "overshoot_pc": 100 * max(0.0, max(beyond)) / sp,
+            "sd_pc": 100 * statistics.pstdev(r for t, r in trace if t > trace[-1][0] - 3.0) / sp}
+
+
+@pytest.fixture(scope="module")
+def hold_figures(tmp_path_factory):
+    found = {}
+
+    async def runner(ctrl):
+        ctrl._enter(State.STEP, "test: contact")
+        no_load = sh.secondary_rpm(ctrl, 1.0)
+        assert await find_contact(ctrl)
+        hold = sh.SpeedHold(sh.gains_for(ctrl, "secondary"))
+        target = {"rpm": 3000.0}
+        task = asyncio.create_task(sh._hold_loop(ctrl, hold, target))
+        found["from_contact"] = _figures(await _trace(ctrl, 3000.0, 12.0), 3000.0, no_load)
+        for sp in (3150.0, 2992.5):  # +5 %, -5 %
+            start = sh.secondary_rpm(ctrl, 0.1)
+            target["rpm"] = sp
+            found[sp] = _figures(await _trace(ctrl, sp, 8.0), sp, start)
+        # An unreachable setpoint above the no-load speed: full release into the end stop for 12 s.
+        target["rpm"] = 1.3 * no_load
+        await ctrl.rig_sleep(12.0)
+        found["owed_s"], found["integral"] = hold.owed_s, hold.integral
+        start = sh.secondary_rpm(ctrl, 0.1)
+        target["rpm"] = 3000.0
+        found["after_end_stop"] = _figures(await _trace(ctrl, 3000.0, 12.0), 3000.0, start)
+        task.cancel()
+        ctrl._enter(State.SETTLE, "test")
+        ctrl._enter(State.DONE, "test done")
+
+    mp = pytest.MonkeyPatch()
+    mp.setitem(plans_mod.RUNNERS, "test-hold", runner)
+    try:
+        r = run_test(RunOptions(sim=True, seed=1, plan=Plan(mode="test-hold"), mock_pins=True,
+                                out_dir=tmp_path_factory.mktemp("hold") / "run"))
+    finally:
+        mp.undo()
+    assert r["state"] in ("done", "aborted") and not [a for a in r["aborts"] if a["cause"] != "no_points"]
+    return found
+
+
+@pytest.mark.parametrize("sp", [3150.0, 2992.5])
+def test_five_percent_step_settles_within_issue_figures(hold_figures, sp):
+    f = hold_figures[sp]
+    assert f["settle_s"] <= 2.0 and f["overshoot_pc"] <= 3.0 and f["sd_pc"] <= 0.3, f
+
+
+def test_no_windup_at_the_release_end_stop(hold_figures):
+    # 12 s of full-release command into the end stop left nothing owed and nothing integrated ...
+    assert abs(hold_figures["owed_s"]) <= 0.05 and hold_figures["integral"] == 0.0
+    back, fresh = hold_figures["after_end_stop"], hold_figures["from_contact"]
+    # ... so from the end stop the hold reaches 3,000 rpm as it did from the contact point (the free
+    # travel to cross again costs about a contact search), and overshoots no more
+    assert back["settle_s"] <= fresh["settle_s"] + 1.5, (back, fresh)
+    assert back["overshoot_pc"] <= fresh["overshoot_pc"] + 3.0, (back, fresh)
