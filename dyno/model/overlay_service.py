@@ -229,7 +229,8 @@ class OverlayService:
                 return key
             e = Entry(key, op, self.clock(), prime=prime)
             self.entries[key] = e
-            cached = self._read_cache(key)
+            # A seed is solved even if its summary is cached: what it is for is the solution to warm-start from.
+            cached = None if prime else self._read_cache(key)
             if cached is not None:
                 e.result, e.done_s = cached, e.submitted_s
             else:
@@ -244,6 +245,12 @@ class OverlayService:
         """Solve ``item`` when nothing else waits (a seed for the warm starts of the points to come)."""
         return self.submit(item, prime=True)
 
+    def nearest_distance(self, item) -> float:
+        """:func:`op_distance` from ``item`` to the nearest solution a warm start could use (inf: none)."""
+        op = _as_point(item, self.slack_tension_n, self.primary_axial_force_n)
+        with self._lock:
+            return self._nearest(op)[0]
+
     def get(self, key: str) -> dict | None:
         with self._lock:
             e = self.entries.get(key)
@@ -254,6 +261,12 @@ class OverlayService:
         with self._lock:
             return len([k for k in self._pending if not self.entries[k].prime]) + (
                 1 if self._busy and not self.entries[self._busy].prime else 0)
+
+    @property
+    def idle(self) -> bool:
+        """Nothing queued or running (seeds included)."""
+        with self._lock:
+            return not self._pending and self._busy is None
 
     def wait_idle(self, timeout_s: float | None = None) -> bool:
         """Block until nothing is pending or running (tests, batches, benchmarks)."""
