@@ -61,6 +61,7 @@ class LiveApp(DynoApp):
         self.overlay_tier = ""
         self.overlay_requested = False
         self.overlay_service = None  # dyno.model.overlay_service.OverlayService, from the first request
+        self.overlay_cache_dir = None  # the model cache's default unless set (a test's own directory)
         self._overlay_points = -1
         self._overlay_pairs: list = []  # overlay_inputs of the submitted points, in order
         self._overlay_keys: list = []
@@ -239,7 +240,7 @@ class LiveApp(DynoApp):
 
             loop = asyncio.get_running_loop()
             self.overlay_service = OverlayService(
-                executor=ThreadPoolExecutor(1, thread_name_prefix="overlay"),
+                executor=ThreadPoolExecutor(1, thread_name_prefix="overlay"), cache_dir=self.overlay_cache_dir,
                 on_result=lambda key, res: loop.call_soon_threadsafe(self._overlay_changed, key))
             # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
             # loop so that nothing of the overlay runs inside the controller's own call.
