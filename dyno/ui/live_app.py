@@ -301,12 +301,12 @@ class LiveApp(DynoApp):
         svc = self.overlay_service
         if svc is None:
             return
-        full, rough, failed = [], [], 0
+        full, rough, failed, newly = [], [], 0, []
         for (rs, op), k in zip(self._overlay_pairs, self._overlay_keys):
             r = svc.get(k)
             if r is not None and r.get("converged") and r.get("efficiency"):
                 full.append((rs, float(r["efficiency"]["overall"])))
-                self._overlay_shown_s.setdefault(k, time.monotonic())
+                newly.append(k)
                 continue
             failed += r is not None
             cf = self._overlay_closed.get(op)
@@ -317,6 +317,11 @@ class LiveApp(DynoApp):
         self.overlay_tier = (f"full {len(full)}/{n}" + (f", {svc.pending} wait" if svc.pending else "")
                              + (f", {failed} fail" if failed else "")) if n else "no points yet"
         self._overlay_version += 1
+        if key is not None and self.overlay_requested and self.is_running:
+            self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
+        now = time.monotonic()
+        for k in newly:
+            self._overlay_shown_s.setdefault(k, now)
 
     def overlay_latencies_s(self) -> dict:
         """Per point: seconds from its acceptance by the controller to its full-model value in the curve."""

@@ -4,7 +4,6 @@ prediction on screen, solved in the background by dyno.model.overlay_service (it
 from __future__ import annotations
 
 import asyncio
-import time
 
 from dyno.control.controller import State
 from dyno.ui.live_app import LiveApp
