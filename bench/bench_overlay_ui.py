@@ -46,7 +46,8 @@ async def measure(n_points: int, speed: float, seed: int, tmp: Path) -> None:
         lat = app.overlay_latencies_s()
         svc = app.overlay_service
         print(f"dyno ui --sim x{speed:g} seed {seed}: {len(s.controller.points)} points accepted, "
-              f"{len(lat)} predictions on screen")
+              f"{len(lat)} predictions on screen; state {s.controller.state.value}: {s.controller.reason} "
+              f"{s.controller.aborts[-1] if s.controller.aborts else ''}")
         print(f"{'#':>3}{'ratio':>7}{'rpm':>6}{'N·m':>6}{'latency s':>11}{'start':>7}{'steps':>6}{'job s':>7}")
         rows = []
         for i, ((_, op), k) in enumerate(zip(app._overlay_pairs, app._overlay_keys)):

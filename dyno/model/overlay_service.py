@@ -51,6 +51,7 @@ from dyno.model.params import TABLE_6_1, ModelParams, OperatingPoint
 RATIO_SCALE, SPEED_SCALE, TORQUE_SCALE, LEVEL_SCALE, SLIP_SCALE = 0.15, 0.5, 0.5, 0.5, 2.0
 WARM_MAX_DISTANCE = 1.0
 MAX_WARM_FILES = 300  # newest persisted warm states read at start (each ~50-150 kB)
+KEEP_WARM_FILES = 1000  # at most this many kept on disk
 
 
 class Cancelled(Exception):
@@ -408,7 +409,13 @@ class OverlayService:
 
         d = self._warm_dir()
         try:
-            files = sorted(d.glob(f"{self._code[:16]}-*.npz"), key=lambda p: p.stat().st_mtime)[-MAX_WARM_FILES:]
+            files = sorted(d.glob(f"{self._code[:16]}-*.npz"), key=lambda p: p.stat().st_mtime)
+            # Bound the directory: older model code's states are no use to this code, and past
+            # KEEP_WARM_FILES the oldest of this code's go (a rig solves ~20-50 points a run).
+            stale = [f for f in d.glob("*.npz") if not f.name.startswith(self._code[:16])]
+            for f in stale + files[:-KEEP_WARM_FILES]:
+                f.unlink(missing_ok=True)
+            files = files[-MAX_WARM_FILES:]
         except OSError:
             return
         for f in files:

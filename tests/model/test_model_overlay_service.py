@@ -180,3 +180,18 @@ def test_close_stops_a_running_solve_at_its_next_continuation_step():
         key = svc.submit(RUN[0])
         svc.close()
     assert svc.get(key) is None  # cancelled: nothing shown, nothing cached
+
+
+def test_stored_warm_states_are_bounded(tmp_path, monkeypatch):
+    from dyno.model import overlay_service
+
+    warm = tmp_path / "warm"
+    warm.mkdir()
+    (warm / "0123456789abcdef-old.npz").write_bytes(b"other model code")
+    code = overlay.model_code_hash()[:16]
+    for i in range(5):
+        (warm / f"{code}-{i}.npz").write_bytes(b"damaged")  # unreadable: skipped, not fatal
+    monkeypatch.setattr(overlay_service, "KEEP_WARM_FILES", 3)
+    svc = service(tmp_path)
+    assert svc._warm == [] and not (warm / "0123456789abcdef-old.npz").exists()
+    assert len(list(warm.glob("*.npz"))) == 3
