@@ -37,7 +37,7 @@ async def measure(n_points: int, speed: float, seed: int, tmp: Path) -> None:
         await pilot.press("g")
         await pilot.pause(0.1)
         await pilot.press("y")
-        t_end = time.monotonic() + 60 + 40 * n_points / speed
+        t_end = time.monotonic() + (150 + 40 * n_points) / speed
         while time.monotonic() < t_end and s.controller.state.value not in ("done", "aborted"):
             if len(app.overlay_latencies_s()) >= n_points:
                 break

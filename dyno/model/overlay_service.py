@@ -9,9 +9,9 @@ step).  :class:`OverlayService` therefore
   point already solved (in memory or on disk, converged or failed) is answered
   at once, and a failed entry is retried only when the model's code changes;
 * solves one point at a time on an injected executor (anything with
-  ``submit(fn, *args, **kwargs) -> Future``: a one-thread pool in the UI,
-  :class:`InlineExecutor` for a batch), so every solve can start from all the
-  solutions before it;
+  ``submit(fn, *args, **kwargs) -> Future``: a one-process pool in the UI
+  (:func:`process_pool`), a thread pool, :class:`InlineExecutor` for a batch),
+  so every solve can start from all the solutions before it;
 * warm-starts each solve from the nearest solved point (:func:`op_distance`),
   when it is near enough (a far neighbour is a worse start than none:
   ratio 1.0 -> 0.73 took 8.8 s warm against 2.6 s cold), else solves cold;
@@ -129,11 +129,53 @@ def _steps(sol) -> int:
     return len(getattr(raw, "history", []) or [])
 
 
+_WORKER_CANCEL = None  # a worker process's cancel event, from process_pool()'s initializer
+
+
+def _init_worker(cancel) -> None:
+    global _WORKER_CANCEL
+    _WORKER_CANCEL = cancel
+    import os
+
+    # The parent may be a full-screen terminal UI on the same tty: nothing of the solver's may print there.
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.dup2(devnull, 2)
+
+
+def process_pool():
+    """(executor, cancel event): a one-process pool for the service and the event its worker got at start.
+
+    The solver then runs in its own interpreter: its numerics never hold the GIL of the process whose event
+    loop polls the rig (with a thread, the control loop was seen silent for 0.68 s under load, tripping the
+    watchdog).  Spawned, not forked: the parent has threads (Textual, the watchdog).
+    """
+    import multiprocessing
+    import sys
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import resource_tracker
+
+    ctx = multiprocessing.get_context("spawn")
+    saved = sys.stderr
+    try:
+        # multiprocessing's helper process inherits sys.stderr's file descriptor: a UI that captured
+        # sys.stderr (Textual) has none, so start it on the real one.
+        if sys.__stderr__ is not None:
+            sys.stderr = sys.__stderr__
+        resource_tracker.ensure_running()
+        cancel = ctx.Event()
+    finally:
+        sys.stderr = saved
+    return ProcessPoolExecutor(1, mp_context=ctx, initializer=_init_worker, initargs=(cancel,)), cancel
+
+
 def solve_job(params: ModelParams, op: OperatingPoint, *, variant: str, slip_threshold_m_s: float, tol: float,
-              time_limit_s: float, guess: WarmState | None = None, cancel: threading.Event | None = None):
+              time_limit_s: float, guess: WarmState | None = None, cancel=None):
     """Solve one point (warm from ``guess`` if given, cold if that fails): (result dict, WarmState or None)."""
     from dyno.errors import MODEL_FAILURES
     from dyno.model import solution
+
+    cancel = cancel if cancel is not None else _WORKER_CANCEL
 
     def log(_record) -> None:  # called after every continuation step: the place to stop a closed service
         if cancel is not None and cancel.is_set():
@@ -190,7 +232,9 @@ class OverlayService:
                  slip_threshold_m_s: float = 1e-4, tol: float = 1e-3, slack_tension_n: float = 100.0,
                  primary_axial_force_n: float | None = None, cache_dir=None, use_cache: bool = True,
                  time_limit_s: float = 20.0, on_result=None, clock=time.monotonic, solve=solve_job,
-                 warm_max_distance: float = WARM_MAX_DISTANCE) -> None:
+                 warm_max_distance: float = WARM_MAX_DISTANCE, cancel=None) -> None:
+        """``cancel``: the event a process pool's workers got at start (:func:`process_pool`); without it the
+        service makes a threading.Event and hands it to each job (thread or inline executors)."""
         self.params, self.variant = params, variant
         self.slip_threshold_m_s, self.tol, self.time_limit_s = slip_threshold_m_s, tol, time_limit_s
         self.slack_tension_n, self.primary_axial_force_n = slack_tension_n, primary_axial_force_n
@@ -204,7 +248,8 @@ class OverlayService:
         self._warm: list[tuple[str, WarmState]] = []
         self._busy: str | None = None
         self._closed = False
-        self._cancel = threading.Event()
+        self._pass_cancel = cancel is None
+        self._cancel = threading.Event() if cancel is None else cancel
         self._lock = threading.RLock()
         self._idle = threading.Condition(self._lock)
         self.solves = 0  # full-model jobs run (cache hits excluded)
@@ -319,7 +364,8 @@ class OverlayService:
         try:
             fut = self.executor.submit(self._solve, self.params, e.op, variant=self.variant,
                                        slip_threshold_m_s=self.slip_threshold_m_s, tol=self.tol,
-                                       time_limit_s=self.time_limit_s, guess=guess, cancel=self._cancel)
+                                       time_limit_s=self.time_limit_s, guess=guess,
+                                       **({"cancel": self._cancel} if self._pass_cancel else {}))
         except RuntimeError:  # the executor was shut down under us
             with self._lock:
                 self._busy = None

@@ -2,8 +2,8 @@
 
 Thin over :mod:`dyno.ui.session` (commands) and :mod:`dyno.ui.live_model`
 (values).  The poller and the controller run as tasks on Textual's own
-loop; this screen only reads them, at ``REFRESH_HZ``, and does the slow
-thing (the belt-model overlay) in a worker thread.
+loop; this screen only reads them, at ``REFRESH_HZ``, and hands the slow
+thing (the belt-model overlay) to a background process.
 """
 
 from __future__ import annotations
@@ -216,7 +216,7 @@ class LiveApp(DynoApp):
         w.refresh()
 
     # --- overlay (belt model, off the UI thread) -----------------------------------------------
-    # The full model runs in dyno.model.overlay_service (one background thread, warm starts from the nearest
+    # The full model runs in dyno.model.overlay_service (one background process, warm starts from the nearest
     # solved point, cache); this screen only submits the accepted points and draws what has come back.
     def action_overlay(self) -> None:
         self.overlay_requested = not self.overlay_requested
@@ -233,14 +233,15 @@ class LiveApp(DynoApp):
         self._overlay_points = len(pts)
         if self.overlay_service is None:
             import asyncio
-            from concurrent.futures import ThreadPoolExecutor
 
-            # Light imports (numpy, the cache key): the solver itself is imported by the first job, in its thread.
-            from dyno.model.overlay_service import OverlayService
+            # Light imports (numpy, the cache key): the solver runs in its own process (its numerics must not
+            # hold this interpreter's GIL, which the poller and the controller need), imported there.
+            from dyno.model.overlay_service import OverlayService, process_pool
 
             loop = asyncio.get_running_loop()
+            pool, cancel = process_pool()
             self.overlay_service = OverlayService(
-                executor=ThreadPoolExecutor(1, thread_name_prefix="overlay"), cache_dir=self.overlay_cache_dir,
+                executor=pool, cancel=cancel, cache_dir=self.overlay_cache_dir,
                 on_result=lambda key, res: loop.call_soon_threadsafe(self._overlay_changed, key))
             # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
             # loop so that nothing of the overlay runs inside the controller's own call.

@@ -195,3 +195,21 @@ def test_stored_warm_states_are_bounded(tmp_path, monkeypatch):
     svc = service(tmp_path)
     assert svc._warm == [] and not (warm / "0123456789abcdef-old.npz").exists()
     assert len(list(warm.glob("*.npz"))) == 3
+
+
+def test_process_pool_solves_in_another_interpreter_and_close_cancels(tmp_path):
+    """The UI's executor: one spawned process, cancelled through the event it got at start."""
+    from dyno.model.overlay_service import process_pool
+
+    pool, cancel = process_pool()
+    svc = OverlayService(TABLE_6_1, executor=pool, cancel=cancel, slip_threshold_m_s=1e-2, cache_dir=tmp_path)
+    key = svc.submit(RUN[0])
+    assert svc.wait_idle(120)
+    r = svc.get(key)
+    assert r["converged"] and r["start"] == "cold" and not r["cached"]
+    k2 = svc.submit(RUN[1])
+    assert svc.wait_idle(60) and svc.get(k2)["start"] == "warm"  # the warm state travelled back and forth
+    svc.submit((2.0, 3400.0, 10.0))  # a cold solve of several steps ...
+    svc.close()  # ... stopped at its next step
+    assert cancel.is_set()
+    pool.shutdown(wait=True)

@@ -35,7 +35,8 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             assert "model (full)" in text, text  # the plot's legend
             keys = app._overlay_keys[:2]
             res = [svc.get(k) for k in keys]
-            assert all(r["converged"] and 0.5 < r["efficiency"]["overall"] <= 1.0 for r in res), res
+            dbg = (res, app._overlay_pairs, [(e.op, e.prime, e.result and e.result.get("start")) for e in svc.entries.values()])
+            assert all(r and r["converged"] and 0.5 < r["efficiency"]["overall"] <= 1.0 for r in res), dbg
             # the second point starts from a neighbour's solution, not from scratch
             assert res[1]["start"] == "warm" and res[1]["steps"] <= 2, res[1]
             assert set(app.overlay_latencies_s()) >= set(keys)
