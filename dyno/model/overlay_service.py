@@ -166,7 +166,25 @@ def process_pool():
         cancel = ctx.Event()
     finally:
         sys.stderr = saved
-    return ProcessPoolExecutor(1, mp_context=ctx, initializer=_init_worker, initargs=(cancel,)), cancel
+    pool = ProcessPoolExecutor(1, mp_context=ctx, initializer=_init_worker, initargs=(cancel,))
+    # Start the worker now, importing the solver there (the first point then pays neither), and without
+    # re-running the parent's __main__ script in it (spawn would, for an unguarded script): only dyno's
+    # module-level functions are ever sent to it.
+    main = sys.modules.get("__main__")
+    hide = main is not None and getattr(main, "__spec__", None) is None and hasattr(main, "__file__")
+    saved_file = main.__file__ if hide else None
+    try:
+        if hide:
+            del main.__file__
+        pool.submit(_import_solver)
+    finally:
+        if hide:
+            main.__file__ = saved_file
+    return pool, cancel
+
+
+def _import_solver() -> None:
+    import dyno.model.solution  # noqa: F401  (imported for the first job)
 
 
 def solve_job(params: ModelParams, op: OperatingPoint, *, variant: str, slip_threshold_m_s: float, tol: float,
@@ -253,6 +271,7 @@ class OverlayService:
         self._lock = threading.RLock()
         self._idle = threading.Condition(self._lock)
         self.solves = 0  # full-model jobs run (cache hits excluded)
+        self.fallbacks = 0  # times a dead worker process was replaced by a thread
         self._code = _overlay.model_code_hash()  # via the module: a test may stand in for it
         if use_cache:
             self._load_warm_states()
@@ -362,10 +381,7 @@ class OverlayService:
                 e.extra["warm_from_op"] = asdict(ws.op)
             self.solves += 1
         try:
-            fut = self.executor.submit(self._solve, self.params, e.op, variant=self.variant,
-                                       slip_threshold_m_s=self.slip_threshold_m_s, tol=self.tol,
-                                       time_limit_s=self.time_limit_s, guess=guess,
-                                       **({"cancel": self._cancel} if self._pass_cancel else {}))
+            fut = self._submit_job(e, guess)
         except RuntimeError:  # the executor was shut down under us
             with self._lock:
                 self._busy = None
@@ -373,10 +389,45 @@ class OverlayService:
             return
         fut.add_done_callback(lambda f, key=key: self._done(key, f))
 
+    def _submit_job(self, e: Entry, guess):
+        from concurrent.futures import BrokenExecutor
+
+        def submit():
+            return self.executor.submit(self._solve, self.params, e.op, variant=self.variant,
+                                        slip_threshold_m_s=self.slip_threshold_m_s, tol=self.tol,
+                                        time_limit_s=self.time_limit_s, guess=guess,
+                                        **({"cancel": self._cancel} if self._pass_cancel else {}))
+
+        try:
+            return submit()
+        except BrokenExecutor:
+            self._fall_back_to_a_thread()
+            return submit()
+
+    def _fall_back_to_a_thread(self) -> None:
+        """The worker process died (killed, out of memory): go on in a thread rather than show nothing."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        with self._lock:
+            self.executor = ThreadPoolExecutor(1, thread_name_prefix="overlay")
+            self._pass_cancel = True  # a multiprocessing Event works within this process too
+            self.fallbacks += 1
+
     def _done(self, key: str, fut: Future) -> None:
+        from concurrent.futures import BrokenExecutor
+
         e = self.entries[key]
         try:
             res, warm = fut.result()
+        except BrokenExecutor:  # the worker process died under this job: solve it again, in a thread
+            self._fall_back_to_a_thread()
+            with self._lock:
+                self._busy = None
+                if not self._closed and self.fallbacks <= 1:
+                    self._pending.insert(0, key)
+                    self.solves -= 1
+            self._pump()
+            return
         except (Cancelled, Exception) as exc:  # noqa: BLE001  (cancelled or a bug: not cached, retried next session)
             with self._lock:
                 self._busy = None

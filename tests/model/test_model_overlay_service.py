@@ -213,3 +213,19 @@ def test_process_pool_solves_in_another_interpreter_and_close_cancels(tmp_path):
     svc.close()  # ... stopped at its next step
     assert cancel.is_set()
     pool.shutdown(wait=True)
+
+
+def test_a_dead_worker_process_is_replaced_by_a_thread(tmp_path):
+    from concurrent.futures import BrokenExecutor
+
+    class Broken:
+        def submit(self, *a, **k):
+            raise BrokenExecutor("worker killed")
+
+        def shutdown(self, **k):
+            pass
+
+    log = []
+    svc = service(tmp_path, executor=Broken(), solve=fake_solver(log), use_cache=False)
+    key = svc.submit(RUN[0])
+    assert svc.wait_idle(10) and svc.get(key)["converged"] and svc.fallbacks == 1 and len(log) == 1
