@@ -19,8 +19,8 @@ step).  :class:`OverlayService` therefore
 * keeps the solutions it warm-starts from on disk too (``warm/`` under the cache
   directory, one small ``.npz`` per converged point, same code hash), so the
   first point of the next session warm-starts as well;
-* picks, among the pending points, the one nearest to a solved point first
-  (a batch is solved as a chain of short steps, not in arrival order);
+* solves the accepted points in arrival order (a run's points come as a chain
+  of neighbours; a far point must not wait behind nearer successors), seeds last;
 * can be *primed* with a point to solve while nothing else waits (a seed near
   where the next points will be), and is cancelled between continuation steps
   by :meth:`OverlayService.close`.
@@ -366,10 +366,11 @@ class OverlayService:
                 if self._busy is None and not self._pending:
                     self._idle.notify_all()
                 return
-            real = [k for k in self._pending if not self.entries[k].prime] or list(self._pending)
-            # nearest to something solved first (a chain of short steps); ties (nothing solved): arrival order
-            scored = [(self._nearest(self.entries[k].op)[0], i, k) for i, k in enumerate(real)]
-            _, _, key = min(scored)
+            # Accepted points in arrival order (each must be on screen soon after it came: a point far from
+            # everything solved must not wait behind its nearer successors; a run's points arrive as a chain
+            # of neighbours anyway), then the newest seed.
+            real = [k for k in self._pending if not self.entries[k].prime]
+            key = real[0] if real else self._pending[-1]
             self._pending.remove(key)
             self._busy = key
             e = self.entries[key]

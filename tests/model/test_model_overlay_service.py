@@ -121,21 +121,20 @@ def fake_solver(log: list, fail: bool = False, gate: threading.Event | None = No
     return solve
 
 
-def test_background_thread_solves_a_batch_as_a_chain_of_neighbours(tmp_path):
+def test_background_thread_solves_in_arrival_order_each_from_its_nearest_solved_point(tmp_path):
     log, results = [], {}
     gate = threading.Event()
     with ThreadPoolExecutor(1) as pool:
         svc = service(tmp_path, executor=pool, solve=fake_solver(log, gate=gate), use_cache=False,
                       on_result=lambda k, r: results.__setitem__(k, r))
         first = svc.submit((1.0, 3400.0, 18.0))  # running (held at the gate) while the batch arrives
-        batch = [svc.submit((r, 3400.0, 18.0)) for r in (1.6, 1.1, 1.3, 1.2)]
+        batch = [svc.submit((r, 3400.0, 18.0)) for r in (1.05, 1.6, 1.1, 1.55)]
         assert svc.pending == 5
         gate.set()
         assert svc.wait_idle(10)
     assert set(results) == {first, *batch} and svc.pending == 0
-    # after 1.0: always the pending point nearest to something solved (1.1, 1.2, 1.3, then 1.6), each warm
-    # from its nearest solved neighbour; 1.6 is too far from 1.3 (+23 %): cold
-    assert log == [(1.0, None), (1.1, 1.0), (1.2, 1.1), (1.3, 1.2), (1.6, None)]
+    # arrival order; each warm from the nearest solved point; 1.6 is too far from 1.05 (+42 %): cold
+    assert log == [(1.0, None), (1.05, 1.0), (1.6, None), (1.1, 1.05), (1.55, 1.6)]
 
 
 def test_prime_is_solved_only_when_nothing_else_waits_and_seeds_the_next_point(tmp_path):
