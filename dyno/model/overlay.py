@@ -37,7 +37,7 @@ TIERS = ("closed_form", "full")
 # Every module a prediction depends on: the cache key hashes their source, so a code change (a fix, a
 # new boundary condition) invalidates old entries and retries cached failures, with no version to bump.
 _MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
-                  "bvp", "balance", "solution", "overlay", "overlay_service")
+                  "bvp", "balance", "solution", "overlay", "overlay_service", "overlay_worker")
 
 
 @functools.lru_cache(maxsize=1)
