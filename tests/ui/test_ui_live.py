@@ -184,11 +184,15 @@ async def main():
                          if m in sys.modules]
         await pilot.press("o")
         t_end = time.monotonic() + 90
-        solved = lambda: app.overlay_service is not None and any(
-            e.result is not None for e in app.overlay_service.entries.values())
-        while time.monotonic() < t_end and not solved():
+        from dyno.model.params import TABLE_6_1_POINT
+
+        svc = lambda: app.overlay_service
+        # a seed solved in the worker, or none needed: a solution stored by an earlier session is at hand
+        stored = lambda: svc() is not None and not svc().entries and svc().nearest_distance(TABLE_6_1_POINT) <= 0.5
+        solved = lambda: svc() is not None and any(e.result is not None for e in svc().entries.values())
+        while time.monotonic() < t_end and not (solved() or stored()):
             await pilot.pause(0.2)
-        out["seed"] = [e.result.get("converged") for e in app.overlay_service.entries.values() if e.result]
+        out["seed"] = "stored" if stored() else [e.result.get("converged") for e in svc().entries.values() if e.result]
         out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay") if m in sys.modules]
         await pilot.press("space")
         await pilot.pause(0.2)
@@ -210,7 +214,7 @@ def test_ui_live_imports_belt_model_only_when_overlay_requested(tmp_path):
     assert "dyno.model.bvp" not in out["before"] and "dyno.model.solution" not in out["before"], out
     # after it: the solver runs in the overlay's own process (its numerics never hold this interpreter's GIL,
     # which the poller and the controller need); here only the light overlay modules
-    assert out["seed"] == [True], out
+    assert out["seed"] in ([True], "stored"), out
     assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay" in out["after"], out
 
 
