@@ -319,7 +319,12 @@ class LiveApp(DynoApp):
                              + (f", {failed} fail" if failed else "")) if n else "no points yet"
         self._overlay_version += 1
         if key is not None and self.overlay_requested and self.is_running:
-            self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
+            from textual.css.query import NoMatches
+
+            try:
+                self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
+            except NoMatches:  # a dialog is on top: the next refresh draws it
+                pass
         now = time.monotonic()
         for k in newly:
             self._overlay_shown_s.setdefault(k, now)
