@@ -9,6 +9,7 @@ thing (the belt-model overlay) to a background process.
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 from rich.text import Text
@@ -67,6 +68,10 @@ class LiveApp(DynoApp):
         self._overlay_keys: list = []
         self._overlay_closed: dict = {}
         self._overlay_seen_s: dict = {}
+        self._overlay_loop = None  # the event loop, known once the overlay is first requested
+        self._overlay_lock = threading.Lock()  # submissions come from worker threads
+        self._overlay_tune_cache = None  # the rig's Tune, False for none, None before the first look
+        self._overlay_primed_s = -math.inf
         self._overlay_shown_s: dict = {}
         self._overlay_version = 0
         self._plotted = None
@@ -228,52 +233,91 @@ class LiveApp(DynoApp):
         self._start_overlay()
 
     def _start_overlay(self) -> None:
-        """Submit the points not yet submitted (the service solves each once), closed form for the rest."""
+        """Submit the points not yet submitted (the service solves each once), closed form for the rest.
+
+        The work runs in a worker thread: the imports, the solver process's start and the inverse of each
+        point (tens of ms) must never hold the event loop on which the poller and the controller run.
+        """
         pts = list(self.session.controller.points)
         self._overlay_points = len(pts)
-        if self.overlay_service is None:
+        if self._overlay_loop is None:
             import asyncio
 
-            # Light imports (numpy, the cache key): the solver runs in its own process (its numerics must not
-            # hold this interpreter's GIL, which the poller and the controller need), imported there.
+            loop = self._overlay_loop = asyncio.get_running_loop()
+            # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
+            # loop so that nothing of the overlay runs inside the controller's own call.
+            self.session.controller.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
+        accepted_s = time.monotonic()
+        self.run_worker(lambda: self._overlay_submit_work(pts, accepted_s), thread=True,
+                        group="overlay-submit", name="overlay submit")
+
+    def _overlay_service_now(self):
+        """The service, made on first use (in a worker thread, see _start_overlay)."""
+        if self.overlay_service is None:
+            # The solver runs in its own process (its numerics must not hold this interpreter's GIL, which
+            # the poller and the controller need), imported there.
             from dyno.model.overlay_service import OverlayService, process_pool
 
-            loop = asyncio.get_running_loop()
+            loop = self._overlay_loop
             pool, cancel = process_pool()
             self.overlay_service = OverlayService(
                 executor=pool, cancel=cancel, cache_dir=self.overlay_cache_dir,
                 on_result=lambda key, res: loop.call_soon_threadsafe(self._overlay_changed, key))
-            # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
-            # loop so that nothing of the overlay runs inside the controller's own call.
-            self.session.controller.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
-        svc = self.overlay_service
-        pairs = overlay_inputs(pts)
-        new = pairs[len(self._overlay_pairs):] if pairs[:len(self._overlay_pairs)] == self._overlay_pairs else pairs
-        if new is pairs:  # not an extension of what was submitted (cannot happen in a run): start over
-            self._overlay_pairs, self._overlay_keys = [], []
-        for rs, op in new:
-            self._overlay_pairs.append((rs, op))
-            key = svc.submit(op)
-            self._overlay_keys.append(key)
-            self._overlay_seen_s.setdefault(key, time.monotonic())
+            if not self.is_running:  # the app closed while this thread started it: stop it too
+                self.overlay_service.close()
+        return self.overlay_service
+
+    def _overlay_tune(self):
+        """The rig's tune (the run's tune.toml source) for the inverse's clamp; None: Table 6.1 at 100 N."""
+        if self._overlay_tune_cache is None:
+            path = getattr(self.session.controller, "tune_path", None)
+            tune = False
+            if path is not None:
+                from dyno.tuning.tune import load_tune
+
+                try:
+                    tune = load_tune(path)
+                except Exception:  # noqa: BLE001  (validated when the run started; never break the overlay)
+                    tune = False
+            self._overlay_tune_cache = tune
+        return self._overlay_tune_cache or None
+
+    def _overlay_submit_work(self, pts, accepted_s: float) -> None:
+        with self._overlay_lock:
+            svc = self._overlay_service_now()
+            pairs = overlay_inputs(pts, self._overlay_tune())
+            done = len(self._overlay_pairs)
+            new = pairs[done:] if pairs[:done] == self._overlay_pairs else pairs
+            if new is pairs:  # not an extension of what was submitted (cannot happen in a run): start over
+                self._overlay_pairs, self._overlay_keys = [], []
+            for rs, op in new:
+                self._overlay_pairs.append((rs, op))
+                key = svc.submit(op)
+                self._overlay_keys.append(key)
+                self._overlay_seen_s.setdefault(key, accepted_s)
+            submitted = list(self._overlay_pairs)
         if not pts:
-            self._overlay_prime()
-        self.run_worker(lambda: self._closed_form_work(list(self._overlay_pairs)), thread=True, exclusive=True,
-                        group="overlay-cf", name="overlay closed form")
-        self._overlay_changed()
+            self.call_from_thread(self._overlay_prime)
+        self._closed_form_work(submitted)
 
     def _overlay_on_points(self) -> None:
         if self.overlay_requested and len(self.session.controller.points) != self._overlay_points:
             self._start_overlay()
 
     def _overlay_prime(self) -> None:
-        """A seed near the coming point while the controller settles/measures, if nothing solved is near it."""
+        """A seed near the coming point while the controller settles/measures, if nothing solved is near it
+        (checked at most once a second, the inverse in a worker thread)."""
         svc, v = self.overlay_service, self.values
-        if svc is None or v is None or not svc.idle:
+        if svc is None or v is None or not svc.idle or time.monotonic() - self._overlay_primed_s < 1.0:
             return
+        self._overlay_primed_s = time.monotonic()
         live = {"rpm_primary": v.rpm_primary, "ratio": v.ratio, "power_in_w": v.power_engine_w,
                 "rpm_secondary": v.rpm_secondary}
-        seed = [op for _, op in overlay_inputs([live])]
+        self.run_worker(lambda: self._overlay_prime_work(svc, live), thread=True, group="overlay-prime",
+                        name="overlay seed")
+
+    def _overlay_prime_work(self, svc, live: dict) -> None:
+        seed = [op for _, op in overlay_inputs([live], self._overlay_tune())]
         if not seed:
             from dyno.model.params import TABLE_6_1_POINT  # nothing measured yet: the thesis's case
 
@@ -287,6 +331,8 @@ class LiveApp(DynoApp):
 
         out = {}
         for _, op in pairs:
+            if op in self._overlay_closed:
+                continue
             try:
                 out[op] = _closed_form_result(TABLE_6_1, _as_point(op, 100.0, None))
             except Exception:  # noqa: BLE001  (a placeholder: a point outside its range has none)
