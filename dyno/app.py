@@ -226,6 +226,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None)
+    controller.rig = rig_cfg
+    controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
     controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
     controller.inertia = rig_cfg.inertia
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
@@ -242,6 +244,9 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
+        from dyno.sim.driven import results_truth_hook
+
+        controller.result_hooks.append(results_truth_hook(sim.model))
 
         def audit(raw: bytes) -> None:
             if not sim.audit(raw):
@@ -372,8 +377,15 @@ async def run_test_async(opts: RunOptions) -> dict:
             ctx.controller.abort("timeout", f"run exceeded {opts.max_sim_s:.0f} s")
             state = ctx.controller.state
         status = "success" if state.value == "done" else "abort"
+        zero_task = None
+        if state.value == "done" and opts.finish_release:  # the zero at rest after the last point
+            from dyno.control.zero_check import after_test
+
+            zero_task = asyncio.create_task(after_test(ctx.controller), name="torque-zero")
         if opts.finish_release:
             await _finish_release(ctx)
+        if zero_task is not None:
+            await zero_task
     finally:
         if ctx.drills is not None:
             ctx.drills.cancel()
@@ -475,10 +487,19 @@ def summarize(ctx: RunContext) -> dict:
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
            "discarded": list(ctx.controller.discards),
            "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    zc = getattr(ctx.controller, "zero_check", None)
+    if zc is not None:
+        out["torque_zero"] = zc
+        if zc.get("correct"):
+            from dyno.analysis.zero_check import corrected_point_keys
+
+            for pub, p in zip(out["points"], ctx.controller.points):
+                pub.update(corrected_point_keys(p, zc))
+    out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
     go_s = ctx.controller.go_s
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
     # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
-    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else None
+    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
     out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs

@@ -143,6 +143,25 @@ class ResetConfig:
 
 
 @dataclass(frozen=True)
+class DrivenConfig:
+    """The driven side (secondary to brake rotor), referred to the secondary: for the coast-down."""
+
+    inertia_kg_m2: float = 0.0251  # secondary pulley + shaft + 32 t gear, and 61 t gear + brake shaft + rotor x g^2
+    inertia_rel_unc: float = 0.03  # its stated relative uncertainty (1 sigma): systematic in the loss
+    inertia_beyond_gauge_kg_m2: float = 0.0121  # the part beyond the torque gauge (brake shaft + rotor x g^2)
+    loss_file: str | None = None  # driven_loss.json of a coast-down: added back to efficiency when asked
+
+
+@dataclass(frozen=True)
+class TorqueZeroConfig:
+    """Torque-channel zero read at rest before GO and after the last point."""
+
+    read_s: float = 4.0  # averaging window at rest (4 s: 95 % half-width ~0.09 N m with the sim's noise)
+    drift_max_nm: float = 0.15  # |after - before| beyond this (secondary N m) is flagged in the run and report
+    correct: bool = False  # linear drift correction of the points' torque (extra keys; raw points unchanged)
+
+
+@dataclass(frozen=True)
 class InertiaConfig:
     """Rotating inertias for the I·alpha correction of sweeps and ramps (docs/control.md).
 
@@ -194,6 +213,8 @@ class RigConfig:
     actuator: ActuatorConfig
     throttle: ThrottleConfig
     reset: ResetConfig
+    driven: DrivenConfig = DrivenConfig()
+    torque_zero: TorqueZeroConfig = TorqueZeroConfig()
     inertia: InertiaConfig = InertiaConfig()
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
@@ -309,7 +330,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
-             "uncertainty"}
+             "uncertainty", "driven", "torque_zero"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -435,6 +456,35 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         active_high=r.boolean(t, "active_high", "reset.", default=True),
     )
 
+    # driven side and torque zero (optional tables)
+    t = data.get("driven", {})
+    if not isinstance(t, Mapping):
+        raise r.err("driven", f"expected a table [driven], got {type(t).__name__}")
+    r.no_extra(t, {"inertia_kg_m2", "inertia_rel_unc", "inertia_beyond_gauge_kg_m2", "loss_file"}, "driven.")
+    dd = DrivenConfig()
+    driven = DrivenConfig(
+        inertia_kg_m2=r.number(t, "inertia_kg_m2", "driven.", lo=1e-4, hi=10.0, required=False,
+                               default=dd.inertia_kg_m2),
+        inertia_rel_unc=r.number(t, "inertia_rel_unc", "driven.", lo=0.0, hi=0.5, required=False,
+                                 default=dd.inertia_rel_unc),
+        inertia_beyond_gauge_kg_m2=r.number(t, "inertia_beyond_gauge_kg_m2", "driven.", lo=0.0, hi=10.0,
+                                            required=False, default=dd.inertia_beyond_gauge_kg_m2),
+        loss_file=r.string(t, "loss_file", "driven.", required=False, default=None),
+    )
+    if driven.inertia_beyond_gauge_kg_m2 > driven.inertia_kg_m2:
+        raise r.err("driven.inertia_beyond_gauge_kg_m2", f"expected <= driven.inertia_kg_m2 ({driven.inertia_kg_m2})")
+    t = data.get("torque_zero", {})
+    if not isinstance(t, Mapping):
+        raise r.err("torque_zero", f"expected a table [torque_zero], got {type(t).__name__}")
+    r.no_extra(t, {"read_s", "drift_max_nm", "correct"}, "torque_zero.")
+    tz = TorqueZeroConfig()
+    torque_zero = TorqueZeroConfig(
+        read_s=r.number(t, "read_s", "torque_zero.", lo=0.2, hi=60.0, required=False, default=tz.read_s),
+        drift_max_nm=r.number(t, "drift_max_nm", "torque_zero.", lo=0.0, hi=100.0, required=False,
+                              default=tz.drift_max_nm),
+        correct=r.boolean(t, "correct", "torque_zero.", default=tz.correct),
+    )
+
     # inertia, control (optional tables; defaults are the thesis rig's, as identified on the sim)
     t = data.get("inertia", {})
     if not isinstance(t, Mapping):
@@ -472,7 +522,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
-        uncertainty=uncertainty,
+        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero,
     )
 
 

@@ -156,3 +156,12 @@ def point_efficiency(rpm_primary, rpm_primary_sem, rpm_secondary, rpm_secondary_
         "efficiency_sem": eta_sem,
         "engine_map_sha256": engine_map.sha256,
     }
+
+
+def add_back_loss(efficiency: float, efficiency_ci95: float, power_in_w: float, rpm_secondary: float,
+                  loss_nm: float, loss_ci95_nm: float) -> tuple[float, float]:
+    """Efficiency with a driven-side loss the gauge does not see added back, and its 95 % half-width
+    (the point's and the loss's, independent)."""
+    w = rpm_secondary * math.pi / 30.0
+    eta = efficiency + loss_nm * w / power_in_w
+    return eta, math.hypot(efficiency_ci95, loss_ci95_nm * w / power_in_w)

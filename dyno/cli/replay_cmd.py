@@ -12,6 +12,9 @@ def add_arguments(p) -> None:
     p.add_argument("--calibration", type=Path, default=None, help="re-process with this calibration history")
     p.add_argument("--engine-map", type=Path, default=None, help="re-process with this engine map")
     p.add_argument("--json", action="store_true", help="print the points as one JSON document, no viewer")
+    p.add_argument("--driven-loss", type=Path, default=None, metavar="FILE",
+                   help="with --json: add a coast-down's driven-side loss (driven_loss.json) back to each point's "
+                        "efficiency as extra keys, uncertainty propagated")
 
 
 def run(args) -> int:
@@ -28,7 +31,21 @@ def run(args) -> int:
         return viewer(args)
     results = [replay(r, args.calibration, args.engine_map) for r in args.run]
     if args.json:
-        docs = [{"run_dir": r["run_dir"], "points": [public_point(p) for p in r["points"]],
+        loss = None
+        if getattr(args, "driven_loss", None) is not None:
+            from dyno.analysis.coastdown import load_driven_loss
+
+            loss = load_driven_loss(args.driven_loss)
+
+        def pub(p):
+            out = public_point(p)
+            if loss is not None:
+                from dyno.analysis.coastdown import driven_loss_keys
+
+                out.update(driven_loss_keys(out, loss))
+            return out
+
+        docs = [{"run_dir": r["run_dir"], "points": [pub(p) for p in r["points"]],
                  "stop": r["stop"], "aborts": r["aborts"], "torn": r["torn"]} for r in results]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1, default=str))
         return 0

@@ -26,12 +26,23 @@ def add_arguments(p) -> None:
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,
                    help="the CVT tune on the rig (TOML), stored with the run; with --sim the simulated CVT uses it")
+    p.add_argument("--driven-loss", type=Path, default=None, metavar="FILE",
+                   help="a coast-down's driven_loss.json: every point also gets its efficiency with the driven-side "
+                        "loss the gauge does not see added back, uncertainty propagated (default: rig.toml "
+                        "[driven] loss_file)")
+    p.add_argument("--sim-driven-loss", default=None, metavar="A,B,C",
+                   help="with --sim: the simulated rig's driven-side parasitic loss a + b w + c w^2 (N m, w in "
+                        "rad/s of the secondary; off by default), the truth a coast-down recovers")
+    p.add_argument("--sim-zero-drift", type=float, default=None, metavar="NM_PER_MIN",
+                   help="with --sim: the torque channel's zero drifts by this many N m (secondary) per minute")
     p.add_argument("--settle", choices=("detect", "fixed"), default=None,
                    help="step plans' settling: detected from the data, or the thesis's fixed 4 s (default: the plan's)")
     p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
                    help="a shipped plan (speed-hold: closed-loop secondary-speed setpoints, each point to a 95 %% "
                         "CI of +-1 pp, the default; thesis-step: the thesis's open-loop brake steps; sweep; "
-                        "torque-hold; engine-hold; ...) or a plan file (a path ending in .toml; docs/control.md)")
+                        "torque-hold; engine-hold; engagement: throttle ramps -> engagement, lock-up, shift-out "
+                        "(vs load), full-shift ratio; coast-down: the driven side's parasitic loss; ...) or a plan "
+                        "file (a path ending in .toml; docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
@@ -72,15 +83,31 @@ def run(args) -> int:
                       protocol=args.protocol, rig_path=getattr(args, "rig", None),
                       plan=_plan(args), drills=drills, handle_signals=True,
                       mock_pins=args.mock_pins)
+    driven_loss = _driven_loss(args)  # a bad file: one line, exit 2, before anything is written
     if args.calibration:
         opts.calibration_path = args.calibration
     if args.engine_map:
         opts.engine_map_path = args.engine_map
+    sim_kw = {}
     if args.tune:
+        opts.tune_path = args.tune
+        sim_kw["cvt_tune_path"] = str(args.tune)
+    if args.sim_driven_loss is not None:
+        try:
+            coeffs = tuple(float(v) for v in args.sim_driven_loss.split(","))
+            if len(coeffs) != 3 or not all(c >= 0 for c in coeffs):
+                raise ValueError
+        except ValueError:
+            print(f"dyno run: --sim-driven-loss: expected three numbers >= 0 as A,B,C, got "
+                  f"{args.sim_driven_loss!r}", file=sys.stderr)
+            return 2
+        sim_kw["driven_loss_nm"] = coeffs
+    if args.sim_zero_drift is not None:
+        sim_kw["adc_zero_drift_nm_per_min"] = float(args.sim_zero_drift)
+    if sim_kw:
         from dyno.sim.physics import RigParams
 
-        opts.tune_path = args.tune
-        opts.sim_params = RigParams(cvt_tune_path=str(args.tune))
+        opts.sim_params = RigParams(**sim_kw)
     from dyno.cli import progress as tty
 
     bar = None
@@ -95,6 +122,11 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.finish()
+    if driven_loss is not None:
+        from dyno.analysis.coastdown import driven_loss_keys
+
+        for p in result["points"]:
+            p.update(driven_loss_keys(p, driven_loss))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
@@ -110,6 +142,18 @@ def run(args) -> int:
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
     _write_report(result, announce=not args.json)
     return exit_code(result)
+
+
+def _driven_loss(args):
+    """The --driven-loss file, else rig.toml [driven] loss_file, loaded and checked (None: none asked)."""
+    from dyno.analysis.coastdown import load_driven_loss
+
+    path = args.driven_loss
+    if path is None:
+        from dyno.rigconfig import load_rig
+
+        path = load_rig(getattr(args, "rig", None)).driven.loss_file
+    return None if path is None else load_driven_loss(path)
 
 
 def _plan(args):

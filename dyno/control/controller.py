@@ -132,6 +132,9 @@ class TestController:
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
+        self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
+        self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
+        self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
         self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
         self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
@@ -236,7 +239,7 @@ class TestController:
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
         if self.state is State.DONE:
             self.act.safe_state()  # end of test: same safe state, not an abort
-            if not self.points:
+            if not self.points and not self.results:
                 # A test that measured nothing is not a success, whatever the plan's end says.
                 self.abort("no_points", "the test ended without a single accepted point", after_done=True)
         return self.state
@@ -297,10 +300,18 @@ class TestController:
             else:
                 since = None
         self._enter(State.ARMED, "engine running; press GO to start")
+        from dyno.control.zero_check import read_zero
+
+        self.zero_before = await read_zero(self)  # torque zero at rest (idle is below engagement)
         if self.auto_go:
             self._go.set()
         await self._go.wait()
         self.go_s = self._now()
+        from dyno.control.plans import FROM_IDLE, runner_for
+
+        if p.mode in FROM_IDLE:  # characterisations start from idle: no full-throttle warm-up
+            await runner_for(p.mode)(self)
+            return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.act.throttle(1.0)
         await self._sleep(p.warmup_s)
@@ -389,6 +400,12 @@ class TestController:
                 point["valid"] = False
                 point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
         return point, host_t0, host_t1
+
+    def _set_results(self, results: dict, *, hooks: bool = True) -> None:
+        for hook in self.result_hooks if hooks else ():
+            hook(results)
+        self.results = results
+        self._log("characterisation", **results)
 
     async def _warm_up_at_load(self) -> None:
         """Before the first point: the plan's time at load (``warmup_at_load_s``), waited out if short."""
@@ -489,8 +506,8 @@ class TestController:
         self._checking = True
         try:
             now = self._now() if now_s is None else now_s
-            trip = self.monitor.check(now, loaded=self.state in _LOADED_STATES,
-                                      engine_expected=self.state in _ENGINE_STATES)
+            trip = self.monitor.check(now, loaded=self.state in _LOADED_STATES and not self.engine_cut,
+                                      engine_expected=self.state in _ENGINE_STATES and not self.engine_cut)
         except Exception as exc:  # a broken check must not leave the rig unmonitored
             self._checking = False
             self.abort("safety_error", f"safety check failed: {type(exc).__name__}: {exc}")

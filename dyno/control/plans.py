@@ -19,13 +19,22 @@ from dataclasses import replace
 from dyno.control.controller import TestPlan
 
 #: mode -> "module:coroutine" (or the coroutine function itself); it takes the controller after the warm-up
+#: (those in FROM_IDLE right after GO)
 RUNNERS: dict[str, object] = {
     "speed-hold": "dyno.control.speed_hold:run_speed_hold",
     "steps": "dyno.control.steps:run_steps",
+    "engagement": "dyno.control.characterise:run_engagement",
+    "coast-down": "dyno.control.coastdown:run_coast_down",
 }
 
+#: modes whose runner starts from idle (GO, then no full-throttle warm-up): the characterisations
+FROM_IDLE = {"engagement", "coast-down"}
+
 #: plans registered in code (no file); the shipped plan files are added to these by name
-PLANS: dict[str, TestPlan] = {}
+PLANS: dict[str, TestPlan] = {
+    "engagement": TestPlan(mode="engagement", name="engagement"),  # dyno.control.characterise
+    "coast-down": TestPlan(mode="coast-down", name="coast-down"),  # dyno.control.coastdown
+}
 
 
 def runner_for(mode: str):

@@ -77,6 +77,7 @@ class SafetyMonitor:
         self.poller = poller
         self.torque_from_code = torque_from_code
         self._last_check_s: float | None = None
+        self._primary_above_since_s: float | None = None  # engine above secondary_check_primary_rpm since
         # thermometer history
         self._temp_seen_s = math.nan
         self._temps: list[tuple[float, float]] = []  # (read time, value) of the last ~1 s
@@ -268,7 +269,16 @@ class SafetyMonitor:
                             "must run: engine stalled or both Hall sensors dead", now)
             return Trip("sensor_fault", f"primary Hall silent for {q_p:.2f} s while the secondary turns at "
                         f"{rs:.0f} rpm", now)
-        if q_s > lim.secondary_quiet_s and rp > lim.secondary_check_primary_rpm:
+        if rp > lim.secondary_check_primary_rpm:
+            if self._primary_above_since_s is None:
+                self._primary_above_since_s = now
+        else:
+            self._primary_above_since_s = None
+        # The engine must also have been above the check speed for the quiet time: an engine that
+        # revs through engagement in a few tens of ms leaves the secondary no time for its first
+        # revolution (a clutch engaging near the check speed would otherwise trip at every start).
+        if (q_s > lim.secondary_quiet_s and rp > lim.secondary_check_primary_rpm
+                and now - self._primary_above_since_s > lim.secondary_quiet_s):
             last = s.edges[v1.CH_SECONDARY]
             last_rpm = 60e6 / (last[-1] - last[-2]) if len(last) >= 2 and last[-1] > last[-2] else 0.0
             if last_rpm < 1000.0:

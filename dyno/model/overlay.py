@@ -5,8 +5,10 @@ torque); two tiers answer:
 
 * ``tier="closed_form"``: microseconds per point, for an instant overlay.  Its
   efficiency is Reynolds' creep only (no seating loss): an upper bound.
-* ``tier="full"``: the thesis's BVP, seconds per point, each point warm-started
-  from the previously solved one (points are visited in ratio order).
+* ``tier="full"``: the thesis's BVP, 0.3-9 s per point, through
+  :class:`dyno.model.overlay_service.OverlayService` run inline: each point
+  warm-started from the nearest solved one (in this call, or stored on disk by
+  an earlier one) when it is near enough, else cold.
 
 Every result is stored as one small JSON file named by the SHA-256 of its
 inputs (parameters, variant, tier, tolerances, the point) and of the model's
@@ -29,14 +31,13 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from dyno.errors import MODEL_FAILURES
 from dyno.model.params import ModelParams, OperatingPoint, TABLE_6_1, bad_input
 
 TIERS = ("closed_form", "full")
 # Every module a prediction depends on: the cache key hashes their source, so a code change (a fix, a
 # new boundary condition) invalidates old entries and retries cached failures, with no version to bump.
 _MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
-                  "bvp", "balance", "solution", "overlay")
+                  "bvp", "balance", "solution", "overlay", "overlay_service", "overlay_worker")
 
 
 @functools.lru_cache(maxsize=1)
@@ -155,13 +156,19 @@ def predict_overlay(
     if tier not in TIERS:
         raise bad_input("tier", f"one of {', '.join(TIERS)}, got {tier!r}")
     ops = [_as_point(p, slack_tension_n, primary_axial_force_n) for p in points]
+    if tier == "full":
+        # The live overlay's service, run inline: cache, nearest-neighbour warm starts (also from solutions
+        # stored by earlier sessions), cold fallback.
+        from dyno.model.overlay_service import InlineExecutor, OverlayService
+
+        svc = OverlayService(params, executor=InlineExecutor(), variant=variant, slip_threshold_m_s=slip_threshold_m_s,
+                             tol=tol, cache_dir=cache_dir, use_cache=use_cache, time_limit_s=time_limit_s)
+        keys = [svc.submit(op) for op in ops]
+        return [dict(svc.get(k)) for k in keys]
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     results: list = [None] * len(ops)
-    todo = []
-    keys = []
     for i, op in enumerate(ops):
         key = point_key(params, op, tier, variant, slip_threshold_m_s, tol)
-        keys.append(key)
         path = cache / f"{key}.json"
         if use_cache and path.is_file():
             try:
@@ -169,55 +176,15 @@ def predict_overlay(
                 continue
             except (OSError, ValueError):
                 pass  # unreadable entry: recompute and overwrite
-        todo.append(i)
-
-    guess = None
-    for i in sorted(todo, key=lambda j: (ops[j].ratio, ops[j].primary_speed_rpm, ops[j].primary_torque_nm)):
-        op = ops[i]
-        if tier == "closed_form":
-            res = _closed_form_result(params, op)
-        else:
-            from dyno.model.solution import solve_point
-
-            try:
-                sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
-                                  guess=guess, time_limit_s=time_limit_s)
-            except MODEL_FAILURES as exc:
-                if guess is not None:
-                    try:  # a far neighbour can be a worse start than none
-                        sol = solve_point(params, op, variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol,
-                                          time_limit_s=time_limit_s)
-                    except MODEL_FAILURES as exc2:
-                        sol, exc = None, exc2
-                else:
-                    sol = None
-                if sol is None:
-                    res = {"converged": False, "tier": "full", "error": str(exc),
-                           "state": "gross_slip" if type(exc).__name__ == "GrossSlip" else "failed"}
-            if sol is not None:
-                guess = sol
-                s = sol.summary
-                res = {
-                    "converged": True,
-                    "tier": "full",
-                    "efficiency": s["efficiency"],
-                    "axial_force_n": s["axial_force_n"],
-                    "span_tension_n": s["span_tension_n"],
-                    "residual_max": s["residual_max"],
-                    "slip_threshold_m_s": s["slip_threshold_m_s"],
-                    "solve_s": s["solve_s"],
-                    "balance": s["balance"],
-                }
-                if "warning" in s:
-                    res["warning"] = s["warning"]
+        res = _closed_form_result(params, op)
         res.update(ratio=op.ratio, primary_speed_rpm=op.primary_speed_rpm, primary_torque_nm=op.primary_torque_nm,
                    variant=variant)
         if use_cache:
             try:
                 cache.mkdir(parents=True, exist_ok=True)
-                tmp = cache / f"{keys[i]}.json.tmp"
+                tmp = cache / f"{key}.json.tmp"
                 tmp.write_text(json.dumps(res, default=float))
-                tmp.replace(cache / f"{keys[i]}.json")  # atomic: a reader never sees half a file
+                tmp.replace(path)  # atomic: a reader never sees half a file
             except OSError:
                 pass  # a read-only cache must not break the overlay
         results[i] = {**res, "cached": False}

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 from html import escape
 
-from dyno.report import figures
+from dyno.report import figures, sections
 
 CSS = """
 body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 70em; color: #222; }
@@ -167,12 +167,13 @@ def _points_table(data: ReportData) -> str:
         rows.append([p.get("index", i), _f(p.get("rpm_primary"), ".0f"), _f(p.get("rpm_secondary"), ".0f"),
                      _f(p.get("ratio"), ".3f"), _f(p.get("torque_secondary_nm"), ".2f"),
                      _f(p.get("power_out_w"), ".2f", 1e-3), _f(p.get("power_in_w"), ".2f", 1e-3),
-                     _f(p.get("efficiency"), ".1f", 100), _f(p.get("efficiency_sem"), ".1f", 100),
+                     _f(p.get("efficiency"), ".1f", 100), _f(p.get("efficiency_ci95"), ".1f", 100),
+                     _f(p.get("efficiency_sys95"), ".1f", 100),
                      state + "".join(f'<br><span class="warn">{escape(n)}</span>' for n in notes)])
     if not rows:
         return "<p>No points were recorded.</p>"
     return _table(["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
-                   "efficiency %", "± %", "state / notes"], rows, left={9})
+                   "efficiency %", "± % (95 %, stat.)", "± % (95 %, syst.)", "state / notes"], rows, left={10})
 
 
 def _faults(data: ReportData) -> str:
@@ -276,18 +277,24 @@ def render_report(data: ReportData) -> str:
     if data.model:
         model_note = f"<p>Belt model: {escape(data.model.get('label', ''))}.</p>"
     notes = "".join(f'<li class="warn">{escape(n)}</li>' for n in data.notes)
+    # a characterisation (engagement, coast-down) has no steady points: its own section, not empty plots
+    characterisation_only = bool(data.docs("characterisation")) and not data.docs("point")
     body = [
         f"<h1>dyno run report: {escape(name)}</h1>",
         "<h2>Summary</h2>", _summary(data),
         f"<ul>{notes}</ul>" if notes else "",
-        "<h2>Efficiency</h2>",
-        _img(figures.efficiency_svg(series["efficiency"]), "efficiency vs secondary speed", "fig-efficiency"),
-        model_note,
-        "<h2>Shift curve</h2>",
-        _img(figures.shift_svg(series["shift"]), "ratio vs engine speed", "fig-shift"),
-        "<h2>Torque and power</h2>",
-        _img(figures.torque_power_svg(series["torque_power"]), "torque and power vs secondary speed",
-             "fig-torque-power"),
+        ("<h2>Characterisation</h2>" + sections.characterisation(data.docs("characterisation")))
+        if data.docs("characterisation") else "",
+        ("<h2>Torque zero</h2>" + sections.torque_zero(data.docs("torque_zero"))) if data.docs("torque_zero") else "",
+        *([] if characterisation_only else [
+            "<h2>Efficiency</h2>",
+            _img(figures.efficiency_svg(series["efficiency"]), "efficiency vs secondary speed", "fig-efficiency"),
+            model_note,
+            "<h2>Shift curve</h2>",
+            _img(figures.shift_svg(series["shift"]), "ratio vs engine speed", "fig-shift"),
+            "<h2>Torque and power</h2>",
+            _img(figures.torque_power_svg(series["torque_power"]), "torque and power vs secondary speed",
+                 "fig-torque-power")]),
         "<h2>Points</h2>", _points_table(data),
         "<h2>Aborts, faults and discarded points</h2>", _faults(data),
         "<h2>Calibration</h2>", _calibration(data),

@@ -61,10 +61,13 @@ model's slip ``s_0 + s_1 |T_p|`` applies.
 Engagement
 ----------
 The CVT is its own centrifugal clutch: below the engagement speed the
-primary spring holds the sheaves open and the belt slips.  The torque the
-primary can pass rises smoothly from 0 at ``n_eng0`` to ``T_cap`` at
-``n_eng1`` (smoothstep), and the belt locks when the slip speed crosses zero
-with the required torque inside that capacity (Karnopp stick/slip).
+primary spring holds the sheaves open and the belt slips.  By default the
+torque the primary can pass follows the net flyweight clamp of the tune
+(:mod:`dyno.sim.driven`, ``RigParams.cvt_engagement_model = "clamp"``); with
+``"smoothstep"`` it rises smoothly from 0 at ``n_eng0`` to ``T_cap`` at
+``n_eng1`` whatever the tune (:meth:`CVT.clutch_capacity_nm_at`).  Either way
+the belt locks when the slip speed crosses zero with the required torque
+inside that capacity (Karnopp stick/slip).
 
 Belt losses (simple loss model)
 -------------------------------

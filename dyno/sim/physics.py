@@ -107,6 +107,7 @@ import numpy as np
 
 from dyno.sim.brake import Brake
 from dyno.sim.cvt import CVT
+from dyno.sim.driven import Engagement, clamp_radius_m, parasitic_nm
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.sensors import LowPassFilter, angle_at, crossing_time_s
 
@@ -183,6 +184,11 @@ class RigParams:
     # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
     # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
     cvt_tune_path: str | None = DEFAULT_TUNE
+    # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
+    # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
+    # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
+    cvt_engagement_model: str = "clamp"
+    cvt_clutch_friction_coefficient: float = 0.4  # belt flank friction while slipping (thesis f = 0.4)
     cvt_engage_start_rpm: float = 1900.0
     cvt_engage_full_rpm: float = 2100.0
     cvt_clutch_capacity_nm: float = 60.0
@@ -210,6 +216,9 @@ class RigParams:
     # Bearing/seal drag on the secondary shaft after the helix: the helix feels
     # the belt torque, the torque gauge (and the brake) that minus this.
     cvt_secondary_friction_torque_nm: float = 0.0
+    # Driven-side parasitic loss a + b w + c w^2 (N m, w in rad/s of the secondary), upstream of
+    # the torque gauge (dyno.sim.driven); off by default, see there.
+    driven_loss_nm: tuple = (0.0, 0.0, 0.0)
     # ---- driveline
     secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
     brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
@@ -234,6 +243,7 @@ class RigParams:
     # ---- torque sensor chain
     adc_gain_counts_per_nm: float = 108.188097293   # counts per N*m of SECONDARY torque (thesis eq. 9.1)
     adc_offset_counts: float = 35144.7019735
+    adc_zero_drift_nm_per_min: float = 0.0       # linear zero drift, secondary N m per minute (dyno.sim.driven)
     lockin_cutoff_hz: float = 15.0
     lockin_filter_order: int = 2
     adc_rate_hz: float = 125.0
@@ -297,6 +307,7 @@ class Truth:
     brake_mu: float = 0.0
     brake_torque_capacity_nm: float = 0.0
     clutch_locked: bool = False
+    clutch_capacity_nm: float = 0.0  # torque the primary can pass now (engagement)
     belt_slip: float = 0.0         # 1 - belt speed efficiency: omega_s = (1 - slip) omega_p / ratio_geometric
 
 
@@ -340,6 +351,19 @@ class RigModel:
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
                        belt_table=_belt_table_for(p, tune))
+        if p.cvt_engagement_model not in ("clamp", "smoothstep"):
+            raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
+        self.engagement = None
+        if p.cvt_engagement_model == "clamp":
+            self.engagement = Engagement(self.cvt, friction_coefficient=p.cvt_clutch_friction_coefficient,
+                                         radius_m=clamp_radius_m(p, self.cvt),
+                                         half_angle_deg=self.cvt.tune.drive.sheave_half_angle_deg
+                                         if self.cvt.tune is not None else p.cvt_sheave_half_angle_deg,
+                                         max_torque_nm=p.cvt_clutch_capacity_nm)
+        self._driven_loss = tuple(float(v) for v in p.driven_loss_nm)
+        if len(self._driven_loss) != 3 or any(not math.isfinite(v) or v < 0 for v in self._driven_loss):
+            raise ValueError(f"driven_loss_nm: three finite coefficients >= 0, got {p.driven_loss_nm!r}")
+        self._zero_drift_counts_per_s = p.adc_zero_drift_nm_per_min * p.adc_gain_counts_per_nm / 60.0
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
                            master_cylinder_bore_mm=p.master_cylinder_bore_mm,
@@ -398,6 +422,7 @@ class RigModel:
         self._ratio_geo = self.cvt.ratio_of_travel(self._x)
         self._slip = p.cvt_slip_base_frac
         self._locked = False
+        self._cap = 0.0
         self._act_mm = 0.0
         self._rotor_c = p.ambient_temp_c
         self._thermo_c = p.ambient_temp_c
@@ -529,6 +554,8 @@ class RigModel:
         self._act_mm = brk.move_actuator_mm(self._act_mm, self.actuator_dir, h)
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
+        if self._driven_loss[0] or self._driven_loss[1] or self._driven_loss[2]:
+            fric += parasitic_nm(self._driven_loss, self._w_s)              # bearings, mesh, windage
         t_load_cap = t_brake_cap * g + fric                                 # referred to the secondary
 
         w_e0 = self._w_e
@@ -548,7 +575,8 @@ class RigModel:
         eta_m = 1.0 - eps
         t_d = cvt.drag_nm(i)
         k = (1.0 - self._slip) / i
-        cap = cvt.clutch_capacity_nm_at(rpm_e)
+        cap = self.engagement.capacity_nm(rpm_e, self._x) if self.engagement else cvt.clutch_capacity_nm_at(rpm_e)
+        self._cap = cap
 
         locked = self._locked
         if locked:
@@ -722,6 +750,8 @@ class RigModel:
         t_sec = sig * g
         sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
         code = p.adc_offset_counts + p.adc_gain_counts_per_nm * t_sec + sigma * self._normal()
+        if self._zero_drift_counts_per_s:
+            code += self._zero_drift_counts_per_s * ta
         code_i = math.floor(code + 0.5)
         code_i = 0 if code_i < 0 else (65535 if code_i > 65535 else code_i)
         status = 0
@@ -771,6 +801,7 @@ class RigModel:
             brake_mu=self.brake.mu(self._rotor_c),
             brake_torque_capacity_nm=self._t_brake_cap,
             clutch_locked=self._locked,
+            clutch_capacity_nm=self._cap,
             belt_slip=self._slip,
         )
 

@@ -2,8 +2,8 @@
 
 Thin over :mod:`dyno.ui.session` (commands) and :mod:`dyno.ui.live_model`
 (values).  The poller and the controller run as tasks on Textual's own
-loop; this screen only reads them, at ``REFRESH_HZ``, and does the slow
-thing (the belt-model overlay) in a worker thread.
+loop; this screen only reads them, at ``REFRESH_HZ``, and hands the slow
+thing (the belt-model overlay) to a background process.
 """
 
 from __future__ import annotations
@@ -56,10 +56,19 @@ class LiveApp(DynoApp):
         self.history = History()
         self.plot_key = "1"
         self.values = None
-        self.overlay: list | None = None  # predicted efficiency per point, or None
+        self.overlay: list | None = None  # closed-form efficiency of the points the full model has not solved yet
+        self.overlay_full: list = []  # (secondary rpm, full-model efficiency)
         self.overlay_tier = ""
         self.overlay_requested = False
+        self.overlay_service = None  # dyno.model.overlay_service.OverlayService, from the first request
+        self.overlay_cache_dir = None  # the model cache's default unless set (a test's own directory)
         self._overlay_points = -1
+        self._overlay_pairs: list = []  # overlay_inputs of the submitted points, in order
+        self._overlay_keys: list = []
+        self._overlay_closed: dict = {}
+        self._overlay_seen_s: dict = {}
+        self._overlay_shown_s: dict = {}
+        self._overlay_version = 0
         self._plotted = None
         self._plotted_t = 0.0
         self._ideal_rpm = math.nan
@@ -103,8 +112,11 @@ class LiveApp(DynoApp):
         st.set_class(v.state == "aborted", "aborted")
         st.set_class(v.state == "done", "done")
         self.query_one("#fields", Static).update(self._fields_text(v))
-        if self.overlay_requested and len(s.controller.points) != self._overlay_points:
-            self._start_overlay()
+        if self.overlay_requested:
+            if len(s.controller.points) != self._overlay_points:
+                self._start_overlay()
+            elif v.state in ("settle", "measure"):
+                self._overlay_prime()
         self._draw_plot()
 
     def _state_text(self, v) -> Text:
@@ -152,7 +164,7 @@ class LiveApp(DynoApp):
         w = self.query_one("#plot", PlotextPlot)
         plt = w.plt
         pts = self.session.controller.points
-        key = (self.plot_key, len(pts), self.overlay_tier, bool(self.overlay))
+        key = (self.plot_key, len(pts), self.overlay_tier, self._overlay_version, self.overlay_requested)
         now = time.monotonic()
         if key == self._plotted and (self.plot_key == "1" or now - self._plotted_t < PLOT_PERIOD_S):
             return  # the efficiency plot changes only with points; the others drift slowly
@@ -169,10 +181,14 @@ class LiveApp(DynoApp):
                 ys = [p["efficiency"] * 100 for p in good]
                 es = [(p.get("efficiency_sem") or 0.0) * 100 for p in good]
                 plt.error(xs, ys, yerr=es, color="cyan", label="measured")
-            if self.overlay:
-                pred = sorted(self.overlay)
-                plt.plot([a for a, _ in pred], [b * 100 for _, b in pred], color="green",
-                         label=f"model ({self.overlay_tier})")
+            if self.overlay_requested and self.overlay_full:
+                pred = sorted(self.overlay_full)
+                plt.plot([a for a, _ in pred], [b * 100 for _, b in pred], color="green", marker="dot",
+                         label="model (full)")
+            if self.overlay_requested and self.overlay:
+                rough = sorted(self.overlay)  # not solved yet: the closed form (creep only, an upper bound)
+                plt.scatter([a for a, _ in rough], [b * 100 for _, b in rough], color="gray", marker="x",
+                            label="model (closed form, solving)")
         elif self.plot_key == "2":
             plt.title(f"shift curve; ideal {self._ideal_rpm:.0f} rpm (peak power)")
             plt.xlabel("secondary rpm")
@@ -200,46 +216,123 @@ class LiveApp(DynoApp):
         w.refresh()
 
     # --- overlay (belt model, off the UI thread) -----------------------------------------------
+    # The full model runs in dyno.model.overlay_service (one background process, warm starts from the nearest
+    # solved point, cache); this screen only submits the accepted points and draws what has come back.
     def action_overlay(self) -> None:
         self.overlay_requested = not self.overlay_requested
         if not self.overlay_requested:
             self.overlay, self.overlay_tier = None, ""
             self.say("overlay off")
             return
-        self.say("belt-model overlay: closed form now, full model in the background")
+        self.say("belt-model overlay: closed form now, full model per point in the background")
         self._start_overlay()
 
     def _start_overlay(self) -> None:
+        """Submit the points not yet submitted (the service solves each once), closed form for the rest."""
         pts = list(self.session.controller.points)
         self._overlay_points = len(pts)
-        self.run_worker(lambda: self._overlay_work(pts), thread=True, exclusive=True, group="overlay",
-                        name="overlay")
+        if self.overlay_service is None:
+            import asyncio
 
-    def _overlay_work(self, pts) -> None:
-        from textual.worker import get_current_worker
+            # Light imports (numpy, the cache key): the solver runs in its own process (its numerics must not
+            # hold this interpreter's GIL, which the poller and the controller need), imported there.
+            from dyno.model.overlay_service import OverlayService, process_pool
 
-        # Imported here, on first request: the belt model is a slow import the live screen must not pay for.
-        from dyno.model.overlay import predict_overlay
-
-        worker = get_current_worker()
+            loop = asyncio.get_running_loop()
+            pool, cancel = process_pool()
+            self.overlay_service = OverlayService(
+                executor=pool, cancel=cancel, cache_dir=self.overlay_cache_dir,
+                on_result=lambda key, res: loop.call_soon_threadsafe(self._overlay_changed, key))
+            # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
+            # loop so that nothing of the overlay runs inside the controller's own call.
+            self.session.controller.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
+        svc = self.overlay_service
         pairs = overlay_inputs(pts)
-        rs = [x for x, _ in pairs]
-        ops = [op for _, op in pairs]
-        self.call_from_thread(self._set_overlay, _curve(rs, predict_overlay(ops, tier="closed_form")),
-                              "closed form")
-        import dyno.model.solution  # noqa: F401  the full tier's solver (dyno.model.bvp), only now
+        new = pairs[len(self._overlay_pairs):] if pairs[:len(self._overlay_pairs)] == self._overlay_pairs else pairs
+        if new is pairs:  # not an extension of what was submitted (cannot happen in a run): start over
+            self._overlay_pairs, self._overlay_keys = [], []
+        for rs, op in new:
+            self._overlay_pairs.append((rs, op))
+            key = svc.submit(op)
+            self._overlay_keys.append(key)
+            self._overlay_seen_s.setdefault(key, time.monotonic())
+        if not pts:
+            self._overlay_prime()
+        self.run_worker(lambda: self._closed_form_work(list(self._overlay_pairs)), thread=True, exclusive=True,
+                        group="overlay-cf", name="overlay closed form")
+        self._overlay_changed()
 
-        full = []
-        for op in ops:  # one point at a time: a cancelled worker (new points, quit) stops between solves
-            if worker.is_cancelled:
-                return
-            full += predict_overlay([op], tier="full", time_limit_s=20.0)
-        if not worker.is_cancelled:
-            self.call_from_thread(self._set_overlay, _curve(rs, full), "full model")
+    def _overlay_on_points(self) -> None:
+        if self.overlay_requested and len(self.session.controller.points) != self._overlay_points:
+            self._start_overlay()
 
-    def _set_overlay(self, curve, tier: str) -> None:
-        if self.overlay_requested:
-            self.overlay, self.overlay_tier = curve, tier
+    def _overlay_prime(self) -> None:
+        """A seed near the coming point while the controller settles/measures, if nothing solved is near it."""
+        svc, v = self.overlay_service, self.values
+        if svc is None or v is None or not svc.idle:
+            return
+        live = {"rpm_primary": v.rpm_primary, "ratio": v.ratio, "power_in_w": v.power_engine_w,
+                "rpm_secondary": v.rpm_secondary}
+        seed = [op for _, op in overlay_inputs([live])]
+        if not seed:
+            from dyno.model.params import TABLE_6_1_POINT  # nothing measured yet: the thesis's case
+
+            seed = [TABLE_6_1_POINT]
+        if svc.nearest_distance(seed[0]) > 0.5:
+            svc.prime(seed[0])
+
+    def _closed_form_work(self, pairs) -> None:
+        from dyno.model.overlay import _as_point, _closed_form_result
+        from dyno.model.params import TABLE_6_1
+
+        out = {}
+        for _, op in pairs:
+            try:
+                out[op] = _closed_form_result(TABLE_6_1, _as_point(op, 100.0, None))
+            except Exception:  # noqa: BLE001  (a placeholder: a point outside its range has none)
+                pass
+        self.call_from_thread(self._set_closed_form, out)
+
+    def _set_closed_form(self, out: dict) -> None:
+        self._overlay_closed.update(out)
+        self._overlay_changed()
+
+    def _overlay_changed(self, key: str | None = None) -> None:
+        """Rebuild the curve: the full model where solved, the closed form (marked) where not yet."""
+        svc = self.overlay_service
+        if svc is None:
+            return
+        full, rough, failed, newly = [], [], 0, []
+        for (rs, op), k in zip(self._overlay_pairs, self._overlay_keys):
+            r = svc.get(k)
+            if r is not None and r.get("converged") and r.get("efficiency"):
+                full.append((rs, float(r["efficiency"]["overall"])))
+                newly.append(k)
+                continue
+            failed += r is not None
+            cf = self._overlay_closed.get(op)
+            if cf is not None:
+                rough.append((rs, float(cf["efficiency"]["overall"])))
+        self.overlay_full, self.overlay = full, rough
+        n = len(self._overlay_pairs)
+        self.overlay_tier = (f"full {len(full)}/{n}" + (f", {svc.pending} wait" if svc.pending else "")
+                             + (f", {failed} fail" if failed else "")) if n else "no points yet"
+        self._overlay_version += 1
+        if key is not None and self.overlay_requested and self.is_running:
+            from textual.css.query import NoMatches
+
+            try:
+                self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
+            except NoMatches:  # a dialog is on top: the next refresh draws it
+                pass
+        now = time.monotonic()
+        for k in newly:
+            self._overlay_shown_s.setdefault(k, now)
+
+    def overlay_latencies_s(self) -> dict:
+        """Per point: seconds from its acceptance by the controller to its full-model value in the curve."""
+        return {k: self._overlay_shown_s[k] - self._overlay_seen_s[k] for k in self._overlay_shown_s
+                if k in self._overlay_seen_s}
 
     # --- keys ------------------------------------------------------------------------------------
     def action_estop(self) -> None:
@@ -308,14 +401,10 @@ class LiveApp(DynoApp):
         self.exit(return_code=code)
 
     async def on_unmount(self) -> None:
+        if self.overlay_service is not None:  # drop queued points, stop the running solve at its next step
+            self.overlay_service.close()
         if self.session is not None:  # any other way out: still safe state first
             await self.session.close("UI closed")
-
-
-def _curve(rs, results) -> list[tuple[float, float]]:
-    """(secondary rpm, predicted overall efficiency) of the converged predictions."""
-    return [(x, r["efficiency"]["overall"]) for x, r in zip(rs, results)
-            if r.get("converged") and r.get("efficiency")]
 
 
 def main(opts: LiveOptions) -> int:

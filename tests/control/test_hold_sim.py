@@ -39,7 +39,9 @@ def hold_figures(tmp_path_factory):
     async def runner(ctrl):
         ctrl._enter(State.STEP, "test: contact")
         no_load = sh.secondary_rpm(ctrl, 1.0)
+        t_c = ctrl.rig_now()
         assert await find_contact(ctrl)
+        found["contact_s"] = ctrl.rig_now() - t_c  # the free travel from the released end to the pads
         hold = sh.SpeedHold(sh.gains_for(ctrl, "secondary"))
         target = {"rpm": 3000.0}
         task = asyncio.create_task(sh._hold_loop(ctrl, hold, target))
@@ -54,7 +56,9 @@ def hold_figures(tmp_path_factory):
         found["owed_s"], found["integral"] = hold.owed_s, hold.integral
         start = sh.secondary_rpm(ctrl, 0.1)
         target["rpm"] = 3000.0
-        found["after_end_stop"] = _figures(await _trace(ctrl, 3000.0, 12.0), 3000.0, start)
+        trace = await _trace(ctrl, 3000.0, 12.0)
+        found["after_end_stop"] = _figures(trace, 3000.0, start)
+        found["bite_s"] = next(t for t, r in trace if r < 0.99 * start)  # the pads slow the secondary again
         task.cancel()
         ctrl._enter(State.SETTLE, "test")
         ctrl._enter(State.DONE, "test done")
@@ -80,7 +84,10 @@ def test_no_windup_at_the_release_end_stop(hold_figures):
     # 12 s of full-release command into the end stop left nothing owed and nothing integrated ...
     assert abs(hold_figures["owed_s"]) <= 0.05 and hold_figures["integral"] == 0.0
     back, fresh = hold_figures["after_end_stop"], hold_figures["from_contact"]
-    # ... so from the end stop the hold reaches 3,000 rpm as it did from the contact point (the free
-    # travel to cross again costs about a contact search), and overshoots no more
-    assert back["settle_s"] <= fresh["settle_s"] + 1.5, (back, fresh)
+    # ... so on the new setpoint the actuator drives at once: the pads bite again after the free travel
+    # (what the contact search took at full speed) plus the speed window's and the loop's delays, and
+    # overshoot no more than from the contact point.  A wound-up hold would first unwind what it stored.
+    # (The settle time itself is not compared: from 4,800 to 3,000 rpm the path crosses the CVT's shift,
+    # whose hysteresis makes the 0.5 % band's last exit differ by seconds between two equal runs.)
+    assert hold_figures["bite_s"] <= hold_figures["contact_s"] + 0.35, hold_figures
     assert back["overshoot_pc"] <= fresh["overshoot_pc"] + 3.0, (back, fresh)

@@ -183,9 +183,16 @@ async def main():
         out["before"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay", "dyno.model.solution")
                          if m in sys.modules]
         await pilot.press("o")
-        t_end = time.monotonic() + 30
-        while time.monotonic() < t_end and "dyno.model.bvp" not in sys.modules:
-            await pilot.pause(0.1)
+        t_end = time.monotonic() + 90
+        from dyno.model.params import TABLE_6_1_POINT
+
+        svc = lambda: app.overlay_service
+        # a seed solved in the worker, or none needed: a solution stored by an earlier session is at hand
+        stored = lambda: svc() is not None and not svc().entries and svc().nearest_distance(TABLE_6_1_POINT) <= 0.5
+        solved = lambda: svc() is not None and any(e.result is not None for e in svc().entries.values())
+        while time.monotonic() < t_end and not (solved() or stored()):
+            await pilot.pause(0.2)
+        out["seed"] = "stored" if stored() else [e.result.get("converged") for e in svc().entries.values() if e.result]
         out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay") if m in sys.modules]
         await pilot.press("space")
         await pilot.pause(0.2)
@@ -199,13 +206,16 @@ asyncio.run(main())
 def test_ui_live_imports_belt_model_only_when_overlay_requested(tmp_path):
     # The simulated rig reads its belt-efficiency table from the belt model's cache
     # (built once per session by tests/conftest.py), which needs only the light
-    # cache-key module; the *solver* must wait for the first overlay request.
+    # cache-key module; the *solver* waits for the first overlay request, and runs in another process.
     proc = subprocess.run([sys.executable, "-c", OVERLAY_SCRIPT, str(tmp_path / "run")], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert "dyno.model.bvp" not in out["before"] and "dyno.model.solution" not in out["before"], out
-    assert "dyno.model.bvp" in out["after"] and "dyno.model.overlay" in out["after"], out
+    # after it: the solver runs in the overlay's own process (its numerics never hold this interpreter's GIL,
+    # which the poller and the controller need); here only the light overlay modules
+    assert out["seed"] in ([True], "stored"), out
+    assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay" in out["after"], out
 
 
 # --- the pure parts ------------------------------------------------------------------------

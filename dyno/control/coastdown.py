@@ -1,0 +1,140 @@
+"""The coast-down / parasitic-loss test (plan ``coast-down``).
+
+Procedure: the torque gauge's zero is read at rest (engine at idle, below engagement,
+brake released); full throttle with the brake released spins the driven side up to
+full shift; then the engine is cut and the throttle closed -- that is the safe state,
+so :meth:`Actuators.safe_state` starts the coast.  The belt keeps coupling the engine
+(and back-shifts) until the primary falls below engagement; the analysis uses only the
+revolutions after the primary is below ``uncoupled_primary_rpm``.  When the secondary
+has stopped the zero is read again, and the loss fit (:mod:`dyno.analysis.coastdown`)
+goes to the run (``characterisation`` document, ``dyno run --json``) and to
+``driven_loss.json`` in the run directory: the file ``--driven-loss`` takes to add the
+loss back to the efficiency of later runs.
+
+Hall plausibility checks assume a running engine; the coast is the safe state with the
+engine cut on purpose, so the controller stops expecting it (``engine_cut``); the other
+checks (link, temperature, over-speed, ADC) go on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dyno.analysis import coastdown as cd
+from dyno.protocol import v1
+
+
+@dataclass(frozen=True)
+class CoastDownPlan:
+    zero_s: float = 4.0  # torque zero read at rest, before and after
+    spin_up_s: float = 6.0  # full throttle, brake released: full shift
+    uncoupled_primary_rpm: float = 1500.0  # below any engagement: the belt no longer drives
+    uncoupled_ratio_drop: float = 0.03  # ... or the speed ratio falls this far below its coupled maximum
+    max_coast_s: float = 90.0
+    min_secondary_rpm: float = 60.0  # below this the periods are too long to difference
+    # Driven-side inertia referred to the secondary (secondary pulley + shaft + gear, brake shaft and
+    # rotor x g^2) and the part beyond the gauge; the rig's values come from rig.toml [driven] when set.
+    inertia_kg_m2: float = 0.0251
+    inertia_rel_unc: float = 0.03
+    inertia_beyond_gauge_kg_m2: float = 0.0121
+
+
+def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
+    """Mean torque (secondary N m) and its standard error over a window (16 batch means)."""
+    from dyno.analysis.zero_check import zero_reading
+
+    _, codes, status = ctrl.poller.streams.adc_window(t0_us, t1_us)
+    z = zero_reading(codes, status, ctrl.calibration)
+    from scipy import stats
+
+    return z["torque_nm"], z["ci95_nm"] / float(stats.t.ppf(0.975, 15))
+
+
+async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
+    from dyno.control.controller import State
+
+    cp = cp or getattr(ctrl, "coast_down_plan", None) or CoastDownPlan()
+    driven = getattr(getattr(ctrl, "rig", None), "driven", None)
+    inertia = getattr(driven, "inertia_kg_m2", None) or cp.inertia_kg_m2
+    inertia_unc = getattr(driven, "inertia_rel_unc", None) or cp.inertia_rel_unc
+    beyond = getattr(driven, "inertia_beyond_gauge_kg_m2", None) or cp.inertia_beyond_gauge_kg_m2
+    ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
+    ctrl.act.throttle(0.0)
+    d0 = ctrl.poller.device_now_us()
+    await ctrl._sleep(cp.zero_s)
+    zero_before = _zero(ctrl, d0 + 500_000, ctrl.poller.device_now_us())
+    ctrl._enter(State.STEP, "full throttle, brake released: spin up to full shift")
+    ctrl.act.throttle(1.0)
+    await ctrl._sleep(cp.spin_up_s)
+    rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
+    ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")
+    ctrl.engine_cut = True
+    ctrl.act.safe_state()
+    t_cut = ctrl.poller.device_now_us()
+    t_unc = None
+    t0 = ctrl._now()
+    ratio_max = 0.0
+    from dyno.control.characterise import _live_ratio
+
+    while ctrl._now() - t0 < cp.max_coast_s:
+        await ctrl._sleep(0.1)
+        # Uncoupled: the engine falls away from the secondary (the ratio drops 3 % below the highest
+        # it reached while coupled -- the back-shift only raises it), or is below any engagement.
+        r = _live_ratio(ctrl)
+        if t_unc is None and math.isfinite(r):
+            ratio_max = max(ratio_max, r)
+            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl._now() - t0 > 1.0:
+                t_unc = ctrl.poller.device_now_us() + 300_000  # past the live ratio's window
+        if t_unc is None and ctrl.poller.rpm(v1.CH_PRIMARY) < cp.uncoupled_primary_rpm:
+            t_unc = ctrl.poller.device_now_us()
+        if ctrl.poller.rpm(v1.CH_SECONDARY) == 0.0:
+            break
+    t_stop = ctrl.poller.device_now_us()
+    ctrl._enter(State.MEASURE, "at rest: torque zero after")
+    await ctrl._sleep(cp.zero_s)
+    zero_after = _zero(ctrl, t_stop + 500_000, ctrl.poller.device_now_us())
+    res: dict = {"secondary_rpm_at_cut": rs_top, "inertia_kg_m2": inertia,
+                 "zero_before_nm": zero_before[0], "zero_after_nm": zero_after[0]}
+    if t_unc is None:
+        ctrl.abort("error", f"coast-down: the primary never fell below {cp.uncoupled_primary_rpm:.0f} rpm")
+        return
+    s = ctrl.poller.streams.edge_window(v1.CH_SECONDARY, t_unc, t_stop)
+    dec = cd.decelerations(s, t_unc)
+    keep = dec["omega_rad_s"] > cp.min_secondary_rpm * cd.RAD_PER_RPM
+    try:
+        fit = cd.fit_loss(dec["omega_rad_s"][keep], dec["alpha_rad_s2"][keep], inertia, inertia_unc)
+    except ValueError as exc:
+        ctrl.abort("error", str(exc))
+        return
+    res["loss_fit"] = fit
+    # the gauge's share (constant drag beyond it) and the loss it does not see
+    t_end = int(dec["t_s"][keep][-1] * 1e6) if keep.any() else t_stop
+    gauge = _zero(ctrl, t_unc, t_end)
+    z = zero_after if math.isfinite(zero_after[0]) else zero_before
+    mean_alpha = float(np.mean(dec["alpha_rad_s2"][keep]))
+    split = cd.split_seen(gauge[0], gauge[1], z[0], z[1], beyond, mean_alpha)
+    res.update(split)
+    res["unseen_torque_nm"] = (np.asarray(fit["torque_nm"]) - split["seen_nm"]).tolist()
+    res["loss_rpm_range"] = [fit["rpm_min"], fit["rpm_max"]]
+    res["test_time_s"] = ctrl._now() - ctrl.go_s
+    ctrl._set_results(res)
+    _write_loss_file(ctrl, res)
+    ctrl._enter(State.DONE, f"coast-down: loss fitted over {fit['rpm_min']:.0f}-{fit['rpm_max']:.0f} rpm")
+
+
+def _write_loss_file(ctrl, res: dict) -> None:
+    """``driven_loss.json`` beside the run's log (what ``--driven-loss`` reads)."""
+    run_dir = getattr(ctrl.writer, "run_dir", None)
+    if run_dir is None:
+        return
+    doc = {"schema": "dyno.driven_loss/1", "loss_fit": res["loss_fit"], "seen_nm": res["seen_nm"],
+           "seen_ci95_nm": res["seen_ci95_nm"]}
+    try:
+        Path(run_dir, "driven_loss.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    except (OSError, ValueError) as exc:
+        ctrl._log("warning", detail=f"driven_loss.json not written: {exc}")

@@ -1,0 +1,27 @@
+"""The "secondary must turn" check with the engagement from the clamp: no false trip when the engine revs
+through engagement at full throttle, and a dead secondary sensor still caught within its bound."""
+
+from dataclasses import replace
+
+from dyno.app import RunOptions, run_test
+from dyno.control.controller import TestPlan as StepPlan
+from dyno.drills import parse_drill
+
+
+def test_dead_secondary_sensor_before_the_warm_up_is_caught_once_the_engine_is_above_the_check_speed(tmp_path):
+    got = {}
+    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run", plan=replace(StepPlan(), max_points=2),
+                            drills=[parse_drill("hall-dead:secondary@2")], setup=lambda ctx: got.update(ctx=ctx)))
+    assert r["state"] == "aborted" and r["rig_safe"]
+    a = r["aborts"][0]
+    assert a["cause"] in ("sensor_fault", "stall") and a["state"] == "warmup"
+    truth = got["ctx"].sim.truth
+    crossed = truth.crossing_s("rp", 2300.0)  # the engine passes the check speed at full throttle
+    # bound: 0.3 s above the check speed, 0.3 s of silence (both run together), and a poll
+    assert crossed is not None and 0.0 < a["trigger_s"] - crossed <= 0.3 + 0.05
+
+
+def test_full_throttle_through_engagement_does_not_trip(tmp_path):
+    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run",
+                            plan=replace(StepPlan(), max_points=1, max_measure_s=3.0)))
+    assert r["state"] == "done" and not r["aborts"]

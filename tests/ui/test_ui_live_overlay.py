@@ -1,0 +1,47 @@
+"""The live screen's belt-model overlay (Textual pilot, simulated rig): each accepted point gets its full-model
+prediction on screen, solved in the background by dyno.model.overlay_service (its own tests cover the solver side)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from dyno.control.controller import State
+from dyno.ui.live_app import LiveApp
+from dyno.ui.session import LiveOptions
+
+from tests.ui.test_ui_live import SIZE, screen_text, wait_for
+
+
+def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
+    async def scenario():
+        app = LiveApp(LiveOptions(sim=True, speed=8.0, seed=0, out_dir=tmp_path / "run"))
+        app.overlay_cache_dir = tmp_path / "model-cache"  # solved here, not answered from an earlier run's cache
+        async with app.run_test(size=SIZE) as pilot:
+            assert await wait_for(pilot, lambda: app.session is not None, 5)
+            s = app.session
+            assert await wait_for(pilot, lambda: s.controller.state is State.ARMED, 30)
+            await pilot.press("o")  # before GO: a seed is solved while the engine warms up
+            await pilot.pause(0.3)
+            assert "overlay" in screen_text(app) and "no points yet" in screen_text(app)
+            await pilot.press("g")
+            await pilot.pause(0.1)
+            await pilot.press("y")
+            assert await wait_for(pilot, lambda: len(s.controller.points) >= 2, 90), s.controller.reason
+            svc = app.overlay_service
+            assert await wait_for(pilot, lambda: len(app.overlay_full) >= 2, 60), app.overlay_tier
+            await pilot.pause(0.4)  # one refresh
+            text = screen_text(app)
+            assert "full 2/" in text or "full 3/" in text, text
+            assert "model (full)" in text, text  # the plot's legend
+            keys = app._overlay_keys[:2]
+            res = [svc.get(k) for k in keys]
+            dbg = (res, app._overlay_pairs, [(e.op, e.prime, e.result and e.result.get("start")) for e in svc.entries.values()])
+            assert all(r and r["converged"] and 0.5 < r["efficiency"]["overall"] <= 1.0 for r in res), dbg
+            # the second point starts from a neighbour's solution, not from scratch
+            assert res[1]["start"] == "warm" and res[1]["steps"] <= 2, res[1]
+            assert set(app.overlay_latencies_s()) >= set(keys)
+            await pilot.press("space")
+            await pilot.pause(0.2)
+        assert svc._closed  # the app's exit closed the service (queued points dropped, solve cancelled)
+
+    asyncio.run(scenario())
