@@ -8,7 +8,7 @@ the true standard error by 2x about one time in 40.  Checked once a second,
 a window whose true error is well above the target still stops, sooner or
 later, on such a lucky estimate: the points that stop early are exactly the
 ones whose error is understated (optional stopping; measured on the sim: a 3 s
-window whose 6-batch estimate was 0.37x its true error, 5.4 estimated standard
+window whose 6-batch estimate was 0.3x its true error, 5.4 estimated standard
 errors off the truth).
 
 The stopping rule therefore compares the one-sided upper confidence bound of
