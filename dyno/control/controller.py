@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass, field
 
 from dyno.analysis.points import reduce_point
+from dyno.analysis.stopping import STOP_QUANTILE, stop_uncertainty
 from dyno.control.outputs import APPLY, STOP
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.control.steady import SettleCriteria, is_settled
@@ -74,6 +75,7 @@ class TestPlan:
     target_efficiency_sem: float = 0.0012  # extend the average until the standard error is this small ...
     target_efficiency_ci95: float | None = None  # ... or, if set, until the 95 % half-width is this small ...
     max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
+    stop_quantile: float = STOP_QUANTILE  # the targets are met by the error's upper bound at this level
     min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
     mode: str = "step"  # "step" (the thesis's open-loop steps) or a runner in dyno.control.plans.RUNNERS
@@ -368,10 +370,11 @@ class TestController:
                 host_t1, dev_t1 = self._now(), self.poller.device_now_us()
                 point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
                                      index=len(self.points))
-                if p.target_efficiency_ci95 is not None:
-                    unsure = point["efficiency_ci95"] > p.target_efficiency_ci95
-                else:
-                    unsure = point["efficiency_sem"] > p.target_efficiency_sem
+                # Against the error's upper bound, not the estimate: few batches must not stop a window
+                # on a luckily small estimate (dyno/analysis/stopping.py).
+                ci = p.target_efficiency_ci95 is not None
+                bound = stop_uncertainty(point, ci95=ci, quantile=p.stop_quantile)
+                unsure = bound > (p.target_efficiency_ci95 if ci else p.target_efficiency_sem)
                 remaining_s = p.max_measure_s - (host_t1 - host_t0)
                 if unsure and give_up is not None and give_up():
                     point["gave_up"] = True

@@ -139,6 +139,8 @@ def _typed(value, default, field: str, err):
             raise err(field, f"a finite number >= 0, got {value!r}")
         if isinstance(default, int) and not isinstance(value, int):
             raise err(field, f"an integer, got {value!r}")
+        if field.endswith("stop_quantile") and not 0.0 < value < 1.0:
+            raise err(field, f"a probability between 0 and 1 (exclusive), got {value!r}")
         return float(value) if isinstance(default, float) else value
     raise err(field, "not settable from a plan file")
 

@@ -48,6 +48,8 @@ def test_overrides_and_paths(tmp_path):
     (HEAD + 'mode = "step"\n[test]\nmeasure_s = "3"\n', "test.measure_s"),
     (HEAD + 'mode = "step"\n[test]\nmode = "step"\n', "test.mode"),
     (HEAD + 'mode = "step"\n[test]\nmax_points = 2.5\n', "test.max_points"),
+    (HEAD + 'mode = "step"\n[test]\nstop_quantile = 1.0\n', "test.stop_quantile"),
+    (HEAD + 'mode = "step"\n[test]\nstop_quantile = 0\n', "test.stop_quantile"),
     (HEAD + 'mode = "step"\n[test.settle]\nwindow_s = true\n', "test.settle.window_s"),
     (HEAD + 'mode = "speed-hold"\n[speed_hold]\npoints = 2.5\n', "speed_hold.points"),
     (HEAD + 'mode = "speed-hold"\n[speed_hold]\npoint = 20\n', "speed_hold.point"),
