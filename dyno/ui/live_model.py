@@ -110,11 +110,12 @@ TEST_STATES = ("warmup", "step", "settle", "measure")  # a test is under way (th
 def measure_text(elapsed_s: float, plan) -> str:
     """MEASURE's clock: elapsed / cap in rig seconds, and what ends it sooner (``plan``: unscaled)."""
     if plan.target_efficiency_ci95 is not None:
-        target = f"95 % CI ±{plan.target_efficiency_ci95 * 100:.2g} pp"
+        target = f"CI95 ±{plan.target_efficiency_ci95 * 100:.2g} pp"
     else:
-        target = f"s.e. {plan.target_efficiency_sem * 100:.2g} pp"
-    return (f"measuring {min(elapsed_s, plan.max_measure_s):.0f} / {plan.max_measure_s:.0f} s "
-            f"(at least {plan.measure_s:.0f} s, until {target})")
+        target = f"s.e. ≤ {plan.target_efficiency_sem * 100:.2g} pp"
+    # short: with the point count and the ETA it stays on one line of 80 columns
+    return (f"{min(elapsed_s, plan.max_measure_s):.0f} / {plan.max_measure_s:.0f} s "
+            f"(≥ {plan.measure_s:.0f} s, until {target})")
 
 
 def progress_text(state: str, n_points: int, total: int | None, eta_s: float | None) -> str:

@@ -180,3 +180,42 @@ def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path):
     finally:
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     assert not hist.exists()
+
+
+def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path):
+    """The real `dyno ui --sim`: GO, E-STOP, `r` (once the engine has stopped), confirm: ARMED again in a new
+    run directory; a second test there; at exit both runs have their record, report.html and path printed."""
+    session = f"dyno-rearm-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --out {run_dir} ; echo EXITED=$? ; sleep 60",
+           tmp_path)
+    try:
+        _go(session)
+        _tmux("send-keys", "-t", session, "Space")
+        screen = _wait_screen(session, "cause: estop", 10)
+        assert "r re-arm" in screen.splitlines()[-1] or "r re-arm" in screen
+        # `r` is refused while the engine still turns; ask until it is accepted (a condition, not a sleep)
+        t_end = time.monotonic() + 60
+        while time.monotonic() < t_end:
+            _tmux("send-keys", "-t", session, "r")
+            screen = _tmux("capture-pane", "-p", "-t", session)
+            if "Acknowledge" in screen:
+                break
+            time.sleep(0.5)
+        screen = _wait_screen(session, "Acknowledge: ABORTED (estop", 5)
+        _tmux("send-keys", "-t", session, "y")
+        screen = _wait_screen(session, "re-armed: new run", 10)
+        assert "run-2" in screen.splitlines()[0]  # the title names the run being written
+        _go(session)  # ARMED again (the simulated operator restarts the engine), then a second GO
+        _tmux("send-keys", "-t", session, "Space")
+        _wait_screen(session, "cause: estop", 10)
+        _tmux("send-keys", "-t", session, "q")
+        screen = _wait_screen(session, "EXITED=0", 120)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    run2 = tmp_path / "run-2"
+    for d in (run_dir, run2):
+        docs = (d / "documents.jsonl").read_text()
+        assert '"cause": "estop"' in docs and '"type": "stop"' in docs, d
+        assert (d / "report.html").is_file(), d
+    assert f"run: {run_dir}" in screen.replace("\n", "") and f"run: {run2}" in screen.replace("\n", "")
