@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""UI benchmarks (issue 5): poll-interval jitter with and without the UI, start-up time and peak memory.
+"""UI benchmarks (issues 5, 13): CPU, poll-interval jitter with and without the UI, start-up time, peak memory.
 
-Run:  python bench/bench_ui.py [--seconds S] [--quick]
+Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test] [--quick]
 
 1. CPU (issue 13): the live screen in an 80x24 pseudo-terminal (Textual's real driver, the output read
    as a terminal would), idle/ARMED and during a test, as % of one core; the simulated rig's own cost
@@ -303,18 +303,36 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="3 s per measurement")
     ap.add_argument("--cpu-seconds", type=float, default=20.0, help="seconds per CPU measurement phase")
     ap.add_argument("--cpu-only", action="store_true", help="only the CPU figures")
+    ap.add_argument("--repeat", type=int, default=3, help="CPU runs per mode (the median is printed)")
     ap.add_argument("--profile", choices=("armed", "test"), default="",
                     help="cProfile this phase of the live screen's CPU run (top 25 by cumulative time)")
     a = ap.parse_args()
     seconds = 3.0 if a.quick else a.seconds
     cpu_s = 6.0 if a.quick else a.cpu_seconds
+    if a.quick:
+        a.repeat = 1
     os.environ.setdefault("DYNO_MODEL_CACHE", tempfile.mkdtemp(prefix="bench-ui-cache-"))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         print(f"CPU, % of one core, simulated rig in real time, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
               "'idle/ARMED' and 'test' are net of the simulated rig (its firmware + physics, shown as 'sim'):")
-        print(fmt_cpu("session alone (no UI)", cpu("bare", tmp / "cpu_bare", cpu_s, cpu_s)))
-        print(fmt_cpu("live screen (dyno ui)", cpu("ui", tmp / "cpu_ui", cpu_s, cpu_s, a.profile)))
+        runs: dict = {"bare": [], "ui": []}
+        for k in range(a.repeat):  # alternated: the shared machine's load drifts
+            for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)")):
+                d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "")
+                runs[mode].append(d)
+                print(fmt_cpu(name, d))
+        if a.repeat > 1:
+            import statistics
+
+            med = {m: {ph: statistics.median(d[ph]["net_pct"] for d in r if "error" not in d)
+                       for ph in ("armed", "test")} for m, r in runs.items()}
+            sim = statistics.median(d[ph]["sim_pct"] for r in runs.values() for d in r if "error" not in d
+                                    for ph in ("armed", "test"))
+            print(f"median of {a.repeat}: dyno ui idle/ARMED {med['ui']['armed']:.1f} %, test {med['ui']['test']:.1f} % "
+                  f"(the UI's own share {med['ui']['armed'] - med['bare']['armed']:.1f} % / "
+                  f"{med['ui']['test'] - med['bare']['test']:.1f} %; session alone {med['bare']['armed']:.1f} % / "
+                  f"{med['bare']['test']:.1f} %); the simulated rig's own cost, subtracted: {sim:.1f} %")
         if a.cpu_only:
             return
         print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "

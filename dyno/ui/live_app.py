@@ -91,18 +91,27 @@ class LiveApp(DynoApp):
             return
         self._ideal_rpm = ideal_engine_rpm(self.session.controller.engine_map)
         self.session.on_signal = lambda code: self.call_later(self._quit, code)
-        self.session.start()
+        # The first screen (layout, styles, the plot's first draw) is the longest the loop is ever busy:
+        # draw it before the rig's clock, the poller and the watchdog start, never after (on a loaded
+        # machine it stalled the loop past the 0.5 s watchdog: an abort before ARMED).
         self._show_run()
+        self.refresh_values(force=True)
+        self.call_after_refresh(self._start_session)
+
+    def _start_session(self) -> None:
+        if self.session.closed:
+            return
+        self.session.start()
         self.set_interval(1.0 / REFRESH_HZ, self.refresh_values)
-        self.refresh_values()
+        self.refresh_values(force=True)
 
     # --- refresh -------------------------------------------------------------------------------
-    def refresh_values(self) -> None:
+    def refresh_values(self, force: bool = False) -> None:
         s = self.session
         if s is None:
             return
         now = self.session.loop.time()
-        if s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
+        if not force and s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
             return  # nothing runs: half the rate
         self._refreshed_s = now
         self._show_help(s.finished)
@@ -276,7 +285,7 @@ class LiveApp(DynoApp):
         if self.session is not None:
             self.session.estop("operator, " + ESTOP_KEYS)
             self.say("E-STOP: rig put in its safe state")
-            self.refresh_values()
+            self.refresh_values(force=True)
 
     def action_go(self) -> None:
         why = self.session.go_refusal() if self.session else "starting"
@@ -314,7 +323,7 @@ class LiveApp(DynoApp):
             if new_dir is not None:
                 self._plotted = None
                 self._show_run()
-                self.refresh_values()
+                self.refresh_values(force=True)
 
         self.push_screen(ConfirmScreen(f"Acknowledge: {ended}.\nRe-arm? A new run directory is started (this run "
                                        "keeps its record). Nothing moves: start the engine, then GO."), answered)

@@ -28,6 +28,15 @@ def screen_text(app) -> str:
     return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
 
 
+def armed_why(app) -> str:
+    """Where the controller is instead of ARMED (for a failure message)."""
+    s = app.session
+    if s is None:
+        return "no session"
+    c = s.controller
+    return f"state {c.state.value} ({c.reason}); aborts {c.aborts}; sim t {s.sim.model.t_s:.1f} s"
+
+
 async def wait_for(pilot, cond, timeout_s: float, step_s: float = 0.2) -> bool:
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
@@ -112,7 +121,7 @@ def test_ui_live_quit_confirms_and_puts_rig_safe_first(tmp_path):
         app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=1, out_dir=tmp_path / "run"))
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None
-                                  and app.session.controller.state is State.ARMED, 30)
+                                  and app.session.controller.state is State.ARMED, 30), armed_why(app)
             s = app.session
             await pilot.press("g")
             await pilot.press("y")
@@ -151,7 +160,7 @@ def test_ui_live_snapshots_80x24(tmp_path):
         app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=2, out_dir=tmp_path / "run"))
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None
-                                  and app.session.controller.state is State.ARMED, 30)
+                                  and app.session.controller.state is State.ARMED, 30), armed_why(app)
             await pilot.pause(0.5)
             for key in ("1", "2", "3"):
                 await pilot.press(key)
@@ -260,7 +269,7 @@ def test_ui_live_session_without_go_leaves_no_run_directory(tmp_path):
         app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=1, out_dir=tmp_path / "run"))
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None
-                                  and app.session.controller.state is State.ARMED, 30)
+                                  and app.session.controller.state is State.ARMED, 30), armed_why(app)
             assert (tmp_path / "run" / "meta.json").exists()  # live, it has one to record an abort in
             await pilot.press("q")
             await wait_for(pilot, lambda: "Quit?" in screen_text(app), 10)
@@ -281,7 +290,7 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
         app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=3, out_dir=tmp_path / "run"))
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None
-                                  and app.session.controller.state is State.ARMED, 30)
+                                  and app.session.controller.state is State.ARMED, 30), armed_why(app)
             s = app.session
             first = s.controller
             await pilot.press("r")  # nothing has ended: nothing to re-arm
