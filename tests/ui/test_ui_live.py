@@ -182,9 +182,11 @@ def test_ui_live_snapshots_80x24(tmp_path):
             await wait_for(pilot, lambda: "cause: estop" in screen_text(app)
                            and "Start the test?" not in screen_text(app), 10)
             shots["aborted"] = screen_text(app)
-        return shots
+            why = [a for a in app.session.controller.aborts if a["cause"] != "estop"]
+        return shots, why
 
-    shots = asyncio.run(scenario())
+    shots, why = asyncio.run(scenario())
+    assert not why, why  # nothing but the E-STOP ended the session
     for name, text in shots.items():
         lines = text.splitlines()
         assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
