@@ -14,6 +14,21 @@ import pytest
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
 
+def _env(home: Path) -> dict:
+    """A terminal's environment: a fresh HOME, but the belt-model table the test session built (else each
+    `dyno ui --sim` builds it again in the new HOME's cache: 20 s, over a minute on a loaded machine) and the
+    session's run library."""
+    import os
+
+    from dyno.model.overlay import default_cache_dir
+
+    env = {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
+           "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "DYNO_MODEL_CACHE": str(default_cache_dir())}
+    if os.environ.get("DYNO_RUNS_DIR"):
+        env["DYNO_RUNS_DIR"] = os.environ["DYNO_RUNS_DIR"]
+    return env
+
+
 def _tmux(*args: str) -> str:
     return subprocess.run(["tmux", *args], capture_output=True, text=True, timeout=20).stdout
 
@@ -43,8 +58,7 @@ def test_ui_tmux_dyno_ui_sim(tmp_path):
     run_dir = tmp_path / "run"
     cmd = (f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30")
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(tmp_path))
     try:
         screen = _wait_screen(session, "ARMED", 60)
         assert "E-STOP" in screen and "g GO" in screen and "engine" in screen
@@ -70,8 +84,7 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
     run_dir = tmp_path / "run"
     cmd = f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(tmp_path))
     try:
         _go(session)
     finally:
@@ -88,8 +101,7 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
 
 def _start(session: str, cmd: str, home: Path, size=("80", "24")) -> None:
     subprocess.run(["tmux", "new-session", "-d", "-x", size[0], "-y", size[1], "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(home))
 
 
 def test_ui_tmux_space_estops_with_the_go_dialog_open(tmp_path):
