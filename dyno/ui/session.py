@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import shutil
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -344,6 +345,9 @@ class LiveSession:
             writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
                                engine_map_text=(old_dir / "engine_map.csv").read_text(),
                                tune_text=tune.read_text() if tune.is_file() else None)
+            for name in INPUT_COPIES:  # any other input the run keeps beside its log (e.g. its plan file)
+                if (old_dir / name).is_file() and not (new_dir / name).exists():
+                    shutil.copy2(old_dir / name, new_dir / name)
         except (DynoError, OSError, ValueError) as exc:
             return None, f"not re-armed: new run directory {new_dir}: {exc}"
         self.cancel_jog()
@@ -354,6 +358,9 @@ class LiveSession:
         ctrl = TestController(self.poller, old.act, old.calibration, old.engine_map, plan=old.plan,
                               limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine)
         ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)
+        for name in REBUILT_ATTRS:  # what the composition root sets on a controller after building it
+            if hasattr(old, name):
+                setattr(ctrl, name, getattr(old, name))
         ctrl.listeners.append(self._on_controller)
         writer.on_error = lambda exc: ctrl.abort(
             "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or new_dir}): "
@@ -434,6 +441,11 @@ class LiveSession:
         return (self.opts.sim and c.go_s is None and all(a.get("cause") == "quit" for a in c.aborts)
                 and not (self.ctx.drills is not None and len(self.ctx.drills.fired) > self._drills_fired_before))
 
+
+# Attributes dyno.app.build may set on a controller after constructing it (rig.toml's control gains and
+# inertias on newer trees): a re-armed controller gets the same.
+REBUILT_ATTRS = ("control", "inertia")
+INPUT_COPIES = ("plan.toml",)
 
 # Aborts after which the session is not re-armed: a software or host fault wants a fresh start.
 NO_REARM = {"watchdog": "the control loop stalled", "error": "the controller crashed",
