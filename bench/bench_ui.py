@@ -1,15 +1,20 @@
 #!/usr/bin/env python3
-"""UI benchmarks (issue 5): poll-interval jitter with and without the UI, start-up time and peak memory.
+"""UI benchmarks (issues 5, 13): CPU, poll-interval jitter with and without the UI, start-up time, peak memory.
 
-Run:  python bench/bench_ui.py [--seconds S] [--quick]
+Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test] [--quick]
 
-1. Jitter: the simulated rig in real time (speed 1) on an ordinary asyncio loop,
+1. CPU (issue 13): the live screen in an 80x24 pseudo-terminal (Textual's real driver, the output read
+   as a terminal would), idle/ARMED and during a test, as % of one core; the simulated rig's own cost
+   (emulated firmware + physics behind the I2C transport, per-thread CPU time) measured and subtracted:
+   what is left is what the real-rig path costs (poller, controller, run log, UI).  The same for the
+   session alone (no UI) shows the UI's share.
+2. Jitter: the simulated rig in real time (speed 1) on an ordinary asyncio loop,
    poller at the rig's 150 Hz, test GO'd; first bare (poller + controller only),
    then inside the live screen (Textual headless driver: it renders every frame
    exactly as on a terminal), then the live screen with the belt-model overlay
    computing in its worker thread.  Reports the poll-interval statistics, frames,
    and events lost (0 = no frame missed).
-2. Entry points: each of ``dyno ui --sim``, ``dyno calibrate --sim`` and
+3. Entry points: each of ``dyno ui --sim``, ``dyno calibrate --sim`` and
    ``dyno replay RUN`` started in a fresh interpreter, headless, until its first
    screen is mounted: wall time from process start, peak RSS, and whether the
    belt-model solver (dyno.model.bvp) was imported.
@@ -137,6 +142,153 @@ def startup(which: str, arg: str) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+# --- CPU: the live screen in a real terminal (a pseudo-terminal), the simulated rig's own cost apart ----------
+CPU_SCRIPT = r"""
+import asyncio, json, os, sys, threading, time
+from pathlib import Path
+
+mode, out_dir, result_path = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
+armed_s, test_s = float(sys.argv[4]), float(sys.argv[5])
+profile_phase, profile_path = os.environ.get("BENCH_PROFILE", ""), os.environ.get("BENCH_PROFILE_OUT", "")
+
+# The simulated rig's cost: everything behind the I2C transport (emulated firmware + physics, which the
+# real rig does in its own hardware) and the truth recorder (sim only).  Per-thread CPU time, so the
+# watchdog thread safing the rig is counted where it is spent.
+from dyno.sim.bus import SimSMBus
+from dyno.sim.rig import TruthRecorder
+
+SIM = {"cpu_s": 0.0}
+_inside = threading.local()
+
+
+def timed(fn):
+    def wrapper(*a, **k):
+        if getattr(_inside, "on", False):
+            return fn(*a, **k)
+        _inside.on = True
+        t = time.thread_time()
+        try:
+            return fn(*a, **k)
+        finally:
+            SIM["cpu_s"] += time.thread_time() - t
+            _inside.on = False
+    return wrapper
+
+
+SimSMBus.i2c_rdwr = timed(SimSMBus.i2c_rdwr)
+SimSMBus.sync = timed(SimSMBus.sync)
+TruthRecorder.__call__ = timed(TruthRecorder.__call__)
+
+
+async def measure(name, seconds):
+    prof = None
+    if profile_phase == name:
+        import cProfile
+        prof = cProfile.Profile()
+        prof.enable()
+    c0, s0, w0 = time.process_time(), SIM["cpu_s"], time.monotonic()
+    await asyncio.sleep(seconds)
+    c1, s1, w1 = time.process_time(), SIM["cpu_s"], time.monotonic()
+    if prof is not None:
+        prof.disable()
+        prof.dump_stats(profile_path)
+    wall = w1 - w0
+    return {"wall_s": wall, "total_pct": 100 * (c1 - c0) / wall, "sim_pct": 100 * (s1 - s0) / wall,
+            "net_pct": 100 * ((c1 - c0) - (s1 - s0)) / wall}
+
+
+async def drive(get_session, quit):
+    while (s := get_session()) is None or s.controller.state.value != "armed":
+        await asyncio.sleep(0.1)
+    await asyncio.sleep(1.0)  # the state change's own redraws are done
+    armed = await measure("armed", armed_s)
+    s.go()
+    await asyncio.sleep(4.0)  # through the warm-up: the test proper
+    test = await measure("test", test_s)
+    res = {"armed": armed, "test": test, "state": s.controller.state.value, "points": len(s.controller.points),
+           "events_lost": s.poller.reader.events_lost}
+    Path(result_path).write_text(json.dumps(res))
+    s.estop("bench")
+    await quit()
+
+
+async def main():
+    from dyno.ui.session import LiveOptions
+    opts = LiveOptions(sim=True, speed=1.0, out_dir=out_dir)
+    if mode == "ui":
+        from dyno.ui.live_app import LiveApp
+        app = LiveApp(opts)
+        task = asyncio.get_running_loop().create_task(drive(lambda: app.session, app._quit))
+        await app.run_async()
+        await task
+    else:
+        from dyno.ui.session import LiveSession
+        s = LiveSession(opts)
+        s.start()
+        await drive(lambda: s, lambda: s.close("bench"))
+
+asyncio.run(main())
+"""
+
+
+def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = "") -> dict:
+    """Run the live screen (``mode`` "ui") or the session alone ("bare") in an 80x24 pseudo-terminal."""
+    import fcntl
+    import pty
+    import select
+    import struct
+    import termios
+
+    result = out_dir.parent / f"cpu-{mode}.json"
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "80", "LINES": "24"}
+    if profile:
+        prof_path = Path(tempfile.gettempdir()) / f"bench-ui-cpu-{mode}-{profile}.prof"  # kept for pstats
+        env.update(BENCH_PROFILE=profile, BENCH_PROFILE_OUT=str(prof_path))
+    proc = subprocess.Popen([sys.executable, "-c", CPU_SCRIPT, mode, str(out_dir), str(result), str(armed_s),
+                             str(test_s)], stdin=slave, stdout=slave, stderr=slave, env=env, cwd=REPO,
+                            start_new_session=True)
+    os.close(slave)
+    tail = b""
+    t_end = time.monotonic() + armed_s + test_s + 120
+    while time.monotonic() < t_end:  # a terminal reads what the app writes
+        r, _, _ = select.select([master], [], [], 0.5)
+        if r:
+            try:
+                data = os.read(master, 65536)
+            except OSError:
+                break
+            if not data:
+                break
+            tail = (tail + data)[-4000:]
+        elif proc.poll() is not None:
+            break
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait()
+    os.close(master)
+    if not result.is_file():
+        return {"error": tail.decode(errors="replace")[-800:]}
+    out = json.loads(result.read_text())
+    if profile:
+        import pstats
+
+        out["profile"] = str(prof_path)
+        print(f"profile of the {profile} phase: {prof_path}")
+        pstats.Stats(out["profile"]).sort_stats("tottime").print_stats(20)
+    return out
+
+
+def fmt_cpu(name: str, d: dict) -> str:
+    if "error" in d:
+        return f"{name:<24} ERROR {d['error']}"
+    a, t = d["armed"], d["test"]
+    return (f"{name:<24} idle/ARMED {a['net_pct']:5.1f} %  (sim {a['sim_pct']:4.1f} %, all {a['total_pct']:5.1f} %)   "
+            f"test {t['net_pct']:5.1f} %  (sim {t['sim_pct']:4.1f} %, all {t['total_pct']:5.1f} %)  "
+            f"[{d['state']}, {d['points']} points, lost {d['events_lost']}]")
+
+
 def fmt_timing(name: str, d: dict) -> str:
     if d.get("polls", 0) == 0:
         return f"{name:<26} no polls"
@@ -149,11 +301,40 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=8.0, help="real-time seconds per jitter measurement")
     ap.add_argument("--quick", action="store_true", help="3 s per measurement")
+    ap.add_argument("--cpu-seconds", type=float, default=20.0, help="seconds per CPU measurement phase")
+    ap.add_argument("--cpu-only", action="store_true", help="only the CPU figures")
+    ap.add_argument("--repeat", type=int, default=3, help="CPU runs per mode (the median is printed)")
+    ap.add_argument("--profile", choices=("armed", "test"), default="",
+                    help="cProfile this phase of the live screen's CPU run (top 25 by cumulative time)")
     a = ap.parse_args()
     seconds = 3.0 if a.quick else a.seconds
+    cpu_s = 6.0 if a.quick else a.cpu_seconds
+    if a.quick:
+        a.repeat = 1
     os.environ.setdefault("DYNO_MODEL_CACHE", tempfile.mkdtemp(prefix="bench-ui-cache-"))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        print(f"CPU, % of one core, simulated rig in real time, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
+              "'idle/ARMED' and 'test' are net of the simulated rig (its firmware + physics, shown as 'sim'):")
+        runs: dict = {"bare": [], "ui": []}
+        for k in range(a.repeat):  # alternated: the shared machine's load drifts
+            for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)")):
+                d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "")
+                runs[mode].append(d)
+                print(fmt_cpu(name, d))
+        if a.repeat > 1:
+            import statistics
+
+            med = {m: {ph: statistics.median(d[ph]["net_pct"] for d in r if "error" not in d)
+                       for ph in ("armed", "test")} for m, r in runs.items()}
+            sim = statistics.median(d[ph]["sim_pct"] for r in runs.values() for d in r if "error" not in d
+                                    for ph in ("armed", "test"))
+            print(f"median of {a.repeat}: dyno ui idle/ARMED {med['ui']['armed']:.1f} %, test {med['ui']['test']:.1f} % "
+                  f"(the UI's own share {med['ui']['armed'] - med['bare']['armed']:.1f} % / "
+                  f"{med['ui']['test'] - med['bare']['test']:.1f} %; session alone {med['bare']['armed']:.1f} % / "
+                  f"{med['bare']['test']:.1f} %); the simulated rig's own cost, subtracted: {sim:.1f} %")
+        if a.cpu_only:
+            return
         print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "
               f"(150 Hz), {seconds:g} s after GO each:")
         bare = asyncio.run(_bare(seconds, tmp / "bare"))

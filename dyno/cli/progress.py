@@ -6,7 +6,8 @@ on every poll) and redraws at most every ``period_s`` of wall time, so it adds n
 and cannot change what the run measures.
 
 The ETA is an estimate (:func:`estimate`): a test walks the secondary speed down to
-``plan.min_secondary_rpm``; the recent speed drop and wall time per point extrapolate the rest.
+``plan.min_secondary_rpm``; the recent speed drop and wall time per point extrapolate the rest, and
+:func:`eta_now` counts it down between points.  The live UI (``dyno ui``) shows the same figures.
 """
 
 from __future__ import annotations
@@ -42,6 +43,25 @@ def estimate(rpm_secondary: list, wall_s: list, stop_rpm: float, target_points: 
     return n + round(left), left * max(wall_per_point, 0.0)
 
 
+def eta_now(points: list, point_wall_s: list, now_wall_s: float, plan) -> tuple[int | None, float | None]:
+    """(estimated total points, wall seconds left now): :func:`estimate` at the last point, counted down
+    since.  ``point_wall_s[k]``: the wall (or loop) time point ``k`` arrived.  The headless status line and the
+    live UI both show this."""
+    total, eta = estimate([p.get("rpm_secondary", math.nan) for p in points], point_wall_s,
+                          plan.min_secondary_rpm, plan.target_points)
+    if eta is not None and point_wall_s:
+        eta = max(0.0, eta - max(0.0, now_wall_s - point_wall_s[-1]))
+    return total, eta
+
+
+def points_text(n_points: int, total: int | None) -> str:
+    return f"point {n_points}/~{total}" if total else f"point {n_points}"
+
+
+def eta_text(eta_s: float | None) -> str:
+    return f"ETA {_dur(eta_s)}" if eta_s is not None else "ETA —"
+
+
 def _dur(s: float) -> str:
     s = int(round(s))
     return f"{s // 60}:{s % 60:02d}" if s >= 60 else f"{s} s"
@@ -50,8 +70,8 @@ def _dur(s: float) -> str:
 def status_line(state: str, n_points: int, total: int | None, rpm_engine: float, rpm_secondary: float,
                 elapsed_s: float, eta_s: float | None) -> str:
     """The text of the line (no control characters), at most WIDTH characters."""
-    pts = f"point {n_points}/~{total}" if total else f"point {n_points}"
-    eta = f"ETA {_dur(eta_s)}" if eta_s is not None else "ETA —"
+    pts = points_text(n_points, total)
+    eta = eta_text(eta_s)
     # most wanted first: what it is doing, how far, how long to go (a narrow terminal cuts the speeds)
     line = (f"{state.upper():<8} {pts:<13} {eta:<10} ran {_dur(elapsed_s):<6} "
             f"engine/secondary {rpm_engine:.0f}/{rpm_secondary:.0f} rpm")
@@ -89,8 +109,7 @@ class TtyProgress:
         pts = c.points
         while len(self._point_wall_s) < len(pts):
             self._point_wall_s.append(t)
-        total, eta = estimate([p.get("rpm_secondary", math.nan) for p in pts], self._point_wall_s,
-                              c.plan.min_secondary_rpm, c.plan.target_points)
+        total, eta = eta_now(pts, self._point_wall_s, t, c.plan)
         return status_line(c.state.value, len(pts), total, poller.rpm(v1.CH_PRIMARY), poller.rpm(v1.CH_SECONDARY),
                            t - self._t0, eta)
 

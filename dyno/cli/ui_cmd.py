@@ -49,17 +49,30 @@ def run(args) -> int:
     app.run()
     rc = app.return_code or 0
     session = getattr(app, "session", None)
-    run_dir = session.ctx.writer.run_dir if session is not None and getattr(session, "ctx", None) else args.out
+    if session is not None and getattr(session, "ctx", None) is not None:
+        runs = list(session.run_dirs)  # every run of the session (re-arm starts a new one), oldest first
+    else:
+        runs = [args.out] if args.out is not None else []
+    for k, run_dir in enumerate(runs):
+        # the last run's report is written now; an earlier one's was written in the background at re-arm
+        finish_run(run_dir, announce=True, only_if_missing=k < len(runs) - 1)
+    return rc
+
+
+def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False) -> None:
+    """Index an ended run and write its report.html (failures are one stderr line, never the exit code)."""
+    if run_dir is None or not (Path(run_dir) / "meta.json").is_file():
+        return  # the session never started a run there
     _index(run_dir)
-    if run_dir is not None and (Path(run_dir) / "meta.json").is_file():
+    if not (only_if_missing and (Path(run_dir) / "report.html").is_file()):
         from dyno.cli.run_cmd import _write_report
 
-        _write_report({"run_dir": str(run_dir)}, announce=True)  # "report: <path>" (or one line why not)
+        _write_report({"run_dir": str(run_dir)}, announce=announce)  # "report: <path>" (or one line why not)
+    if announce:
         try:
             print(f"run: {run_dir}")
         except OSError:
             pass
-    return rc
 
 
 def _index(out) -> None:
@@ -68,6 +81,4 @@ def _index(out) -> None:
 
     from dyno.library.index import index_after_run
 
-    if out is not None and not (Path(out) / "meta.json").is_file():
-        return  # the session never started a run there
     index_after_run(out, lambda line: print(f"dyno ui: {line}", file=sys.stderr))

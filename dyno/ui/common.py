@@ -61,6 +61,36 @@ class EstopSafeInput(Input):
         return super().check_consume_key(key, character)
 
 
+class Readout(Static):
+    """A Static for values refreshed a few times a second, at the least cost.
+
+    An unchanged text is not redrawn at all; a changed one repaints this widget only,
+    without a layout pass of the screen (Static's default, the larger part of a refresh),
+    unless its height may change: ``fixed_size=False`` (height auto) lays out again
+    when a line is added or removed, or a line too long for the width (it wraps) changes.
+    """
+
+    def __init__(self, content="", *, fixed_size: bool = True, **kwargs) -> None:
+        super().__init__(content, **kwargs)
+        self._fixed = fixed_size
+        self._shown = None
+        self._shape = None
+
+    def update(self, content="", *, layout: bool | None = None) -> None:
+        if content == self._shown and type(content) is type(self._shown):
+            return
+        self._shown = content
+        if layout is None:
+            layout = False
+            if not self._fixed:
+                plain = getattr(content, "plain", None)
+                plain = str(content) if plain is None else plain
+                width = max(1, self.content_size.width or 80)
+                shape = tuple(line if len(line) >= width else 1 for line in plain.split("\n"))
+                layout, self._shape = shape != self._shape, shape
+        super().update(content, layout=layout)
+
+
 class ConfirmScreen(ModalScreen[bool]):
     """y / Enter confirms, n / Escape declines.  The E-STOP keys still work (app priority bindings)."""
 

@@ -19,14 +19,17 @@ from textual.containers import Horizontal
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
-from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, bottom_lines
+from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
+from dyno.ui.live_model import TEST_STATES, discard_text, measure_text, progress_text
 from dyno.ui.session import LiveOptions, LiveSession
 
-REFRESH_HZ = 4.0  # values: a few Hz, readable; a text refresh costs ~1 ms
+REFRESH_HZ = 4.0  # values during a test: a few Hz, readable
+IDLE_REFRESH_HZ = 2.0  # ... and while nothing runs (waiting, armed, ended): the screen's CPU is most of the idle cost
 PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
 PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
+HELP_ENDED = "r re-arm (new run)  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE / ABORTED
 
 LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
@@ -46,7 +49,7 @@ class LiveApp(DynoApp):
         Binding("left_square_bracket", "jog(-1)", "release"), Binding("right_square_bracket", "jog(1)", "apply"),
         Binding("1", "plot('1')", show=False), Binding("2", "plot('2')", show=False),
         Binding("3", "plot('3')", show=False), Binding("o", "overlay", "overlay"),
-        Binding("q", "quit_safe", "quit"),
+        Binding("q", "quit_safe", "quit"), Binding("r", "rearm", "re-arm"),
     ]
 
     def __init__(self, opts: LiveOptions | None = None) -> None:
@@ -69,6 +72,7 @@ class LiveApp(DynoApp):
         self._overlay_closed: dict = {}
         self._overlay_seen_s: dict = {}
         self._overlay_loop = None  # the event loop, known once the overlay is first requested
+        self._overlay_listening = None  # the controller whose accepted points are submitted at once
         self._overlay_lock = threading.Lock()  # submissions come from worker threads
         self._overlay_tune_cache = None  # the rig's Tune, False for none, None before the first look
         self._overlay_primed_s = -math.inf
@@ -77,15 +81,18 @@ class LiveApp(DynoApp):
         self._plotted = None
         self._plotted_t = 0.0
         self._ideal_rpm = math.nan
+        self._refreshed_s = -math.inf
+        self._ended: bool | None = None  # the help line shown: None (not yet), False (GO ...), True (re-arm)
 
     # --- layout ------------------------------------------------------------------------------
     def compose(self) -> ComposeResult:
         mode = f"SIM x{self.opts.speed:g} seed {self.opts.seed}" if self.opts.sim else "RIG"
+        self._mode = mode
         yield Static(f" dyno live │ {mode}", id="title")
         yield Static(f" E-STOP: {ESTOP_KEYS} (always active)", id="estop")
-        yield Static("", id="state")
+        yield Readout("", id="state", fixed_size=False)  # an abort's cause wraps: its height follows
         with Horizontal(id="main"):
-            yield Static("", id="fields")
+            yield Readout("", id="fields")
             yield PlotextPlot(id="plot")
         yield bottom_lines(HELP)
 
@@ -99,16 +106,37 @@ class LiveApp(DynoApp):
             return
         self._ideal_rpm = ideal_engine_rpm(self.session.controller.engine_map)
         self.session.on_signal = lambda code: self.call_later(self._quit, code)
+        # The first screen (layout, styles, the plot's first draw) is the longest the loop is ever busy:
+        # draw it before the rig's clock, the poller and the watchdog start, never after (on a loaded
+        # machine it stalled the loop past the 0.5 s watchdog: an abort before ARMED).
+        self._show_run()
+        self.refresh_values(force=True)
+        self.call_after_refresh(self._start_session)
+
+    def _start_session(self) -> None:
+        if self.session.closed:
+            return
+        # Everything built so far (imports, maps, the screen) lives as long as the app: out of the cyclic
+        # collector's sight, or each full collection walks it all while the loop waits (0.1-0.3 s measured
+        # on a loaded 2-core machine: with the rest of a busy moment, past the 0.5 s watchdog).
+        import gc
+
+        gc.collect()
+        gc.freeze()
         self.session.start()
         self.set_interval(1.0 / REFRESH_HZ, self.refresh_values)
-        self.refresh_values()
+        self.refresh_values(force=True)
 
     # --- refresh -------------------------------------------------------------------------------
-    def refresh_values(self) -> None:
+    def refresh_values(self, force: bool = False) -> None:
         s = self.session
         if s is None:
             return
         now = self.session.loop.time()
+        if not force and s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
+            return  # nothing runs: half the rate
+        self._refreshed_s = now
+        self._show_help(s.finished)
         v = live_values(s.poller, s.controller, now, self.rate)
         self.values = v
         self.history.add(now - s.t0, v)
@@ -131,7 +159,18 @@ class LiveApp(DynoApp):
             t.append(" (PAUSED)", style="bold yellow")
         if self.session.manual:
             t.append(" MANUAL", style="bold magenta")
-        t.append(f"  {v.reason}")
+        s = self.session
+        if v.state == "measure":
+            t.append(f"  {measure_text(s.state_elapsed_s(), s.opts.plan)}")
+        else:
+            t.append(f"  {v.reason}")
+        n, total, eta = s.test_progress()
+        prog = progress_text(v.state, n, total, eta)
+        if prog:
+            t.append(f"  │ {prog}", style="bold")
+        disc = discard_text(s.controller.discards)
+        if disc and v.state in TEST_STATES:
+            t.append(f"\n {disc}", style="yellow")
         if v.state == "aborted" or v.abort_cause:
             safe = getattr(self.session.actuators, "is_safe", None)
             safe_txt = {True: "rig SAFE", False: "rig NOT SAFE", None: "safe state commanded"}[safe]
@@ -158,6 +197,8 @@ class LiveApp(DynoApp):
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
         row("points", str(v.points))
+        nd = len(self.session.controller.discards)
+        row("discarded", f"{nd} windows" if nd != 1 else "1 window", "bold yellow" if nd else "")
         row("link", fmt(v.frames_per_s, ".0f", " frames/s"))
         row(" CRC/NACK", f"{v.crc_errors} / {v.nacks} (rej {v.rejected_total})")
         row(" lost", f"{v.events_lost} events", "bold red" if v.events_lost else "")
@@ -169,7 +210,8 @@ class LiveApp(DynoApp):
         w = self.query_one("#plot", PlotextPlot)
         plt = w.plt
         pts = self.session.controller.points
-        key = (self.plot_key, len(pts), self.overlay_tier, self._overlay_version, self.overlay_requested)
+        key = (self.plot_key, len(pts), self.overlay_tier, self._overlay_version, self.overlay_requested,
+               id(self.session.controller))
         now = time.monotonic()
         if key == self._plotted and (self.plot_key == "1" or now - self._plotted_t < PLOT_PERIOD_S):
             return  # the efficiency plot changes only with points; the others drift slowly
@@ -177,7 +219,9 @@ class LiveApp(DynoApp):
         plt.clear_data()
         plt.clear_figure()
         if self.plot_key == "1":
-            good = [p for p in pts if p.get("efficiency") is not None and math.isfinite(p["efficiency"])]
+            shown = [p for p in pts if p.get("efficiency") is not None and math.isfinite(p["efficiency"])]
+            good = [p for p in shown if p.get("valid", True)]
+            bad = [p for p in shown if not p.get("valid", True)]  # windows disturbed every time, or outside 0..1
             plt.title("efficiency vs secondary rpm")
             plt.xlabel("secondary rpm")
             plt.ylabel("%")
@@ -186,6 +230,9 @@ class LiveApp(DynoApp):
                 ys = [p["efficiency"] * 100 for p in good]
                 es = [(p.get("efficiency_sem") or 0.0) * 100 for p in good]
                 plt.error(xs, ys, yerr=es, color="cyan", label="measured")
+            if bad:
+                plt.scatter([p["rpm_secondary"] for p in bad], [p["efficiency"] * 100 for p in bad], marker="x",
+                            color="red", label="invalid (see status)")
             if self.overlay_requested and self.overlay_full:
                 pred = sorted(self.overlay_full)
                 plt.plot([a for a, _ in pred], [b * 100 for _, b in pred], color="green", marker="dot",
@@ -240,13 +287,15 @@ class LiveApp(DynoApp):
         """
         pts = list(self.session.controller.points)
         self._overlay_points = len(pts)
-        if self._overlay_loop is None:
+        ctrl = self.session.controller
+        if self._overlay_listening is not ctrl:  # (a re-armed session has a new controller)
             import asyncio
 
+            self._overlay_listening = ctrl
             loop = self._overlay_loop = asyncio.get_running_loop()
             # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
             # loop so that nothing of the overlay runs inside the controller's own call.
-            self.session.controller.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
+            ctrl.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
         accepted_s = time.monotonic()
         self.run_worker(lambda: self._overlay_submit_work(pts, accepted_s), thread=True,
                         group="overlay-submit", name="overlay submit")
@@ -386,7 +435,7 @@ class LiveApp(DynoApp):
         if self.session is not None:
             self.session.estop("operator, " + ESTOP_KEYS)
             self.say("E-STOP: rig put in its safe state")
-            self.refresh_values()
+            self.refresh_values(force=True)
 
     def action_go(self) -> None:
         why = self.session.go_refusal() if self.session else "starting"
@@ -402,6 +451,44 @@ class LiveApp(DynoApp):
 
         self.push_screen(ConfirmScreen("Start the test?\nThrottle goes to FULL and the brake starts stepping."),
                          answered)
+
+    def action_rearm(self) -> None:
+        """Acknowledge the ended test and arm a new one (new run directory); asks first."""
+        s = self.session
+        why = s.rearm_refusal() if s else "starting"
+        if why:
+            self.say(why)
+            return
+        last = s.controller.aborts[-1] if s.controller.aborts else None
+        ended = f"ABORTED ({last['cause']}: {last['detail']})" if last else "DONE"
+        if len(ended) > 120:
+            ended = ended[:119] + "…"
+
+        def answered(yes: bool | None) -> None:
+            if not yes:
+                self.say("re-arm cancelled")
+                return
+            new_dir, msg = self.session.rearm()  # the rig is checked again: it may have changed meanwhile
+            self.say(msg)
+            if new_dir is not None:
+                self._plotted = None
+                self._show_run()
+                self.refresh_values(force=True)
+
+        self.push_screen(ConfirmScreen(f"Acknowledge: {ended}.\nRe-arm? A new run directory is started (this run "
+                                       "keeps its record). Nothing moves: start the engine, then GO."), answered)
+
+    def _show_run(self) -> None:
+        """The title: mode and the run directory being written (its start cut, to fit)."""
+        run = str(self.session.ctx.writer.run_dir)
+        head = f" dyno live │ {self._mode} │ run "
+        room = max(10, (self.size.width or 80) - len(head) - 1)
+        self.query_one("#title", Static).update(head + (run if len(run) <= room else "…" + run[-room + 1:]))
+
+    def _show_help(self, ended: bool) -> None:
+        if ended != self._ended:
+            self._ended = ended
+            self.query_one("#help", Static).update(HELP_ENDED if ended else HELP)
 
     def action_pause(self) -> None:
         self.say(self.session.toggle_pause())

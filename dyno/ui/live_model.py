@@ -104,6 +104,38 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
         abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None)
 
 
+TEST_STATES = ("warmup", "step", "settle", "measure")  # a test is under way (the ETA means something)
+
+
+def measure_text(elapsed_s: float, plan) -> str:
+    """MEASURE's clock: elapsed / cap in rig seconds, and what ends it sooner (``plan``: unscaled)."""
+    if plan.target_efficiency_ci95 is not None:
+        target = f"CI95 ±{plan.target_efficiency_ci95 * 100:.2g} pp"
+    else:
+        target = f"s.e. ≤ {plan.target_efficiency_sem * 100:.2g} pp"
+    # short: with the point count and the ETA it stays on one line of 80 columns
+    return (f"{min(elapsed_s, plan.max_measure_s):.0f} / {plan.max_measure_s:.0f} s "
+            f"(≥ {plan.measure_s:.0f} s, until {target})")
+
+
+def progress_text(state: str, n_points: int, total: int | None, eta_s: float | None) -> str:
+    """``point n/~N  ETA m:ss`` of a running test (the headless progress line's words), else ''."""
+    from dyno.cli.progress import eta_text, points_text
+
+    if state not in TEST_STATES:
+        return ""
+    return f"{points_text(n_points, total)}  {eta_text(eta_s)}"
+
+
+def discard_text(discards: list) -> str:
+    """The last discarded measurement window and why (the controller measures it again), or ''."""
+    if not discards:
+        return ""
+    d = discards[-1]
+    many = f"{len(discards)} windows discarded" if len(discards) > 1 else "window discarded"
+    return f"{many}; last: point {d.get('index', 0) + 1}, try {d.get('attempt', 1)}: {d.get('reason', '?')}"
+
+
 def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple[str, str]:
     """(colour, marker) for the rotor temperature: green at ambient -> yellow -> red at the limit.
 

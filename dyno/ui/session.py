@@ -14,7 +14,10 @@ host time and measured in device time, which no longer agree).
 from __future__ import annotations
 
 import asyncio
+import json
 import math
+import shutil
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -120,6 +123,12 @@ class LiveSession:
         self.manual = False
         self._jog_handle = None
         self._pause_points = 0
+        # progress: when the controller last changed state (MEASURE's elapsed time), when each point arrived
+        self.state_since_s = loop.time()
+        self.controller.listeners.append(self._on_controller)
+        self.run_dirs: list[Path] = [Path(self.ctx.writer.run_dir)]  # this session's runs, oldest first
+        self._reports: list[asyncio.Task] = []  # report.html of re-armed-from runs, written in the background
+        self._drills_fired_before = 0  # drills fired in earlier runs of the session (re-arm)
 
     @property
     def sim(self):
@@ -174,6 +183,24 @@ class LiveSession:
     @property
     def finished(self) -> bool:
         return self.controller.state in FINISHED
+
+    def _on_controller(self, controller) -> None:
+        """Controller listener: every state change (and a discarded window, after which it measures again)."""
+        self.state_since_s = self.loop.time()
+
+    def state_elapsed_s(self) -> float:
+        """Rig seconds in the current state (the scaled clock: what MEASURE's limits are in)."""
+        return (self.loop.time() - self.state_since_s) * self.speed
+
+    def test_progress(self) -> tuple[int, int | None, float | None]:
+        """(points so far, estimated total, real seconds left) of the running test: the headless
+        progress line's estimate (:func:`dyno.cli.progress.eta_now`) over the points' end times."""
+        from dyno.cli.progress import eta_now
+
+        pts = self.controller.points
+        ends = [p.get("host_t_end_s", math.nan) for p in pts]
+        total, eta = eta_now(pts, ends, self.loop.time(), self.controller.plan)
+        return len(pts), total, eta
 
     # --- operator commands ---------------------------------------------------------------
     def estop(self, source: str = "operator") -> None:
@@ -259,6 +286,121 @@ class LiveSession:
             self._jog_handle = None
             self.controller.act.brake(STOP)
 
+    # --- acknowledge + re-arm: a new run on the same rig ------------------------------------
+    def rearm_refusal(self) -> str | None:
+        """Why the rig cannot be re-armed now (None: it can).
+
+        Only after a test has ended, with the outputs in their safe state, the engine
+        stopped and no limit or plausibility check failing (rotor too hot, link lost, ...);
+        never after a software fault (watchdog, crashed controller or safety task, a run
+        log that cannot be written): those want a fresh start of ``dyno``.
+        """
+        c = self.controller
+        if not self.finished:
+            return f"re-arm only after a test has ended (state: {c.state.value}; E-STOP first)"
+        cause = c.aborts[-1]["cause"] if c.aborts else None
+        if cause in NO_REARM:
+            return f"not re-armed after {cause} ({NO_REARM[cause]}): quit and start dyno again"
+        if getattr(self.controller.act, "latched", False):
+            return "not re-armed: the safe state is latched (watchdog or signal): quit and start dyno again"
+        if self.ctx.watchdog is not None and getattr(self.ctx.watchdog, "tripped", False):
+            return "not re-armed: the watchdog tripped: quit and start dyno again"
+        outs = self.actuators.output_states()
+        if not outs.get("safe"):
+            return (f"not re-armed: the rig is not in its safe state (throttle {outs.get('throttle')}, engine "
+                    f"{outs.get('engine_kill')}, brake {outs.get('brake_actuator')}): E-STOP")
+        from dyno.protocol import v1
+
+        rp = self.poller.rpm(v1.CH_PRIMARY)
+        if rp > c.plan.engine_running_rpm:
+            return f"not re-armed: the engine still turns ({rp:.0f} rpm): wait until it has stopped"
+        trip = c.check_limits()
+        if trip is not None:
+            return f"not re-armed: {trip.cause}: {trip.detail}"
+        return None
+
+    def rearm(self) -> tuple[Path | None, str]:
+        """Acknowledge the ended test and arm a new one in a new run directory.
+
+        The ended run's log is closed (its abort record stays) and its report.html is
+        written in the background; the poller, the rig and its safety keep running; the
+        new controller starts from WAIT_ENGINE, which only re-enables the ignition (the
+        engine is started by the operator, the test by GO).  Returns (new run dir, message);
+        (None, why) if refused.
+        """
+        why = self.rearm_refusal()
+        if why:
+            return None, why
+        from dyno.control.controller import TestController
+        from dyno.errors import DynoError
+        from dyno.runlog.writer import RunWriter
+
+        old, old_writer = self.controller, self.ctx.writer
+        old_dir = Path(old_writer.run_dir)
+        new_dir = _next_run_dir(old_dir, self.opts.out_dir)
+        try:  # first the new log: if it cannot be written, nothing changes
+            meta = json.loads((old_dir / "meta.json").read_text())
+            for k in ("software_version", "created_unix_s", "format"):
+                meta.pop(k, None)
+            meta["rearmed_after"] = str(old_dir)
+            tune = old_dir / "tune.toml"
+            writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
+                               engine_map_text=(old_dir / "engine_map.csv").read_text(),
+                               tune_text=tune.read_text() if tune.is_file() else None)
+            for name in INPUT_COPIES:  # any other input the run keeps beside its log (e.g. its plan file)
+                if (old_dir / name).is_file() and not (new_dir / name).exists():
+                    shutil.copy2(old_dir / name, new_dir / name)
+        except (DynoError, OSError, ValueError) as exc:
+            return None, f"not re-armed: new run directory {new_dir}: {exc}"
+        self.cancel_jog()
+        self.manual = False
+        self._close_log()
+        self.poller.listeners.remove(old_writer.events)
+        self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
+        ctrl = TestController(self.poller, old.act, old.calibration, old.engine_map, plan=old.plan,
+                              limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine)
+        ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)
+        ctrl.result_hooks = list(getattr(old, "result_hooks", []))  # (the characterisations' sim truths)
+        for name in REBUILT_ATTRS:  # what the composition root sets on a controller after building it
+            if hasattr(old, name):
+                setattr(ctrl, name, getattr(old, name))
+        ctrl.listeners.append(self._on_controller)
+        writer.on_error = lambda exc: ctrl.abort(
+            "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or new_dir}): "
+            "safe state; what was recorded before stays readable")
+        self.poller.listeners.append(writer.events)
+        self.ctx.writer, self.ctx.controller, self.controller = writer, ctrl, ctrl
+        self._rehook_watchdog()
+        if self.ctx.drills is not None:
+            self._drills_fired_before = len(self.ctx.drills.fired)
+        self._pause_points = 0
+        self.state_since_s = self.loop.time()
+        self._tasks = [t for t in self._tasks if t.get_name() != "controller"]
+        self._tasks.append(asyncio.create_task(ctrl.run(), name="controller"))
+        self.run_dirs.append(new_dir)
+        self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
+        return new_dir, f"re-armed: new run {new_dir} (report of the last one: {old_dir / 'report.html'})"
+
+    def _rehook_watchdog(self) -> None:
+        """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
+        from dyno.app import _attach_watchdog, start_watchdog
+
+        self.poller.listeners[:] = [fn for fn in self.poller.listeners
+                                    if not getattr(fn, "__qualname__", "").startswith("_attach_watchdog.")]
+        timeout_s = self.ctx.rig_cfg.actuator.watchdog_s
+        if self.ctx.hw is None:  # the session's own watchdog: a new one beside the new controller
+            if self._stop_watchdog is not None:
+                self._stop_watchdog()
+            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
+            self._stop_watchdog = start_watchdog(self.ctx, self.loop)
+        else:  # pragma: no cover - the rig's watchdog (its thread runs on) reports to the new controller
+            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
+
+    def _close_log(self) -> None:
+        status = {"done": "success"}.get(self.controller.state.value, "abort")
+        self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
+                              events_lost=self.poller.reader.events_lost)
+
     async def close(self, why: str = "operator quit") -> None:
         """Safe state first, then stop the tasks and close the run log."""
         if self.closed:
@@ -282,9 +424,9 @@ class LiveSession:
 
         for sig, old in self._old_signals.items():
             signal.signal(sig, old)
-        status = {"done": "success"}.get(self.controller.state.value, "abort")
-        self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
-                              events_lost=self.poller.reader.events_lost)
+        self._close_log()
+        if self._reports:  # the re-armed-from runs' reports (usually long done)
+            await asyncio.wait(self._reports, timeout=60.0)
         if self.guard is not None:  # pragma: no cover - rig only
             self.guard.__exit__(None, None, None)
         if self._nothing_ran():
@@ -295,8 +437,48 @@ class LiveSession:
 
             shutil.rmtree(self.ctx.writer.run_dir, ignore_errors=True)
             self.run_dir_removed = True
+            self.run_dirs.remove(Path(self.ctx.writer.run_dir))
 
     def _nothing_ran(self) -> bool:
         c = self.controller
         return (self.opts.sim and c.go_s is None and all(a.get("cause") == "quit" for a in c.aborts)
-                and not (self.ctx.drills is not None and self.ctx.drills.fired))
+                and not (self.ctx.drills is not None and len(self.ctx.drills.fired) > self._drills_fired_before))
+
+
+# Attributes dyno.app.build may set on a controller after constructing it (rig.toml's control gains and
+# inertias on newer trees): a re-armed controller gets the same.
+REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia")
+INPUT_COPIES = ("plan.toml",)
+
+# Aborts after which the session is not re-armed: a software or host fault wants a fresh start.
+NO_REARM = {"watchdog": "the control loop stalled", "error": "the controller crashed",
+            "safety_error": "the safety task failed", "disk_full": "the run log cannot be written",
+            "signal": "the session is closing"}
+
+
+def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
+    """The next run's directory: ``<--out>-2``, ``-3``, ... beside the one given, else a new runs/<timestamp>."""
+    if out_dir is None:
+        from dyno.app import default_run_dir
+
+        return default_run_dir(old.parent)
+    base = Path(out_dir)
+    n = 2
+    while (base.parent / f"{base.name}-{n}").exists():
+        n += 1
+    return base.parent / f"{base.name}-{n}"
+
+
+async def _finish_in_background(run_dir: Path) -> None:
+    """report.html and the run library's entry for an ended run, in a low-priority child process
+    (matplotlib would hold the loop, and the GIL, for seconds)."""
+    code = ("import os, sys; os.nice(10); from dyno.cli.ui_cmd import finish_run; "
+            "finish_run(sys.argv[1], announce=False)")
+    try:
+        proc = await asyncio.create_subprocess_exec(sys.executable, "-c", code, str(run_dir),
+                                                    stdin=asyncio.subprocess.DEVNULL,
+                                                    stdout=asyncio.subprocess.DEVNULL,
+                                                    stderr=asyncio.subprocess.DEVNULL)
+        await proc.wait()
+    except (OSError, asyncio.CancelledError):
+        pass  # `dyno ui` retries at exit (report.html missing), `dyno report RUN` any time

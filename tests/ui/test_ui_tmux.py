@@ -14,6 +14,21 @@ import pytest
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
 
+def _env(home: Path) -> dict:
+    """A terminal's environment: a fresh HOME, but the belt-model table the test session built (else each
+    `dyno ui --sim` builds it again in the new HOME's cache: 20 s, over a minute on a loaded machine) and the
+    session's run library."""
+    import os
+
+    from dyno.model.overlay import default_cache_dir
+
+    env = {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
+           "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "DYNO_MODEL_CACHE": str(default_cache_dir())}
+    if os.environ.get("DYNO_RUNS_DIR"):
+        env["DYNO_RUNS_DIR"] = os.environ["DYNO_RUNS_DIR"]
+    return env
+
+
 def _tmux(*args: str) -> str:
     return subprocess.run(["tmux", *args], capture_output=True, text=True, timeout=20).stdout
 
@@ -43,8 +58,7 @@ def test_ui_tmux_dyno_ui_sim(tmp_path):
     run_dir = tmp_path / "run"
     cmd = (f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30")
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(tmp_path))
     try:
         screen = _wait_screen(session, "ARMED", 60)
         assert "E-STOP" in screen and "g GO" in screen and "engine" in screen
@@ -70,8 +84,7 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
     run_dir = tmp_path / "run"
     cmd = f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(tmp_path))
     try:
         _go(session)
     finally:
@@ -88,8 +101,7 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
 
 def _start(session: str, cmd: str, home: Path, size=("80", "24")) -> None:
     subprocess.run(["tmux", "new-session", "-d", "-x", size[0], "-y", size[1], "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+                   timeout=20, env=_env(home))
 
 
 def test_ui_tmux_space_estops_with_the_go_dialog_open(tmp_path):
@@ -180,3 +192,42 @@ def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path):
     finally:
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     assert not hist.exists()
+
+
+def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path):
+    """The real `dyno ui --sim`: GO, E-STOP, `r` (once the engine has stopped), confirm: ARMED again in a new
+    run directory; a second test there; at exit both runs have their record, report.html and path printed."""
+    session = f"dyno-rearm-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --out {run_dir} ; echo EXITED=$? ; sleep 60",
+           tmp_path)
+    try:
+        _go(session)
+        _tmux("send-keys", "-t", session, "Space")
+        screen = _wait_screen(session, "cause: estop", 10)
+        assert "r re-arm" in screen.splitlines()[-1] or "r re-arm" in screen
+        # `r` is refused while the engine still turns; ask until it is accepted (a condition, not a sleep)
+        t_end = time.monotonic() + 60
+        while time.monotonic() < t_end:
+            _tmux("send-keys", "-t", session, "r")
+            screen = _tmux("capture-pane", "-p", "-t", session)
+            if "Acknowledge" in screen:
+                break
+            time.sleep(0.5)
+        screen = _wait_screen(session, "Acknowledge: ABORTED (estop", 5)
+        _tmux("send-keys", "-t", session, "y")
+        screen = _wait_screen(session, "re-armed: new run", 10)
+        assert "run-2" in screen.splitlines()[0]  # the title names the run being written
+        _go(session)  # ARMED again (the simulated operator restarts the engine), then a second GO
+        _tmux("send-keys", "-t", session, "Space")
+        _wait_screen(session, "cause: estop", 10)
+        _tmux("send-keys", "-t", session, "q")
+        screen = _wait_screen(session, "EXITED=0", 120)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    run2 = tmp_path / "run-2"
+    for d in (run_dir, run2):
+        docs = (d / "documents.jsonl").read_text()
+        assert '"cause": "estop"' in docs and '"type": "stop"' in docs, d
+        assert (d / "report.html").is_file(), d
+    assert f"run: {run_dir}" in screen.replace("\n", "") and f"run: {run2}" in screen.replace("\n", "")
