@@ -131,20 +131,21 @@ class SpeedHoldPlan:
     contact_timeout_s: float = 10.0
 
 
-def secondary_rpm(ctrl, window_s: float) -> float:
+def channel_rpm(ctrl, channel: int, window_s: float) -> float:
+    """A Hall channel's rpm by edge count over the last ``window_s`` (NaN before the first frame)."""
     now = ctrl.poller.device_now_us()
     if now is None:
         return math.nan
-    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(v1.CH_SECONDARY, now - int(window_s * 1e6), now))
+    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(channel, now - int(window_s * 1e6), now))
     return rpm
+
+
+def secondary_rpm(ctrl, window_s: float) -> float:
+    return channel_rpm(ctrl, v1.CH_SECONDARY, window_s)
 
 
 def engine_rpm(ctrl, window_s: float) -> float:
-    now = ctrl.poller.device_now_us()
-    if now is None:
-        return math.nan
-    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(v1.CH_PRIMARY, now - int(window_s * 1e6), now))
-    return rpm
+    return channel_rpm(ctrl, v1.CH_PRIMARY, window_s)
 
 
 def brake_torque_nm(ctrl, window_s: float) -> float:
