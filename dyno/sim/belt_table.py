@@ -285,33 +285,51 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 _TABLES: dict = {}
 
 
+class _CacheMiss(Exception):
+    """A cell the cache does not hold (raised past build_belt_table's model-failure handling)."""
+
+
+def _cached_only(op, guess):
+    raise _CacheMiss
+
+
 def belt_table(cache_dir=None, tune=None) -> BeltTable:
     """The default table for ``tune`` (None: 100 N slack), built once per process (and once per
     machine via the cache).
 
     Concurrent processes (e.g. pytest-xdist workers) serialise on a lock file in
-    the cache directory: the first builds, the others then read its entries.
+    the cache directory: the first builds, the others then read its entries.  A table
+    whose every cell is cached is read without the lock (entries are written
+    atomically), so a reader never waits for another process building another table.
     """
     from dyno.model.overlay import default_cache_dir
 
     key = (str(cache_dir), None if tune is None else json.dumps(tune.to_dict(), sort_keys=True, default=str))
     if key not in _TABLES:
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        lock = None
         try:
-            import fcntl
-
-            cache.mkdir(parents=True, exist_ok=True)
-            lock = open(cache / "belt_table.lock", "w")
-            fcntl.flock(lock, fcntl.LOCK_EX)
-        except (ImportError, OSError):
-            lock = None  # no locking available: build anyway (entries are written atomically)
-        try:
-            _TABLES[key] = build_belt_table(cache_dir=cache, tune=tune)
-        finally:
-            if lock is not None:
-                lock.close()
+            _TABLES[key] = build_belt_table(cache_dir=cache, tune=tune, solve=_cached_only)
+        except _CacheMiss:
+            _TABLES[key] = _build_locked(cache, tune)
         t = _TABLES[key]
         log.info("belt table: %d x %d cells, %d solved now, %d failed, %.2f s", t.ratios.size, t.torques_nm.size,
                  t.solved, int((~t.ok).sum()), t.build_s)
     return _TABLES[key]
+
+
+def _build_locked(cache: Path, tune) -> BeltTable:
+    """Build under the cache's lock file: concurrent builders wait, then read what the first wrote."""
+    lock = None
+    try:
+        import fcntl
+
+        cache.mkdir(parents=True, exist_ok=True)
+        lock = open(cache / "belt_table.lock", "w")
+        fcntl.flock(lock, fcntl.LOCK_EX)
+    except (ImportError, OSError):
+        lock = None  # no locking available: build anyway (entries are written atomically)
+    try:
+        return build_belt_table(cache_dir=cache, tune=tune)
+    finally:
+        if lock is not None:
+            lock.close()

@@ -163,3 +163,27 @@ def test_default_table_covers_the_sim_range_at_the_tunes_clamp(tmp_path):
     assert 850 < tab.clamp_n[0] < 950 and 550 < tab.clamp_n[-1] < 650
     assert tab.lookup(2.3, 12.0) is not None      # no clamping to 1.75 any more
     assert tab.lookup(2.3, 12.0) != tab.lookup(1.75, 12.0)
+
+
+def test_a_complete_cache_is_read_without_waiting_for_the_build_lock(tmp_path):
+    """A process building some table holds the lock; one whose table is all cached must not wait for it
+    (the tmux tests' blank screens: a reader blocked behind another process's 60 s build)."""
+    import fcntl
+    import threading
+
+    from dyno.sim import belt_table as bt
+
+    build_belt_table(cache_dir=tmp_path, solve=_fake_solver()[0])  # the default grid, all cells cached
+    holder = open(tmp_path / "belt_table.lock", "w")
+    fcntl.flock(holder, fcntl.LOCK_EX)  # "another process is building"
+    got = []
+    try:
+        bt._TABLES.pop((str(tmp_path), None), None)
+        reader = threading.Thread(target=lambda: got.append(bt.belt_table(cache_dir=tmp_path)), daemon=True)
+        reader.start()
+        reader.join(20.0)
+        assert got, "the reader waited for the build lock although every cell was cached"
+        assert got[0].ok.all() and got[0].solved == 0
+    finally:
+        holder.close()
+        bt._TABLES.pop((str(tmp_path), None), None)
