@@ -1,4 +1,4 @@
-"""Engine map: full-throttle torque vs speed, for the efficiency denominator.
+"""Engine map: torque vs speed at full (and optionally part) throttle, for the efficiency denominator.
 
 The rig cannot measure engine power (thesis Section 9.3): efficiency divides
 the measured secondary power by the power an engine map says the engine makes
@@ -6,6 +6,12 @@ at the measured primary (crank) speed.  This module loads such maps,
 interpolates them with a monotone, shape-preserving PCHIP of torque vs rpm,
 refuses to extrapolate, and converts between the SAE J1349 standard
 conditions the map is assumed to be corrected to and the run's ambient air.
+
+A map may also hold part-throttle curves (a ``throttle`` column, one curve per
+throttle fraction; :meth:`EngineMap.at_throttle`): a point measured at part
+throttle takes its denominator from the curve at its own throttle, never from
+the full-throttle one, and never from a blend of two throttles (the governor
+makes torque at a given speed steep in throttle).
 
 Only :func:`load_engine_map` and :func:`load_legacy_engine_map` read files;
 malformed files raise :class:`dyno.errors.ConfigError` naming file, line and
@@ -61,6 +67,26 @@ class NoMapPower(OutOfMapRange):
         where = f" ({source})" if source else ""
         self.args = (f"engine map{where} gives {power_w:g} W at {rpm:g} rpm (governor cut-off?); "
                      f"efficiency is undefined there",)
+
+
+#: a point's throttle matches a map curve's within this (fractions of full throttle): the servo's
+#: setting is commanded, so a point at 0.6 matches the 0.6 curve exactly; 0.005 absorbs the 3-4
+#: decimals a CSV writer may round to, and nothing more (see :meth:`EngineMap.at_throttle`)
+THROTTLE_TOL = 0.005
+
+
+class NoThrottleCurve(OutOfMapRange):
+    """The map has no curve at a point's throttle: no efficiency denominator (torque and power stay)."""
+
+    def __init__(self, throttle_frac: float, throttles, source: str = ""):
+        ValueError.__init__(self)
+        self.throttle_frac = throttle_frac
+        self.throttles = tuple(throttles)
+        self.rpm, self.rpm_min, self.rpm_max = math.nan, math.nan, math.nan
+        where = f" {source}" if source else ""
+        have = ", ".join(f"{t:.2f}" for t in self.throttles)
+        self.args = (f"no engine-map curve at throttle {throttle_frac:.2f} (the map{where} has throttle {have}; "
+                     f"within {THROTTLE_TOL:g}): efficiency undefined at part throttle without a curve for it",)
 
 
 def _torque_from_power_w(rpm: np.ndarray, power_w: np.ndarray) -> np.ndarray:
@@ -135,6 +161,30 @@ class EngineMap:
         self._standard_torque_nm = t if _standard_torque_nm is None else _standard_torque_nm
         self._pchip = PchipInterpolator(n, t, extrapolate=False)
         self._dpchip = self._pchip.derivative()
+        self.throttle_frac = 1.0  # the throttle this curve is at
+        self.part_throttle: dict[float, EngineMap] = {}  # (on the full-throttle map) throttle -> curve
+
+    # -- throttle ------------------------------------------------------------
+
+    @property
+    def throttles(self) -> list[float]:
+        """The throttle fractions this map has curves for, ascending (1.0 always)."""
+        return sorted({*self.part_throttle, 1.0})
+
+    def at_throttle(self, throttle_frac: float) -> "EngineMap":
+        """The curve at ``throttle_frac`` (within :data:`THROTTLE_TOL`); :class:`NoThrottleCurve` if none.
+
+        No interpolation across throttle: in a governed engine the torque at a given speed falls from
+        the full curve to nothing across the governor's droop band (~150 rpm), so between two curves
+        a blend can be off by most of the torque.  A part-throttle point needs a curve at its throttle.
+        """
+        u = float(throttle_frac)
+        if math.isfinite(u) and abs(u - 1.0) <= THROTTLE_TOL:
+            return self
+        for t, curve in self.part_throttle.items():
+            if math.isfinite(u) and abs(u - t) <= THROTTLE_TOL:
+                return curve
+        raise NoThrottleCurve(u, self.throttles, self.source or "")
 
     def __repr__(self) -> str:
         amb = "" if self.ambient is None else f", ambient={self.ambient}"
@@ -206,16 +256,20 @@ class EngineMap:
         cf = j1349_correction_factor(temp_c, dry_pressure_kpa)
         std = self._standard_torque_nm
         src = f"{self.source} at {temp_c:g} C, {dry_pressure_kpa:g} kPa dry (SAE J1349 CF {cf:.4f})"
-        return EngineMap(self.rpm, std / cf, source=src, sha256=self.sha256, _j1349_factor=cf,
-                         _ambient=(float(temp_c), float(dry_pressure_kpa)),
-                         _standard_torque_nm=std)
+        out = EngineMap(self.rpm, std / cf, source=src, sha256=self.sha256, _j1349_factor=cf,
+                        _ambient=(float(temp_c), float(dry_pressure_kpa)),
+                        _standard_torque_nm=std)
+        out.throttle_frac = self.throttle_frac
+        out.part_throttle = {t: c.at_ambient(temp_c, dry_pressure_kpa) for t, c in self.part_throttle.items()}
+        return out
 
     def metadata(self) -> dict:
         """Provenance for run metadata: source, sha256, range, correction."""
         return {"source": self.source, "sha256": self.sha256, "rpm_min": self.rpm_min,
                 "rpm_max": self.rpm_max, "j1349_factor": self.j1349_factor,
                 "ambient_temp_c": None if self.ambient is None else self.ambient[0],
-                "ambient_dry_pressure_kpa": None if self.ambient is None else self.ambient[1]}
+                "ambient_dry_pressure_kpa": None if self.ambient is None else self.ambient[1],
+                "throttles": self.throttles}
 
 
 # ----------------------------------------------------------------------------
@@ -354,6 +408,13 @@ def load_engine_map(path) -> EngineMap:
     taken to be at SAE J1349 standard conditions (see
     :meth:`EngineMap.at_ambient`).
 
+    Part throttle: a header ``throttle,rpm,torque_nm`` (or ``power_hp`` /
+    ``power_kw``) adds a first column, the throttle fraction (0 < throttle <= 1);
+    each throttle's rows are one curve (contiguous, rpm strictly increasing, at
+    least 2 rows), and a curve at throttle 1 (full) is required: it is the map
+    every full-throttle point and every other reader (the simulator, the shift
+    curve) uses.  A two-column file is a full-throttle map, as before.
+
     For the thesis's headerless ``rpm,hp`` file use
     :func:`load_legacy_engine_map`; guessing units from numbers is how
     efficiencies of 130 % get published.
@@ -366,11 +427,15 @@ def load_engine_map(path) -> EngineMap:
     path = Path(path)
     raw, text = _read(path)
     lines = _content_lines(text)
-    expected_header = "a header rpm,torque_nm or rpm,power_hp or rpm,power_kw"
+    expected_header = ("a header rpm,torque_nm or rpm,power_hp or rpm,power_kw "
+                       "(part-throttle maps: throttle,rpm,torque_nm ...)")
     if not lines:
         raise ConfigError(path, "header", expected_header)
     lineno, header = lines[0]
     cols = [c.strip() for c in header.split(",")]
+    throttle = len(cols) == 3 and cols[0] == "throttle"
+    if throttle:
+        cols = cols[1:]
     if len(cols) != 2 or cols[0] != "rpm" or cols[1] not in _VALUE_COLUMNS:
         hint = ""
         try:
@@ -379,15 +444,57 @@ def load_engine_map(path) -> EngineMap:
         except ValueError:
             pass
         raise ConfigError(path, f"line {lineno} (header)", f"{expected_header}, got {header.strip()!r}{hint}")
-    rpm, val = _parse_rows(path, lines[1:], cols[1])
     kind = _VALUE_COLUMNS[cols[1]]
-    if kind == "torque":
-        torque = val
-    elif kind == "hp":
-        torque = _torque_from_power_w(rpm, val * W_PER_HP)
-    else:
-        torque = _torque_from_power_w(rpm, val * 1000.0)
-    return EngineMap(rpm, torque, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
+    sha = hashlib.sha256(raw).hexdigest()
+
+    def curve(rows) -> EngineMap:
+        rpm, val = _parse_rows(path, rows, cols[1])
+        if kind == "torque":
+            torque = val
+        elif kind == "hp":
+            torque = _torque_from_power_w(rpm, val * W_PER_HP)
+        else:
+            torque = _torque_from_power_w(rpm, val * 1000.0)
+        return EngineMap(rpm, torque, source=str(path), sha256=sha)
+
+    if not throttle:
+        return curve(lines[1:])
+    groups = _throttle_groups(path, lines[1:], cols[1])
+    full = curve(groups.pop(1.0))
+    for u, rows in groups.items():
+        c = curve(rows)
+        c.throttle_frac = u
+        c.source = f"{path} (throttle {u:g})"
+        full.part_throttle[u] = c
+    return full
+
+
+def _throttle_groups(path: Path, rows: list[tuple[int, str]], value_name: str) -> dict[float, list]:
+    """Split ``throttle,rpm,value`` rows into one ``rpm,value`` row list per throttle (checked)."""
+    groups: dict[float, list] = {}
+    last = None
+    for lineno, line in rows:
+        cell, _, rest = line.partition(",")
+        u = _number(path, lineno, "throttle", cell.strip())
+        if not 0.0 < u <= 1.0:
+            raise ConfigError(path, f"line {lineno}, field throttle", f"a fraction 0 < throttle <= 1, got {cell.strip()!r}")
+        if u != last and u in groups:
+            raise ConfigError(path, f"line {lineno}, field throttle",
+                              f"each throttle's rows together (throttle {u:g} appeared before line {lineno})")
+        if u != last and any(abs(u - t) <= THROTTLE_TOL for t in groups):
+            raise ConfigError(path, f"line {lineno}, field throttle",
+                              f"throttles more than {THROTTLE_TOL:g} apart, got {u:g} beside "
+                              f"{min(groups, key=lambda t: abs(u - t)):g}")
+        groups.setdefault(u, []).append((lineno, rest))
+        last = u
+    if 1.0 not in groups:
+        raise ConfigError(path, "throttle", f"a full-throttle curve (rows with throttle 1), got throttle "
+                          f"{', '.join(f'{t:g}' for t in sorted(groups)) or 'none'}")
+    for u, g in groups.items():
+        if len(g) < 2:
+            raise ConfigError(path, f"line {g[0][0]}, field throttle",
+                              f"at least 2 rows rpm,{value_name} per throttle, got {len(g)} at throttle {u:g}")
+    return groups
 
 
 def load_legacy_engine_map(path) -> EngineMap:
