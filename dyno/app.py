@@ -533,8 +533,10 @@ def rig_outputs(ctx: RunContext) -> dict:
     return {}
 
 
-POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w", "power_in_w",
-              "efficiency", "efficiency_sem", "efficiency_ci95", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
+POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_primary", "rpm_secondary", "ratio",
+              "torque_secondary_nm", "power_out_w", "power_in_w",
+              # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
+              "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
               "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
               # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction

@@ -40,8 +40,9 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
     engine_map = load_engine_map(engine_map_path or run.engine_map_path)
     points = []
     for doc in run.points:
+        # the throttle the point was measured at, as recorded (runs before it was recorded: full)
         p = reduce_point(run.streams, doc["t_start_us"], doc["t_end_us"], calibration, engine_map,
-                         index=doc.get("index"))
+                         index=doc.get("index"), throttle_frac=doc.get("throttle_frac", 1.0))
         if "inertia_engine_kg_m2" in doc:  # a ramp point (plan step "ramp"): the same I·alpha correction
             from dyno.analysis.inertia import correct_inertia
 

@@ -83,10 +83,10 @@ class NoThrottleCurve(OutOfMapRange):
         self.throttle_frac = throttle_frac
         self.throttles = tuple(throttles)
         self.rpm, self.rpm_min, self.rpm_max = math.nan, math.nan, math.nan
-        where = f" {source}" if source else ""
+        self.source = source  # (not in the message: a replay reads the run's copy of the same map)
         have = ", ".join(f"{t:.2f}" for t in self.throttles)
-        self.args = (f"no engine-map curve at throttle {throttle_frac:.2f} (the map{where} has throttle {have}; "
-                     f"within {THROTTLE_TOL:g}): efficiency undefined at part throttle without a curve for it",)
+        self.args = (f"no engine-map curve at throttle {throttle_frac:.2f} (the map has throttle {have}): "
+                     f"efficiency undefined without a curve at the point's throttle",)
 
 
 def _torque_from_power_w(rpm: np.ndarray, power_w: np.ndarray) -> np.ndarray:

@@ -50,6 +50,8 @@ def correct_inertia(point: dict, streams, engine_map, j_engine_kg_m2: float, j_s
     if not (math.isfinite(a_e) and math.isfinite(a_s) and math.isfinite(point.get("efficiency", math.nan))):
         return out
     rp, rs = point["rpm_primary"], point["rpm_secondary"]
+    if hasattr(engine_map, "at_throttle"):  # the curve the point's efficiency came from
+        engine_map = engine_map.at_throttle(point.get("throttle_frac", 1.0))
     t_in_nm = float(engine_map.torque_nm(rp)) - j_engine_kg_m2 * a_e
     t_out_nm = point["torque_secondary_nm"] + j_secondary_kg_m2 * a_s
     p_in = t_in_nm * rp * RPM_TO_RAD_S

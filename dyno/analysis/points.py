@@ -18,7 +18,7 @@ import numpy as np
 
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
 from dyno.analysis.efficiency import batch_mean, point_efficiency
-from dyno.analysis.engine_map import OutOfMapRange
+from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange
 from dyno.protocol import v1
 
 ADC_RAILS = (0, 0xFFFF)
@@ -58,12 +58,19 @@ def _speed(streams, channel: int, t0_us: int, t1_us: int) -> dict:
     return out
 
 
-def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, index: int | None = None) -> dict:
+def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, index: int | None = None,
+                 throttle_frac: float = 1.0) -> dict:
     """Statistics of one steady window ``[t0_us, t1_us]`` (host-unwrapped device times).
 
     Returns a flat dict with means, standard deviations, standard errors
     (``*_sem``), sample counts, the time span, powers and efficiency, and a
     ``faults`` list of what kept a value from being computed.
+
+    ``throttle_frac`` is the throttle commanded over the window (recorded as the point's
+    ``throttle_frac``): the efficiency's denominator is the engine map's curve at that throttle
+    (:meth:`~dyno.analysis.engine_map.EngineMap.at_throttle`).  A map without one leaves the
+    efficiency undefined (NaN, ``efficiency_reason`` naming the throttle) and the point otherwise
+    valid: its torque, speeds, ratio and output power do not depend on the map.
     """
     faults = []
     p = _speed(streams, v1.CH_PRIMARY, t0_us, t1_us)
@@ -73,6 +80,7 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     rail = np.isin(codes, ADC_RAILS)
     good = codes[~err & ~rail]
     point = {
+        "throttle_frac": float(throttle_frac),
         "t_start_us": int(t0_us), "t_end_us": int(t1_us), "duration_s": (t1_us - t0_us) / 1e6,
         "rpm_primary": p["rpm"], "rpm_primary_std": p["std"], "rpm_primary_sem": p["sem"],
         "n_primary_edges": p["n_edges"],
@@ -107,13 +115,19 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     rp, rs = point["rpm_primary"], point["rpm_secondary"]
     point["ratio"] = rp / rs if rs and rs > 0 and not math.isnan(rp) else math.nan
     point.update(power_out_w=math.nan, power_in_w=math.nan, efficiency=math.nan, efficiency_sem=math.nan,
-                 efficiency_ci95=math.nan)
+                 efficiency_ci95=math.nan, efficiency_reason=None)
     if not any(math.isnan(x) for x in (rp, rs, torque)):
         point["power_out_w"] = torque * rs * 2 * math.pi / 60
         try:
+            curve = engine_map.at_throttle(throttle_frac) if hasattr(engine_map, "at_throttle") else engine_map
             eff = point_efficiency(rp, _nz(p["sem"]), rs, _nz(s["sem"]), torque, _nz(point["torque_secondary_sem_nm"]),
-                                   engine_map)
+                                   curve)
+        except NoThrottleCurve as exc:
+            # Not a fault of the measurement: only the denominator is missing (a warning keeps the point).
+            point["efficiency_reason"] = str(exc)
+            faults.append({"channel": "efficiency", "reason": str(exc), "severity": "warning"})
         except OutOfMapRange as exc:
+            point["efficiency_reason"] = f"engine speed outside the engine map: {exc}"
             faults.append({"channel": "primary", "reason": f"engine speed outside the engine map: {exc}"})
         else:
             point.update(power_out_w=eff["power_out_w"], power_in_w=eff["power_in_w"],

@@ -60,7 +60,7 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
 
     ep = ep or getattr(ctrl, "engagement_plan", None) or EngagementPlan()
     ctrl._enter(State.WARMUP, "idle, brake released: the secondary must be at rest")
-    ctrl.act.throttle(0.0)
+    ctrl.set_throttle(0.0)
     await ctrl._sleep(ep.idle_s)
     if ctrl.poller.rpm(v1.CH_SECONDARY) > 0:
         ctrl.abort("error", f"engagement: the secondary turns at idle ({ctrl.poller.rpm(v1.CH_PRIMARY):.0f} rpm "
@@ -85,7 +85,7 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
                                                          [r["shift_out_rpm_true"] for r in rows])
     res.update(predicted_from_tune(ctrl, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
                                    or [res.get("shift_out_torque_nm", math.nan)]))
-    ctrl.act.throttle(0.0)
+    ctrl.set_throttle(0.0)
     res["test_time_s"] = ctrl._now() - ctrl.go_s
     ctrl._set_results(res, hooks=False)
     ctrl._enter(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
@@ -106,7 +106,7 @@ async def _ramp(ctrl, ep: EngagementPlan):
     while True:
         el = ctrl._now() - t0_host
         u = min(ep.throttle_max, ep.throttle_rate_per_s * el)
-        ctrl.act.throttle(u)
+        ctrl.set_throttle(u, log=False)
         await ctrl._sleep(0.1)
         r = _live_ratio(ctrl)
         recent.append((ctrl._now(), r))
@@ -170,7 +170,7 @@ async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
                                      "no heavier load")
             break
         ctrl._enter(State.STEP, f"shift-out flatness: brake preset {apply_s:g} s, back to idle")
-        ctrl.act.throttle(0.0)
+        ctrl.set_throttle(0.0)
         ctrl.act.brake(RELEASE)
         try:
             await ctrl._sleep(ep.release_s)
@@ -194,7 +194,7 @@ async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
         row.update(brake_apply_s=apply_s, ramp_ended=ended, curve=r.get("curve"))
         rows.append(row)
         last_eng = r.get("engagement_rpm", math.nan)
-    ctrl.act.throttle(0.0)
+    ctrl.set_throttle(0.0)
     return rows
 
 

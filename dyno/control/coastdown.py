@@ -64,12 +64,12 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     inertia_unc = getattr(driven, "inertia_rel_unc", None) or cp.inertia_rel_unc
     beyond = getattr(driven, "inertia_beyond_gauge_kg_m2", None) or cp.inertia_beyond_gauge_kg_m2
     ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
-    ctrl.act.throttle(0.0)
+    ctrl.set_throttle(0.0)
     d0 = ctrl.poller.device_now_us()
     await ctrl._sleep(cp.zero_s)
     zero_before = _zero(ctrl, d0 + 500_000, ctrl.poller.device_now_us())
     ctrl._enter(State.STEP, "full throttle, brake released: spin up to full shift")
-    ctrl.act.throttle(1.0)
+    ctrl.set_throttle(1.0)
     await ctrl._sleep(cp.spin_up_s)
     rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
     ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")

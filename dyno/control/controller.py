@@ -20,11 +20,11 @@ import enum
 import math
 from dataclasses import dataclass, field
 
-from dyno.analysis.points import reduce_point
-from dyno.analysis.stopping import STOP_QUANTILE, stop_uncertainty
+from dyno.analysis.stopping import STOP_QUANTILE
 from dyno.control.outputs import APPLY, STOP
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
-from dyno.control.steady import SettleCriteria, is_settled
+from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
+from dyno.control.steady import SettleCriteria
 from dyno.protocol import v1
 
 
@@ -94,12 +94,11 @@ class TestPlan:
 
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
 _ENGINE_STATES = _LOADED_STATES | {State.ARMED}
-MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most this often
 
 __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 
 
-class TestController:
+class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
                  on_wait_engine=None) -> None:
@@ -140,6 +139,9 @@ class TestController:
         self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
+        # The throttle as last commanded (the Actuators interface has no read-back): every point records
+        # it (``throttle_frac``) and takes its efficiency from the engine map's curve at that throttle.
+        self.throttle_frac = 0.0
         poller.listeners.append(self._on_poll)
 
     # --- commands (from the UI / CLI) ------------------------------------------------------
@@ -155,6 +157,14 @@ class TestController:
         self.paused = False
         self._resume.set()
         self._log("resume")
+
+    def set_throttle(self, fraction: float, *, log: bool = True) -> None:
+        """Command the throttle (0 idle .. 1 full) and remember it for the points (logged as ``throttle``
+        unless ``log`` is False: a ramp's every tick)."""
+        self.act.throttle(fraction)
+        self.throttle_frac = min(1.0, max(0.0, float(fraction)))
+        if log:
+            self._log("throttle", throttle_frac=self.throttle_frac)
 
     def estop(self, source: str = "operator") -> None:
         self.abort("estop", f"E-stop ({source})")
@@ -281,6 +291,7 @@ class TestController:
     async def _plan(self) -> None:
         p = self.plan
         self.act.safe_state()
+        self.throttle_frac = 0.0
         self._enter(State.WAIT_ENGINE, f"start the engine (primary > {p.engine_running_rpm:.0f} rpm)")
         self.act.engine_kill(False)
         if self.on_wait_engine:
@@ -313,7 +324,7 @@ class TestController:
             await runner_for(p.mode)(self)
             return
         self._enter(State.WARMUP, "full throttle, no brake")
-        self.act.throttle(1.0)
+        self.set_throttle(1.0)
         await self._sleep(p.warmup_s)
         if p.mode != "step":
             from dyno.control.plans import runner_for
@@ -351,149 +362,6 @@ class TestController:
             if len(self.points) >= p.max_points:
                 self._enter(State.DONE, f"{p.max_points} points")
                 return
-
-    async def _measure(self, give_up=None) -> tuple[dict, float, float]:
-        """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
-        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).  ``give_up``
-        (a callable, checked each second) ends a window that cannot become a point early: the point
-        comes back with ``gave_up`` set (a closed-loop plan's drifting speed).
-
-        Returns the reduced point and the window's host start and end times.
-        """
-        p = self.plan
-        await self._warm_up_at_load()
-        for attempt in range(MAX_REMEASURE + 1):
-            self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
-            host_t0, dev_t0 = self._now(), self.poller.device_now_us()
-            await self._sleep(p.measure_s)
-            while True:
-                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
-                point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
-                                     index=len(self.points))
-                # Against the error's upper bound, not the estimate: few batches must not stop a window
-                # on a luckily small estimate (dyno/analysis/stopping.py).
-                ci = p.target_efficiency_ci95 is not None
-                bound = stop_uncertainty(point, ci95=ci, quantile=p.stop_quantile)
-                unsure = bound > (p.target_efficiency_ci95 if ci else p.target_efficiency_sem)
-                remaining_s = p.max_measure_s - (host_t1 - host_t0)
-                if unsure and give_up is not None and give_up():
-                    point["gave_up"] = True
-                    break
-                if not unsure or remaining_s < 0.05:
-                    break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
-                await self._sleep(min(1.0, remaining_s))
-            # Let the poller look once more: a loss or reset at the window's end is reported late.
-            await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
-            disturbed = self.poller.disturbances_between(host_t0, self._now())
-            if not await self._sensors_alive():
-                disturbed.append({"detail": "a Hall channel went silent at the window's end"})
-            if not disturbed:
-                break
-            why = "; ".join(d["detail"] for d in disturbed)
-            entry = {"index": len(self.points), "host_t_start_s": host_t0, "host_t_end_s": host_t1,
-                     "reason": why, "attempt": attempt + 1}
-            self.discards.append(entry)
-            self._log("discard", **entry)
-            for fn in self.listeners:
-                fn(self)
-            if attempt == MAX_REMEASURE:
-                point["valid"] = False
-                point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
-        return point, host_t0, host_t1
-
-    def _set_results(self, results: dict, *, hooks: bool = True) -> None:
-        for hook in self.result_hooks if hooks else ():
-            hook(results)
-        self.results = results
-        self._log("characterisation", **results)
-
-    async def _warm_up_at_load(self) -> None:
-        """Before the first point: the plan's time at load (``warmup_at_load_s``), waited out if short."""
-        need = self.plan.warmup_at_load_s
-        if self.warmup is not None or need <= 0:
-            return
-        if self.load_since_s is None:
-            self.load_since_s = self.rig_now()
-        left = need - (self.rig_now() - self.load_since_s)
-        if left > 0:
-            self._log("warmup_wait", wait_s=left)
-            await self.rig_sleep(left)
-        self.warmup = {"criterion": "time at load", "required_s": need,
-                       "at_load_s": self.rig_now() - self.load_since_s}
-        self._log("warmup", **self.warmup)
-
-    def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
-        point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)
-        for hook in self.point_hooks:
-            hook(point, host_t0, host_t1)
-        self.points.append(point)
-        self._log("point", **point)
-        for fn in self.listeners:
-            fn(self)
-
-    def _channel_quiet_s(self, channel: int) -> float:
-        e = self.poller.streams.edges[channel]
-        now = self.poller.device_now_us()
-        return math.inf if not e or now is None else (now - e[-1]) * 1e-6
-
-    async def _sensors_alive(self) -> bool:
-        """Both Hall channels still ticking; if not, give the safety monitor time to judge.
-
-        A shaft cannot stop between two edges at test speeds, so a silent channel is
-        a dead sensor (the monitor aborts) or a stall (it aborts too); either way the
-        window is not averaged into a point.
-        """
-        lim = self.limits
-        for ch in (v1.CH_PRIMARY, v1.CH_SECONDARY):
-            if self._channel_quiet_s(ch) > 0.1:
-                await self._sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)
-                return False
-        return True
-
-    async def _secondary_below(self, rpm_min: float) -> bool:
-        """The secondary really turns slower than ``rpm_min`` (measured by its edges, not a silent sensor)."""
-        rs = self.poller.rpm(v1.CH_SECONDARY)
-        if rs >= rpm_min:
-            return False
-        if rs == 0.0 and self._channel_quiet_s(v1.CH_SECONDARY) < 2.0:
-            # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
-            # within secondary_quiet_s; never read it as "the test has reached its end".
-            await self._sleep(self.limits.secondary_quiet_s + 0.1)
-            rs = self.poller.rpm(v1.CH_SECONDARY)
-        return rs < rpm_min
-
-    def _adapt_step(self, rs_before: float, rs_after: float) -> None:
-        """Aim at ~target_points over the range: lengthen short steps, shorten long ones."""
-        p = self.plan
-        if math.isnan(rs_before) or math.isnan(rs_after):
-            return
-        want = p.expected_secondary_span_rpm / p.target_points
-        got = rs_before - rs_after
-        if got < 0.5 * want:
-            self._step_s = min(p.step_max_s, self._step_s * 1.5)
-        elif got > 1.5 * want:
-            self._step_s = max(p.step_min_s, self._step_s * 0.6)
-
-    async def _settle(self) -> tuple[str, float]:
-        p, c = self.plan, self.plan.settle
-        t0 = self._now()
-        if p.settle_mode == "fixed":
-            await self._sleep(c.fixed_settle_s)
-            return "fixed", c.fixed_settle_s
-        await self._sleep(c.min_settle_s)
-        while True:
-            now_dev = self.poller.device_now_us()
-            if now_dev is not None and self._now() - t0 >= c.window_s:
-                ok, _ = is_settled(self.poller.streams, now_dev, self.calibration.slope_counts_per_nm,
-                                   self.calibration.intercept_counts, c)
-                if ok:
-                    return "detected", self._now() - t0
-            if self._now() - t0 >= c.max_settle_s:
-                return "timeout", self._now() - t0
-            if (self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and self._now() - t0 > c.min_settle_s + 1
-                    and await self._secondary_below(p.min_secondary_rpm)):
-                return "below_min", self._now() - t0
-            await self._sleep(0.1)
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:

@@ -157,7 +157,7 @@ async def _run_step(ctrl, st: dict) -> None:
     if kind == "wait":
         await ctrl.rig_sleep(st["s"])
     elif kind == "throttle":
-        ctrl.act.throttle(st["fraction"])
+        ctrl.set_throttle(st["fraction"])
         await ctrl.rig_sleep(0.05)
     elif kind == "brake":
         ctrl.act.brake(APPLY if st["direction"] == "apply" else RELEASE)
@@ -316,7 +316,7 @@ async def _ramp_step(ctrl, st: dict) -> None:
                 target["rpm"] = a + rate * (ctrl.rig_now() - t_start)
             h1, d1 = ctrl._now(), ctrl.poller.device_now_us()
             point = reduce_point(ctrl.poller.streams, d0, d1, ctrl.calibration, ctrl.engine_map,
-                                 index=len(ctrl.points))
+                                 index=len(ctrl.points), throttle_frac=ctrl.throttle_frac)
             point = correct_inertia(point, ctrl.poller.streams, ctrl.engine_map, j_e, j_s)
             point.update(settled_by="ramp", settle_s=0.0, setpoint=target["rpm"], hold_variable=variable,
                          ramp_rate_rpm_s=rate)

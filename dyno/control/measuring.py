@@ -1,0 +1,165 @@
+"""The controller's measurement: a steady window to a point, the warm-up criterion, settling.
+
+A mixin of :class:`dyno.control.controller.TestController` (split from it along this seam: the
+state table and safety there, how a window becomes a recorded point here).  Every plan runner
+measures through :meth:`Measuring._measure` and records through :meth:`Measuring._record_point`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from dyno.analysis.points import reduce_point
+from dyno.analysis.stopping import stop_uncertainty
+from dyno.control.steady import is_settled
+from dyno.protocol import v1
+
+MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most this often
+
+
+class Measuring:
+    """Measurement methods of the TestController (they use its poller, plan, clock and log)."""
+    async def _measure(self, give_up=None) -> tuple[dict, float, float]:
+        """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
+        disturbance touched is discarded and measured again (at most MAX_REMEASURE times).  ``give_up``
+        (a callable, checked each second) ends a window that cannot become a point early: the point
+        comes back with ``gave_up`` set (a closed-loop plan's drifting speed).
+
+        Returns the reduced point and the window's host start and end times.
+        """
+        from dyno.control.controller import State
+
+        p = self.plan
+        await self._warm_up_at_load()
+        for attempt in range(MAX_REMEASURE + 1):
+            self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
+            host_t0, dev_t0 = self._now(), self.poller.device_now_us()
+            await self._sleep(p.measure_s)
+            while True:
+                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
+                point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
+                                     index=len(self.points), throttle_frac=self.throttle_frac)
+                # Against the error's upper bound, not the estimate: few batches must not stop a window
+                # on a luckily small estimate (dyno/analysis/stopping.py).
+                ci = p.target_efficiency_ci95 is not None
+                bound = stop_uncertainty(point, ci95=ci, quantile=p.stop_quantile)
+                unsure = bound > (p.target_efficiency_ci95 if ci else p.target_efficiency_sem)
+                remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                if unsure and give_up is not None and give_up():
+                    point["gave_up"] = True
+                    break
+                if not unsure or remaining_s < 0.05:
+                    break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
+                await self._sleep(min(1.0, remaining_s))
+            # Let the poller look once more: a loss or reset at the window's end is reported late.
+            await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
+            disturbed = self.poller.disturbances_between(host_t0, self._now())
+            if not await self._sensors_alive():
+                disturbed.append({"detail": "a Hall channel went silent at the window's end"})
+            if not disturbed:
+                break
+            why = "; ".join(d["detail"] for d in disturbed)
+            entry = {"index": len(self.points), "host_t_start_s": host_t0, "host_t_end_s": host_t1,
+                     "reason": why, "attempt": attempt + 1}
+            self.discards.append(entry)
+            self._log("discard", **entry)
+            for fn in self.listeners:
+                fn(self)
+            if attempt == MAX_REMEASURE:
+                point["valid"] = False
+                point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
+        return point, host_t0, host_t1
+
+    def _set_results(self, results: dict, *, hooks: bool = True) -> None:
+        for hook in self.result_hooks if hooks else ():
+            hook(results)
+        self.results = results
+        self._log("characterisation", **results)
+
+    async def _warm_up_at_load(self) -> None:
+        """Before the first point: the plan's time at load (``warmup_at_load_s``), waited out if short."""
+        need = self.plan.warmup_at_load_s
+        if self.warmup is not None or need <= 0:
+            return
+        if self.load_since_s is None:
+            self.load_since_s = self.rig_now()
+        left = need - (self.rig_now() - self.load_since_s)
+        if left > 0:
+            self._log("warmup_wait", wait_s=left)
+            await self.rig_sleep(left)
+        self.warmup = {"criterion": "time at load", "required_s": need,
+                       "at_load_s": self.rig_now() - self.load_since_s}
+        self._log("warmup", **self.warmup)
+
+    def _record_point(self, point: dict, host_t0: float, host_t1: float) -> None:
+        point.update(host_t_start_s=host_t0, host_t_end_s=host_t1)
+        for hook in self.point_hooks:
+            hook(point, host_t0, host_t1)
+        self.points.append(point)
+        self._log("point", **point)
+        for fn in self.listeners:
+            fn(self)
+
+    def _channel_quiet_s(self, channel: int) -> float:
+        e = self.poller.streams.edges[channel]
+        now = self.poller.device_now_us()
+        return math.inf if not e or now is None else (now - e[-1]) * 1e-6
+
+    async def _sensors_alive(self) -> bool:
+        """Both Hall channels still ticking; if not, give the safety monitor time to judge.
+
+        A shaft cannot stop between two edges at test speeds, so a silent channel is
+        a dead sensor (the monitor aborts) or a stall (it aborts too); either way the
+        window is not averaged into a point.
+        """
+        lim = self.limits
+        for ch in (v1.CH_PRIMARY, v1.CH_SECONDARY):
+            if self._channel_quiet_s(ch) > 0.1:
+                await self._sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)
+                return False
+        return True
+
+    async def _secondary_below(self, rpm_min: float) -> bool:
+        """The secondary really turns slower than ``rpm_min`` (measured by its edges, not a silent sensor)."""
+        rs = self.poller.rpm(v1.CH_SECONDARY)
+        if rs >= rpm_min:
+            return False
+        if rs == 0.0 and self._channel_quiet_s(v1.CH_SECONDARY) < 2.0:
+            # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
+            # within secondary_quiet_s; never read it as "the test has reached its end".
+            await self._sleep(self.limits.secondary_quiet_s + 0.1)
+            rs = self.poller.rpm(v1.CH_SECONDARY)
+        return rs < rpm_min
+
+    def _adapt_step(self, rs_before: float, rs_after: float) -> None:
+        """Aim at ~target_points over the range: lengthen short steps, shorten long ones."""
+        p = self.plan
+        if math.isnan(rs_before) or math.isnan(rs_after):
+            return
+        want = p.expected_secondary_span_rpm / p.target_points
+        got = rs_before - rs_after
+        if got < 0.5 * want:
+            self._step_s = min(p.step_max_s, self._step_s * 1.5)
+        elif got > 1.5 * want:
+            self._step_s = max(p.step_min_s, self._step_s * 0.6)
+
+    async def _settle(self) -> tuple[str, float]:
+        p, c = self.plan, self.plan.settle
+        t0 = self._now()
+        if p.settle_mode == "fixed":
+            await self._sleep(c.fixed_settle_s)
+            return "fixed", c.fixed_settle_s
+        await self._sleep(c.min_settle_s)
+        while True:
+            now_dev = self.poller.device_now_us()
+            if now_dev is not None and self._now() - t0 >= c.window_s:
+                ok, _ = is_settled(self.poller.streams, now_dev, self.calibration.slope_counts_per_nm,
+                                   self.calibration.intercept_counts, c)
+                if ok:
+                    return "detected", self._now() - t0
+            if self._now() - t0 >= c.max_settle_s:
+                return "timeout", self._now() - t0
+            if (self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and self._now() - t0 > c.min_settle_s + 1
+                    and await self._secondary_below(p.min_secondary_rpm)):
+                return "below_min", self._now() - t0
+            await self._sleep(0.1)
