@@ -68,7 +68,12 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
             p["withheld_by_import"] = True
         points.append(p)
     plan_path = run.path / "plan.toml"
-    return {"run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
+    extra = {}
+    if run.docs("grid_cell"):  # a drive grid: its table from the re-processed points (dyno.analysis.drive_grid)
+        from dyno.analysis.drive_grid import grid_table
+
+        extra["drive_grid"] = grid_table(run.docs("grid_cell"), points)
+    return {**extra, "run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
             "plan": run.meta.get("plan"), "plan_text": plan_path.read_text() if plan_path.is_file() else None,
             "aborts": run.docs("abort"), "meta": run.meta, "calibration": calibration.to_dict(),
             "engine_map": str(engine_map.source)}

@@ -34,7 +34,8 @@ TOP_KEYS = {"schema", "name", "description", "mode", "test", "step"}
 #: TestPlan fields a file may not set ([test] is for measurement settings; these come from elsewhere)
 _NOT_IN_TEST = {"mode", "name", "params", "steps", "settle", "source", "text"}
 #: a mode's parameter table, checked against these dataclasses' fields (other modes: passed through)
-PARAM_SCHEMAS = {"speed-hold": "dyno.control.speed_hold:SpeedHoldPlan"}
+PARAM_SCHEMAS = {"speed-hold": "dyno.control.speed_hold:SpeedHoldPlan",
+                 "drive-grid": "dyno.control.drive_grid:DriveGridPlan"}
 
 
 def shipped_plans() -> dict[str, Path]:
@@ -106,7 +107,9 @@ def plan_from_dict(data: dict, path="plan", *, text: str = "") -> TestPlan:
         import importlib
 
         mod, _, cls = PARAM_SCHEMAS[mode].partition(":")
-        dataclasses.asdict(_dataclass_from(getattr(importlib.import_module(mod), cls), params, table_key, err))
+        obj = _dataclass_from(getattr(importlib.import_module(mod), cls), params, table_key, err)
+        if hasattr(obj, "check"):  # the mode's own checks beyond the types
+            obj.check(lambda field, expected: err(f"{table_key}.{field}", expected))
     steps = ()
     if mode == "steps":
         from dyno.control.steps import validate_steps
@@ -132,6 +135,11 @@ def _typed(value, default, field: str, err):
         if field.endswith("settle_mode") and value not in ("detect", "fixed"):
             raise err(field, f'"detect" or "fixed", got {value!r}')
         return value
+    if isinstance(default, tuple):  # a list of numbers (e.g. [drive_grid] throttles)
+        if (not isinstance(value, list) or not value or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0 for v in value)):
+            raise err(field, f"a non-empty list of finite numbers >= 0, got {value!r}")
+        return tuple(float(v) for v in value)
     if isinstance(default, int) or isinstance(default, float) or default is None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise err(field, f"a number, got {value!r}")

@@ -25,6 +25,7 @@ RUNNERS: dict[str, object] = {
     "steps": "dyno.control.steps:run_steps",
     "engagement": "dyno.control.characterise:run_engagement",
     "coast-down": "dyno.control.coastdown:run_coast_down",
+    "drive-grid": "dyno.control.drive_grid:run_drive_grid",
 }
 
 #: modes whose runner starts from idle (GO, then no full-throttle warm-up): the characterisations

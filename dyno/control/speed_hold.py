@@ -245,56 +245,68 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
         for sp in setpoints:
             if secondary_rpm(ctrl, hold.g.speed_window_s) < sp * (1.0 - sh.unholdable_rel) and sp != setpoints[-1]:
                 continue  # already below it (the CVT jumped past): next setpoint
-            target["rpm"] = sp
-            ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
-            t0 = ctrl.rig_now()
-            ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
-            in_band_since = None
-            settled_by = "held"
-            while True:
-                await ctrl.rig_sleep(0.05)
-                if loop_task.done():
-                    loop_task.result()  # re-raise: the control task failed
-                rpm = secondary_rpm(ctrl, hold.g.speed_window_s)
-                if abs(rpm - sp) <= sh.tolerance_rel * sp:
-                    in_band_since = in_band_since if in_band_since is not None else ctrl.rig_now()
-                    if ctrl.rig_now() - in_band_since >= sh.in_band_s:
-                        break
-                else:
-                    in_band_since = None
-                if ctrl.rig_now() - t0 > sh.max_approach_s:
-                    settled_by = "timeout"
-                    break
-            settle_s = ctrl.rig_now() - t0
-            if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
-                ctrl._log("skip", reason=f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after "
-                                         f"{settle_s:.1f} s): the CVT's shift region")
-                continue
-            # Measure with the brake where the hold put it: corrections during the window would
-            # move the torque and the shift under the average (measured: CI 4-10x wider).
-            target["frozen"] = True
-            try:
-                point, host_t0, host_t1 = await ctrl._measure(
-                    give_up=lambda: not abs(secondary_rpm(ctrl, 0.5) - sp) <= sh.drift_rel * sp)
-            finally:
-                target["frozen"] = False
-            point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
-            if point.get("gave_up") or not abs(point["rpm_secondary"] - sp) <= sh.drift_rel * sp:
-                # The frozen brake let the CVT shift under the window (its hysteresis): the average
-                # is of a transient, not a steady point; the truth check showed errors of 3 pp.
-                ctrl._log("skip", reason=f"secondary drifted to {point['rpm_secondary']:.0f} rpm while "
-                                         f"measuring at {sp:.0f} rpm: not a steady point")
-                continue
-            if point["torque_secondary_nm"] >= p.min_point_torque_nm:
-                ctrl._record_point(point, host_t0, host_t1)
-            else:
-                ctrl._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
-                                         f"{p.min_point_torque_nm} N m at {sp:.0f} rpm")
+            await hold_point(ctrl, sp, sh, target, loop_task, hold.g.speed_window_s)
         ctrl._enter(State.DONE, f"speed hold: {len(setpoints)} setpoints")
     finally:
         loop_task.cancel()
         await asyncio.gather(loop_task, return_exceptions=True)
         ctrl.act.brake(STOP)
+
+
+async def hold_point(ctrl, sp: float, sh: SpeedHoldPlan, target: dict, loop_task, window_s: float,
+                     unholdable_why: str = "the CVT's shift region", **skip_fields) -> tuple[dict | None, str | None]:
+    """Hold the secondary at ``sp`` (``loop_task`` runs :func:`_hold_loop` on ``target``), then measure with
+    the brake frozen and record the point.  Returns (the point, None), or (None, why) when there is no point
+    at ``sp``: the why is logged as a ``skip`` document (with ``skip_fields``)."""
+    from dyno.control.controller import State
+
+    p = ctrl.plan
+
+    def skip(reason: str) -> tuple[None, str]:
+        ctrl._log("skip", reason=reason, **skip_fields)
+        return None, reason
+
+    target["rpm"] = sp
+    ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
+    t0 = ctrl.rig_now()
+    ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
+    in_band_since = None
+    settled_by = "held"
+    while True:
+        await ctrl.rig_sleep(0.05)
+        if loop_task.done():
+            loop_task.result()  # re-raise: the control task failed
+        rpm = secondary_rpm(ctrl, window_s)
+        if abs(rpm - sp) <= sh.tolerance_rel * sp:
+            in_band_since = in_band_since if in_band_since is not None else ctrl.rig_now()
+            if ctrl.rig_now() - in_band_since >= sh.in_band_s:
+                break
+        else:
+            in_band_since = None
+        if ctrl.rig_now() - t0 > sh.max_approach_s:
+            settled_by = "timeout"
+            break
+    settle_s = ctrl.rig_now() - t0
+    if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
+        return skip(f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after {settle_s:.1f} s): {unholdable_why}")
+    # Measure with the brake where the hold put it: corrections during the window would
+    # move the torque and the shift under the average (measured: CI 4-10x wider).
+    target["frozen"] = True
+    try:
+        point, host_t0, host_t1 = await ctrl._measure(
+            give_up=lambda: not abs(secondary_rpm(ctrl, 0.5) - sp) <= sh.drift_rel * sp)
+    finally:
+        target["frozen"] = False
+    point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
+    if point.get("gave_up") or not abs(point["rpm_secondary"] - sp) <= sh.drift_rel * sp:
+        # The frozen brake let the CVT shift under the window (its hysteresis): the average
+        # is of a transient, not a steady point; the truth check showed errors of 3 pp.
+        return skip(f"secondary drifted to {point['rpm_secondary']:.0f} rpm while measuring at {sp:.0f} rpm: "
+                    "not a steady point")
+    if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
+        return skip(f"torque {point['torque_secondary_nm']:.2f} N m below {p.min_point_torque_nm} N m at {sp:.0f} rpm")
+    ctrl._record_point(point, host_t0, host_t1)
+    return point, None
 
 
 def speed_hold_plan_of(plan) -> SpeedHoldPlan:
