@@ -46,7 +46,8 @@ def run(args) -> int:
             return out
 
         docs = [{"run_dir": r["run_dir"], "points": [pub(p) for p in r["points"]],
-                 "stop": r["stop"], "aborts": r["aborts"], "torn": r["torn"]} for r in results]
+                 "stop": r["stop"], "aborts": r["aborts"], "torn": r["torn"],
+                 **({"drive_grid": r["drive_grid"]} if "drive_grid" in r else {})} for r in results]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1, default=str))
         return 0
     from dyno.cli.run_cmd import _print_table

@@ -41,7 +41,8 @@ def add_arguments(p) -> None:
                    help="a shipped plan (speed-hold: closed-loop secondary-speed setpoints, each point to a 95 %% "
                         "CI of +-1 pp, the default; thesis-step: the thesis's open-loop brake steps; sweep; "
                         "torque-hold; engine-hold; engagement: throttle ramps -> engagement, lock-up, shift-out "
-                        "(vs load), full-shift ratio; coast-down: the driven side's parasitic loss; ...) or a plan "
+                        "(vs load), full-shift ratio; coast-down: the driven side's parasitic loss; drive-grid: throttle x "
+                        "secondary-speed grid, with a part-throttle --engine-map; ...) or a plan "
                         "file (a path ending in .toml; docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",

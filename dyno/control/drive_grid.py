@@ -126,6 +126,7 @@ async def run_drive_grid(ctrl) -> None:
             loop_task.cancel()
             await asyncio.gather(loop_task, return_exceptions=True)
             ctrl.act.brake(STOP)
-    ctrl._set_results({"drive_grid": grid_table(cells, ctrl.points)})
+    # (not _set_results: the grid is no characterisation document; the grid_cell documents are its record)
+    ctrl.results = {"drive_grid": grid_table(cells, ctrl.points)}
     ctrl._enter(State.DONE, f"drive grid: {len(g.throttles)} throttles x {len(setpoints)} speeds, "
                             f"{sum(c['index'] is not None for c in cells)} points")

@@ -61,7 +61,8 @@ def exclusion_reason(p: dict) -> str | None:
         return f"invalid{': ' + why if why else ''}"
     for key in ("rpm_primary", "rpm_secondary", "torque_secondary_nm", "efficiency"):
         if not _finite(p.get(key)):
-            return f"no {key.replace('_', ' ')}"
+            why = p.get("efficiency_reason") if key == "efficiency" else None  # e.g. no curve at its throttle
+            return f"no {key.replace('_', ' ')}{': ' + why if why else ''}"
     if not 0.0 <= p["efficiency"] <= 1.0:
         return f"implausible efficiency {100 * p['efficiency']:.1f} % (outside 0..100 %)"
     return None
@@ -286,6 +287,8 @@ def render_report(data: ReportData) -> str:
         ("<h2>Characterisation</h2>" + sections.characterisation(data.docs("characterisation")))
         if data.docs("characterisation") else "",
         ("<h2>Torque zero</h2>" + sections.torque_zero(data.docs("torque_zero"))) if data.docs("torque_zero") else "",
+        ('<h2 id="drive-grid">Drive grid</h2>' + sections.drive_grid(data.docs("grid_cell"), data.docs("point")))
+        if data.docs("grid_cell") else "",
         *([] if characterisation_only else [
             "<h2>Efficiency</h2>",
             _img(figures.efficiency_svg(series["efficiency"]), "efficiency vs secondary speed", "fig-efficiency"),

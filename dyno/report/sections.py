@@ -1,4 +1,4 @@
-"""Report sections for the characterisation plans, the coast-down and the torque-zero check."""
+"""Report sections for the characterisation plans, the coast-down, the drive grid and the torque-zero check."""
 
 from __future__ import annotations
 
@@ -141,3 +141,31 @@ def torque_zero(docs: list) -> str:
             f"{_f(z.get('drift_nm'), '+.3f')} ± {_f(z.get('drift_ci95_nm'), '.3f')} N·m (limit "
             f"{_f(z.get('drift_max_nm'), 'g')} N·m) — <span class=\"{cls}\">{verdict}</span>"
             f"{'; drift-corrected efficiencies are in the run JSON' if z.get('correct') else ''}.</p>")
+
+
+def drive_grid(cells: list, points: list) -> str:
+    """The drive grid as a table: a row per secondary-speed setpoint, a column per throttle; each cell its
+    efficiency (%) ± the 95 % CI and the systematic 95 %, torque, output power and ratio, or why it has none."""
+    from dyno.analysis.drive_grid import grid_table
+
+    g = grid_table(cells, points)
+    at = {(c["throttle_frac"], c["setpoint_rpm"]): c for c in g["cells"]}
+
+    def cell(c) -> str:
+        if c is None:
+            return "—"
+        if c["index"] is None:
+            return f'<span class="warn">{escape(c["reason"] or "")}</span>'
+        eff = (f"<b>{_f(c['efficiency'], '.1f', 100)} %</b> ± {_f(c['efficiency_ci95'], '.1f', 100)} pp "
+               f"(sys ± {_f(c['efficiency_sys95'], '.1f', 100)} pp)" if c["efficiency"] is not None
+               else f'<span class="warn">efficiency: {escape(c["reason"] or "undefined")}</span>')
+        truth = f"; sim truth {_f(c['efficiency_true'], '.1f', 100)} %" if c.get("efficiency_true") is not None else ""
+        return (f"{eff}{truth}<br>{_f(c['torque_secondary_nm'], '.2f')} N·m, {_f(c['power_out_w'], '.2f', 1e-3)} kW, "
+                f"ratio {_f(c['ratio'], '.3f')}, engine {_f(c['rpm_primary'], '.0f')} rpm (point {c['index']})")
+
+    head = ["secondary setpoint, rpm"] + [f"throttle {100 * u:.0f} %" for u in g["throttles"]]
+    rows = [[_f(sp, ".0f")] + [cell(at.get((u, sp))) for u in g["throttles"]] for sp in g["setpoints_rpm"]]
+    n = sum(c["index"] is not None for c in g["cells"])
+    return (f"<p>{n} of {len(g['cells'])} cells measured; efficiency ± its 95 % CI and (sys) the systematic 95 % "
+            "(torque calibration, engine map); each part-throttle efficiency uses the engine map's curve at that "
+            "throttle.</p>" + _table(head, rows))
