@@ -79,10 +79,10 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
             "engine_map": str(engine_map.source)}
 
 
-CSV_COLUMNS = ("index", "rpm_primary", "rpm_primary_std", "rpm_secondary", "rpm_secondary_std", "ratio",
+CSV_COLUMNS = ("index", "throttle_frac", "rpm_primary", "rpm_primary_std", "rpm_secondary", "rpm_secondary_std", "ratio",
                "torque_secondary_nm", "torque_secondary_std_nm", "power_out_w", "power_in_w", "efficiency",
                "efficiency_sem", "n_primary_edges", "n_secondary_edges", "n_adc", "n_adc_error", "duration_s",
-               "t_start_us", "t_end_us", "settled_by", "valid", "efficiency_true")
+               "t_start_us", "t_end_us", "settled_by", "valid", "efficiency_true", "efficiency_reason")
 
 
 def points_csv(points) -> str:

@@ -25,7 +25,7 @@ import numpy as np
 
 #: point fields exported (numeric) and their units ("" = dimensionless)
 POINT_UNITS = {
-    "index": "", "t_start_us": "us", "t_end_us": "us", "duration_s": "s",
+    "index": "", "throttle_frac": "", "t_start_us": "us", "t_end_us": "us", "duration_s": "s",
     "rpm_primary": "rpm", "rpm_primary_std": "rpm", "rpm_secondary": "rpm", "rpm_secondary_std": "rpm",
     "ratio": "", "torque_secondary_nm": "N·m", "torque_secondary_std_nm": "N·m", "torque_secondary_sem_nm": "N·m",
     "power_out_w": "W", "power_in_w": "W", "efficiency": "", "efficiency_sem": "",
