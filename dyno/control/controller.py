@@ -202,6 +202,7 @@ class TestController(Measuring):
         now = self._now()
         self.act.safe_state()  # first, before any bookkeeping
         safe_s = self._now()
+        self.throttle_frac = 0.0  # (the safe state closed it)
         trigger_s = now if trigger_s is None else trigger_s
         entry = {"cause": cause, "detail": detail, "state": self.state.value, "trigger_s": trigger_s,
                  "safe_state_s": safe_s, "latency_s": safe_s - trigger_s}
