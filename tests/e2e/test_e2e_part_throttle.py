@@ -2,7 +2,7 @@
 throttle (`throttle_frac`); its efficiency comes from the engine map's curve at that throttle, or is null
 with a reason naming the throttle when the map has none (torque, speeds, ratio, output power kept);
 `dyno replay` reproduces the points exactly.  (The bug this guards: part-throttle points divided by the
-FULL-throttle map: 0.35 for a true 0.80 in the governor's band.)"""
+FULL-throttle map: 0.34 for a true 0.80 in the governor's band.)"""
 
 import json
 import os
