@@ -82,7 +82,9 @@ def write_map(out: Path, throttles=DEFAULT_THROTTLES) -> float:
     for u in sorted(throttles, reverse=True):
         rpm, t = curve_knots(eng, u)
         lines += [f"{u:g},{n:.4f},{x:.6f}" for n, x in zip(rpm, t)]
-    out.write_text("\n".join(lines) + "\n")
+    from dyno.fileio import write_atomic
+
+    write_atomic(out, "\n".join(lines) + "\n")  # (a reader never sees half a map)
     host = load_engine_map(out)
     worst = 0.0
     for u in throttles:
