@@ -19,6 +19,7 @@ from textual.containers import Horizontal
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
+from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
 from dyno.ui.live_model import TEST_STATES, discard_text, measure_text, progress_text
@@ -166,12 +167,12 @@ class LiveApp(DynoApp):
         if self.session.manual:
             t.append(" MANUAL", style="bold magenta")
         s = self.session
-        if v.state == "measure":
+        if v.state == "measure" and s.controller.plan.mode not in FROM_IDLE:
             t.append(f"  {measure_text(s.state_elapsed_s(), s.opts.plan)}")
         else:
             t.append(f"  {v.reason}")
         n, total, eta = s.test_progress()
-        prog = progress_text(v.state, n, total, eta)
+        prog = progress_text(v.state, n, total, eta) if s.controller.plan.mode not in FROM_IDLE else ""
         if prog:
             t.append(f"  │ {prog}", style="bold")
         disc = discard_text(s.controller.discards)
