@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -144,11 +145,8 @@ class ResetConfig:
 
 @dataclass(frozen=True)
 class DrivenConfig:
-    """The driven side (secondary to brake rotor), referred to the secondary: for the coast-down."""
+    """The driven side's measured loss (its inertia is ``[inertia]``'s: :attr:`InertiaConfig.driven_kg_m2`)."""
 
-    inertia_kg_m2: float = 0.0251  # secondary pulley + shaft + 32 t gear, and 61 t gear + brake shaft + rotor x g^2
-    inertia_rel_unc: float = 0.03  # its stated relative uncertainty (1 sigma): systematic in the loss
-    inertia_beyond_gauge_kg_m2: float = 0.0121  # the part beyond the torque gauge (brake shaft + rotor x g^2)
     loss_file: str | None = None  # driven_loss.json of a coast-down: added back to efficiency when asked
 
 
@@ -167,10 +165,20 @@ class InertiaConfig:
 
     ``engine_kg_m2``: crank, flywheel and primary pulley (the map's torque minus ``J alpha`` enters the
     CVT).  ``secondary_kg_m2``: secondary pulley, shaft and drive sprocket, the part *upstream* of the
-    torque gauge (the gauge already reads the brake shaft's own inertia torque)."""
+    torque gauge (the gauge already reads the brake shaft's own inertia torque).  ``beyond_gauge_kg_m2``:
+    61 t gear, brake shaft and rotor referred to the secondary (x g^2).  The coast-down decelerates both:
+    :attr:`driven_kg_m2`, with ``driven_rel_unc`` its relative uncertainty (1 sigma).  One source of truth:
+    the old ``[driven]`` inertia keys are mapped here (:func:`_inertia`)."""
 
     engine_kg_m2: float = 0.045
     secondary_kg_m2: float = 0.013
+    beyond_gauge_kg_m2: float = 0.0121
+    driven_rel_unc: float = 0.03
+
+    @property
+    def driven_kg_m2(self) -> float:
+        """The whole driven side referred to the secondary (what the coast-down decelerates)."""
+        return self.secondary_kg_m2 + self.beyond_gauge_kg_m2
 
 
 @dataclass(frozen=True)
@@ -218,6 +226,7 @@ class RigConfig:
     inertia: InertiaConfig = InertiaConfig()
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
+    deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -460,19 +469,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = data.get("driven", {})
     if not isinstance(t, Mapping):
         raise r.err("driven", f"expected a table [driven], got {type(t).__name__}")
-    r.no_extra(t, {"inertia_kg_m2", "inertia_rel_unc", "inertia_beyond_gauge_kg_m2", "loss_file"}, "driven.")
-    dd = DrivenConfig()
-    driven = DrivenConfig(
-        inertia_kg_m2=r.number(t, "inertia_kg_m2", "driven.", lo=1e-4, hi=10.0, required=False,
-                               default=dd.inertia_kg_m2),
-        inertia_rel_unc=r.number(t, "inertia_rel_unc", "driven.", lo=0.0, hi=0.5, required=False,
-                                 default=dd.inertia_rel_unc),
-        inertia_beyond_gauge_kg_m2=r.number(t, "inertia_beyond_gauge_kg_m2", "driven.", lo=0.0, hi=10.0,
-                                            required=False, default=dd.inertia_beyond_gauge_kg_m2),
-        loss_file=r.string(t, "loss_file", "driven.", required=False, default=None),
-    )
-    if driven.inertia_beyond_gauge_kg_m2 > driven.inertia_kg_m2:
-        raise r.err("driven.inertia_beyond_gauge_kg_m2", f"expected <= driven.inertia_kg_m2 ({driven.inertia_kg_m2})")
+    r.no_extra(t, {"loss_file", *DRIVEN_INERTIA_KEYS}, "driven.")
+    driven = DrivenConfig(loss_file=r.string(t, "loss_file", "driven.", required=False, default=None))
     t = data.get("torque_zero", {})
     if not isinstance(t, Mapping):
         raise r.err("torque_zero", f"expected a table [torque_zero], got {type(t).__name__}")
@@ -486,13 +484,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     )
 
     # inertia, control (optional tables; defaults are the thesis rig's, as identified on the sim)
-    t = data.get("inertia", {})
-    if not isinstance(t, Mapping):
-        raise r.err("inertia", f"expected a table [inertia], got {type(t).__name__}")
-    r.no_extra(t, {"engine_kg_m2", "secondary_kg_m2"}, "inertia.")
-    inertia = InertiaConfig(**{k: r.number(t, k, "inertia.", lo=0.0, hi=10.0, required=False,
-                                           default=getattr(InertiaConfig, k))
-                               for k in ("engine_kg_m2", "secondary_kg_m2")})
+    inertia, deprecations = _inertia(r, data)
     t = data.get("control", {})
     if not isinstance(t, Mapping):
         raise r.err("control", f"expected a table [control], got {type(t).__name__}")
@@ -522,8 +514,53 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
-        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero,
+        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero, deprecations=deprecations,
     )
+
+
+#: [driven] keys of older rig files, now in [inertia] (old name -> new name; inertia_kg_m2 is derived)
+DRIVEN_INERTIA_KEYS = {"inertia_beyond_gauge_kg_m2": "beyond_gauge_kg_m2", "inertia_rel_unc": "driven_rel_unc",
+                       "inertia_kg_m2": None}
+
+
+def _inertia(r: "_Reader", data: Mapping) -> tuple[InertiaConfig, tuple]:
+    """``[inertia]``, with the old ``[driven]`` inertia keys mapped onto it (a deprecation line each).
+
+    An old file said the driven side's inertia twice: ``[driven] inertia_kg_m2`` (the whole) beside
+    ``[inertia] secondary_kg_m2`` (its part upstream of the gauge) and ``[driven] inertia_beyond_gauge_kg_m2``
+    (the rest).  The whole is now derived; an old total is kept only if it agrees with the parts, or, when
+    the file does not give ``secondary_kg_m2``, it sets it (total - beyond)."""
+    t = data.get("inertia", {})
+    if not isinstance(t, Mapping):
+        raise r.err("inertia", f"expected a table [inertia], got {type(t).__name__}")
+    names = {"engine_kg_m2": 10.0, "secondary_kg_m2": 10.0, "beyond_gauge_kg_m2": 10.0, "driven_rel_unc": 0.5}
+    r.no_extra(t, set(names), "inertia.")
+    old = data.get("driven", {})
+    vals = {k: r.number(t, k, "inertia.", lo=0.0, hi=hi, required=False, default=getattr(InertiaConfig, k))
+            for k, hi in names.items()}
+    notes = []
+    for key, new in DRIVEN_INERTIA_KEYS.items():
+        if key not in old or new is None:
+            continue
+        v = r.number(old, key, "driven.", lo=0.0, hi=names[new])
+        if new in t and abs(v - vals[new]) > 1e-9 * max(1.0, abs(v)):
+            raise r.err(f"driven.{key}", f"deprecated and different from inertia.{new} ({vals[new]}): keep one")
+        vals[new] = v
+        notes.append(f"[driven] {key} is deprecated: it is [inertia] {new} now (mapped)")
+    if "inertia_kg_m2" in old:
+        total = r.number(old, "inertia_kg_m2", "driven.", lo=1e-4, hi=10.0)
+        parts = vals["secondary_kg_m2"] + vals["beyond_gauge_kg_m2"]
+        if "secondary_kg_m2" not in t and total >= vals["beyond_gauge_kg_m2"]:
+            vals["secondary_kg_m2"] = total - vals["beyond_gauge_kg_m2"]
+            notes.append(f"[driven] inertia_kg_m2 is deprecated: the driven side is [inertia] secondary_kg_m2 + "
+                         f"beyond_gauge_kg_m2 now (secondary_kg_m2 = {vals['secondary_kg_m2']:g} mapped from it)")
+        elif abs(total - parts) <= 0.005 * total:
+            notes.append(f"[driven] inertia_kg_m2 is deprecated: the driven side is [inertia] secondary_kg_m2 + "
+                         f"beyond_gauge_kg_m2 = {parts:g} now (remove it)")
+        else:
+            raise r.err("driven.inertia_kg_m2", f"deprecated and != [inertia] secondary_kg_m2 + beyond_gauge_kg_m2 "
+                                                f"({parts:g}), got {total:g}: remove it, set the parts")
+    return InertiaConfig(**vals), tuple(f"{r.path}: {n}" for n in notes)
 
 
 def resolve_rig_path(path: str | Path | None = None) -> Path:
@@ -546,7 +583,15 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
         raise ConfigError(p, "file", f"unreadable ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(p, "toml", f"not valid TOML ({exc})") from None
-    return rig_from_dict(data, p)
+    rig = rig_from_dict(data, p)
+    for line in rig.deprecations:  # an old key that still loads: one line each, once per process
+        if line not in _WARNED:
+            _WARNED.add(line)
+            print(f"dyno: warning: {line}", file=sys.stderr)
+    return rig
+
+
+_WARNED: set = set()
 
 
 def add_rig_argument(parser: argparse.ArgumentParser) -> None:

@@ -37,11 +37,8 @@ class CoastDownPlan:
     uncoupled_ratio_drop: float = 0.03  # ... or the speed ratio falls this far below its coupled maximum
     max_coast_s: float = 90.0
     min_secondary_rpm: float = 60.0  # below this the periods are too long to difference
-    # Driven-side inertia referred to the secondary (secondary pulley + shaft + gear, brake shaft and
-    # rotor x g^2) and the part beyond the gauge; the rig's values come from rig.toml [driven] when set.
-    inertia_kg_m2: float = 0.0251
-    inertia_rel_unc: float = 0.03
-    inertia_beyond_gauge_kg_m2: float = 0.0121
+    # The driven side's inertia (referred to the secondary) and the part beyond the gauge are the rig's:
+    # rig.toml [inertia] (dyno.rigconfig.InertiaConfig), the controller's ``inertia``.
 
 
 def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
@@ -59,10 +56,10 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     from dyno.control.controller import State
 
     cp = cp or getattr(ctrl, "coast_down_plan", None) or CoastDownPlan()
-    driven = getattr(getattr(ctrl, "rig", None), "driven", None)
-    inertia = getattr(driven, "inertia_kg_m2", None) or cp.inertia_kg_m2
-    inertia_unc = getattr(driven, "inertia_rel_unc", None) or cp.inertia_rel_unc
-    beyond = getattr(driven, "inertia_beyond_gauge_kg_m2", None) or cp.inertia_beyond_gauge_kg_m2
+    from dyno.rigconfig import InertiaConfig
+
+    jc = getattr(ctrl, "inertia", None) or InertiaConfig()
+    inertia, inertia_unc, beyond = jc.driven_kg_m2, jc.driven_rel_unc, jc.beyond_gauge_kg_m2
     ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
     ctrl.act.throttle(0.0)
     d0 = ctrl.poller.device_now_us()

@@ -290,9 +290,10 @@ async def _ramp_step(ctrl, st: dict) -> None:
     b = float(st["to"])
     rate = float(st["rate_rpm_s"]) * (1.0 if b >= a else -1.0)
     point_s = float(st.get("point_s", 1.0))
-    inertia = getattr(ctrl, "inertia", None)
-    j_e = getattr(inertia, "engine_kg_m2", 0.045)
-    j_s = getattr(inertia, "secondary_kg_m2", 0.013)
+    from dyno.rigconfig import InertiaConfig
+
+    inertia = getattr(ctrl, "inertia", None) or InertiaConfig()  # rig.toml [inertia]: the one source
+    j_e, j_s = inertia.engine_kg_m2, inertia.secondary_kg_m2
     target = {"rpm": a}
     task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name=f"ramp-{variable}")
     try:
