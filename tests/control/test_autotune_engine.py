@@ -84,3 +84,33 @@ def test_identified_engine_kp_meets_the_step_figures(tmp_path, seed, stiff):
     assert f["kp"] == pytest.approx(5.9 if stiff else 11.6, rel=0.08), ident
     for step in f["steps"]:
         assert step["settle_s"] <= 2.0 and step["overshoot_pc"] <= 3.0 and step["sd_pc"] <= 0.3, (f["kp"], step)
+
+
+def test_identify_engine_step_as_a_real_process(tmp_path):
+    """A plan file with the engine's identify step, through `dyno run --sim --mock-pins --json`: the identified
+    kp is recorded with the run and used by the engine hold that follows."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    plan = tmp_path / "engine-tune.toml"
+    plan.write_text('schema = "dyno.plan/1"\nname = "engine-tune"\nmode = "steps"\n'
+                    '[test]\nmeasure_s = 2.0\ntarget_efficiency_ci95 = 0.01\nmax_measure_s = 6.0\n'
+                    '[[step]]\nkind = "contact"\n'
+                    '[[step]]\nkind = "hold"\nvariable = "secondary"\nsetpoint = 3000.0\nmeasure = false\n'
+                    '[[step]]\nkind = "identify"\nvariable = "engine"\nsetpoint = 2860.0\nload_raises_speed = true\n'
+                    '[[step]]\nkind = "hold"\nvariable = "engine"\nsetpoint = 2930.0\nload_raises_speed = true\n')
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--mock-pins", "--json", "--plan", str(plan),
+                           "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=180,
+                          cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(root)))
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads(proc.stdout)
+    assert d["state"] == "done" and len(d["points"]) == 1
+    docs = [json.loads(line) for line in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()]
+    (ident,) = [x for x in docs if x["type"] == "identify"]
+    assert ident["ok"] and ident["applied"] and ident["variable"] == "engine"
+    assert ident["kp_identified"] == pytest.approx(11.6, rel=0.08)
+    assert abs(d["points"][0]["rpm_primary"] - 2930.0) <= 0.02 * 2930.0
