@@ -198,8 +198,9 @@ class LiveApp(DynoApp):
         row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
         row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
-        # The map is full throttle: the efficiency means something only while the test holds it there.
-        loaded = v.state in ("warmup", "step", "settle", "measure")
+        # The map is full throttle: the efficiency means something only while the test holds it there
+        # (never in the characterisations: throttle ramps, idle, an engine cut).
+        loaded = v.state in ("warmup", "step", "settle", "measure") and self.session.controller.plan.mode not in FROM_IDLE
         row("effic.", fmt(v.efficiency * 100 if loaded and not math.isnan(v.efficiency) else math.nan, ".1f", " %"))
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")

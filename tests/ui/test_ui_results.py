@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import re
 import time
 
 from dyno.control.characterise import EngagementPlan
@@ -38,7 +39,7 @@ def _stored(run_dir) -> dict:
     return c
 
 
-def _run(tmp_path, plan_name: str, setup=None, timeout_s: float = 90.0):
+def _run(tmp_path, plan_name: str, setup=None, timeout_s: float = 90.0, rearm: bool = False):
     """Run ``plan_name`` in the live app at 8x to its end; returns (screens, results, run_dir)."""
     run_dir = tmp_path / "run"
 
@@ -75,6 +76,16 @@ def _run(tmp_path, plan_name: str, setup=None, timeout_s: float = 90.0):
             await pilot.pause(0.3)
             shots["again"] = screen_text(app)
             results = dict(s.controller.results)
+            if rearm:  # a new run has no results yet: the plot is back
+                first = s.controller
+                await pilot.press("r")
+                await pilot.pause(0.2)
+                await pilot.press("y")
+                assert await wait_for(pilot, lambda: s.controller is not first, 20), screen_text(app)
+                assert await wait_for(pilot, lambda: not app.view_results, 5)
+                await pilot.pause(0.3)
+                shots["rearmed"] = screen_text(app)
+                assert app.query_one("#plot").display and "COAST-DOWN" not in shots["rearmed"]
             await pilot.press("q")
             await pilot.pause(0.5)
         return shots, results
@@ -92,12 +103,13 @@ def _check_layout(shots):
         assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
         if name == "running":
             assert "ETA" not in text and "point 0" not in text and "s.e. ≤" not in text, text
-        else:
+            assert re.search(r"effic\.\s+—", text), text  # no full-throttle efficiency in a characterisation
+        elif name != "rearmed":
             assert "4 results" in lines[-1], name
 
 
 def test_coast_down_results_panel(tmp_path):
-    shots, r, run_dir = _run(tmp_path, "coast-down")
+    shots, r, run_dir = _run(tmp_path, "coast-down", rearm=True)
     _check_layout(shots)
     text = shots["results"]
     co = r["loss_fit"]["coefficients"]
