@@ -63,29 +63,29 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
     ctrl.act.throttle(0.0)
     d0 = ctrl.poller.device_now_us()
-    await ctrl._sleep(cp.zero_s)
+    await ctrl.rig_sleep(cp.zero_s)
     zero_before = _zero(ctrl, d0 + 500_000, ctrl.poller.device_now_us())
     ctrl._enter(State.STEP, "full throttle, brake released: spin up to full shift")
     ctrl.act.throttle(1.0)
-    await ctrl._sleep(cp.spin_up_s)
+    await ctrl.rig_sleep(cp.spin_up_s)
     rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
     ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")
     ctrl.engine_cut = True
     ctrl.act.safe_state()
     t_cut = ctrl.poller.device_now_us()
     t_unc = None
-    t0 = ctrl._now()
+    t0 = ctrl.rig_now()
     ratio_max = 0.0
     from dyno.control.characterise import _live_ratio
 
-    while ctrl._now() - t0 < cp.max_coast_s:
-        await ctrl._sleep(0.1)
+    while ctrl.rig_now() - t0 < cp.max_coast_s:
+        await ctrl.rig_sleep(0.1)
         # Uncoupled: the engine falls away from the secondary (the ratio drops 3 % below the highest
         # it reached while coupled -- the back-shift only raises it), or is below any engagement.
         r = _live_ratio(ctrl)
         if t_unc is None and math.isfinite(r):
             ratio_max = max(ratio_max, r)
-            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl._now() - t0 > 1.0:
+            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl.rig_now() - t0 > 1.0:
                 t_unc = ctrl.poller.device_now_us() + 300_000  # past the live ratio's window
         if t_unc is None and ctrl.poller.rpm(v1.CH_PRIMARY) < cp.uncoupled_primary_rpm:
             t_unc = ctrl.poller.device_now_us()
@@ -93,7 +93,7 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
             break
     t_stop = ctrl.poller.device_now_us()
     ctrl._enter(State.MEASURE, "at rest: torque zero after")
-    await ctrl._sleep(cp.zero_s)
+    await ctrl.rig_sleep(cp.zero_s)
     zero_after = _zero(ctrl, t_stop + 500_000, ctrl.poller.device_now_us())
     res: dict = {"secondary_rpm_at_cut": rs_top, "inertia_kg_m2": inertia,
                  "zero_before_nm": zero_before[0], "zero_after_nm": zero_after[0]}
@@ -118,7 +118,7 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     res.update(split)
     res["unseen_torque_nm"] = (np.asarray(fit["torque_nm"]) - split["seen_nm"]).tolist()
     res["loss_rpm_range"] = [fit["rpm_min"], fit["rpm_max"]]
-    res["test_time_s"] = ctrl._now() - ctrl.go_s
+    res["test_time_s"] = (ctrl._now() - ctrl.go_s) / ctrl.time_scale  # rig seconds
     ctrl._set_results(res)
     _write_loss_file(ctrl, res)
     ctrl._enter(State.DONE, f"coast-down: loss fitted over {fit['rpm_min']:.0f}-{fit['rpm_max']:.0f} rpm")

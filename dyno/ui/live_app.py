@@ -33,6 +33,12 @@ PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
 HELP_ENDED = "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE/ABORTED
 
+# what GO moves, for the plans that do not start at full throttle (the characterisations): (asked, said)
+GO_TEXT = {"engagement": ("From idle the THROTTLE RAMPS up to 90 % through the shift; the brake then steps "
+                          "the load.", "GO: throttle ramp from idle"),
+           "coast-down": ("Throttle goes to FULL with the brake released, then the ENGINE IS CUT and the rig "
+                          "coasts to rest.", "GO: full throttle, then engine cut and coast-down")}
+
 LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
 #state { height: auto; max-height: 5; }  /* an abort's cause wraps, never cut */
@@ -482,14 +488,17 @@ class LiveApp(DynoApp):
             self.say(why)
             return
 
+        plan = self.session.controller.plan
+        what = GO_TEXT.get(plan.mode, ("Throttle goes to FULL and the brake starts stepping.",
+                                       "GO: full throttle, brake stepping"))
+
         def answered(yes: bool | None) -> None:
             if yes:
-                self.say(self.session.go() or "GO: full throttle, brake stepping")
+                self.say(self.session.go() or what[1])
             else:
                 self.say("GO cancelled")
 
-        self.push_screen(ConfirmScreen("Start the test?\nThrottle goes to FULL and the brake starts stepping."),
-                         answered)
+        self.push_screen(ConfirmScreen(f"Start the test?\n{what[0]}"), answered)
 
     def action_rearm(self) -> None:
         """Acknowledge the ended test and arm a new one (new run directory); asks first."""

@@ -126,9 +126,9 @@ def test_coast_down_results_panel(tmp_path):
 
 
 def test_engagement_results_panel(tmp_path):
-    # one faster ramp (no back-shift, no flatness ramps): the panel, not the figures' accuracy, is under test
+    # one ramp (no back-shift, no flatness ramps): the panel, not the plan's length, is under test here
     def short(ctrl):
-        ctrl.engagement_plan = EngagementPlan(back_shift=False, flatness_apply_s=(), throttle_rate_per_s=0.03)
+        ctrl.engagement_plan = EngagementPlan(back_shift=False, flatness_apply_s=())
 
     shots, r, run_dir = _run(tmp_path, "engagement", setup=short)
     _check_layout(shots)
@@ -142,6 +142,12 @@ def test_engagement_results_panel(tmp_path):
         line = next(ln for ln in text.splitlines() if label in ln)
         assert f"{r[key]:{spec}} ± {r[key + '_ci95']:{spec}}" in line and f"{r[key + '_true']:{spec}}" in line
     assert "ENGAGEMENT" not in shots["plot"] and "ENGAGEMENT" in shots["again"]
+    # paced at 8x the plan keeps rig time (as headless: a ~46 s ramp at 0.01/s, 4 s at idle before it); with
+    # host time it ran 8x longer on the rig, and the back-shift's 2 s brake step became 16 s: a stall trip
+    docs = [json.loads(line) for line in (run_dir / "documents.jsonl").read_text().splitlines()]
+    (ramp,) = [d for d in docs if d.get("type") == "ramp"]
+    assert 35.0 < (ramp["t_end_us"] - ramp["t_start_us"]) / 1e6 < 60.0, ramp
+    assert r["test_time_s"] < 80.0, r["test_time_s"]
     report = (run_dir / "report.html").read_text()
     assert 'id="fig-ramps"' in report and f"{r['engagement_rpm']:.0f}" in report
 

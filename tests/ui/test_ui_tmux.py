@@ -243,7 +243,11 @@ def test_ui_tmux_coast_down_shows_its_results(tmp_path):
     _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --plan coast-down --out {run_dir} ; "
                     "echo EXITED=$? ; sleep 30", tmp_path)
     try:
-        _go(session)
+        _wait_screen(session, "ARMED", 60)
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "ENGINE IS CUT", 10)  # the dialog says what this plan moves
+        _tmux("send-keys", "-t", session, "y")
+        _wait_screen(session, "GO: full throttle, then engine cut", 10)
         screen = _wait_screen(session, "COAST-DOWN: driven-side loss", 90)
         assert "DONE" in screen and "T = a + b·ω + c·ω² (ω in rad/s)" in screen and "4 results" in screen
         # the numbers are the run's stored characterisation (written at DONE), formatted
