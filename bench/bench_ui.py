@@ -4,7 +4,8 @@
 Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test] [--quick]
 
 1. CPU (issue 13): the live screen in an 80x24 pseudo-terminal (Textual's real driver, the output read
-   as a terminal would), idle/ARMED and during a test, as % of one core; the simulated rig's own cost
+   as a terminal would), idle/ARMED and during a test, as % of one core, with the simulated bus read on
+   the loop and again as the real rig reads its blocking bus (transfers in the poller's I/O thread); the simulated rig's own cost
    (emulated firmware + physics behind the I2C transport, per-thread CPU time) measured and subtracted:
    what is left is what the real-rig path costs (poller, controller, run log, UI).  The same for the
    session alone (no UI) shows the UI's share.
@@ -175,6 +176,20 @@ def timed(fn):
     return wrapper
 
 
+if mode.endswith("-rigio"):
+    # The real rig's configuration: a blocking bus, transfers in the poller's I/O thread (the sim's
+    # bus serialises its own access with a lock, as the kernel does a real adapter's).
+    from dyno.acquisition import poller as _poller_mod
+
+    _init = _poller_mod.Poller.__init__
+
+    def _init_blocking(self, *a, **k):
+        k["blocking_io"] = True
+        _init(self, *a, **k)
+
+    _poller_mod.Poller.__init__ = _init_blocking
+    mode = mode[: -len("-rigio")]
+
 SimSMBus.i2c_rdwr = timed(SimSMBus.i2c_rdwr)
 SimSMBus.sync = timed(SimSMBus.sync)
 TruthRecorder.__call__ = timed(TruthRecorder.__call__)
@@ -316,9 +331,10 @@ def main() -> None:
         tmp = Path(tmp)
         print(f"CPU, % of one core, simulated rig in real time, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
               "'idle/ARMED' and 'test' are net of the simulated rig (its firmware + physics, shown as 'sim'):")
-        runs: dict = {"bare": [], "ui": []}
+        runs: dict = {"bare": [], "ui": [], "ui-rigio": []}
         for k in range(a.repeat):  # alternated: the shared machine's load drifts
-            for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)")):
+            for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)"),
+                               ("ui-rigio", "live screen, rig bus I/O")):
                 d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "")
                 runs[mode].append(d)
                 print(fmt_cpu(name, d))
@@ -333,6 +349,8 @@ def main() -> None:
                   f"(the UI's own share {med['ui']['armed'] - med['bare']['armed']:.1f} % / "
                   f"{med['ui']['test'] - med['bare']['test']:.1f} %; session alone {med['bare']['armed']:.1f} % / "
                   f"{med['bare']['test']:.1f} %); the simulated rig's own cost, subtracted: {sim:.1f} %")
+            print(f"median of {a.repeat}: dyno ui with the rig's blocking bus I/O (transfers in the poller's I/O "
+                  f"thread) idle/ARMED {med['ui-rigio']['armed']:.1f} %, test {med['ui-rigio']['test']:.1f} %")
         if a.cpu_only:
             return
         print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "

@@ -2,15 +2,31 @@
 
 One task.  Each tick: poll the reader (again at once, a bounded number of
 times, while the device says MORE), append the events to the streams, hand
-them to the listeners (the run log), and every ``temp_period_s`` read the
-rotor thermometer.  Time comes from the running loop, so under
-:class:`dyno.clock.VirtualTimeLoop` the same code runs faster than real time.
+them to the listeners (the run log, the safety check), and every
+``temp_period_s`` read the rotor thermometer.  Time comes from the running
+loop, so under :class:`dyno.clock.VirtualTimeLoop` the same code runs faster
+than real time.
+
+Why the ticks are not ``await asyncio.sleep`` in a loop: at 150 Hz a sleeping
+coroutine costs two loop iterations and a task step per tick, and a blocking
+bus read via ``asyncio.to_thread`` an executor hand-off each way (measured:
+0.7 % and 2.1 % of a core for an empty tick, against 0.3 % for a timer
+callback and 1.0 % for one paced I/O thread; bench/bench_ui.py).  So:
+
+* non-blocking transports (the simulated bus): a timer callback on the loop
+  (``loop.call_at``) polls synchronously; one loop iteration per tick;
+* blocking transports (a real I2C or serial bus): one I/O thread paces the
+  transfers itself and hands each tick's result to the loop with one
+  ``call_soon_threadsafe``; streams, listeners and the safety check still
+  run on the loop, in tick order.  A hung transfer blocks only that thread:
+  the loop's heartbeat sees the link silent (``comms_lost``).
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,20 +89,98 @@ class Poller:
 
     # --- the task ------------------------------------------------------------------
     async def run(self) -> None:
+        """Poll until :meth:`stop`; an exception raised by a tick (a listener's, a reader's) ends it here."""
         loop = asyncio.get_running_loop()
-        self.started_s = next_t = loop.time()
-        last = None
-        while not self._stop.is_set():
+        self._loop = loop
+        self._error: BaseException | None = None
+        self.started_s = self._next_t = loop.time()
+        self._last_tick_s = None
+        if self.blocking_io:
+            io_stop = threading.Event()
+            thread = threading.Thread(target=self._io_thread, args=(loop, io_stop), name="dyno-poller-io",
+                                      daemon=True)  # daemon: a transfer hung in the kernel must not hang exit
+            thread.start()
+            try:
+                await self._stop.wait()
+            finally:
+                io_stop.set()  # not joined: a hung transfer must not block the loop
+        else:
+            self._timer = loop.call_at(self._next_t, self._tick)
+            try:
+                await self._stop.wait()
+            finally:
+                self._timer.cancel()
+        if self._error is not None:
+            raise self._error
+
+    def _tick(self) -> None:
+        """One tick on the loop (non-blocking transports), then the next one scheduled."""
+        loop = self._loop
+        now = loop.time()
+        self._note_interval(now)
+        try:
+            self._finish_poll(now, *self._read_burst(now), self._read_temperature(now))
+        except Exception as exc:  # ends run() with it, as a crashing task would
+            self._error = exc
+            self._stop.set()
+            return
+        if self._stop.is_set():
+            return
+        self._next_t += self.poll_period_s
+        now = loop.time()
+        if self._next_t < now:  # fell behind: skip ticks rather than bunch them
+            self._next_t = now
+        self._timer = loop.call_at(self._next_t, self._tick)
+
+    def _io_thread(self, loop, io_stop: threading.Event) -> None:
+        """Blocking transports: transfers paced in this thread, each tick's result handed to the loop."""
+        next_t = loop.time()  # a real loop's clock is time.monotonic(): usable from any thread
+        while not io_stop.is_set():
             now = loop.time()
-            if last is not None:
-                self.timing.add(now - last)
-            last = now
-            await self.poll_once(now)
+            try:
+                result = (now, *self._read_burst(now), self._read_temperature(now))
+            except Exception as exc:
+                result = exc
+            try:
+                loop.call_soon_threadsafe(self._deliver, result)
+            except RuntimeError:  # the loop is closed: nothing left to deliver to
+                return
+            if isinstance(result, Exception):
+                return
             next_t += self.poll_period_s
             now = loop.time()
-            if next_t < now:  # fell behind: skip ticks rather than bunch them
+            if next_t < now:
                 next_t = now
-            await asyncio.sleep(next_t - now)
+            io_stop.wait(next_t - now)
+
+    def _deliver(self, result) -> None:
+        """On the loop: one I/O-thread tick's events to the streams, listeners and safety, in order.
+
+        A tick read before :meth:`stop` and handed over after it is still delivered: its frames
+        were acknowledged, so the device has retired their events and this is their only copy.
+        """
+        if isinstance(result, Exception):
+            if not self._stop.is_set():
+                self._error = result
+                self._stop.set()
+            return
+        now = result[0]
+        self._note_interval(now)
+        lag_s = self._loop.time() - now
+        if lag_s > self._gap_limit_s():  # the loop stalled: actions and checks ran late in this window
+            self.disturbances.append({"host_t_s": now, "kind": "poll_gap",
+                                      "detail": f"tick handled {lag_s:.3f} s late (host loop stalled)"})
+        try:
+            self._finish_poll(*result)
+        except Exception as exc:
+            if not self._stop.is_set():
+                self._error = exc
+                self._stop.set()
+
+    def _note_interval(self, now: float) -> None:
+        if self._last_tick_s is not None:
+            self.timing.add(now - self._last_tick_s)
+        self._last_tick_s = now
 
     def stop(self) -> None:
         self._stop.set()
@@ -123,38 +217,68 @@ class Poller:
         self._last_poll_s = now_s
 
     async def poll_once(self, now_s: float) -> list:
-        self.last_poll_s = now_s
-        events = []
+        """One tick by hand (tests, tools): read, then streams, listeners and thermometer."""
+        if self.blocking_io:
+            burst = await asyncio.to_thread(self._read_burst, now_s)
+            temp = await asyncio.to_thread(self._read_temperature, now_s)
+        else:
+            burst, temp = self._read_burst(now_s), self._read_temperature(now_s)
+        return self._finish_poll(now_s, *burst, temp)
+
+    def _read_burst(self, now_s: float) -> tuple[list, bool, int | None]:
+        """The bus part of a tick (any thread): the reader polled while the device says MORE.
+
+        Returns the events, whether a frame was accepted, and the first event time of a
+        new boot (None if no reset was seen).
+        """
+        events: list = []
+        accepted = False
+        new_epoch_us = None
+        reader = self.reader
         for _ in range(self.max_burst):
-            accepted_before = self.reader.stats.accepted
-            resets_before = self.reader.stats.device_resets
-            if self.blocking_io:
-                new = await asyncio.to_thread(self.reader.poll, now_s)
-            else:
-                new = self.reader.poll(now_s)
+            accepted_before = reader.stats.accepted
+            resets_before = reader.stats.device_resets
+            new = reader.poll(now_s)
             self.polls += 1
-            if self.reader.stats.device_resets > resets_before:
+            if reader.stats.device_resets > resets_before:
                 # A new boot: its edges must never pair with the old boot's (the gap between
                 # the two time bases is only estimated), so speeds restart from its own edges.
-                first = min((e.t_us for e in new), default=self.reader.device_time_us)
-                self.epoch_start_us = first if first is not None else self.epoch_start_us
-            if self.reader.stats.accepted > accepted_before:
-                self.last_valid_frame_s = now_s
+                new_epoch_us = min((e.t_us for e in new), default=reader.device_time_us)
+            if reader.stats.accepted > accepted_before:
+                accepted = True
             events.extend(new)
-            if not self.reader.more:
+            if not reader.more:
                 break
+        return events, accepted, new_epoch_us
+
+    def _read_temperature(self, now_s: float):
+        """The rotor thermometer every ``temp_period_s`` (any thread): a float, an exception, or None."""
+        if self.thermometer is None or now_s - self._last_temp_s < self.temp_period_s:
+            return None
+        self._last_temp_s = now_s
+        try:
+            return float(self.thermometer())
+        except Exception as exc:  # a failed read keeps the last value; counted, monitored
+            return exc
+
+    def _finish_poll(self, now_s: float, events: list, accepted: bool, new_epoch_us, temp) -> list:
+        """The loop's part of a tick: streams, disturbances, listeners (run log, safety), temperature."""
+        self.last_poll_s = now_s
+        if new_epoch_us is not None:
+            self.epoch_start_us = new_epoch_us
+        if accepted:
+            self.last_valid_frame_s = now_s
         if events:
             self.streams.extend(events)
         self._note_disturbances(now_s)
+        if temp is not None:
+            if isinstance(temp, Exception):
+                self.temp_errors += 1
+            else:
+                self.rotor_temp_c = temp
+                self.rotor_temp_time_s = now_s
         for listener in self.listeners:
             listener(events, now_s)
-        if self.thermometer is not None and now_s - self._last_temp_s >= self.temp_period_s:
-            self._last_temp_s = now_s
-            try:
-                self.rotor_temp_c = float(self.thermometer())
-                self.rotor_temp_time_s = now_s
-            except Exception:  # a failed read keeps the last value; counted, monitored
-                self.temp_errors += 1
         return events
 
     # --- live values ------------------------------------------------------------------

@@ -523,7 +523,11 @@ class TestController:
             self.act.tick(self._now())
             for hook in self.heartbeat_hooks:
                 hook()
-            self._safety_check()
+            # The checks already ran on every poll; the heartbeat's own check is for when polls
+            # stop (a silent link, a stopped poller), so it is skipped while they are fresh.
+            last = self.monitor.last_check_s
+            if last is None or self._now() - last >= lim.check_period_s:
+                self._safety_check()
         # after the test: keep servicing the outputs (release stroke) until cancelled
         while True:
             await asyncio.sleep(lim.check_period_s)

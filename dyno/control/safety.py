@@ -85,6 +85,7 @@ class SafetyMonitor:
         self._temp_last_good_c = math.nan
         self._temp_last_good_s = math.nan
         self.heat_since_good_c = 0.0  # thermal estimate's rise since the last trustworthy reading
+        self._temp_slope = 0.0  # C/s over the last ~0.6 s of readings
         # ADC history
         self._adc_seen = 0
         self._adc_err_run = 0
@@ -119,11 +120,11 @@ class SafetyMonitor:
         if good_n and self.torque_from_code is not None:
             self._torque_nm = float(self.torque_from_code(good_sum / good_n))
 
-    def _update_thermal(self, now: float, dt: float) -> None:
+    def _update_thermal(self, now: float, dt: float, rpm_secondary: float) -> None:
         p = self.poller
         lim = self.limits
         # brake power from the measured torque and secondary speed (heating only: errs hot)
-        w_s = p.rpm(v1.CH_SECONDARY) * TWO_PI_OVER_60
+        w_s = rpm_secondary * TWO_PI_OVER_60
         power_w = max(0.0, self._torque_nm) * w_s
         if dt > 0:
             self.heat_since_good_c += power_w * dt / lim.rotor_heat_capacity_min_j_per_k
@@ -143,8 +144,12 @@ class SafetyMonitor:
         self._temps.append((t_read, value))
         while self._temps and self._temps[0][0] < t_read - 0.6:
             self._temps.pop(0)
+        self._temp_slope = self._fit_slope_c_per_s()  # once per reading (10 Hz), not per check (150 Hz)
 
     def _temp_slope_c_per_s(self) -> float:
+        return self._temp_slope
+
+    def _fit_slope_c_per_s(self) -> float:
         pts = self._temps
         if len(pts) < 3:
             return 0.0
@@ -156,6 +161,11 @@ class SafetyMonitor:
         if sxx <= 0:
             return 0.0
         return sum((t - t0 - mt) * (v - mv) for t, v in pts) / sxx
+
+    @property
+    def last_check_s(self) -> float | None:
+        """Host time of the last :meth:`check` (None before the first)."""
+        return self._last_check_s
 
     # ------------------------------------------------------------------ the check
     def check(self, now: float, *, loaded: bool, engine_expected: bool = False) -> Trip | None:
@@ -169,7 +179,8 @@ class SafetyMonitor:
         dt = 0.0 if self._last_check_s is None else max(0.0, now - self._last_check_s)
         self._last_check_s = now
         self._update_adc()
-        self._update_thermal(now, dt)
+        rp, rs = p.rpm(v1.CH_PRIMARY), p.rpm(v1.CH_SECONDARY)
+        self._update_thermal(now, dt, rs)
 
         # Link silence counts while the poller was polling: a host stall (the watchdog's business)
         # is not a lost link.  A poller that stops polling altogether is one.
@@ -186,7 +197,6 @@ class SafetyMonitor:
         if trip:
             return trip
 
-        rp, rs = p.rpm(v1.CH_PRIMARY), p.rpm(v1.CH_SECONDARY)
         if rp > lim.overspeed_primary_rpm:
             return Trip("overspeed", f"primary {rp:.0f} rpm > {lim.overspeed_primary_rpm:.0f}", now)
         if rs > lim.overspeed_secondary_rpm:
