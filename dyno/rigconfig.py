@@ -22,12 +22,14 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
 from dyno.errors import ConfigError
+from dyno.rig_inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
 
 SCHEMA = "dyno.rig/1"
 
@@ -144,11 +146,8 @@ class ResetConfig:
 
 @dataclass(frozen=True)
 class DrivenConfig:
-    """The driven side (secondary to brake rotor), referred to the secondary: for the coast-down."""
+    """The driven side's measured loss (its inertia is ``[inertia]``'s: :attr:`InertiaConfig.driven_kg_m2`)."""
 
-    inertia_kg_m2: float = 0.0251  # secondary pulley + shaft + 32 t gear, and 61 t gear + brake shaft + rotor x g^2
-    inertia_rel_unc: float = 0.03  # its stated relative uncertainty (1 sigma): systematic in the loss
-    inertia_beyond_gauge_kg_m2: float = 0.0121  # the part beyond the torque gauge (brake shaft + rotor x g^2)
     loss_file: str | None = None  # driven_loss.json of a coast-down: added back to efficiency when asked
 
 
@@ -159,18 +158,6 @@ class TorqueZeroConfig:
     read_s: float = 4.0  # averaging window at rest (4 s: 95 % half-width ~0.09 N m with the sim's noise)
     drift_max_nm: float = 0.15  # |after - before| beyond this (secondary N m) is flagged in the run and report
     correct: bool = False  # linear drift correction of the points' torque (extra keys; raw points unchanged)
-
-
-@dataclass(frozen=True)
-class InertiaConfig:
-    """Rotating inertias for the I·alpha correction of sweeps and ramps (docs/control.md).
-
-    ``engine_kg_m2``: crank, flywheel and primary pulley (the map's torque minus ``J alpha`` enters the
-    CVT).  ``secondary_kg_m2``: secondary pulley, shaft and drive sprocket, the part *upstream* of the
-    torque gauge (the gauge already reads the brake shaft's own inertia torque)."""
-
-    engine_kg_m2: float = 0.045
-    secondary_kg_m2: float = 0.013
 
 
 @dataclass(frozen=True)
@@ -218,6 +205,7 @@ class RigConfig:
     inertia: InertiaConfig = InertiaConfig()
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
+    deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -460,19 +448,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = data.get("driven", {})
     if not isinstance(t, Mapping):
         raise r.err("driven", f"expected a table [driven], got {type(t).__name__}")
-    r.no_extra(t, {"inertia_kg_m2", "inertia_rel_unc", "inertia_beyond_gauge_kg_m2", "loss_file"}, "driven.")
-    dd = DrivenConfig()
-    driven = DrivenConfig(
-        inertia_kg_m2=r.number(t, "inertia_kg_m2", "driven.", lo=1e-4, hi=10.0, required=False,
-                               default=dd.inertia_kg_m2),
-        inertia_rel_unc=r.number(t, "inertia_rel_unc", "driven.", lo=0.0, hi=0.5, required=False,
-                                 default=dd.inertia_rel_unc),
-        inertia_beyond_gauge_kg_m2=r.number(t, "inertia_beyond_gauge_kg_m2", "driven.", lo=0.0, hi=10.0,
-                                            required=False, default=dd.inertia_beyond_gauge_kg_m2),
-        loss_file=r.string(t, "loss_file", "driven.", required=False, default=None),
-    )
-    if driven.inertia_beyond_gauge_kg_m2 > driven.inertia_kg_m2:
-        raise r.err("driven.inertia_beyond_gauge_kg_m2", f"expected <= driven.inertia_kg_m2 ({driven.inertia_kg_m2})")
+    r.no_extra(t, {"loss_file", *DRIVEN_INERTIA_KEYS}, "driven.")
+    driven = DrivenConfig(loss_file=r.string(t, "loss_file", "driven.", required=False, default=None))
     t = data.get("torque_zero", {})
     if not isinstance(t, Mapping):
         raise r.err("torque_zero", f"expected a table [torque_zero], got {type(t).__name__}")
@@ -486,13 +463,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     )
 
     # inertia, control (optional tables; defaults are the thesis rig's, as identified on the sim)
-    t = data.get("inertia", {})
-    if not isinstance(t, Mapping):
-        raise r.err("inertia", f"expected a table [inertia], got {type(t).__name__}")
-    r.no_extra(t, {"engine_kg_m2", "secondary_kg_m2"}, "inertia.")
-    inertia = InertiaConfig(**{k: r.number(t, k, "inertia.", lo=0.0, hi=10.0, required=False,
-                                           default=getattr(InertiaConfig, k))
-                               for k in ("engine_kg_m2", "secondary_kg_m2")})
+    inertia, deprecations = inertia_table(r, data)
     t = data.get("control", {})
     if not isinstance(t, Mapping):
         raise r.err("control", f"expected a table [control], got {type(t).__name__}")
@@ -522,7 +493,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
-        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero,
+        uncertainty=uncertainty, driven=driven, torque_zero=torque_zero, deprecations=deprecations,
     )
 
 
@@ -546,7 +517,15 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
         raise ConfigError(p, "file", f"unreadable ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(p, "toml", f"not valid TOML ({exc})") from None
-    return rig_from_dict(data, p)
+    rig = rig_from_dict(data, p)
+    for line in rig.deprecations:  # an old key that still loads: one line each, once per process
+        if line not in _WARNED:
+            _WARNED.add(line)
+            print(f"dyno: warning: {line}", file=sys.stderr)
+    return rig
+
+
+_WARNED: set = set()
 
 
 def add_rig_argument(parser: argparse.ArgumentParser) -> None:

@@ -1,14 +1,18 @@
-"""Auto-tune of the speed hold: identify the plant's gain with brake pulses, scale ``kp`` to it.
+"""Auto-tune of the speed holds (secondary or engine rpm): identify the plant's gain with brake pulses,
+scale ``kp`` to it.
 
-At a held secondary speed the brake is frozen, then pulsed at full speed for ``pulse_s`` (APPLY, then
-RELEASE back), and the speed read before and 1.5 s after each pulse (long after the ~0.3 s lag)::
+At a held speed the brake is frozen, then pulsed at full speed for ``pulse_s`` (APPLY, then RELEASE
+back), and the speed read before and 1.5 s after each pulse (long after the ~0.3 s lag)::
 
     g = |Δn| / n / pulse_s          (relative speed change per second of full-speed travel)
 
-The loop's gain ``kp·g`` is what sets its damping, so ``kp = LOOP_GAIN_PER_S / g``; ``LOOP_GAIN_PER_S``
-is the simulated rig's tuned loop (kp = 3 on g ≈ 0.33 /s near 3,000 rpm through the real output code).  The result is
-used only if the pulses agree (spread ≤ ``MAX_SPREAD``) and ``kp`` lands in a sane range; otherwise the
-rig.toml gain stays and an ``identify`` document says why.  Either way it is recorded with the run.
+The loop's gain ``kp·g`` is what sets its damping, so ``kp = LOOP_GAIN_PER_S[variable] / g``; each is
+the simulated rig's tuned loop through the real output code (secondary: kp = 3 on g ≈ 0.33 /s near
+3,000 rpm; engine at heavy load: the kp that settles a 5 % step fastest, ``bench/bench_hold_tune.py``).
+The result is used only if the pulses agree (spread ≤ ``MAX_SPREAD``) and ``kp`` lands in a sane range;
+otherwise the rig.toml gain stays and an ``identify`` document says why.  Either way it is recorded with
+the run.  The torque hold has none: its gauge reading's own scatter (sd ~2 % of the setpoint over the
+hold's 0.2 s window, brake frozen) is larger than the step figures it would be tuned to (docs/control.md).
 """
 
 from __future__ import annotations
@@ -20,18 +24,24 @@ from dataclasses import replace
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 
-LOOP_GAIN_PER_S = 1.0
+# Engine at heavy load (bench/bench_hold_tune.py, 5 % steps from ~2,860 rpm, seeds 1-3, mock pins): g ≈ 0.071 /s,
+# and kp 11-12.5 settles within +-0.5 % in <= 2 s (10 and 14 do not); with a brake twice as stiff g ≈ 0.138 /s
+# and kp 5.5-6.0.  Both give kp·g ≈ 0.82.  A narrow window (+-5 %): the identification must be repeatable.
+ENGINE_LOOP_GAIN = 0.82
+LOOP_GAIN_PER_S = {"secondary": 1.0, "engine": ENGINE_LOOP_GAIN}
+#: the rig.toml [control] key each variable's identified kp replaces
+KP_KEY = {"secondary": "kp_speed", "engine": "kp_engine"}
 MAX_SPREAD = 0.5  # (max - min) / mean of the pulses' gains
 KP_RANGE = (0.3, 30.0)
 
 
-async def _reach(ctrl, hold_loop_target: dict, setpoint: float, timeout_s: float = 10.0) -> bool:
-    from dyno.control.speed_hold import secondary_rpm
+async def _reach(ctrl, variable: str, setpoint: float, timeout_s: float = 10.0) -> bool:
+    from dyno.control.speed_hold import measured
 
     t0, since = ctrl.rig_now(), None
     while ctrl.rig_now() - t0 < timeout_s:
         await ctrl.rig_sleep(0.05)
-        if abs(secondary_rpm(ctrl, 0.15) - setpoint) <= 0.0075 * setpoint:
+        if abs(measured(ctrl, variable, 0.15) - setpoint) <= 0.0075 * setpoint:
             since = since if since is not None else ctrl.rig_now()
             if ctrl.rig_now() - since >= 1.0:
                 return True
@@ -51,28 +61,38 @@ async def _pulse(ctrl, direction: int, pulse_s: float) -> None:
 async def identify_speed_gain(ctrl, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
                               apply: bool = True) -> dict:
     """Identify ``g`` at ``setpoint`` (secondary rpm); returns (and logs) what was found and done."""
-    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, secondary_rpm
+    return await identify_gain(ctrl, "secondary", setpoint, pulse_s=pulse_s, repeats=repeats, apply=apply)
 
-    hold = SpeedHold(gains_for(ctrl, "secondary"))
-    target = {"rpm": setpoint}
-    task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="identify-hold")
+
+async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1.0, pulse_s: float = 0.2,
+                        repeats: int = 2, apply: bool = True) -> dict:
+    """Identify ``g`` of ``variable`` (secondary | engine rpm) at ``setpoint`` while holding it (``sign``
+    -1 where more brake raises the speed: the engine while the CVT back-shifts); returns (and logs) what
+    was found and done."""
+    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
+
+    if variable not in LOOP_GAIN_PER_S:
+        raise ValueError(f"no auto-tune for {variable!r}: one of {', '.join(LOOP_GAIN_PER_S)}")
+    hold = SpeedHold(gains_for(ctrl, variable))
+    target = {"rpm": setpoint, "sign": sign}
+    task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name="identify-hold")
     gains = []
     try:
-        if not await _reach(ctrl, target, setpoint):
+        if not await _reach(ctrl, variable, setpoint):
             result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify"}
         else:
             target["frozen"] = True
             await ctrl.rig_sleep(1.0)
             for _ in range(repeats):
                 for direction in (APPLY, RELEASE):
-                    n0 = secondary_rpm(ctrl, 0.5)
+                    n0 = measured(ctrl, variable, 0.5)
                     await _pulse(ctrl, direction, pulse_s)
                     await ctrl.rig_sleep(1.5)
-                    n1 = secondary_rpm(ctrl, 0.5)
+                    n1 = measured(ctrl, variable, 0.5)
                     gains.append(abs(n1 - n0) / n0 / pulse_s)
             g = statistics.fmean(gains)
             spread = (max(gains) - min(gains)) / g if g > 0 else math.inf
-            kp = LOOP_GAIN_PER_S / g if g > 0 else math.inf
+            kp = LOOP_GAIN_PER_S[variable] / g if g > 0 else math.inf
             ok = spread <= MAX_SPREAD and KP_RANGE[0] <= kp <= KP_RANGE[1]
             result = {"ok": ok, "gain_rel_per_s": g, "pulse_gains_rel_per_s": gains, "spread": spread,
                       "kp_identified": kp}
@@ -84,9 +104,11 @@ async def identify_speed_gain(ctrl, setpoint: float, *, pulse_s: float = 0.2, re
         await asyncio.gather(task, return_exceptions=True)
         ctrl.act.brake(STOP)
     control = getattr(ctrl, "control", None)
-    result.update(setpoint_rpm=setpoint, kp_before=getattr(control, "kp_speed", None), applied=False)
+    key = KP_KEY[variable]
+    result.update(variable=variable, setpoint_rpm=setpoint, kp_key=key, kp_before=getattr(control, key, None),
+                  applied=False)
     if result["ok"] and apply and control is not None:
-        ctrl.control = replace(control, kp_speed=result["kp_identified"])
+        ctrl.control = replace(control, **{key: result["kp_identified"]})
         result["applied"] = True
     ctrl._log("identify", **result)
     ctrl.identified = result

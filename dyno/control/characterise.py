@@ -61,7 +61,7 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
     ep = ep or getattr(ctrl, "engagement_plan", None) or EngagementPlan()
     ctrl._enter(State.WARMUP, "idle, brake released: the secondary must be at rest")
     ctrl.set_throttle(0.0)
-    await ctrl._sleep(ep.idle_s)
+    await ctrl.rig_sleep(ep.idle_s)
     if ctrl.poller.rpm(v1.CH_SECONDARY) > 0:
         ctrl.abort("error", f"engagement: the secondary turns at idle ({ctrl.poller.rpm(v1.CH_PRIMARY):.0f} rpm "
                             "engine): the clutch engages below idle, nothing to characterise")
@@ -86,7 +86,7 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
     res.update(predicted_from_tune(ctrl, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
                                    or [res.get("shift_out_torque_nm", math.nan)]))
     ctrl.set_throttle(0.0)
-    res["test_time_s"] = ctrl._now() - ctrl.go_s
+    res["test_time_s"] = (ctrl._now() - ctrl.go_s) / ctrl.time_scale  # rig seconds
     ctrl._set_results(res, hooks=False)
     ctrl._enter(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
                 else "engagement not found in the ramp")
@@ -97,23 +97,23 @@ async def _ramp(ctrl, ep: EngagementPlan):
     from dyno.control.controller import State
 
     ctrl._enter(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
-    t0_host = ctrl._now()
+    t0_rig = ctrl.rig_now()
     t0_dev = ctrl.poller.device_now_us()
     over_s = getattr(ctrl.limits, "overspeed_secondary_rpm", 7800.0) * ep.secondary_max_frac
     recent: deque = deque()
     low_plateau = math.nan  # the live ratio once flat (+-1 %) for 1 s after engagement: the low stop
     ended = "throttle at its maximum"
     while True:
-        el = ctrl._now() - t0_host
+        el = ctrl.rig_now() - t0_rig
         u = min(ep.throttle_max, ep.throttle_rate_per_s * el)
         ctrl.set_throttle(u, log=False)
-        await ctrl._sleep(0.1)
+        await ctrl.rig_sleep(0.1)
         r = _live_ratio(ctrl)
-        recent.append((ctrl._now(), r))
-        while recent and recent[0][0] < ctrl._now() - ep.high_plateau_s:
+        recent.append((ctrl.rig_now(), r))
+        while recent and recent[0][0] < ctrl.rig_now() - ep.high_plateau_s:
             recent.popleft()
         rs = [x for _, x in recent if math.isfinite(x)]
-        last_1s = [x for t, x in recent if t > ctrl._now() - 1.0 and math.isfinite(x)]
+        last_1s = [x for t, x in recent if t > ctrl.rig_now() - 1.0 and math.isfinite(x)]
         if not math.isfinite(low_plateau) and len(last_1s) >= 9 and max(last_1s) < 1.01 * min(last_1s):
             low_plateau = float(np.median(last_1s))
         shifted = math.isfinite(low_plateau) and rs and max(rs) < 0.6 * low_plateau
@@ -173,18 +173,18 @@ async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
         ctrl.set_throttle(0.0)
         ctrl.act.brake(RELEASE)
         try:
-            await ctrl._sleep(ep.release_s)
+            await ctrl.rig_sleep(ep.release_s)
         finally:
             ctrl.act.brake(STOP)
         ctrl.act.brake(APPLY)
         try:
-            await ctrl._sleep(apply_s)
+            await ctrl.rig_sleep(apply_s)
         finally:
             ctrl.act.brake(STOP)
-        t0 = ctrl._now()
-        while ctrl.poller.rpm(v1.CH_SECONDARY) > 0 and ctrl._now() - t0 < 30.0:
-            await ctrl._sleep(0.1)
-        await ctrl._sleep(1.0)
+        t0 = ctrl.rig_now()
+        while ctrl.poller.rpm(v1.CH_SECONDARY) > 0 and ctrl.rig_now() - t0 < 30.0:
+            await ctrl.rig_sleep(0.1)
+        await ctrl.rig_sleep(1.0)
         p, s, t0_dev, t1_dev, ended = await _ramp(ctrl, ep)
         r = characterise_ramp(p, s, t0_dev, t1_dev)
         r["shift_out_torque_nm"] = _torque_near(ctrl, r.get("shift_out_t_us"))
@@ -221,16 +221,16 @@ def characterise_ramp(p_edges, s_edges, t0_us: int, t1_us: int) -> dict:
 async def _back_shift(ctrl, ep: EngagementPlan, res: dict) -> dict:
     """At full shift: a brake load step; the ratio's rise (the CVT back-shifts) and its time."""
     r0 = _live_ratio(ctrl, 0.5)
-    t0 = ctrl._now()
+    t0 = ctrl.rig_now()
     ctrl.act.brake(APPLY)
     try:
-        await ctrl._sleep(ep.back_shift_step_s)
+        await ctrl.rig_sleep(ep.back_shift_step_s)
     finally:
         ctrl.act.brake(STOP)
     trace = []
-    while ctrl._now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
-        await ctrl._sleep(0.1)
-        trace.append((ctrl._now() - t0, _live_ratio(ctrl)))
+    while ctrl.rig_now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
+        await ctrl.rig_sleep(0.1)
+        trace.append((ctrl.rig_now() - t0, _live_ratio(ctrl)))
     r1 = float(np.nanmedian([r for t, r in trace if t > trace[-1][0] - 1.0]))
     out = {"ratio_before": r0, "ratio_after": r1, "rpm_primary_after": ctrl.poller.rpm(v1.CH_PRIMARY),
            "rpm_secondary_after": ctrl.poller.rpm(v1.CH_SECONDARY), "t63_s": math.nan}

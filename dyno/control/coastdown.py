@@ -37,11 +37,8 @@ class CoastDownPlan:
     uncoupled_ratio_drop: float = 0.03  # ... or the speed ratio falls this far below its coupled maximum
     max_coast_s: float = 90.0
     min_secondary_rpm: float = 60.0  # below this the periods are too long to difference
-    # Driven-side inertia referred to the secondary (secondary pulley + shaft + gear, brake shaft and
-    # rotor x g^2) and the part beyond the gauge; the rig's values come from rig.toml [driven] when set.
-    inertia_kg_m2: float = 0.0251
-    inertia_rel_unc: float = 0.03
-    inertia_beyond_gauge_kg_m2: float = 0.0121
+    # The driven side's inertia (referred to the secondary) and the part beyond the gauge are the rig's:
+    # rig.toml [inertia] (dyno.rigconfig.InertiaConfig), the controller's ``inertia``.
 
 
 def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
@@ -59,36 +56,36 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     from dyno.control.controller import State
 
     cp = cp or getattr(ctrl, "coast_down_plan", None) or CoastDownPlan()
-    driven = getattr(getattr(ctrl, "rig", None), "driven", None)
-    inertia = getattr(driven, "inertia_kg_m2", None) or cp.inertia_kg_m2
-    inertia_unc = getattr(driven, "inertia_rel_unc", None) or cp.inertia_rel_unc
-    beyond = getattr(driven, "inertia_beyond_gauge_kg_m2", None) or cp.inertia_beyond_gauge_kg_m2
+    from dyno.rigconfig import InertiaConfig
+
+    jc = getattr(ctrl, "inertia", None) or InertiaConfig()
+    inertia, inertia_unc, beyond = jc.driven_kg_m2, jc.driven_rel_unc, jc.beyond_gauge_kg_m2
     ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
     ctrl.set_throttle(0.0)
     d0 = ctrl.poller.device_now_us()
-    await ctrl._sleep(cp.zero_s)
+    await ctrl.rig_sleep(cp.zero_s)
     zero_before = _zero(ctrl, d0 + 500_000, ctrl.poller.device_now_us())
     ctrl._enter(State.STEP, "full throttle, brake released: spin up to full shift")
     ctrl.set_throttle(1.0)
-    await ctrl._sleep(cp.spin_up_s)
+    await ctrl.rig_sleep(cp.spin_up_s)
     rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
     ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")
     ctrl.engine_cut = True
     ctrl.act.safe_state()
     t_cut = ctrl.poller.device_now_us()
     t_unc = None
-    t0 = ctrl._now()
+    t0 = ctrl.rig_now()
     ratio_max = 0.0
     from dyno.control.characterise import _live_ratio
 
-    while ctrl._now() - t0 < cp.max_coast_s:
-        await ctrl._sleep(0.1)
+    while ctrl.rig_now() - t0 < cp.max_coast_s:
+        await ctrl.rig_sleep(0.1)
         # Uncoupled: the engine falls away from the secondary (the ratio drops 3 % below the highest
         # it reached while coupled -- the back-shift only raises it), or is below any engagement.
         r = _live_ratio(ctrl)
         if t_unc is None and math.isfinite(r):
             ratio_max = max(ratio_max, r)
-            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl._now() - t0 > 1.0:
+            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl.rig_now() - t0 > 1.0:
                 t_unc = ctrl.poller.device_now_us() + 300_000  # past the live ratio's window
         if t_unc is None and ctrl.poller.rpm(v1.CH_PRIMARY) < cp.uncoupled_primary_rpm:
             t_unc = ctrl.poller.device_now_us()
@@ -96,7 +93,7 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
             break
     t_stop = ctrl.poller.device_now_us()
     ctrl._enter(State.MEASURE, "at rest: torque zero after")
-    await ctrl._sleep(cp.zero_s)
+    await ctrl.rig_sleep(cp.zero_s)
     zero_after = _zero(ctrl, t_stop + 500_000, ctrl.poller.device_now_us())
     res: dict = {"secondary_rpm_at_cut": rs_top, "inertia_kg_m2": inertia,
                  "zero_before_nm": zero_before[0], "zero_after_nm": zero_after[0]}
@@ -121,7 +118,7 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     res.update(split)
     res["unseen_torque_nm"] = (np.asarray(fit["torque_nm"]) - split["seen_nm"]).tolist()
     res["loss_rpm_range"] = [fit["rpm_min"], fit["rpm_max"]]
-    res["test_time_s"] = ctrl._now() - ctrl.go_s
+    res["test_time_s"] = (ctrl._now() - ctrl.go_s) / ctrl.time_scale  # rig seconds
     ctrl._set_results(res)
     _write_loss_file(ctrl, res)
     ctrl._enter(State.DONE, f"coast-down: loss fitted over {fit['rpm_min']:.0f}-{fit['rpm_max']:.0f} rpm")

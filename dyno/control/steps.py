@@ -12,8 +12,9 @@ Step kinds (keys; every time in s, speeds in rpm, torque in N·m):
 * ``ramp``: move the setpoint of ``variable`` (secondary | engine) from ``from`` to ``to`` at ``rate_rpm_s``
   under the hold, a point every ``point_s``, each corrected for I·alpha (:mod:`dyno.analysis.inertia`).
 * ``brake``: ``direction`` = "apply" | "release" for ``s``.
-* ``identify``: the speed hold's auto-tune at ``setpoint`` (:mod:`dyno.control.autotune`): ``pulse_s``,
-  ``repeats``, ``apply`` (use the identified ``kp`` for the rest of the run; default true).
+* ``identify``: the auto-tune of the hold of ``variable`` (``secondary``, default, | ``engine`` rpm) at
+  ``setpoint`` (:mod:`dyno.control.autotune`): ``pulse_s``, ``repeats``, ``apply`` (use the identified
+  ``kp`` for the rest of the run; default true), ``load_raises_speed`` (as for ``hold``).
 * ``throttle``: ``fraction`` 0..1.
 * ``wait``: ``s``.
 
@@ -39,7 +40,8 @@ KINDS = {
     "ramp": {"variable": ("secondary", "engine"), "from": (0.0, 1e5), "to": (0.0, 1e5),
              "rate_rpm_s": (1.0, 1e4), "point_s": (0.2, 60.0)},
     "brake": {"direction": ("apply", "release"), "s": (0.0, 60.0)},
-    "identify": {"setpoint": (100.0, 1e5), "pulse_s": (0.05, 1.0), "repeats": (1, 10), "apply": "bool"},
+    "identify": {"variable": ("secondary", "engine"), "setpoint": (100.0, 1e5), "pulse_s": (0.05, 1.0),
+                 "repeats": (1, 10), "apply": "bool", "load_raises_speed": "bool"},
     "throttle": {"fraction": (0.0, 1.0)},
     "wait": {"s": (0.0, 3600.0)},
 }
@@ -172,10 +174,11 @@ async def _run_step(ctrl, st: dict) -> None:
     elif kind == "ramp":
         await _ramp_step(ctrl, st)
     elif kind == "identify":
-        from dyno.control.autotune import identify_speed_gain
+        from dyno.control.autotune import identify_gain
 
-        await identify_speed_gain(ctrl, st["setpoint"], pulse_s=st.get("pulse_s", 0.2),
-                                  repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
+        await identify_gain(ctrl, st.get("variable", "secondary"), st["setpoint"],
+                            sign=-1.0 if st.get("load_raises_speed") else 1.0, pulse_s=st.get("pulse_s", 0.2),
+                            repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
 
 
 async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
@@ -290,9 +293,10 @@ async def _ramp_step(ctrl, st: dict) -> None:
     b = float(st["to"])
     rate = float(st["rate_rpm_s"]) * (1.0 if b >= a else -1.0)
     point_s = float(st.get("point_s", 1.0))
-    inertia = getattr(ctrl, "inertia", None)
-    j_e = getattr(inertia, "engine_kg_m2", 0.045)
-    j_s = getattr(inertia, "secondary_kg_m2", 0.013)
+    from dyno.rigconfig import InertiaConfig
+
+    inertia = getattr(ctrl, "inertia", None) or InertiaConfig()  # rig.toml [inertia]: the one source
+    j_e, j_s = inertia.engine_kg_m2, inertia.secondary_kg_m2
     target = {"rpm": a}
     task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name=f"ramp-{variable}")
     try:

@@ -19,9 +19,11 @@ from textual.containers import Horizontal
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
+from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
 from dyno.ui.live_model import TEST_STATES, discard_text, measure_text, progress_text
+from dyno.ui.results_view import has_results, results_lines
 from dyno.ui.session import LiveOptions, LiveSession
 
 REFRESH_HZ = 4.0  # values during a test: a few Hz, readable
@@ -29,7 +31,13 @@ IDLE_REFRESH_HZ = 2.0  # ... and while nothing runs (waiting, armed, ended): the
 PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
 PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
-HELP_ENDED = "r re-arm (new run)  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE / ABORTED
+HELP_ENDED = "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE/ABORTED
+
+# what GO moves, for the plans that do not start at full throttle (the characterisations): (asked, said)
+GO_TEXT = {"engagement": ("From idle the THROTTLE RAMPS up to 90 % through the shift; the brake then steps "
+                          "the load.", "GO: throttle ramp from idle"),
+           "coast-down": ("Throttle goes to FULL with the brake released, then the ENGINE IS CUT and the rig "
+                          "coasts to rest.", "GO: full throttle, then engine cut and coast-down")}
 
 LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
@@ -37,6 +45,7 @@ LIVE_CSS = """
 #main { height: 1fr; }
 #fields { width: 30; padding: 0 1; }
 #plot { width: 1fr; }
+#results { width: 1fr; display: none; padding: 0 1; }  /* a characterisation's figures, in place of the plot */
 #state.aborted { background: $error 40%; }
 #state.done { background: $success 40%; }
 """
@@ -48,7 +57,7 @@ class LiveApp(DynoApp):
         Binding("g", "go", "GO"), Binding("p", "pause", "pause/resume"), Binding("m", "manual", "manual"),
         Binding("left_square_bracket", "jog(-1)", "release"), Binding("right_square_bracket", "jog(1)", "apply"),
         Binding("1", "plot('1')", show=False), Binding("2", "plot('2')", show=False),
-        Binding("3", "plot('3')", show=False), Binding("o", "overlay", "overlay"),
+        Binding("3", "plot('3')", show=False), Binding("4", "results", show=False), Binding("o", "overlay", "overlay"),
         Binding("q", "quit_safe", "quit"), Binding("r", "rearm", "re-arm"),
     ]
 
@@ -83,6 +92,8 @@ class LiveApp(DynoApp):
         self._ideal_rpm = math.nan
         self._refreshed_s = -math.inf
         self._ended: bool | None = None  # the help line shown: None (not yet), False (GO ...), True (re-arm)
+        self.view_results = False  # the results panel is shown in place of the plot
+        self._results_shown_for = None  # the controller whose results were put up by themselves (once)
 
     # --- layout ------------------------------------------------------------------------------
     def compose(self) -> ComposeResult:
@@ -94,6 +105,7 @@ class LiveApp(DynoApp):
         with Horizontal(id="main"):
             yield Readout("", id="fields")
             yield PlotextPlot(id="plot")
+            yield Readout("", id="results")
         yield bottom_lines(HELP)
 
     async def on_mount(self) -> None:
@@ -145,6 +157,7 @@ class LiveApp(DynoApp):
         st.set_class(v.state == "aborted", "aborted")
         st.set_class(v.state == "done", "done")
         self.query_one("#fields", Static).update(self._fields_text(v))
+        self._show_results()
         if self.overlay_requested:
             if len(s.controller.points) != self._overlay_points:
                 self._start_overlay()
@@ -160,12 +173,12 @@ class LiveApp(DynoApp):
         if self.session.manual:
             t.append(" MANUAL", style="bold magenta")
         s = self.session
-        if v.state == "measure":
+        if v.state == "measure" and s.controller.plan.mode not in FROM_IDLE:
             t.append(f"  {measure_text(s.state_elapsed_s(), s.opts.plan)}")
         else:
             t.append(f"  {v.reason}")
         n, total, eta = s.test_progress()
-        prog = progress_text(v.state, n, total, eta)
+        prog = progress_text(v.state, n, total, eta) if s.controller.plan.mode not in FROM_IDLE else ""
         if prog:
             t.append(f"  │ {prog}", style="bold")
         disc = discard_text(s.controller.discards)
@@ -191,8 +204,9 @@ class LiveApp(DynoApp):
         row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
         row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
-        # The map is full throttle: the efficiency means something only while the test holds it there.
-        loaded = v.state in ("warmup", "step", "settle", "measure")
+        # The map is full throttle: the efficiency means something only while the test holds it there
+        # (never in the characterisations: throttle ramps, idle, an engine cut).
+        loaded = v.state in ("warmup", "step", "settle", "measure") and self.session.controller.plan.mode not in FROM_IDLE
         row("effic.", fmt(v.efficiency * 100 if loaded and not math.isnan(v.efficiency) else math.nan, ".1f", " %"))
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
@@ -206,7 +220,38 @@ class LiveApp(DynoApp):
             row("overlay", self.overlay_tier or "computing…")
         return t
 
+    def _show_results(self) -> None:
+        """A characterisation plan's figures (engagement, coast-down): shown by themselves once they arrive
+        (``4`` brings them back after ``1``-``3``); the controller's ``results``, as stored with the run."""
+        ctrl = self.session.controller
+        if not has_results(ctrl.results):
+            if self.view_results:  # (a re-armed run has none yet)
+                self._set_view(results=False)
+            return
+        if self._results_shown_for is not ctrl:
+            self._results_shown_for = ctrl
+            self._set_view(results=True)
+        if self.view_results:
+            self.query_one("#results", Static).update("\n".join(results_lines(ctrl.results)))
+
+    def _set_view(self, results: bool) -> None:
+        self.view_results = results
+        self.query_one("#results").display = results
+        self.query_one("#plot").display = not results
+        if not results:
+            self._plotted = None  # redraw the plot now that it shows again
+
+    def action_results(self) -> None:
+        if self.session is None or not has_results(self.session.controller.results):
+            self.say("no results: the engagement and coast-down plans show theirs here when they end")
+            return
+        self._set_view(results=True)
+        self._show_results()
+        self.say("results of the characterisation (also in the run's report.html)")
+
     def _draw_plot(self) -> None:
+        if self.view_results:
+            return  # the plot is hidden behind the results
         w = self.query_one("#plot", PlotextPlot)
         plt = w.plt
         pts = self.session.controller.points
@@ -443,14 +488,17 @@ class LiveApp(DynoApp):
             self.say(why)
             return
 
+        plan = self.session.controller.plan
+        what = GO_TEXT.get(plan.mode, ("Throttle goes to FULL and the brake starts stepping.",
+                                       "GO: full throttle, brake stepping"))
+
         def answered(yes: bool | None) -> None:
             if yes:
-                self.say(self.session.go() or "GO: full throttle, brake stepping")
+                self.say(self.session.go() or what[1])
             else:
                 self.say("GO cancelled")
 
-        self.push_screen(ConfirmScreen("Start the test?\nThrottle goes to FULL and the brake starts stepping."),
-                         answered)
+        self.push_screen(ConfirmScreen(f"Start the test?\n{what[0]}"), answered)
 
     def action_rearm(self) -> None:
         """Acknowledge the ended test and arm a new one (new run directory); asks first."""
@@ -513,6 +561,8 @@ class LiveApp(DynoApp):
 
     def action_plot(self, key: str) -> None:
         self.plot_key = key
+        if self.view_results:
+            self._set_view(results=False)
         self._plotted = None
         self.say(f"plot: {PLOTS[key]}")
         self._draw_plot()

@@ -66,6 +66,8 @@ def test_overrides_and_paths(tmp_path):
     (HEAD + 'mode = "steps"\n[[step]]\nkind = "ramp"\nto = 2000\n', "step[1].rate_rpm_s"),
     (HEAD + 'mode = "steps"\n[[step]]\nkind = "identify"\n', "step[1].setpoint"),
     (HEAD + 'mode = "steps"\n[[step]]\nkind = "identify"\nsetpoint = 3000\napply = 1\n', "step[1].apply"),
+    (HEAD + 'mode = "steps"\n[[step]]\nkind = "identify"\nvariable = "torque"\nsetpoint = 16\n',
+     "step[1].variable"),  # no auto-tune for the torque hold (docs/control.md)
     (HEAD + 'mode = [1\n', "toml"),
 ])
 def test_bad_plan_files_name_file_and_field(tmp_path, body, field):

@@ -192,7 +192,7 @@ def test_ui_live_snapshots_80x24(tmp_path):
         assert len(lines) == 24 and all(len(line) <= 80 for line in lines), name
         assert "E-STOP" in text, name
         if name == "aborted":  # after the test: re-arm instead of the test's keys
-            assert "r re-arm (new run)  1-3 plot  o overlay  q quit" in lines[-1], name
+            assert "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit" in lines[-1], name
         else:
             assert "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit" in lines[-1], name
     for label in ("engine", "secondary", "ratio", "torque", "P out", "P engine", "effic.", "rotor", "points",

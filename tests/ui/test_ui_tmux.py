@@ -231,3 +231,34 @@ def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path):
         assert '"cause": "estop"' in docs and '"type": "stop"' in docs, d
         assert (d / "report.html").is_file(), d
     assert f"run: {run_dir}" in screen.replace("\n", "") and f"run: {run2}" in screen.replace("\n", "")
+
+
+def test_ui_tmux_coast_down_shows_its_results(tmp_path):
+    """`dyno ui --sim --plan coast-down` in a real terminal: when the plan ends, its loss fit is on screen
+    (the run's characterisation document, units labelled); at exit the report has it too."""
+    import json
+
+    session = f"dyno-res-{uuid.uuid4().hex[:8]}"
+    run_dir = tmp_path / "run"
+    _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --plan coast-down --out {run_dir} ; "
+                    "echo EXITED=$? ; sleep 30", tmp_path)
+    try:
+        _wait_screen(session, "ARMED", 60)
+        _tmux("send-keys", "-t", session, "g")
+        _wait_screen(session, "ENGINE IS CUT", 10)  # the dialog says what this plan moves
+        _tmux("send-keys", "-t", session, "y")
+        _wait_screen(session, "GO: full throttle, then engine cut", 10)
+        screen = _wait_screen(session, "COAST-DOWN: driven-side loss", 90)
+        assert "DONE" in screen and "T = a + b·ω + c·ω² (ω in rad/s)" in screen and "4 results" in screen
+        # the numbers are the run's stored characterisation (written at DONE), formatted
+        docs = [json.loads(line) for line in (run_dir / "documents.jsonl").read_text().splitlines()]
+        (c,) = [d for d in docs if d.get("type") == "characterisation"]
+        fit = c["loss_fit"]
+        assert f"a = {fit['coefficients']['a_nm']:.4f} N·m" in screen, screen
+        assert f"over {fit['rpm_min']:.0f}–{fit['rpm_max']:.0f} rpm" in screen, screen
+        _tmux("send-keys", "-t", session, "q")
+        _wait_screen(session, "EXITED=0", 30)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    report = (run_dir / "report.html").read_text()
+    assert "<h2>Characterisation</h2>" in report and f"{fit['coefficients']['a_nm']:.4f}" in report

@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""Step responses of the torque hold and the engine-speed hold on the simulated rig, per kp and seed.
+
+For each variable the rig is brought to a standard operating point (contact; torque: hold 16 N·m;
+engine: the secondary held at 3,000 rpm -- heavy load, the CVT in low -- then the engine held where it
+is), then the setpoint is stepped by +5 % and -5 % and each step's figures printed as in the speed
+hold's (bench_test_time.py): the time after which the held value stays within +-0.5 % of the setpoint,
+the overshoot (% of the setpoint) and the standard deviation over the last 3 s (% of the setpoint),
+each value read through the hold's own window (torque 0.2 s, speeds 0.15 s).  With ``--identify``,
+the auto-tune's identification runs first at the operating point and its kp is used.
+
+Through the real-rig output code on mock pins (rig.toml's relay settle honoured).
+
+    python bench/bench_hold_tune.py [--variable torque|engine] [--seeds 1,2,3] [--kp 1.0,2.0] [--identify]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import sys
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import dyno.control.speed_hold as sh  # noqa: E402
+from dyno.app import RunOptions, run_test  # noqa: E402
+from dyno.control import plans as plans_mod  # noqa: E402
+from dyno.control.controller import State, TestPlan  # noqa: E402
+from dyno.control.steps import find_contact  # noqa: E402
+
+OPERATING = {"torque": 16.0, "engine": None}  # engine: where it is with the secondary at 3,000 rpm
+SIGN = {"torque": -1.0, "engine": -1.0}  # engine at heavy load: more brake raises it (the CVT back-shifts)
+
+
+def figures(trace, sp: float, start: float) -> dict:
+    outside = [t for t, x in trace if abs(x - sp) > 0.005 * sp]
+    beyond = [(x - sp) * (1 if sp > start else -1) for _, x in trace]
+    return {"settle_s": max(outside) if outside else 0.0, "overshoot_pc": 100 * max(0.0, max(beyond)) / sp,
+            "sd_pc": 100 * statistics.pstdev(x for t, x in trace if t > trace[-1][0] - 3.0) / sp}
+
+
+async def trace_of(ctrl, variable: str, window_s: float, seconds: float):
+    t0, out = ctrl.rig_now(), []
+    while ctrl.rig_now() - t0 < seconds:
+        await ctrl.rig_sleep(0.05)
+        out.append((ctrl.rig_now() - t0, sh.measured(ctrl, variable, window_s)))
+    return out
+
+
+def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, params=None,
+        deadband: float | None = None) -> dict:
+    found: dict = {}
+
+    async def runner(ctrl):
+        ctrl._enter(State.STEP, "bench: contact")
+        assert await find_contact(ctrl)
+        if variable == "engine":  # into the heavy-load region first, as the engine-hold plan does
+            pre = {"rpm": 3000.0}
+            task = asyncio.create_task(sh._hold_loop(ctrl, sh.SpeedHold(sh.gains_for(ctrl, "secondary")), pre))
+            await ctrl.rig_sleep(8.0)
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+        sp0 = OPERATING[variable] or sh.measured(ctrl, variable, 1.0)
+        if identify:
+            from dyno.control.autotune import identify_gain
+
+            res = await identify_gain(ctrl, variable, sp0, sign=SIGN[variable])
+            found["identify"] = res
+        gains = sh.gains_for(ctrl, variable)
+        if kp is not None:
+            gains = replace(gains, kp=kp)
+        if deadband is not None:
+            gains = replace(gains, deadband_rel=deadband)
+        found["kp"] = gains.kp
+        hold = sh.SpeedHold(gains)
+        target = {"rpm": sp0, "sign": SIGN[variable]}
+        task = asyncio.create_task(sh._hold_loop(ctrl, hold, target, variable))
+        await trace_of(ctrl, variable, gains.speed_window_s, 8.0)
+        steps = []
+        for sp in (sp0 * 1.05, sp0):
+            start = sh.measured(ctrl, variable, gains.speed_window_s)
+            target["rpm"] = sp
+            tr = await trace_of(ctrl, variable, gains.speed_window_s, 8.0)
+            steps.append({"from": start, "to": sp, **figures(tr, sp, start)})
+        found["steps"] = steps
+        # the noise floor: the brake frozen where the hold put it, the same reading's sd over 3 s
+        target["frozen"] = True
+        await ctrl.rig_sleep(1.0)
+        tr = await trace_of(ctrl, variable, gains.speed_window_s, 3.0)
+        found["frozen_sd_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
+        tr = await trace_of(ctrl, variable, 1.0, 3.0)
+        found["frozen_sd_1s_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        ctrl._enter(State.SETTLE, "bench")
+        ctrl._enter(State.DONE, "bench done")
+
+    mp_old = plans_mod.RUNNERS.get("bench-hold")
+    plans_mod.RUNNERS["bench-hold"] = runner
+    try:
+        r = run_test(RunOptions(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
+                                out_dir=tmp / f"{variable}-{seed}-{kp}-{identify}", sim_params=params))
+    finally:
+        if mp_old is None:
+            plans_mod.RUNNERS.pop("bench-hold", None)
+    found["aborts"] = [a for a in r["aborts"] if a["cause"] != "no_points"]
+    return found
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--variable", default="torque", choices=("torque", "engine"))
+    ap.add_argument("--seeds", default="1,2,3")
+    ap.add_argument("--kp", default="", help="comma-separated kp values (default: rig.toml's)")
+    ap.add_argument("--identify", action="store_true")
+    ap.add_argument("--deadband", type=float, default=None, help="the hold's dead band (default: rig.toml's)")
+    ap.add_argument("--stiff", action="store_true", help="a brake spring twice as stiff (13 N/mm)")
+    a = ap.parse_args()
+    params = None
+    if a.stiff:
+        from dyno.sim.physics import RigParams
+
+        params = replace(RigParams(), brake_spring_rate_n_per_mm=13.0)
+    kps = [float(x) for x in a.kp.split(",") if x] or [None]
+    print(f"| variable | seed | kp | step | settle s (±0.5 %) | overshoot % | sd % |")
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for kp in kps:
+            for seed in (int(s) for s in a.seeds.split(",")):
+                f = run(a.variable, seed, kp, a.identify, Path(tmp), params, a.deadband)
+                if f.get("identify"):
+                    i = f["identify"]
+                    print(f"<!-- identify seed {seed}: ok={i['ok']} g={i.get('gain_rel_per_s', float('nan')):.3f} "
+                          f"spread={i.get('spread', float('nan')):.2f} kp={i.get('kp_identified', float('nan')):.2f} "
+                          f"{i.get('reason', '')} -->")
+                for s in f.get("steps", []):
+                    print(f"| {a.variable} | {seed} | {f['kp']:.2f} | {s['from']:.1f} → {s['to']:.1f} | "
+                          f"{s['settle_s']:.2f} | {s['overshoot_pc']:.2f} | {s['sd_pc']:.3f} |")
+                print(f"<!-- seed {seed} kp {f['kp']:.2f}: brake frozen, sd of the hold's reading "
+                      f"{f['frozen_sd_pc']:.3f} % (1 s mean: {f['frozen_sd_1s_pc']:.3f} %) -->")
+                if f["aborts"]:
+                    print(f"<!-- aborts: {f['aborts']} -->")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
