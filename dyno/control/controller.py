@@ -98,6 +98,9 @@ _ENGINE_STATES = _LOADED_STATES | {State.ARMED}
 __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 
 
+STANDBY_PERIODS = 5  # the heartbeat task's wake-up, in check periods, while polls beat for it
+
+
 class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
@@ -130,6 +133,8 @@ class TestController(Measuring):
                 return (code - cal.intercept_counts) / cal.slope_counts_per_nm
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
+        self._beat_s = -math.inf  # controller time of the last heartbeat (outputs serviced, watchdog fed)
+        self._polled_s = -math.inf  # controller time of the last poll seen
         self.discards: list[dict] = []
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
@@ -366,8 +371,23 @@ class TestController(Measuring):
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:
-        """Poller listener: the checks run on fresh data, not only on the heartbeat."""
+        """Poller listener: the checks run on fresh data, and the heartbeat rides the polls.
+
+        While polls arrive, the heartbeat (outputs serviced, watchdog fed) is done here every
+        ``check_period_s``: one loop wake-up per poll instead of a second timer beside it (the
+        idle CPU cost is mostly wake-ups).  The heartbeat task stands by for when polls stop.
+        """
         self._safety_check(now_s)
+        self._polled_s = now = self._now()
+        if now - self._beat_s >= self.limits.check_period_s:
+            self._beat()
+
+    def _beat(self) -> None:
+        now = self._now()
+        self._beat_s = now
+        self.act.tick(now)
+        for hook in self.heartbeat_hooks:
+            hook()
 
     def _safety_check(self, now_s: float | None = None) -> None:
         if self._checking or self.state in (State.DONE, State.ABORTED, State.IDLE):
@@ -386,23 +406,22 @@ class TestController(Measuring):
             self.abort(trip.cause, trip.detail, trip.trigger_s)
 
     async def _safety_loop(self) -> None:
+        """The heartbeat that does not depend on polls: beats and checks when they stop.
+
+        While polls beat (see :meth:`_on_poll`) it wakes every ``STANDBY_PERIODS`` check periods
+        only to see that they still do; once they stop (a stopped poller, a hung blocking bus,
+        the test ended with the poller stopped) it beats every ``check_period_s`` itself.  A
+        stopped poller is a ``comms_lost`` trip after 1 s, so the standby wake (0.1 s) is ample.
+        """
         lim = self.limits
-        while self.state not in (State.DONE, State.ABORTED):
-            await asyncio.sleep(lim.check_period_s)
-            self.act.tick(self._now())
-            for hook in self.heartbeat_hooks:
-                hook()
-            # The checks already ran on every poll; the heartbeat's own check is for when polls
-            # stop (a silent link, a stopped poller), so it is skipped while they are fresh.
-            last = self.monitor.last_check_s
-            if last is None or self._now() - last >= lim.check_period_s:
-                self._safety_check()
-        # after the test: keep servicing the outputs (release stroke) until cancelled
         while True:
-            await asyncio.sleep(lim.check_period_s)
-            self.act.tick(self._now())
-            for hook in self.heartbeat_hooks:
-                hook()
+            fresh = self._now() - self._polled_s < 2 * lim.check_period_s  # polls are beating
+            await asyncio.sleep(lim.check_period_s * (STANDBY_PERIODS if fresh else 1))
+            if self._now() - self._polled_s < 2 * lim.check_period_s:
+                continue  # polls beat and check: nothing to stand in for
+            self._beat()
+            if self.state not in (State.DONE, State.ABORTED):
+                self._safety_check()
 
     def check_limits(self) -> Trip | None:
         """The first limit or plausibility check failing now, or None (see SafetyMonitor)."""

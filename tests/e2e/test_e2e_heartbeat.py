@@ -1,0 +1,67 @@
+"""The safety heartbeat rides the polls and takes over when they stop (outputs serviced, watchdog fed)."""
+
+import asyncio
+
+from dyno.app import RunOptions, run_test
+from dyno.control.controller import STANDBY_PERIODS, SafetyLimits
+
+from .conftest import QUICK_PLAN
+
+
+def _run(tmp_path, stop_poller_at_s=None):
+    ticks: list[float] = []
+    start: list[float] = []
+
+    def setup(ctx):
+        loop = asyncio.get_running_loop()
+        act = ctx.controller.act
+        real_tick = act.tick
+
+        def tick(now_s):
+            ticks.append(loop.time())
+            return real_tick(now_s)
+
+        act.tick = tick
+        start.append(loop.time())
+        if stop_poller_at_s is not None:
+            loop.call_later(stop_poller_at_s, ctx.poller.stop)
+
+    captured = {}
+
+    def _setup(ctx):
+        captured["ctx"] = ctx
+        setup(ctx)
+
+    result = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=_setup,
+                                 max_sim_s=120.0))
+    return result, captured["ctx"], [t - start[0] for t in ticks]
+
+
+def test_outputs_serviced_every_check_period_while_polls_run(tmp_path):
+    result, ctx, ticks = _run(tmp_path)
+    assert result["state"] == "done"
+    period = SafetyLimits().check_period_s
+    poll = ctx.poller.poll_period_s
+    gaps = [b - a for a, b in zip(ticks, ticks[1:])]
+    assert len(ticks) > 1000
+    # the beat comes with the first poll at least one check period after the last: never later
+    assert max(gaps) <= period + poll + 1e-6
+
+
+def test_when_polls_stop_the_heartbeat_takes_over_and_comms_lost_trips(tmp_path):
+    stop_at = 20.0
+    result, ctx, ticks = _run(tmp_path, stop_poller_at_s=stop_at)
+    assert result["state"] == "aborted"
+    abort = result["aborts"][0]
+    assert abort["cause"] == "comms_lost" and "not polled" in abort["detail"]
+    after = [t for t in ticks if stop_at < t <= abort["trigger_s"]]  # then the run's end takes over
+    period = SafetyLimits().check_period_s
+    # the standby wake notices within STANDBY_PERIODS check periods, then beats every period
+    assert after and after[0] - stop_at <= STANDBY_PERIODS * period + period
+    gaps = [b - a for a, b in zip(after, after[1:])]
+    assert gaps and max(gaps) <= period + 1e-6
+    # the stopped poller is a comms_lost trip within max(1 s, 4 x comms_timeout) + the standby wake
+    lim = SafetyLimits()
+    assert abort["trigger_s"] - stop_at <= max(1.0, 4 * lim.comms_timeout_s) + STANDBY_PERIODS * period + 0.05
+    m = ctx.sim.model
+    assert m.throttle_frac == 0.0 and not m.engine_enabled
