@@ -170,7 +170,7 @@ class CalibrateApp(DynoApp):
                              for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
 
     async def _quit_code(self, code: int) -> None:
-        await self._shutdown()
+        await self._stop_rig()
         self.exit(return_code=code)
 
     # --- view ----------------------------------------------------------------------------------
@@ -355,10 +355,12 @@ class CalibrateApp(DynoApp):
                                                  else "; the calibration fixture has no outputs to stop"))
 
     async def action_quit_safe(self) -> None:
-        await self._shutdown()
+        await self._stop_rig()
         self.exit(return_code=0)
 
-    async def _shutdown(self) -> None:
+    async def _stop_rig(self) -> None:
+        # Not named `_shutdown`: that is Textual's own App._shutdown, which run_test calls when the
+        # test body raises; overriding it left the app running and hung the test instead of failing it.
         if self.poller is not None:
             # The UI's listener goes first: while Textual unmounts, a last poll must not
             # update widgets that are closing (that wait never ends).  The safety check stays.
@@ -380,7 +382,7 @@ class CalibrateApp(DynoApp):
         self._old_signals = {}
 
     async def on_unmount(self) -> None:
-        await self._shutdown()
+        await self._stop_rig()
 
 
 def main(opts: CalibrateOptions) -> int:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import time
 
+import pytest
+
 from dyno.analysis.calibration import load_history
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
 from dyno.ui.calibration_wizard import Phase
@@ -137,3 +139,18 @@ def test_ui_calibrate_c_in_a_number_field_acts_instead_of_typing(tmp_path):
 
     value, phase = asyncio.run(scenario())
     assert value == "0.15" and phase is not Phase.SETUP
+
+
+def test_an_error_inside_the_running_app_propagates_instead_of_hanging(tmp_path):
+    """Textual's run_test shuts the app down with App._shutdown when its body raises: the wizard must not
+    shadow it (it did: the app never exited and a failing assertion hung the suite)."""
+    async def scenario():
+        app = CalibrateApp(_opts(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.pause(0.3)
+            raise RuntimeError("an assertion inside the app's context")
+
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match="inside the app's context"):
+        asyncio.run(asyncio.wait_for(scenario(), 40))
+    assert time.monotonic() - t0 < 20, "the app did not shut down: the test body's error waited for a timeout"
