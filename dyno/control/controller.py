@@ -373,19 +373,25 @@ class TestController(Measuring):
     def _on_poll(self, events, now_s: float) -> None:
         """Poller listener: the checks run on fresh data, and the heartbeat rides the polls.
 
-        While polls arrive, the heartbeat (outputs serviced, watchdog fed) is done here every
-        ``check_period_s``: one loop wake-up per poll instead of a second timer beside it (the
-        idle CPU cost is mostly wake-ups).  The heartbeat task stands by for when polls stop.
+        While polls arrive, the outputs are serviced on every poll and the heartbeat (watchdog fed)
+        is done here every ``check_period_s``: one loop wake-up per poll instead of a second timer
+        beside it (the idle CPU cost is mostly wake-ups).  The heartbeat task stands by for when
+        polls stop.
         """
         self._safety_check(now_s)
         self._polled_s = now = self._now()
+        # Outputs serviced on every poll: a timed brake pulse ends within one poll period (6.7 ms),
+        # not at the next beat (a pulse quantised to a jittered 20-27 ms grid made the speed
+        # hold limit-cycle: tests/control/test_hold_sim.py).  Cheap: no wake-up of its own.
+        self.act.tick(now)
         if now - self._beat_s >= self.limits.check_period_s:
-            self._beat()
+            self._beat(tick=False)
 
-    def _beat(self) -> None:
+    def _beat(self, tick: bool = True) -> None:
         now = self._now()
         self._beat_s = now
-        self.act.tick(now)
+        if tick:
+            self.act.tick(now)
         for hook in self.heartbeat_hooks:
             hook()
 

@@ -10,6 +10,7 @@ from .conftest import QUICK_PLAN
 
 def _run(tmp_path, stop_poller_at_s=None):
     ticks: list[float] = []
+    beats: list[float] = []
     start: list[float] = []
 
     def setup(ctx):
@@ -22,6 +23,7 @@ def _run(tmp_path, stop_poller_at_s=None):
             return real_tick(now_s)
 
         act.tick = tick
+        ctx.controller.heartbeat_hooks.append(lambda: beats.append(loop.time()))
         start.append(loop.time())
         if stop_poller_at_s is not None:
             loop.call_later(stop_poller_at_s, ctx.poller.stop)
@@ -34,27 +36,31 @@ def _run(tmp_path, stop_poller_at_s=None):
 
     result = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=_setup,
                                  max_sim_s=120.0))
-    return result, captured["ctx"], [t - start[0] for t in ticks]
+    return result, captured["ctx"], [t - start[0] for t in ticks], [t - start[0] for t in beats]
 
 
-def test_outputs_serviced_every_check_period_while_polls_run(tmp_path):
-    result, ctx, ticks = _run(tmp_path)
+def test_outputs_serviced_on_every_poll_and_heartbeat_every_check_period(tmp_path):
+    result, ctx, ticks, beats = _run(tmp_path)
     assert result["state"] == "done"
     period = SafetyLimits().check_period_s
     poll = ctx.poller.poll_period_s
-    gaps = [b - a for a, b in zip(ticks, ticks[1:])]
-    assert len(ticks) > 1000
-    # the beat comes with the first poll at least one check period after the last: never later
-    assert max(gaps) <= period + poll + 1e-6
+    end = result["aborts"][0]["trigger_s"] if result["aborts"] else max(beats)
+    ticks = [t for t in ticks if 1.0 < t < end]  # the test proper (polls running)
+    beats = [t for t in beats if 1.0 < t < end]
+    assert len(ticks) > 1000 and len(beats) > 300
+    # timed brake pulses end within one poll of their time
+    assert max(b - a for a, b in zip(ticks, ticks[1:])) <= poll + 1e-6
+    # the watchdog is fed by the first poll at least one check period after the last beat: never later
+    assert max(b - a for a, b in zip(beats, beats[1:])) <= period + poll + 1e-6
 
 
 def test_when_polls_stop_the_heartbeat_takes_over_and_comms_lost_trips(tmp_path):
     stop_at = 20.0
-    result, ctx, ticks = _run(tmp_path, stop_poller_at_s=stop_at)
+    result, ctx, _, beats = _run(tmp_path, stop_poller_at_s=stop_at)
     assert result["state"] == "aborted"
     abort = result["aborts"][0]
     assert abort["cause"] == "comms_lost" and "not polled" in abort["detail"]
-    after = [t for t in ticks if stop_at < t <= abort["trigger_s"]]  # then the run's end takes over
+    after = [t for t in beats if stop_at < t <= abort["trigger_s"]]  # then the run's end takes over
     period = SafetyLimits().check_period_s
     # the standby wake notices within STANDBY_PERIODS check periods, then beats every period
     assert after and after[0] - stop_at <= STANDBY_PERIODS * period + period
