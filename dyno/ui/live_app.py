@@ -22,7 +22,7 @@ from textual_plotext import PlotextPlot
 from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
-from dyno.ui.live_model import TEST_STATES, discard_text, measure_text, progress_text
+from dyno.ui.live_model import TEST_STATES, discard_text, efficiency_text, measure_text, progress_text
 from dyno.ui.results_view import has_results, results_lines
 from dyno.ui.session import LiveOptions, LiveSession
 
@@ -204,10 +204,11 @@ class LiveApp(DynoApp):
         row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
         row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
-        # The map is full throttle: the efficiency means something only while the test holds it there
-        # (never in the characterisations: throttle ramps, idle, an engine cut).
-        loaded = v.state in ("warmup", "step", "settle", "measure") and self.session.controller.plan.mode not in FROM_IDLE
-        row("effic.", fmt(v.efficiency * 100 if loaded and not math.isnan(v.efficiency) else math.nan, ".1f", " %"))
+        # The denominator is the map's curve at the commanded throttle (n/a without one); the efficiency
+        # means something only while the test holds a steady load (never in the characterisations:
+        # throttle ramps, idle, an engine cut).
+        loaded = v.state in TEST_STATES and self.session.controller.plan.mode not in FROM_IDLE
+        row("effic.", efficiency_text(v, loaded))
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
         row("points", str(v.points))
