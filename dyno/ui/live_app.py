@@ -16,6 +16,7 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
+from textual.css.query import NoMatches
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
@@ -128,6 +129,10 @@ class LiveApp(OverlayMixin, DynoApp):
         s = self.session
         if s is None:
             return
+        try:
+            st = self.query_one("#state", Static)
+        except NoMatches:  # the app is closing: its widgets go before its interval timer stops
+            return
         now = self.session.loop.time()
         if not force and s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
             return  # nothing runs: half the rate
@@ -136,8 +141,7 @@ class LiveApp(OverlayMixin, DynoApp):
         v = live_values(s.poller, s.controller, now, self.rate)
         self.values = v
         self.history.add(now - s.t0, v)
-        self.query_one("#state", Static).update(self._state_text(v))
-        st = self.query_one("#state", Static)
+        st.update(self._state_text(v))
         st.set_class(v.state == "aborted", "aborted")
         st.set_class(v.state == "done", "done")
         self.query_one("#fields", Static).update(self._fields_text(v))
