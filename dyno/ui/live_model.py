@@ -60,20 +60,21 @@ def engine_power_w(engine_map, rpm: float, throttle_frac: float = 1.0) -> tuple[
 
     The curve at the commanded throttle, never the full-throttle one at part throttle (it would credit
     the engine with power it does not make) and never a blend of two throttles (see
-    :meth:`dyno.analysis.engine_map.EngineMap.at_throttle`).  The reason is short: it fits the screen.
+    :meth:`dyno.analysis.engine_map.EngineMap.at_throttle`).  The reason is the screen's words (at most
+    13 characters: ``n/a: <reason>`` fits the fields column); None when there is nothing to explain.
     """
     if engine_map is None:
         return math.nan, "no engine map"
     if not (rpm > 0):
-        return math.nan, None  # engine stopped or no edges: nothing to explain
+        return math.nan, None  # engine stopped or no edges yet
     try:
         curve = engine_map.at_throttle(throttle_frac)
     except NoThrottleCurve:
-        return math.nan, f"no map curve at throttle {throttle_frac:.2f}"
+        return math.nan, f"no {throttle_frac * 100:.0f} % curve"
     if not curve.covers(rpm):
-        return math.nan, f"{rpm:.0f} rpm outside the map"
+        return math.nan, "rpm off map"
     p = float(curve.power_w(rpm))
-    return (p, None) if p > 0 else (math.nan, f"map gives no power at {rpm:.0f} rpm")
+    return (p, None) if p > 0 else (math.nan, "no map power")  # (a governor cut-off row)
 
 
 def ideal_engine_rpm(engine_map) -> float:
@@ -174,19 +175,14 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
 
 
 def efficiency_text(v: LiveValues, loaded: bool) -> str:
-    """The efficiency readout: ``—`` unless the test holds a steady load (``loaded``), ``n/a: why``
-    (at most 18 characters, the fields column) when the engine map gives no denominator."""
+    """The efficiency readout: ``—`` unless the test holds a steady load (``loaded``), ``n/a: why`` when the
+    engine map gives no denominator (no curve at the commanded throttle, speed off the map)."""
     if not loaded:
         return "—"
     if math.isnan(v.efficiency):
-        r = v.efficiency_reason
-        if r is None or not math.isnan(v.power_engine_w):
+        if v.efficiency_reason is None or not math.isnan(v.power_engine_w):
             return "—"  # no speed or no torque yet: nothing to explain
-        if r.startswith("no map curve"):
-            return f"n/a: no {v.throttle_frac * 100:.0f} % curve"
-        if "outside" in r:
-            return "n/a: rpm off map"
-        return "n/a: no map power"
+        return f"n/a: {v.efficiency_reason}"
     return fmt(v.efficiency * 100, ".1f", " %")
 
 

@@ -67,17 +67,19 @@ def test_live_efficiency_without_a_curve_at_the_throttle_is_na_with_a_reason():
     v = _values(load_engine_map(FULL_MAP), 0.6)  # a full-throttle-only map
     assert math.isnan(v.efficiency) and math.isnan(v.power_engine_w)
     assert not math.isnan(v.power_out_w)  # the measurement stays: only the denominator is missing
-    assert "0.60" in v.efficiency_reason
-    text = efficiency_text(v, loaded=True)
-    assert text.startswith("n/a") and "60 %" in text and len(text) <= 18  # fits the fields column
+    assert v.efficiency_reason == "no 60 % curve"
+    assert efficiency_text(v, loaded=True) == "n/a: no 60 % curve"  # 18 characters: fits the fields column
     v = _values(load_engine_map(PART_MAP), 0.55)  # between curves: no blend across throttle
-    assert math.isnan(v.efficiency) and "0.55" in v.efficiency_reason
+    assert math.isnan(v.efficiency) and v.efficiency_reason == "no 55 % curve"
 
 
 def test_live_efficiency_outside_the_map_and_while_not_loaded():
     v = _values(load_engine_map(PART_MAP), 1.0, rpm_primary=9000.0)
-    assert math.isnan(v.efficiency) and "outside" in v.efficiency_reason
-    assert efficiency_text(v, loaded=True).startswith("n/a")
+    assert math.isnan(v.efficiency) and efficiency_text(v, loaded=True) == "n/a: rpm off map"
+    v = _values(load_engine_map(PART_MAP), 0.6, rpm_primary=3200.0)  # past the 0.6 curve's governor cut-off
+    assert math.isnan(v.power_engine_w) and efficiency_text(v, loaded=True) == "n/a: rpm off map"
+    v = _values(None, 1.0)
+    assert math.isnan(v.efficiency) and efficiency_text(v, loaded=True) == "n/a: no engine map"
     ok = _values(load_engine_map(PART_MAP), 1.0)
     assert efficiency_text(ok, loaded=False) == "—"  # idle, ramps, coasting: no efficiency to read
     stopped = _values(load_engine_map(PART_MAP), 1.0, rpm_primary=math.nan)
