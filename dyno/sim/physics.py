@@ -60,48 +60,14 @@ depend on how the host slices time; explicit for the (slow) mean speeds,
 exact exponentials for the rotor temperature and lock-in filter, and exact
 within-cell angle/edge timing for the constant acceleration of each cell.
 
-Signals calibrated on the thesis rig's real logs
--------------------------------------------------
-Measured from ``vt-cvt-dyno-2019`` (read in place; runs 2 and 3, steady
-points 1-34; run 4's ADC channel is all zeros, a dead channel, not used).
-Per point: mean ADC counts -> secondary torque ``T`` (eq. 9.1), then
-least-squares sinusoid fits at the engine firing frequency (``n_p/120``,
-23-28 Hz), at the brake-shaft frequency (``n_s g/60``, 10-53 Hz) and at the
-engine revolution frequency (46-55 Hz), and the residual.  "pre" = the
-post-filter amplitude divided by ``|H(f)|`` of a 2nd-order 15 Hz Butterworth.
-
-===========================  ==========================================  =================================
-quantity                     measured                                    chosen
-===========================  ==========================================  =================================
-ADC rate (Arduino time)      126.6-127.0 Hz (nominal 125)                ``adc_clock_error_frac = 0.015``
-firing ripple, post-filter   90-190 counts at T = 4-6 N m, 450-1000 at   ``ripple_firing_frac_table``:
-                             10-23, 600-850 at 25-35                     pre/T 0.7 (T=0), 0.8 (4),
-firing ripple, pre / T       0.75-0.85 at 4 N m, 1.0 at 6-7, 1.2-1.3 at  1.0 (6.5), 1.2 (9..21), 0.8 (25),
-                             9-21, 0.9 at 24, 0.5 at 29, 0.42 at 35      0.5 (29), 0.42 (35)
-revolution order, post       5-65 counts; pre / T 0.1-0.35               ``ripple_engine_rev_frac = 0.22``
-brake-shaft order, post      < 15 counts above 35 Hz, 60-320 at 10-26 Hz ``ripple_brake_shaft_frac = 0.08``
-                             (heavy load); pre / T 0.03-0.15 (outliers
-                             0.3-0.6 where it meets the firing frequency)
-residual (white) noise       85-130 counts std at T = 4-10 N m (one       ``adc_noise_counts = 85``,
-                             run 190-200), 130-290 at 15-35; 0.5 s        ``adc_noise_counts_per_nm = 5``
-                             segment means scatter as white noise would
-total ADC std per point      150-240 counts light, 540-740 heavy         (reproduced, see tests/sim)
-primary rpm, consecutive     mean abs difference 0.6-1.6 % of rpm         ``engine_firing_ripple_ratio = 1.8``
-revolutions                  (long/short revolutions from firing)        ``engine_inertia_kg_m2 = 0.045``,
-                                                                         ``hall_primary_phase_rad = 0.7``
-===========================  ==========================================  =================================
-
-Consequence for the host: with this (realistic) noise the 3 s mean of the
-torque scatters by ``(85 + 5 T)/sqrt(380)`` counts, i.e. 0.4-0.65 % of the
-mean torque (1 sigma) between 10 and 25 N m, and the per-point efficiency
-scatters by about the same relative amount.
+The sensor outputs (Hall edges, ADC conversions with the noise measured on the
+thesis rig's logs) and the truth are in :mod:`dyno.sim.rig_signals`, the
+parameters in :mod:`dyno.sim.rig_params`; both are re-exported here.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -109,209 +75,18 @@ from dyno.sim.brake import Brake
 from dyno.sim.cvt import CVT
 from dyno.sim.driven import Engagement, clamp_radius_m, parasitic_nm
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
-from dyno.sim.sensors import LowPassFilter, angle_at, crossing_time_s
+# The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
+# keep importing them from dyno.sim.physics.
+from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_table_for
+from dyno.sim.rig_params import _load_tune, _resolve_map_path
+from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
+from dyno.sim.sensors import LowPassFilter
 
-TWO_PI = 2.0 * math.pi
-_REPO_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
-DEFAULT_TUNE = "calibration/tunes/cvtech-stock.toml"
-
-ADC_STATUS_ERROR = 0x20
-
-
-def _load_tune(path: str | None):
-    """The CVT tune for the shift balance, or None for the closed form.
-
-    Uses :mod:`dyno.tuning` (another part of the project) when it is
-    importable; a missing package falls back to the closed form, a broken
-    tune file is an error (ConfigError naming file and field).
-    """
-    if not path:
-        return None
-    try:
-        from dyno.tuning.tune import load_tune
-    except ImportError:
-        return None
-    return load_tune(_resolve_map_path(path))
+__all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
+           "Truth"]
 
 
-def _resolve_map_path(path: str) -> Path:
-    p = Path(path)
-    if p.is_absolute():
-        return p
-    # Repository-relative by design (the default), so it works from any cwd;
-    # fall back to cwd-relative for user-supplied relative paths.
-    repo_p = _REPO_ROOT / p
-    return repo_p if repo_p.exists() or not p.exists() else p
-
-
-@dataclass
-class RigParams:
-    """Every parameter of the simulated rig (units in the names).
-
-    Defaults describe the thesis rig (Messick 2018, Sections 8-9) where it
-    gives a number, and representative values elsewhere (commented).
-    """
-
-    # ---- engine
-    engine_map_path: str = DEFAULT_ENGINE_MAP
-    engine_inertia_kg_m2: float = 0.045          # crank + flywheel + primary pulley
-    engine_idle_rpm: float = 1800.0
-    engine_idle_offset_rpm: float = 20.0         # governor set point above idle: friction balance lands on ~1800
-    engine_governor_droop_rpm: float = 150.0     # part-throttle governor band
-    engine_friction_nm: float = 1.5              # motoring friction at 0 rpm
-    engine_friction_at_3600_rpm_nm: float = 3.0  # motoring friction + pumping at 3600 rpm
-    engine_firing_ripple_ratio: float = 1.8      # half-order gas-torque amplitude / gross torque
-    engine_stall_rpm: float = 600.0
-    engine_start_rpm: float = 1000.0             # speed the pull start leaves the engine at
-    # ---- CVT (ratio = primary speed / secondary speed)
-    # Low ratio: the thesis belt-model solutions span 1.74..0.72 (Fig. 6.20),
-    # but the real rig's CVT reached a speed ratio of 2.36 at full load in the
-    # 2019 logs (n_p 2747 / n_s 1166), and with 1.74 the engine cannot hold a
-    # secondary speed below 1500 rpm above its peak-torque speed (it lugs down
-    # to clutch slip).  So low = 2.4 (the logs), high = 0.72 (thesis model).
-    cvt_ratio_low: float = 2.4
-    cvt_ratio_high: float = 0.72
-    cvt_primary_radius_max_m: float = 0.093      # belt radius at full shift (thesis 9.4.1)
-    cvt_sheave_half_angle_deg: float = 13.0
-    cvt_flyweight_coeff_kg_m: float = 0.0108     # n m r dr/dz of the flyweights (eq. 9.2), held constant
-    cvt_primary_spring_full_shift_n: float = 950.0   # thesis 9.4.1 (spring datasheet)
-    cvt_primary_spring_rate_n_per_m: float = 18200.0
-    cvt_secondary_spring_preload_n: float = 200.0
-    cvt_secondary_spring_rate_n_per_m: float = 5000.0
-    cvt_helix_gain_n_per_nm: float = 20.0        # axial force per N*m through the helix
-    cvt_shift_time_constant_s: float = 0.4
-    # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
-    # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
-    cvt_tune_path: str | None = DEFAULT_TUNE
-    # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
-    # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
-    # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
-    cvt_engagement_model: str = "clamp"
-    cvt_clutch_friction_coefficient: float = 0.4  # belt flank friction while slipping (thesis f = 0.4)
-    cvt_engage_start_rpm: float = 1900.0
-    cvt_engage_full_rpm: float = 2100.0
-    cvt_clutch_capacity_nm: float = 60.0
-    cvt_slip_base_frac: float = 0.01
-    cvt_slip_per_20nm_frac: float = 0.015
-    cvt_loss_frac_min: float = 0.04
-    cvt_loss_frac_high_ratio: float = 0.07       # extra loss toward overdrive (thesis Fig. 9.6)
-    cvt_loss_frac_low_ratio: float = 0.02
-    cvt_ratio_best_eff: float = 1.35
-    cvt_bending_drag_nm: float = 0.25
-    # Belt efficiency: "loss_model" = the simple loss model above; "belt_model" =
-    # the full belt model's share (dyno.sim.belt_table, built once per machine in
-    # the overlay cache) + the loss model's parasitic remainder (see dyno.sim.cvt).
-    belt_efficiency_source: str = "belt_model"
-    belt_table_cache_dir: str | None = None      # None = $DYNO_MODEL_CACHE or ~/.cache/dyno/model
-    # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
-    # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
-    # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
-    cvt_belt_friction_coefficient: float | None = None
-    cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
-    # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
-    # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
-    # against itself; "closed_form" reproduces the fitted model (circular: for comparison only).
-    cvt_belt_thrust_model: str = "capstan"
-    # Bearing/seal drag on the secondary shaft after the helix: the helix feels
-    # the belt torque, the torque gauge (and the brake) that minus this.
-    cvt_secondary_friction_torque_nm: float = 0.0
-    # Driven-side parasitic loss a + b w + c w^2 (N m, w in rad/s of the secondary), upstream of
-    # the torque gauge (dyno.sim.driven); off by default, see there.
-    driven_loss_nm: tuple = (0.0, 0.0, 0.0)
-    # ---- driveline
-    secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
-    brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
-    gear_ratio_brake_per_secondary: float = 32.0 / 61.0
-    # ---- brake
-    actuator_speed_mm_s: float = 5.0
-    actuator_travel_mm: float = 40.0             # 8 s full stroke at 5 mm/s (the host's release time)
-    brake_free_travel_mm: float = 1.0
-    brake_spring_rate_n_per_mm: float = 6.5      # ~22 steps of 0.2 s from light load to n_s < 1500 rpm
-    master_cylinder_bore_mm: float = 19.05
-    caliper_piston_bore_mm: float = 48.0
-    brake_pad_radius_m: float = 0.10
-    brake_mu_cold: float = 0.40
-    brake_mu_fade_per_c: float = 6e-4
-    brake_mu_floor_frac: float = 0.5
-    brake_residual_drag_nm: float = 0.5          # at the brake shaft, pads just touching
-    rotor_heat_capacity_j_per_k: float = 2800.0  # ~6 kg cast-iron rotor
-    rotor_cooling_w_per_k: float = 8.0
-    rotor_cooling_w_per_k_per_rad_s: float = 0.15
-    ambient_temp_c: float = 25.0
-    rotor_temp_limit_c: float = 600.0            # physical sanity cap only; the controller's limit is its own
-    # ---- torque sensor chain
-    adc_gain_counts_per_nm: float = 108.188097293   # counts per N*m of SECONDARY torque (thesis eq. 9.1)
-    adc_offset_counts: float = 35144.7019735
-    adc_zero_drift_nm_per_min: float = 0.0       # linear zero drift, secondary N m per minute (dyno.sim.driven)
-    lockin_cutoff_hz: float = 15.0
-    lockin_filter_order: int = 2
-    adc_rate_hz: float = 125.0
-    adc_clock_error_frac: float = 0.015
-    adc_noise_counts: float = 85.0
-    adc_noise_counts_per_nm: float = 5.0
-    # Shaft-torque ripple amplitudes BEFORE the lock-in filter, as fractions
-    # of the mean brake-shaft torque (measured through a 2nd-order filter;
-    # see the module docstring).  Firing order: tabulated against secondary
-    # torque (N*m, fraction), linear in between, clamped at the ends.
-    ripple_firing_frac_table: tuple = ((0.0, 0.7), (4.0, 0.8), (6.5, 1.0), (9.0, 1.2), (21.0, 1.2),
-                                       (25.0, 0.8), (29.0, 0.5), (35.0, 0.42))
-    ripple_engine_rev_frac: float = 0.22
-    ripple_brake_shaft_frac: float = 0.08
-    adc_error_prob: float = 0.0
-    # ---- rotor thermometer (MLX90614): first-order optical/filter lag and read noise;
-    # quantisation (0.02 K) comes from its word format in dyno.sim.bus
-    thermometer_time_constant_s: float = 0.15
-    thermometer_noise_c: float = 0.05
-    # ---- Hall sensors
-    hall_bounce_prob: float = 0.05
-    hall_bounce_min_s: float = 50e-6
-    hall_bounce_max_s: float = 500e-6
-    hall_primary_phase_rad: float = 0.7          # magnet position relative to the firing cycle
-    # ---- numerics
-    max_substep_s: float = 0.004                 # fixed physics cell; also the input latency bound
-
-
-@dataclass
-class SensorEvent:
-    """One sensor event: a Hall falling edge or an ADC conversion."""
-
-    channel: str          # "primary" | "secondary" | "adc"
-    t_s: float            # true simulation time of the event
-    code: int = 0         # ADC code (0..65535, clipped at the rails)
-    status: int = 0       # AD7171 status bits; 0x20 = error bit
-
-
-@dataclass
-class Truth:
-    """True state of the rig at the current time (for tests)."""
-
-    t_s: float
-    rpm_primary: float
-    rpm_secondary: float
-    ratio: float                   # primary speed / secondary speed (speed ratio, includes creep)
-    torque_engine_nm: float        # mean net engine torque (no firing ripple)
-    torque_primary_nm: float       # belt input torque
-    torque_secondary_nm: float     # belt output torque
-    torque_brake_shaft_nm: float   # torque in the instrumented brake shaft (mean, no ripple)
-    power_in_w: float              # CVT input power  T_p omega_p
-    power_out_w: float             # CVT output power T_s omega_s
-    efficiency: float              # power_out / power_in (0 when no power flows)
-    rotor_temp_c: float
-    actuator_mm: float
-    engine_running: bool
-    ratio_geometric: float = 0.0   # r_s / r_p of the sheaves
-    shift_travel_frac: float = 0.0
-    power_engine_w: float = 0.0    # engine mean torque x speed
-    power_loss_w: float = 0.0      # power_in - power_out (belt losses)
-    brake_mu: float = 0.0
-    brake_torque_capacity_nm: float = 0.0
-    clutch_locked: bool = False
-    clutch_capacity_nm: float = 0.0  # torque the primary can pass now (engagement)
-    belt_slip: float = 0.0         # 1 - belt speed efficiency: omega_s = (1 - slip) omega_p / ratio_geometric
-
-
-class RigModel:
+class RigModel(RigSignals):
     """The simulated rig.  See the module docstring for the physics.
 
     Inputs (attributes set by the device/actuator emulation):
@@ -479,25 +254,6 @@ class RigModel:
 
     def _kin_ratio(self) -> float:
         return (1.0 - self._slip) / self._ratio_geo
-
-    # ------------------------------------------------------------ random buffers
-    def _normal(self) -> float:
-        buf = self._noise_buf
-        if not buf:
-            buf.extend(self._rng_noise.standard_normal(4096).tolist())
-        return buf.pop()
-
-    def _uniform_bounce(self) -> float:
-        buf = self._bounce_buf
-        if not buf:
-            buf.extend(self._rng_bounce.random(4096).tolist())
-        return buf.pop()
-
-    def _uniform_err(self) -> float:
-        buf = self._err_buf
-        if not buf:
-            buf.extend(self._rng_err.random(4096).tolist())
-        return buf.pop()
 
     # ------------------------------------------------------------ stepping
     def step(self, dt_s: float) -> list[SensorEvent]:
@@ -697,125 +453,6 @@ class RigModel:
             t_p = t_e - j_e * acc
         return acc, t_p
 
-    def _emit_edge(self, channel: str, t: float, events: list[SensorEvent]) -> None:
-        events.append(SensorEvent(channel, t))
-        pb = self.params.hall_bounce_prob
-        if pb > 0.0 and self._uniform_bounce() < pb:
-            p = self.params
-            tb = t + p.hall_bounce_min_s + (p.hall_bounce_max_s - p.hall_bounce_min_s) * self._uniform_bounce()
-            events.append(SensorEvent(channel, tb))
-
-    def _primary_edges(self, t0, h, th0, w0, a, th1, amp, events) -> None:
-        """Edges where the *measured* crank angle (mean + firing ripple) crosses 2 pi k."""
-        ph = self.params.hall_primary_phase_rad
-        while True:
-            target = TWO_PI * self._next_edge_e
-            ts = target
-            if amp > 0.0:
-                for _ in range(4):   # fixed point, contraction amp/2 < 0.1
-                    ts = target + amp * math.sin(0.5 * ts + ph)
-            if th1 < ts:
-                return
-            tau = crossing_time_s(th0, w0, a, ts)
-            tau = min(max(tau, 0.0), h)
-            self._emit_edge("primary", t0 + tau, events)
-            self._next_edge_e += 1
-
-    def _secondary_edges(self, t0, h, th0, w0, a, th1, events) -> None:
-        while th1 >= TWO_PI * self._next_edge_s:
-            tau = crossing_time_s(th0, w0, a, TWO_PI * self._next_edge_s)
-            tau = min(max(tau, 0.0), h)
-            self._emit_edge("secondary", t0 + tau, events)
-            self._next_edge_s += 1
-
-    def _adc_event(self, ta, tau, y_mean, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge) -> SensorEvent:
-        p = self.params
-        g = self._g
-        th_e = angle_at(th_e0, w_e0, a_e, tau)
-        w_e = w_e0 + a_e * tau
-        sig = y_mean
-        amp_base = abs(t_gauge)
-        if amp_base > 0.0 and w_e > 0.0:
-            lp = self.lockin
-            gm, ph = lp.gain_phase(0.5 * w_e)
-            frac = _interp_table(self._firing_table, abs(t_gauge * g))
-            sig += frac * amp_base * gm * math.sin(0.5 * th_e + self._phase_firing + ph)
-            gm, ph = lp.gain_phase(w_e)
-            sig += p.ripple_engine_rev_frac * amp_base * gm * math.sin(th_e + self._phase_rev + ph)
-            w_s = w_s0 + a_s * tau
-            if w_s > 0.0:
-                th_b = g * angle_at(th_s0, w_s0, a_s, tau)
-                gm, ph = lp.gain_phase(g * w_s)
-                sig += p.ripple_brake_shaft_frac * amp_base * gm * math.sin(th_b + self._phase_brake + ph)
-        t_sec = sig * g
-        sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
-        code = p.adc_offset_counts + p.adc_gain_counts_per_nm * t_sec + sigma * self._normal()
-        if self._zero_drift_counts_per_s:
-            code += self._zero_drift_counts_per_s * ta
-        code_i = math.floor(code + 0.5)
-        code_i = 0 if code_i < 0 else (65535 if code_i > 65535 else code_i)
-        status = 0
-        if self.adc_error_prob > 0.0 and self._uniform_err() < self.adc_error_prob:
-            status = ADC_STATUS_ERROR
-        if self.adc_stuck:
-            if self._adc_stuck_code is None:
-                self._adc_stuck_code = code_i
-            code_i = self._adc_stuck_code
-        return SensorEvent("adc", ta, code_i, status)
-
-    # ------------------------------------------------------------ truth
-    def truth(self) -> Truth:
-        """True state at the caller's time ``t_s``.
-
-        Speeds are interpolated within the physics cell (they vary linearly
-        there); torques, powers and temperatures are the cell's values.
-        """
-        span = self._cell_end_s - self._cell_start_s
-        f = (self.t_s - self._cell_start_s) / span if span > 0.0 else 1.0
-        f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
-        w_e = self._w_e_start + f * (self._w_e - self._w_e_start)
-        w_s = self._w_s_start + f * (self._w_s - self._w_s_start)
-        p_in = self._t_p * w_e
-        p_out = self._t_s * w_s
-        eff = p_out / p_in if p_in > 1e-9 and p_out > 0.0 else 0.0
-        speed_ratio = w_e / w_s if w_s > 1e-9 else 0.0
-        return Truth(
-            t_s=self.t_s,
-            rpm_primary=w_e * RPM_PER_RAD_S,
-            rpm_secondary=w_s * RPM_PER_RAD_S,
-            ratio=speed_ratio,
-            torque_engine_nm=self._t_e,
-            torque_primary_nm=self._t_p,
-            torque_secondary_nm=self._t_s,
-            torque_brake_shaft_nm=self._t_gauge,
-            power_in_w=p_in,
-            power_out_w=p_out,
-            efficiency=eff,
-            rotor_temp_c=self._rotor_c,
-            actuator_mm=self._act_mm,
-            engine_running=self._running,
-            ratio_geometric=self._ratio_geo,
-            shift_travel_frac=self._x,
-            power_engine_w=self._t_e * w_e,
-            power_loss_w=p_in - p_out,
-            brake_mu=self.brake.mu(self._rotor_c),
-            brake_torque_capacity_nm=self._t_brake_cap,
-            clutch_locked=self._locked,
-            clutch_capacity_nm=self._cap,
-            belt_slip=self._slip,
-        )
-
-
-def _belt_table_for(p: RigParams, tune=None):
-    """The belt-model efficiency table (at ``tune``'s clamp) when ``belt_efficiency_source == "belt_model"``."""
-    if p.belt_efficiency_source == "loss_model":
-        return None
-    if p.belt_efficiency_source != "belt_model":
-        raise ValueError(f"belt_efficiency_source: 'belt_model' or 'loss_model', got {p.belt_efficiency_source!r}")
-    from dyno.sim.belt_table import belt_table
-
-    return belt_table(p.belt_table_cache_dir, tune)
-
 
 def _after_drag(torque_nm: float, drag_nm: float) -> float:
     """Torque left for the brake at standstill once the shaft drag holds its share."""
@@ -828,13 +465,3 @@ def _after_drag(torque_nm: float, drag_nm: float) -> float:
 
 def _event_time(ev: SensorEvent) -> float:
     return ev.t_s
-
-
-def _interp_table(table: tuple, x: float) -> float:
-    """Piecewise-linear lookup in ``((x0, y0), (x1, y1), ...)``, clamped at the ends."""
-    if x <= table[0][0]:
-        return table[0][1]
-    for (x0, y0), (x1, y1) in zip(table, table[1:]):
-        if x <= x1:
-            return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
-    return table[-1][1]

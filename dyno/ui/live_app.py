@@ -3,33 +3,35 @@
 Thin over :mod:`dyno.ui.session` (commands) and :mod:`dyno.ui.live_model`
 (values).  The poller and the controller run as tasks on Textual's own
 loop; this screen only reads them, at ``REFRESH_HZ``, and hands the slow
-thing (the belt-model overlay) to a background process.
+thing (the belt-model overlay, :mod:`dyno.ui.live_overlay`) to a background
+process.  The plots are drawn by :mod:`dyno.ui.live_plots`.
 """
 
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
+from textual.css.query import NoMatches
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
 from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
-from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, overlay_inputs, temp_colour
-from dyno.ui.live_model import TEST_STATES, discard_text, measure_text, progress_text
+from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, temp_colour
+from dyno.ui.live_model import TEST_STATES, discard_text, efficiency_text, measure_text, progress_text
+from dyno.ui.live_overlay import OverlayMixin
+from dyno.ui.live_plots import PLOTS, draw_efficiency, draw_shift_curve, draw_time
 from dyno.ui.results_view import has_results, results_lines
 from dyno.ui.session import LiveOptions, LiveSession
 
 REFRESH_HZ = 4.0  # values during a test: a few Hz, readable
 IDLE_REFRESH_HZ = 2.0  # ... and while nothing runs (waiting, armed, ended): the screen's CPU is most of the idle cost
 PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
-PLOTS = {"1": "efficiency", "2": "shift curve", "3": "torque/rpm vs time"}
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
 HELP_ENDED = "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE/ABORTED
 
@@ -51,7 +53,7 @@ LIVE_CSS = """
 """
 
 
-class LiveApp(DynoApp):
+class LiveApp(OverlayMixin, DynoApp):
     CSS = DynoApp.CSS + LIVE_CSS
     BINDINGS = DynoApp.BINDINGS + [
         Binding("g", "go", "GO"), Binding("p", "pause", "pause/resume"), Binding("m", "manual", "manual"),
@@ -69,24 +71,7 @@ class LiveApp(DynoApp):
         self.history = History()
         self.plot_key = "1"
         self.values = None
-        self.overlay: list | None = None  # closed-form efficiency of the points the full model has not solved yet
-        self.overlay_full: list = []  # (secondary rpm, full-model efficiency)
-        self.overlay_tier = ""
-        self.overlay_requested = False
-        self.overlay_service = None  # dyno.model.overlay_service.OverlayService, from the first request
-        self.overlay_cache_dir = None  # the model cache's default unless set (a test's own directory)
-        self._overlay_points = -1
-        self._overlay_pairs: list = []  # overlay_inputs of the submitted points, in order
-        self._overlay_keys: list = []
-        self._overlay_closed: dict = {}
-        self._overlay_seen_s: dict = {}
-        self._overlay_loop = None  # the event loop, known once the overlay is first requested
-        self._overlay_listening = None  # the controller whose accepted points are submitted at once
-        self._overlay_lock = threading.Lock()  # submissions come from worker threads
-        self._overlay_tune_cache = None  # the rig's Tune, False for none, None before the first look
-        self._overlay_primed_s = -math.inf
-        self._overlay_shown_s: dict = {}
-        self._overlay_version = 0
+        self._init_overlay()
         self._plotted = None
         self._plotted_t = 0.0
         self._ideal_rpm = math.nan
@@ -144,6 +129,10 @@ class LiveApp(DynoApp):
         s = self.session
         if s is None:
             return
+        try:
+            st = self.query_one("#state", Static)
+        except NoMatches:  # the app is closing: its widgets go before its interval timer stops
+            return
         now = self.session.loop.time()
         if not force and s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
             return  # nothing runs: half the rate
@@ -152,8 +141,7 @@ class LiveApp(DynoApp):
         v = live_values(s.poller, s.controller, now, self.rate)
         self.values = v
         self.history.add(now - s.t0, v)
-        self.query_one("#state", Static).update(self._state_text(v))
-        st = self.query_one("#state", Static)
+        st.update(self._state_text(v))
         st.set_class(v.state == "aborted", "aborted")
         st.set_class(v.state == "done", "done")
         self.query_one("#fields", Static).update(self._fields_text(v))
@@ -204,10 +192,11 @@ class LiveApp(DynoApp):
         row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
         row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
-        # The map is full throttle: the efficiency means something only while the test holds it there
-        # (never in the characterisations: throttle ramps, idle, an engine cut).
-        loaded = v.state in ("warmup", "step", "settle", "measure") and self.session.controller.plan.mode not in FROM_IDLE
-        row("effic.", fmt(v.efficiency * 100 if loaded and not math.isnan(v.efficiency) else math.nan, ".1f", " %"))
+        # The denominator is the map's curve at the commanded throttle (n/a without one); the efficiency
+        # means something only while the test holds a steady load (never in the characterisations:
+        # throttle ramps, idle, an engine cut).
+        loaded = v.state in TEST_STATES and self.session.controller.plan.mode not in FROM_IDLE
+        row("effic.", efficiency_text(v, loaded))
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
         row("points", str(v.points))
@@ -264,215 +253,13 @@ class LiveApp(DynoApp):
         plt.clear_data()
         plt.clear_figure()
         if self.plot_key == "1":
-            shown = [p for p in pts if p.get("efficiency") is not None and math.isfinite(p["efficiency"])]
-            good = [p for p in shown if p.get("valid", True)]
-            bad = [p for p in shown if not p.get("valid", True)]  # windows disturbed every time, or outside 0..1
-            plt.title("efficiency vs secondary rpm")
-            plt.xlabel("secondary rpm")
-            plt.ylabel("%")
-            if good:
-                xs = [p["rpm_secondary"] for p in good]
-                ys = [p["efficiency"] * 100 for p in good]
-                es = [(p.get("efficiency_sem") or 0.0) * 100 for p in good]
-                plt.error(xs, ys, yerr=es, color="cyan", label="measured")
-            if bad:
-                plt.scatter([p["rpm_secondary"] for p in bad], [p["efficiency"] * 100 for p in bad], marker="x",
-                            color="red", label="invalid (see status)")
-            if self.overlay_requested and self.overlay_full:
-                pred = sorted(self.overlay_full)
-                plt.plot([a for a, _ in pred], [b * 100 for _, b in pred], color="green", marker="dot",
-                         label="model (full)")
-            if self.overlay_requested and self.overlay:
-                rough = sorted(self.overlay)  # not solved yet: the closed form (creep only, an upper bound)
-                plt.scatter([a for a, _ in rough], [b * 100 for _, b in rough], color="gray", marker="x",
-                            label="model (closed form, solving)")
+            draw_efficiency(plt, pts, self.overlay_full if self.overlay_requested else None,
+                            self.overlay if self.overlay_requested else None)
         elif self.plot_key == "2":
-            plt.title(f"shift curve; ideal {self._ideal_rpm:.0f} rpm (peak power)")
-            plt.xlabel("secondary rpm")
-            plt.ylabel("engine rpm")
-            h = self.history
-            trail = [(b, a) for a, b in zip(h.rpm_primary, h.rpm_secondary) if b > 0 and a > 0]
-            if trail:
-                plt.scatter([x for x, _ in trail], [y for _, y in trail], marker="dot", color="gray", label="live")
-            if pts:
-                plt.scatter([p["rpm_secondary"] for p in pts], [p["rpm_primary"] for p in pts], color="cyan",
-                            label="points")
-            if math.isfinite(self._ideal_rpm):
-                plt.hline(self._ideal_rpm, color="green")  # the flat engine speed a perfect CVT would hold
+            draw_shift_curve(plt, self.history, pts, self._ideal_rpm)
         else:
-            h = self.history
-            plt.title("last 30 s: rpm (left), torque N·m (right)")
-            t = list(h.t)
-            if t:
-                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.rpm_primary], color="yellow", label="engine")
-                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.rpm_secondary], color="cyan",
-                         label="secondary")
-                plt.plot(t, [x if math.isfinite(x) else 0 for x in h.torque_nm], color="magenta", yside="right",
-                         label="torque")
-            plt.xlabel("s")
+            draw_time(plt, self.history)
         w.refresh()
-
-    # --- overlay (belt model, off the UI thread) -----------------------------------------------
-    # The full model runs in dyno.model.overlay_service (one background process, warm starts from the nearest
-    # solved point, cache); this screen only submits the accepted points and draws what has come back.
-    def action_overlay(self) -> None:
-        self.overlay_requested = not self.overlay_requested
-        if not self.overlay_requested:
-            self.overlay, self.overlay_tier = None, ""
-            self.say("overlay off")
-            return
-        self.say("belt-model overlay: closed form now, full model per point in the background")
-        self._start_overlay()
-
-    def _start_overlay(self) -> None:
-        """Submit the points not yet submitted (the service solves each once), closed form for the rest.
-
-        The work runs in a worker thread: the imports, the solver process's start and the inverse of each
-        point (tens of ms) must never hold the event loop on which the poller and the controller run.
-        """
-        pts = list(self.session.controller.points)
-        self._overlay_points = len(pts)
-        ctrl = self.session.controller
-        if self._overlay_listening is not ctrl:  # (a re-armed session has a new controller)
-            import asyncio
-
-            self._overlay_listening = ctrl
-            loop = self._overlay_loop = asyncio.get_running_loop()
-            # Submit a point as soon as the controller accepts it (not at the next refresh); deferred to the
-            # loop so that nothing of the overlay runs inside the controller's own call.
-            ctrl.listeners.append(lambda _c: loop.call_soon(self._overlay_on_points))
-        accepted_s = time.monotonic()
-        self.run_worker(lambda: self._overlay_submit_work(pts, accepted_s), thread=True,
-                        group="overlay-submit", name="overlay submit")
-
-    def _overlay_service_now(self):
-        """The service, made on first use (in a worker thread, see _start_overlay)."""
-        if self.overlay_service is None:
-            # The solver runs in its own process (its numerics must not hold this interpreter's GIL, which
-            # the poller and the controller need), imported there.
-            from dyno.model.overlay_service import OverlayService, process_pool
-
-            loop = self._overlay_loop
-            pool, cancel = process_pool()
-            self.overlay_service = OverlayService(
-                executor=pool, cancel=cancel, cache_dir=self.overlay_cache_dir,
-                on_result=lambda key, res: loop.call_soon_threadsafe(self._overlay_changed, key))
-            if not self.is_running:  # the app closed while this thread started it: stop it too
-                self.overlay_service.close()
-        return self.overlay_service
-
-    def _overlay_tune(self):
-        """The rig's tune (the run's tune.toml source) for the inverse's clamp; None: Table 6.1 at 100 N."""
-        if self._overlay_tune_cache is None:
-            path = getattr(self.session.controller, "tune_path", None)
-            tune = False
-            if path is not None:
-                from dyno.tuning.tune import load_tune
-
-                try:
-                    tune = load_tune(path)
-                except Exception:  # noqa: BLE001  (validated when the run started; never break the overlay)
-                    tune = False
-            self._overlay_tune_cache = tune
-        return self._overlay_tune_cache or None
-
-    def _overlay_submit_work(self, pts, accepted_s: float) -> None:
-        with self._overlay_lock:
-            svc = self._overlay_service_now()
-            pairs = overlay_inputs(pts, self._overlay_tune())
-            done = len(self._overlay_pairs)
-            new = pairs[done:] if pairs[:done] == self._overlay_pairs else pairs
-            if new is pairs:  # not an extension of what was submitted (cannot happen in a run): start over
-                self._overlay_pairs, self._overlay_keys = [], []
-            for rs, op in new:
-                self._overlay_pairs.append((rs, op))
-                key = svc.submit(op)
-                self._overlay_keys.append(key)
-                self._overlay_seen_s.setdefault(key, accepted_s)
-            submitted = list(self._overlay_pairs)
-        if not pts:
-            self.call_from_thread(self._overlay_prime)
-        self._closed_form_work(submitted)
-
-    def _overlay_on_points(self) -> None:
-        if self.overlay_requested and len(self.session.controller.points) != self._overlay_points:
-            self._start_overlay()
-
-    def _overlay_prime(self) -> None:
-        """A seed near the coming point while the controller settles/measures, if nothing solved is near it
-        (checked at most once a second, the inverse in a worker thread)."""
-        svc, v = self.overlay_service, self.values
-        if svc is None or v is None or not svc.idle or time.monotonic() - self._overlay_primed_s < 1.0:
-            return
-        self._overlay_primed_s = time.monotonic()
-        live = {"rpm_primary": v.rpm_primary, "ratio": v.ratio, "power_in_w": v.power_engine_w,
-                "rpm_secondary": v.rpm_secondary}
-        self.run_worker(lambda: self._overlay_prime_work(svc, live), thread=True, group="overlay-prime",
-                        name="overlay seed")
-
-    def _overlay_prime_work(self, svc, live: dict) -> None:
-        seed = [op for _, op in overlay_inputs([live], self._overlay_tune())]
-        if not seed:
-            from dyno.model.params import TABLE_6_1_POINT  # nothing measured yet: the thesis's case
-
-            seed = [TABLE_6_1_POINT]
-        if svc.nearest_distance(seed[0]) > 0.5:
-            svc.prime(seed[0])
-
-    def _closed_form_work(self, pairs) -> None:
-        from dyno.model.overlay import _as_point, _closed_form_result
-        from dyno.model.params import TABLE_6_1
-
-        out = {}
-        for _, op in pairs:
-            if op in self._overlay_closed:
-                continue
-            try:
-                out[op] = _closed_form_result(TABLE_6_1, _as_point(op, 100.0, None))
-            except Exception:  # noqa: BLE001  (a placeholder: a point outside its range has none)
-                pass
-        self.call_from_thread(self._set_closed_form, out)
-
-    def _set_closed_form(self, out: dict) -> None:
-        self._overlay_closed.update(out)
-        self._overlay_changed()
-
-    def _overlay_changed(self, key: str | None = None) -> None:
-        """Rebuild the curve: the full model where solved, the closed form (marked) where not yet."""
-        svc = self.overlay_service
-        if svc is None:
-            return
-        full, rough, failed, newly = [], [], 0, []
-        for (rs, op), k in zip(self._overlay_pairs, self._overlay_keys):
-            r = svc.get(k)
-            if r is not None and r.get("converged") and r.get("efficiency"):
-                full.append((rs, float(r["efficiency"]["overall"])))
-                newly.append(k)
-                continue
-            failed += r is not None
-            cf = self._overlay_closed.get(op)
-            if cf is not None:
-                rough.append((rs, float(cf["efficiency"]["overall"])))
-        self.overlay_full, self.overlay = full, rough
-        n = len(self._overlay_pairs)
-        self.overlay_tier = (f"full {len(full)}/{n}" + (f", {svc.pending} wait" if svc.pending else "")
-                             + (f", {failed} fail" if failed else "")) if n else "no points yet"
-        self._overlay_version += 1
-        if key is not None and self.overlay_requested and self.is_running:
-            from textual.css.query import NoMatches
-
-            try:
-                self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
-            except NoMatches:  # a dialog is on top: the next refresh draws it
-                pass
-        now = time.monotonic()
-        for k in newly:
-            self._overlay_shown_s.setdefault(k, now)
-
-    def overlay_latencies_s(self) -> dict:
-        """Per point: seconds from its acceptance by the controller to its full-model value in the curve."""
-        return {k: self._overlay_shown_s[k] - self._overlay_seen_s[k] for k in self._overlay_shown_s
-                if k in self._overlay_seen_s}
 
     # --- keys ------------------------------------------------------------------------------------
     def action_estop(self) -> None:

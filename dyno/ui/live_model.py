@@ -11,6 +11,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from dyno.analysis.engine_map import NoThrottleCurve
 from dyno.protocol import v1
 
 RAD_S_PER_RPM = 2.0 * math.pi / 60.0
@@ -27,8 +28,8 @@ class LiveValues:
     ratio: float
     torque_secondary_nm: float
     power_out_w: float
-    power_engine_w: float  # full-throttle map at the engine speed
-    efficiency: float  # power_out / power_engine (meaningful at full throttle only)
+    power_engine_w: float  # the engine map's curve at the commanded throttle, at the engine speed
+    efficiency: float  # power_out / power_engine (meaningful in steady running only)
     rotor_temp_c: float
     rotor_temp_limit_c: float
     points: int
@@ -39,6 +40,8 @@ class LiveValues:
     rejected_total: int
     abort_cause: str | None
     abort_detail: str | None
+    throttle_frac: float = 1.0  # as commanded: the engine-map curve power_engine_w comes from
+    efficiency_reason: str | None = None  # why power_engine_w (and so the efficiency) is NaN, if known
 
 
 def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQUE_WINDOW_US) -> float:
@@ -52,10 +55,26 @@ def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQU
     return float(calibration.torque_secondary_nm(float(good.mean())))
 
 
-def engine_power_w(engine_map, rpm: float) -> float:
-    if engine_map is None or not (rpm > 0) or not engine_map.covers(rpm):
-        return math.nan
-    return float(engine_map.power_w(rpm))
+def engine_power_w(engine_map, rpm: float, throttle_frac: float = 1.0) -> tuple[float, str | None]:
+    """(engine power from the map's curve at ``throttle_frac``, None) or (NaN, why there is none).
+
+    The curve at the commanded throttle, never the full-throttle one at part throttle (it would credit
+    the engine with power it does not make) and never a blend of two throttles (see
+    :meth:`dyno.analysis.engine_map.EngineMap.at_throttle`).  The reason is the screen's words (at most
+    13 characters: ``n/a: <reason>`` fits the fields column); None when there is nothing to explain.
+    """
+    if engine_map is None:
+        return math.nan, "no engine map"
+    if not (rpm > 0):
+        return math.nan, None  # engine stopped or no edges yet
+    try:
+        curve = engine_map.at_throttle(throttle_frac)
+    except NoThrottleCurve:
+        return math.nan, f"no {throttle_frac * 100:.0f} % curve"
+    if not curve.covers(rpm):
+        return math.nan, "rpm off map"
+    p = float(curve.power_w(rpm))
+    return (p, None) if p > 0 else (math.nan, "no map power")  # (a governor cut-off row)
 
 
 def ideal_engine_rpm(engine_map) -> float:
@@ -89,7 +108,7 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
     ratio = rp / rs if rs > 1.0 else math.nan
     torque = recent_torque_nm(poller.streams, poller.device_now_us(), controller.calibration)
     p_out = torque * rs * RAD_S_PER_RPM if not math.isnan(torque) else math.nan
-    p_eng = engine_power_w(controller.engine_map, rp)
+    p_eng, eff_reason = engine_power_w(controller.engine_map, rp, controller.throttle_frac)
     eff = p_out / p_eng if p_eng > 0 and not math.isnan(p_out) else math.nan
     st = poller.reader.stats
     abort = controller.aborts[-1] if controller.aborts else None
@@ -101,7 +120,8 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
         frames_per_s=rate.update(now_s, st.accepted), crc_errors=int(st.rejected.get("crc", 0)),
         nacks=int(st.transport_errors.get("nack", 0)), events_lost=int(poller.reader.events_lost),
         rejected_total=int(sum(st.rejected.values())),
-        abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None)
+        abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None,
+        throttle_frac=controller.throttle_frac, efficiency_reason=eff_reason)
 
 
 TEST_STATES = ("warmup", "step", "settle", "measure")  # a test is under way (the ETA means something)
@@ -152,6 +172,18 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
         r, g = 255, int(200 * (1.0 - f) * 2)
     marker = " OVER LIMIT" if temp_c >= limit_c else (" HOT" if f >= 0.8 else (" warm" if f >= 0.5 else ""))
     return f"#{min(r, 255):02x}{g:02x}00", marker
+
+
+def efficiency_text(v: LiveValues, loaded: bool) -> str:
+    """The efficiency readout: ``—`` unless the test holds a steady load (``loaded``), ``n/a: why`` when the
+    engine map gives no denominator (no curve at the commanded throttle, speed off the map)."""
+    if not loaded:
+        return "—"
+    if math.isnan(v.efficiency):
+        if v.efficiency_reason is None or not math.isnan(v.power_engine_w):
+            return "—"  # no speed or no torque yet: nothing to explain
+        return f"n/a: {v.efficiency_reason}"
+    return fmt(v.efficiency * 100, ".1f", " %")
 
 
 def fmt(x: float, spec: str = ".0f", unit: str = "") -> str:

@@ -1,0 +1,180 @@
+"""Every parameter of the simulated rig (:class:`RigParams`, units in the names) and its file defaults.
+
+Split from :mod:`dyno.sim.physics` (which re-exports these names, so ``from dyno.sim.physics import
+RigParams`` keeps working): the parameters with their sources, and the repository-relative defaults
+(engine map, CVT tune) with how a path is resolved.  What the numbers of the signal chain were
+measured from is in :mod:`dyno.sim.rig_signals`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+_REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
+DEFAULT_TUNE = "calibration/tunes/cvtech-stock.toml"
+
+
+def _load_tune(path: str | None):
+    """The CVT tune for the shift balance, or None for the closed form.
+
+    Uses :mod:`dyno.tuning` (another part of the project) when it is
+    importable; a missing package falls back to the closed form, a broken
+    tune file is an error (ConfigError naming file and field).
+    """
+    if not path:
+        return None
+    try:
+        from dyno.tuning.tune import load_tune
+    except ImportError:
+        return None
+    return load_tune(_resolve_map_path(path))
+
+
+def _resolve_map_path(path: str) -> Path:
+    p = Path(path)
+    if p.is_absolute():
+        return p
+    # Repository-relative by design (the default), so it works from any cwd;
+    # fall back to cwd-relative for user-supplied relative paths.
+    repo_p = _REPO_ROOT / p
+    return repo_p if repo_p.exists() or not p.exists() else p
+
+
+@dataclass
+class RigParams:
+    """Every parameter of the simulated rig (units in the names).
+
+    Defaults describe the thesis rig (Messick 2018, Sections 8-9) where it
+    gives a number, and representative values elsewhere (commented).
+    """
+
+    # ---- engine
+    engine_map_path: str = DEFAULT_ENGINE_MAP
+    engine_inertia_kg_m2: float = 0.045          # crank + flywheel + primary pulley
+    engine_idle_rpm: float = 1800.0
+    engine_idle_offset_rpm: float = 20.0         # governor set point above idle: friction balance lands on ~1800
+    engine_governor_droop_rpm: float = 150.0     # part-throttle governor band
+    engine_friction_nm: float = 1.5              # motoring friction at 0 rpm
+    engine_friction_at_3600_rpm_nm: float = 3.0  # motoring friction + pumping at 3600 rpm
+    engine_firing_ripple_ratio: float = 1.8      # half-order gas-torque amplitude / gross torque
+    engine_stall_rpm: float = 600.0
+    engine_start_rpm: float = 1000.0             # speed the pull start leaves the engine at
+    # ---- CVT (ratio = primary speed / secondary speed)
+    # Low ratio: the thesis belt-model solutions span 1.74..0.72 (Fig. 6.20),
+    # but the real rig's CVT reached a speed ratio of 2.36 at full load in the
+    # 2019 logs (n_p 2747 / n_s 1166), and with 1.74 the engine cannot hold a
+    # secondary speed below 1500 rpm above its peak-torque speed (it lugs down
+    # to clutch slip).  So low = 2.4 (the logs), high = 0.72 (thesis model).
+    cvt_ratio_low: float = 2.4
+    cvt_ratio_high: float = 0.72
+    cvt_primary_radius_max_m: float = 0.093      # belt radius at full shift (thesis 9.4.1)
+    cvt_sheave_half_angle_deg: float = 13.0
+    cvt_flyweight_coeff_kg_m: float = 0.0108     # n m r dr/dz of the flyweights (eq. 9.2), held constant
+    cvt_primary_spring_full_shift_n: float = 950.0   # thesis 9.4.1 (spring datasheet)
+    cvt_primary_spring_rate_n_per_m: float = 18200.0
+    cvt_secondary_spring_preload_n: float = 200.0
+    cvt_secondary_spring_rate_n_per_m: float = 5000.0
+    cvt_helix_gain_n_per_nm: float = 20.0        # axial force per N*m through the helix
+    cvt_shift_time_constant_s: float = 0.4
+    # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
+    # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
+    cvt_tune_path: str | None = DEFAULT_TUNE
+    # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
+    # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
+    # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
+    cvt_engagement_model: str = "clamp"
+    cvt_clutch_friction_coefficient: float = 0.4  # belt flank friction while slipping (thesis f = 0.4)
+    cvt_engage_start_rpm: float = 1900.0
+    cvt_engage_full_rpm: float = 2100.0
+    cvt_clutch_capacity_nm: float = 60.0
+    cvt_slip_base_frac: float = 0.01
+    cvt_slip_per_20nm_frac: float = 0.015
+    cvt_loss_frac_min: float = 0.04
+    cvt_loss_frac_high_ratio: float = 0.07       # extra loss toward overdrive (thesis Fig. 9.6)
+    cvt_loss_frac_low_ratio: float = 0.02
+    cvt_ratio_best_eff: float = 1.35
+    cvt_bending_drag_nm: float = 0.25
+    # Belt efficiency: "loss_model" = the simple loss model above; "belt_model" =
+    # the full belt model's share (dyno.sim.belt_table, built once per machine in
+    # the overlay cache) + the loss model's parasitic remainder (see dyno.sim.cvt).
+    belt_efficiency_source: str = "belt_model"
+    belt_table_cache_dir: str | None = None      # None = $DYNO_MODEL_CACHE or ~/.cache/dyno/model
+    # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
+    # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
+    # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
+    cvt_belt_friction_coefficient: float | None = None
+    cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
+    # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
+    # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
+    # against itself; "closed_form" reproduces the fitted model (circular: for comparison only).
+    cvt_belt_thrust_model: str = "capstan"
+    # Bearing/seal drag on the secondary shaft after the helix: the helix feels
+    # the belt torque, the torque gauge (and the brake) that minus this.
+    cvt_secondary_friction_torque_nm: float = 0.0
+    # Driven-side parasitic loss a + b w + c w^2 (N m, w in rad/s of the secondary), upstream of
+    # the torque gauge (dyno.sim.driven); off by default, see there.
+    driven_loss_nm: tuple = (0.0, 0.0, 0.0)
+    # ---- driveline
+    secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
+    brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
+    gear_ratio_brake_per_secondary: float = 32.0 / 61.0
+    # ---- brake
+    actuator_speed_mm_s: float = 5.0
+    actuator_travel_mm: float = 40.0             # 8 s full stroke at 5 mm/s (the host's release time)
+    brake_free_travel_mm: float = 1.0
+    brake_spring_rate_n_per_mm: float = 6.5      # ~22 steps of 0.2 s from light load to n_s < 1500 rpm
+    master_cylinder_bore_mm: float = 19.05
+    caliper_piston_bore_mm: float = 48.0
+    brake_pad_radius_m: float = 0.10
+    brake_mu_cold: float = 0.40
+    brake_mu_fade_per_c: float = 6e-4
+    brake_mu_floor_frac: float = 0.5
+    brake_residual_drag_nm: float = 0.5          # at the brake shaft, pads just touching
+    rotor_heat_capacity_j_per_k: float = 2800.0  # ~6 kg cast-iron rotor
+    rotor_cooling_w_per_k: float = 8.0
+    rotor_cooling_w_per_k_per_rad_s: float = 0.15
+    ambient_temp_c: float = 25.0
+    rotor_temp_limit_c: float = 600.0            # physical sanity cap only; the controller's limit is its own
+    # ---- torque sensor chain
+    adc_gain_counts_per_nm: float = 108.188097293   # counts per N*m of SECONDARY torque (thesis eq. 9.1)
+    adc_offset_counts: float = 35144.7019735
+    adc_zero_drift_nm_per_min: float = 0.0       # linear zero drift, secondary N m per minute (dyno.sim.driven)
+    lockin_cutoff_hz: float = 15.0
+    lockin_filter_order: int = 2
+    adc_rate_hz: float = 125.0
+    adc_clock_error_frac: float = 0.015
+    adc_noise_counts: float = 85.0
+    adc_noise_counts_per_nm: float = 5.0
+    # Shaft-torque ripple amplitudes BEFORE the lock-in filter, as fractions
+    # of the mean brake-shaft torque (measured through a 2nd-order filter;
+    # see dyno.sim.rig_signals).  Firing order: tabulated against secondary
+    # torque (N*m, fraction), linear in between, clamped at the ends.
+    ripple_firing_frac_table: tuple = ((0.0, 0.7), (4.0, 0.8), (6.5, 1.0), (9.0, 1.2), (21.0, 1.2),
+                                       (25.0, 0.8), (29.0, 0.5), (35.0, 0.42))
+    ripple_engine_rev_frac: float = 0.22
+    ripple_brake_shaft_frac: float = 0.08
+    adc_error_prob: float = 0.0
+    # ---- rotor thermometer (MLX90614): first-order optical/filter lag and read noise;
+    # quantisation (0.02 K) comes from its word format in dyno.sim.bus
+    thermometer_time_constant_s: float = 0.15
+    thermometer_noise_c: float = 0.05
+    # ---- Hall sensors
+    hall_bounce_prob: float = 0.05
+    hall_bounce_min_s: float = 50e-6
+    hall_bounce_max_s: float = 500e-6
+    hall_primary_phase_rad: float = 0.7          # magnet position relative to the firing cycle
+    # ---- numerics
+    max_substep_s: float = 0.004                 # fixed physics cell; also the input latency bound
+
+
+def _belt_table_for(p: RigParams, tune=None):
+    """The belt-model efficiency table (at ``tune``'s clamp) when ``belt_efficiency_source == "belt_model"``."""
+    if p.belt_efficiency_source == "loss_model":
+        return None
+    if p.belt_efficiency_source != "belt_model":
+        raise ValueError(f"belt_efficiency_source: 'belt_model' or 'loss_model', got {p.belt_efficiency_source!r}")
+    from dyno.sim.belt_table import belt_table
+
+    return belt_table(p.belt_table_cache_dir, tune)

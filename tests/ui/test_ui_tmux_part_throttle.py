@@ -1,0 +1,132 @@
+"""The real `dyno ui --sim` at part throttle (tmux, 80x24): the live "effic." readout divides by the engine map's
+curve at the commanded throttle, and says n/a (why) when the map has none there."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+
+REPO = Path(__file__).resolve().parents[2]
+PART_MAP = REPO / "calibration/engine_maps/baja-10hp-representative-part-throttle.csv"
+FULL_MAP = REPO / "calibration/engine_maps/baja-10hp-representative.csv"
+# One cell at throttle 0.6 at a light load (secondary 4100 rpm): the engine runs in the governor's droop band,
+# where the 0.6 curve gives ~17 % less power than the full-throttle one (4655 vs 5592 W at 3000 rpm).
+PLAN = """schema = "dyno.plan/1"
+mode = "drive-grid"
+[test]
+measure_s = 4.0
+max_measure_s = 6.0
+[drive_grid]
+throttles = [0.6]
+setpoints_rpm = [4100.0]
+"""
+FIELD = re.compile(r"^ (engine|P out|P engine|effic\.)\s+(.*)$")
+
+
+def _env(home: Path) -> dict:
+    from dyno.model.overlay import default_cache_dir
+
+    return {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home), "PYTHONPATH": str(REPO),
+            "DYNO_MODEL_CACHE": str(default_cache_dir())}  # the session's belt table, not a rebuild
+
+
+def _screen(session: str) -> str:
+    return subprocess.run(["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True,
+                          timeout=20).stdout
+
+
+def _wait(session: str, needle: str, timeout_s: float) -> str:
+    t_end = time.monotonic() + timeout_s
+    screen = ""
+    while time.monotonic() < t_end:
+        screen = _screen(session)
+        if needle in screen:
+            return screen
+        time.sleep(0.2)
+    raise AssertionError(f"{needle!r} not on screen after {timeout_s} s:\n{screen}")
+
+
+def _fields(screen: str) -> dict:
+    """The live screen's fields column (30 wide) as {label: value text}."""
+    out = {}
+    for line in screen.splitlines():
+        m = FIELD.match(line[:30].rstrip())
+        if m:
+            out[m.group(1)] = m.group(2).strip()
+    return out
+
+
+def _loaded_readouts(tmp_path: Path, engine_map: Path) -> list[dict]:
+    """Run the one-cell grid in `dyno ui`; the fields seen while the brake holds the speed (SETTLE/MEASURE)."""
+    plan = tmp_path / "grid.toml"
+    plan.write_text(PLAN)
+    run_dir = tmp_path / "run"
+    session = f"dyno-pt-{uuid.uuid4().hex[:8]}"
+    cmd = (f"{sys.executable} -m dyno ui --sim --speed 2 --seed 2 --plan {plan} --engine-map {engine_map} "
+           f"--out {run_dir} ; echo EXITED=$? ; sleep 30")
+    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
+                   timeout=20, env=_env(tmp_path))
+    seen = []
+    try:
+        _wait(session, "ARMED", 60)
+        subprocess.run(["tmux", "send-keys", "-t", session, "g"], timeout=20)
+        _wait(session, "Start the test?", 10)
+        subprocess.run(["tmux", "send-keys", "-t", session, "y"], timeout=20)
+        t_end = time.monotonic() + 120
+        while time.monotonic() < t_end:
+            screen = _screen(session)
+            if " DONE" in screen or "ABORTED" in screen:
+                break
+            if " MEASURE" in screen or " SETTLE" in screen:
+                seen.append(_fields(screen))
+            time.sleep(0.2)
+        assert " DONE" in screen, screen
+        subprocess.run(["tmux", "send-keys", "-t", session, "q"], timeout=20)
+        _wait(session, "EXITED=0", 30)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+    assert seen, "no SETTLE/MEASURE screen captured"
+    return seen
+
+
+def test_ui_tmux_part_throttle_efficiency_uses_the_curve_at_the_throttle(tmp_path):
+    from dyno.analysis.engine_map import load_engine_map
+
+    full = load_engine_map(PART_MAP)
+    part = full.at_throttle(0.6)
+    seen = _loaded_readouts(tmp_path, PART_MAP)
+    apart = 0  # readouts where the two curves differ by > 10 %: where the old full-throttle denominator was wrong
+    for f in seen:
+        rpm = float(f["engine"].split()[0])
+        if f["P engine"] == "—":  # above the 0.6 curve's last speed (the screen's rpm is rounded)
+            assert f["effic."] == "n/a: rpm off map" and not part.covers([rpm - 0.5, rpm + 0.5]), f
+            continue
+        def on_curve(r: float) -> float:
+            return float(part.power_w(min(max(r, part.rpm_min), part.rpm_max)))
+
+        p_eng = float(f["P engine"].split()[0])
+        # the screen's rpm is rounded to 1 rpm (the curve falls ~40 W/rpm in the droop band), its power to 1 W
+        lo, hi = sorted((on_curve(rpm - 0.5), on_curve(rpm + 0.5)))
+        assert lo - 1.0 <= p_eng <= hi + 1.0, (f, lo, hi)
+        p_out = float(f["P out"].split()[0])
+        m = re.fullmatch(r"(\d+\.\d) %", f["effic."])
+        assert m, f
+        eff_pct = 100 * p_out / p_eng  # from the screen's rounded powers: their rounding, and the 0.1 pp shown
+        assert abs(float(m.group(1)) - eff_pct) <= 0.051 + eff_pct * (0.5 / max(abs(p_out), 0.5) + 0.5 / p_eng), f
+        apart += float(full.power_w(rpm)) > 1.1 * on_curve(rpm)
+    assert apart >= 2, seen
+
+
+def test_ui_tmux_part_throttle_without_a_curve_says_na(tmp_path):
+    seen = _loaded_readouts(tmp_path, FULL_MAP)
+    assert {f["effic."] for f in seen} == {"n/a: no 60 % curve"}, seen
+    assert {f["P engine"] for f in seen} == {"—"}, seen
