@@ -81,7 +81,8 @@ async def _with_ui(seconds: float, out_dir: Path, overlay: bool) -> dict:
             fake = [{"rpm_primary": 3300.0 + 50 * i, "ratio": 1.5 - 0.1 * i, "power_in_w": 5200.0,
                      "rpm_secondary": 2200.0 + 200 * i, "efficiency": 0.85} for i in range(4)]
             app.overlay_requested = True
-            app.run_worker(lambda: app._overlay_work(fake), thread=True, exclusive=True, group="overlay")
+            app.run_worker(lambda: app._overlay_submit_work(fake, time.monotonic()), thread=True,
+                           exclusive=True, group="overlay")
         for key in "123" * int(max(1, seconds // 3)):
             await asyncio.sleep(1.0)
             await pilot.press(key)  # switch plots: the heaviest redraws

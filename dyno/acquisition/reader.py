@@ -241,7 +241,7 @@ V0_TIME_MARGIN_US = 50_000  # clock slack between a Hall edge slot and the ADC s
 V0_RPM_JUMP_ABS = 400  # rpm: beyond this and ...
 V0_RPM_JUMP_REL = 0.25  # ... this fraction of the last value, a one-poll change is suspect
 # Torque code between two conversions 8 ms apart: the firing ripple moves it by up to ~2,000
-# counts peak to peak (sim/physics.py, from the thesis logs); a flipped bit 12+ moves it more.
+# counts peak to peak (dyno/sim/rig_signals.py, from the thesis logs); a flipped bit 12+ moves it more.
 V0_ADC_JUMP_COUNTS = 4000
 
 

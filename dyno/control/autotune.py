@@ -32,6 +32,7 @@ LOOP_GAIN_PER_S = {"secondary": 1.0, "engine": ENGINE_LOOP_GAIN}
 #: the rig.toml [control] key each variable's identified kp replaces
 KP_KEY = {"secondary": "kp_speed", "engine": "kp_engine"}
 MAX_SPREAD = 0.5  # (max - min) / mean of the pulses' gains
+REACH_ATTEMPTS = 3  # holds tried before pulsing: kp, kp/2, kp/4 (a too-high kp rings instead of holding)
 KP_RANGE = (0.3, 30.0)
 
 
@@ -73,13 +74,27 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
 
     if variable not in LOOP_GAIN_PER_S:
         raise ValueError(f"no auto-tune for {variable!r}: one of {', '.join(LOOP_GAIN_PER_S)}")
-    hold = SpeedHold(gains_for(ctrl, variable))
+    base = gains_for(ctrl, variable)
     target = {"rpm": setpoint, "sign": sign}
-    task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name="identify-hold")
     gains = []
+    task = None
     try:
-        if not await _reach(ctrl, variable, setpoint):
-            result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify"}
+        # The hold must settle before the plant can be pulsed.  The gain being tuned may be too high
+        # for this plant (a stiffer brake: the loop rings instead of holding), so halve it and retry.
+        reached, hold_kp = False, base.kp
+        for attempt in range(REACH_ATTEMPTS):
+            hold_kp = base.kp / 2 ** attempt
+            task = asyncio.create_task(_hold_loop(ctrl, SpeedHold(replace(base, kp=hold_kp)), target, variable),
+                                       name="identify-hold")
+            if await _reach(ctrl, variable, setpoint):
+                reached = True
+                break
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+            ctrl.act.brake(STOP)
+        if not reached:
+            result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify (kp {base.kp:g} "
+                                             f"down to {hold_kp:g})"}
         else:
             target["frozen"] = True
             await ctrl.rig_sleep(1.0)
@@ -95,13 +110,14 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
             kp = LOOP_GAIN_PER_S[variable] / g if g > 0 else math.inf
             ok = spread <= MAX_SPREAD and KP_RANGE[0] <= kp <= KP_RANGE[1]
             result = {"ok": ok, "gain_rel_per_s": g, "pulse_gains_rel_per_s": gains, "spread": spread,
-                      "kp_identified": kp}
+                      "kp_identified": kp, "kp_held": hold_kp}
             if not ok:
                 result["reason"] = (f"pulses disagree (spread {spread:.0%})" if spread > MAX_SPREAD
                                     else f"kp {kp:.2f} outside {KP_RANGE[0]}..{KP_RANGE[1]}")
     finally:
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
         ctrl.act.brake(STOP)
     control = getattr(ctrl, "control", None)
     key = KP_KEY[variable]
