@@ -61,6 +61,7 @@ class Poller:
     def __init__(self, reader, *, poll_hz: float = 150.0, thermometer=None, temp_period_s: float = 0.1,
                  max_burst: int = 8, blocking_io: bool = False) -> None:
         self.reader = reader
+        self.full_poll_hz = poll_hz  # the rig's rate (rig.toml poll_hz); set_poll_hz() may lower it for a while
         self.poll_period_s = 1.0 / poll_hz
         self.thermometer = thermometer
         self.temp_period_s = temp_period_s
@@ -184,6 +185,11 @@ class Poller:
 
     def stop(self) -> None:
         self._stop.set()
+
+    def set_poll_hz(self, hz: float | None) -> None:
+        """Poll at ``hz`` from the next tick on (None: the rig's full rate); never above the full rate."""
+        hz = self.full_poll_hz if hz is None else min(float(hz), self.full_poll_hz)
+        self.poll_period_s = 1.0 / hz
 
     def disturbances_between(self, t0_s: float, t1_s: float) -> list[dict]:
         """Disturbances recorded in ``[t0_s, t1_s]`` (host time), plus a poll gap still open at ``t1_s``."""

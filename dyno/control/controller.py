@@ -183,9 +183,16 @@ class TestController(Measuring):
             raise RuntimeError(f"illegal transition {self.state.value} -> {new.value}")
         self.state = new
         self.reason = reason
+        self._set_poll_rate()
         self._log("state", state=new.value, reason=reason)
         for fn in self.listeners:
             fn(self)
+
+    def _set_poll_rate(self) -> None:
+        """ARMED polls at ``limits.armed_poll_hz`` (waiting for GO: the idle CPU); every other state at full rate."""
+        set_hz = getattr(self.poller, "set_poll_hz", None)
+        if set_hz is not None:
+            set_hz(self.limits.armed_poll_hz if self.state is State.ARMED else None)
 
     def _log(self, doc_type: str, **fields) -> None:
         if self.writer is not None:
@@ -217,6 +224,7 @@ class TestController(Measuring):
             self._enter(State.ABORTED, detail)
         elif after_done:  # the plan ended, but what it produced is not a result
             self.state = State.ABORTED
+            self._set_poll_rate()
             self.reason = detail
             self._log("state", state=State.ABORTED.value, reason=detail)
             for fn in self.listeners:
