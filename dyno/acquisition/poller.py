@@ -13,8 +13,9 @@ bus read via ``asyncio.to_thread`` an executor hand-off each way (measured:
 0.7 % and 2.1 % of a core for an empty tick, against 0.3 % for a timer
 callback and 1.0 % for one paced I/O thread; bench/bench_ui.py).  So:
 
-* non-blocking transports (the simulated bus): a timer callback on the loop
-  (``loop.call_at``) polls synchronously; one loop iteration per tick;
+* non-blocking transports (the simulated bus): the task polls synchronously and sleeps to the
+  next tick (a ``loop.call_at`` timer would save a loop iteration per tick, but it changes the
+  order of same-instant wake-ups the speed hold was tuned with, see :meth:`run`);
 * blocking transports (a real I2C or serial bus): one I/O thread paces the
   transfers itself and hands each tick's result to the loop with one
   ``call_soon_threadsafe``; streams, listeners and the safety check still
@@ -62,6 +63,7 @@ class Poller:
                  max_burst: int = 8, blocking_io: bool = False) -> None:
         self.reader = reader
         self.full_poll_hz = poll_hz  # the rig's rate (rig.toml poll_hz); set_poll_hz() may lower it for a while
+        self._periods_per_tick = 1
         self.poll_period_s = 1.0 / poll_hz
         self.thermometer = thermometer
         self.temp_period_s = temp_period_s
@@ -106,32 +108,24 @@ class Poller:
             finally:
                 io_stop.set()  # not joined: a hung transfer must not block the loop
         else:
-            self._timer = loop.call_at(self._next_t, self._tick)
-            try:
-                await self._stop.wait()
-            finally:
-                self._timer.cancel()
+            # Ticks in this task, not as a loop timer: a timer callback runs before the tasks waking
+            # at the same instant, and that order moved the speed hold's 5 % step response from
+            # 1.5 s to 7.65 s (bench/bench_test_time.py): the controller sees its data one poll
+            # earlier at the instants it shares with the polls.  Kept as it was tuned.
+            next_t = self._next_t
+            full_period_s = 1.0 / self.full_poll_hz
+            while not self._stop.is_set():
+                now = loop.time()
+                self._note_interval(now)
+                self._finish_poll(now, *self._read_burst(now), self._read_temperature(now))
+                for _ in range(self._periods_per_tick):
+                    next_t += full_period_s
+                now = loop.time()
+                if next_t < now:  # fell behind: skip ticks rather than bunch them
+                    next_t = now
+                await asyncio.sleep(next_t - now)
         if self._error is not None:
             raise self._error
-
-    def _tick(self) -> None:
-        """One tick on the loop (non-blocking transports), then the next one scheduled."""
-        loop = self._loop
-        now = loop.time()
-        self._note_interval(now)
-        try:
-            self._finish_poll(now, *self._read_burst(now), self._read_temperature(now))
-        except Exception as exc:  # ends run() with it, as a crashing task would
-            self._error = exc
-            self._stop.set()
-            return
-        if self._stop.is_set():
-            return
-        self._next_t += self.poll_period_s
-        now = loop.time()
-        if self._next_t < now:  # fell behind: skip ticks rather than bunch them
-            self._next_t = now
-        self._timer = loop.call_at(self._next_t, self._tick)
 
     def _io_thread(self, loop, io_stop: threading.Event) -> None:
         """Blocking transports: transfers paced in this thread, each tick's result handed to the loop."""
@@ -187,9 +181,11 @@ class Poller:
         self._stop.set()
 
     def set_poll_hz(self, hz: float | None) -> None:
-        """Poll at ``hz`` from the next tick on (None: the rig's full rate); never above the full rate."""
+        """Poll at ``hz`` from the next tick on (None: the rig's full rate), as a whole number of full-rate
+        periods: the ticks stay on the full-rate grid (same-instant order with the other tasks unchanged)."""
         hz = self.full_poll_hz if hz is None else min(float(hz), self.full_poll_hz)
-        self.poll_period_s = 1.0 / hz
+        self._periods_per_tick = max(1, round(self.full_poll_hz / hz))
+        self.poll_period_s = self._periods_per_tick / self.full_poll_hz
 
     def disturbances_between(self, t0_s: float, t1_s: float) -> list[dict]:
         """Disturbances recorded in ``[t0_s, t1_s]`` (host time), plus a poll gap still open at ``t1_s``."""

@@ -94,12 +94,10 @@ class TestPlan:
 
 _LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
 _ENGINE_STATES = _LOADED_STATES | {State.ARMED}
-_WAITING_STATES = frozenset({State.IDLE, State.WAIT_ENGINE, State.ARMED})  # nothing timed on the outputs
 
 __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 
 
-STANDBY_PERIODS = 5  # the heartbeat task's wake-up, in check periods, while polls beat for it
 
 
 class TestController(Measuring):
@@ -135,8 +133,6 @@ class TestController(Measuring):
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self._beat_s = -math.inf  # controller time of the last heartbeat (outputs serviced, watchdog fed)
-        self._polled_s = -math.inf  # controller time of the last poll seen
-        self._standby = False  # the heartbeat task sleeps long: polls carry the beat
         self.discards: list[dict] = []
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
@@ -381,16 +377,8 @@ class TestController(Measuring):
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:
-        """Poller listener: the checks run on fresh data, and the heartbeat rides the polls.
-
-        While polls arrive, the heartbeat (outputs serviced, watchdog fed) is done here every
-        ``check_period_s``: one loop wake-up per poll instead of a second timer beside it (the idle
-        CPU cost is mostly wake-ups).  The heartbeat task stands by for when polls stop.
-        """
+        """Poller listener: the checks run on fresh data, not only on the heartbeat."""
         self._safety_check(now_s)
-        self._polled_s = now = self._now()
-        if self._standby and now - self._beat_s >= self.limits.check_period_s:
-            self._beat()  # also just after GO, until the heartbeat task wakes from standby
 
     def _beat(self) -> None:
         now = self._now()
@@ -416,30 +404,20 @@ class TestController(Measuring):
             self.abort(trip.cause, trip.detail, trip.trigger_s)
 
     async def _safety_loop(self) -> None:
-        """The heartbeat: outputs serviced and watchdog fed every ``check_period_s``.
+        """The heartbeat: outputs serviced and watchdog fed every ``check_period_s``, from each wake-up.
 
-        While the rig waits (IDLE, WAIT_ENGINE, ARMED: nothing timed on the outputs) and polls
-        arrive, the polls carry the beat (see :meth:`_on_poll`) and this task only wakes every
-        ``STANDBY_PERIODS`` check periods to see that they still do: the idle CPU is mostly
-        wake-ups.  From GO on it beats on its own 20 ms grid, as the brake pulses' timing was
-        tuned with (beats moved onto the poll ticks changed the speed hold's step response:
-        a -5 % step settled in 3.0 s instead of 1.25 s).  Once polls stop it beats every period
-        and runs the checks itself.
+        Kept on its own sleep, not carried by the polls: the brake pulses' timing was tuned with it, and
+        every variant tried (beats on poll ticks; a standby while ARMED; an exact absolute grid) moved
+        the speed hold's 5 % step response from 1.5 s to 3-7.65 s (bench/bench_test_time.py).
         """
         lim = self.limits
         while True:
-            self._standby = self.state in _WAITING_STATES and self._now() - self._polled_s < 2 * lim.check_period_s
-            try:
-                await asyncio.sleep(lim.check_period_s * (STANDBY_PERIODS if self._standby else 1))
-            finally:
-                self._standby = False
-            polls_fresh = self._now() - self._polled_s < 2 * lim.check_period_s
-            if self.state in _WAITING_STATES and polls_fresh:
-                continue  # the polls beat and check
+            await asyncio.sleep(lim.check_period_s)
             self._beat()
             if self.state not in (State.DONE, State.ABORTED):
-                last = self.monitor.last_check_s  # the checks already ran on every poll
-                if not polls_fresh or last is None or self._now() - last >= lim.check_period_s:
+                # The checks already ran on every poll; this one is for when polls stop.
+                last = self.monitor.last_check_s
+                if last is None or self._now() - last >= lim.check_period_s:
                     self._safety_check()
 
     def check_limits(self) -> Trip | None:

@@ -1,4 +1,4 @@
-"""The poller's two tick paths: a loop timer (non-blocking bus) and a paced I/O thread (blocking bus)."""
+"""The poller's two tick paths: in its task on the loop (non-blocking bus) and a paced I/O thread (blocking bus)."""
 
 import asyncio
 import threading
@@ -24,7 +24,7 @@ def _rig_and_poller(loop, *, blocking_io: bool, poll_hz: float = 150.0):
 
 
 @pytest.mark.parametrize("virtual", [True, False])
-def test_timer_ticks_at_the_poll_rate_and_loses_nothing(virtual):
+def test_loop_ticks_at_the_poll_rate_and_lose_nothing(virtual):
     async def go():
         loop = asyncio.get_running_loop()
         rig, poller = _rig_and_poller(loop, blocking_io=False)
