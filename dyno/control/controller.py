@@ -132,7 +132,6 @@ class TestController(Measuring):
                 return (code - cal.intercept_counts) / cal.slope_counts_per_nm
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
-        self._beat_s = -math.inf  # controller time of the last heartbeat (outputs serviced, watchdog fed)
         self.discards: list[dict] = []
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
@@ -381,9 +380,7 @@ class TestController(Measuring):
         self._safety_check(now_s)
 
     def _beat(self) -> None:
-        now = self._now()
-        self._beat_s = now
-        self.act.tick(now)
+        self.act.tick(self._now())
         for hook in self.heartbeat_hooks:
             hook()
 
