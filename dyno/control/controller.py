@@ -141,6 +141,9 @@ class TestController(Measuring):
         self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
         self._checking = False
+        self._silence: asyncio.Future | None = None  # the heartbeat task's wait; set while run() runs
+        self._silence_timer: asyncio.TimerHandle | None = None
+        self._last_beat_s = -math.inf
         # The throttle as last commanded (the Actuators interface has no read-back): every point records
         # it (``throttle_frac``) and takes its efficiency from the engine map's curve at that throttle.
         self.throttle_frac = 0.0
@@ -376,11 +379,20 @@ class TestController(Measuring):
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:
-        """Poller listener: the checks run on fresh data, not only on the heartbeat."""
+        """Poller listener: the checks run on fresh data; while :meth:`run` runs, each poll is also the
+        heartbeat (outputs serviced, watchdog fed) and re-arms the heartbeat's own timer for when polls stop."""
         self._safety_check(now_s)
+        if self._silence is not None and not self._silence.done():
+            # The beat keeps the heartbeat's cadence (every 3rd poll at 150 Hz, every poll at the ARMED 50 Hz): the
+            # real rig's relay/enable sequencing is serviced on beats, and the brake pulses were tuned on it.
+            now = self._now() if now_s is None else now_s
+            if now - self._last_beat_s >= 0.75 * self.limits.check_period_s:
+                self._beat()
+            self._arm_silence_timer(after_poll=True)
 
     def _beat(self) -> None:
-        self.act.tick(self._now())
+        self._last_beat_s = now = self._now()
+        self.act.tick(now)
         for hook in self.heartbeat_hooks:
             hook()
 
@@ -400,22 +412,42 @@ class TestController(Measuring):
         if trip:
             self.abort(trip.cause, trip.detail, trip.trigger_s)
 
-    async def _safety_loop(self) -> None:
-        """The heartbeat: outputs serviced and watchdog fed every ``check_period_s``, from each wake-up.
+    def _arm_silence_timer(self, after_poll: bool = False) -> None:
+        """(Re)start the heartbeat's timer: ``check_period_s`` from now, plus one poll period after a poll.
 
-        Kept on its own sleep, not carried by the polls: the brake pulses' timing was tuned with it, and
-        every variant tried (beats on poll ticks; a standby while ARMED; an exact absolute grid) moved
-        the speed hold's 5 % step response from 1.5 s to 3-7.65 s (bench/bench_test_time.py).
+        One loop timer moved on every poll (a heap push) instead of a task waking every period: while
+        polls flow the heartbeat costs no wake-up of its own, which is most of the idle CPU (issue 13).
+        The poll period's allowance keeps a poll a little late (or a slow ARMED rate) from waking it.
         """
-        lim = self.limits
-        while True:
-            await asyncio.sleep(lim.check_period_s)
-            self._beat()
-            if self.state not in (State.DONE, State.ABORTED):
-                # The checks already ran on every poll; this one is for when polls stop.
-                last = self.monitor.last_check_s
-                if last is None or self._now() - last >= lim.check_period_s:
-                    self._safety_check()
+        if self._silence_timer is not None:
+            self._silence_timer.cancel()
+        fut = self._silence
+        loop = fut.get_loop()
+        wait_s = self.limits.check_period_s + (getattr(self.poller, "poll_period_s", 0.0) if after_poll else 0.0)
+        self._silence_timer = loop.call_at(loop.time() + wait_s, lambda: fut.done() or fut.set_result(None))
+
+    async def _safety_loop(self) -> None:
+        """The heartbeat when polls stop: outputs serviced, watchdog fed and the checks run
+        ``check_period_s`` after the last beat.
+
+        While polls flow each poll is the beat (:meth:`_on_poll`) and this task sleeps; when they stop
+        (a hung bus, a blocked transfer) it beats every ``check_period_s`` and its checks find the link
+        silent.  If the loop itself stops, nothing beats and the watchdog thread trips.
+        """
+        loop = asyncio.get_running_loop()
+        try:
+            while True:
+                self._silence = loop.create_future()
+                self._arm_silence_timer()
+                await self._silence
+                self._beat()
+                if self.state not in (State.DONE, State.ABORTED):
+                    self._safety_check()  # no poll ran one for a whole period
+        finally:
+            self._silence = None
+            if self._silence_timer is not None:
+                self._silence_timer.cancel()
+                self._silence_timer = None
 
     def check_limits(self) -> Trip | None:
         """The first limit or plausibility check failing now, or None (see SafetyMonitor)."""
