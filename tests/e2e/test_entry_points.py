@@ -13,7 +13,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 import uuid
 from pathlib import Path
 
@@ -21,6 +20,8 @@ import pytest
 
 from dyno.cli import COMMANDS
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
+from tests.screens import tmux as _tmux
+from tests.screens import wait_screen as _wait_screen
 
 REPO = Path(__file__).resolve().parents[2]
 LEGACY_RUN = "2019-04-18_run2"
@@ -52,24 +53,6 @@ def _ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
 
 
 # --- tmux ----------------------------------------------------------------------------------------
-def _tmux(*args: str) -> str:
-    return subprocess.run(["tmux", *args], capture_output=True, text=True, timeout=20).stdout
-
-
-def _wait_screen(session: str, needles, timeout_s: float) -> str:
-    needles = [needles] if isinstance(needles, str) else list(needles)
-    t_end = time.monotonic() + timeout_s
-    screen = ""
-    while time.monotonic() < t_end:
-        screen = _tmux("capture-pane", "-p", "-t", session)
-        if all(n in screen for n in needles):
-            return screen
-        if "EXITED=" in screen and not any("EXITED=" in n for n in needles):
-            break  # the program is gone (a start-up crash): fail now, with what it printed
-        time.sleep(0.3)
-    raise AssertionError(f"{needles!r} not on screen (waited up to {timeout_s} s or the program exited):\n{screen}")
-
-
 class Terminal:
     """A 120x40 tmux session running one dyno command; the shell line after it reports the exit code."""
 

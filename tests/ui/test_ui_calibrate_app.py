@@ -10,13 +10,10 @@ import pytest
 from dyno.analysis.calibration import load_history
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
 from dyno.ui.calibration_wizard import Phase
+from tests.screens import screen_text
 
 SIZE = (80, 24)
 HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
 
 
 def _opts(tmp_path, **kw):

@@ -14,12 +14,9 @@ import pytest
 
 from dyno.drills import parse_drill
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
+from tests.screens import screen_text
 
 SIZE = (80, 24)
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
 
 
 @pytest.mark.parametrize("drill, cause", [("adc-error@1", "sensor_fault"), ("adc-stuck@1", "sensor_fault"),

@@ -9,7 +9,6 @@ import re
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
@@ -18,14 +17,10 @@ from dyno.control.controller import TestPlan as Plan
 from dyno.ui.live_app import LiveApp
 from dyno.ui.live_model import RateMeter, fmt, ideal_engine_rpm, overlay_inputs, temp_colour
 from dyno.ui.session import LiveOptions, scaled_plan
+from tests.screens import screen_text, wait_for
 
 SPEED = 8.0  # 8x real time: a first point within ~10 s of wall time on a loaded 2-core machine
 SIZE = (80, 24)
-
-
-def screen_text(app) -> str:
-    """The rendered screen as plain text, one line per row (a structural snapshot)."""
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
 
 
 def armed_why(app) -> str:
@@ -35,15 +30,6 @@ def armed_why(app) -> str:
         return "no session"
     c = s.controller
     return f"state {c.state.value} ({c.reason}); aborts {c.aborts}; sim t {s.sim.model.t_s:.1f} s"
-
-
-async def wait_for(pilot, cond, timeout_s: float, step_s: float = 0.2) -> bool:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        await pilot.pause(step_s)
-    return cond()
 
 
 def test_ui_live_go_points_estop(tmp_path):

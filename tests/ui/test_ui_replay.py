@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -14,13 +13,10 @@ import pytest
 
 from dyno.ui.replay_app import ReplayApp
 from dyno.ui.replay_model import ReplaySet, efficiency_series, export_png, point_streams
+from tests.screens import screen_text
 
 SIZE = (80, 24)
 REPO = Path(__file__).resolve().parents[2]
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
 
 
 @pytest.fixture(scope="module")

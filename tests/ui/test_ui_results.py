@@ -7,7 +7,6 @@ import asyncio
 import json
 import math
 import re
-import time
 
 from dyno.control.characterise import EngagementPlan
 from dyno.control.controller import State
@@ -15,22 +14,10 @@ from dyno.control.plans import plan_named
 from dyno.ui.live_app import LiveApp
 from dyno.ui.results_view import WIDTH, has_results, results_lines
 from dyno.ui.session import LiveOptions
+from tests.screens import screen_text, wait_for
 
 SPEED = 8.0
 SIZE = (80, 24)
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
-
-
-async def wait_for(pilot, cond, timeout_s: float, step_s: float = 0.2) -> bool:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        await pilot.pause(step_s)
-    return cond()
 
 
 def _stored(run_dir) -> dict:

@@ -11,6 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.screens import tmux as _tmux
+from tests.screens import wait_screen as _wait_screen
+
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
 
@@ -27,21 +30,6 @@ def _env(home: Path) -> dict:
     if os.environ.get("DYNO_RUNS_DIR"):
         env["DYNO_RUNS_DIR"] = os.environ["DYNO_RUNS_DIR"]
     return env
-
-
-def _tmux(*args: str) -> str:
-    return subprocess.run(["tmux", *args], capture_output=True, text=True, timeout=20).stdout
-
-
-def _wait_screen(session: str, needle: str, timeout_s: float) -> str:
-    t_end = time.monotonic() + timeout_s
-    screen = ""
-    while time.monotonic() < t_end:
-        screen = _tmux("capture-pane", "-p", "-t", session)
-        if needle in screen:
-            return screen
-        time.sleep(0.3)
-    raise AssertionError(f"{needle!r} not on screen after {timeout_s} s:\n{screen}")
 
 
 def _go(session: str) -> None:

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.screens import pane as _screen
+from tests.screens import wait_screen as _wait
+
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
 REPO = Path(__file__).resolve().parents[2]
@@ -37,22 +40,6 @@ def _env(home: Path) -> dict:
 
     return {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home), "PYTHONPATH": str(REPO),
             "DYNO_MODEL_CACHE": str(default_cache_dir())}  # the session's belt table, not a rebuild
-
-
-def _screen(session: str) -> str:
-    return subprocess.run(["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True,
-                          timeout=20).stdout
-
-
-def _wait(session: str, needle: str, timeout_s: float) -> str:
-    t_end = time.monotonic() + timeout_s
-    screen = ""
-    while time.monotonic() < t_end:
-        screen = _screen(session)
-        if needle in screen:
-            return screen
-        time.sleep(0.2)
-    raise AssertionError(f"{needle!r} not on screen after {timeout_s} s:\n{screen}")
 
 
 def _fields(screen: str) -> dict:
