@@ -380,15 +380,23 @@ class TestController(Measuring):
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:
         """Poller listener: the checks run on fresh data; while :meth:`run` runs, each poll is also the
-        heartbeat (outputs serviced, watchdog fed) and re-arms the heartbeat's own timer for when polls stop."""
+        heartbeat (outputs serviced, watchdog fed) and re-arms the heartbeat's own timer for when polls stop.
+        After the test has ended the polls still service the outputs: the safe state's release stroke
+        ends (and the actuator is de-energised) though the heartbeat has stopped with the test."""
         self._safety_check(now_s)
-        if self._silence is not None and not self._silence.done():
+        running = self._silence is not None and not self._silence.done()
+        if running or self.state in (State.DONE, State.ABORTED):
             # The beat keeps the heartbeat's cadence (every 3rd poll at 150 Hz, every poll at the ARMED 50 Hz): the
             # real rig's relay/enable sequencing is serviced on beats, and the brake pulses were tuned on it.
             now = self._now() if now_s is None else now_s
             if now - self._last_beat_s >= 0.75 * self.limits.check_period_s:
-                self._beat()
-            self._arm_silence_timer(after_poll=True)
+                if running:
+                    self._beat()
+                else:
+                    self._last_beat_s = now
+                    self.act.tick(now)
+            if running:
+                self._arm_silence_timer(after_poll=True)
 
     def _beat(self) -> None:
         self._last_beat_s = now = self._now()

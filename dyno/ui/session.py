@@ -187,6 +187,25 @@ class LiveSession:
     def _on_controller(self, controller) -> None:
         """Controller listener: every state change (and a discarded window, after which it measures again)."""
         self.state_since_s = self.loop.time()
+        if controller.state in FINISHED and not any(t.get_name() == "rest-rate" for t in self._tasks):
+            self._tasks.append(asyncio.create_task(self._idle_rate_at_rest(controller), name="rest-rate"))
+
+    async def _idle_rate_at_rest(self, ctrl) -> None:
+        """A test has ended: full rate while the rig spins down and the brake releases (recorded as it
+        happens; the polls service the release stroke), then the idle rate (``limits.armed_poll_hz``)
+        until a re-arm — the screen left up after a test is idle CPU too.  The re-armed controller's
+        first state sets the rate again."""
+        from dyno.protocol import v1
+
+        p = self.poller
+        while ctrl is self.controller and ctrl.state in FINISHED:
+            outs = self.actuators.output_states()
+            if (outs.get("safe") and outs.get("brake_actuator") != "releasing"
+                    and p.rpm(v1.CH_PRIMARY) == 0.0 and p.rpm(v1.CH_SECONDARY) == 0.0):
+                p.set_poll_hz(ctrl.limits.armed_poll_hz)
+                break
+            await asyncio.sleep(0.5)
+        self._tasks = [t for t in self._tasks if t.get_name() != "rest-rate"]
 
     def state_elapsed_s(self) -> float:
         """Rig seconds in the current state (the scaled clock: what MEASURE's limits are in)."""

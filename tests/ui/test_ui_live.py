@@ -323,6 +323,9 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
             s.sim.actuators.safe_state()
             # once the engine has stopped: asks, `n` changes nothing
             assert await wait_for(pilot, lambda: s.rearm_refusal() is None, 60), s.rearm_refusal()
+            # at rest after the test: the poller drops from the full rate to the idle rate (the screen left up)
+            idle_period_s = 1 / first.limits.armed_poll_hz
+            assert await wait_for(pilot, lambda: s.poller.poll_period_s == pytest.approx(idle_period_s), 5)
             await pilot.press("r")
             assert await wait_for(pilot, lambda: "Acknowledge: ABORTED (estop" in screen_text(app), 5)
             await pilot.press("n")
@@ -345,6 +348,7 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
             await pilot.press("g")
             await pilot.press("y")
             assert await wait_for(pilot, lambda: s.sim.model.throttle_frac == 1.0, 10)
+            assert s.poller.poll_period_s == pytest.approx(1 / s.poller.full_poll_hz)  # a test: the full rate again
             await pilot.press("space")
             assert await wait_for(pilot, lambda: "cause: estop" in screen_text(app), 5)
             # after a software fault there is no re-arm: a fresh start of dyno

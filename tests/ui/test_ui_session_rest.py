@@ -1,0 +1,52 @@
+"""A live session after its test has ended: the polls service the safe state's release stroke to its end (the
+test's heartbeat stopped with the test), and once the rig is at rest the poller drops to the idle rate."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import pytest
+
+from dyno.control.controller import State
+from dyno.control.outputs import STOP
+from dyno.ui.session import LiveOptions, LiveSession
+
+
+async def _until(cond, timeout_s: float) -> bool:
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        await asyncio.sleep(0.05)
+    return cond()
+
+
+def test_after_an_estop_the_release_stroke_ends_and_the_rig_at_rest_polls_at_the_idle_rate(tmp_path):
+    async def scenario():
+        s = LiveSession(LiveOptions(sim=True, speed=8.0, seed=2, out_dir=tmp_path / "run"))
+        s.start()
+        try:
+            assert await _until(lambda: s.controller.state is State.ARMED, 30), s.controller.reason
+            idle_period_s = 1 / s.controller.limits.armed_poll_hz
+            assert s.poller.poll_period_s == pytest.approx(idle_period_s)
+            s.go()
+            assert await _until(lambda: s.sim.model.throttle_frac == 1.0, 10)
+            assert s.poller.poll_period_s == pytest.approx(1 / s.poller.full_poll_hz)
+            s.estop("test")
+            t_estop = s.sim.model.t_s
+            m, act = s.sim.model, s.sim.actuators
+            assert act.releasing and m.actuator_dir != STOP
+            # the full release stroke (8 s of rig time, 1 s here) ends and the actuator is switched off
+            assert await _until(lambda: not act.releasing and m.actuator_dir == STOP, 5), act.history[-3:]
+            stroke_end = next(t for t, what, v in reversed(act.history) if what == "brake" and v == STOP)
+            assert stroke_end - t_estop == pytest.approx(act.brake_full_stroke_s, abs=0.2)
+            # full rate while the engine spins down, then the idle rate
+            if m.truth().rpm_primary > 100:
+                assert s.poller.poll_period_s == pytest.approx(1 / s.poller.full_poll_hz)
+            assert await _until(lambda: s.poller.poll_period_s == pytest.approx(idle_period_s), 10)
+            assert s.controller.state is State.ABORTED and act.is_safe
+        finally:
+            await s.close("test")
+
+    asyncio.run(scenario())
