@@ -189,10 +189,11 @@ class TestController(Measuring):
             fn(self)
 
     def _set_poll_rate(self) -> None:
-        """ARMED polls at ``limits.armed_poll_hz`` (waiting for GO: the idle CPU); every other state at full rate."""
+        """The waiting states (WAIT_ENGINE: for the operator to start the engine; ARMED: for GO) poll at
+        ``limits.armed_poll_hz`` — the idle CPU; every other state at the full rate."""
         set_hz = getattr(self.poller, "set_poll_hz", None)
         if set_hz is not None:
-            set_hz(self.limits.armed_poll_hz if self.state is State.ARMED else None)
+            set_hz(self.limits.armed_poll_hz if self.state in (State.WAIT_ENGINE, State.ARMED) else None)
 
     def _log(self, doc_type: str, **fields) -> None:
         if self.writer is not None:

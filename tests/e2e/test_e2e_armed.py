@@ -1,4 +1,5 @@
-"""ARMED (engine idling, waiting for GO) polls at ``armed_poll_hz``; every fault there still trips within its bound.
+"""ARMED (engine idling, waiting for GO) and WAIT_ENGINE poll at ``armed_poll_hz``; every fault there still trips
+within its bound.
 
 The slower rate is what brings the idle CPU down (bench/bench_ui.py); these drills, with onset while the
 controller waits in ARMED, measure the latency in true simulated time from the physical onset.
@@ -65,5 +66,6 @@ def test_go_restores_the_full_poll_rate(tmp_path):
     assert r["state"] == "done"
     by_state = dict(periods)
     assert by_state["armed"] == pytest.approx(1 / SafetyLimits().armed_poll_hz)
+    assert by_state["wait_engine"] == pytest.approx(1 / SafetyLimits().armed_poll_hz)  # waiting for the operator too
     for state in ("warmup", "step", "settle", "measure", "done"):
         assert by_state[state] == pytest.approx(1 / 150.0), state
