@@ -75,7 +75,8 @@ class LiveApp(OverlayMixin, DynoApp):
         self._plotted = None
         self._plotted_t = 0.0
         self._ideal_rpm = math.nan
-        self._refreshed_s = -math.inf
+        self._refresh_timer = None
+        self._refresh_hz = 0.0
         self._ended: bool | None = None  # the help line shown: None (not yet), False (GO ...), True (re-arm)
         self.view_results = False  # the results panel is shown in place of the plot
         self._results_shown_for = None  # the controller whose results were put up by themselves (once)
@@ -121,8 +122,7 @@ class LiveApp(OverlayMixin, DynoApp):
         gc.collect()
         gc.freeze()
         self.session.start()
-        self.set_interval(1.0 / REFRESH_HZ, self.refresh_values)
-        self.refresh_values(force=True)
+        self.refresh_values(force=True)  # (starts the refresh timer at the state's rate)
 
     # --- refresh -------------------------------------------------------------------------------
     def refresh_values(self, force: bool = False) -> None:
@@ -134,9 +134,7 @@ class LiveApp(OverlayMixin, DynoApp):
         except NoMatches:  # the app is closing: its widgets go before its interval timer stops
             return
         now = self.session.loop.time()
-        if not force and s.controller.state.value not in TEST_STATES and now - self._refreshed_s < 0.9 / IDLE_REFRESH_HZ:
-            return  # nothing runs: half the rate
-        self._refreshed_s = now
+        self._refresh_rate(s.controller.state.value in TEST_STATES)
         self._show_help(s.finished)
         v = live_values(s.poller, s.controller, now, self.rate)
         self.values = v
@@ -152,6 +150,15 @@ class LiveApp(OverlayMixin, DynoApp):
             elif v.state in ("settle", "measure"):
                 self._overlay_prime()
         self._draw_plot()
+
+    def _refresh_rate(self, testing: bool) -> None:
+        """One interval timer at the state's rate: while nothing runs it fires at the idle rate (a timer
+        that fires and returns early still wakes the loop: the idle CPU is mostly wake-ups)."""
+        hz = REFRESH_HZ if testing else IDLE_REFRESH_HZ
+        if hz != self._refresh_hz:
+            if self._refresh_timer is not None:
+                self._refresh_timer.stop()
+            self._refresh_timer, self._refresh_hz = self.set_interval(1.0 / hz, self.refresh_values), hz
 
     def _state_text(self, v) -> Text:
         t = Text()
