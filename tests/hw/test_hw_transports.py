@@ -252,3 +252,47 @@ def test_hw_serial_deframer_takes_v2_frames_after_garbage():
     d = CobsDeframer()
     stream = b"\x13\x37garbage" + b"".join(cobs_encode(f) + b"\0" for f in frames)
     assert d.feed(stream) == frames
+
+
+class EchoBus:
+    """Answers each read with the request it got (padded), slowly enough that two threads overlap; a
+    ``short`` read fills only its first bytes, as a read cut short leaves the rest of the buffer alone."""
+
+    def __init__(self, short: int | None = None) -> None:
+        self.short = short
+
+    def i2c_rdwr(self, *msgs) -> None:
+        import ctypes
+        import time
+
+        req = bytes(msgs[0])
+        time.sleep(0.0002)
+        rd = msgs[-1]
+        n = rd.len if self.short is None else self.short
+        ctypes.memmove(rd.buf, (req * rd.len)[:n], n)
+
+
+def test_hw_i2c_reused_messages_never_mix_threads_or_keep_old_bytes():
+    import threading
+
+    from dyno.transports.base import I2CTransport
+
+    t = I2CTransport(EchoBus(), 0x03)
+    bad: list = []
+
+    def worker(tag: bytes) -> None:
+        for i in range(300):
+            req = tag + bytes([i % 256])
+            out = t.transfer(req, 8)
+            if out != (req * 8)[:8]:
+                bad.append((req, out))
+
+    threads = [threading.Thread(target=worker, args=(bytes([k]),)) for k in (0xA1, 0xB2, 0xC3)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert not bad, bad[:3]
+    assert t.transfer(b"\x01\x02", 6) == b"\x01\x02\x01\x02\x01\x02"
+    t.bus = EchoBus(short=2)  # the same cached read buffer, a short read: zeros after it, not the last frame
+    assert t.transfer(b"\x07\x08", 6) == b"\x07\x08\x00\x00\x00\x00"
