@@ -169,19 +169,19 @@ def main() -> int:
         tmp = Path(tmp)
         if not args.skip_steps and args.step_seeds > 0:
             step_table(list(range(args.step_seed_start, args.step_seed_start + args.step_seeds)), tmp)
-        print("\n| plan | seed | points | test time s | s/point | max CI95 | truth in CI | median err | pulses/s |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print("\n| plan | seed | points | test time s | s/point | max CI95 | truth in CI | median err | pulses/s | reversals/s |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for plan, n in (("speed-hold", args.seeds), ("thesis-step", args.thesis_seeds)):
             rows = []
             for seed in range(1, n + 1):
                 with PulseCount() as count:
                     s = summary(run_test(RunOptions(sim=True, seed=seed, plan=plan_named(plan), mock_pins=True,
                                                     out_dir=tmp / f"{plan}-{seed}")))
-                s["pulses_per_s"] = count.per_s()[0] if count.periods else math.nan
+                s["pulses_per_s"], s["reversals_per_s"] = count.per_s() if count.periods else (math.nan, math.nan)
                 rows.append(s)
                 print(f"| {plan} | {seed} | {s['points']} | {s['test_time_s']:.0f} | {s['per_point_s']:.1f} | "
                       f"{s['max_ci95']:.5f} | {s['covered']:.0%} | {s['median_err']:.4f} | "
-                      f"{s['pulses_per_s']:.2f} |", flush=True)
+                      f"{s['pulses_per_s']:.2f} | {s['reversals_per_s']:.2f} |", flush=True)
             if rows:
                 allpts = sum(r["points"] for r in rows)
                 cov = sum(r["covered"] * r["points"] for r in rows) / allpts
@@ -191,7 +191,8 @@ def main() -> int:
                       f"{statistics.mean(r['per_point_s'] for r in rows):.1f} | "
                       f"{max(r['max_ci95'] for r in rows):.5f} | {cov:.0%} of {allpts} | "
                       f"{statistics.median(e for r in rows for e in r['errs']):.4f} | "
-                      f"{statistics.mean(r['pulses_per_s'] for r in rows):.2f} |", flush=True)
+                      f"{statistics.mean(r['pulses_per_s'] for r in rows):.2f} | "
+                      f"{statistics.mean(r['reversals_per_s'] for r in rows):.2f} |", flush=True)
     return 0
 
 
