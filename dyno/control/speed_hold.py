@@ -106,8 +106,8 @@ class SpeedHold:
         Dropping it made every exit from the band start from zero: at the band's edge
         ``kp·e·T`` is 0.6 ms a period, so the first pulse came 1.1-1.7 s after the error
         left the band while the brake's fade kept carrying the speed away (+0.05-0.07 %/s
-        on the simulated rig): a 5 % step then sat outside +-0.5 % for seconds, on about
-        half the seeds (docs/control.md "The holds").
+        on the simulated rig): 5 % steps sat outside +-0.5 % for 3-8 s (63 of 160 on seeds
+        1-40; 15 with the travel kept: docs/control.md "Resolution and drift").
         """
         if not math.isfinite(e_rel):
             self.owed_s = 0.0
