@@ -80,8 +80,9 @@ def test_identified_engine_kp_meets_the_step_figures(tmp_path, seed, stiff):
     ident = f["identify"]
     assert ident["ok"] and ident["applied"] and ident["variable"] == "engine" and ident["kp_key"] == "kp_engine"
     assert ident["kp_before"] == 3.0 and f["kp"] == ident["kp_identified"]
-    # the plant's gain doubles with the stiffer brake, so the kp found halves (~11.6 and ~5.9)
-    assert f["kp"] == pytest.approx(5.9 if stiff else 11.6, rel=0.08), ident
+    # the plant's gain doubles with the stiffer brake, so the kp found halves (~11.0 and ~5.8; it is identified
+    # from the state the hold leaves, so it moves by a few % with the hold's pulse timing: bench_hold_tune.py)
+    assert f["kp"] == pytest.approx(5.8 if stiff else 11.0, rel=0.08), ident
     for step in f["steps"]:
         assert step["settle_s"] <= 2.0 and step["overshoot_pc"] <= 3.0 and step["sd_pc"] <= 0.3, (f["kp"], step)
 

@@ -39,3 +39,30 @@ def test_integral_does_not_wind_up_while_saturated():
     for _ in range(100):  # 50 % too fast for 5 s: the command saturates at +1
         assert h.update(4500.0, 3000.0, 0.05) == 1.0
     assert h.integral == 0.0
+
+
+def test_owed_travel_survives_the_dead_band_on_the_same_side():
+    """At the band's edge kp·e·T is a fraction of a ms a period: if the band dropped the travel already
+    owed, the first pulse after the error leaves it would come seconds late (the long step responses
+    of docs/control.md "The holds").  Kept, it comes at once; dropped when the error changes side."""
+    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004)
+    h = SpeedHold(g)
+    e = 0.02  # 2 % too fast: 3 ms of travel a period
+    for _ in range(5):  # 15 ms owed, below the minimum pulse
+        assert h.pulse(h.command(e, g.period_s), e) == (STOP, 0.0)
+    for e in (0.003, 0.001, 0.002):  # back inside the band on the same side: no motion
+        assert h.pulse(h.command(e, g.period_s), e) == (STOP, 0.0)
+    e = 0.0045  # out again by a hair: 0.7 ms a period on top of the 15 ms kept
+    out = [h.pulse(h.command(e, g.period_s), e) for _ in range(8)]
+    assert all(o == (STOP, 0.0) for o in out[:7])
+    assert out[7][0] == APPLY and out[7][1] >= g.min_pulse_s  # the old hold: 30 periods (1.5 s) to the first
+    # An error that changes side inside the band makes the ask stale: nothing is owed any more.
+    h = SpeedHold(g)
+    for _ in range(6):
+        h.pulse(h.command(0.02, g.period_s), 0.02)
+    assert h.owed_s > 0
+    h.pulse(h.command(-0.001, g.period_s), -0.001)
+    assert h.owed_s == 0.0
+    e = -0.0045  # too slow now: the first pulse is a release, after the travel of a minimum pulse is owed
+    out = [h.pulse(h.command(e, g.period_s), e)[0] for _ in range(40)]
+    assert APPLY not in out and out.index(RELEASE) >= 29
