@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """UI benchmarks (issues 5, 13): CPU, poll-interval jitter with and without the UI, start-up time, peak memory.
 
-Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test] [--quick]
+Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test|ended] [--quick]
 
 1. CPU (issue 13): the live screen in an 80x24 pseudo-terminal (Textual's real driver, the output read
-   as a terminal would), idle/ARMED and during a test, as % of one core, with the simulated bus read on
+   as a terminal would), idle/ARMED, during a test and with the screen left up after it (E-STOP, the rig
+   at rest), as % of one core, with the simulated bus read on
    the loop and again as the real rig reads its blocking bus (transfers in the poller's I/O thread); the simulated rig's own cost
    (emulated firmware + physics behind the I2C transport, per-thread CPU time) measured and subtracted:
    what is left is what the real-rig path costs (poller, controller, run log, UI).  The same for the
@@ -223,8 +224,15 @@ async def drive(get_session, quit):
     test = await measure("test", test_s)
     res = {"armed": armed, "test": test, "state": s.controller.state.value, "points": len(s.controller.points),
            "events_lost": s.poller.reader.events_lost}
-    Path(result_path).write_text(json.dumps(res))
+    # The screen left up after the test: E-STOP, the rig spins down and the brake releases, then it rests.
     s.estop("bench")
+    idle_period_s = 1.0 / s.controller.limits.armed_poll_hz
+    t_end = time.monotonic() + 40.0
+    while abs(s.poller.poll_period_s - idle_period_s) > 1e-9 and time.monotonic() < t_end:
+        await asyncio.sleep(0.2)
+    await asyncio.sleep(1.0)
+    res["ended"] = await measure("ended", armed_s)
+    Path(result_path).write_text(json.dumps(res))
     await quit()
 
 
@@ -267,7 +275,7 @@ def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = 
                             start_new_session=True)
     os.close(slave)
     tail = b""
-    t_end = time.monotonic() + armed_s + test_s + 120
+    t_end = time.monotonic() + 2 * armed_s + test_s + 160
     while time.monotonic() < t_end:  # a terminal reads what the app writes
         r, _, _ = select.select([master], [], [], 0.5)
         if r:
@@ -299,9 +307,10 @@ def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = 
 def fmt_cpu(name: str, d: dict) -> str:
     if "error" in d:
         return f"{name:<24} ERROR {d['error']}"
-    a, t = d["armed"], d["test"]
-    return (f"{name:<24} idle/ARMED {a['net_pct']:5.1f} %  (sim {a['sim_pct']:4.1f} %, all {a['total_pct']:5.1f} %)   "
-            f"test {t['net_pct']:5.1f} %  (sim {t['sim_pct']:4.1f} %, all {t['total_pct']:5.1f} %)  "
+    a, t, e = d["armed"], d["test"], d["ended"]
+    return (f"{name:<24} idle/ARMED {a['net_pct']:4.1f} %  (sim {a['sim_pct']:3.1f} %, all {a['total_pct']:4.1f} %)  "
+            f"test {t['net_pct']:4.1f} %  (sim {t['sim_pct']:3.1f} %, all {t['total_pct']:4.1f} %)  "
+            f"ended, at rest {e['net_pct']:4.1f} %  (sim {e['sim_pct']:3.1f} %)  "
             f"[{d['state']}, {d['points']} points, lost {d['events_lost']}]")
 
 
@@ -320,7 +329,7 @@ def main() -> None:
     ap.add_argument("--cpu-seconds", type=float, default=20.0, help="seconds per CPU measurement phase")
     ap.add_argument("--cpu-only", action="store_true", help="only the CPU figures")
     ap.add_argument("--repeat", type=int, default=3, help="CPU runs per mode (the median is printed)")
-    ap.add_argument("--profile", choices=("armed", "test"), default="",
+    ap.add_argument("--profile", choices=("armed", "test", "ended"), default="",
                     help="cProfile this phase of the live screen's CPU run (top 25 by cumulative time)")
     a = ap.parse_args()
     seconds = 3.0 if a.quick else a.seconds
@@ -343,7 +352,7 @@ def main() -> None:
             import statistics
 
             med = {m: {ph: statistics.median(d[ph]["net_pct"] for d in r if "error" not in d)
-                       for ph in ("armed", "test")} for m, r in runs.items()}
+                       for ph in ("armed", "test", "ended")} for m, r in runs.items()}
             sim = statistics.median(d[ph]["sim_pct"] for r in runs.values() for d in r if "error" not in d
                                     for ph in ("armed", "test"))
             print(f"median of {a.repeat}: dyno ui idle/ARMED {med['ui']['armed']:.1f} %, test {med['ui']['test']:.1f} % "
@@ -351,7 +360,8 @@ def main() -> None:
                   f"{med['ui']['test'] - med['bare']['test']:.1f} %; session alone {med['bare']['armed']:.1f} % / "
                   f"{med['bare']['test']:.1f} %); the simulated rig's own cost, subtracted: {sim:.1f} %")
             print(f"median of {a.repeat}: dyno ui with the rig's blocking bus I/O (transfers in the poller's I/O "
-                  f"thread) idle/ARMED {med['ui-rigio']['armed']:.1f} %, test {med['ui-rigio']['test']:.1f} %")
+                  f"thread) idle/ARMED {med['ui-rigio']['armed']:.1f} %, test {med['ui-rigio']['test']:.1f} %, "
+                  f"ended at rest {med['ui-rigio']['ended']:.1f} % (bus read on the loop: {med['ui']['ended']:.1f} %)")
         if a.cpu_only:
             return
         print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "

@@ -84,7 +84,12 @@ def test_not_significant_where_the_truths_do_not_differ(compared, quantity):
     # interpolation error; the truths too are interpolated from points at different speeds: at 2000 rpm
     # the engine-speed truths of two seeds differ by 0.19 rpm where s = 0.25 rpm)
     assert (np.abs(truth[ok]) < s[ok]).all()
-    assert not any(same["significant"]), "no difference claimed between two runs of the same tune"
+    # A 95 % test at each of ~18 grid speeds claims a difference that is not there at ~1 of them by design
+    # (seen: 1 of 18 for the torque at 2.05 s.e.); more than 2, or any claim past 3 s.e., is a wrong s.e.
+    sig = np.array(same["significant"], dtype=bool)
+    d = _arr(same["difference"])
+    assert sig.sum() <= 2, f"{sig.sum()} of {sig.size} grid speeds claim a difference between runs of the same tune"
+    assert (np.abs(d[sig]) <= 3 * s[sig]).all(), "a claimed difference beyond 3 s.e. where the truths agree"
 
 
 def test_html_report_is_self_contained(compared):

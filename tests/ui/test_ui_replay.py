@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import re
 import json
 import subprocess
 import sys
@@ -108,7 +109,9 @@ def test_ui_replay_app_browse_overlay_export(two_runs, tmp_path):
     assert "shift curve" in shots["shift"] and "run0" in shots["shift"] and "run1" in shots["shift"]
     assert "point 1: rpm (left), ADC (right)" in shots["raw"]
     assert "run 2/2: run1" in shots["run2"]
-    assert "Δeff % vs run 1: 0/3 sig. 95 %" in shots["diff"] and "tune: same as run 1" in shots["diff"]
+    # same tune, another seed: no difference claimed at the 2-3 common grid speeds (a 95 % test on 3 points)
+    assert re.search(r"Δeff % vs run 1: 0/[23] sig\. 95 %", shots["diff"]), shots["diff"]
+    assert "tune: same as run 1" in shots["diff"]
     assert "which engine map file?" in shots["ask"]
     assert running and "no rig is attached" in shots["estop"]
     assert (two_runs[1] / "export" / "points.csv").exists() and (two_runs[1] / "export" / "adc.csv").exists()
