@@ -30,7 +30,7 @@ from dyno.ui.results_view import has_results, results_lines
 from dyno.ui.session import LiveOptions, LiveSession
 
 REFRESH_HZ = 4.0  # values during a test: a few Hz, readable
-IDLE_REFRESH_HZ = 2.0  # ... and while nothing runs (waiting, armed, ended): the screen's CPU is most of the idle cost
+IDLE_REFRESH_HZ = 1.0  # ... and while nothing runs (waiting, armed, ended): a refresh costs ~2 ms of loop time, the idle is mostly wake-ups
 PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
 HELP_ENDED = "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE/ABORTED
