@@ -386,18 +386,19 @@ class TestController(Measuring):
         ends (and the actuator is de-energised) though the heartbeat has stopped with the test."""
         self._safety_check(now_s)
         running = self._silence is not None and not self._silence.done()
-        if running or self.state in (State.DONE, State.ABORTED):
-            # The beat keeps the heartbeat's cadence (every 3rd poll at 150 Hz, every poll at the ARMED 50 Hz): the
-            # real rig's relay/enable sequencing is serviced on beats, and the brake pulses were tuned on it.
-            now = self._now() if now_s is None else now_s
-            if now - self._last_beat_s >= 0.75 * self.limits.check_period_s:
-                if running:
-                    self._beat()
-                else:
-                    self._last_beat_s = now
-                    self.act.tick(now)
+        if not running and self.state not in (State.DONE, State.ABORTED):
+            return
+        # The beat keeps the heartbeat's cadence (every 3rd poll at 150 Hz, every poll at the ARMED 50 Hz): the
+        # real rig's relay/enable sequencing is serviced on beats, and the brake pulses were tuned on it.
+        now = self._now() if now_s is None else now_s
+        if now - self._last_beat_s >= 0.75 * self.limits.check_period_s:
             if running:
-                self._arm_silence_timer(after_poll=True)
+                self._beat()
+            else:
+                self._last_beat_s = now
+                self.act.tick(now)
+        if running:
+            self._arm_silence_timer(after_poll=True)
 
     def _beat(self) -> None:
         self._last_beat_s = now = self._now()
@@ -430,10 +431,14 @@ class TestController(Measuring):
         """
         if self._silence_timer is not None:
             self._silence_timer.cancel()
-        fut = self._silence
-        loop = fut.get_loop()
+        loop = self._silence.get_loop()
         wait_s = self.limits.check_period_s + (getattr(self.poller, "poll_period_s", 0.0) if after_poll else 0.0)
-        self._silence_timer = loop.call_at(loop.time() + wait_s, lambda: fut.done() or fut.set_result(None))
+        self._silence_timer = loop.call_at(loop.time() + wait_s, self._end_silence)
+
+    def _end_silence(self) -> None:
+        """The heartbeat's timer fired: no poll for a whole period, wake its task."""
+        if self._silence is not None and not self._silence.done():
+            self._silence.set_result(None)
 
     async def _safety_loop(self) -> None:
         """The heartbeat when polls stop: outputs serviced, watchdog fed and the checks run

@@ -43,13 +43,12 @@ def _run(tmp_path, stop_poller_at_s=None):
 
     result = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=_setup,
                                  max_sim_s=120.0))
-    _run.polls = [t - start[0] for t in polls]
     return result, captured["ctx"], [(t - start[0], dt) for t, dt in zip(ticks, periods)], \
-        [t - start[0] for t in beats]
+        [t - start[0] for t in beats], [t - start[0] for t in polls]
 
 
 def test_outputs_serviced_and_watchdog_fed_every_check_period(tmp_path):
-    result, ctx, ticks, beats = _run(tmp_path)
+    result, ctx, ticks, beats, polls = _run(tmp_path)
     assert result["state"] == "done"
     period = SafetyLimits().check_period_s
     end = max(beats)
@@ -57,7 +56,7 @@ def test_outputs_serviced_and_watchdog_fed_every_check_period(tmp_path):
     assert len(beats) > 300
     # Carried by the polls: every beat is at a poll's instant (the heartbeat task never woke on its
     # own), no closer than 3/4 of a check period and at most one poll period after a whole one.
-    poll_times = set(_run.polls)
+    poll_times = set(polls)
     assert all(b in poll_times for b in beats)
     slowest_poll_s = max(dt for _, dt in ticks)
     gaps = [b - a for a, b in zip(beats, beats[1:])]
@@ -69,7 +68,7 @@ def test_outputs_serviced_and_watchdog_fed_every_check_period(tmp_path):
 
 def test_when_polls_stop_the_heartbeat_checks_and_comms_lost_trips(tmp_path):
     stop_at = 20.0
-    result, ctx, _, beats = _run(tmp_path, stop_poller_at_s=stop_at)
+    result, ctx, _, beats, _ = _run(tmp_path, stop_poller_at_s=stop_at)
     assert result["state"] == "aborted"
     abort = result["aborts"][0]
     assert abort["cause"] == "comms_lost" and "not polled" in abort["detail"]
