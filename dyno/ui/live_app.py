@@ -142,7 +142,7 @@ class LiveApp(OverlayMixin, DynoApp):
         st.update(self._state_text(v))
         st.set_class(v.state == "aborted", "aborted")
         st.set_class(v.state == "done", "done")
-        self.query_one("#fields", Static).update(self._fields_text(v))
+        self._show_fields()
         self._show_results()
         if self.overlay_requested:
             if len(s.controller.points) != self._overlay_points:
@@ -185,6 +185,11 @@ class LiveApp(OverlayMixin, DynoApp):
             t.append(f"\n {safe_txt}: throttle idle, engine killed, brake released", style="bold")
             t.append(f"\n cause: {v.abort_cause}: {v.abort_detail}", style="bold")
         return t
+
+    def _show_fields(self) -> None:
+        """The fields column from the last values (also between refreshes: the overlay's status)."""
+        if self.values is not None:
+            self.query_one("#fields", Static).update(self._fields_text(self.values))
 
     def _fields_text(self, v) -> Text:
         t = Text()

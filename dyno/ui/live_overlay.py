@@ -18,7 +18,7 @@ from dyno.ui.live_model import overlay_inputs
 
 
 class OverlayMixin:
-    """The overlay's state and work; the host app provides ``session``, ``values``, ``_draw_plot``,
+    """The overlay's state and work; the host app provides ``session``, ``values``, ``_draw_plot``, ``_show_fields``,
     ``say``, ``run_worker``, ``call_from_thread`` and ``is_running`` (a Textual App)."""
 
     def _init_overlay(self) -> None:
@@ -46,9 +46,11 @@ class OverlayMixin:
         if not self.overlay_requested:
             self.overlay, self.overlay_tier = None, ""
             self.say("overlay off")
-            return
-        self.say("belt-model overlay: closed form now, full model per point in the background")
-        self._start_overlay()
+        else:
+            self.say("belt-model overlay: closed form now, full model per point in the background")
+            self._start_overlay()
+        self._show_fields()  # on screen at the key, not at the next refresh (1 s while nothing runs)
+        self._draw_plot()
 
     def _start_overlay(self) -> None:
         """Submit the points not yet submitted (the service solves each once), closed form for the rest.
@@ -184,11 +186,13 @@ class OverlayMixin:
         self.overlay_tier = (f"full {len(full)}/{n}" + (f", {svc.pending} wait" if svc.pending else "")
                              + (f", {failed} fail" if failed else "")) if n else "no points yet"
         self._overlay_version += 1
-        if key is not None and self.overlay_requested and self.is_running:
+        if self.overlay_requested and self.is_running:
             from textual.css.query import NoMatches
 
             try:
-                self._draw_plot()  # a prediction came back: on screen now, not at the next refresh
+                self._show_fields()  # its status, and a prediction that came back: on screen now, not at
+                if key is not None:  # the next refresh
+                    self._draw_plot()
             except NoMatches:  # a dialog is on top: the next refresh draws it
                 pass
         now = time.monotonic()
