@@ -38,6 +38,8 @@ from dyno.analysis.calibration import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BR
 
 ADC_STATUS_ERR = 0x20
 ADC_RAILS = (0, 0xFFFF)
+# The zero drift refuses only beyond this many standard errors (a 3-sigma event is 1 in 370 by noise).
+DRIFT_SIGNIFICANCE = 3.0
 
 
 class Phase(enum.Enum):
@@ -133,8 +135,15 @@ class CalibrationWizard:
         Refuse a fit below this R^2.
     zero_drift_max_nm : float
         Refuse when the tare after differs from the tare before by more than
-        this (in secondary torque, with the new slope): the bridge drifted or
-        the rope did not come off.
+        this (in secondary torque, with the new slope) *and* by more than
+        ``DRIFT_SIGNIFICANCE`` standard errors of that difference: the bridge
+        drifted or the rope did not come off.  The second condition matters
+        only for short tares: with ``n`` samples of scatter ``s`` the
+        difference of two tare means scatters by ``s sqrt(2/n)`` (0.11 N·m for
+        100 samples on the thesis bridge, 0.05 N·m for the default 500), so a
+        bare threshold at 0.25 N·m refused one short calibration in ~40 for
+        noise alone.  When the tares are too short to resolve the limit the
+        review says so (:meth:`zero_check_inconclusive`).
     previous : CalibrationEntry, optional
         The calibration in force: the tare before is compared with its intercept.
     """
@@ -310,6 +319,24 @@ class CalibrationWizard:
             return math.nan
         return self.tare_after.mean_counts - self.tare_before.mean_counts
 
+    def zero_drift_se_counts(self) -> float:
+        """Standard error of :meth:`zero_drift_counts` from the two tares' scatter.
+
+        ``se = sqrt(s_b^2 / n_b + s_a^2 / n_a)``, white noise assumed: noise
+        correlated from sample to sample makes this smaller than the truth,
+        which errs towards refusing.
+        """
+        if not self.steps:
+            return math.nan
+        return math.hypot(self.tare_before.sem_counts, self.tare_after.sem_counts)
+
+    def zero_check_inconclusive(self) -> bool:
+        """The tares are too short to tell a drift at the limit from their noise."""
+        if self.fit is None:
+            return False
+        se_nm = self.zero_drift_se_counts() / abs(self.fit.slope_counts_per_nm)
+        return not DRIFT_SIGNIFICANCE * se_nm <= self.zero_drift_max_nm
+
     def previous_zero_offset_nm(self) -> float | None:
         """The tare before against the calibration in force, in N·m (None without one)."""
         if self.previous is None or not self.steps or not self.tare_before.n:
@@ -327,9 +354,11 @@ class CalibrationWizard:
             self.rejection = str(exc)
             return
         drift_nm = self.zero_drift_counts() / self.fit.slope_counts_per_nm
-        if abs(drift_nm) > self.zero_drift_max_nm:
-            self.rejection = (f"zero drifted by {drift_nm:+.3f} N·m between the tare before and after "
-                              f"(limit {self.zero_drift_max_nm} N·m): bridge drift, a rope left on, or the "
+        se_nm = self.zero_drift_se_counts() / abs(self.fit.slope_counts_per_nm)
+        # A NaN s.e. (a tare of one sample) cannot excuse anything: "not <=" refuses then.
+        if abs(drift_nm) > self.zero_drift_max_nm and not abs(drift_nm) <= DRIFT_SIGNIFICANCE * se_nm:
+            self.rejection = (f"zero drifted by {drift_nm:+.3f} ± {se_nm:.3f} N·m between the tare before and "
+                              f"after (limit {self.zero_drift_max_nm} N·m): bridge drift, a rope left on, or the "
                               f"secondary lock slipped; repeat the calibration")
         else:
             self.rejection = None
@@ -349,7 +378,11 @@ class CalibrationWizard:
                       f"R²     {f.r2:.6f} (min {self.r2_min})",
                       f"non-lin {f.nonlinearity_pct_fs:.3f} %FS"
                       + (f"  hyst {f.hysteresis_pct_fs:.3f} %FS" if f.hysteresis_pct_fs is not None else ""),
-                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} N·m)"]
+                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} "
+                      f"± {self.zero_drift_se_counts() / abs(f.slope_counts_per_nm):.3f} N·m)"]
+            if self.zero_check_inconclusive():
+                lines.append(f"zero check inconclusive: the tares are too short to resolve "
+                             f"{self.zero_drift_max_nm} N·m; collect more samples per step")
         prev = self.previous_zero_offset_nm()
         if prev is not None:
             lines.append(f"tare vs cal. in force {prev:+.3f} N·m")

@@ -96,3 +96,41 @@ def test_ui_wizard_step_bookkeeping_refuses_error_and_rail_conversions():
     assert w.add_samples([103, 104]) is True
     assert w.phase is Phase.LOADING and w.steps[0].mean_counts == pytest.approx(102.25)
     assert [s.direction for s in w.steps] == [0, 1, 1, 1, -1, -1, 0]
+
+
+def _feed(n_samples: int, drift_counts: float, seed: int = 0) -> CalibrationWizard:
+    """A whole procedure fed by hand: a line of 108 counts/N·m with 85 counts of white noise (the sim's bridge)."""
+    rng = np.random.default_rng(seed)
+    w = CalibrationWizard(n_samples=n_samples, settle_samples=0)
+    assert w.configure(RADIUS_M, MASSES_KG) == []
+    w.start()
+    while w.phase is not Phase.REVIEW:
+        s = w.current
+        w.begin_step()
+        level = 30000.0 + 108.0 * s.torque_nm + (drift_counts if s.phase is Phase.TARE_AFTER else 0.0)
+        w.add_samples(np.round(level + 85.0 * rng.standard_normal(n_samples)).astype(int).tolist())
+    return w
+
+
+def test_ui_wizard_zero_drift_is_judged_against_its_noise():
+    """A drift of 0.3 N·m refuses when the tares resolve it (500 samples: s.e. ~0.05 N·m), not when they
+    cannot (20 samples: s.e. ~0.25 N·m), and then the review says the zero check was inconclusive;
+    a rope left on (2 N·m) refuses whatever the tares' length."""
+    long = _feed(500, 0.3 * 108.0)
+    assert not long.acceptable and "zero drifted by +0.3" in long.rejection
+    assert not long.zero_check_inconclusive()
+    assert not any("inconclusive" in line for line in long.result_lines())
+
+    short = _feed(20, 0.3 * 108.0)
+    se_nm = short.zero_drift_se_counts() / short.fit.slope_counts_per_nm
+    assert 0.15 < se_nm < 0.4
+    assert short.acceptable, short.rejection
+    assert short.zero_check_inconclusive()
+    assert any("zero check inconclusive" in line for line in short.result_lines())
+
+    rope = _feed(20, 2.0 * 108.0)
+    assert not rope.acceptable and "zero drifted by +2." in rope.rejection
+
+    # and no drift at all passes the long check quietly
+    fine = _feed(500, 0.0)
+    assert fine.acceptable and not fine.zero_check_inconclusive()
