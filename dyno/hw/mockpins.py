@@ -52,6 +52,8 @@ class SimPinFactory(RecordingFactory):
         role = self._role.get(name)
         if role in ("enable", "direction"):
             self._level[role] = value
+            if role == "direction":  # the coil: the sim's relay starts its transfer now
+                self.sim.relay(APPLY if value >= 0.5 else RELEASE)
             if self._level["enable"] < 0.5:
                 self.sim.brake(STOP)
             else:

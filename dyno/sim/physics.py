@@ -91,7 +91,12 @@ class RigModel(RigSignals):
 
     Inputs (attributes set by the device/actuator emulation):
     ``throttle_frac`` (0 idle .. 1 full), ``engine_enabled`` (False = kill
-    relay open), ``actuator_dir`` (+1 extend/apply, -1 retract, 0 stop).
+    relay open), ``actuator_dir`` (the enable: +1/-1 powered, 0 stop),
+    ``relay_dir`` (the direction relay's coil: +1 apply, -1 release = rest;
+    set by a powered ``actuator_dir``, or alone by a driver that switches it
+    with the enable off).  The actuator moves the way the relay's contacts
+    point once they have made, ``relay_transfer_s`` after the coil changed,
+    unpowered meanwhile.
     Fault knobs: ``stuck_hall`` (set of channel names that give no edges),
     ``adc_error_prob``.
     """
@@ -167,6 +172,9 @@ class RigModel(RigSignals):
         self.throttle_frac = 0.0
         self.engine_enabled = True
         self.actuator_dir = 0
+        self.relay_dir = -1                 # at rest: release
+        self._relay_goal = -1
+        self._relay_made_s = -math.inf      # when the contacts made on the goal's side
         # fault knobs
         self.stuck_hall: set[str] = set()
         self.adc_error_prob = p.adc_error_prob
@@ -307,7 +315,15 @@ class RigModel(RigSignals):
             self._running = False
 
         # --- actuator and brake capacity (inputs act from the start of the step)
-        self._act_mm = brk.move_actuator_mm(self._act_mm, self.actuator_dir, h)
+        if self.actuator_dir:  # powered: the coil is wherever the command points
+            self.relay_dir = self.actuator_dir
+        if self.relay_dir != self._relay_goal:  # the coil changed: contacts in transit from this cell
+            self._relay_goal = self.relay_dir
+            self._relay_made_s = t0 + p.relay_transfer_s
+        if self.actuator_dir:
+            run_s = t0 + h - self._relay_made_s  # powered time with the contacts made, in this cell
+            if run_s > 0.0:
+                self._act_mm = brk.move_actuator_mm(self._act_mm, self._relay_goal, h if run_s > h else run_s)
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
         if self._driven_loss[0] or self._driven_loss[1] or self._driven_loss[2]:

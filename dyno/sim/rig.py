@@ -35,10 +35,24 @@ class SimActuators:
         self.history.append((self.model.t_s, what, value))
 
     def brake(self, direction: int) -> None:
+        """Power the actuator in ``direction`` (STOP: enable off).
+
+        Without a driver in front (the default sim) a reversal also moves the
+        direction relay, and the physics keeps the motor unpowered until its
+        contacts make (``RigParams.relay_transfer_s``): a pulse shorter than
+        that after a reversal moves nothing, as on the rig.
+        """
         self._sync()
         self._release_until_s = None
-        self.model.actuator_dir = int(direction)
-        self._record("brake", int(direction))
+        direction = int(direction)
+        self.model.actuator_dir = direction
+        self._record("brake", direction)
+
+    def relay(self, direction: int) -> None:
+        """The direction relay's coil alone (a driver switching it with the enable off)."""
+        self._sync()
+        self.model.relay_dir = int(direction)
+        self._record("relay", int(direction))
 
     def throttle(self, fraction: float) -> None:
         self._sync()

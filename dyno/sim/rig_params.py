@@ -123,6 +123,10 @@ class RigParams:
     # ---- brake
     actuator_speed_mm_s: float = 5.0
     actuator_travel_mm: float = 40.0             # 8 s full stroke at 5 mm/s (the host's release time)
+    # Direction relay (DPDT, rest = release): from the coil's change until the contacts make on the
+    # other side (operate ~10 ms + bounce ~5 ms, automotive relay data sheets). The motor is
+    # unpowered meanwhile. The driver's rig.toml relay_settle_s (30 ms) must cover it.
+    relay_transfer_s: float = 0.015
     brake_free_travel_mm: float = 1.0
     brake_spring_rate_n_per_mm: float = 6.5      # ~22 steps of 0.2 s from light load to n_s < 1500 rpm
     master_cylinder_bore_mm: float = 19.05

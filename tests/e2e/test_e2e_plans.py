@@ -40,7 +40,10 @@ def test_sweep_is_stored_with_its_plan_and_corrected_for_inertia(sweep_run):
     pts = result["points"]
     assert len(pts) >= 12
     rs = [p["rpm_secondary"] for p in pts]
-    assert rs == sorted(rs, reverse=True) and rs[0] - rs[-1] > 2000  # a sweep down the range
+    # A sweep down the range: each point below the one before, except where the CVT shifts (~3,850 rpm on
+    # seed 3): there the secondary hardly slows as the load rises and two 1 s means may sit within a few
+    # rpm of each other, either way (seen: +4 rpm; 0.5 % is 19 rpm there).
+    assert all(b < a * 1.005 for a, b in zip(rs, rs[1:])) and rs[0] - rs[-1] > 2000, rs
     # The secondary decelerates ~150 rpm/s all along: the I·alpha terms are not negligible, and the
     # corrected efficiency is closer to the sim's truth than the gauge-and-map one.
     alphas = [p["alpha_secondary_rad_s2"] for p in pts]
