@@ -378,11 +378,11 @@ class CalibrationWizard:
                       f"R²     {f.r2:.6f} (min {self.r2_min})",
                       f"non-lin {f.nonlinearity_pct_fs:.3f} %FS"
                       + (f"  hyst {f.hysteresis_pct_fs:.3f} %FS" if f.hysteresis_pct_fs is not None else ""),
-                      f"zero drift {drift:+.1f} counts ({drift / f.slope_counts_per_nm:+.3f} "
-                      f"± {self.zero_drift_se_counts() / abs(f.slope_counts_per_nm):.3f} N·m)"]
+                      # N·m only (the tares' counts are in the table): the line fits the 80-column review
+                      f"zero drift {drift / f.slope_counts_per_nm:+.3f} "
+                      f"± {self.zero_drift_se_counts() / abs(f.slope_counts_per_nm):.3f} N·m"]
             if self.zero_check_inconclusive():
-                lines.append(f"zero check inconclusive: the tares are too short to resolve "
-                             f"{self.zero_drift_max_nm} N·m; collect more samples per step")
+                lines.append(f"zero check inconclusive: tares too short for {self.zero_drift_max_nm} N·m")
         prev = self.previous_zero_offset_nm()
         if prev is not None:
             lines.append(f"tare vs cal. in force {prev:+.3f} N·m")
