@@ -12,6 +12,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from dyno.acquisition.poller import Poller
+from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
+from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.protocol import v1
@@ -163,6 +165,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         faults = opts.faults or (BusFaults.mixed(opts.fault_rate) if opts.fault_rate else None)
         sim = SimRig(now_s, seed=opts.seed, params=opts.sim_params, protocol=protocol, faults=faults,
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
+        sim.model.brake_hold_relay = rig_cfg.actuator.brake_hold_relay  # K3: wiring, as rig.toml declares it
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:
             from dyno.hw.mockpins import mock_pin_actuators
@@ -297,10 +300,14 @@ def _attach_watchdog(ctx: RunContext, timeout_s: float, now_s) -> None:
     ctx.watchdog = wd
 
     def beat() -> None:
-        if wd.tripped and trip and not trip.get("reported"):
+        if wd.tripped and not trip.get("reported"):
             trip["reported"] = True
-            controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
-                             f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
+            if "silent_s" in trip:
+                controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
+                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
+            else:  # a look that raised: safed, logged, still watching
+                errs = getattr(wd, "errors", None) or ["tripped"]
+                controller.abort("watchdog", f"{errs[0]}: the watchdog put the rig in its safe state")
         wd.kick()
 
     controller.heartbeat_hooks.append(beat)
@@ -383,7 +390,7 @@ async def run_test_async(opts: RunOptions) -> dict:
 
             zero_task = asyncio.create_task(after_test(ctx.controller), name="torque-zero")
         if opts.finish_release:
-            await _finish_release(ctx)
+            await finish_release(ctx)
         if zero_task is not None:
             await zero_task
     finally:
@@ -393,11 +400,20 @@ async def run_test_async(opts: RunOptions) -> dict:
         await asyncio.gather(poll_task, return_exceptions=True)
         stop_watchdog()
         restore_signals()
+        result = summarize(ctx)
+        record_safety(ctx, result)
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
                          events_lost=ctx.poller.reader.events_lost)
-        result = summarize(ctx)
         close_rig(ctx)
     return result
+
+
+def record_safety(ctx: RunContext, summary: dict) -> None:
+    """The run directory keeps what the run reports of its safety (a ``safety`` document)."""
+    from dyno.summary import safety_document
+
+    if ctx.writer.error is None:
+        ctx.writer.doc("safety", **safety_document(summary))
 
 
 def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
@@ -442,7 +458,9 @@ def _install_signal_handlers(ctx: RunContext, loop):
         if ctx.signal_received is None:
             ctx.signal_received = signum
         if ctx.sim is None:
-            ctx.controller.act.safe_state()  # at once, whatever the loop is doing
+            from dyno.control.outputs import enter_safe_state
+
+            enter_safe_state(ctx.controller.act, latch=True)  # at once, latched, whatever the loop is doing
         loop.call_soon_threadsafe(on_loop, signum)
 
     for sig in sigs:
@@ -456,103 +474,6 @@ def _install_signal_handlers(ctx: RunContext, loop):
             signal.signal(sig, h)
 
     return restore
-
-
-async def _finish_release(ctx: RunContext) -> None:
-    """Keep servicing the outputs until the brake's release stroke has ended (sim and rig)."""
-    act = ctx.controller.act
-    stroke_s = float(getattr(act, "brake_full_stroke_s", 8.0))
-    loop = asyncio.get_running_loop()
-    end = loop.time() + 2.0 * stroke_s + 1.0  # GpioActuators adds its own margin to a full stroke
-    while loop.time() < end:
-        if ctx.sim is not None and ctx.sim.model.actuator_dir == 0 and not ctx.sim.actuators.releasing \
-                and getattr(act, "released", True):
-            break
-        await asyncio.sleep(0.1)
-        act.tick(loop.time())
-        if ctx.watchdog is not None:
-            ctx.watchdog.kick()  # the loop is alive and servicing the release
-
-
-def summarize(ctx: RunContext) -> dict:
-    reader = ctx.poller.reader
-    st = reader.stats
-    frames = {"read": st.read, "accepted": st.accepted, "rejected": dict(sorted(st.rejected.items())),
-              "rejected_total": sum(st.rejected.values()),
-              "transport_errors": dict(sorted(st.transport_errors.items())),
-              "device_resets": st.device_resets, "resyncs": st.resyncs,
-              "boots": list(getattr(st, "boots", []))}  # v2: each boot seen, with its reset cause
-    aborts = [dict(a) for a in ctx.controller.aborts]
-    out = {"run_dir": str(ctx.writer.run_dir), "state": ctx.controller.state.value,
-           "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
-           "discarded": list(ctx.controller.discards),
-           "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
-    zc = getattr(ctx.controller, "zero_check", None)
-    if zc is not None:
-        out["torque_zero"] = zc
-        if zc.get("correct"):
-            from dyno.analysis.zero_check import corrected_point_keys
-
-            for pub, p in zip(out["points"], ctx.controller.points):
-                pub.update(corrected_point_keys(p, zc))
-    out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
-    go_s = ctx.controller.go_s
-    ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
-    # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
-    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
-    out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
-    outputs = rig_outputs(ctx)
-    out["outputs"] = outputs
-    out["rig_safe"] = bool(outputs.get("safe"))
-    if ctx.writer.error is not None:
-        out["log_error"] = f"{ctx.writer.error.strerror or ctx.writer.error}"
-    if ctx.signal_received is not None:
-        out["signal"] = int(ctx.signal_received)
-    if ctx.sim is not None:
-        frames["corrupted_accepted"] = ctx.audit["corrupted_accepted"]
-        out["faults_injected"] = dict(ctx.sim.bus.injected)
-        out["sim_time_s"] = ctx.sim.model.t_s
-        if ctx.drills is not None:
-            out["drills"] = ctx.drills.fired
-        from dyno.drills import true_latencies
-
-        true_latencies(ctx, aborts)
-    from dyno.runlog.files import finite  # JSON-safe: NaN and infinities become null
-
-    return finite(out)
-
-
-def rig_outputs(ctx: RunContext) -> dict:
-    """The outputs' final states, by name, and whether together they are the safe state."""
-    act = ctx.controller.act
-    report = getattr(act, "output_states", None)  # GpioActuators (pins read back) or SimActuators
-    if callable(report):
-        return dict(report())
-    if ctx.sim is not None:
-        return ctx.sim.actuators.output_states()
-    return {}
-
-
-POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_primary", "rpm_secondary", "ratio",
-              "torque_secondary_nm", "power_out_w", "power_in_w",
-              # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
-              "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
-              "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
-              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
-              # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
-              "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
-              "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
-              # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
-              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map")
-
-
-def public_point(p: dict) -> dict:
-    out = {}
-    for k in POINT_KEYS:
-        if k in p:
-            v = p[k]
-            out[k] = None if isinstance(v, float) and math.isnan(v) else v
-    return out
 
 
 def run_test(opts: RunOptions) -> dict:

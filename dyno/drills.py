@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import errno
 import math
+from bisect import bisect_left
 import os
 import signal
 from dataclasses import dataclass
@@ -59,14 +60,21 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
 SIGNAL_DRILLS = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM, "sighup": signal.SIGHUP}
 
 
+#: ``@PHASE`` onsets: the first poll in that controller state, ``loaded`` (the pads first bite: the true
+#: actuator past the brake's free travel), ``after`` (the test has ended)
+PHASES = ("wait_engine", "armed", "warmup", "step", "settle", "measure", "loaded", "after")
+
+
 @dataclass(frozen=True)
 class Drill:
     name: str
     arg: str | None
-    at_s: float  # simulated seconds from the first frame
+    at_s: float  # simulated seconds from the first frame (or from the phase's start)
+    phase: str | None = None  # fire at the first poll in this phase (PHASES), plus at_s
 
     def __str__(self) -> str:
-        return f"{self.name}{':' + self.arg if self.arg else ''}@{self.at_s:g}"
+        at = f"{self.phase}+{self.at_s:g}" if self.phase and self.at_s else (self.phase or f"{self.at_s:g}")
+        return f"{self.name}{':' + self.arg if self.arg else ''}@{at}"
 
 
 #: the drills that apply to the calibration fixture (no engine, no test controller, no run log)
@@ -81,7 +89,7 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     """
     names = DRILLS if engine else CALIBRATION_DRILLS
     expected = (f"NAME[:ARG]@T with NAME one of {', '.join(names)} "
-                "and T >= 0 simulated seconds from the first frame")
+                f"and T >= 0 simulated seconds from the first frame, or a phase PHASE[+S] ({', '.join(PHASES)})")
     name_arg, at, t_text = text.partition("@")
     if not at:
         raise ConfigError("command line", "--drill", f"{text!r}: missing @T; expected {expected}")
@@ -89,6 +97,13 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     name = name.strip().lower()
     if name not in names:
         raise ConfigError("command line", "--drill", f"{text!r}: unknown drill {name!r}; expected {expected}")
+    phase, _, plus = t_text.strip().lower().partition("+")
+    if phase in PHASES:
+        if not engine:
+            raise ConfigError("command line", "--drill", f"{text!r}: phases are for test plans, not calibration")
+        t_text = plus or "0"
+    else:
+        phase = None
     try:
         t_s = float(t_text)
     except ValueError:
@@ -110,7 +125,7 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
             ms = math.nan
         if not (math.isfinite(ms) and 0 < ms <= 60_000):
             raise ConfigError("command line", "--drill", f"{text!r}: loop-stall:MS needs 0 < MS <= 60000")
-    return Drill(name, arg, t_s)
+    return Drill(name, arg, t_s, phase)
 
 
 class DrillRunner:
@@ -131,6 +146,28 @@ class DrillRunner:
         self.fired: list[dict] = []  # {drill, scheduled_s, onset_s, ...} in firing order
         self.t_first_frame_s: float | None = None
         self._handles: list = []
+        self._phased: list[Drill] = []  # waiting for their phase (checked on every poll)
+        poller = getattr(ctx, "poller", None)
+        if any(d.phase for d in self.drills) and poller is not None:
+            poller.listeners.append(self._on_poll)
+
+    def _in_phase(self, phase: str) -> bool:
+        ctrl = getattr(self.ctx, "controller", None)
+        state = getattr(getattr(ctrl, "state", None), "value", None)
+        if phase == "loaded":
+            sim = self.ctx.sim
+            return sim is not None and not sim.model.pads_off
+        if phase == "after":
+            return state in ("done", "aborted")
+        return state == phase
+
+    def _on_poll(self, events, now_s: float) -> None:
+        if self.t_first_frame_s is None or not self._phased:
+            return
+        for d in list(self._phased):
+            if self._in_phase(d.phase):
+                self._phased.remove(d)
+                self._handles.append(self.loop.call_later(d.at_s / self.speed, self._fire, d))
 
     def on_first_frame(self, now_s: float) -> None:
         if self.t_first_frame_s is not None:
@@ -138,6 +175,9 @@ class DrillRunner:
         self.t_first_frame_s = now_s
         sim_first = self.sim_now()
         for d in self.drills:
+            if d.phase is not None:
+                self._phased.append(d)
+                continue
             if d.name == "device-reset":
                 # The reset is a bus-level event at an exact instant: the bus applies it in time order.
                 t = sim_first + d.at_s
@@ -160,10 +200,16 @@ class DrillRunner:
         if sim is not None:
             sim.bus.sync()  # the physics up to now: the fault acts from this instant, not the last poll
         rec = {"drill": str(d), "name": d.name, "scheduled_s": self.loop.time(), "onset_s": self.sim_now()}
+        ctrl = getattr(self.ctx, "controller", None)
+        if ctrl is not None:
+            rec["state_at_onset"] = ctrl.state.value
         self.fired.append(rec)
         getattr(self, "_" + d.name.replace("-", "_"))(d, rec)
 
     # --- the faults ------------------------------------------------------------------------
+    def _device_reset(self, d: Drill, rec: dict) -> None:  # (a phased one: now; timed ones go to the bus)
+        self.ctx.sim.bus.schedule_reset(self.sim_now())
+
     def _hall_dead(self, d: Drill, rec: dict) -> None:
         chans = ("primary", "secondary") if d.arg == "both" else (d.arg,)
         self.ctx.sim.model.stuck_hall.update(chans)
@@ -260,13 +306,36 @@ def true_latencies(ctx, aborts: list[dict]) -> None:
     truth = sim.truth
     rec = min(drills.fired, key=lambda r: r["onset_s"])
     onset = rec["onset_s"]
+    t_from = rec["onset_s"] - 1e-9
+    safe = [first_safe_s(sim.actuators.history, t_from)]
+    safe = [t for t in safe if t is not None]
     if rec.get("onset_from") == "rotor_temp_c":
         crossing = truth.crossing_s("rotor_c", lim.rotor_temp_max_c, onset)
         a["max_rotor_temp_c"] = truth.max_after("rotor_c", onset)
         a["overshoot_c"] = a["max_rotor_temp_c"] - lim.rotor_temp_max_c
-        if crossing is None:  # safed before the true temperature reached the limit
-            a["latency_note"] = "safe state commanded before the rotor reached the limit"
+        if crossing is None and safe:  # safed before the true temperature reached the limit
+            crossing = _extrapolated_crossing_s(truth, "rotor_c", lim.rotor_temp_max_c, safe[0])
+            a["latency_note"] = ("safe state commanded before the rotor reached the limit: onset is the "
+                                 "crossing its true heating rate then would have made (negative latency)")
+            a["onset_basis"] = "extrapolated"
         onset = crossing if crossing is not None else math.nan
+    elif rec["name"] == "hall-dead":
+        # The hazard is a silent sensor on a turning shaft: from the drill, or from when the shaft began to
+        # turn if it was at rest then (a dead secondary Hall while the CVT is not yet engaged hides nothing).
+        arg = rec["drill"].partition(":")[2].partition("@")[0]
+        fields = ("rp", "rs") if arg == "both" else (("rp",) if arg == "primary" else ("rs",))
+        starts = []
+        for f in fields:
+            i = bisect_left(truth.t, onset)
+            if i < len(truth.t) and getattr(truth, f)[i] > HALL_TURNING_RPM:
+                starts.append(onset)
+            else:
+                c = truth.crossing_s(f, HALL_TURNING_RPM, onset)
+                if c is not None:
+                    starts.append(c)
+        if starts and min(starts) > onset:
+            a["onset_basis"] = "the shaft began to turn"
+        onset = min(starts) if starts else onset
     elif rec.get("onset_from") == "rpm":
         cands = [truth.crossing_s("rp", lim.overspeed_primary_rpm, onset),
                  truth.crossing_s("rs", lim.overspeed_secondary_rpm, onset)]
@@ -275,12 +344,97 @@ def true_latencies(ctx, aborts: list[dict]) -> None:
     elif rec["name"].startswith("thermometer"):
         a["max_rotor_temp_c"] = truth.max_after("rotor_c", onset)
         a["overshoot_c"] = a["max_rotor_temp_c"] - lim.rotor_temp_max_c
-    t_from = rec["onset_s"] - 1e-9
-    safe = [first_safe_s(sim.actuators.history, t_from)]
-    safe = [t for t in safe if t is not None]
     a["drill"] = rec["drill"]
     a["onset_s"] = onset
     a["safe_commanded_s"] = safe[0] if safe else math.nan
     a["latency_s"] = a["safe_commanded_s"] - onset
     a["detection_s"] = a["trigger_s"] - onset if a.get("trigger_s") is not None else math.nan
     a["latency_basis"] = "true time from the physical onset (simulated rig)"
+
+
+def _extrapolated_crossing_s(truth, field: str, level: float, t_s: float, span_s: float = 0.5) -> float | None:
+    """When ``field`` would have crossed ``level`` had it kept its true rate of the ``span_s`` before ``t_s``."""
+    from bisect import bisect_left
+
+    t, a = truth.t, getattr(truth, field)
+    j = min(bisect_left(t, t_s), len(t) - 1)
+    i = bisect_left(t, t_s - span_s)
+    if j <= i:
+        return None
+    rate = (a[j] - a[i]) / (t[j] - t[i])
+    if not rate > 0:
+        return None
+    return t[j] + (level - a[j]) / rate
+
+
+def _truth_range(truth, field: str, t0_s: float, t1_s: float) -> tuple[float, float]:
+    from bisect import bisect_left, bisect_right
+
+    i, j = bisect_left(truth.t, t0_s), bisect_right(truth.t, t1_s)
+    vals = getattr(truth, field)[i:j]
+    return (min(vals), max(vals)) if len(vals) else (math.nan, math.nan)
+
+
+#: a shaft turning slower than this has no edges to miss: a silent Hall sensor reads what it should
+HALL_TURNING_RPM = 100.0
+#: a thermometer repeating one word hides nothing while the true temperature moves less than this
+THERMO_MOVING_C = 1.0
+
+
+def hazard_verdicts(ctx) -> None:
+    """Add ``hazard_arose`` (and, when false, ``hazard_note``: why) to every fired drill (in place).
+
+    The hazard is the physical one the drill targets, read from the simulated world's truth: a limit
+    crossed, a sensor silent while what it measures changes, the bus gone, the loop silent past the
+    watchdog.  The window is from the onset to the first safe state after it (or the end of the run).
+    """
+    drills = getattr(ctx, "drills", None)
+    sim = getattr(ctx, "sim", None)
+    if drills is None or sim is None or not hasattr(sim, "truth"):
+        return
+    truth = sim.truth
+    ctrl = ctx.controller
+    lim = ctrl.limits
+    end_s = sim.model.t_s
+    for rec in drills.fired:
+        t0 = rec["onset_s"]
+        t_safe = first_safe_s(sim.actuators.history, t0 - 1e-9)
+        t1 = t_safe if t_safe is not None and t_safe > t0 else end_s
+        name, arg = rec["name"], rec["drill"].partition(":")[2].partition("@")[0]
+        arose, note = True, ""
+        if name == "overtemp":
+            lo, hi = _truth_range(truth, "rotor_c", t0, end_s)
+            arose = truth.crossing_s("rotor_c", lim.rotor_temp_max_c, t0) is not None or hi > lim.rotor_temp_max_c
+            note = (f"the rotor's true temperature peaked at {hi:.2f} C, below the {lim.rotor_temp_max_c:g} C "
+                    "limit: the engine stopped driving it (safe state or end of test) first")
+        elif name == "overspeed":
+            _, rp = _truth_range(truth, "rp", t0, end_s)
+            _, rs = _truth_range(truth, "rs", t0, end_s)
+            arose = rp > lim.overspeed_primary_rpm or rs > lim.overspeed_secondary_rpm
+            note = (f"throttle stuck open, but the true speeds peaked at {rp:.0f} rpm primary / {rs:.0f} rpm "
+                    f"secondary, below the {lim.overspeed_primary_rpm:g} / {lim.overspeed_secondary_rpm:g} rpm "
+                    "limits (the brake's load held them, or the engine was not running)")
+        elif name == "hall-dead":
+            chans = ("rp", "rs") if arg == "both" else (("rp",) if arg == "primary" else ("rs",))
+            peak = max(_truth_range(truth, c, t0, t1)[1] for c in chans)
+            arose = peak > HALL_TURNING_RPM
+            note = (f"the {arg} shaft{'s' if arg == 'both' else ''} turned at most {peak:.0f} rpm from the onset "
+                    "to the safe state: a silent sensor read what it should")
+        elif name == "thermometer-stuck":
+            lo, hi = _truth_range(truth, "rotor_c", t0, t1)
+            arose = hi - lo >= THERMO_MOVING_C
+            note = (f"the rotor's true temperature moved {hi - lo:.2f} C while the thermometer repeated itself: "
+                    "the stuck word was still the truth")
+        elif name == "loop-stall":
+            wd_s = getattr(getattr(ctx, "watchdog", None), "timeout_s", None)
+            arose = wd_s is None or float(arg) / 1000.0 > wd_s
+            note = f"a {arg} ms stall is shorter than the watchdog's {wd_s:g} s: the loop was not silent past it"
+        elif name == "controller-crash":
+            arose = rec.get("state_at_onset") not in ("done", "aborted")
+            note = f"the control task had already ended ({rec.get('state_at_onset')}): nothing left to crash"
+        elif name == "disk-full":
+            arose = getattr(ctx.writer, "error", None) is not None
+            note = "no write was attempted after the disk filled"
+        rec["hazard_arose"] = bool(arose)
+        if not arose:
+            rec["hazard_note"] = note

@@ -53,6 +53,7 @@ OUTPUT_BCM = range(4, 28)
 BOOT_PULL_UP_BCM = range(4, 9)  # default pulls until a program claims the pin
 
 PIN_NAMES = ("brake_enable", "brake_direction", "throttle_servo", "engine_kill", "arduino_reset")
+OPTIONAL_INPUTS = ("estop_input", "brake_released_input")  # pins read, each optional
 # Hardware PWM channels on the header; the throttle servo jitters on software PWM.
 HARDWARE_PWM_BCM = {12, 13, 18, 19}
 
@@ -71,6 +72,10 @@ class Pins:
     # Optional input: the E-stop chain's monitor contact, normally closed to ground (pull-up
     # on): open = STOP, so a pressed button, a cut wire or a lost connector all stop the rig.
     estop_input: int | None = None
+    # Optional input: an end-of-travel switch closed (to ground, pull-up on) when the brake actuator is
+    # fully retracted. Where declared, "released" is this switch closing; without it, a release stroke
+    # that ran its full time uninterrupted (GpioActuators.release_basis).
+    brake_released_input: int | None = None
 
     def as_dict(self) -> dict[str, int]:
         return {name: getattr(self, name) for name in PIN_NAMES}
@@ -121,6 +126,9 @@ class ActuatorConfig:
     full_stroke_s: float  # end stop to end stop at rated load
     relay_settle_s: float = 0.03  # direction relay contact bounce + release time
     watchdog_s: float = 0.5  # control loop silent this long -> safe state
+    # K3, the "brake hold" relay (hardware/README.md): coil beside the kill relay's, NC contacts power the
+    # actuator in release whenever the ignition is killed, with no software involved.
+    brake_hold_relay: bool = False
 
 
 @dataclass(frozen=True)
@@ -338,7 +346,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
     # pins
     p = r.table(data, "pins")
-    r.no_extra(p, set(PIN_NAMES) | {"estop_input"}, "pins.")
+    r.no_extra(p, set(PIN_NAMES) | set(OPTIONAL_INPUTS), "pins.")
     pins_by_name: dict[str, int] = {}
     for name in PIN_NAMES:
         bcm = r.pin(p, name)
@@ -352,14 +360,15 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         if pins_by_name[name] in BOOT_PULL_UP_BCM:
             raise r.err(f"pins.{name}", f"GPIO{pins_by_name[name]} is pulled up at boot (GPIO4..8); "
                         "use a pin pulled down at boot (GPIO9..27)")
-    if "estop_input" in p:
-        bcm = r.pin(p, "estop_input")
-        for other, other_bcm in pins_by_name.items():
-            if other_bcm == bcm:
-                raise r.err("pins.estop_input", f"duplicate pin: GPIO{bcm} is already pins.{other}")
-        pins = Pins(**pins_by_name, estop_input=bcm)
-    else:
-        pins = Pins(**pins_by_name)
+    inputs: dict[str, int] = {}
+    for name in OPTIONAL_INPUTS:
+        if name in p:
+            bcm = r.pin(p, name)
+            for other, other_bcm in {**pins_by_name, **inputs}.items():
+                if other_bcm == bcm:
+                    raise r.err(f"pins.{name}", f"duplicate pin: GPIO{bcm} is already pins.{other}")
+            inputs[name] = bcm
+    pins = Pins(**pins_by_name, **inputs)
 
     # i2c
     t = r.table(data, "i2c")
@@ -407,12 +416,13 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
     # actuator
     t = r.table(data, "actuator")
-    r.no_extra(t, {"step_s", "full_stroke_s", "relay_settle_s", "watchdog_s"}, "actuator.")
+    r.no_extra(t, {"step_s", "full_stroke_s", "relay_settle_s", "watchdog_s", "brake_hold_relay"}, "actuator.")
     actuator = ActuatorConfig(
         step_s=r.number(t, "step_s", "actuator.", lo=0.01, hi=10.0),
         full_stroke_s=r.number(t, "full_stroke_s", "actuator.", lo=0.5, hi=120.0),
         relay_settle_s=r.number(t, "relay_settle_s", "actuator.", lo=0.0, hi=1.0, required=False, default=0.03),
         watchdog_s=r.number(t, "watchdog_s", "actuator.", lo=0.05, hi=5.0, required=False, default=0.5),
+        brake_hold_relay=r.boolean(t, "brake_hold_relay", "actuator.", False),
     )
     if actuator.step_s > actuator.full_stroke_s:
         raise r.err("actuator.step_s", f"expected <= actuator.full_stroke_s ({actuator.full_stroke_s})")

@@ -52,11 +52,11 @@ async def _reach(ctrl, variable: str, setpoint: float, timeout_s: float = 10.0) 
 
 
 async def _pulse(ctrl, direction: int, pulse_s: float) -> None:
-    ctrl.act.brake(direction)
+    ctrl.brake(direction)
     try:
         await ctrl.rig_sleep(pulse_s)
     finally:
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
 
 
 async def identify_speed_gain(ctrl, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
@@ -91,7 +91,7 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
                 break
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
         if not reached:
             result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify (kp {base.kp:g} "
                                              f"down to {hold_kp:g})"}
@@ -118,7 +118,7 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
         if task is not None:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
     control = getattr(ctrl, "control", None)
     key = KP_KEY[variable]
     result.update(variable=variable, setpoint_rpm=setpoint, kp_key=key, kp_before=getattr(control, key, None),

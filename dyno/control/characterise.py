@@ -171,16 +171,16 @@ async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
             break
         ctrl._enter(State.STEP, f"shift-out flatness: brake preset {apply_s:g} s, back to idle")
         ctrl.set_throttle(0.0)
-        ctrl.act.brake(RELEASE)
+        ctrl.brake(RELEASE)
         try:
             await ctrl.rig_sleep(ep.release_s)
         finally:
-            ctrl.act.brake(STOP)
-        ctrl.act.brake(APPLY)
+            ctrl.brake(STOP)
+        ctrl.brake(APPLY)
         try:
             await ctrl.rig_sleep(apply_s)
         finally:
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
         t0 = ctrl.rig_now()
         while ctrl.poller.rpm(v1.CH_SECONDARY) > 0 and ctrl.rig_now() - t0 < 30.0:
             await ctrl.rig_sleep(0.1)
@@ -222,11 +222,11 @@ async def _back_shift(ctrl, ep: EngagementPlan, res: dict) -> dict:
     """At full shift: a brake load step; the ratio's rise (the CVT back-shifts) and its time."""
     r0 = _live_ratio(ctrl, 0.5)
     t0 = ctrl.rig_now()
-    ctrl.act.brake(APPLY)
+    ctrl.brake(APPLY)
     try:
         await ctrl.rig_sleep(ep.back_shift_step_s)
     finally:
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
     trace = []
     while ctrl.rig_now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
         await ctrl.rig_sleep(0.1)

@@ -70,8 +70,7 @@ async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
     await ctrl.rig_sleep(cp.spin_up_s)
     rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
     ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")
-    ctrl.engine_cut = True
-    ctrl.act.safe_state()
+    ctrl.cut_engine()  # a deliberate cut (brake released, ignition off): not a trip, nothing latched
     t_cut = ctrl.poller.device_now_us()
     t_unc = None
     t0 = ctrl.rig_now()

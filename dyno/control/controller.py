@@ -21,7 +21,8 @@ import math
 from dataclasses import dataclass, field
 
 from dyno.analysis.stopping import STOP_QUANTILE
-from dyno.control.outputs import APPLY, STOP
+from dyno.control.outputs import APPLY, STOP, enter_safe_state
+from dyno.errors import SafetyAbort
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
 from dyno.control.steady import SettleCriteria
@@ -147,6 +148,11 @@ class TestController(Measuring):
         # The throttle as last commanded (the Actuators interface has no read-back): every point records
         # it (``throttle_frac``) and takes its efficiency from the engine map's curve at that throttle.
         self.throttle_frac = 0.0
+        # The engine's gate: closed by every safe state the controller commands after a trip or at the
+        # end of the test; from then on the plans' output calls are refused (and logged), whatever the
+        # actuators themselves latch. Only a new controller (a re-arm) starts open.
+        self.outputs_latched = False
+        self.refused: list[dict] = []
         poller.listeners.append(self._on_poll)
 
     # --- commands (from the UI / CLI) ------------------------------------------------------
@@ -165,11 +171,51 @@ class TestController(Measuring):
 
     def set_throttle(self, fraction: float, *, log: bool = True) -> None:
         """Command the throttle (0 idle .. 1 full) and remember it for the points (logged as ``throttle``
-        unless ``log`` is False: a ramp's every tick)."""
+        unless ``log`` is False: a ramp's every tick). Refused (SafetyAbort) after the safe state."""
+        if self.outputs_latched and fraction > 0:
+            self._refuse("throttle", float(fraction))
         self.act.throttle(fraction)
         self.throttle_frac = min(1.0, max(0.0, float(fraction)))
         if log:
             self._log("throttle", throttle_frac=self.throttle_frac)
+
+    # --- the plans' outputs: every actuator call a plan makes passes the gate --------------------------
+    def brake(self, direction: int) -> None:
+        """Move the brake actuator (APPLY/RELEASE) or stop it (STOP), as a plan or the operator asks.
+
+        After a safe state has been commanded nothing here reaches the actuator: STOP and RELEASE are
+        refused quietly (logged as ``refused``: a plan's cleanup must not stop the release stroke), APPLY
+        raises :class:`~dyno.errors.SafetyAbort` (the caller must not believe it is loading the rig).
+        """
+        if self.outputs_latched:
+            self._refuse("brake", int(direction), hard=direction == APPLY)
+            return
+        self.act.brake(direction)
+
+    def cut_engine(self) -> None:
+        """A deliberate engine cut (coast-down): ignition off, throttle idle, brake released — the safe
+        state's outputs without its latch, and the Hall checks stop expecting the engine."""
+        self.engine_cut = True
+        enter_safe_state(self.act, latch=False)
+        self.throttle_frac = 0.0
+        self._log("engine_cut")
+
+    def _refuse(self, what: str, value, hard: bool = True) -> None:
+        entry = {"command": what, "value": value, "state": self.state.value}
+        try:
+            entry["t_s"] = self._now()
+        except RuntimeError:
+            entry["t_s"] = math.nan
+        self.refused.append(entry)
+        self._log("refused", **entry)
+        if hard:
+            raise SafetyAbort(f"{what} refused: the rig is in its safe state (latched until re-armed)")
+
+    def latch_safe_state(self) -> None:
+        """The engine's last word: the safe state, latched (actuators and this controller's gate)."""
+        enter_safe_state(self.act, latch=True)
+        self.outputs_latched = True
+        self.throttle_frac = 0.0
 
     def estop(self, source: str = "operator") -> None:
         self.abort("estop", f"E-stop ({source})")
@@ -213,9 +259,8 @@ class TestController(Measuring):
         if self.state in (State.ABORTED,):
             return
         now = self._now()
-        self.act.safe_state()  # first, before any bookkeeping
+        self.latch_safe_state()  # first, before any bookkeeping
         safe_s = self._now()
-        self.throttle_frac = 0.0  # (the safe state closed it)
         trigger_s = now if trigger_s is None else trigger_s
         entry = {"cause": cause, "detail": detail, "state": self.state.value, "trigger_s": trigger_s,
                  "safe_state_s": safe_s, "latency_s": safe_s - trigger_s}
@@ -256,14 +301,18 @@ class TestController(Measuring):
                 if plan_task in done or aborted in done or self.state in (State.DONE, State.ABORTED):
                     break
         except BaseException:
-            self.act.safe_state()
+            self.latch_safe_state()
             raise
         finally:
             for t in (plan_task, aborted, safety):
                 t.cancel()
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
+            # The engine has the last word, after the plan's cleanup: whatever the plan did on its way
+            # out, the outputs are in the latched safe state (a release already under way keeps going).
+            if self.state is State.ABORTED and not getattr(self.act, "latched", False):
+                self.latch_safe_state()
         if self.state is State.DONE:
-            self.act.safe_state()  # end of test: same safe state, not an abort
+            self.latch_safe_state()  # end of test: same safe state, not an abort
             if not self.points and not self.results:
                 # A test that measured nothing is not a success, whatever the plan's end says.
                 self.abort("no_points", "the test ended without a single accepted point", after_done=True)
@@ -305,7 +354,7 @@ class TestController(Measuring):
 
     async def _plan(self) -> None:
         p = self.plan
-        self.act.safe_state()
+        enter_safe_state(self.act, latch=False)  # the start of a run (the brake position is not known)
         self.throttle_frac = 0.0
         self._enter(State.WAIT_ENGINE, f"start the engine (primary > {p.engine_running_rpm:.0f} rpm)")
         self.act.engine_kill(False)
@@ -350,9 +399,9 @@ class TestController(Measuring):
         while True:
             await self._resume.wait()
             self._enter(State.STEP, f"brake step {self._step_s * 1e3:.0f} ms")
-            self.act.brake(APPLY)
+            self.brake(APPLY)
             await self._sleep(self._step_s)
-            self.act.brake(STOP)
+            self.brake(STOP)
             if self.load_since_s is None:
                 self.load_since_s = self.rig_now()
             self._enter(State.SETTLE, "waiting for steady state")

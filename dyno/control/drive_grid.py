@@ -63,7 +63,7 @@ async def release_brake(ctrl, g: DriveGridPlan) -> float:
 
     t0 = ctrl.rig_now()
     best, best_t = secondary_rpm(ctrl, 0.3), t0
-    ctrl.act.brake(RELEASE)
+    ctrl.brake(RELEASE)
     try:
         while ctrl.rig_now() - t0 < g.release_s:
             await ctrl.rig_sleep(0.1)
@@ -73,7 +73,7 @@ async def release_brake(ctrl, g: DriveGridPlan) -> float:
             elif ctrl.rig_now() - best_t >= g.release_quiet_s:
                 break
     finally:
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
     return ctrl.rig_now() - t0
 
 
@@ -125,7 +125,7 @@ async def run_drive_grid(ctrl) -> None:
         finally:
             loop_task.cancel()
             await asyncio.gather(loop_task, return_exceptions=True)
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
     # (not _set_results: the grid is no characterisation document; the grid_cell documents are its record)
     ctrl.results = {"drive_grid": grid_table(cells, ctrl.points)}
     ctrl._enter(State.DONE, f"drive grid: {len(g.throttles)} throttles x {len(setpoints)} speeds, "

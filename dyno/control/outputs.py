@@ -34,8 +34,19 @@ class Actuators(Protocol):
     def engine_kill(self, killed: bool) -> None:
         """True opens the ignition (kill relay); False lets the engine run."""
 
-    def safe_state(self) -> None:
-        """Throttle idle, engine killed, brake released; immediately."""
+    def safe_state(self, latch: bool = False) -> None:
+        """Throttle idle, engine killed, brake released; immediately.
+
+        ``latch``: until ``clear_latch()`` refuse every command but the release (a trip's safe state).
+        """
 
     def tick(self, now_s: float) -> None:
         """Give time-based behaviour (end of a release stroke) a chance to act."""
+
+
+def enter_safe_state(actuators, latch: bool = True) -> None:
+    """``actuators.safe_state(latch=...)``; for an implementation without latching, its plain safe state."""
+    try:
+        actuators.safe_state(latch=latch)
+    except TypeError:
+        actuators.safe_state()

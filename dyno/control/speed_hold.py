@@ -210,11 +210,11 @@ async def _hold_loop(ctrl, hold: SpeedHold, target: dict, variable: str = "secon
         if direction == STOP:
             await ctrl.rig_sleep(g.period_s)
             continue
-        ctrl.act.brake(direction)
+        ctrl.brake(direction)
         try:
             await ctrl.rig_sleep(on_s)
         finally:
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
         await ctrl.rig_sleep(max(0.0, g.period_s - on_s))
 
 
@@ -240,7 +240,7 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     # across it at a fraction of full speed wastes seconds. Full-speed apply until it bites.
     ctrl._enter(State.STEP, "speed hold: finding the brake's contact point")
     t_c = ctrl.rig_now()
-    ctrl.act.brake(APPLY)
+    ctrl.brake(APPLY)
     try:
         while secondary_rpm(ctrl, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
             if ctrl.rig_now() - t_c > sh.contact_timeout_s:
@@ -248,7 +248,7 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
                 return
             await ctrl.rig_sleep(0.02)
     finally:
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
     ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
     ctrl.load_since_s = ctrl.rig_now()  # the pads bite: the CVT is loaded from here (warm-up criterion)
     target = {"rpm": setpoints[0], "last_rpm": math.nan}
@@ -262,7 +262,7 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     finally:
         loop_task.cancel()
         await asyncio.gather(loop_task, return_exceptions=True)
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
 
 
 async def hold_point(ctrl, sp: float, sh: SpeedHoldPlan, target: dict, loop_task, window_s: float,

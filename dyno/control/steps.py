@@ -118,7 +118,7 @@ async def run_steps(ctrl) -> None:
             if not task.done():
                 task.cancel()
                 await asyncio.gather(task, return_exceptions=True)
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
         if ctrl.state in (State.DONE, State.ABORTED):
             return
         if why:
@@ -162,11 +162,11 @@ async def _run_step(ctrl, st: dict) -> None:
         ctrl.set_throttle(st["fraction"])
         await ctrl.rig_sleep(0.05)
     elif kind == "brake":
-        ctrl.act.brake(APPLY if st["direction"] == "apply" else RELEASE)
+        ctrl.brake(APPLY if st["direction"] == "apply" else RELEASE)
         try:
             await ctrl.rig_sleep(st["s"])
         finally:
-            ctrl.act.brake(STOP)
+            ctrl.brake(STOP)
     elif kind == "contact":
         await find_contact(ctrl, st.get("drop_rel", 0.01), st.get("limit_s", 10.0))
     elif kind == "hold":
@@ -187,7 +187,7 @@ async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) ->
 
     no_load = secondary_rpm(ctrl, 1.0)
     t_c = ctrl.rig_now()
-    ctrl.act.brake(APPLY)
+    ctrl.brake(APPLY)
     try:
         while secondary_rpm(ctrl, 0.15) > no_load * (1.0 - drop_rel):
             if ctrl.rig_now() - t_c > timeout_s:
@@ -195,7 +195,7 @@ async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) ->
                 return False
             await ctrl.rig_sleep(0.02)
     finally:
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
     ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
     if ctrl.load_since_s is None:
         ctrl.load_since_s = ctrl.rig_now()  # the CVT is loaded from here (warm-up criterion)
@@ -276,7 +276,7 @@ async def _hold_step(ctrl, st: dict) -> None:
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)
 
 
 async def _ramp_step(ctrl, st: dict) -> None:
@@ -328,4 +328,4 @@ async def _ramp_step(ctrl, st: dict) -> None:
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl.act.brake(STOP)
+        ctrl.brake(STOP)

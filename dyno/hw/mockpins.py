@@ -36,7 +36,8 @@ class SimPinFactory(RecordingFactory):
         super().__init__(clock)
         self.pin_class = _BridgePin
         self.rig_cfg = rig_cfg
-        self.sim = sim_actuators
+        # the copper, not the simulated driver: the real-rig output code in front is the driver here
+        self.sim = getattr(sim_actuators, "wiring", sim_actuators)
         p = rig_cfg.pins
         self._role = {f"GPIO{p.brake_enable}": "enable", f"GPIO{p.brake_direction}": "direction",
                       f"GPIO{p.engine_kill}": "kill", f"GPIO{p.throttle_servo}": "throttle"}

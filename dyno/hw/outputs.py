@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import threading
 
-from gpiozero import DigitalOutputDevice, PWMOutputDevice
+from gpiozero import DigitalInputDevice, DigitalOutputDevice, PWMOutputDevice
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
@@ -75,6 +75,10 @@ class GpioActuators:
             self._throttle = self._add(PWMOutputDevice(
                 pins.throttle_servo, frequency=1e6 / th.frame_us,
                 initial_value=th.idle_pulse_us / th.frame_us, **pf))
+            # The end-of-travel switch (optional): closed to ground when fully retracted, pull-up on,
+            # so a cut wire reads "not released" (the stroke's full time then decides).
+            eot = getattr(pins, "brake_released_input", None)
+            self._end_switch = self._add(DigitalInputDevice(eot, pull_up=True, **pf)) if eot is not None else None
         except Exception:
             self.close()
             raise
@@ -92,6 +96,12 @@ class GpioActuators:
         self._generation = 0  # bumps on every new command, so a stale step never stops a newer one
         self._latched = False
         self._safe_release = False
+        # How the last safe-state release was confirmed: "end_of_travel" (the switch closed),
+        # "full_stroke_time" (the stroke ran its full time + margin uninterrupted), or None (not yet /
+        # interrupted: then the brake may still be on the rotor and the rig is not called safe).
+        self.release_basis: str | None = None
+        self.release_interrupted = ""  # why the last safe release did not complete ("" if it did or runs)
+        self.refused: list[tuple[float, str, object]] = []  # (time, command, value) refused while latched
         self.last_tick_s = now
         self.closed = False
         self.safe_state()
@@ -120,6 +130,7 @@ class GpioActuators:
         f = min(1.0, max(0.0, float(fraction)))
         with self._lock:
             if f > 0 and self._latched:
+                self.refused.append((self.clock.now(), "throttle", f))
                 raise SafetyAbort("throttle refused: safe state latched")
             self._throttle_fraction = f
             self._throttle.value = self.config.throttle.pulse_us(f) / self.config.throttle.frame_us
@@ -127,6 +138,7 @@ class GpioActuators:
     def engine_kill(self, killed: bool) -> None:
         with self._lock:
             if not killed and self._latched:
+                self.refused.append((self.clock.now(), "engine_run", True))
                 raise SafetyAbort("engine run refused: safe state latched")
             self._kill.value = bool(killed)
             self._killed = bool(killed)
@@ -134,8 +146,9 @@ class GpioActuators:
     def safe_state(self, latch: bool = False) -> None:
         """Throttle idle, engine killed, enable off now; release stroke follows via tick().
 
-        ``latch=True`` (the watchdog, the signal path) also refuses throttle,
-        run and apply commands until :meth:`clear_latch`.
+        ``latch=True`` (every trip: the controller's abort, the watchdog, the signal path, the E-stop)
+        also refuses every later command but the release — throttle, run, and the brake in any
+        direction, STOP included, since stopping a release freezes the load — until :meth:`clear_latch`.
         """
         with self._lock:
             if self.closed:
@@ -152,7 +165,10 @@ class GpioActuators:
             # A full stroke from wherever the estimate says, or from full apply:
             # after a fault the estimate is not trusted.
             self._position = max(self._position, 1.0)
+            if not self._safe_release or self.release_basis is not None:
+                self.release_basis = None  # a new release to confirm (a running one carries on)
             self._safe_release = True
+            self.release_interrupted = ""
             self._generation += 1
             self._target, self._step_s, self._stop_at_s = RELEASE, None, None
             self._advance(now)
@@ -183,6 +199,8 @@ class GpioActuators:
         """
         with self._lock:
             gen = self._command(direction, float(duration_s))
+        if gen < 0:  # refused (latched): the release owns the actuator
+            return
         try:
             while True:
                 with self._lock:
@@ -233,6 +251,7 @@ class GpioActuators:
         self.clock.sleep(r.boot_s)
 
     def clear_latch(self) -> None:
+        """The explicit re-arm: commands are accepted again."""
         with self._lock:
             self._latched = False
 
@@ -245,6 +264,18 @@ class GpioActuators:
         """Brake at its release stop with the actuator de-energised."""
         return self._moving == STOP and self._target == STOP and self._position <= 0.0 \
             and (self.closed or not self._enable.value)
+
+    @property
+    def release_confirmed(self) -> bool:
+        """The last safe state's release is known complete (``release_basis``) and the actuator is off."""
+        return self.released and self.release_basis is not None
+
+    @property
+    def end_switch_closed(self) -> bool | None:
+        """The end-of-travel switch (None where ``rig.toml`` declares none)."""
+        if self._end_switch is None or self.closed:
+            return None
+        return bool(self._end_switch.value)
 
     @property
     def brake_position(self) -> float:
@@ -274,9 +305,15 @@ class GpioActuators:
         value, which the wiring makes the safe one (hardware/README.md).
         """
         with self._lock:
+            basis = {"released": self.release_confirmed, "release_basis": self.release_basis}
+            if self.release_interrupted:
+                basis["release_interrupted"] = self.release_interrupted
             if self.closed:
+                # pins released: every output at its de-energised value, which the wiring makes the safe
+                # one (hardware/README.md) — but the brake is only known off if its release completed
                 return {"throttle": "idle", "engine_kill": "killed", "brake_actuator": "stopped",
-                        "brake_position": round(self.brake_position, 3), "pins": "released", "safe": True}
+                        "brake_estimate": round(self.brake_position, 3), "pins": "released", **basis,
+                        "safe": self.release_confirmed}
             th = self.config.throttle
             pulse_us = float(self._throttle.value) * th.frame_us
             idle = abs(pulse_us - th.idle_pulse_us) < 1.0
@@ -288,8 +325,8 @@ class GpioActuators:
             span = th.full_pulse_us - th.idle_pulse_us
             return {"throttle": "idle" if idle else f"{(pulse_us - th.idle_pulse_us) / span:.2f}",
                     "engine_kill": "killed" if killed else "run", "brake_actuator": brake,
-                    "brake_position": round(self.brake_position, 3),
-                    "safe": idle and killed and brake != "applying"}
+                    "brake_estimate": round(self.brake_position, 3), **basis,
+                    "safe": idle and killed and brake == "stopped" and self.release_confirmed}
 
     def close(self) -> None:
         """Drive every output to its safe value, then release the pins.
@@ -300,6 +337,8 @@ class GpioActuators:
         with self._lock:
             if getattr(self, "closed", False):
                 return
+            if getattr(self, "_safe_release", False) and getattr(self, "release_basis", None) is None:
+                self.release_interrupted = "pins released before the release stroke ended"
             for name in ("_enable", "_direction", "_reset"):
                 dev = getattr(self, name, None)
                 if dev is not None:
@@ -325,13 +364,19 @@ class GpioActuators:
     def _command(self, direction: int, duration_s: float | None) -> int:
         if direction not in (APPLY, RELEASE, STOP):
             raise ValueError(f"brake direction must be APPLY, RELEASE or STOP, got {direction!r}")
-        if direction == APPLY and self._latched:
-            raise SafetyAbort("brake apply refused: safe state latched")
+        if self._latched:
+            # Nothing but the release runs while latched: STOP would freeze the brake on the rotor.
+            self.refused.append((self.clock.now(), "brake", direction))
+            if direction == APPLY:
+                raise SafetyAbort("brake apply refused: safe state latched")
+            return -1
         if self.closed:
             raise SafetyAbort("actuators closed")
         now = self.clock.now()
         self._integrate(now)
         self._generation += 1
+        if self._safe_release and self.release_basis is None:
+            self.release_interrupted = f"brake command {direction:+d} stopped the release (not latched)"
         self._safe_release = False
         self._target = direction
         self._step_s = duration_s if direction != STOP else None
@@ -364,8 +409,11 @@ class GpioActuators:
         self._integrate(now)
         if self._stop_at_s is not None and now >= self._stop_at_s - 1e-12:
             self._target, self._stop_at_s = STOP, None
-        if self._target != STOP and self._end_stop_reached(self._target):
+        switch = self._target == RELEASE and self._end_switch is not None and self._end_switch.value
+        if self._target != STOP and (switch or self._end_stop_reached(self._target)):
             self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
+            if self._target == RELEASE and self._safe_release:
+                self.release_basis = "end_of_travel" if switch else "full_stroke_time"
             self._target, self._stop_at_s, self._step_s = STOP, None, None
             self._safe_release = False
         target = self._target

@@ -121,6 +121,7 @@ class Watchdog:
         self._last_kick_s = self.clock.now()
         self.tripped = False
         self.level_checks = []  # callables run on every look, e.g. the E-stop input's level
+        self.errors: list[str] = []  # exceptions caught inside a look (each one safed the rig; it kept watching)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -131,9 +132,37 @@ class Watchdog:
         return max(self._last_kick_s, getattr(self.actuators, "last_tick_s", float("-inf")))
 
     def check(self) -> bool:
-        """One watchdog look; returns True if tripped (now or before)."""
+        """One watchdog look; returns True if tripped (now or before).
+
+        It cannot die: an exception anywhere in a look (a level check's ``OSError``, a clock, a callback)
+        puts the rig in its latched safe state, is logged in :attr:`errors`, and the next look runs as usual.
+        """
+        try:
+            return self._look()
+        except Exception as exc:  # noqa: BLE001 - a watchdog that stops watching is the one thing not allowed
+            self._failed(exc)
+            return self.tripped
+
+    def _failed(self, exc: BaseException) -> None:
+        import logging
+
+        msg = f"watchdog look failed: {type(exc).__name__}: {exc}"
+        self.errors.append(msg)
+        self.tripped = True  # the loop's beat reports it (an abort record); servicing goes on
+        logging.getLogger("dyno.watchdog").error("%s: safe state", msg)
+        try:
+            self.actuators.safe_state(latch=True)
+        except TypeError:
+            self.actuators.safe_state()
+        except Exception as exc2:  # noqa: BLE001 - still keep watching
+            self.errors.append(f"safe state failed too: {type(exc2).__name__}: {exc2}")
+
+    def _look(self) -> bool:
         for level_check in self.level_checks:
-            level_check()
+            try:
+                level_check()
+            except Exception as exc:  # noqa: BLE001 - one broken input must not skip the liveness check
+                self._failed(exc)
         now = self.clock.now()
         if not self.tripped and now - self.last_alive_s() > self.timeout_s:
             self.tripped = True
@@ -168,7 +197,10 @@ class Watchdog:
 
         def loop():
             while not self._stop.wait(period):
-                self.check()
+                try:
+                    self.check()  # (check() catches everything itself; this is the last line of defence)
+                except BaseException as exc:  # noqa: BLE001
+                    self._failed(exc)
 
         self._thread = threading.Thread(target=loop, name="dyno-watchdog", daemon=True)
         self._thread.start()

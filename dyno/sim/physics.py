@@ -175,6 +175,8 @@ class RigModel(RigSignals):
         self.relay_dir = -1                 # at rest: release
         self._relay_goal = -1
         self._relay_made_s = -math.inf      # when the contacts made on the goal's side
+        self.brake_hold_relay = False       # K3 fitted (rig.toml actuator.brake_hold_relay): see _substep
+        self.pads_off_at_s: float | None = 0.0  # when the actuator last came back inside the free travel
         # fault knobs
         self.stuck_hall: set[str] = set()
         self.adc_error_prob = p.adc_error_prob
@@ -257,6 +259,11 @@ class RigModel(RigSignals):
         return self._act_mm
 
     @property
+    def pads_off(self) -> bool:
+        """The pads are off the rotor: the actuator is inside the brake's free travel (no pushrod force)."""
+        return self._act_mm <= self.brake.a0_mm
+
+    @property
     def engine_running(self) -> bool:
         return self._running
 
@@ -320,10 +327,22 @@ class RigModel(RigSignals):
         if self.relay_dir != self._relay_goal:  # the coil changed: contacts in transit from this cell
             self._relay_goal = self.relay_dir
             self._relay_made_s = t0 + p.relay_transfer_s
-        if self.actuator_dir:
+        a_before = self._act_mm
+        if self.brake_hold_relay and not self.engine_enabled:
+            # K3 (hardware/README.md) de-energised with the kill relay: its NC contacts power the actuator
+            # straight from the supply in the release polarity until its internal end stop; the driver's
+            # enable and direction relay are cut off by its open NO contacts.
+            self._act_mm = brk.move_actuator_mm(self._act_mm, -1, h)
+        elif self.actuator_dir:
             run_s = t0 + h - self._relay_made_s  # powered time with the contacts made, in this cell
             if run_s > 0.0:
                 self._act_mm = brk.move_actuator_mm(self._act_mm, self._relay_goal, h if run_s > h else run_s)
+        if self._act_mm != a_before:
+            a0 = brk.a0_mm
+            if a_before > a0 >= self._act_mm:  # the pads left the rotor in this cell (constant speed)
+                self.pads_off_at_s = t0 + h * (a_before - a0) / (a_before - self._act_mm)
+            elif self._act_mm > a0 >= a_before:
+                self.pads_off_at_s = None
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
         if self._driven_loss[0] or self._driven_loss[1] or self._driven_loss[2]:

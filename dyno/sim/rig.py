@@ -19,20 +19,34 @@ from dyno.sim.bus import BusFaults, SimSMBus
 from dyno.sim.device import EmulatedFirmware
 
 
-class SimActuators:
-    """The controller's outputs wired to the physics model's inputs."""
+#: the release stroke runs this fraction of a full stroke beyond it before de-energising (as the real-rig
+#: output code's END_STOP_OVERRUN_FRACTION), so a stroke that started at full apply still reaches the stop
+RELEASE_MARGIN_FRACTION = 0.10
+#: and this long on top, for the direction relay's transfer after a reversal (RigParams.relay_transfer_s)
+RELEASE_MARGIN_S = 0.05
 
-    def __init__(self, rig_model, full_stroke_s: float = 8.0, sync=None) -> None:
+
+class SimWiring:
+    """The simulated rig's output wiring: the physics' inputs, set as the pins would set them.
+
+    No policy here (no latch, no timers): this is the copper between a driver and the actuator.
+    :class:`SimActuators` is the simulated driver in front of it; under ``--mock-pins`` the real-rig
+    output code drives it through :mod:`dyno.hw.mockpins` instead.  ``history`` keeps every change
+    ``(sim t, what, value)`` and ``history_mm`` the actuator's true position at that instant, so the
+    run can state when the safe state reached the outputs and where the brake was then.
+    """
+
+    def __init__(self, rig_model, sync=None) -> None:
         self.model = rig_model
         # Bring the physics up to "now" before changing an input, so the input
         # acts from the moment it was commanded (not from the last bus poll).
         self._sync = sync or (lambda: None)
-        self.brake_full_stroke_s = full_stroke_s
-        self.history: list[tuple[float, str, object]] = []  # (sim t, what, value) for tests
-        self._release_until_s: float | None = None
+        self.history: list[tuple[float, str, object]] = []
+        self.history_mm: list[float] = []
 
-    def _record(self, what: str, value) -> None:
+    def record(self, what: str, value) -> None:
         self.history.append((self.model.t_s, what, value))
+        self.history_mm.append(self.model.actuator_mm)
 
     def brake(self, direction: int) -> None:
         """Power the actuator in ``direction`` (STOP: enable off).
@@ -43,61 +57,151 @@ class SimActuators:
         that after a reversal moves nothing, as on the rig.
         """
         self._sync()
-        self._release_until_s = None
         direction = int(direction)
         self.model.actuator_dir = direction
-        self._record("brake", direction)
+        self.record("brake", direction)
 
     def relay(self, direction: int) -> None:
         """The direction relay's coil alone (a driver switching it with the enable off)."""
         self._sync()
         self.model.relay_dir = int(direction)
-        self._record("relay", int(direction))
+        self.record("relay", int(direction))
 
     def throttle(self, fraction: float) -> None:
         self._sync()
         self.model.throttle_frac = min(1.0, max(0.0, float(fraction)))
-        self._record("throttle", self.model.throttle_frac)
+        self.record("throttle", self.model.throttle_frac)
 
     def engine_kill(self, killed: bool) -> None:
         self._sync()
         self.model.engine_enabled = not killed
-        self._record("kill", bool(killed))
+        self.record("kill", bool(killed))
 
-    def safe_state(self) -> None:
+
+class SimActuators:
+    """The controller's outputs on the simulated rig: a simulated driver over :class:`SimWiring`.
+
+    Like the real-rig output code (:class:`dyno.hw.outputs.GpioActuators`) it **latches** the safe
+    state: after ``safe_state(latch=True)`` every command but the release is refused (and recorded in
+    ``refused``) until :meth:`clear_latch` — a plan's cleanup that says STOP cannot freeze the brake on
+    the rotor.  The release stroke runs a full stroke plus margin on the physics' clock, then
+    de-energises (:meth:`tick`).  ``is_safe`` is the physics' state, not the commands'.
+    """
+
+    def __init__(self, rig_model, full_stroke_s: float = 8.0, sync=None) -> None:
+        self.model = rig_model
+        self.wiring = SimWiring(rig_model, sync)
+        self._sync = self.wiring._sync
+        self.brake_full_stroke_s = full_stroke_s
+        self._release_until_s: float | None = None
+        self._latched = False
+        self.refused: list[tuple[float, str, object]] = []  # (sim t, command, value) refused while latched
+        self.safe_commanded_s: float | None = None  # sim time of the last safe_state()
+
+    @property
+    def history(self) -> list:
+        return self.wiring.history
+
+    def _refuse(self, what: str, value, hard: bool) -> None:
+        from dyno.errors import SafetyAbort
+
+        self.refused.append((self.model.t_s, what, value))
+        self.wiring.record("refused", f"{what}={value}")
+        if hard:  # a command that would move the rig out of its safe state: the caller must know
+            raise SafetyAbort(f"{what} refused: safe state latched")
+
+    def brake(self, direction: int) -> None:
+        """Power the actuator in ``direction`` (STOP: enable off); refused while latched."""
+        direction = int(direction)
+        if self._latched:
+            self._refuse("brake", direction, hard=direction > 0)
+            return
+        self._release_until_s = None
+        self.wiring.brake(direction)
+
+    def relay(self, direction: int) -> None:
+        self.wiring.relay(direction)
+
+    def throttle(self, fraction: float) -> None:
+        if self._latched and float(fraction) > 0.0:
+            self._refuse("throttle", float(fraction), hard=True)
+        self.wiring.throttle(fraction)
+
+    def engine_kill(self, killed: bool) -> None:
+        if self._latched and not killed:
+            self._refuse("engine_run", True, hard=True)
+        self.wiring.engine_kill(killed)
+
+    def safe_state(self, latch: bool = False) -> None:
+        """Throttle idle, ignition killed, release stroke started; ``latch``: refuse all else until re-armed.
+
+        A release already under way keeps its end (a second safe state does not restart the stroke
+        from the top, but never shortens it either).
+        """
         self._sync()
-        self.model.throttle_frac = 0.0
-        self.model.engine_enabled = False
-        self.model.actuator_dir = RELEASE
-        self._release_until_s = self.model.t_s + self.brake_full_stroke_s
-        self._record("safe_state", True)
+        m = self.model
+        m.throttle_frac = 0.0
+        m.engine_enabled = False
+        m.actuator_dir = RELEASE
+        end = m.t_s + self.brake_full_stroke_s * (1.0 + RELEASE_MARGIN_FRACTION) + RELEASE_MARGIN_S
+        if self._release_until_s is None or end > self._release_until_s:
+            self._release_until_s = end
+        self._latched = self._latched or latch
+        self.safe_commanded_s = m.t_s
+        self.wiring.record("safe_state", True)
+
+    def clear_latch(self) -> None:
+        """The explicit re-arm (between runs): commands are accepted again."""
+        self._latched = False
+
+    @property
+    def latched(self) -> bool:
+        return self._latched
 
     def tick(self, now_s: float) -> None:
         # The release timer runs on the physics' clock (the caller's clock may be
         # offset from it, e.g. a UI on the real loop driving a paced simulation).
         if self._release_until_s is not None and self.model.t_s >= self._release_until_s:
-            self.model.actuator_dir = STOP
             self._release_until_s = None
-            self._record("brake", STOP)
+            self.wiring.brake(STOP)
+
+    def service(self) -> None:
+        """The watchdog's servicing call (as ``GpioActuators.service``): end a release that is due."""
+        self.tick(self.model.t_s)
 
     @property
     def is_safe(self) -> bool:
+        """The physics is in the safe state: throttle idle, ignition killed, pads off the rotor,
+        actuator not applying (a release may still be de-energising)."""
         m = self.model
-        return m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir in (RELEASE, STOP)
+        return m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir in (RELEASE, STOP) \
+            and m.pads_off
 
     @property
     def releasing(self) -> bool:
         """A release stroke is under way (the actuator retracts until its timer ends)."""
         return self._release_until_s is not None
 
+    @property
+    def released(self) -> bool:
+        """Pads off the rotor and the actuator de-energised (the release stroke has ended)."""
+        return self.model.pads_off and self.model.actuator_dir == STOP and not self.releasing
+
     def output_states(self) -> dict:
         """The outputs by name (as the rig's pins would show them) and ``safe``."""
-        m = self.model
-        brake = {RELEASE: "releasing", STOP: "stopped"}.get(m.actuator_dir, "applying")
-        return {"throttle": "idle" if m.throttle_frac == 0.0 else f"{m.throttle_frac:.2f}",
-                "engine_kill": "killed" if not m.engine_enabled else "run",
-                "brake_actuator": brake, "brake_position_mm": round(m.actuator_mm, 3),
-                "safe": self.is_safe}
+        return physical_outputs(self.model)
+
+
+def physical_outputs(model) -> dict:
+    """The simulated rig's outputs as the physics has them, and ``safe``: throttle idle, ignition
+    killed, pads off the rotor (actuator at or inside the free travel) and the actuator de-energised."""
+    m = model
+    brake = {RELEASE: "releasing", STOP: "stopped"}.get(m.actuator_dir, "applying")
+    return {"throttle": "idle" if m.throttle_frac == 0.0 else f"{m.throttle_frac:.2f}",
+            "engine_kill": "killed" if not m.engine_enabled else "run",
+            "brake_actuator": brake, "brake_position_mm": round(m.actuator_mm, 3),
+            "pads_off_rotor": bool(m.pads_off),
+            "safe": m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir == STOP and bool(m.pads_off)}
 
 
 class TruthRecorder:

@@ -174,7 +174,9 @@ class LiveSession:
 
         def handler(signum, frame) -> None:
             if self.ctx.sim is None:
-                self.controller.act.safe_state()  # at once, whatever the loop is doing
+                from dyno.control.outputs import enter_safe_state
+
+                enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
             self.loop.call_soon_threadsafe(on_loop, signum)
 
         for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
@@ -225,7 +227,7 @@ class LiveSession:
     def estop(self, source: str = "operator") -> None:
         self.cancel_jog()
         if self.finished:
-            self.controller.act.safe_state()  # again: an E-stop is never refused
+            self.controller.latch_safe_state()  # again: an E-stop is never refused
             if not self.controller.aborts:
                 self.controller.aborts.append({"cause": "estop", "detail": f"E-stop ({source}) after the test",
                                                "state": self.controller.state.value})
@@ -276,9 +278,14 @@ class LiveSession:
             return "test finished: the rig stays in its safe state"
         if not self._between_steps():
             return f"wait: the controller is in {self.controller.state.value} (pause takes effect after the point)"
+        from dyno.errors import SafetyAbort
+
         self.cancel_jog()
-        self.controller.act.brake(direction)
-        self._jog_handle = self.loop.call_later(self.opts.jog_s / self.speed, self.controller.act.brake, STOP)
+        try:  # through the controller's gate, like a plan's commands
+            self.controller.brake(direction)
+        except SafetyAbort as exc:
+            return str(exc)
+        self._jog_handle = self.loop.call_later(self.opts.jog_s / self.speed, self.controller.brake, STOP)
         return None
 
     def _between_steps(self) -> bool:
@@ -303,7 +310,7 @@ class LiveSession:
         if self._jog_handle is not None:
             self._jog_handle.cancel()
             self._jog_handle = None
-            self.controller.act.brake(STOP)
+            self.controller.brake(STOP)  # (refused after the safe state: the release runs on)
 
     # --- acknowledge + re-arm: a new run on the same rig ------------------------------------
     def rearm_refusal(self) -> str | None:
@@ -320,11 +327,11 @@ class LiveSession:
         cause = c.aborts[-1]["cause"] if c.aborts else None
         if cause in NO_REARM:
             return f"not re-armed after {cause} ({NO_REARM[cause]}): quit and start dyno again"
-        if getattr(self.controller.act, "latched", False):
-            return "not re-armed: the safe state is latched (watchdog or signal): quit and start dyno again"
         if self.ctx.watchdog is not None and getattr(self.ctx.watchdog, "tripped", False):
             return "not re-armed: the watchdog tripped: quit and start dyno again"
         outs = self.actuators.output_states()
+        if getattr(self.actuators, "releasing", False) or outs.get("brake_actuator") == "releasing":
+            return "not re-armed: the brake is still releasing (wait for the release stroke to end)"
         if not outs.get("safe"):
             return (f"not re-armed: the rig is not in its safe state (throttle {outs.get('throttle')}, engine "
                     f"{outs.get('engine_kill')}, brake {outs.get('brake_actuator')}): E-STOP")
@@ -373,6 +380,9 @@ class LiveSession:
             return None, f"not re-armed: new run directory {new_dir}: {exc}"
         self.cancel_jog()
         self.manual = False
+        clear = getattr(old.act, "clear_latch", None)
+        if clear is not None:  # the explicit re-arm: the released rig accepts commands again
+            clear()
         self._close_log()
         self.poller.listeners.remove(old_writer.events)
         self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
@@ -426,7 +436,7 @@ class LiveSession:
             return
         self.closed = True
         self.cancel_jog()
-        self.controller.act.safe_state()
+        self.controller.latch_safe_state()
         if not self.finished:
             self.controller.abort("quit", why)
         for t in reversed(self._tasks):

@@ -1,0 +1,145 @@
+"""The rig's outputs at the end of a run, as the world has them — not as the program wished.
+
+``rig_safe`` means throttle idle, ignition killed, brake released (pads off the rotor) and the actuator
+de-energised:
+
+* **simulated rig** (with or without ``--mock-pins``): read from the physics — its throttle, ignition,
+  actuator power and the actuator's true position against the brake's free travel.  The release is
+  timed in true (simulated) time: ``safe_commanded_s`` (the last moment the outputs became safe, whoever
+  commanded it), ``released_at_s`` (the pads left the rotor), ``release_s`` between them, and its bound
+  ``release_bound_s`` = (position then − free travel) ÷ actuator speed + 0.2 s.
+* **real rig** (no position sensor): the driver's confirmation (:class:`dyno.hw.outputs.GpioActuators`):
+  the end-of-travel input closed where ``rig.toml`` declares one, else the release stroke ran its full time
+  uninterrupted (``release_basis``); a release interrupted or not confirmed makes the rig not safe, and
+  ``unsafe_because`` says why.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+#: the release bound's allowance beyond the pure travel time: relay settle/transfer, one control period
+RELEASE_BOUND_MARGIN_S = 0.2
+
+
+def last_safe_transition(history: list, history_mm: list) -> tuple[float | None, float | None]:
+    """(sim time, actuator mm) of the last moment the wired inputs went from not safe to safe.
+
+    Safe inputs: throttle idle, ignition killed, actuator not applying.  ``history`` is
+    :class:`dyno.sim.rig.SimWiring`'s ``(t, what, value)`` list (``safe_state`` sets all three at once).
+    """
+    throttle, enabled, direction = 0.0, True, 0
+    was_safe = False
+    found: tuple[float | None, float | None] = (None, None)
+    for i, (t, what, value) in enumerate(history):
+        if what == "safe_state":
+            throttle, enabled, direction = 0.0, False, -1
+        elif what == "throttle":
+            throttle = float(value)
+        elif what == "kill":
+            enabled = not value
+        elif what == "brake":
+            direction = int(value)
+        safe = throttle == 0.0 and not enabled and direction <= 0
+        if safe and not was_safe:
+            found = (t, history_mm[i] if i < len(history_mm) else None)
+        was_safe = safe
+    return found
+
+
+def sim_outputs(ctx) -> dict:
+    """The simulated rig's outputs from its physics, with the release's true timing (module doc)."""
+    from dyno.sim.rig import physical_outputs
+
+    sim = ctx.sim
+    model = sim.model
+    outs = physical_outputs(model)
+    driver = getattr(ctx.controller.act, "output_states", None)
+    if driver is not None and getattr(ctx.controller.act, "release_basis", "absent") != "absent":
+        d = driver()  # --mock-pins: the real-rig output code's own view beside the physics'
+        outs["brake_estimate"] = d.get("brake_estimate")
+        outs["driver_released"] = d.get("released")
+        outs["driver_release_basis"] = d.get("release_basis")
+    wiring = getattr(sim.actuators, "wiring", None)
+    t_cmd, mm_at = last_safe_transition(wiring.history, wiring.history_mm) if wiring is not None else (None, None)
+    outs["safe_commanded_s"] = t_cmd
+    outs["brake_position_at_safe_mm"] = None if mm_at is None else round(mm_at, 3)
+    released_at = model.pads_off_at_s if model.pads_off else None
+    outs["released_at_s"] = released_at
+    outs["release_s"] = (max(0.0, released_at - t_cmd) if released_at is not None and t_cmd is not None
+                         else None)
+    if mm_at is not None:
+        b = model.brake
+        outs["release_bound_s"] = max(0.0, mm_at - b.a0_mm) / b.v_act_mm_s + RELEASE_BOUND_MARGIN_S
+        outs["release_within_bound"] = outs["release_s"] is not None and outs["release_s"] <= outs["release_bound_s"]
+    outs["release_basis"] = "physics"
+    outs["brake_hold_relay"] = bool(model.brake_hold_relay)
+    if not outs["safe"]:
+        outs["unsafe_because"] = _why_not(outs)
+    return outs
+
+
+def hw_outputs(act) -> dict:
+    """The real rig's outputs, read back from its pins, with the release's confirmation (module doc)."""
+    report = getattr(act, "output_states", None)
+    if not callable(report):
+        return {"safe": False, "unsafe_because": "the outputs cannot be read back"}
+    outs = dict(report())
+    if not outs.get("safe"):
+        outs["unsafe_because"] = _why_not(outs)
+    return outs
+
+
+def rig_outputs(ctx) -> dict:
+    """The outputs' final states, by name, and whether together they are the safe state."""
+    if ctx.sim is not None:
+        return sim_outputs(ctx)
+    return hw_outputs(ctx.controller.act)
+
+
+def _why_not(outs: dict) -> str:
+    why = []
+    if outs.get("throttle") != "idle":
+        why.append(f"throttle {outs.get('throttle')}")
+    if outs.get("engine_kill") != "killed":
+        why.append("ignition on")
+    if outs.get("pads_off_rotor") is False:
+        why.append(f"brake pads on the rotor (actuator at {outs.get('brake_position_mm')} mm)")
+    if outs.get("brake_actuator") != "stopped":
+        why.append(f"actuator {outs.get('brake_actuator')}")
+    if outs.get("released") is False:
+        why.append(outs.get("release_interrupted") or "release not confirmed (stroke not completed)")
+    return "; ".join(why) or "not in the safe state"
+
+
+def release_done(ctx) -> bool:
+    """The release stroke has ended: the brake released and the actuator de-energised."""
+    act = ctx.controller.act
+    if ctx.sim is not None:
+        m = ctx.sim.model
+        if m.actuator_dir != 0 or not m.pads_off or ctx.sim.actuators.releasing:
+            return False
+    return bool(getattr(act, "released", True))
+
+
+async def finish_release(ctx, *, poll_s: float = 0.1) -> bool:
+    """Keep servicing the outputs until the release stroke has ended (sim and rig); True if it did."""
+    act = ctx.controller.act
+    stroke_s = float(getattr(act, "brake_full_stroke_s", 8.0))
+    loop = asyncio.get_running_loop()
+    end = loop.time() + 2.0 * stroke_s + 1.0  # the drivers add their own margins to a full stroke
+    while loop.time() < end:
+        if release_done(ctx):
+            return True
+        await asyncio.sleep(poll_s)
+        act.tick(loop.time())
+        if ctx.watchdog is not None:
+            ctx.watchdog.kick()  # the loop is alive and servicing the release
+    return release_done(ctx)
+
+
+def add_release_to_abort(abort: dict, outs: dict) -> None:
+    """The drill's record states the release beside its latency (in place)."""
+    for k in ("brake_position_at_safe_mm", "released_at_s", "release_s", "release_bound_s", "release_within_bound"):
+        if k in outs:
+            abort[k] = outs[k]

@@ -1,0 +1,106 @@
+"""What ``dyno run --json`` reports of a finished run (and the run directory's ``safety`` document).
+
+Pure bookkeeping over the composition root's :class:`~dyno.app.RunContext`: the points, the link's
+figures, the aborts with their true-time latencies and the outputs as the world has them
+(:mod:`dyno.safe_outputs`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from dyno.safe_outputs import add_release_to_abort, rig_outputs
+
+
+def summarize(ctx) -> dict:
+    reader = ctx.poller.reader
+    st = reader.stats
+    frames = {"read": st.read, "accepted": st.accepted, "rejected": dict(sorted(st.rejected.items())),
+              "rejected_total": sum(st.rejected.values()),
+              "transport_errors": dict(sorted(st.transport_errors.items())),
+              "device_resets": st.device_resets, "resyncs": st.resyncs,
+              "boots": list(getattr(st, "boots", []))}  # v2: each boot seen, with its reset cause
+    aborts = [dict(a) for a in ctx.controller.aborts]
+    out = {"run_dir": str(ctx.writer.run_dir), "state": ctx.controller.state.value,
+           "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
+           "discarded": list(ctx.controller.discards),
+           "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
+    zc = getattr(ctx.controller, "zero_check", None)
+    if zc is not None:
+        out["torque_zero"] = zc
+        if zc.get("correct"):
+            from dyno.analysis.zero_check import corrected_point_keys
+
+            for pub, p in zip(out["points"], ctx.controller.points):
+                pub.update(corrected_point_keys(p, zc))
+    out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
+    go_s = ctx.controller.go_s
+    ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
+    # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
+    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
+    out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
+    outputs = rig_outputs(ctx)
+    out["outputs"] = outputs
+    out["rig_safe"] = bool(outputs.get("safe"))  # the physical state (dyno.safe_outputs), not a wish
+    if not out["rig_safe"]:
+        out["rig_unsafe_because"] = outputs.get("unsafe_because", "not in the safe state")
+    refused = list(getattr(ctx.controller, "refused", []))
+    act_refused = getattr(getattr(ctx.sim, "actuators", None), "refused", None) if ctx.sim is not None else None
+    for t, what, value in (act_refused or getattr(ctx.controller.act, "refused", None) or []):
+        refused.append({"command": what, "value": value, "t_s": t, "by": "actuators"})
+    if refused:
+        out["refused"] = refused  # commands refused after the safe state (a plan's cleanup, a late jog)
+    if ctx.writer.error is not None:
+        out["log_error"] = f"{ctx.writer.error.strerror or ctx.writer.error}"
+    if ctx.signal_received is not None:
+        out["signal"] = int(ctx.signal_received)
+    if ctx.sim is not None:
+        frames["corrupted_accepted"] = ctx.audit["corrupted_accepted"]
+        out["faults_injected"] = dict(ctx.sim.bus.injected)
+        out["sim_time_s"] = ctx.sim.model.t_s
+        from dyno.drills import hazard_verdicts, true_latencies
+
+        if ctx.drills is not None:
+            hazard_verdicts(ctx)
+            out["drills"] = ctx.drills.fired
+
+        true_latencies(ctx, aborts)
+    if aborts:
+        add_release_to_abort(aborts[0], outputs)
+    from dyno.runlog.files import finite  # JSON-safe: NaN and infinities become null
+
+    return finite(out)
+
+
+POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_primary", "rpm_secondary", "ratio",
+              "torque_secondary_nm", "power_out_w", "power_in_w",
+              # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
+              "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
+              "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
+              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
+              # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
+              "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
+              "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
+              # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
+              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map")
+
+
+def public_point(p: dict) -> dict:
+    out = {}
+    for k in POINT_KEYS:
+        if k in p:
+            v = p[k]
+            out[k] = None if isinstance(v, float) and math.isnan(v) else v
+    return out
+
+
+
+
+SAFETY_KEYS = ("state", "reason", "aborts", "drills", "outputs", "rig_safe", "rig_unsafe_because", "refused",
+               "signal", "faults_injected", "sim_time_s", "events_lost")
+
+
+def safety_document(summary: dict) -> dict:
+    """The ``safety`` document every run directory ends with: what ``dyno run --json`` reports of its
+    safety (drill records, true-time latencies from the onset, the physical outputs at the end)."""
+    return {k: summary[k] for k in SAFETY_KEYS if k in summary}

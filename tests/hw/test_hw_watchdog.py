@@ -1,0 +1,106 @@
+"""The watchdog cannot die, and it catches a real blocked event loop on the real-rig path."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+from dyno.hw.clock import MonotonicClock
+from dyno.hw.outputs import GpioActuators
+from dyno.hw.safety import Watchdog
+from dyno.hw.testing import RecordingFactory, gpio
+
+
+def test_watchdog_survives_an_exception_in_its_look_and_still_trips_on_a_later_stall(rig, factory, clock):
+    act = GpioActuators(rig, pin_factory=factory, clock=clock)
+    act.finish_release()
+    dog = Watchdog(act, 0.5, clock=clock)
+    calls = {"n": 0}
+
+    def flaky_level_check():
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise OSError(5, "E-stop input read failed")
+
+    dog.level_checks.append(flaky_level_check)
+    act.tick()
+    dog.check()  # the level check raises inside the look
+    assert dog.errors and "OSError" in dog.errors[0]
+    assert act.latched and act.engine_killed, "an exception in the watchdog is a safe state"
+    # it keeps watching: re-arm as an operator would, then stall the loop
+    act.finish_release()
+    act.clear_latch()
+    act.engine_kill(False)
+    dog.tripped = False
+    act.tick()
+    clock.advance(0.4)
+    assert not dog.check() and not act.engine_killed
+    clock.advance(0.2)  # 0.6 s without a tick
+    assert dog.check() and act.engine_killed and act.latched
+    act.close()
+
+
+def test_watchdog_thread_keeps_running_when_a_look_raises(rig, factory, clock):
+    act = GpioActuators(rig, pin_factory=factory, clock=MonotonicClock())
+    dog = Watchdog(act, 0.2, clock=MonotonicClock())
+    looks = {"n": 0}
+
+    def broken():
+        looks["n"] += 1
+        raise RuntimeError("every look raises")
+
+    dog.level_checks.append(broken)
+    dog.start_thread(period_s=0.005)
+    try:
+        t_end = time.monotonic() + 2.0
+        while looks["n"] < 20 and time.monotonic() < t_end:
+            time.sleep(0.01)
+    finally:
+        dog.stop_thread()
+        act.close()
+    assert looks["n"] >= 20, "the thread died after the first exception"
+    assert len(dog.errors) >= 20
+
+
+def test_watchdog_thread_catches_a_real_blocked_event_loop_on_the_real_rig_path(rig):
+    """HardwareRig on MockFactory, a real asyncio loop beating it, then the loop blocked (time.sleep):
+    the kill pin and the enable must drop within watchdog_s + one watchdog period, in real time."""
+    from dyno.hw.rig import HardwareRig
+
+    class Bus:
+        def i2c_rdwr(self, *msgs):
+            raise OSError(5, "no Nano here")
+
+        def close(self):
+            pass
+
+    clock = MonotonicClock()
+    factory = RecordingFactory(clock)
+    result: dict = {}
+
+    async def main(hw):
+        act = hw.actuators
+        assert act.finish_release()  # the start-up release stroke (real time: the fixture's 2 s stroke)
+        act.engine_kill(False)
+        hw.watchdog.start_thread()
+        for _ in range(20):  # a live loop beats every 20 ms
+            act.tick()
+            await asyncio.sleep(0.02)
+        assert not act.engine_killed, "tripped while the loop was alive"
+        result["blocked_at"] = time.monotonic()
+        time.sleep(1.2)  # the loop blocks: no await, no tick
+        result["resumed_at"] = time.monotonic()
+
+    hw = HardwareRig(rig, pin_factory=factory, clock=clock, bus=Bus(), install_signals=False)
+    with hw:
+        asyncio.run(main(hw))
+        wd = hw.watchdog
+        kill = gpio(rig.pins.engine_kill)
+        high_kills = rig.kill_relay == "energise_to_kill"
+        killed_at = [t for t, pin, v in factory.log
+                     if pin == kill and t >= result["blocked_at"] and (v >= 0.5) == high_kills]
+        assert killed_at, "the watchdog never killed the engine while the loop was blocked"
+        latency = killed_at[0] - result["blocked_at"]
+        assert latency <= wd.timeout_s + wd.period_s + 0.05, latency  # 50 ms: thread scheduling on a busy VM
+        assert killed_at[0] < result["resumed_at"], "safed only after the loop came back"
+        assert hw.actuators.latched
