@@ -15,6 +15,7 @@ from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
 from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
+from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.protocol import v1
 from dyno.transports.base import I2CTransport
@@ -112,6 +113,9 @@ class RunContext:
     rig_cfg: object = None
     signal_received: int | None = None
     hw: object = None  # dyno.hw.rig.HardwareRig on the real rig (closed by close_rig)
+    # host (loop) time -> simulated time; None: the same clock (a virtual loop). The UI paces the physics
+    # on a scaled clock, so its drill latencies convert the controller's trigger times with this.
+    host_to_sim: object = None
 
 
 def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
@@ -228,7 +232,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     poller.listeners.append(writer.events)
     controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
-                                on_wait_engine=sim.start_engine if sim else None)
+                                on_wait_engine=sim.start_engine if sim else None,
+                                runner_for=plans.runner_for, from_idle=plans.FROM_IDLE)  # (the plan modes)
     controller.rig = rig_cfg
     controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
     controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])

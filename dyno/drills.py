@@ -287,7 +287,7 @@ def first_safe_s(history, t_from_s: float) -> float | None:
     return None
 
 
-def true_latencies(ctx, aborts: list[dict]) -> None:
+def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     """Add true-time figures to ``aborts[0]`` of a simulated run with drills (in place).
 
     ``onset_s``: when the fault physically began (the drill's instant, or for
@@ -298,13 +298,14 @@ def true_latencies(ctx, aborts: list[dict]) -> None:
     reached); ``detection_s``: the host's trigger time - onset.
     """
     drills = ctx.drills
-    if not aborts or drills is None or not drills.fired:
+    fired = drills.fired[drills_from:] if drills is not None else []
+    if not aborts or not fired:
         return
     a = aborts[0]
     sim = ctx.sim
     lim = ctx.controller.limits
     truth = sim.truth
-    rec = min(drills.fired, key=lambda r: r["onset_s"])
+    rec = min(fired, key=lambda r: r["onset_s"])
     onset = rec["onset_s"]
     t_from = rec["onset_s"] - 1e-9
     safe = [first_safe_s(sim.actuators.history, t_from)]
@@ -348,7 +349,8 @@ def true_latencies(ctx, aborts: list[dict]) -> None:
     a["onset_s"] = onset
     a["safe_commanded_s"] = safe[0] if safe else math.nan
     a["latency_s"] = a["safe_commanded_s"] - onset
-    a["detection_s"] = a["trigger_s"] - onset if a.get("trigger_s") is not None else math.nan
+    to_sim = getattr(ctx, "host_to_sim", None) or (lambda t: t)
+    a["detection_s"] = to_sim(a["trigger_s"]) - onset if a.get("trigger_s") is not None else math.nan
     a["latency_basis"] = "true time from the physical onset (simulated rig)"
 
 
@@ -381,7 +383,7 @@ HALL_TURNING_RPM = 100.0
 THERMO_MOVING_C = 1.0
 
 
-def hazard_verdicts(ctx) -> None:
+def hazard_verdicts(ctx, drills_from: int = 0) -> None:
     """Add ``hazard_arose`` (and, when false, ``hazard_note``: why) to every fired drill (in place).
 
     The hazard is the physical one the drill targets, read from the simulated world's truth: a limit
@@ -396,7 +398,7 @@ def hazard_verdicts(ctx) -> None:
     ctrl = ctx.controller
     lim = ctrl.limits
     end_s = sim.model.t_s
-    for rec in drills.fired:
+    for rec in drills.fired[drills_from:]:
         t0 = rec["onset_s"]
         t_safe = first_safe_s(sim.actuators.history, t0 - 1e-9)
         t1 = t_safe if t_safe is not None and t_safe > t0 else end_s

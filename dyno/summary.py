@@ -12,7 +12,9 @@ import math
 from dyno.safe_outputs import add_release_to_abort, rig_outputs
 
 
-def summarize(ctx) -> dict:
+def summarize(ctx, drills_from: int = 0) -> dict:
+    """The run's JSON document; ``drills_from``: the first of ``ctx.drills.fired`` that belongs to this run
+    (a UI session's re-armed runs share one drill runner)."""
     reader = ctx.poller.reader
     st = reader.stats
     frames = {"read": st.read, "accepted": st.accepted, "rejected": dict(sorted(st.rejected.items())),
@@ -61,10 +63,10 @@ def summarize(ctx) -> dict:
         from dyno.drills import hazard_verdicts, true_latencies
 
         if ctx.drills is not None:
-            hazard_verdicts(ctx)
-            out["drills"] = ctx.drills.fired
+            hazard_verdicts(ctx, drills_from)
+            out["drills"] = ctx.drills.fired[drills_from:]
 
-        true_latencies(ctx, aborts)
+        true_latencies(ctx, aborts, drills_from)
     if aborts:
         add_release_to_abort(aborts[0], outputs)
     from dyno.runlog.files import finite  # JSON-safe: NaN and infinities become null

@@ -20,6 +20,8 @@ def add_arguments(p) -> None:
                         "engine-hold; ...) or a plan file (a path ending in .toml; docs/control.md)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only; docs/safety.md)")
+    p.add_argument("--mock-pins", action="store_true",
+                   help="--sim: drive the simulated physics through the real-rig output code (gpiozero MockFactory)")
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
@@ -42,9 +44,12 @@ def run(args) -> int:
     load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
+    if getattr(args, "mock_pins", False) and not args.sim:
+        raise ConfigError("command line", "--mock-pins", "the mock pins drive the simulated rig only (--sim)")
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
-                       engine_map_path=args.engine_map, drills=drills, plan=plan)
+                       engine_map_path=args.engine_map, drills=drills, plan=plan,
+                       mock_pins=bool(getattr(args, "mock_pins", False)))
     app = LiveApp(opts)
     app.run()
     rc = app.return_code or 0

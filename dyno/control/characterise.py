@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dyno.analysis import shift_events as se
+from dyno.control.api import State
 from dyno.control.outputs import APPLY, STOP
 from dyno.protocol import v1
 
@@ -56,8 +57,6 @@ def _live_ratio(ctrl, window_s: float = 0.3) -> float:
 
 
 async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
-    from dyno.control.controller import State
-
     ep = ep or getattr(ctrl, "engagement_plan", None) or EngagementPlan()
     ctrl._enter(State.WARMUP, "idle, brake released: the secondary must be at rest")
     ctrl.set_throttle(0.0)
@@ -94,8 +93,6 @@ async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
 
 async def _ramp(ctrl, ep: EngagementPlan):
     """From idle with the secondary at rest: the throttle ramp; returns the ramp's edges and times."""
-    from dyno.control.controller import State
-
     ctrl._enter(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
     t0_rig = ctrl.rig_now()
     t0_dev = ctrl.poller.device_now_us()
@@ -156,7 +153,6 @@ def _load_row(r: dict) -> dict:
 
 async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
     """More ramps, each with the brake preset a little further: shift-out against load."""
-    from dyno.control.controller import State
     from dyno.control.outputs import RELEASE
 
     rows = []

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from dyno.analysis import coastdown as cd
+from dyno.control.api import State
 from dyno.protocol import v1
 
 
@@ -53,8 +54,6 @@ def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
 
 
 async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
-    from dyno.control.controller import State
-
     cp = cp or getattr(ctrl, "coast_down_plan", None) or CoastDownPlan()
     from dyno.rigconfig import InertiaConfig
 

@@ -16,95 +16,30 @@ released) and logs the cause with the trigger and safe-state times.
 from __future__ import annotations
 
 import asyncio
-import enum
 import math
-from dataclasses import dataclass, field
 
-from dyno.analysis.stopping import STOP_QUANTILE
-from dyno.control.outputs import APPLY, STOP, enter_safe_state
-from dyno.errors import SafetyAbort
-from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
+# The dependency runs one way: this engine and the plan runners are siblings that meet at
+# dyno.control.api (State, TestPlan: defined there, re-exported here), and no plan module imports this
+# one.  Nor does this module import dyno.control.plans: the plan modes' runners are handed in
+# (``runner_for``/``from_idle``, as the app's composition root does); the default is the mode table in
+# dyno.control.registry, a leaf over the api that imports a runner's module only when its mode runs.
+from dyno.control import registry as _registry
+from dyno.control.api import ENGINE_STATES as _ENGINE_STATES
+from dyno.control.api import LOADED_STATES as _LOADED_STATES
+from dyno.control.api import TRANSITIONS, State, TestPlan
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
-from dyno.control.steady import SettleCriteria
+from dyno.control.outputs import APPLY, STOP, enter_safe_state
+from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
+from dyno.errors import SafetyAbort
 from dyno.protocol import v1
 
-
-class State(enum.Enum):
-    IDLE = "idle"
-    WAIT_ENGINE = "wait_engine"
-    ARMED = "armed"
-    WARMUP = "warmup"
-    STEP = "step"
-    SETTLE = "settle"
-    MEASURE = "measure"
-    DONE = "done"
-    ABORTED = "aborted"
-
-
-TRANSITIONS: dict[State, set[State]] = {
-    State.IDLE: {State.WAIT_ENGINE},
-    State.WAIT_ENGINE: {State.ARMED},
-    State.ARMED: {State.WARMUP},
-    State.WARMUP: {State.STEP},
-    State.STEP: {State.SETTLE, State.STEP, State.DONE},  # (speed hold: next setpoint, or none left)
-    State.SETTLE: {State.MEASURE, State.DONE, State.STEP},  # (speed hold: a setpoint it cannot hold)
-    State.MEASURE: {State.STEP, State.DONE, State.MEASURE},
-    State.DONE: set(),
-    State.ABORTED: set(),
-}
-for _s in State:
-    if _s not in (State.DONE, State.ABORTED):
-        TRANSITIONS[_s].add(State.ABORTED)
-
-
-@dataclass(frozen=True)
-class TestPlan:
-    engine_running_rpm: float = 1300.0  # primary above this = engine started
-    engine_detect_s: float = 0.5
-    # Ignition enabled and no primary rpm for this long: the engine was not started, or its
-    # Hall sensor is dead (an engine running unseen would be blind to over-speed): abort.
-    engine_start_timeout_s: float = 60.0
-    warmup_s: float = 3.0  # full throttle, no brake: let it stabilise
-    # Warm-up criterion: no point is measured before the brake has loaded the CVT this long (belt and
-    # clutch warm-up; the rig has no belt-temperature channel, only the rotor's). Recorded with the run.
-    warmup_at_load_s: float = 0.0
-    step_s: float = 0.25  # brake actuator on-time per step (adapted, see below)
-    step_min_s: float = 0.08
-    step_max_s: float = 1.0
-    target_points: int = 20  # adapt the step so the run gives about this many points
-    measure_s: float = 3.0  # the thesis's 3 s average (the minimum)
-    target_efficiency_sem: float = 0.0012  # extend the average until the standard error is this small ...
-    target_efficiency_ci95: float | None = None  # ... or, if set, until the 95 % half-width is this small ...
-    max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
-    stop_quantile: float = STOP_QUANTILE  # the targets are met by the error's upper bound at this level
-    min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
-    settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)
-    mode: str = "step"  # "step" (the thesis's open-loop steps) or a runner in dyno.control.plans.RUNNERS
-    settle: SettleCriteria = field(default_factory=SettleCriteria)
-    min_secondary_rpm: float = 1500.0  # stop when the secondary falls below this
-    max_points: int = 60
-    expected_secondary_span_rpm: float = 4500.0  # light load to min, for the step adaptation
-    # A plan file's identity and its mode's own parameters (dyno.control.planfile): the name it was
-    # chosen by, the mode's table (e.g. [speed_hold]) and, for mode "steps", the [[step]] list.
-    name: str = ""
-    params: dict = field(default_factory=dict, hash=False)
-    steps: tuple = ()
-    source: str = ""  # the plan file it came from ("" for a plan built in code)
-    text: str = field(default="", repr=False, compare=False)  # that file's text (stored as plan.toml)
-
-
-_LOADED_STATES = {State.WARMUP, State.STEP, State.SETTLE, State.MEASURE}
-_ENGINE_STATES = _LOADED_STATES | {State.ARMED}
-
 __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
-
-
 
 
 class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
-                 on_wait_engine=None) -> None:
+                 on_wait_engine=None, runner_for=None, from_idle=None) -> None:
         self.poller = poller
         self.act = actuators
         self.calibration = calibration
@@ -114,6 +49,10 @@ class TestController(Measuring):
         self.writer = writer
         self.auto_go = auto_go
         self.on_wait_engine = on_wait_engine  # e.g. the simulated operator pulls the cord
+        # The plan modes other than "step": mode -> coroutine function(controller), and the modes whose
+        # runner starts from idle right after GO (no warm-up). Default: dyno.control.registry's table.
+        self.runner_for = runner_for if runner_for is not None else _registry.runner_for
+        self.from_idle = from_idle if from_idle is not None else _registry.FROM_IDLE
         self.state = State.IDLE
         self.reason = ""
         self.points: list[dict] = []
@@ -382,18 +321,14 @@ class TestController(Measuring):
             self._go.set()
         await self._go.wait()
         self.go_s = self._now()
-        from dyno.control.plans import FROM_IDLE, runner_for
-
-        if p.mode in FROM_IDLE:  # characterisations start from idle: no full-throttle warm-up
-            await runner_for(p.mode)(self)
+        if p.mode in self.from_idle:  # characterisations start from idle: no full-throttle warm-up
+            await self.runner_for(p.mode)(self)
             return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.set_throttle(1.0)
         await self._sleep(p.warmup_s)
         if p.mode != "step":
-            from dyno.control.plans import runner_for
-
-            await runner_for(p.mode)(self)
+            await self.runner_for(p.mode)(self)
             return
         last_rs = self.poller.rpm(v1.CH_SECONDARY)
         while True:

@@ -21,6 +21,7 @@ import asyncio
 import math
 from dataclasses import dataclass
 
+from dyno.control.api import State
 from dyno.control.outputs import RELEASE, STOP
 
 
@@ -79,7 +80,6 @@ async def release_brake(ctrl, g: DriveGridPlan) -> float:
 
 async def run_drive_grid(ctrl) -> None:
     from dyno.analysis.drive_grid import grid_table
-    from dyno.control.controller import State
     from dyno.control.speed_hold import SpeedHold, SpeedHoldPlan, _hold_loop, gains_for, hold_point, secondary_rpm
     from dyno.control.steps import find_contact
 

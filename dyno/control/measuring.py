@@ -1,8 +1,9 @@
 """The controller's measurement: a steady window to a point, the warm-up criterion, settling.
 
 A mixin of :class:`dyno.control.controller.TestController` (split from it along this seam: the
-state table and safety there, how a window becomes a recorded point here).  Every plan runner
-measures through :meth:`Measuring._measure` and records through :meth:`Measuring._record_point`.
+state machine and safety there, how a window becomes a recorded point here; the states come from
+:mod:`dyno.control.api`, so this base class does not import the controller built on it).  Every
+plan runner measures through :meth:`Measuring._measure` and records through :meth:`Measuring._record_point`.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 
 from dyno.analysis.points import reduce_point
 from dyno.analysis.stopping import stop_uncertainty
+from dyno.control.api import State
 from dyno.control.steady import is_settled
 from dyno.protocol import v1
 
@@ -27,8 +29,6 @@ class Measuring:
 
         Returns the reduced point and the window's host start and end times.
         """
-        from dyno.control.controller import State
-
         p = self.plan
         await self._warm_up_at_load()
         for attempt in range(MAX_REMEASURE + 1):

@@ -24,7 +24,8 @@ import math
 import tomllib
 from pathlib import Path
 
-from dyno.control.controller import TestPlan
+from dyno.control.api import TestPlan
+from dyno.control.registry import known_modes
 from dyno.control.steady import SettleCriteria
 from dyno.errors import ConfigError
 
@@ -67,8 +68,6 @@ def plan_from_text(text: str, path="plan") -> TestPlan:
 
 
 def plan_from_dict(data: dict, path="plan", *, text: str = "") -> TestPlan:
-    from dyno.control.plans import known_modes
-
     def err(field: str, expected: str) -> ConfigError:
         return ConfigError(path, field, expected)
 

@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass
 
 from dyno.acquisition.rpm import rpm_by_count
+from dyno.control.api import State
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.protocol import v1
 
@@ -224,8 +225,6 @@ async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHold
     Uses the controller's own measurement (uncertainty target, discards) and states:
     STEP = moving to the next setpoint, SETTLE = holding until in band, MEASURE.
     """
-    from dyno.control.controller import State
-
     p = ctrl.plan
     sh = sh or getattr(ctrl, "speed_hold_plan", None) or speed_hold_plan_of(p)
     hold = SpeedHold(gains or getattr(ctrl, "speed_hold_gains", None) or gains_for(ctrl, "secondary"))
@@ -270,8 +269,6 @@ async def hold_point(ctrl, sp: float, sh: SpeedHoldPlan, target: dict, loop_task
     """Hold the secondary at ``sp`` (``loop_task`` runs :func:`_hold_loop` on ``target``), then measure with
     the brake frozen and record the point.  Returns (the point, None), or (None, why) when there is no point
     at ``sp``: the why is logged as a ``skip`` document (with ``skip_fields``)."""
-    from dyno.control.controller import State
-
     p = ctrl.plan
 
     def skip(reason: str) -> tuple[None, str]:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import math
 
+from dyno.control.api import State
 from dyno.control.outputs import APPLY, RELEASE, STOP
 
 KINDS = {
@@ -98,8 +99,6 @@ class LimitReached(Exception):
 
 
 async def run_steps(ctrl) -> None:
-    from dyno.control.controller import State
-
     for i, st in enumerate(ctrl.plan.steps):
         task = asyncio.create_task(_run_step(ctrl, st), name=f"step-{i + 1}")
         why = None
@@ -151,8 +150,6 @@ def _limit_passed(ctrl, st: dict, elapsed_s: float) -> str | None:
 
 
 async def _run_step(ctrl, st: dict) -> None:
-    from dyno.control.controller import State
-
     kind = st["kind"]
     if ctrl.state is State.WARMUP or ctrl.state is State.MEASURE:
         ctrl._enter(State.STEP, f"plan step: {kind}")
@@ -216,7 +213,6 @@ async def _hold_step(ctrl, st: dict) -> None:
     """Hold each setpoint, measure a point with the brake frozen there (as the speed-hold plan does)."""
     from dataclasses import replace
 
-    from dyno.control.controller import State
     from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
 
     variable = st.get("variable", "secondary")
@@ -283,7 +279,6 @@ async def _ramp_step(ctrl, st: dict) -> None:
     """Move the held setpoint at ``rate_rpm_s``; a point (I·alpha corrected) every ``point_s``."""
     from dyno.analysis.inertia import correct_inertia
     from dyno.analysis.points import reduce_point
-    from dyno.control.controller import State
     from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
 
     variable = st.get("variable", "secondary")

@@ -38,6 +38,7 @@ class LiveOptions:
     plan: TestPlan = field(default_factory=TestPlan)
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
     drills: list = field(default_factory=list)  # dyno.drills.Drill (sim only), from the first frame
+    mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
 
 
 def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
@@ -85,7 +86,8 @@ class LiveSession:
         self.t0 = loop.time()
         self.sim_now = lambda: (loop.time() - self.t0) * self.speed
         run_opts = RunOptions(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
-                              rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed))
+                              rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed),
+                              mock_pins=opts.sim and opts.mock_pins)
         if opts.calibration_path:
             run_opts.calibration_path = opts.calibration_path
         if opts.engine_map_path:
@@ -96,7 +98,9 @@ class LiveSession:
             self.ctx = build(run_opts, self.sim_now)
             # the plan runners' own durations (hold periods, approach times) shrink like the plan's
             self.ctx.controller.time_scale = 1.0 / self.speed
-            self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
+            if not opts.mock_pins:  # (GpioActuators already keep time on the simulated clock)
+                self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
+            self.ctx.host_to_sim = lambda t: (t - self.t0) * self.speed  # drills' true-time latencies
             # Each real-time poll spans `speed` x more rig time: let it drain that many more frames.
             self.ctx.poller.max_burst = max(8, math.ceil(8 * self.speed))
             # ... and give the emulated firmware's ring the same span of rig time it has at 1x
@@ -387,7 +391,8 @@ class LiveSession:
         self.poller.listeners.remove(old_writer.events)
         self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
         ctrl = TestController(self.poller, old.act, old.calibration, old.engine_map, plan=old.plan,
-                              limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine)
+                              limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
+                              runner_for=old.runner_for, from_idle=old.from_idle)
         ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)
         ctrl.result_hooks = list(getattr(old, "result_hooks", []))  # (the characterisations' sim truths)
         for name in REBUILT_ATTRS:  # what the composition root sets on a controller after building it
@@ -426,6 +431,16 @@ class LiveSession:
             _attach_watchdog(self.ctx, timeout_s, self.loop.time)
 
     def _close_log(self) -> None:
+        """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
+        document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
+        from dyno.summary import safety_document, summarize
+
+        if self.ctx.writer.error is None:
+            try:
+                doc = safety_document(summarize(self.ctx, drills_from=self._drills_fired_before))
+                self.ctx.writer.doc("safety", **doc)
+            except Exception as exc:  # noqa: BLE001 - the log still closes; say why the record is missing
+                self.ctx.writer.doc("safety", error=f"{type(exc).__name__}: {exc}")
         status = {"done": "success"}.get(self.controller.state.value, "abort")
         self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
                               events_lost=self.poller.reader.events_lost)
@@ -439,6 +454,12 @@ class LiveSession:
         self.controller.latch_safe_state()
         if not self.finished:
             self.controller.abort("quit", why)
+        if self.ctx.sim is not None and self.controller.go_s is not None:
+            # the simulated brake releases while the polls still advance its physics, so the run records
+            # where it ended (the rig's own release is finished by its SafetyGuard on the way out)
+            from dyno.safe_outputs import finish_release
+
+            await finish_release(self.ctx, poll_s=0.05)
         for t in reversed(self._tasks):
             if t.get_name() == "poller":
                 self.poller.stop()

@@ -33,7 +33,7 @@ def test_stuck_primary_hall_aborts(tmp_path):
     r = run_test(RunOptions(sim=True, seed=6, out_dir=tmp_path / "stuck", plan=QUICK_PLAN, setup=setup))
     assert r["state"] == "aborted"
     assert r["aborts"][0]["cause"] == "sensor_fault" and "primary" in r["aborts"][0]["detail"]
-    assert 30.0 < r["aborts"][0]["trigger_s"] < 31.0  # stale after at most 0.5 s
+    assert 30.0 < r["aborts"][0]["trigger_s"] <= 30.5  # stale after at most 0.5 s
 
 
 def test_adc_error_bit_conversions_are_excluded_and_counted(tmp_path):

@@ -315,7 +315,8 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
             if rp > first.plan.engine_running_rpm:
                 assert "engine still turns" in why, why
             # refused with an output not in its safe state (a fault injected on the simulated rig)
-            s.sim.actuators.throttle(0.3)
+            # (the wiring: the latched driver refuses it, so the fault is a servo driven past the driver)
+            s.sim.actuators.wiring.throttle(0.3)
             assert "not in its safe state" in s.rearm_refusal()
             await pilot.press("r")
             assert await wait_for(pilot, lambda: "not in its safe state" in screen_text(app), 5), screen_text(app)

@@ -1,0 +1,51 @@
+"""The plan modes: which runner runs each mode, and the plans registered in code.
+
+Split from :mod:`dyno.control.plans` so that the dependency runs one way: the plan-file reader
+(:mod:`dyno.control.planfile`, which checks a file's ``mode``) and :mod:`dyno.control.plans`
+(which finds plans by name, through that reader) both read this table, and it imports neither.
+Nor does it import a runner's module or the controller: a runner is named as a
+``"module:function"`` string and imported when used (:func:`runner_for`), so this module is a
+leaf over :mod:`dyno.control.api`.  ``dyno.control.plans`` re-exports every name here (the same
+objects: a mode added to ``plans.RUNNERS`` is added here).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from dyno.control.api import TestPlan
+from dyno.errors import ConfigError
+
+#: mode -> "module:coroutine" (or the coroutine function itself); it takes the controller after the warm-up
+#: (those in FROM_IDLE right after GO)
+RUNNERS: dict[str, object] = {
+    "speed-hold": "dyno.control.speed_hold:run_speed_hold",
+    "steps": "dyno.control.steps:run_steps",
+    "engagement": "dyno.control.characterise:run_engagement",
+    "coast-down": "dyno.control.coastdown:run_coast_down",
+    "drive-grid": "dyno.control.drive_grid:run_drive_grid",
+}
+
+#: modes whose runner starts from idle (GO, then no full-throttle warm-up): the characterisations
+FROM_IDLE = {"engagement", "coast-down"}
+
+#: plans registered in code (no file); the shipped plan files are added to these by name
+PLANS: dict[str, TestPlan] = {
+    "engagement": TestPlan(mode="engagement", name="engagement"),  # dyno.control.characterise
+    "coast-down": TestPlan(mode="coast-down", name="coast-down"),  # dyno.control.coastdown
+}
+
+
+def runner_for(mode: str):
+    """The coroutine function that runs a plan of ``mode`` (see :data:`RUNNERS`)."""
+    if mode not in RUNNERS:
+        raise ConfigError("plan", "mode", f"one of step, {', '.join(sorted(RUNNERS))}, got {mode!r}")
+    if callable(RUNNERS[mode]):
+        return RUNNERS[mode]
+    module, _, fn = RUNNERS[mode].partition(":")
+    return getattr(importlib.import_module(module), fn)
+
+
+def known_modes() -> set[str]:
+    """Every mode a plan file may name: ``step``, the registered runners, and any mode a code plan uses."""
+    return {"step", *RUNNERS, *(p.mode for p in PLANS.values())}
