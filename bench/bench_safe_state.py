@@ -125,7 +125,11 @@ def _listed(runs_root: Path, rows: list[dict]) -> None:
     lib.reindex(conn, runs_root)
     runs = {Path(r["path"]).name: (r.get("state"), r.get("n_points")) for r in lib.dump(conn).get("runs", [])}
     for row in rows:
-        row["listed"] = runs.get(Path(row["run_dir"]).name) == (row["state"], row["points"])
+        state, n = runs.get(Path(row["run_dir"]).name, (None, None))
+        row["library_state"] = state
+        # a full disk takes the run's last records with it: the library shows what reached the disk
+        same = state == row["state"] or (row["drill"].startswith("disk-full") and state == "incomplete")
+        row["listed"] = same and n == row["points"]
 
 
 def fmt(v, spec="{:.3f}") -> str:

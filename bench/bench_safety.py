@@ -62,12 +62,17 @@ def _drills_for(name: str, t: float):
 
 
 def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, plan=None) -> dict:
+    held: dict = {}
     opts = RunOptions(sim=True, seed=seed, out_dir=out, drills=_drills_for(name, t), handle_signals=True,
-                      plan=plan or TestPlan())
+                      plan=plan or TestPlan(), setup=lambda ctx: held.update(ctx=ctx))
     if mock_pins:
         opts.mock_pins = True
     r = run_test(opts)
     a = r["aborts"][0] if r["aborts"] else {}
+    m = held["ctx"].sim.model  # the physics' own verdict: pads off the rotor, actuator off, idle, killed
+    physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0
+                    and not m.engine_enabled)
+    o = r["outputs"]
     try:
         replayed = len(load_run(r["run_dir"]).docs("point"))
     except Exception as exc:  # noqa: BLE001 - the table reports it
@@ -76,11 +81,17 @@ def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, p
             "detection_s": a.get("detection_s"), "latency_s": a.get("latency_s"),
             "overshoot_c": a.get("overshoot_c"), "rig_safe": r["rig_safe"], "points": len(r["points"]),
             "replayed": replayed, "discarded": len(r.get("discarded", [])), "exit": exit_code(r),
-            "note": a.get("latency_note", ""),
+            "note": a.get("latency_note", ""), "physics_safe": physics_safe,
+            "brake_mm_at_safe": o.get("brake_position_at_safe_mm"), "release_s": o.get("release_s"),
+            "release_bound_s": o.get("release_bound_s"),
             "resets_seen": r["frames"]["device_resets"]}
 
 
 def within(row: dict, bound) -> bool:
+    released = (row["physics_safe"] and row["rig_safe"] == row["physics_safe"] and row["release_s"] is not None
+                and row["release_s"] <= row["release_bound_s"])
+    if not released:
+        return False
     if row["drill"] in SURVIVABLE:
         return row["state"] == "done" and row["rig_safe"] and row["replayed"] == row["points"]
     ok = row["state"] == "aborted" and row["rig_safe"] and row["replayed"] == row["points"]
@@ -121,14 +132,17 @@ def main() -> int:
         return 0 if all(r["ok"] for r in rows) else 1
     path = "sim --mock-pins" if args.mock_pins else "sim"
     print(f"\nFault drills on the simulated rig ({path}); times in true (simulated) seconds from the physical onset")
-    print("| drill | onset T s | cause | detection s | safe-state latency s | bound s | overshoot C | outputs safe "
+    print("| drill | onset T s | cause | detection s | safe-state latency s | bound s | overshoot C "
+          "| brake mm at safe | release s (bound) | rig_safe / physics "
           "| points kept (replayed) | discarded | exit | within bound |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        lat = "< 0 (before the limit)" if r["note"] else fmt(r["latency_s"])
+        lat = f"{fmt(r['latency_s'])} (before the limit)" if r["note"] else fmt(r["latency_s"])
         cause = r["cause"] if r["drill"] not in SURVIVABLE else f"survived, {r['resets_seen']} resets seen"
         print(f"| {r['drill']} | {r['t_s']:g} | {cause} | {fmt(r['detection_s'])} | {lat} "
-              f"| {fmt(r['bound_s'], '{:g}')} | {fmt(r['overshoot_c'], '{:.1f}')} | {'yes' if r['rig_safe'] else 'NO'} "
+              f"| {fmt(r['bound_s'], '{:g}')} | {fmt(r['overshoot_c'], '{:.1f}')} "
+              f"| {fmt(r['brake_mm_at_safe'], '{:.2f}')} | {fmt(r['release_s'])} ({fmt(r['release_bound_s'])}) "
+              f"| {'yes' if r['rig_safe'] else 'NO'} / {'yes' if r['physics_safe'] else 'NO'} "
               f"| {r['points']} ({r['replayed']}) | {r['discarded']} | {r['exit']} | {'yes' if r['ok'] else 'NO'} |")
     bad = [r for r in rows if not r["ok"]]
     print(f"\n{len(rows) - len(bad)}/{len(rows)} rows within their bound")
