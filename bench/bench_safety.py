@@ -1,15 +1,20 @@
 #!/usr/bin/env python3
-"""Every fault drill on the simulated rig, at several onset times: one table.
+"""The fault drills' bench: every drill on every shipped plan (the default), or at timed onsets (``--timed``).
 
-For each drill and onset time it runs ``dyno run --sim`` in-process (the same
-composition root the command uses, signal handlers included) and prints: the
-cause recorded, the detection time and the safe-state latency in true
-(simulated) time from the physical onset, the overshoot where it applies, whether
-the outputs ended safe, the points kept on disk (and that they replay), and the
-exit code the command returns.  ``--mock-pins`` drives the simulated physics
-through the real-rig output code (gpiozero on MockFactory).
+Default: the plan x drill x phase x mode matrix of ``bench/bench_safe_state.py`` (its options pass through:
+``--quick``, ``--plans``, ``--drills``, ``--phases``, ``--modes``, ``--workers``, ``--markdown``, ``--json``):
+the safe state as the physics sees it, the release against its bound, ``rig_safe`` against the physics.
 
-    python bench/bench_safety.py [--mock-pins] [--quick] [--json]
+``--timed``: each drill at several onset times on the thesis-step plan; for each it runs ``dyno run --sim``
+in-process (the same composition root the command uses, signal handlers included) and prints: the cause
+recorded, the detection time and the safe-state latency in true (simulated) time from the physical onset,
+the overshoot where it applies, the brake's release (true time to pads off, against its bound) and whether
+the outputs ended safe as reported and as the physics has them, the points kept on disk (and that they
+replay), and the exit code the command returns.  ``--mock-pins`` drives the simulated physics through the
+real-rig output code (gpiozero on MockFactory).
+
+    python bench/bench_safety.py [--quick] [--plans ...] [--modes sim,mock,sim+faults] [--markdown]
+    python bench/bench_safety.py --timed [--mock-pins] [--quick] [--json] [--only NAME]
 """
 
 from __future__ import annotations
@@ -107,6 +112,12 @@ def fmt(v, spec="{:.3f}") -> str:
 
 
 def main() -> int:
+    if "--timed" not in sys.argv[1:]:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import bench_safe_state
+
+        return bench_safe_state.main()
+    sys.argv.remove("--timed")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mock-pins", action="store_true", help="through the real-rig output code (MockFactory)")
     ap.add_argument("--quick", action="store_true", help="one onset time per drill")

@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import datetime as _dt
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.acquisition.poller import Poller
@@ -17,7 +17,6 @@ from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-e
 from dyno.acquisition.reader import make_reader
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
-from dyno.protocol import v1
 from dyno.transports.base import I2CTransport
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -56,17 +55,23 @@ class RunOptions:
 
 
 def default_run_dir(root: Path | None = None) -> Path:
+    """A new run directory ``<root>/<timestamp>[-N]``, created here: claimed atomically (``mkdir`` fails on
+    a name another process took in the meantime, and the next suffix is tried), so runs started together
+    never pick the same one."""
     if root is None:
         from dyno.runlog.files import runs_root
 
         root = runs_root()  # $DYNO_RUNS_DIR, else runs/
+    root.mkdir(parents=True, exist_ok=True)
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    path = root / stamp
-    n = 1
-    while path.exists():
-        n += 1
-        path = root / f"{stamp}-{n}"
-    return path
+    for n in range(1, 100_000):
+        path = root / (stamp if n == 1 else f"{stamp}-{n}")
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(root / stamp)
 
 
 def load_inputs(opts: RunOptions):
@@ -189,7 +194,6 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         thermometer = hw.thermometer.object_c
     reader = make_reader(protocol, transport)
     poller = Poller(reader, poll_hz=rig_cfg.poll_hz, thermometer=thermometer, blocking_io=blocking)
-    out = Path(opts.out_dir) if opts.out_dir else default_run_dir()
     meta = {
         "mode": "sim" if opts.sim else "rig",
         "protocol": protocol,
@@ -226,6 +230,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
 
         meta["plan_source"] = opts.plan.source
         meta["plan_text_sha256"] = hashlib.sha256(plan_text.encode()).hexdigest()
+    out = Path(opts.out_dir) if opts.out_dir else default_run_dir()  # (last: a bad input leaves no directory)
     writer = RunWriter(out, meta, calibration=calibration.to_dict(),
                        engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text,
                        plan_text=plan_text)
@@ -551,7 +556,9 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         if trip is not None:
             ctx.trip = trip
             if ctx.hw is not None:
-                ctx.hw.actuators.safe_state()
+                from dyno.control.outputs import enter_safe_state
+
+                enter_safe_state(ctx.hw.actuators, latch=True)
             if on_trip is not None:
                 on_trip(trip)
 

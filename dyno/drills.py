@@ -267,23 +267,17 @@ def first_safe_s(history, t_from_s: float) -> float | None:
     controller, the watchdog, a signal handler, or the real-rig output code through
     the mock pins, whose relay settle makes "release started" a little later).
     """
-    throttle, enabled, direction = 0.0, False, 0
-    seen_from = False
-    for t, what, value in history:
-        if t >= t_from_s and not seen_from:
-            seen_from = True
-            if throttle == 0.0 and not enabled and direction <= 0:
+    from dyno.sim.rig import wired_states
+
+    safe_before = False
+    for _, t, safe in wired_states(history):
+        if t >= t_from_s:
+            if safe_before:
                 return t_from_s  # already safe when the fault began
-        if what == "safe_state":
-            throttle, enabled, direction = 0.0, False, -1
-        elif what == "throttle":
-            throttle = float(value)
-        elif what == "kill":
-            enabled = not value
-        elif what == "brake":
-            direction = int(value)
-        if t >= t_from_s and throttle == 0.0 and not enabled and direction <= 0:
-            return t
+            if safe:
+                return t
+        else:
+            safe_before = safe
     return None
 
 

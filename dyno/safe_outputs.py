@@ -28,19 +28,11 @@ def last_safe_transition(history: list, history_mm: list) -> tuple[float | None,
     Safe inputs: throttle idle, ignition killed, actuator not applying.  ``history`` is
     :class:`dyno.sim.rig.SimWiring`'s ``(t, what, value)`` list (``safe_state`` sets all three at once).
     """
-    throttle, enabled, direction = 0.0, True, 0
+    from dyno.sim.rig import wired_states
+
     was_safe = False
     found: tuple[float | None, float | None] = (None, None)
-    for i, (t, what, value) in enumerate(history):
-        if what == "safe_state":
-            throttle, enabled, direction = 0.0, False, -1
-        elif what == "throttle":
-            throttle = float(value)
-        elif what == "kill":
-            enabled = not value
-        elif what == "brake":
-            direction = int(value)
-        safe = throttle == 0.0 and not enabled and direction <= 0
+    for i, t, safe in wired_states(history):
         if safe and not was_safe:
             found = (t, history_mm[i] if i < len(history_mm) else None)
         was_safe = safe

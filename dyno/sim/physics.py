@@ -329,20 +329,18 @@ class RigModel(RigSignals):
             self._relay_made_s = t0 + p.relay_transfer_s
         a_before = self._act_mm
         if self.brake_hold_relay and not self.engine_enabled:
-            # K3 (hardware/README.md) de-energised with the kill relay: its NC contacts power the actuator
-            # straight from the supply in the release polarity until its internal end stop; the driver's
-            # enable and direction relay are cut off by its open NO contacts.
+            # K3 (hardware/README.md) off with the kill relay: its NC contacts drive the actuator in release
+            # to its end stop, the driver cut off
             self._act_mm = brk.move_actuator_mm(self._act_mm, -1, h)
         elif self.actuator_dir:
             run_s = t0 + h - self._relay_made_s  # powered time with the contacts made, in this cell
             if run_s > 0.0:
                 self._act_mm = brk.move_actuator_mm(self._act_mm, self._relay_goal, h if run_s > h else run_s)
-        if self._act_mm != a_before:
-            a0 = brk.a0_mm
-            if a_before > a0 >= self._act_mm:  # the pads left the rotor in this cell (constant speed)
-                self.pads_off_at_s = t0 + h * (a_before - a0) / (a_before - self._act_mm)
-            elif self._act_mm > a0 >= a_before:
-                self.pads_off_at_s = None
+        a0 = brk.a0_mm
+        if a_before > a0 >= self._act_mm:  # the pads left the rotor in this cell (constant speed)
+            self.pads_off_at_s = t0 + h * (a_before - a0) / (a_before - self._act_mm)
+        elif self._act_mm > a0 >= a_before:
+            self.pads_off_at_s = None
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
         if self._driven_loss[0] or self._driven_loss[1] or self._driven_loss[2]:

@@ -78,6 +78,22 @@ class SimWiring:
         self.record("kill", bool(killed))
 
 
+def wired_states(history):
+    """Replay :class:`SimWiring`'s ``history``: yields ``(index, t, safe)`` after each entry, ``safe`` being
+    throttle idle, ignition killed and the actuator not applying (stopped or releasing)."""
+    throttle, enabled, direction = 0.0, True, 0
+    for i, (t, what, value) in enumerate(history):
+        if what == "safe_state":
+            throttle, enabled, direction = 0.0, False, -1
+        elif what == "throttle":
+            throttle = float(value)
+        elif what == "kill":
+            enabled = not value
+        elif what == "brake":
+            direction = int(value)
+        yield i, t, throttle == 0.0 and not enabled and direction <= 0
+
+
 class SimActuators:
     """The controller's outputs on the simulated rig: a simulated driver over :class:`SimWiring`.
 

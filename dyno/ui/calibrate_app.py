@@ -163,7 +163,7 @@ class CalibrateApp(DynoApp):
 
         def handler(signum, frame) -> None:
             if self.cal_ctx.hw is not None:
-                self.cal_ctx.hw.actuators.safe_state()
+                self.cal_ctx.hw.actuators.safe_state(latch=True)  # at once, latched
             loop.call_soon_threadsafe(on_loop, signum)
 
         self._old_signals = {sig: signal.signal(sig, handler)
@@ -345,7 +345,7 @@ class CalibrateApp(DynoApp):
             self.wizard.redo_step()
         act = getattr(self.rig, "actuators", None)  # the rig's outputs (hardware); the fixture has none
         if act is not None:  # pragma: no cover - rig only
-            act.safe_state()
+            act.safe_state(latch=True)
         if self.wizard is not None and self.cal_ctx is not None and self.cal_ctx.trip is None:
             from dyno.control.safety import Trip
 

@@ -17,11 +17,12 @@ import asyncio
 import json
 import math
 import shutil
-import sys
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
+from dyno.ui.pacing import SimTimeActuators, scaled_plan  # noqa: F401 (scaled_plan: re-exported)
+from dyno.ui.run_dirs import _finish_in_background, _next_run_dir
 
 FINISHED = (State.DONE, State.ABORTED)
 
@@ -39,38 +40,6 @@ class LiveOptions:
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
     drills: list = field(default_factory=list)  # dyno.drills.Drill (sim only), from the first frame
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
-
-
-def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
-    """The plan with every duration divided by ``speed`` (host seconds for ``speed`` x simulated ones)."""
-    if speed == 1.0:
-        return plan
-    k = 1.0 / speed
-    settle = replace(plan.settle, min_settle_s=plan.settle.min_settle_s * k,
-                     max_settle_s=plan.settle.max_settle_s * k, fixed_settle_s=plan.settle.fixed_settle_s * k)
-    return replace(plan, engine_detect_s=plan.engine_detect_s * k, engine_start_timeout_s=plan.engine_start_timeout_s * k,
-                   warmup_s=plan.warmup_s * k,
-                   step_s=plan.step_s * k, step_min_s=plan.step_min_s * k, step_max_s=plan.step_max_s * k,
-                   measure_s=plan.measure_s * k, max_measure_s=plan.max_measure_s * k, settle_mode="fixed",
-                   settle=settle)
-
-
-class SimTimeActuators:
-    """The simulated actuators with ``tick`` translated to simulated time.
-
-    The controller ticks with the loop's time; the simulated release stroke is
-    timed in the physics' time.  Everything else passes through.
-    """
-
-    def __init__(self, inner, sim_now) -> None:
-        self._inner = inner
-        self._sim_now = sim_now
-
-    def tick(self, now_s: float) -> None:
-        self._inner.tick(self._sim_now())
-
-    def __getattr__(self, name):
-        return getattr(self._inner, name)
 
 
 class LiveSession:
@@ -504,31 +473,3 @@ INPUT_COPIES = ("plan.toml",)
 NO_REARM = {"watchdog": "the control loop stalled", "error": "the controller crashed",
             "safety_error": "the safety task failed", "disk_full": "the run log cannot be written",
             "signal": "the session is closing"}
-
-
-def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
-    """The next run's directory: ``<--out>-2``, ``-3``, ... beside the one given, else a new runs/<timestamp>."""
-    if out_dir is None:
-        from dyno.app import default_run_dir
-
-        return default_run_dir(old.parent)
-    base = Path(out_dir)
-    n = 2
-    while (base.parent / f"{base.name}-{n}").exists():
-        n += 1
-    return base.parent / f"{base.name}-{n}"
-
-
-async def _finish_in_background(run_dir: Path) -> None:
-    """report.html and the run library's entry for an ended run, in a low-priority child process
-    (matplotlib would hold the loop, and the GIL, for seconds)."""
-    code = ("import os, sys; os.nice(10); from dyno.cli.ui_cmd import finish_run; "
-            "finish_run(sys.argv[1], announce=False)")
-    try:
-        proc = await asyncio.create_subprocess_exec(sys.executable, "-c", code, str(run_dir),
-                                                    stdin=asyncio.subprocess.DEVNULL,
-                                                    stdout=asyncio.subprocess.DEVNULL,
-                                                    stderr=asyncio.subprocess.DEVNULL)
-        await proc.wait()
-    except (OSError, asyncio.CancelledError):
-        pass  # `dyno ui` retries at exit (report.html missing), `dyno report RUN` any time

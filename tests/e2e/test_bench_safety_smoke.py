@@ -18,8 +18,8 @@ def _bench(*args, timeout=900):
                           timeout=timeout)
 
 
-def test_bench_safe_state_quick_every_plan_ends_physically_safe():
-    p = _bench(REPO / "bench" / "bench_safe_state.py", "--quick", "--workers", "2", "--json")
+def test_bench_safety_quick_every_plan_ends_physically_safe():
+    p = _bench(REPO / "bench" / "bench_safety.py", "--quick", "--workers", "2", "--json")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     rows = json.loads(p.stdout)
     plans = {r["plan"] for r in rows}
@@ -35,7 +35,7 @@ def test_bench_safe_state_quick_every_plan_ends_physically_safe():
 
 
 def test_bench_safety_quick_one_drill_as_a_process():
-    p = _bench(REPO / "bench" / "bench_safety.py", "--quick", "--only", "bus-lost", "--json")
+    p = _bench(REPO / "bench" / "bench_safety.py", "--timed", "--quick", "--only", "bus-lost", "--json")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     rows = json.loads(p.stdout)
     assert rows and all(r["ok"] and r["physics_safe"] for r in rows), rows
