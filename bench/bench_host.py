@@ -49,7 +49,7 @@ def realistic_frames(n: int, seed: int = 0, version: int = 1) -> list[bytes]:
 
 
 def bench_throughput(n: int) -> float:
-    frames = realistic_frames(n)
+    frames = realistic_frames(n, version=2)  # the protocol the host session speaks (v2)
     session = LinkSession()
     streams = Streams()
     with tempfile.TemporaryDirectory() as d:

@@ -41,7 +41,11 @@ def run(args) -> int:
     drills = [parse_drill(d, engine=False) for d in args.drill]
     from dyno.rigconfig import load_rig
 
-    load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    if not args.sim:  # no GPIO / I2C here: one line and exit 2, not a traceback from inside the app
+        from dyno.hw.preflight import check_rig_present
+
+        check_rig_present(rig_cfg)
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     history = args.history

@@ -41,7 +41,11 @@ def run(args) -> int:
     from dyno.rigconfig import load_rig
 
     plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
-    load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    if not args.sim:  # no GPIO / I2C here: one line and exit 2, not a traceback from inside the app
+        from dyno.hw.preflight import check_rig_present
+
+        check_rig_present(rig_cfg)
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     if getattr(args, "mock_pins", False) and not args.sim:

@@ -170,7 +170,10 @@ class CalibrateApp(DynoApp):
                              for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
 
     async def _quit_code(self, code: int) -> None:
-        await self._stop_rig()
+        await self._stop_rig()  # safe state and the rig released first
+        # A hang-up leaves Textual restoring a terminal that is gone (it waited forever on its input thread,
+        # the wizard holding the pins and the bus): if the exit has not happened within a grace, it is forced.
+        _exit_after(code, grace_s=0.8)
         self.exit(return_code=code)
 
     # --- view ----------------------------------------------------------------------------------
@@ -389,3 +392,16 @@ def main(opts: CalibrateOptions) -> int:
     app = CalibrateApp(opts)
     app.run()
     return app.return_code or 0
+
+
+def _exit_after(code: int, grace_s: float) -> None:
+    """End the process with ``code`` in ``grace_s`` unless it has ended by then (a daemon thread)."""
+    import os
+    import threading
+    import time
+
+    def later() -> None:
+        time.sleep(grace_s)
+        os._exit(code)
+
+    threading.Thread(target=later, name="dyno-exit-grace", daemon=True).start()
