@@ -53,3 +53,33 @@ def test_after_an_estop_the_release_stroke_ends_and_the_rig_at_rest_polls_at_the
             await s.close("test")
 
     asyncio.run(scenario())
+
+
+def test_a_jog_under_way_when_the_rig_trips_cannot_stop_the_release(tmp_path):
+    """The operator jogs the brake on (manual mode); the link is lost mid-jog. The jog's own end (its timer's
+    STOP), the operator's next jog and the session's cancel all come after the safe state: each is refused and
+    logged, and the physics' pads leave the rotor (the release runs to its end)."""
+    from dyno.control.outputs import APPLY
+
+    async def scenario():
+        s = LiveSession(LiveOptions(sim=True, speed=2.0, seed=2, out_dir=tmp_path / "run", jog_s=2.0))
+        s.start()
+        try:
+            assert await _until(lambda: s.controller.state is State.ARMED, 30), s.controller.reason
+            m, act = s.sim.model, s.sim.actuators
+            assert s.set_manual(True).startswith("manual mode")
+            assert s.jog(APPLY) is None  # 2 s of rig time on the brake (1 s here), its STOP on a timer
+            assert await _until(lambda: m.actuator_mm > 6.0, 5), m.actuator_mm  # well onto the rotor
+            s.sim.bus.lost = True  # the cable falls out mid-jog
+            assert await _until(lambda: s.controller.state is State.ABORTED, 5)
+            assert "test finished" in s.jog(APPLY)  # the operator tries again: refused by the session
+            assert not m.pads_off, "the release had already ended: this test would prove nothing"
+            s.cancel_jog()  # ... and the pending jog's STOP goes through the controller's gate: refused
+            assert await _until(lambda: m.pads_off and m.actuator_dir == STOP, 10), m.actuator_mm
+            refused = [r for r in s.controller.refused if r["command"] == "brake" and r["value"] == STOP]
+            assert refused, s.controller.refused
+            assert act.latched and act.is_safe
+        finally:
+            await s.close("test")
+
+    asyncio.run(scenario())
