@@ -250,6 +250,15 @@ class TestController(Measuring):
             # out, the outputs are in the latched safe state (a release already under way keeps going).
             if self.state is State.ABORTED and not getattr(self.act, "latched", False):
                 self.latch_safe_state()
+        if self.state not in (State.DONE, State.ABORTED):
+            # The plan task ended (returned, or was cancelled and swallowed it) without finishing the test:
+            # never leave the rig running as it was (found by bench_safety: a crash injected mid-measure).
+            # (an injected crash may have been raised in a plan's helper task, e.g. the speed hold's loop,
+            # while the plan task itself was cancelled)
+            crash, self.fault_injection = self.fault_injection or self._injected, None
+            why = (f"controller error: {type(crash).__name__}: {crash}" if crash is not None
+                   else f"the plan ended in state {self.state.value} without finishing the test")
+            self.abort("error", why)
         if self.state is State.DONE:
             self.latch_safe_state()  # end of test: same safe state, not an abort
             if not self.points and not self.results:
@@ -268,10 +277,12 @@ class TestController(Measuring):
 
     def inject_crash(self, exc: BaseException) -> None:
         """Drill ``controller-crash``: the control task raises ``exc`` at once."""
-        self.fault_injection = exc
+        self.fault_injection = self._injected = exc
         task = getattr(self, "_plan_task", None)
         if task is not None and not task.done():
             task.cancel()
+
+    _injected: BaseException | None = None  # the last crash injected (drill controller-crash)
 
     #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
     #: runners' own durations (hold periods, approach times) must shrink like the plan's

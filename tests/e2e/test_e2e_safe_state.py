@@ -150,3 +150,12 @@ def test_brake_hold_relay_releases_without_software(tmp_path):
     assert dataclasses.is_dataclass(ctx.rig_cfg)
     m = ctx.sim.model
     assert m.actuator_mm <= m.brake.a0_mm and r["rig_safe"] is True
+
+
+def test_a_crash_raised_in_a_plans_helper_task_still_ends_in_the_safe_state(tmp_path):
+    """Found by bench_safety: the crash injected mid-measure on torque-hold was raised in the hold loop's task
+    while the plan task was cancelled; the run ended in state MEASURE, throttle open, no abort. The engine now
+    has the last word: a plan that ends without finishing is an abort to the safe state."""
+    r, ctx = _run("torque-hold", "controller-crash@measure+1", tmp_path)
+    assert r["state"] == "aborted" and r["aborts"][0]["cause"] == "error", (r["state"], r["aborts"])
+    _assert_physically_safe(r, ctx)
