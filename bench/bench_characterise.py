@@ -7,7 +7,10 @@ full-shift ratio's relative error.  Part 2 runs ``--plan coast-down`` with a dri
 switched on in the sim and prints the loss curve's largest relative error over the fitted speed range.
 Part 3: the torque zero check with a drifting zero.
 
-    python bench/bench_characterise.py [--seeds 3]
+    python bench/bench_characterise.py [--seeds 3] [--quick]
+
+``--quick`` (CI's smoke run): one seed; two tunes (the stock tune, whose ramps give the shift-out slope,
+and the stiff primary spring, whose single load skips it); the zero check at one drift.
 """
 
 from __future__ import annotations
@@ -26,19 +29,26 @@ from dyno.sim.physics import RigParams  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TUNES = ("cvtech-stock", "heavy-flyweights", "stiff-primary-spring")
+QUICK_TUNES = ("cvtech-stock", "stiff-primary-spring")
+DRIFTS = (0.0, 0.1, 1.0)
 LOSS = (0.10, 4e-4, 1.2e-6)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run: one seed, two tunes, the zero check at one drift")
     a = ap.parse_args()
+    tunes, drifts = TUNES, DRIFTS
+    if a.quick:
+        a.seeds, tunes, drifts = 1, QUICK_TUNES, (1.0,)
     tmp = Path(tempfile.mkdtemp(prefix="bench_char_"))
     print("| tune | seed | engagement err rpm (±95 %) | lock-up err rpm | shift-out err rpm (±95 %) | "
           "full-shift ratio err % (±95 %) | shift-out slope rpm/N·m (±95 %) [truth] | sim s | wall s |")
     print("|---|---|---|---|---|---|---|---|---|")
     worst = {"eng": 0.0, "so": 0.0, "fs": 0.0}
-    for tune in TUNES:
+    for tune in tunes:
         for seed in range(1, a.seeds + 1):
             t0 = time.monotonic()
             path = ROOT / "calibration" / "tunes" / f"{tune}.toml"
@@ -76,7 +86,7 @@ def main() -> None:
               f"{time.monotonic() - t0:.1f} |")
     print("\n| zero drift N·m/min | true drift N·m | measured N·m (±95 %) | flagged |")
     print("|---|---|---|---|")
-    for drift in (0.0, 0.1, 1.0):
+    for drift in drifts:
         r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp / f"z-{drift}", plan=plan_named("engagement"),
                                 sim_params=RigParams(adc_zero_drift_nm_per_min=drift)))
         z = r["torque_zero"]

@@ -6,7 +6,9 @@ widest 95 % CI, the share of points whose CI holds the sim's truth and the media
 then the totals, and the grid of the first seed (efficiency % per throttle and secondary setpoint).
 Uses the synthetic part-throttle map (calibration/engine_maps/baja-10hp-representative-part-throttle.csv).
 
-    python bench/bench_drive_grid.py [--seeds 10] [--plan drive-grid]
+    python bench/bench_drive_grid.py [--seeds 10] [--plan drive-grid] [--quick]
+
+``--quick`` (CI's smoke run): one seed.
 """
 
 from __future__ import annotations
@@ -31,7 +33,10 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--plan", default="drive-grid")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: one seed")
     a = ap.parse_args()
+    if a.quick:
+        a.seeds = 1
     rows, all_pts, first = [], [], None
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(1, a.seeds + 1):

@@ -11,7 +11,9 @@ the auto-tune's identification runs first at the operating point and its kp is u
 
 Through the real-rig output code on mock pins (rig.toml's relay settle honoured).
 
-    python bench/bench_hold_tune.py [--variable torque|engine] [--seeds 1,2,3] [--kp 1.0,2.0] [--identify]
+    python bench/bench_hold_tune.py [--variable torque|engine] [--seeds 1,2,3] [--kp 1.0,2.0] [--identify] [--quick]
+
+``--quick`` (CI's smoke run): seed 1 only.
 """
 
 from __future__ import annotations
@@ -119,7 +121,10 @@ def main() -> int:
     ap.add_argument("--identify", action="store_true")
     ap.add_argument("--deadband", type=float, default=None, help="the hold's dead band (default: rig.toml's)")
     ap.add_argument("--stiff", action="store_true", help="a brake spring twice as stiff (13 N/mm)")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: seed 1 only")
     a = ap.parse_args()
+    if a.quick:
+        a.seeds = "1"
     params = None
     if a.stiff:
         from dyno.sim.physics import RigParams

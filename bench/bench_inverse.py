@@ -1,13 +1,13 @@
 """Slip-consistent inverse against the simulator's truth, and the belt table's first build.
 
-    python bench/bench_inverse.py [--seeds 1 2 3] [--full 0 2] [--table-build]
+    python bench/bench_inverse.py [--seeds 1 2 3] [--full 0 2] [--table-build] [--quick]
 
 Per seed: a default simulated run (`dyno run --sim`), every valid point inverted
 (closed-form slip at the run's tune), worst geometric-ratio and slip errors against
 the sim's recorded truth, time per point.  ``--full I J``: the full-model tier at
 those point indices (seconds per point; gross slip is a state).  ``--table-build``:
 the sim's belt table at the stock tune's clamp from an empty cache (minutes).
-Figures go to docs/belt-model.md ("Slip-consistent inverse").
+Figures go to docs/belt-model.md ("Slip-consistent inverse").  ``--quick`` (CI's smoke run): seed 1 only.
 """
 
 from __future__ import annotations
@@ -39,7 +39,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--full", type=int, nargs="*", default=[])
     ap.add_argument("--table-build", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: seed 1 only")
     args = ap.parse_args()
+    if args.quick:
+        args.seeds = [1]
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             out = Path(tmp) / f"seed{seed}"

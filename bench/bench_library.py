@@ -5,7 +5,9 @@ to N run directories with altered metadata (creation time, seed, tune name), the
 times ``dyno runs reindex`` (in-process: ``reindex`` on a fresh index), the
 end-of-run hook path (``index_run`` once per run) and a no-change ``sync``.
 
-    python bench/bench_library.py [--n 200] [--keep DIR]
+    python bench/bench_library.py [--n 200] [--keep DIR] [--quick]
+
+``--quick`` (CI's smoke run): 20 run directories.
 """
 
 from __future__ import annotations
@@ -64,7 +66,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--keep", type=Path, default=None, help="leave the runs here (default: a temporary directory)")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: 20 run directories")
     args = ap.parse_args()
+    if args.quick:
+        args.n = 20
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench-library-"))
     try:
         t0 = time.perf_counter()

@@ -2,14 +2,15 @@
 """Benchmark: a full predicted shift curve (50 load points) with the
 closed-form belt relations (target < 1 s).  Prints, never asserts.
 
-    python bench/bench_shift_curve.py [--points 50] [--repeat 3] [--full] [--fit]
+    python bench/bench_shift_curve.py [--points 50] [--repeat 3] [--full] [--fit] [--quick]
 
 ``--full`` times the full belt model (dyno.model.solution.solve_point, BVP,
 cheap settings tol 1e-2 / rounded friction corner) at one shift-curve point
 driven by the primary axial force, cold and warm-started, and extrapolates
 to a curve (each curve point is a root solve in engine rpm: ~8 belt solves).
 ``--fit`` times the rig fit's residual vector and one exact prediction
-sweep on synthetic points (no sim run needed).
+sweep on synthetic points (no sim run needed).  ``--quick`` (CI's smoke run) is accepted and
+changes nothing: the default run takes a second or two.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--full", action="store_true", help="also time the full belt model (slow)")
     ap.add_argument("--fit", action="store_true", help="also time the rig fit's residuals")
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run: the same as the default run, which already takes a second or two")
     args = ap.parse_args()
 
     from dyno.tuning.shift_curve import EngineMap, load_engine_map, predict_shift_curve

@@ -6,7 +6,9 @@ Runs a test-like sequence on one core (pull start, idle, full throttle,
 150 Hz stepping, and prints the simulated time, the wall time, the speed-up
 over real time and the sensor event rate.
 
-    python bench/bench_sim.py [--seed S] [--dt 0.00667]
+    python bench/bench_sim.py [--seed S] [--dt 0.00667] [--quick]
+
+``--quick`` (CI's smoke run) is accepted and runs the same sequence: the full bench takes a few seconds.
 """
 
 from __future__ import annotations
@@ -51,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--dt", type=float, default=1 / 150, help="host step in seconds (default 1/150)")
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run: the same as the full run, which already takes only a few seconds")
     args = ap.parse_args(argv)
     model = RigModel(seed=args.seed)
     t0 = time.perf_counter()

@@ -13,7 +13,9 @@ reversals per second.  Part 2 runs the full steady test per plan
 Everything runs through the real-rig output code on mock pins (``--mock-pins``): the relay settle of
 ``rig.toml`` is honoured as on the rig.  The gains are ``rig.toml``'s [control].
 
-    python bench/bench_test_time.py [--seeds 10] [--thesis-seeds 2] [--step-seeds 10] [--skip-steps]
+    python bench/bench_test_time.py [--seeds 10] [--thesis-seeds 2] [--step-seeds 10] [--skip-steps] [--quick]
+
+``--quick`` (CI's smoke run): one seed of each part (steps, speed-hold, thesis-step).
 """
 
 from __future__ import annotations
@@ -164,7 +166,11 @@ def main() -> int:
     ap.add_argument("--step-seeds", type=int, default=10, help="seeds of the step part (~1-2 s each)")
     ap.add_argument("--step-seed-start", type=int, default=1)
     ap.add_argument("--skip-steps", action="store_true")
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run: one seed of each part (steps, speed-hold, thesis-step)")
     args = ap.parse_args()
+    if args.quick:
+        args.seeds = args.thesis_seeds = args.step_seeds = 1
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if not args.skip_steps and args.step_seeds > 0:

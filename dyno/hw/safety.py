@@ -182,7 +182,11 @@ class Watchdog:
 
     @property
     def period_s(self) -> float:
-        return max(self.timeout_s / 5, 0.005)
+        """How often it looks: a twentieth of the timeout (25 ms at 0.5 s).  Once tripped, its looks are
+        what advance the release's relay sequencing (enable off -> settle -> relay -> settle -> enable on)
+        while the loop is gone, so a coarse period would delay the release itself (at timeout/5 = 0.1 s the
+        pads left the rotor 0.2 s late: bench_safety, --mock-pins loop-stall:800)."""
+        return max(self.timeout_s / 20, 0.005)
 
     async def run(self, period_s: float | None = None) -> None:
         """asyncio task: ``asyncio.create_task(watchdog.run())``; cancel to stop."""
