@@ -48,4 +48,4 @@ def test_entry_point_ends_when_its_terminal_goes(command, screen, tmp_path):
     for pid in left:  # do not leave it behind for the next test
         subprocess.run(["kill", "-9", str(pid)])
     assert not left, f"still running {time.monotonic() - t0:.1f} s after its terminal closed"
-    assert time.monotonic() - t0 <= 2.0
+    assert time.monotonic() - t0 <= 3.0  # (2.0 s seen on a machine running two test workers and a bench)

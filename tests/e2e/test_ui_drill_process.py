@@ -31,7 +31,7 @@ def test_ui_mock_pins_drill_records_the_physical_safe_state(tmp_path):
                    check=True, timeout=20, env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""),
                                                 "HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
     try:
-        wait_screen(name, "ARMED", 90)
+        wait_screen(name, "ARMED", 150)  # (a busy 2-core machine: the app and the sim start slowly)
         subprocess.run(["tmux", "send-keys", "-t", name, "g"], timeout=20)
         wait_screen(name, "GO", 10)
         subprocess.run(["tmux", "send-keys", "-t", name, "y"], timeout=20)
