@@ -16,6 +16,7 @@ and the stiff primary spring, whose single load skips it); the zero check at one
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import tempfile
 import time
@@ -44,6 +45,14 @@ def main() -> None:
     if a.quick:
         a.seeds, tunes, drifts = 1, QUICK_TUNES, (1.0,)
     tmp = Path(tempfile.mkdtemp(prefix="bench_char_"))
+    try:
+        _tables(a, tunes, drifts, tmp)
+    finally:
+        if a.quick:  # a smoke run leaves nothing behind
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _tables(a, tunes, drifts, tmp: Path) -> None:
     print("| tune | seed | engagement err rpm (±95 %) | lock-up err rpm | shift-out err rpm (±95 %) | "
           "full-shift ratio err % (±95 %) | shift-out slope rpm/N·m (±95 %) [truth] | sim s | wall s |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -5,6 +5,8 @@ accepts of corrupted frames, v1 (CRC-16) against v2 (CRC-32C), at bit-error rate
 
 Run:  python bench/bench_host.py [--frames N] [--quick] [--fuzz-only]
 Prints figures; asserts nothing (the machine is shared and noisy).
+``--quick`` (CI's smoke run): 10^4 frames per rate, 2*10^4 for the throughput, and a short simulated test
+(about 6 points of at most 3 s each) for the speed-up.
 """
 
 from __future__ import annotations
@@ -105,13 +107,14 @@ def false_accepts(frames: list[bytes], ber: float, seed: int, version: int = 1) 
             "rejected": causes}
 
 
-def bench_sim(seconds_cap: float = 600.0) -> dict:
+def bench_sim(seconds_cap: float = 600.0, plan=None) -> dict:
     from dyno.app import RunOptions, run_test
 
+    kw = {} if plan is None else {"plan": plan}
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
         c0 = time.process_time()
-        r = run_test(RunOptions(sim=True, seed=0, out_dir=Path(d) / "r", max_sim_s=seconds_cap))
+        r = run_test(RunOptions(sim=True, seed=0, out_dir=Path(d) / "r", max_sim_s=seconds_cap, **kw))
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
     return {"sim_s": r["sim_time_s"], "wall_s": wall, "cpu_s": cpu, "points": len(r["points"]),
@@ -150,7 +153,8 @@ def fuzz(n_fa: int, bers=(1e-4, 1e-3, 3e-3, 1e-2, 2e-2, 5e-2)) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=1_000_000, help="frames per bit-error rate")
-    ap.add_argument("--quick", action="store_true", help="10^4 frames per rate, short throughput run")
+    ap.add_argument("--quick", action="store_true",
+                    help="10^4 frames per rate, short throughput run, a short simulated test (CI smoke run)")
     ap.add_argument("--fuzz-only", action="store_true", help="only the false-accept fuzz")
     ap.add_argument("--bers", default="1e-4,1e-3,3e-3,1e-2,2e-2,5e-2", help="bit-error rates to fuzz")
     args = ap.parse_args()
@@ -163,8 +167,16 @@ def main() -> None:
     fps = bench_throughput(20_000 if args.quick else 200_000)
     print(f"decode+check+unwrap+stream+log: {fps:,.0f} frames/s per core "
           f"({fps / 150:.0f}x the 150 Hz poll rate)")
-    s = bench_sim()
-    print(f"simulated full test: {s['points']} points, {s['sim_s']:.0f} s simulated in {s['wall_s']:.1f} s wall "
+    if args.quick:
+        from dataclasses import replace
+
+        from dyno.control.controller import TestPlan
+
+        s = bench_sim(plan=replace(TestPlan(), target_points=6, max_measure_s=3.0, warmup_s=2.0))
+    else:
+        s = bench_sim()
+    print(f"simulated {'short (--quick)' if args.quick else 'full'} test: {s['points']} points, "
+          f"{s['sim_s']:.0f} s simulated in {s['wall_s']:.1f} s wall "
           f"({s['cpu_s']:.1f} s cpu): speed-up {s['speedup_wall']:.1f}x wall, {s['speedup_cpu']:.1f}x cpu")
     fuzz(n_fa, bers)
 

@@ -20,6 +20,12 @@ Prints (does not assert):
 5. the live overlay's latency: a simulated run's points handed to the overlay service at
    their acceptance times, acceptance -> prediction per point, warm vs cold (``--only latency``).
    The UI's own figure (on screen, 1x, whole run): ``python bench/bench_overlay_ui.py``.
+
+``--quick`` (CI's smoke run, about a minute): every table on a much smaller problem -- 1. at Table 6.1 only,
+tolerance 1e-2, slip threshold 1e-2, the PNG to a temporary directory (docs/img is left alone); 2. two cases
+(a verified one, the gross-slip one); 3. the rounded corner's cold solve, one warm start (from section 1's
+cold solve), a 3-point sweep over 1.1..0.9; 4. one ratio and torque, one variant; 5. the speed-hold run's first
+point, not solved again cold alone.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dyno.errors import DidNotConverge  # noqa: E402
+from dyno.errors import DidNotConverge, GrossSlip  # noqa: E402
 from dyno.model import bvp, capstan, closed_form, sweep  # noqa: E402
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT  # noqa: E402
 from dyno.model.solution import solve_point  # noqa: E402
@@ -67,11 +73,12 @@ def table_error_vs_time(quick: bool):
     """Every tier x tolerance x slip threshold at each of ERROR_POINTS, against the finest full solve there."""
     print("\n== 1. Error against run time (reference at each point: full BVP, tol 1e-4, v_th 1e-4 m/s; "
           "times are cold solves) ==")
-    tols = (1e-2, 1e-3) if quick else (1e-2, 1e-3, 3e-4)
-    slips = (1e-2, 1e-3, 1e-4)
+    tols = (1e-2,) if quick else (1e-2, 1e-3, 3e-4)
+    slips = (1e-2,) if quick else (1e-2, 1e-3, 1e-4)
+    points = [(label, op) for label, op in ERROR_POINTS if op == TABLE_6_1_POINT] if quick else ERROR_POINTS
     rows = []  # (point label, tier, tol, slip, seconds, err F_P, err F_S, err eta)
     base = None
-    for label, op in ERROR_POINTS:
+    for label, op in points:
         t0 = time.perf_counter()
         start = solve_point(TABLE_6_1, op, time_limit_s=300)
         if op == TABLE_6_1_POINT:
@@ -81,7 +88,7 @@ def table_error_vs_time(quick: bool):
               f"eta {ref.summary['efficiency']['overall']:.4f}, F_P {ref.summary['axial_force_n']['primary']:.0f} N",
               flush=True)
         for name, fn in (("capstan", capstan.capstan_point), ("closed form", closed_form.closed_form_point)):
-            n = 500
+            n = 50 if quick else 500
             t = time.perf_counter()
             for _ in range(n):
                 c = fn(TABLE_6_1, op)
@@ -107,11 +114,17 @@ def table_error_vs_time(quick: bool):
           f"{'err F_S':>10}{'err eta':>10}")
     for label, name, tol, slip, dt, ep, es, ee in rows:
         print(f"{label:<26}{name:<26}{tol!s:>7}{slip!s:>9}{dt:>10.3g}{ep:>10.2e}{es:>10.2e}{ee:>10.2e}")
-    _plot_error_vs_time(rows)
+    if quick:  # a smoke run's figures are not the documented ones: leave docs/img alone
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            _plot_error_vs_time(rows, Path(tmp) / PNG.name)
+    else:
+        _plot_error_vs_time(rows)
     return base if base is not None else solve_point()
 
 
-def _plot_error_vs_time(rows) -> None:
+def _plot_error_vs_time(rows, png: Path = PNG) -> None:
     try:
         import matplotlib
 
@@ -154,12 +167,15 @@ def _plot_error_vs_time(rows) -> None:
     fig.suptitle("belt model: error vs run time (error: max of F_P, F_S relative and efficiency absolute)",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.08, 1, 0.96))
-    PNG.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(PNG, dpi=80)
-    print(f"PNG: {PNG} ({PNG.stat().st_size // 1024} kB)")
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=80)
+    print(f"PNG: {png} ({png.stat().st_size // 1024} kB)")
 
 
-def table_extremes(base):
+QUICK_EXTREMES = ("slip 1e-2 m/s", "slack 10 N")  # a verified case and the gross-slip one
+
+
+def table_extremes(base, quick: bool = False):
     print("\n== 2. Stiff and extreme cases (warm start from Table 6.1, rounded corner, 30 s limit) ==")
     cases = [
         ("slip 1e-2 m/s", TABLE_6_1, TABLE_6_1_POINT, 1e-2),
@@ -178,6 +194,8 @@ def table_extremes(base):
         ("beta 8 deg", TABLE_6_1.with_sheave_angle(8.0), TABLE_6_1_POINT, 1e-4),
         ("beta 16 deg", TABLE_6_1.with_sheave_angle(16.0), TABLE_6_1_POINT, 1e-4),
     ]
+    if quick:
+        cases = [c for c in cases if c[0] in QUICK_EXTREMES]
     guess = solve_point(guess=base, friction_corner=0.2)
     print(f"{'case':<20}{'result':<12}{'run s':>7}{'resid':>10}{'F_P N':>9}{'F_S N':>9}{'eta':>8}  note")
     for name, params, op, slip in cases:
@@ -191,13 +209,15 @@ def table_extremes(base):
             print(f"{name:<20}{'verified' if verified else 'UNVERIFIED':<12}{time.perf_counter() - t:>7.1f}"
                   f"{raw.residual_max:>10.2e}{sm['axial_force_n']['primary']:>9.1f}{sm['axial_force_n']['secondary']:>9.1f}"
                   f"{sm['efficiency']['overall']:>8.4f}")
-        except DidNotConverge as exc:
+        except (DidNotConverge, GrossSlip) as exc:  # GrossSlip: a state (no steady solution), not a failure
             msg = str(exc)
-            print(f"{name:<20}{'DidNotConv':<12}{time.perf_counter() - t:>7.1f}{'':>36}  {msg[msg.index(': ', 30) + 2:][:90]}"
+            what = "GrossSlip" if isinstance(exc, GrossSlip) else "DidNotConv"
+            at = msg.find(": ", 30)
+            print(f"{name:<20}{what:<12}{time.perf_counter() - t:>7.1f}{'':>36}  {msg[at + 2 if at >= 0 else 0:][:90]}"
                   + (" ... GROSS SLIP (capstan bound reached): beyond the model" if "gross slip" in msg else ""))
 
 
-def table_performance(base):
+def table_performance(base, quick: bool = False):
     print("\n== 3. Performance against the issue-3 targets (ratio = measured / target; < 1 meets it) ==")
     rows = []
 
@@ -205,28 +225,35 @@ def table_performance(base):
         rows.append((label, seconds, target_s, note))
         print(f"  {label}: {seconds:.3g} s", flush=True)
 
-    t = time.perf_counter()
-    s = solve_point()
-    row("Table 6.1 from no starting solution (sharp corner, default)", time.perf_counter() - t, 20.0,
-        f"{s.summary['mesh_nodes']} nodes, {s.summary['continuation_steps']} steps")
+    if quick:  # the sharp corner's cold solve was timed in section 1 (its start): warm-start from that
+        s = base
+    else:
+        t = time.perf_counter()
+        s = solve_point()
+        row("Table 6.1 from no starting solution (sharp corner, default)", time.perf_counter() - t, 20.0,
+            f"{s.summary['mesh_nodes']} nodes, {s.summary['continuation_steps']} steps")
     t = time.perf_counter()
     sr = solve_point(friction_corner=0.2)
     row("Table 6.1 from no starting solution (rounded corner 0.2)", time.perf_counter() - t, 20.0,
         f"{sr.summary['mesh_nodes']} nodes")
-    for label, op in (("slack 100->105 N", replace(TABLE_6_1_POINT, slack_tension_n=105.0)),
-                      ("torque 18->19 N*m", replace(TABLE_6_1_POINT, primary_torque_nm=19.0)),
-                      ("ratio 1.00->1.02", replace(TABLE_6_1_POINT, ratio=1.02))):
+    warm = (("slack 100->105 N", replace(TABLE_6_1_POINT, slack_tension_n=105.0)),
+            ("torque 18->19 N*m", replace(TABLE_6_1_POINT, primary_torque_nm=19.0)),
+            ("ratio 1.00->1.02", replace(TABLE_6_1_POINT, ratio=1.02)))
+    for label, op in warm[:1] if quick else warm:
         t = time.perf_counter()
         w = solve_point(TABLE_6_1, op, guess=s)
         row(f"warm start from the neighbour, {label}", time.perf_counter() - t, 2.0, f"{w.summary['mesh_nodes']} nodes")
-    for corner, tol in ((0.0, 1e-3), (0.2, 1e-3), (0.2, 1e-2)):
+    # quick: 3 points near Table 6.1's ratio, the target scaled to the points (60 s for 20)
+    n_sweep, span = (3, (1.1, 0.9)) if quick else (20, sweep.DEFAULT_RATIO_RANGE)
+    for corner, tol in ((0.2, 1e-2),) if quick else ((0.0, 1e-3), (0.2, 1e-3), (0.2, 1e-2)):
         start = s if corner == 0 else sr
         t = time.perf_counter()
-        rows_, _ = sweep.sweep_operating_range(20, start=start, friction_corner=corner, tol=tol)
+        rows_, _ = sweep.sweep_operating_range(n_sweep, start=start, friction_corner=corner, tol=tol,
+                                               ratio_range=span)
         n_ok = sum(bool(r["converged"]) for r in rows_)
-        row(f"20-point sweep 1.74..0.72, corner={corner}, tol={tol:g}", time.perf_counter() - t, 60.0,
-            f"{n_ok}/20 converged")
-    n = 5000
+        row(f"{n_sweep}-point sweep {span[0]:g}..{span[1]:g}, corner={corner}, tol={tol:g}", time.perf_counter() - t,
+            60.0 * n_sweep / 20, f"{n_ok}/{n_sweep} converged")
+    n = 500 if quick else 5000
     t = time.perf_counter()
     for _ in range(n):
         closed_form.closed_form_point(TABLE_6_1, TABLE_6_1_POINT)
@@ -258,7 +285,8 @@ def _run_points(plan: str, seed: int, workdir: Path) -> list:
                                                                else (None, None) for p in pts)) if op is not None]
 
 
-def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0):
+def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0, max_points: int | None = None,
+                          cold_alone: bool = True):
     """A run's accepted points handed to the overlay service at their acceptance times (1x): latency per point.
 
     One background thread as in the UI, a fresh cache (nothing solved before: the first point is cold), and
@@ -275,7 +303,7 @@ def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0):
           "one background thread, fresh cache ==")
     with tempfile.TemporaryDirectory() as tmp:
         for plan in plans:
-            arrivals = _run_points(plan, seed, Path(tmp))
+            arrivals = _run_points(plan, seed, Path(tmp))[:max_points]
             t_first = arrivals[0][0]
             with ThreadPoolExecutor(1) as pool:
                 svc = OverlayService(TABLE_6_1, executor=pool, cache_dir=Path(tmp) / f"cache-{plan}")
@@ -300,13 +328,16 @@ def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0):
                 r = e.result
                 lat.append(e.latency_s)
                 t = time.perf_counter()
-                cold, _ = solve_job(TABLE_6_1, svc.entries[k].op, variant="corrected", slip_threshold_m_s=1e-4,
-                                    tol=1e-3, time_limit_s=60)
-                cold_s = time.perf_counter() - t
-                print(f"{i:>3}{op[0]:>7.3f}{op[1]:>6.0f}{op[2]:>6.1f}{e.latency_s:>11.2f}{r.get('start', '-')[:5]:>7}"
+                cold, cold_s = {}, math.nan  # (quick: not solved again alone; the service ran the same solve_job)
+                if cold_alone:
+                    cold, _ = solve_job(TABLE_6_1, svc.entries[k].op, variant="corrected", slip_threshold_m_s=1e-4,
+                                        tol=1e-3, time_limit_s=60)
+                    cold_s = time.perf_counter() - t
+                print(f"{i:>3}{op.ratio:>7.3f}{op.primary_speed_rpm:>6.0f}{op.primary_torque_nm:>6.1f}"
+                      f"{e.latency_s:>11.2f}{r.get('start', '-')[:5]:>7}"
                       f"{r.get('steps', 0):>6}{cold_s:>14.2f}{cold.get('steps', 0):>11}")
             print(f"latency per point: median {statistics.median(lat):.2f} s, max {max(lat):.2f} s "
-                  f"(max after the first {max(lat[1:]):.2f} s; goal <= 2 s)")
+                  f"(max after the first {max(lat[1:], default=math.nan):.2f} s; goal <= 2 s)")
 
 
 GRID_RATIOS = (0.9, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5)
@@ -324,7 +355,7 @@ def _stock_tune_clamp_n(ratio: float) -> float:
     return float(actuators.primary_axial_force_n(tune, TABLE_6_1_POINT.primary_speed_rpm, r_p))
 
 
-def table_grid(variants=("corrected", "as_published")):
+def table_grid(variants=("corrected", "as_published"), ratios=GRID_RATIOS, torques=GRID_TORQUES_NM):
     """Cold solve (no starting solution) at every grid point: time, state, balances, efficiency."""
     print("\n== 4. Cold start on the grid: ratio R_S/R_P x primary torque x {slack 100 N, stock tune's clamp at "
           "3400 rpm}, v_th 1e-4 m/s, tol 1e-3 ==")
@@ -333,8 +364,8 @@ def table_grid(variants=("corrected", "as_published")):
     worst = {}
     for variant in variants:
         for level in ("slack 100 N", "stock clamp"):
-            for ratio in GRID_RATIOS:
-                for torque in GRID_TORQUES_NM:
+            for ratio in ratios:
+                for torque in torques:
                     op = replace(TABLE_6_1_POINT, ratio=ratio, primary_torque_nm=torque)
                     label = level
                     if level == "stock clamp":
@@ -362,27 +393,30 @@ def table_grid(variants=("corrected", "as_published")):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer tolerance/threshold combinations")
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run (about a minute): every table on a few points, the PNG not written to docs/")
     ap.add_argument("--only", choices=("errors", "extremes", "performance", "grid", "latency"), default=None)
     args = ap.parse_args()
     base = None
+    grid = dict(variants=("corrected",), ratios=(1.0,), torques=(10.0,)) if args.quick else {}
+    latency = dict(plans=("speed-hold",), max_points=1, cold_alone=False) if args.quick else {}
     if args.only == "grid":
-        table_grid()
+        table_grid(**grid)
         return 0
     if args.only == "latency":
-        table_overlay_latency()
+        table_overlay_latency(**latency)
         return 0
     if args.only in (None, "errors"):
         base = table_error_vs_time(args.quick)
     if base is None:
         base = solve_point()
     if args.only in (None, "extremes"):
-        table_extremes(base)
+        table_extremes(base, args.quick)
     if args.only in (None, "performance"):
-        table_performance(base)
+        table_performance(base, args.quick)
     if args.only is None:
-        table_grid()
-        table_overlay_latency()
+        table_grid(**grid)
+        table_overlay_latency(**latency)
     return 0
 
 

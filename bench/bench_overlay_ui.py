@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
 """The live overlay's latency on screen: `dyno ui` (headless, Textual's pilot) on the simulated rig at 1x.
 
-Run:  python bench/bench_overlay_ui.py [--points N] [--speed 1] [--seed 0]
+Run:  python bench/bench_overlay_ui.py [--points N] [--speed 1] [--seed 0] [--quick]
 
 The overlay is switched on before GO (as an operator would), with a fresh model cache (nothing solved
 before, so the service's seeds and warm starts are what this measures); for each accepted point it
 prints the seconds from the controller's acceptance to the full-model prediction drawn on the plot.
-Prints; asserts nothing (a whole thesis-step run is ~9 minutes at 1x).
+Prints; asserts nothing (a whole thesis-step run is ~9 minutes at 1x).  ``--quick`` (CI's smoke run, about a
+minute): one point, the simulated rig at 2x, the plan's warm-up 2 s and its points at most 3 s long (faster,
+the solver process starves on a busy 2-core machine and nothing reaches the screen in time).
 """
 
 from __future__ import annotations
@@ -17,17 +19,19 @@ import statistics
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dyno.control.controller import State  # noqa: E402
+from dyno.control.controller import State, TestPlan  # noqa: E402
 from dyno.ui.live_app import LiveApp  # noqa: E402
 from dyno.ui.session import LiveOptions  # noqa: E402
 
 
-async def measure(n_points: int, speed: float, seed: int, tmp: Path) -> None:
-    app = LiveApp(LiveOptions(sim=True, speed=speed, seed=seed, out_dir=tmp / "run"))
+async def measure(n_points: int, speed: float, seed: int, tmp: Path, plan: TestPlan | None = None) -> None:
+    kw = {} if plan is None else {"plan": plan}
+    app = LiveApp(LiveOptions(sim=True, speed=speed, seed=seed, out_dir=tmp / "run", **kw))
     app.overlay_cache_dir = tmp / "model-cache"
     async with app.run_test(size=(100, 30)) as pilot:
         while app.session is None or app.session.controller.state is not State.ARMED:
@@ -54,7 +58,8 @@ async def measure(n_points: int, speed: float, seed: int, tmp: Path) -> None:
             r = svc.get(k) or {}
             x = lat.get(k, float("nan"))
             rows.append(x)
-            print(f"{i:>3}{op[0]:>7.3f}{op[1]:>6.0f}{op[2]:>6.1f}{x:>11.2f}{str(r.get('start', '-'))[:5]:>7}"
+            print(f"{i:>3}{op.ratio:>7.3f}{op.primary_speed_rpm:>6.0f}{op.primary_torque_nm:>6.1f}{x:>11.2f}"
+                  f"{str(r.get('start', '-'))[:5]:>7}"
                   f"{r.get('steps', 0):>6}{r.get('job_s', float('nan')):>7.2f}")
         seeds = [e for e in svc.entries.values() if e.prime]
         print(f"seeds solved while measuring: {len(seeds)}")
@@ -71,9 +76,15 @@ def main() -> int:
     ap.add_argument("--points", type=int, default=18)
     ap.add_argument("--speed", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run (about a minute): one point at 2x, a shorter warm-up and measurement")
     args = ap.parse_args()
+    plan = None
+    if args.quick:
+        args.points, args.speed = 1, 2.0
+        plan = replace(TestPlan(), warmup_s=2.0, max_measure_s=3.0)
     with tempfile.TemporaryDirectory() as tmp:
-        asyncio.run(measure(args.points, args.speed, args.seed, Path(tmp)))
+        asyncio.run(measure(args.points, args.speed, args.seed, Path(tmp), plan))
     return 0
 
 

@@ -22,6 +22,13 @@ Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--c
    belt-model solver (dyno.model.bvp) was imported.
 
 Prints figures; asserts nothing (the machine is shared and noisy).
+
+``--quick`` (CI's smoke run, about 80 s): every part once on a smaller problem -- the CPU figures for the
+session alone and the live screen with the rig's bus I/O (the plain live screen's path is within the latter),
+2 s per phase; the jitter without the UI and with the UI + overlay (the plain UI's path is within the latter),
+2 s each; the entry points -- with the simulated rig at 5x real time so that the waits for ARMED, the warm-up
+and the spin-down are short, and the model cache's entries copied into its fresh cache (else the simulated
+rig's belt table is built anew: about a minute).  Its figures are not the real-time ones.
 """
 
 from __future__ import annotations
@@ -47,10 +54,10 @@ def _summary(poller) -> dict:
             "rejected": sum(poller.reader.stats.rejected.values())}
 
 
-async def _bare(seconds: float, out_dir: Path) -> dict:
+async def _bare(seconds: float, out_dir: Path, speed: float = 1.0) -> dict:
     from dyno.ui.session import LiveOptions, LiveSession
 
-    s = LiveSession(LiveOptions(sim=True, speed=1.0, out_dir=out_dir))
+    s = LiveSession(LiveOptions(sim=True, speed=speed, out_dir=out_dir))
     s.start()
     t_end = asyncio.get_running_loop().time() + seconds + 15
     while s.controller.state.value != "armed" and asyncio.get_running_loop().time() < t_end:
@@ -64,11 +71,11 @@ async def _bare(seconds: float, out_dir: Path) -> dict:
     return out
 
 
-async def _with_ui(seconds: float, out_dir: Path, overlay: bool) -> dict:
+async def _with_ui(seconds: float, out_dir: Path, overlay: bool, speed: float = 1.0) -> dict:
     from dyno.ui.live_app import LiveApp
     from dyno.ui.session import LiveOptions
 
-    app = LiveApp(LiveOptions(sim=True, speed=1.0, out_dir=out_dir))
+    app = LiveApp(LiveOptions(sim=True, speed=speed, out_dir=out_dir))
     async with app.run_test(size=(80, 24)) as pilot:
         t_end = time.monotonic() + 20
         while (app.session is None or app.session.controller.state.value != "armed") and time.monotonic() < t_end:
@@ -152,6 +159,7 @@ from pathlib import Path
 
 mode, out_dir, result_path = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
 armed_s, test_s = float(sys.argv[4]), float(sys.argv[5])
+speed = float(sys.argv[6]) if len(sys.argv) > 6 else 1.0  # x real time (1: the figures; more: a smoke run)
 profile_phase, profile_path = os.environ.get("BENCH_PROFILE", ""), os.environ.get("BENCH_PROFILE_OUT", "")
 
 # The simulated rig's cost: everything behind the I2C transport (emulated firmware + physics, which the
@@ -220,7 +228,7 @@ async def drive(get_session, quit):
     await asyncio.sleep(1.0)  # the state change's own redraws are done
     armed = await measure("armed", armed_s)
     s.go()
-    await asyncio.sleep(4.0)  # through the warm-up: the test proper
+    await asyncio.sleep(4.0 / speed)  # through the warm-up: the test proper
     test = await measure("test", test_s)
     res = {"armed": armed, "test": test, "state": s.controller.state.value, "points": len(s.controller.points),
            "events_lost": s.poller.reader.events_lost}
@@ -238,7 +246,7 @@ async def drive(get_session, quit):
 
 async def main():
     from dyno.ui.session import LiveOptions
-    opts = LiveOptions(sim=True, speed=1.0, out_dir=out_dir)
+    opts = LiveOptions(sim=True, speed=speed, out_dir=out_dir)
     if mode == "ui":
         from dyno.ui.live_app import LiveApp
         app = LiveApp(opts)
@@ -255,7 +263,7 @@ asyncio.run(main())
 """
 
 
-def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = "") -> dict:
+def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = "", speed: float = 1.0) -> dict:
     """Run the live screen (``mode`` "ui") or the session alone ("bare") in an 80x24 pseudo-terminal."""
     import fcntl
     import pty
@@ -271,7 +279,7 @@ def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = 
         prof_path = Path(tempfile.gettempdir()) / f"bench-ui-cpu-{mode}-{profile}.prof"  # kept for pstats
         env.update(BENCH_PROFILE=profile, BENCH_PROFILE_OUT=str(prof_path))
     proc = subprocess.Popen([sys.executable, "-c", CPU_SCRIPT, mode, str(out_dir), str(result), str(armed_s),
-                             str(test_s)], stdin=slave, stdout=slave, stderr=slave, env=env, cwd=REPO,
+                             str(test_s), str(speed)], stdin=slave, stdout=slave, stderr=slave, env=env, cwd=REPO,
                             start_new_session=True)
     os.close(slave)
     tail = b""
@@ -325,27 +333,58 @@ def fmt_timing(name: str, d: dict) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=8.0, help="real-time seconds per jitter measurement")
-    ap.add_argument("--quick", action="store_true", help="3 s per measurement")
+    ap.add_argument("--quick", action="store_true",
+                    help="CI smoke run (about 80 s): each part once, 2 s per measurement, the simulated rig at "
+                         "5x real time, the plain live screen left out (its path is within the runs kept)")
     ap.add_argument("--cpu-seconds", type=float, default=20.0, help="seconds per CPU measurement phase")
     ap.add_argument("--cpu-only", action="store_true", help="only the CPU figures")
     ap.add_argument("--repeat", type=int, default=3, help="CPU runs per mode (the median is printed)")
     ap.add_argument("--profile", choices=("armed", "test", "ended"), default="",
                     help="cProfile this phase of the live screen's CPU run (top 25 by cumulative time)")
     a = ap.parse_args()
-    seconds = 3.0 if a.quick else a.seconds
-    cpu_s = 6.0 if a.quick else a.cpu_seconds
+    seconds = 2.0 if a.quick else a.seconds
+    cpu_s = 2.0 if a.quick else a.cpu_seconds
+    speed = 5.0 if a.quick else 1.0
+    pace = "in real time" if speed == 1.0 else f"at {speed:g}x real time (--quick: not the real-time figures)"
     if a.quick:
         a.repeat = 1
-    os.environ.setdefault("DYNO_MODEL_CACHE", tempfile.mkdtemp(prefix="bench-ui-cache-"))
+    quick_cache = None
+    if a.quick and "DYNO_MODEL_CACHE" not in os.environ:
+        # A fresh cache as below, but with this machine's entries in it: the simulated rig's belt table is read,
+        # not built again (about a minute); removed at the end.
+        import shutil
+
+        from dyno.model.overlay import default_cache_dir
+
+        quick_cache = Path(tempfile.mkdtemp(prefix="bench-ui-cache-"))
+        if default_cache_dir().is_dir():
+            for entry in default_cache_dir().glob("*.json"):
+                shutil.copy2(entry, quick_cache)
+        os.environ["DYNO_MODEL_CACHE"] = str(quick_cache)
+    try:
+        _run(a, seconds, cpu_s, speed, pace)
+    finally:
+        if quick_cache is not None:
+            import shutil
+
+            shutil.rmtree(quick_cache, ignore_errors=True)
+
+
+def _run(a, seconds: float, cpu_s: float, speed: float, pace: str) -> None:
+    if "DYNO_MODEL_CACHE" not in os.environ:  # (not setdefault: that would make a directory either way)
+        os.environ["DYNO_MODEL_CACHE"] = tempfile.mkdtemp(prefix="bench-ui-cache-")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        print(f"CPU, % of one core, simulated rig in real time, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
+        print(f"CPU, % of one core, simulated rig {pace}, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
               "'idle/ARMED' and 'test' are net of the simulated rig (its firmware + physics, shown as 'sim'):")
         runs: dict = {"bare": [], "ui": [], "ui-rigio": []}
         for k in range(a.repeat):  # alternated: the shared machine's load drifts
             for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)"),
                                ("ui-rigio", "live screen, rig bus I/O")):
-                d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "")
+                if a.quick and mode == "ui" and not a.profile:
+                    print(f"{name:<24} left out by --quick (the rig bus I/O run is this one's path and more)")
+                    continue
+                d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "", speed)
                 runs[mode].append(d)
                 print(fmt_cpu(name, d))
         if a.repeat > 1:
@@ -364,13 +403,16 @@ def main() -> None:
                   f"ended at rest {med['ui-rigio']['ended']:.1f} % (bus read on the loop: {med['ui']['ended']:.1f} %)")
         if a.cpu_only:
             return
-        print(f"poll-interval jitter, simulated rig in real time, target period {1e3 / 150:.3f} ms "
+        print(f"poll-interval jitter, simulated rig {pace}, target period {1e3 / 150:.3f} ms "
               f"(150 Hz), {seconds:g} s after GO each:")
-        bare = asyncio.run(_bare(seconds, tmp / "bare"))
+        bare = asyncio.run(_bare(seconds, tmp / "bare", speed))
         print(fmt_timing("without UI", bare))
-        ui = asyncio.run(_with_ui(seconds, tmp / "ui", overlay=False))
-        print(fmt_timing("with UI (80x24)", ui))
-        ov = asyncio.run(_with_ui(seconds, tmp / "ov", overlay=True))
+        if a.quick:
+            print(f"{'with UI (80x24)':<26} left out by --quick (the run with the overlay is this one's path and more)")
+        else:
+            ui = asyncio.run(_with_ui(seconds, tmp / "ui", overlay=False, speed=speed))
+            print(fmt_timing("with UI (80x24)", ui))
+        ov = asyncio.run(_with_ui(seconds, tmp / "ov", overlay=True, speed=speed))
         print(fmt_timing("with UI + model overlay", ov) + f"  overlay: {ov.get('overlay_tier') or 'pending'}")
 
         from dyno.app import RunOptions, run_test
