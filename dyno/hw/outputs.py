@@ -271,13 +271,6 @@ class GpioActuators:
         return self.released and self.release_basis is not None
 
     @property
-    def end_switch_closed(self) -> bool | None:
-        """The end-of-travel switch (None where ``rig.toml`` declares none)."""
-        if self._end_switch is None or self.closed:
-            return None
-        return bool(self._end_switch.value)
-
-    @property
     def brake_position(self) -> float:
         """Estimated travel, 0 released .. 1 full apply."""
         return min(1.0, max(0.0, self._position))

@@ -112,7 +112,6 @@ class SimActuators:
         self._release_until_s: float | None = None
         self._latched = False
         self.refused: list[tuple[float, str, object]] = []  # (sim t, command, value) refused while latched
-        self.safe_commanded_s: float | None = None  # sim time of the last safe_state()
 
     @property
     def history(self) -> list:
@@ -163,7 +162,6 @@ class SimActuators:
         if self._release_until_s is None or end > self._release_until_s:
             self._release_until_s = end
         self._latched = self._latched or latch
-        self.safe_commanded_s = m.t_s
         self.wiring.record("safe_state", True)
 
     def clear_latch(self) -> None:
