@@ -127,9 +127,9 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
     rec = {"plan": plan, "seed": seed, "drill": str(drill) if drill else None}
     try:
         r = run_test(opts)
-    except Exception:  # noqa: BLE001 - counted: the acceptance figure
+    except Exception as exc:  # noqa: BLE001 - counted: the acceptance figure
         errors.add(f"{plan} seed {seed} {rec['drill']}: " + traceback.format_exc())
-        rec.update(state="exception", sim_s=0.0)
+        rec.update(state="exception", sim_s=0.0, error=f"{type(exc).__name__}: {exc}")
         ctx = held.get("ctx")
         if ctx is not None and ctx.writer is not None:
             rec["run_dir"] = str(ctx.writer.path) if hasattr(ctx.writer, "path") else None
@@ -261,7 +261,7 @@ def soak(args) -> dict:
     sim_s, next_report_s, next_drill_s = 0.0, every_s, drill_every_s
     iv, total, rows, run_dirs, bad_runs = Interval(), Interval(), [], [], []
     wall0 = time.monotonic()
-    k = 0
+    k = failed_in_a_row = 0
     print(f"soak: {args.hours:g} simulated h, fault rate {args.fault_rate}, a drill every {args.drill_every_min:g} "
           f"simulated min, runs in {root}; start RSS {rss_mb():.1f} MB fds {open_fds()}", file=log, flush=True)
     while sim_s < end_s:
@@ -272,6 +272,10 @@ def soak(args) -> dict:
             next_drill_s += drill_every_s
         rec = one_run(plan, args.seed + k, drill, args.fault_rate, errors, warns)
         k += 1
+        failed_in_a_row = failed_in_a_row + 1 if rec["state"] == "exception" else 0
+        if failed_in_a_row >= 5:  # (a run that raises adds no simulated time: never loop on it)
+            print(f"soak: stopped: {failed_in_a_row} runs in a row raised", file=log, flush=True)
+            break
         sim_s += rec["sim_s"]
         if rec.get("run_dir"):
             run_dirs.append(rec["run_dir"])
