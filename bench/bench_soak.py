@@ -135,6 +135,8 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
             rec["run_dir"] = str(ctx.writer.path) if hasattr(ctx.writer, "path") else None
         return rec
     ctx = held.pop("ctx")
+    if ctx.signal_received is not None and not (drill and drill.name in ("sigint", "sigterm", "sighup")):
+        rec["stop"] = f"signal {ctx.signal_received} from outside"  # the run's handler took it: end the soak
     rec.update(state=r["state"], sim_s=float(r.get("sim_time_s") or 0.0), run_dir=r["run_dir"],
                points=len(r["points"]), events_lost=int(r.get("events_lost") or 0),
                cause=r["aborts"][0]["cause"] if r["aborts"] else None,
@@ -270,12 +272,17 @@ def soak(args) -> dict:
         if sim_s >= next_drill_s:  # the drill due: on this run, at a random onset
             drill = parse_drill(f"{rng.choice(DRILLS)}@{rng.choice(ONSETS)}")
             next_drill_s += drill_every_s
-        rec = one_run(plan, args.seed + k, drill, args.fault_rate, errors, warns)
+        try:
+            rec = one_run(plan, args.seed + k, drill, args.fault_rate, errors, warns)
+        except KeyboardInterrupt:  # Ctrl+C between two runs (within one, the run's handler takes it)
+            rec = {"stop": "SIGINT between runs"}
         k += 1
+        if rec.get("stop"):  # SIGINT/SIGTERM meant for the soak: end it here, with its figures
+            print(f"soak: stopped: {rec['stop']}", file=log, flush=True)
+            end_s = sim_s + rec.get("sim_s", 0.0)
+            if "state" not in rec:
+                break
         failed_in_a_row = failed_in_a_row + 1 if rec["state"] == "exception" else 0
-        if failed_in_a_row >= 5:  # (a run that raises adds no simulated time: never loop on it)
-            print(f"soak: stopped: {failed_in_a_row} runs in a row raised", file=log, flush=True)
-            break
         sim_s += rec["sim_s"]
         if rec.get("run_dir"):
             run_dirs.append(rec["run_dir"])
@@ -293,6 +300,9 @@ def soak(args) -> dict:
             print_row(rows[-1], log)
             iv = Interval()
             next_report_s += every_s if at_s == next_report_s else 0.0
+        if failed_in_a_row >= 5:  # (a run that raises adds no simulated time: never loop on it)
+            print(f"soak: stopped: {failed_in_a_row} runs in a row raised", file=log, flush=True)
+            break
     out = {"hours": args.hours, "sim_s": round(sim_s, 1), "wall_s": round(time.monotonic() - wall0, 1),
            "runs": total.runs, "points": total.points, "aborts": dict(sorted(total.aborts.items())),
            "drills": total.drills, "drills_fired": total.drills_fired, "rows": rows,
