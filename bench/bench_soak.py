@@ -131,8 +131,8 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
         errors.add(f"{plan} seed {seed} {rec['drill']}: " + traceback.format_exc())
         rec.update(state="exception", sim_s=0.0, error=f"{type(exc).__name__}: {exc}")
         ctx = held.get("ctx")
-        if ctx is not None and ctx.writer is not None:
-            rec["run_dir"] = str(ctx.writer.path) if hasattr(ctx.writer, "path") else None
+        if ctx is not None and ctx.writer is not None:  # the directory it left, counted with the others
+            rec["run_dir"] = str(ctx.writer.run_dir)
         return rec
     ctx = held.pop("ctx")
     if ctx.signal_received is not None and not (drill and drill.name in ("sigint", "sigterm", "sighup")):
@@ -142,7 +142,8 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
                cause=r["aborts"][0]["cause"] if r["aborts"] else None,
                drill_fired=bool(r.get("drills")), rig_safe=bool(r["rig_safe"]),
                pads_off=bool(r["outputs"].get("pads_off_rotor")), physics_safe=physics_safe(ctx))
-    del ctx, held
+    del ctx
+    held.clear()  # (the soak keeps no run context alive)
     rec["indexed"] = index_after_run(r["run_dir"], lambda line: warns.append(line))
     try:
         rec["replayed"] = len(replay(r["run_dir"])["points"])

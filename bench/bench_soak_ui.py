@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -35,6 +36,11 @@ sys.path.insert(0, str(REPO))
 
 RSS_GROWTH_MAX = 0.10
 ENDED = (" DONE ", " ABORTED ")  # the state line's first word once a test has ended
+NO_REARM = "quit and start dyno again"  # the UI's refusal after a software fault (dyno.ui.session.NO_REARM)
+
+
+class Restart(Exception):
+    """The UI refused the re-arm for good: quit and start it again, as the operator is told to."""
 
 
 def tmux(*args: str) -> str:
@@ -90,18 +96,20 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
     if estop:
         wait_any(name, [" MEASURE ", " SETTLE ", " STEP "], 120)
         tmux("send-keys", "-t", name, "Space")
-    seen, _ = wait_any(name, list(ENDED), test_timeout_s)
+    ended, _ = wait_any(name, list(ENDED), test_timeout_s)
     t_end = time.monotonic() + 60  # re-arm as the operator does: ask until the release has ended
     while True:
         tmux("send-keys", "-t", name, "r")
         try:
-            wait_any(name, ["Re-arm?"], 2)
+            seen, _ = wait_any(name, ["Re-arm?", NO_REARM], 2)
+            if seen == NO_REARM:  # after a software fault (the watchdog, ...) the operator starts dyno again
+                raise Restart(pane(name))
             break
         except AssertionError:
             if time.monotonic() > t_end:
                 raise
     tmux("send-keys", "-t", name, "y")
-    return seen.strip()
+    return ended.strip()
 
 
 def check_runs(root: Path) -> dict:
@@ -131,41 +139,61 @@ def soak(args) -> dict:
     root = work / "runs"
     name = f"dyno-soak-ui-{uuid.uuid4().hex[:8]}"
     log = sys.stderr if args.json else sys.stdout
-    cmd = (f"{sys.executable} -m dyno ui --sim --speed {args.speed:g} --plan {args.plan} --seed {args.seed}"
-           " ; echo EXITED=$? ; sleep 30")
-    env = {"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""), "HOME": str(work),
-           "PYTHONPATH": str(REPO), "DYNO_RUNS_DIR": str(root)}
-    subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", name, "-c", str(work), cmd],
-                   check=True, timeout=20, env=env)
-    samples, states, error = [], [], None
+    # (in the command: a tmux server that is already running gives a new session its own environment)
+    cmd = (f"env PYTHONPATH={shlex.quote(str(REPO))} DYNO_RUNS_DIR={shlex.quote(str(root))} "
+           f"{shlex.quote(sys.executable)} -m dyno ui --sim --speed {args.speed:g} --plan {shlex.quote(args.plan)} "
+           f"--seed {args.seed} ; echo EXITED=$? ; sleep 30")
+    env = {"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""), "HOME": str(work)}
+    samples, states, restarts, error, exited = [], [], [], None, None
     wall0 = time.monotonic()
+    sim_before_s = 0.0  # simulated time of the processes before a restart
     try:
-        pid = ui_pid(name)
-        wait_any(name, [" ARMED "], 150)
-        t0 = time.monotonic()  # the UI's simulated clock runs from about here (its first frame)
-        print(f"soak-ui: dyno ui pid {pid}, x{args.speed:g}, {args.hours:g} simulated h, runs in {root}",
-              file=log, flush=True)
-        while (time.monotonic() - t0) * args.speed < args.hours * 3600.0:
-            k = len(states) + 1
-            states.append(one_test(name, args.estop_every > 0 and k % args.estop_every == 0, args.test_timeout_s))
-            rss, fds = proc_figures(pid)
-            sim_h = (time.monotonic() - t0) * args.speed / 3600.0
-            samples.append({"test": k, "sim_h": round(sim_h, 3), "wall_s": round(time.monotonic() - wall0, 1),
-                            "state": states[-1], "rss_mb": round(rss, 1), "fds": fds})
-            print(f"[{sim_h:6.2f} h sim, {samples[-1]['wall_s']:6.0f} s wall] test {k:3d} {states[-1]:8s} re-armed; "
-                  f"RSS {rss:6.1f} MB fds {fds}", file=log, flush=True)
+        while True:  # one dyno ui process; again after a restart
+            subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", name, "-c", str(work), cmd],
+                           check=True, timeout=20, env=env)
+            pid = ui_pid(name)
+            wait_any(name, [" ARMED "], 150)
+            t0 = time.monotonic()  # the UI's simulated clock runs from about here (its first frame)
+            print(f"soak-ui: dyno ui pid {pid}, x{args.speed:g}, {args.hours:g} simulated h, runs in {root}",
+                  file=log, flush=True)
+            try:
+                while sim_before_s + (time.monotonic() - t0) * args.speed < args.hours * 3600.0:
+                    k = len(states) + 1
+                    try:
+                        states.append(one_test(name, args.estop_every > 0 and k % args.estop_every == 0,
+                                               args.test_timeout_s))
+                    except Restart as why:
+                        states.append("ABORTED")
+                        restarts.append({"test": k, "pid": pid, "screen": str(why)[-600:]})
+                        raise
+                    rss, fds = proc_figures(pid)
+                    sim_h = (sim_before_s + (time.monotonic() - t0) * args.speed) / 3600.0
+                    samples.append({"test": k, "pid": pid, "sim_h": round(sim_h, 3), "state": states[-1],
+                                    "wall_s": round(time.monotonic() - wall0, 1), "rss_mb": round(rss, 1), "fds": fds})
+                    print(f"[{sim_h:6.2f} h sim, {samples[-1]['wall_s']:6.0f} s wall] test {k:3d} {states[-1]:8s} "
+                          f"re-armed; RSS {rss:6.1f} MB fds {fds}", file=log, flush=True)
+            except Restart:
+                print(f"soak-ui: test {len(states)}: re-arm refused ({NO_REARM}): quit, start dyno ui again",
+                      file=log, flush=True)
+                sim_before_s += (time.monotonic() - t0) * args.speed
+                tmux("send-keys", "-t", name, "q")  # (an ended test: quits without asking)
+                wait_any(name, ["EXITED="], 120)
+                tmux("kill-session", "-t", name)
+                continue
+            break
         tmux("send-keys", "-t", name, "q")
         wait_any(name, ["Quit?"], 20)
         tmux("send-keys", "-t", name, "y")
         wait_any(name, ["EXITED="], 120)
         exited = pane(name).split("EXITED=")[1].split()[0]
     except AssertionError as exc:
-        error, exited = str(exc)[-1500:], None
+        error = str(exc)[-1500:]
     finally:
         tmux("kill-session", "-t", name)
     runs = check_runs(root) if root.is_dir() else {"run_dirs": 0, "unsafe": [], "unreplayable": []}
-    # RSS flat: the last sample against the first one after a quarter of the soak (start-up and caches done)
-    settled = [s for s in samples if s["sim_h"] >= args.hours / 4] or samples[-1:]
+    # RSS flat: the last process's samples, from a quarter of the soak on (start-up and caches done)
+    last_pid = samples[-1]["pid"] if samples else None
+    settled = [s for s in samples if s["sim_h"] >= args.hours / 4 and s["pid"] == last_pid]
     growth = (max(s["rss_mb"] for s in settled) / settled[0]["rss_mb"] - 1.0) if len(settled) >= 3 else None
     fds = [s["fds"] for s in settled]
     checks = {"ran_to_the_end": error is None and exited == "0", "every_run_safe": not runs["unsafe"],
@@ -177,6 +205,7 @@ def soak(args) -> dict:
     return {"hours": args.hours, "speed": args.speed, "tests": len(states), "ended": {s: states.count(s) for s in
             set(states)}, "wall_s": round(time.monotonic() - wall0, 1), "samples": samples,
             "rss_growth": None if growth is None else round(growth, 4), "runs": runs, "error": error,
+            "restarts": restarts,
             "checks": checks, "ok": all(v is not False for v in checks.values())}
 
 
@@ -196,6 +225,12 @@ def main(argv=None) -> int:
     if shutil.which("tmux") is None:
         print("bench_soak_ui: skipped: tmux is not installed")
         return 0
+    import signal
+
+    def stop(signum, frame):  # (SystemExit: the tmux session is closed by soak()'s finally)
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stop)
     out = soak(args)
     if args.json:
         print(json.dumps(out, indent=1))
