@@ -52,6 +52,7 @@ class RunOptions:
     handle_signals: bool = False  # SIGINT/SIGTERM/SIGHUP -> safe state + abort record (the CLI sets it)
     finish_release: bool = True  # after the test, service the outputs until the brake release stroke ends
     mock_pins: bool = False  # sim: drive the physics through the real-rig output code (dyno.hw.mockpins)
+    ambient: object = None  # dyno.analysis.air.Ambient given on the command line (--ambient), else rig.toml/sensor
 
 
 def default_run_dir(root: Path | None = None) -> Path:
@@ -121,6 +122,8 @@ class RunContext:
     # host (loop) time -> simulated time; None: the same clock (a virtual loop). The UI paces the physics
     # on a scaled clock, so its drill latencies convert the controller's trigger times with this.
     host_to_sim: object = None
+    ambient: dict = field(default_factory=dict)  # the run's air (meta.json "ambient"; "end": the reading after)
+    ambient_sensor: object = None  # the BME280 driver when the rig has one
 
 
 def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
@@ -186,6 +189,14 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
                                      serial_port=opts.serial_port)
         actuators = hw.actuators
         blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
+    from dyno.ambient import ambient_sensor, run_ambient
+
+    map_source = engine_map.source
+    ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw, seed=opts.seed)
+    ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
+    if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
+        engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
+    holder["uncertainty"]["air_rel"] = ambient.air_rel_u()
     if opts.sim:
         transport = I2CTransport(bus, rig_cfg.i2c.firmware_address)
         thermometer = _thermometer(bus, rig_cfg.i2c.thermometer_address)
@@ -202,10 +213,11 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "rig_config": rig_cfg.path,
         "rig": _asdict(rig_cfg),
         "calibration_source": str(opts.calibration_path),
-        "engine_map_source": str(engine_map.source),
+        "engine_map_source": str(map_source),
         "engine_map_sha256": engine_map.sha256,
         "plan": plan_meta(opts.plan),
         "uncertainty": holder["uncertainty"],
+        "ambient": ambient.to_dict(),  # the one place the air is read from (library, report, replay)
         "limits": _asdict(limits),
     }
     tune_path = opts.tune_path
@@ -243,17 +255,19 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
     controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
     controller.inertia = rig_cfg.inertia
-    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw)
+    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
+                     ambient=ambient.to_dict(), ambient_sensor=ambient_dev)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
     _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
     unc = holder["uncertainty"]
     if unc:
-        from dyno.analysis.systematic import point_systematic
+        from dyno.analysis.systematic import calibration_rel_for, point_systematic
 
-        controller.point_hooks.append(lambda point, t0, t1: point.update(
-            point_systematic(point, unc["torque_calibration_rel"], unc["engine_map_rel"])))
+        controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
+            point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
+            unc["engine_map_rel"], unc["air_rel"])))
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -410,12 +424,24 @@ async def run_test_async(opts: RunOptions) -> dict:
         await asyncio.gather(poll_task, return_exceptions=True)
         stop_watchdog()
         restore_signals()
+        log_end_ambient(ctx)
         result = summarize(ctx)
         record_safety(ctx, result)
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
                          events_lost=ctx.poller.reader.events_lost)
         close_rig(ctx)
     return result
+
+
+def log_end_ambient(ctx: RunContext) -> None:
+    """The air after the run, beside the reading it was corrected to (an ``ambient`` document)."""
+    from dyno.ambient import end_reading
+
+    end = end_reading(ctx.ambient_sensor)
+    if end is not None:
+        ctx.ambient = {**ctx.ambient, "end": end}
+    if ctx.writer.error is None:
+        ctx.writer.doc("ambient", **ctx.ambient)
 
 
 def record_safety(ctx: RunContext, summary: dict) -> None:

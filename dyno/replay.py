@@ -24,7 +24,9 @@ PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "ste
 WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 
 
-def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
+def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -> dict:
+    """The run's points re-processed (``ambient``: another day than the run's, a
+    :class:`dyno.analysis.air.Ambient`; ``Ambient()`` re-processes it uncorrected)."""
     from dyno.analysis.calibration import CalibrationEntry, latest, load_history
     from dyno.analysis.engine_map import load_engine_map
 
@@ -37,7 +39,18 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
         from dyno.errors import ConfigError
 
         raise ConfigError(run.path, "calibration.json", "the run's calibration (or pass --calibration FILE)")
+    tares = run.docs("tare")
+    if tares:  # the points were measured from the zero read at rest before GO: so are the replayed ones
+        import dataclasses
+
+        calibration = dataclasses.replace(calibration, intercept_counts=float(tares[-1]["zero_counts"]))
     engine_map = load_engine_map(engine_map_path or run.engine_map_path)
+    from dyno.analysis.air import Ambient
+
+    ambient = ambient if ambient is not None else Ambient.from_dict(run.meta.get("ambient"))
+    air_rel = ambient.air_rel_u() if "ambient" in run.meta or ambient.corrected else 0.0
+    if ambient.corrected:  # the run's day (SAE J1349), as the run itself took it
+        engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     points = []
     for doc in run.points:
         # the throttle the point was measured at, as recorded (runs before it was recorded: full)
@@ -53,9 +66,11 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
                 p[k] = doc[k]
         unc = run.meta.get("uncertainty")
         if unc and "efficiency_sys95" in doc:  # the run's stated systematic terms, on the re-processed point
-            from dyno.analysis.systematic import point_systematic
+            from dyno.analysis.systematic import calibration_rel_for, point_systematic
 
-            p.update(point_systematic(p, unc["torque_calibration_rel"], unc["engine_map_rel"]))
+            p.update(point_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
+                                                             else None), unc["engine_map_rel"],
+                                      air_rel))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still
@@ -76,7 +91,7 @@ def replay(run_dir, calibration_path=None, engine_map_path=None) -> dict:
     return {**extra, "run_dir": str(run.path), "points": points, "stop": run.stop, "torn": run.torn,
             "plan": run.meta.get("plan"), "plan_text": plan_path.read_text() if plan_path.is_file() else None,
             "aborts": run.docs("abort"), "meta": run.meta, "calibration": calibration.to_dict(),
-            "engine_map": str(engine_map.source)}
+            "engine_map": str(engine_map.source), "ambient": ambient.to_dict()}
 
 
 CSV_COLUMNS = ("index", "throttle_frac", "rpm_primary", "rpm_primary_std", "rpm_secondary", "rpm_secondary_std", "ratio",

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from dyno.errors import ConfigError
+from dyno.rig_ambient import AmbientConfig, ambient_table
 from dyno.rig_inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
 
 SCHEMA = "dyno.rig/1"
@@ -166,6 +167,7 @@ class TorqueZeroConfig:
     read_s: float = 4.0  # averaging window at rest (4 s: 95 % half-width ~0.09 N m with the sim's noise)
     drift_max_nm: float = 0.15  # |after - before| beyond this (secondary N m) is flagged in the run and report
     correct: bool = False  # linear drift correction of the points' torque (extra keys; raw points unchanged)
+    tare: bool = True  # the zero read before GO is the points' zero (the bridge offset moves between calibrations)
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,7 @@ class RigConfig:
     inertia: InertiaConfig = InertiaConfig()
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
+    ambient: AmbientConfig = AmbientConfig()
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
     @property
@@ -326,7 +329,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
-             "uncertainty", "driven", "torque_zero"}
+             "uncertainty", "driven", "torque_zero", "ambient"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -463,13 +466,14 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = data.get("torque_zero", {})
     if not isinstance(t, Mapping):
         raise r.err("torque_zero", f"expected a table [torque_zero], got {type(t).__name__}")
-    r.no_extra(t, {"read_s", "drift_max_nm", "correct"}, "torque_zero.")
+    r.no_extra(t, {"read_s", "drift_max_nm", "correct", "tare"}, "torque_zero.")
     tz = TorqueZeroConfig()
     torque_zero = TorqueZeroConfig(
         read_s=r.number(t, "read_s", "torque_zero.", lo=0.2, hi=60.0, required=False, default=tz.read_s),
         drift_max_nm=r.number(t, "drift_max_nm", "torque_zero.", lo=0.0, hi=100.0, required=False,
                               default=tz.drift_max_nm),
         correct=r.boolean(t, "correct", "torque_zero.", default=tz.correct),
+        tare=r.boolean(t, "tare", "torque_zero.", default=tz.tare),
     )
 
     # inertia, control (optional tables; defaults are the thesis rig's, as identified on the sim)
@@ -504,6 +508,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
         uncertainty=uncertainty, driven=driven, torque_zero=torque_zero, deprecations=deprecations,
+        ambient=ambient_table(r, data),
     )
 
 

@@ -35,6 +35,9 @@ def summarize(ctx, drills_from: int = 0) -> dict:
 
             for pub, p in zip(out["points"], ctx.controller.points):
                 pub.update(corrected_point_keys(p, zc))
+    out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)
+    if getattr(ctx.controller, "tare", None):
+        out["torque_tare"] = ctx.controller.tare  # the zero the points were measured from
     out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
     go_s = ctx.controller.go_s
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
@@ -60,6 +63,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
         frames["corrupted_accepted"] = ctx.audit["corrupted_accepted"]
         out["faults_injected"] = dict(ctx.sim.bus.injected)
         out["sim_time_s"] = ctx.sim.model.t_s
+        out["sim_world"] = ctx.sim.model.world.to_dict()  # the simulated truth: its engine, sensor, day
         from dyno.drills import hazard_verdicts, true_latencies
 
         if ctx.drills is not None:
@@ -84,7 +88,8 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
               # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
-              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map")
+              "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
+              "efficiency_sys95_air", "efficiency_u95", "efficiency_u95_terms", "torque_zero_tare_nm")
 
 
 def public_point(p: dict) -> dict:

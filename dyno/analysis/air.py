@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 #: SAE J1349 reference conditions: 25 °C intake air, 99 kPa dry-air pressure.
 J1349_REFERENCE_TEMP_C = 25.0
@@ -74,3 +75,136 @@ def dry_air_pressure_kpa(total_pressure_kpa: float, temp_c: float,
     if not (math.isfinite(p) and p > 0):
         raise ValueError(f"dry_air_pressure_kpa: total_pressure_kpa must be > 0, got {p!r}")
     return p - rh / 100.0 * saturation_vapour_pressure_kpa(temp_c)
+
+
+# ---------------------------------------------------------------------------------------------------
+# The run's air: where it came from, its J1349 factor, and the uncertainty it leaves in efficiency
+
+#: A plausible day when nothing says what the air was (a run "uncorrected"): intake air −10…45 °C,
+#: station pressure 80…105 kPa (sea level to ~2,000 m, with weather), water vapour 0…4 kPa (a dew point
+#: up to ~29 °C; beyond that is rare weather anywhere a Baja team tests).
+PLAUSIBLE_TEMP_C = (-10.0, 45.0)
+PLAUSIBLE_PRESSURE_KPA = (80.0, 105.0)
+PLAUSIBLE_VAPOUR_KPA = (0.0, 4.0)
+
+#: What a given or sensed day is known to (rectangular half-widths): a BME280's absolute accuracy
+#: (data sheet: ±1 °C, ±1 hPa, ±3 %RH); a thermometer and barometer read by hand are no better.
+AIR_TOLERANCE_TEMP_C = 1.0
+AIR_TOLERANCE_PRESSURE_KPA = 0.1
+AIR_TOLERANCE_RH_PCT = 3.0
+#: Humidity not given: taken as 50 % with ±50 % (rectangular), the whole range.
+RH_UNKNOWN_PCT = 50.0
+
+
+def j1349_factor_of(temp_c: float, pressure_kpa: float, rh_pct: float) -> float:
+    """J1349 factor of a day given as a barometer and hygrometer read it (station pressure, RH)."""
+    return j1349_correction_factor(temp_c, dry_air_pressure_kpa(pressure_kpa, temp_c, rh_pct))
+
+
+def uncorrected_air_rel_u() -> float:
+    """Relative standard uncertainty of an efficiency whose map was NOT taken to the run's air.
+
+    Such an efficiency divides by the standard-day power, so it is off by the factor ``CF`` of the
+    unknown day (efficiency_reported / efficiency_true = CF, the map otherwise exact).  Over the
+    plausible day (``PLAUSIBLE_*``) CF spans [CF_lo, CF_hi]; the error is bounded by
+    ``a = max(|CF_lo − 1|, |CF_hi − 1|)`` and taken as rectangular on ±a (GUM 4.3.7): ``u = a/√3``.
+    The bound is wide on purpose: it is what not knowing the air costs.
+    """
+    corners = []
+    for t in PLAUSIBLE_TEMP_C:
+        for p in PLAUSIBLE_PRESSURE_KPA:
+            for e in PLAUSIBLE_VAPOUR_KPA:
+                corners.append(j1349_correction_factor(t, p - min(e, saturation_vapour_pressure_kpa(t))))
+    a = max(abs(min(corners) - 1.0), abs(max(corners) - 1.0))
+    return a / math.sqrt(3.0)
+
+
+def known_air_rel_u(temp_c: float, pressure_kpa: float, rh_pct: float | None) -> float:
+    """Relative standard uncertainty of the J1349 factor from what the day is known to.
+
+    Sensitivities by central differences; each tolerance rectangular (``u = a/√3``); an unknown
+    humidity is 50 ± 50 %.  Combined in quadrature (the three readings are independent).
+    """
+    rh = RH_UNKNOWN_PCT if rh_pct is None else rh_pct
+    rh_tol = RH_UNKNOWN_PCT if rh_pct is None else AIR_TOLERANCE_RH_PCT
+    cf = j1349_factor_of(temp_c, pressure_kpa, rh)
+    u2 = 0.0
+    for dt, dp, dr in ((AIR_TOLERANCE_TEMP_C, 0, 0), (0, AIR_TOLERANCE_PRESSURE_KPA, 0), (0, 0, rh_tol)):
+        hi = j1349_factor_of(temp_c + dt, pressure_kpa + dp, min(100.0, rh + dr))
+        lo = j1349_factor_of(temp_c - dt, pressure_kpa - dp, max(0.0, rh - dr))
+        u2 += (0.5 * abs(hi - lo) / cf / math.sqrt(3.0)) ** 2
+    return math.sqrt(u2)
+
+
+@dataclass(frozen=True)
+class Ambient:
+    """The run's intake air and where it came from.
+
+    ``source``: ``"sensor"`` (read from the rig's BME280), ``"given"`` (``--ambient`` or ``rig.toml
+    [ambient]``) or ``"none"`` (nothing: the run is *uncorrected*, its map stays at the J1349 reference
+    day and the air term widens to a plausible day, :func:`uncorrected_air_rel_u`).
+    ``pressure_kpa`` is station pressure, as a barometer or a BME280 reads it.
+    """
+
+    temp_c: float | None = None
+    pressure_kpa: float | None = None
+    rh_pct: float | None = None
+    source: str = "none"
+
+    @property
+    def corrected(self) -> bool:
+        return self.source != "none" and self.temp_c is not None and self.pressure_kpa is not None
+
+    @property
+    def dry_pressure_kpa(self) -> float | None:
+        if not self.corrected:
+            return None
+        return dry_air_pressure_kpa(self.pressure_kpa, self.temp_c,
+                                    RH_UNKNOWN_PCT if self.rh_pct is None else self.rh_pct)
+
+    @property
+    def j1349_factor(self) -> float | None:
+        return j1349_correction_factor(self.temp_c, self.dry_pressure_kpa) if self.corrected else None
+
+    def air_rel_u(self) -> float:
+        """Relative standard uncertainty the air leaves in efficiency (see the two functions above)."""
+        if not self.corrected:
+            return uncorrected_air_rel_u()
+        return known_air_rel_u(self.temp_c, self.pressure_kpa, self.rh_pct)
+
+    def to_dict(self) -> dict:
+        """The run's ``ambient`` (meta.json, the run's JSON): the one place the library and report read."""
+        return {"temp_c": self.temp_c, "pressure_kpa": self.pressure_kpa, "rh_pct": self.rh_pct,
+                "source": self.source, "j1349_factor": self.j1349_factor}
+
+    @classmethod
+    def from_dict(cls, d) -> "Ambient":
+        if not isinstance(d, dict):
+            return cls()
+        return cls(d.get("temp_c"), d.get("pressure_kpa"), d.get("rh_pct"), d.get("source") or "none")
+
+
+def parse_ambient(text: str, what: str = "--ambient", source: str = "given") -> Ambient:
+    """``TEMP_C,PRESSURE_KPA[,RH_PCT]`` (station pressure) -> :class:`Ambient`; ValueError names what is wrong."""
+    parts = [s.strip() for s in str(text).split(",")]
+    try:
+        vals = [float(s) for s in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3) or not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"{what}: expected TEMP_C,PRESSURE_KPA[,RH_PCT] (e.g. 35,90,20), got {text!r}")
+    t, p = vals[0], vals[1]
+    rh = vals[2] if len(vals) == 3 else None
+    check_air(t, p, rh, what)
+    return Ambient(t, p, rh, source)
+
+
+def check_air(temp_c, pressure_kpa, rh_pct, what: str) -> None:
+    """A day a dyno can be run on: −40…60 °C, 50…110 kPa station pressure, 0…100 %RH."""
+    if not -40.0 <= temp_c <= 60.0:
+        raise ValueError(f"{what}: TEMP_C {temp_c:g} is not an intake air temperature (-40..60 C)")
+    if not 50.0 <= pressure_kpa <= 110.0:
+        raise ValueError(f"{what}: PRESSURE_KPA {pressure_kpa:g} is not a station pressure in kPa (50..110; "
+                         "hPa/mbar divide by 10)")
+    if rh_pct is not None and not 0.0 <= rh_pct <= 100.0:
+        raise ValueError(f"{what}: RH_PCT {rh_pct:g} is not a relative humidity (0..100 %)")

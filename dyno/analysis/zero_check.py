@@ -75,3 +75,24 @@ def corrected_point_keys(point: dict, check: dict) -> dict:
     if eff is not None and math.isfinite(eff) and torque:
         out["efficiency_zero_corrected"] = eff * tc / torque
     return out
+
+
+def tare(calibration, zero: dict):
+    """The calibration measured from the zero read at rest: ``(tared_entry, tare_record)``, or
+    ``(calibration, None)`` when there is no finite zero.
+
+    A strain-gauge bridge's offset moves between calibrations (the thesis rig's four intercepts
+    scatter by ~60 counts, 0.6 N m); its slope moves far less.  Read at rest before GO, the offset is
+    measured to ±0.1 N m, so the points take their zero from it: the intercept becomes the code at
+    rest, :math:`b' = b + a\\,T_0`.  The record keeps what a replay needs (``zero_counts``) and the
+    zero's own uncertainty (``u_nm``, standard), which stays in each point's calibration term.
+    """
+    import dataclasses
+
+    z = zero.get("torque_nm", math.nan)
+    if not isinstance(z, float) or not math.isfinite(z):
+        return calibration, None
+    zero_counts = calibration.intercept_counts + z * calibration.slope_counts_per_nm
+    rec = {"zero_counts": float(zero_counts), "zero_nm": float(z), "u_nm": float(zero.get("ci95_nm", 0.0)) / 2.0,
+           "intercept_counts_before": float(calibration.intercept_counts)}
+    return dataclasses.replace(calibration, intercept_counts=float(zero_counts)), rec

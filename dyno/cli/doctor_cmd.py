@@ -125,6 +125,32 @@ def check_thermometer(report: Report, cfg, bus) -> None:
     report.add("thermometer", status, f"rotor {obj:.1f} C (limit {limit:.0f} C), sensor {amb:.1f} C")
 
 
+def check_ambient(report: Report, cfg, bus) -> None:
+    """The BME280 when rig.toml fits one: it answers, and with a day a dyno can run on (and its J1349 factor)."""
+    amb = cfg.ambient
+    if amb.sensor != "bme280":
+        given = amb.given()
+        report.add("ambient", OK if given else WARN,
+                   f"no sensor; rig.toml gives {given.temp_c:g} C, {given.pressure_kpa:g} kPa" if given else
+                   "no sensor and no day in rig.toml [ambient]: runs are uncorrected unless given --ambient "
+                   "(docs/analysis.md)", essential=False)
+        return
+    if bus is None:
+        report.add("ambient", FAIL, "BME280: no I2C bus")
+        return
+    from dyno.ambient import read_sensor
+    from dyno.errors import ConfigError
+    from dyno.hw.bme280 import BME280
+
+    try:
+        a = read_sensor(BME280(bus, amb.address), "BME280")
+    except ConfigError as exc:
+        report.add("ambient", FAIL, f"0x{amb.address:02X}: {exc.expected}")
+        return
+    report.add("ambient", OK, f"BME280 0x{amb.address:02X}: {a.temp_c:.1f} C, {a.pressure_kpa:.2f} kPa, "
+               f"{a.rh_pct:.0f} %RH: SAE J1349 factor {a.j1349_factor:.4f}")
+
+
 def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, bus=None, serial_port=None) -> None:
     """--toggle: claims the pins (driving them safe), pulses reset, steps the brake.
 
@@ -236,6 +262,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
         check_thermometer(report, cfg, bus)
     else:
         report.add("thermometer", FAIL, "no I2C bus")
+    check_ambient(report, cfg, bus)
 
     if toggle:
         if transport is None:
@@ -277,6 +304,10 @@ def run(args) -> int:
 
         sim = SimRig(now_s, protocol=cfg.protocol)
         bus = sim.bus
+        if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
+            from dyno.sim.bme280_chip import SimBME280
+
+            bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
         if args.toggle:
             from dyno.hw.clock import FakeClock
 

@@ -35,6 +35,7 @@ def add_arguments(p) -> None:
                         "rad/s of the secondary; off by default), the truth a coast-down recovers")
     p.add_argument("--sim-zero-drift", type=float, default=None, metavar="NM_PER_MIN",
                    help="with --sim: the torque channel's zero drifts by this many N m (secondary) per minute")
+    add_air_arguments(p)
     p.add_argument("--settle", choices=("detect", "fixed"), default=None,
                    help="step plans' settling: detected from the data, or the thesis's fixed 4 s (default: the plan's)")
     p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
@@ -53,6 +54,59 @@ def add_arguments(p) -> None:
     from dyno.rigconfig import add_rig_argument
 
     add_rig_argument(p)
+
+
+def add_air_arguments(p) -> None:
+    """--ambient and the simulated world's flags (dyno run, dyno ui)."""
+    p.add_argument("--ambient", default=None, metavar="TEMP_C,PRESSURE_KPA[,RH_PCT]",
+                   help="the day's intake air (station pressure, as a barometer reads it): the engine map is taken "
+                        "to it by SAE J1349 (default: rig.toml [ambient]'s sensor or day; neither: uncorrected)")
+    p.add_argument("--sim-ambient", default=None, metavar="TEMP_C,PRESSURE_KPA,RH_PCT",
+                   help="with --sim: the simulated day (default: drawn per seed). The host is not told it")
+    p.add_argument("--sim-engine-dev", type=float, default=None, metavar="REL_SD",
+                   help="with --sim: relative sd of the simulated engine's smooth deviation from its map "
+                        "(default 0.05; 0: exactly the map's shape)")
+    p.add_argument("--sim-engine-ageing", type=float, default=None, metavar="FRAC",
+                   help="with --sim: the simulated engine makes this fraction less than its map (worn)")
+    p.add_argument("--sim-cal-drift", type=float, default=None, metavar="REL_SD",
+                   help="with --sim: relative sd of the torque sensor's gain drift from its latest calibration "
+                        "(default 0.0157, the calibration history's reproducibility; 0: none)")
+    p.add_argument("--sim-world-seed", type=int, default=None, metavar="N",
+                   help="with --sim: draw the engine, sensor and day from this seed instead of --seed (the same "
+                        "rig measured again: compare runs that share it)")
+    p.add_argument("--sim-ideal", action="store_true",
+                   help="with --sim: perfect knowledge (the engine exactly its map, the sensor exactly its "
+                        "calibration, the J1349 reference day): for checks of statistics alone")
+
+
+def air_options(args, sim_kw: dict, prog: str = "dyno run"):
+    """(ambient, error line): --ambient parsed, the sim-world flags put into ``sim_kw``."""
+    from dyno.analysis.air import parse_ambient
+
+    ambient = None
+    try:
+        if args.ambient is not None:
+            ambient = parse_ambient(args.ambient, "--ambient")
+        if args.sim_ambient is not None:
+            day = parse_ambient(args.sim_ambient, "--sim-ambient")
+            sim_kw["ambient_day"] = (day.temp_c, day.pressure_kpa, 40.0 if day.rh_pct is None else day.rh_pct)
+    except ValueError as exc:
+        return None, f"{prog}: {exc}"
+    for flag, key, hi in (("sim_engine_dev", "engine_map_dev_rel_sd", 0.5),
+                          ("sim_engine_ageing", "engine_ageing_loss_frac", 0.9),
+                          ("sim_cal_drift", "adc_gain_drift_rel_sd", 0.5)):
+        v = getattr(args, flag)
+        if v is not None:
+            if not 0.0 <= v <= hi:
+                return None, f"{prog}: --{flag.replace('_', '-')}: expected a number 0..{hi:g}, got {v:g}"
+            sim_kw[key] = float(v)
+    if args.sim_ideal:
+        sim_kw["ideal"] = True
+    if args.sim_world_seed is not None:
+        if not 0 <= args.sim_world_seed < 2**32:
+            return None, f"{prog}: --sim-world-seed: expected 0..{2**32 - 1}, got {args.sim_world_seed}"
+        sim_kw["world_seed"] = int(args.sim_world_seed)
+    return ambient, None
 
 
 def plan_named(name: str, **overrides):
@@ -105,6 +159,10 @@ def run(args) -> int:
         sim_kw["driven_loss_nm"] = coeffs
     if args.sim_zero_drift is not None:
         sim_kw["adc_zero_drift_nm_per_min"] = float(args.sim_zero_drift)
+    opts.ambient, bad = air_options(args, sim_kw)
+    if bad:
+        print(bad, file=sys.stderr)
+        return 2
     if sim_kw:
         from dyno.sim.physics import RigParams
 
@@ -141,7 +199,8 @@ def run(args) -> int:
     if result.get("log_error"):
         print(f"dyno run: {result['run_dir']}: {result['log_error']}: safe state reached; "
               "what was recorded before is readable with `dyno replay`", file=sys.stderr)
-    _write_report(result, announce=not args.json)
+    if result.get("signal") != 1:  # SIGHUP: the terminal went, end now (`dyno report RUN` writes it later)
+        _write_report(result, announce=not args.json)
     return exit_code(result)
 
 

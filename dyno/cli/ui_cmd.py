@@ -22,8 +22,10 @@ def add_arguments(p) -> None:
                    help="fault drill at T simulated seconds from the first frame (--sim only; docs/safety.md)")
     p.add_argument("--mock-pins", action="store_true",
                    help="--sim: drive the simulated physics through the real-rig output code (gpiozero MockFactory)")
+    from dyno.cli.run_cmd import add_air_arguments
     from dyno.rigconfig import add_rig_argument
 
+    add_air_arguments(p)
     add_rig_argument(p)
 
 
@@ -54,6 +56,19 @@ def run(args) -> int:
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
                        engine_map_path=args.engine_map, drills=drills, plan=plan,
                        mock_pins=bool(getattr(args, "mock_pins", False)))
+    from dyno.cli.run_cmd import air_options
+
+    sim_kw: dict = {}
+    opts.ambient, bad = air_options(args, sim_kw, "dyno ui")
+    if bad:  # one line, exit 2, before the screen is taken over
+        import sys
+
+        print(bad, file=sys.stderr)
+        return 2
+    if sim_kw and args.sim:
+        from dyno.sim.physics import RigParams
+
+        opts.sim_params = RigParams(**sim_kw)
     app = LiveApp(opts)
     app.run()
     rc = app.return_code or 0
@@ -64,16 +79,18 @@ def run(args) -> int:
         runs = [args.out] if args.out is not None else []
     for k, run_dir in enumerate(runs):
         # the last run's report is written now; an earlier one's was written in the background at re-arm
-        finish_run(run_dir, announce=True, only_if_missing=k < len(runs) - 1)
+        # (after a hang-up, SIGHUP: the terminal went, end now: no report, `dyno report RUN` writes it later)
+        finish_run(run_dir, announce=True, only_if_missing=k < len(runs) - 1,
+                   report=rc != 128 + 1)
     return rc
 
 
-def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False) -> None:
+def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False, report: bool = True) -> None:
     """Index an ended run and write its report.html (failures are one stderr line, never the exit code)."""
     if run_dir is None or not (Path(run_dir) / "meta.json").is_file():
         return  # the session never started a run there
     _index(run_dir)
-    if not (only_if_missing and (Path(run_dir) / "report.html").is_file()):
+    if report and not (only_if_missing and (Path(run_dir) / "report.html").is_file()):
         from dyno.cli.run_cmd import _write_report
 
         _write_report({"run_dir": str(run_dir)}, announce=announce)  # "report: <path>" (or one line why not)

@@ -42,7 +42,8 @@ class TestController(Measuring):
                  on_wait_engine=None, runner_for=None, from_idle=None) -> None:
         self.poller = poller
         self.act = actuators
-        self.calibration = calibration
+        self.calibration = calibration  # tared at the zero read before GO (self.tare: the record)
+        self.tare: dict | None = None
         self.engine_map = engine_map
         self.plan = plan
         self.limits = limits
@@ -302,6 +303,19 @@ class TestController(Measuring):
             raise exc
         self.act.tick(self._now())
 
+    def _tare(self) -> None:
+        """The points measure torque from the zero just read at rest (rig.toml [torque_zero] tare)."""
+        from dyno.analysis.zero_check import tare
+        from dyno.control.zero_check import _config
+
+        if not _config(self).tare:
+            return
+        self.calibration, rec = tare(self.calibration, self.zero_before)
+        if rec is not None:
+            self.tare = rec
+            self.zero_before = {**self.zero_before, "torque_nm": 0.0, "tared_from_nm": rec["zero_nm"]}
+            self._log("tare", **rec)
+
     async def _plan(self) -> None:
         p = self.plan
         enter_safe_state(self.act, latch=False)  # the start of a run (the brake position is not known)
@@ -328,6 +342,7 @@ class TestController(Measuring):
         from dyno.control.zero_check import read_zero
 
         self.zero_before = await read_zero(self)  # torque zero at rest (idle is below engagement)
+        self._tare()
         if self.auto_go:
             self._go.set()
         await self._go.wait()

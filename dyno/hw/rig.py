@@ -40,6 +40,7 @@ class HardwareRig:
         self._serial_port = serial_port
         self._install_signals = install_signals
         self.actuators = self.guard = self.transport = self.thermometer = self.watchdog = None
+        self.ambient_sensor = None  # dyno.hw.bme280.BME280 when rig.toml [ambient] sensor = "bme280"
         self.estop = None  # dyno.hw.estop.EstopInput when rig.toml names pins.estop_input
         self._i2c = None
 
@@ -69,6 +70,10 @@ class HardwareRig:
             else:
                 self.transport = self._i2c
             self.thermometer = MLX90614(_CurrentBus(self._i2c), cfg.i2c.thermometer_address)
+            if cfg.ambient.sensor == "bme280":  # the air, read by the run before and after (dyno.ambient)
+                from dyno.hw.bme280 import BME280
+
+                self.ambient_sensor = BME280(_CurrentBus(self._i2c), cfg.ambient.address)
             self.watchdog = Watchdog(self.actuators, cfg.actuator.watchdog_s, clock=clock)
             if self.estop is not None:
                 self.watchdog.level_checks.append(self.estop.poll)

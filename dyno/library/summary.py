@@ -136,7 +136,7 @@ def run_row(files: dict, path_key: str, signature: str = "") -> dict:
     if tune and not tune_name and meta.get("tune_source"):
         tune_name = Path(str(meta["tune_source"])).stem
     cal = files["calibration"] if isinstance(files["calibration"], dict) else {}
-    atm = meta.get("atmosphere") if isinstance(meta.get("atmosphere"), dict) else {}
+    atm = meta.get("ambient") if isinstance(meta.get("ambient"), dict) else {}  # the run's air (dyno.ambient)
     state, status, reason = run_state(docs)
     aborts = [d for d in docs if d.get("type") == "abort"]
     points = [d for d in docs if d.get("type") == "point"]
@@ -158,8 +158,8 @@ def run_row(files: dict, path_key: str, signature: str = "") -> dict:
         "calibration_source": meta.get("calibration_source"), "calibration_date": cal.get("date"),
         "calibration_slope_counts_per_nm": _num(cal.get("slope_counts_per_nm")),
         "engine_map_sha256": meta.get("engine_map_sha256"),
-        "atm_pressure_kpa": _num(atm.get("pressure_kpa")), "atm_temperature_c": _num(atm.get("temperature_c")),
-        "atm_humidity_pct": _num(atm.get("humidity_pct")),
+        "atm_pressure_kpa": _num(atm.get("pressure_kpa")), "atm_temperature_c": _num(atm.get("temp_c")),
+        "atm_humidity_pct": _num(atm.get("rh_pct")),
         "firmware_version": meta.get("firmware_version") or device.get("fw_version"),
         "protocol": meta.get("protocol"), "software_version": meta.get("software_version"),
         "state": state, "exit_status": status, "reason": reason,

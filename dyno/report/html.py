@@ -169,12 +169,13 @@ def _points_table(data: ReportData) -> str:
                      _f(p.get("ratio"), ".3f"), _f(p.get("torque_secondary_nm"), ".2f"),
                      _f(p.get("power_out_w"), ".2f", 1e-3), _f(p.get("power_in_w"), ".2f", 1e-3),
                      _f(p.get("efficiency"), ".1f", 100), _f(p.get("efficiency_ci95"), ".1f", 100),
-                     _f(p.get("efficiency_sys95"), ".1f", 100),
+                     _f(p.get("efficiency_sys95"), ".1f", 100), _f(p.get("efficiency_u95"), ".1f", 100),
                      state + "".join(f'<br><span class="warn">{escape(n)}</span>' for n in notes)])
     if not rows:
         return "<p>No points were recorded.</p>"
     return _table(["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
-                   "efficiency %", "± % (95 %, stat.)", "± % (95 %, syst.)", "state / notes"], rows, left={10})
+                   "efficiency %", "± pp (95 %, stat.)", "± pp (95 %, syst.)", "± pp (95 %, total)", "state / notes"],
+                  rows, left={11})
 
 
 def _faults(data: ReportData) -> str:
@@ -218,15 +219,32 @@ def _calibration(data: ReportData) -> str:
     return _kv(rows)
 
 
+def air_text(amb) -> str:
+    """The run's air and what was done with it, in words (meta.json ``ambient``, dyno.ambient)."""
+    if not isinstance(amb, dict) or not amb:
+        return ("not recorded (a run from before the air was logged): the map is used as recorded, at the "
+                "SAE J1349 reference day")
+    if amb.get("j1349_factor") is None:
+        return ("uncorrected: no air was known (no BME280, no --ambient, no rig.toml [ambient] day), so the map "
+                "stays at the SAE J1349 reference day (25 °C, 99 kPa dry) and each point's efficiency_u95 "
+                "carries an air term wide enough for a plausible day (−10…45 °C, 80…105 kPa)")
+    rh = amb.get("rh_pct")
+    rh_s = f", {rh:.0f} %RH" if isinstance(rh, (int, float)) else ", humidity not given"
+    src = {"sensor": "read from the rig's BME280", "given": "given (--ambient or rig.toml)"}.get(amb.get("source"),
+                                                                                                  str(amb.get("source")))
+    end = amb.get("end") if isinstance(amb.get("end"), dict) else None
+    end_s = (f"; after the run {end['temp_c']:.1f} °C, {end['pressure_kpa']:.2f} kPa"
+             if end and isinstance(end.get("temp_c"), (int, float)) else "")
+    return (f"SAE J1349 factor {amb['j1349_factor']:.4f}: the engine made 1/{amb['j1349_factor']:.4f} of its "
+            f"standard-day map on a day of {amb['temp_c']:.1f} °C, {amb['pressure_kpa']:.2f} kPa station pressure"
+            f"{rh_s} ({src}){end_s}")
+
+
 def _engine_map(data: ReportData) -> str:
     m = data.engine_map
     if not m:
         return "<p>No engine map stored with this run: no input power, no efficiency.</p>"
-    cf = m.get("j1349_factor")
-    amb = data.meta.get("ambient") or {}
-    atmos = (f"SAE J1349 correction factor {cf:.4f} at {amb}" if amb else
-             f"SAE J1349 correction factor {_f(cf, '.4f')}: the map is used as recorded "
-             "(no ambient air conditions were logged with this run)")
+    atmos = air_text(data.meta.get("ambient"))
     rows = [("source", data.meta.get("engine_map_source") or m.get("source") or "?"),
             ("sha256", data.meta.get("engine_map_sha256") or m.get("sha256") or "?"),
             ("speed range", f"{_f(m['rpm'][0], '.0f')} … {_f(m['rpm'][-1], '.0f')} rpm"),

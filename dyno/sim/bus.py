@@ -1,7 +1,7 @@
 """A simulated I2C bus speaking the same ``i2c_rdwr`` call as smbus2.
 
-Devices: the emulated firmware at 0x03 and an MLX90614-like rotor thermometer
-at 0x5A.  Before every transaction the rig physics is advanced to the current
+Devices: the emulated firmware at 0x03, an MLX90614-like rotor thermometer
+at 0x5A and, when the rig declares one, a BME280 (:mod:`dyno.sim.bme280_chip`).  Before every transaction the rig physics is advanced to the current
 (injected) time and its sensor events are captured by the emulated firmware,
 so what the host reads is exactly what it would read on the rig at that
 moment.  Fault injection (bit errors, NACKs, timeouts, truncated reads, device
@@ -69,6 +69,7 @@ class SimSMBus:
         self.thermometer_lost = False
         self.thermometer_stuck = False
         self._thermo_stuck_word: bytes | None = None
+        self.devices: dict = {}  # address -> device with .transaction(msgs) (the BME280 when rig.toml fits one)
 
     def schedule_reset(self, t_s: float) -> None:
         """A device reset at simulation time ``t_s`` (a drill)."""
@@ -112,6 +113,8 @@ class SimSMBus:
             self._firmware_transaction(msgs, now)
         elif addr == THERMOMETER_ADDRESS:
             self._thermometer_transaction(msgs)
+        elif addr in self.devices:
+            self.devices[addr].transaction(msgs)
         else:
             raise OSError(errno.ENXIO, f"no device at 0x{addr:02x}")
 

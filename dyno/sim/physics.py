@@ -81,6 +81,7 @@ from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _be
 from dyno.sim.rig_params import _load_tune, _resolve_map_path
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
+from dyno.sim.world import realise
 
 __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
            "Truth"]
@@ -103,9 +104,12 @@ class RigModel(RigSignals):
 
     def __init__(self, params: RigParams | None = None, seed: int = 0):
         p = params if params is not None else RigParams()
+        nominal = EngineMap.from_csv(_resolve_map_path(p.engine_map_path))
+        # this seed's own engine, sensor and day (dyno.sim.world): p becomes the rig as it is
+        p, rpm, torque_true_nm, self.world = realise(p, seed, nominal.rpm, nominal.torque_nm)
         self.params = p
         self.seed = seed
-        self.engine_map = EngineMap.from_csv(_resolve_map_path(p.engine_map_path))
+        self.engine_map = EngineMap(rpm, torque_true_nm, source=f"{nominal.source} (this seed's engine)")
         self.engine = Engine(self.engine_map, idle_rpm=p.engine_idle_rpm, idle_offset_rpm=p.engine_idle_offset_rpm,
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,

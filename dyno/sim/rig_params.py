@@ -60,6 +60,20 @@ class RigParams:
     engine_friction_at_3600_rpm_nm: float = 3.0  # motoring friction + pumping at 3600 rpm
     engine_firing_ripple_ratio: float = 1.8      # half-order gas-torque amplitude / gross torque
     engine_stall_rpm: float = 600.0
+    # The engine is not its map (dyno.sim.world): a smooth deviation drawn per seed with this relative
+    # standard deviation (5 %: what a representative map is stated to, rig.toml [uncertainty]) and
+    # correlation length, an optional ageing loss, and the day's air (J1349).
+    engine_map_dev_rel_sd: float = 0.05
+    engine_map_dev_length_rpm: float = 700.0
+    engine_ageing_loss_frac: float = 0.0
+    # The day (intake air): (temp_c, station pressure_kpa, rh_pct), or None = drawn per seed.
+    ambient_day: tuple | None = None
+    # Perfect knowledge: the engine exactly its map, the sensor exactly its nominal calibration, the
+    # J1349 reference day (tests of statistics alone; --sim-ideal).
+    ideal: bool = False
+    # The world's draws (engine, sensor, day) come from this seed; None = the run's seed.  Two runs with
+    # one world_seed and different seeds are the same rig on the same day, measured twice (its noise new).
+    world_seed: int | None = None
     engine_start_rpm: float = 1000.0             # speed the pull start leaves the engine at
     # ---- CVT (ratio = primary speed / secondary speed)
     # Low ratio: the thesis belt-model solutions span 1.74..0.72 (Fig. 6.20),
@@ -139,11 +153,16 @@ class RigParams:
     rotor_heat_capacity_j_per_k: float = 2800.0  # ~6 kg cast-iron rotor
     rotor_cooling_w_per_k: float = 8.0
     rotor_cooling_w_per_k_per_rad_s: float = 0.15
-    ambient_temp_c: float = 25.0
+    ambient_temp_c: float = 25.0                 # (the day's, set by dyno.sim.world)
     rotor_temp_limit_c: float = 600.0            # physical sanity cap only; the controller's limit is its own
     # ---- torque sensor chain
     adc_gain_counts_per_nm: float = 108.188097293   # counts per N*m of SECONDARY torque (thesis eq. 9.1)
     adc_offset_counts: float = 35144.7019735
+    # The sensor drifts from its calibration (dyno.sim.world), drawn per seed with the thesis history's
+    # reproducibility (calibration/torque_calibration.csv, its four entries): slopes 1.57 % relative sd,
+    # intercepts 63 counts sd (0.58 N m).  The host's zero at rest before GO measures the offset.
+    adc_gain_drift_rel_sd: float = 0.0157
+    adc_offset_drift_counts_sd: float = 63.0
     adc_zero_drift_nm_per_min: float = 0.0       # linear zero drift, secondary N m per minute (dyno.sim.driven)
     lockin_cutoff_hz: float = 15.0
     lockin_filter_order: int = 2

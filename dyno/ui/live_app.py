@@ -23,7 +23,8 @@ from textual_plotext import PlotextPlot
 from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, temp_colour
-from dyno.ui.live_model import TEST_STATES, discard_text, efficiency_text, measure_text, progress_text
+from dyno.ui.live_model import (TEST_STATES, discard_text, efficiency_text, last_point_text, measure_text,
+                                progress_text)
 from dyno.ui.live_overlay import OverlayMixin
 from dyno.ui.live_plots import PLOTS, draw_efficiency, draw_shift_curve, draw_time
 from dyno.ui.results_view import has_results, results_lines
@@ -209,6 +210,7 @@ class LiveApp(OverlayMixin, DynoApp):
         # throttle ramps, idle, an engine cut).
         loaded = v.state in TEST_STATES and self.session.controller.plan.mode not in FROM_IDLE
         row("effic.", efficiency_text(v, loaded))
+        row("last pt", last_point_text(self.session.controller.points))  # its CI and its total U95 (pp)
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
         row("points", str(v.points))

@@ -174,6 +174,18 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
     return f"#{min(r, 255):02x}{g:02x}00", marker
 
 
+def last_point_text(points: list) -> str:
+    """The last point's efficiency with both its intervals: the CI (scatter of the window) and the total
+    ``efficiency_u95`` (with the calibration, the engine map and the air: dyno.analysis.systematic)."""
+    p = next((q for q in reversed(points) if isinstance(q.get("efficiency"), float)
+              and math.isfinite(q["efficiency"])), None)
+    if p is None:
+        return "—"
+    ci, u = p.get("efficiency_ci95", math.nan), p.get("efficiency_u95", math.nan)
+    return (f"{p['efficiency'] * 100:.1f} % ±{fmt(ci * 100, '.1f')} CI "
+            f"±{fmt(u * 100, '.1f')} total")
+
+
 def efficiency_text(v: LiveValues, loaded: bool) -> str:
     """The efficiency readout: ``—`` unless the test holds a steady load (``loaded``), ``n/a: why`` when the
     engine map gives no denominator (no curve at the commanded throttle, speed off the map)."""

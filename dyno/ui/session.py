@@ -40,6 +40,8 @@ class LiveOptions:
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
     drills: list = field(default_factory=list)  # dyno.drills.Drill (sim only), from the first frame
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
+    ambient: object = None  # dyno.analysis.air.Ambient from --ambient (else rig.toml's sensor or day)
+    sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
 
 
 class LiveSession:
@@ -56,7 +58,8 @@ class LiveSession:
         self.sim_now = lambda: (loop.time() - self.t0) * self.speed
         run_opts = RunOptions(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
                               rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed),
-                              mock_pins=opts.sim and opts.mock_pins)
+                              mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient,
+                              sim_params=opts.sim_params if opts.sim else None)
         if opts.calibration_path:
             run_opts.calibration_path = opts.calibration_path
         if opts.engine_map_path:
@@ -150,6 +153,10 @@ class LiveSession:
                 from dyno.control.outputs import enter_safe_state
 
                 enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
+            if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
+                from dyno.ui.common import detach_terminal
+
+                detach_terminal()
             self.loop.call_soon_threadsafe(on_loop, signum)
 
         for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):

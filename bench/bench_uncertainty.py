@@ -1,0 +1,178 @@
+"""Does a point's ``efficiency_u95`` cover the truth?  Judged over many simulated rigs.
+
+Each seed is a different rig (:mod:`dyno.sim.world`): its engine differs from the shipped map by a
+smooth deviation (5 % sd), its torque sensor's gain from the latest calibration by the history's
+reproducibility, and its day is drawn (5…35 °C, 0…1,500 m).  The host is told only what an operator
+would know: the shipped map, the calibration history, and the air if a BME280 is fitted.  A short
+speed-hold plan (4 setpoints) runs on each seed with the sensor fitted ("air known"); the same run is
+re-processed with no air ("uncorrected", :func:`dyno.replay.replay` with ``Ambient()``).
+
+Printed per case: points, coverage of ``efficiency_u95`` (95 % nominal), the normalised errors
+``error / (u95/1.96)`` (mean, standard deviation), the mean half-width; and, with the air known, each
+systematic term's true contribution (RMS over seeds) beside the standard uncertainty the host states.
+The systematic part is one draw per run, so coverage is also given per run (its middle point).
+
+    python bench/bench_uncertainty.py            # 100 seeds (about 10 min on 2 cores)
+    python bench/bench_uncertainty.py --quick    # 8 seeds
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+SHORT_PLAN = """schema = "dyno.plan/1"
+name = "speed-hold-short"
+description = "four speed-hold setpoints (bench_uncertainty)"
+mode = "speed-hold"
+[test]
+warmup_s = 3.0
+warmup_at_load_s = 5.0
+measure_s = 2.5
+target_efficiency_ci95 = 0.009
+max_measure_s = 10.0
+min_point_torque_nm = 4.0
+target_points = 4
+[speed_hold]
+points = 4
+low_rpm = 2200.0
+"""
+
+
+def _rig_with_sensor(tmp: Path) -> Path:
+    text = (REPO / "hardware" / "rig.toml").read_text().replace('sensor = "none"', 'sensor = "bme280"', 1)
+    path = tmp / "rig-bme280.toml"
+    path.write_text(text)
+    return path
+
+
+def one_seed(seed: int, tmp: str) -> dict:
+    """One simulated rig: its points with the air known and uncorrected, and its truth."""
+    from dyno.analysis.air import Ambient
+    from dyno.app import RunOptions, run_test
+    from dyno.control.plans import plan_named
+    from dyno.replay import replay
+
+    tmp_dir = Path(tmp)
+    plan_path = tmp_dir / "short.toml"
+    out = tmp_dir / f"seed{seed}"
+    opts = RunOptions(sim=True, seed=seed, out_dir=out, rig_path=_rig_with_sensor(tmp_dir),
+                      plan=plan_named(str(plan_path)))
+    result = run_test(opts)
+    world = result["sim_world"]
+    cf_host = result["ambient"]["j1349_factor"]
+    uncorrected = replay(out, ambient=Ambient())["points"]
+    rows = []
+    for p, q in zip(result["points"], uncorrected):
+        if p.get("efficiency") is None or p.get("efficiency_true") is None or not p.get("valid", True):
+            continue
+        rows.append({"seed": seed, "rpm_primary": p["rpm_primary"], "true": p["efficiency_true"],
+                     "known": (p["efficiency"], p["efficiency_u95"], p["efficiency_u95_terms"]),
+                     "uncorrected": (q["efficiency"], q["efficiency_u95"], q["efficiency_u95_terms"])})
+    return {"seed": seed, "rows": rows, "world": world, "cf_host": cf_host, "state": result["state"],
+            "stated": result["points"][0]["efficiency_u95_terms"] if result["points"] else None}
+
+
+def _true_parts(run: dict, rpm: float) -> dict:
+    """Each systematic term's true relative contribution to (reported / true − 1) at this point."""
+    import numpy as np
+
+    w = run["world"]
+    dev = float(np.interp(rpm, w["engine_dev_rpm"], w["engine_dev_rel"])) if w["engine_dev_rpm"] else 0.0
+    return {"calibration": w["adc_gain_drift_rel"],
+            "engine_map": (1.0 + dev) * (1.0 - w["engine_ageing_loss_frac"]) - 1.0,
+            "air": run["cf_host"] / w["j1349_factor"] - 1.0}
+
+
+def summarise(runs: list[dict], case: str) -> dict:
+    z, covered, half = [], [], []
+    per_run_cov = []
+    for run in runs:
+        mids = []
+        for r in run["rows"]:
+            eff, u95, _ = r[case]
+            if eff is None or u95 is None or not u95 > 0:
+                continue
+            err = eff - r["true"]
+            z.append(err / (u95 / 1.96))
+            covered.append(abs(err) <= u95)
+            half.append(u95)
+            mids.append(abs(err) <= u95)
+        if mids:
+            per_run_cov.append(mids[len(mids) // 2])
+    n = len(z)
+    return {"case": case, "points": n, "runs": len(per_run_cov),
+            "coverage": sum(covered) / n if n else math.nan,
+            "coverage_per_run": sum(per_run_cov) / len(per_run_cov) if per_run_cov else math.nan,
+            "z_mean": statistics.fmean(z) if n else math.nan, "z_sd": statistics.stdev(z) if n > 1 else math.nan,
+            "mean_u95": statistics.fmean(half) if n else math.nan}
+
+
+def bias_by_term(runs: list[dict]) -> list[dict]:
+    """RMS and mean of each term's true contribution (one value per run, at its middle point), against
+    the standard relative uncertainty the host states (its 95 % half-width / 2 / efficiency)."""
+    parts: dict = {"calibration": [], "engine_map": [], "air": []}
+    stated: dict = {k: [] for k in parts}
+    for run in runs:
+        if not run["rows"]:
+            continue
+        r = run["rows"][len(run["rows"]) // 2]
+        for k, v in _true_parts(run, r["rpm_primary"]).items():
+            parts[k].append(v)
+        eff, _, terms = r["known"]
+        for k in parts:
+            stated[k].append(terms[k] / 2.0 / eff)
+    return [{"term": k, "true_rms": math.sqrt(statistics.fmean(v * v for v in parts[k])) if parts[k] else math.nan,
+             "true_mean": statistics.fmean(parts[k]) if parts[k] else math.nan,
+             "stated_u": statistics.fmean(stated[k]) if stated[k] else math.nan} for k in parts]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=100, help="simulated rigs (default 100)")
+    ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    ap.add_argument("--quick", action="store_true", help="8 seeds: a smoke run")
+    ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    args = ap.parse_args(argv)
+    n = 8 if args.quick else args.seeds
+    seeds = list(range(args.first_seed, args.first_seed + n))
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="bench-unc-") as tmp:
+        (Path(tmp) / "short.toml").write_text(SHORT_PLAN)
+        if args.jobs > 1:
+            with ProcessPoolExecutor(args.jobs) as pool:
+                runs = list(pool.map(one_seed, seeds, [tmp] * len(seeds)))
+        else:
+            runs = [one_seed(s, tmp) for s in seeds]
+    wall_s = time.monotonic() - t0
+    cases = [summarise(runs, "known"), summarise(runs, "uncorrected")]
+    terms = bias_by_term(runs)
+    print(f"bench_uncertainty: {len(seeds)} seeds ({seeds[0]}..{seeds[-1]}), short speed-hold plan, "
+          f"{sum(r['state'] == 'done' for r in runs)} runs done, {wall_s:.0f} s wall")
+    print(f"{'case':<13}{'points':>7}{'runs':>6}{'coverage':>10}{'per run':>9}{'z mean':>8}{'z sd':>7}"
+          f"{'mean U95 pp':>13}")
+    for c in cases:
+        print(f"{c['case']:<13}{c['points']:>7}{c['runs']:>6}{c['coverage']:>10.3f}{c['coverage_per_run']:>9.3f}"
+              f"{c['z_mean']:>8.2f}{c['z_sd']:>7.2f}{100 * c['mean_u95']:>13.2f}")
+    print("air known: each term's true contribution (relative, one per run) vs the host's stated standard u")
+    print(f"{'term':<13}{'true RMS %':>11}{'true mean %':>12}{'stated u %':>11}")
+    for t in terms:
+        print(f"{t['term']:<13}{100 * t['true_rms']:>11.2f}{100 * t['true_mean']:>12.2f}{100 * t['stated_u']:>11.2f}")
+    if args.json:
+        args.json.write_text(json.dumps({"cases": cases, "terms": terms, "seeds": seeds, "wall_s": wall_s}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

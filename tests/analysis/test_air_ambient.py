@@ -1,0 +1,57 @@
+"""The run's air (dyno.analysis.air): parsing what an operator types, J1349 by the physics, and the
+uncertainty each way of knowing the day leaves."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from dyno.analysis.air import (PLAUSIBLE_PRESSURE_KPA, PLAUSIBLE_TEMP_C, Ambient, j1349_correction_factor,
+                               j1349_factor_of, known_air_rel_u, parse_ambient, uncorrected_air_rel_u)
+
+
+def test_hot_high_day_factor_follows_density_and_friction():
+    # 35 C, 90 kPa station, 20 %RH: dry air 89.88 kPa; CF = 1.176 (99/p_d) sqrt(308/298) - 0.176
+    p_d = 90.0 - 0.2 * 5.6290  # Buck: e_s(35 C) = 5.629 kPa
+    want = 1.176 * (99.0 / p_d) * math.sqrt(308.0 / 298.0) - 0.176
+    assert j1349_factor_of(35.0, 90.0, 20.0) == pytest.approx(want, rel=1e-4)
+    assert 1.15 < want < 1.16
+    assert j1349_factor_of(25.0, 99.0, 0.0) == pytest.approx(1.0, abs=1e-12)  # the reference day
+
+
+@pytest.mark.parametrize("text, bad", [("35", "TEMP_C,PRESSURE_KPA"), ("35,900", "PRESSURE_KPA 900"),
+                                       ("99,90", "TEMP_C 99"), ("35,90,120", "RH_PCT 120"), ("a,b", "expected"),
+                                       ("35,90,20,1", "expected"), ("nan,90", "expected")])
+def test_bad_ambient_names_what_is_expected(text, bad):
+    with pytest.raises(ValueError, match=bad) as e:
+        parse_ambient(text)
+    assert str(e.value).startswith("--ambient: ")
+
+
+def test_ambient_without_humidity_is_corrected_and_wider():
+    a = parse_ambient("30,95")
+    assert a.corrected and a.rh_pct is None and a.source == "given"
+    assert a.air_rel_u() > known_air_rel_u(30.0, 95.0, 40.0)  # an unknown humidity costs something
+    d = a.to_dict()
+    assert set(d) == {"temp_c", "pressure_kpa", "rh_pct", "source", "j1349_factor"}
+
+
+def test_uncorrected_term_covers_every_plausible_day():
+    """Uncorrected, the efficiency is off by CF of the unknown day: the stated 95 % half-width (k = 2)
+    must cover CF - 1 at every corner of the plausible day."""
+    u95 = 2.0 * uncorrected_air_rel_u()
+    for t in PLAUSIBLE_TEMP_C:
+        for p in PLAUSIBLE_PRESSURE_KPA:
+            for rh in (0.0, 50.0):
+                assert abs(j1349_factor_of(t, p, rh) - 1.0) <= u95
+    assert Ambient().j1349_factor is None and not Ambient().corrected
+    assert Ambient().air_rel_u() == uncorrected_air_rel_u()
+
+
+def test_known_air_term_matches_the_sensitivity():
+    """Numerically: the relative change of CF for +-1 C, taken as rectangular, dominates at 25 C."""
+    u = known_air_rel_u(25.0, 99.0, 0.0)
+    cf = j1349_correction_factor
+    dt = (cf(26.0, 99.0) - cf(24.0, 99.0)) / 2.0 / math.sqrt(3.0)
+    assert dt < u < 2.0 * dt
