@@ -114,14 +114,24 @@ def release_done(ctx) -> bool:
     return bool(getattr(act, "released", True))
 
 
-async def finish_release(ctx, *, poll_s: float = 0.1) -> bool:
-    """Keep servicing the outputs until the release stroke has ended (sim and rig); True if it did."""
+def pads_off(ctx) -> bool:
+    """The brake's pads are off the rotor (the simulated world's; the rig has no such sensor: True)."""
+    return ctx.sim is None or bool(ctx.sim.model.pads_off)
+
+
+async def finish_release(ctx, *, poll_s: float = 0.1, pads_only: bool = False) -> bool:
+    """Keep servicing the outputs until the release stroke has ended (sim and rig); True if it did.
+
+    ``pads_only``: until the pads are off the rotor (within ``release_bound_s`` of the safe state), not
+    the whole stroke to the retracted end (seconds): a session whose terminal went ends at once, the
+    stroke then completed by the wiring (hardware/README.md: K3, released pins); docs/safety.md.
+    """
     act = ctx.controller.act
     stroke_s = float(getattr(act, "brake_full_stroke_s", 8.0))
     loop = asyncio.get_running_loop()
     end = loop.time() + 2.0 * stroke_s + 1.0  # the drivers add their own margins to a full stroke
     while loop.time() < end:
-        if release_done(ctx):
+        if release_done(ctx) or (pads_only and pads_off(ctx)):
             return True
         await asyncio.sleep(poll_s)
         act.tick(loop.time())

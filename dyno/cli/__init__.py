@@ -78,10 +78,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: exit codes for a closed output pipe and Ctrl+C outside a test: 128 + the signal's number, as a shell reports
 EXIT_BROKEN_PIPE, EXIT_INTERRUPTED = 128 + 13, 128 + 2
+EXIT_HANGUP = 128 + 1  # SIGHUP: the command's terminal went (docs/safety.md)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command.  `dyno ... | head` and Ctrl+C end quietly (one line at most), never with a traceback."""
+    as_program = argv is None  # (tests call main(argv) in their own process: never ended from here)
     argv = list(sys.argv[1:] if argv is None else argv)
     name = argv[0] if argv and argv[0] in COMMANDS else None
     try:
@@ -97,7 +99,26 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()
     except BrokenPipeError:  # the command did its job; only the tail of its output was not read
         _detach_stdout()
+    except OSError:  # a terminal that went (EIO)
+        pass
+    if as_program and rc == EXIT_HANGUP:
+        _end_now(rc)
     return rc
+
+
+def _end_now(rc: int) -> None:
+    """The terminal went (SIGHUP) and the command has put the rig in its safe state and closed its record:
+    end now.  The interpreter's own finalisation (module teardown and collection: 0.3-0.8 s measured on a
+    loaded 2-core machine) is skipped; the atexit hooks (gpiozero closing its pins) still run first."""
+    import atexit
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(rc)
 
 
 def _detach_stdout() -> None:

@@ -24,7 +24,7 @@ from textual.widgets import Input, ProgressBar, Static
 from textual_plotext import PlotextPlot
 
 from dyno.ui.calibration_wizard import COLLECTING_PHASES, CalibrationWizard, Phase, WizardFeeder, parse_masses
-from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, EstopSafeInput, bottom_lines
+from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, EstopSafeInput, bottom_lines, detach_terminal, exit_after
 
 HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
 DEFAULT_RADIUS_M = 0.15
@@ -164,6 +164,8 @@ class CalibrateApp(DynoApp):
         def handler(signum, frame) -> None:
             if self.cal_ctx.hw is not None:
                 self.cal_ctx.hw.actuators.safe_state(latch=True)  # at once, latched
+            if signum == signal.SIGHUP:
+                detach_terminal()  # (after the safe state) or Textual's shut-down waits on the dead terminal
             loop.call_soon_threadsafe(on_loop, signum)
 
         self._old_signals = {sig: signal.signal(sig, handler)
@@ -171,9 +173,10 @@ class CalibrateApp(DynoApp):
 
     async def _quit_code(self, code: int) -> None:
         await self._stop_rig()  # safe state and the rig released first
-        # A hang-up leaves Textual restoring a terminal that is gone (it waited forever on its input thread,
-        # the wizard holding the pins and the bus): if the exit has not happened within a grace, it is forced.
-        _exit_after(code, grace_s=0.8)
+        # A hang-up left Textual restoring a terminal that is gone (it waited for ever on its output thread,
+        # the wizard holding the pins and the bus): the handler now detaches the terminal; should the exit
+        # still not have happened within a grace, it is forced.
+        exit_after(code, grace_s=0.8)
         self.exit(return_code=code)
 
     # --- view ----------------------------------------------------------------------------------
@@ -393,15 +396,3 @@ def main(opts: CalibrateOptions) -> int:
     app.run()
     return app.return_code or 0
 
-
-def _exit_after(code: int, grace_s: float) -> None:
-    """End the process with ``code`` in ``grace_s`` unless it has ended by then (a daemon thread)."""
-    import os
-    import threading
-    import time
-
-    def later() -> None:
-        time.sleep(grace_s)
-        os._exit(code)
-
-    threading.Thread(target=later, name="dyno-exit-grace", daemon=True).start()

@@ -110,6 +110,55 @@ class ConfirmScreen(ModalScreen[bool]):
         self.dismiss(yes)
 
 
+def detach_terminal() -> None:
+    """The terminal went (SIGHUP): point stdin, stdout and stderr at /dev/null, from the signal handler.
+
+    Textual's output thread dies on the first write to a hung-up terminal (EIO); its queue then fills and
+    the app's shut-down waits on it for ever (``dyno calibrate`` stayed behind).  Writes to /dev/null
+    succeed and reads see end of file, so the app ends as if the operator had quit.  Only a descriptor
+    on a hung-up terminal (its ioctl says EIO) is replaced: a pipe, a file or a live terminal is kept.
+    """
+    import errno
+    import os
+    import termios
+
+    gone = []
+    for k in (0, 1, 2):
+        try:
+            termios.tcgetattr(k)
+        except termios.error as exc:
+            if exc.args and exc.args[0] == errno.EIO:
+                gone.append(k)
+        except (OSError, ValueError):
+            pass
+    if not gone:
+        return
+    try:
+        fd = os.open(os.devnull, os.O_RDWR)
+    except OSError:
+        return
+    for k in gone:
+        try:
+            os.dup2(fd, k)
+        except OSError:
+            pass
+    os.close(fd)
+
+
+def exit_after(code: int, grace_s: float) -> None:
+    """End the process with ``code`` in ``grace_s`` unless it has ended by then (a daemon thread): the
+    backstop for an app whose shut-down still waits on something after the safe state."""
+    import os
+    import threading
+    import time
+
+    def later() -> None:
+        time.sleep(grace_s)
+        os._exit(code)
+
+    threading.Thread(target=later, name="dyno-exit-grace", daemon=True).start()
+
+
 class DynoApp(App):
     """Base: E-STOP everywhere, a message line, safe quit."""
 

@@ -157,6 +157,7 @@ class LiveSession:
                 from dyno.ui.common import detach_terminal
 
                 detach_terminal()
+                self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
             self.loop.call_soon_threadsafe(on_loop, signum)
 
         for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
@@ -435,7 +436,7 @@ class LiveSession:
             # where it ended (the rig's own release is finished by its SafetyGuard on the way out)
             from dyno.safe_outputs import finish_release
 
-            await finish_release(self.ctx, poll_s=0.05)
+            await finish_release(self.ctx, poll_s=0.05, pads_only=getattr(self, "hung_up", False))
         for t in reversed(self._tasks):
             if t.get_name() == "poller":
                 self.poller.stop()
