@@ -266,16 +266,29 @@ def _index(result: dict) -> None:
         index_after_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
 
 
+def air_line(amb: dict) -> str:
+    """One line on the run's air: the J1349 factor the map was taken to the day by, or "uncorrected"."""
+    if amb.get("j1349_factor") is None:
+        return ("air: uncorrected (no BME280, no --ambient, no rig.toml [ambient] day): the map is the standard "
+                "day's, and each point's efficiency_u95 covers a plausible day")
+    rh = amb.get("rh_pct")
+    return (f"air: {amb['temp_c']:.1f} C, {amb['pressure_kpa']:.2f} kPa" + (f", {rh:.0f} %RH" if rh is not None else "")
+            + f" ({amb.get('source')}): SAE J1349 factor {amb['j1349_factor']:.4f} applied to the engine map")
+
+
 def _print_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
-    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5}")
+    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5} "
+          f"{'±U95':>5}")
     for p in result["points"]:
         def f(k, scale=1.0, fmt="{:.0f}"):
             v = p.get(k)
             return "-" if v is None else fmt.format(v * scale)
         print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
               f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
-              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5}")
+              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5} "
+              f"{f('efficiency_u95', 100, '{:.1f}'):>5}")
+    print(air_line(result.get("ambient") or {}))
     fr = result["frames"]
     print(f"frames: read {fr['read']}, accepted {fr['accepted']}, rejected {fr['rejected']}; "
           f"events lost {result['events_lost']}")

@@ -55,3 +55,17 @@ def test_known_air_term_matches_the_sensitivity():
     cf = j1349_correction_factor
     dt = (cf(26.0, 99.0) - cf(24.0, 99.0)) / 2.0 / math.sqrt(3.0)
     assert dt < u < 2.0 * dt
+
+
+def test_every_face_says_what_was_done_with_the_air():
+    from dyno.cli.run_cmd import air_line
+    from dyno.report.html import air_text
+    from dyno.ui.live_model import last_point_text
+
+    none, given = Ambient().to_dict(), parse_ambient("35,90,20").to_dict()
+    assert "uncorrected" in air_line(none) and "uncorrected" in air_text(none)
+    assert "1.1558" in air_line(given) and "1.1558" in air_text(given)
+    assert "not recorded" in air_text({})  # a run from before the air was logged
+    pt = {"efficiency": 0.85, "efficiency_ci95": 0.006, "efficiency_u95": 0.09}
+    assert last_point_text([pt]) == "85.0 % ±0.6 CI ±9.0 total"
+    assert last_point_text([]) == "—"

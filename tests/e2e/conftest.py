@@ -9,6 +9,13 @@ import pytest
 
 from dyno.app import RunOptions, run_test
 from dyno.control.controller import TestPlan
+from dyno.sim.rig_params import RigParams
+
+# Perfect knowledge (the engine exactly its map, the sensor exactly its calibration, the J1349 reference
+# day: dyno.sim.world): for the tests that check the statistics alone (CI coverage, lost data, replay
+# equality). Accuracy against the truth with the simulated rig's own engine, sensor and day is
+# tests/e2e/test_e2e_honest_numbers.py and bench/bench_uncertainty.py.
+IDEAL = RigParams(ideal=True)
 
 # A shorter plan for tests that only need a few points (aborts, kills).
 QUICK_PLAN = replace(TestPlan(), max_measure_s=3.0, warmup_s=2.0)
@@ -18,13 +25,13 @@ QUICK_PLAN = replace(TestPlan(), max_measure_s=3.0, warmup_s=2.0)
 def full_run(tmp_path_factory):
     """One complete default simulated test, shared by the tests that inspect it."""
     out = tmp_path_factory.mktemp("runs") / "full"
-    return run_test(RunOptions(sim=True, seed=1, out_dir=out))
+    return run_test(RunOptions(sim=True, seed=1, out_dir=out, sim_params=IDEAL))
 
 
 @pytest.fixture(scope="session")
 def faulty_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "faulty"
-    return run_test(RunOptions(sim=True, seed=1, fault_rate=0.05, out_dir=out))
+    return run_test(RunOptions(sim=True, seed=1, fault_rate=0.05, out_dir=out, sim_params=IDEAL))
 
 
 @pytest.fixture(scope="session")

@@ -107,7 +107,7 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
     from dyno.control.plans import plan_named
     from dyno.sim.physics import RigParams
 
-    params = RigParams(driven_loss_nm=(0.10, 4e-4, 1.2e-6))
+    params = RigParams(driven_loss_nm=(0.10, 4e-4, 1.2e-6), ideal=True)  # (perfect knowledge: the loss alone)
     cd = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
                              sim_params=params))
     assert cd["state"] == "done"

@@ -24,7 +24,7 @@ from dyno.errors import ConfigError
 from dyno.replay import replay
 from dyno.runlog.reader import load_run
 
-from .conftest import QUICK_PLAN
+from .conftest import IDEAL, QUICK_PLAN
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -51,7 +51,7 @@ def _run(tmp_path, drills, *, seed=3, limits=None, name="run", mock_pins=False):
     def setup(ctx):
         captured["ctx"] = ctx
 
-    r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / name, plan=QUICK_PLAN, limits=limits,
+    r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / name, plan=QUICK_PLAN, limits=limits, sim_params=IDEAL,
                             drills=[parse_drill(d) for d in drills], handle_signals=True, setup=setup,
                             mock_pins=mock_pins))
     return r, captured["ctx"]

@@ -25,7 +25,7 @@ def _dyno(*args, timeout=300):
 @pytest.fixture(scope="module")
 def grid_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("grid") / "run"
-    r = _dyno("run", "--sim", "--headless", "--json", "--seed", "1", "--plan", "drive-grid",
+    r = _dyno("run", "--sim", "--headless", "--json", "--sim-ideal", "--seed", "1", "--plan", "drive-grid",
               "--engine-map", PART_MAP, "--out", out)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout), out

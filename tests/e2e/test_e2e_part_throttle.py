@@ -50,7 +50,8 @@ def _dyno(*args, timeout=300):
 def _run(tmp_path_factory, name: str, *extra):
     d = tmp_path_factory.mktemp(name)
     (d / "plan.toml").write_text(PLAN)
-    r = _dyno("run", "--sim", "--headless", "--json", "--seed", "4", "--plan", d / "plan.toml", "--out", d / "run",
+    r = _dyno("run", "--sim", "--headless", "--json", "--sim-ideal", "--seed", "4", "--plan", d / "plan.toml",
+              "--out", d / "run",
               *extra)
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)

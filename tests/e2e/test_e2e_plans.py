@@ -26,7 +26,7 @@ def _dyno(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def sweep_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep") / "run"
-    r = _dyno("run", "--sim", "--headless", "--json", "--seed", "3", "--plan", "sweep", "--out", out)
+    r = _dyno("run", "--sim", "--headless", "--json", "--sim-ideal", "--seed", "3", "--plan", "sweep", "--out", out)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout), out
 
@@ -70,7 +70,7 @@ def test_a_users_plan_file_runs_torque_hold_and_is_stored(tmp_path):
                     '[[step]]\nkind = "hold"\nvariable = "torque"\nsetpoints = [12.0, 18.0]\n'
                     '[[step]]\nkind = "wait"\ns = 1.0\n')
     out = tmp_path / "run"
-    r = _dyno("run", "--sim", "--headless", "--json", "--seed", "4", "--plan", plan, "--out", out)
+    r = _dyno("run", "--sim", "--headless", "--json", "--sim-ideal", "--seed", "4", "--plan", plan, "--out", out)
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert [p["setpoint"] for p in res["points"]] == [12.0, 18.0]

@@ -15,6 +15,8 @@ from dyno.control.plans import plan_named
 from dyno.drills import parse_drill
 from dyno.replay import replay
 
+from .conftest import IDEAL  # perfect knowledge: this test checks the statistics alone
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -22,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 def hold_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("hold") / "run"
     # no --plan: speed-hold is the default plan
-    r = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--seed", "2",
+    r = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--sim-ideal", "--seed", "2",
                         "--out", str(out)], capture_output=True, text=True, timeout=600,
                        env={**os.environ, "PYTHONPATH": str(REPO)})
     assert r.returncode == 0, r.stderr
@@ -56,7 +58,7 @@ def test_speed_hold_replays_exactly(hold_run):
 
 
 def test_a_drill_during_a_hold_still_trips_within_its_bound(tmp_path):
-    r = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"),
+    r = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"), sim_params=IDEAL,
                             drills=[parse_drill("bus-lost@70")], handle_signals=True))
     assert r["state"] == "aborted"
     a = r["aborts"][0]

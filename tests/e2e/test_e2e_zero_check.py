@@ -20,7 +20,7 @@ def test_drift_is_measured_flagged_and_corrected(tmp_path):
     drift_per_min = 2.0
     res = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", rig_path=rig,
                               plan=replace(StepPlan(), max_points=5, max_measure_s=4.0),
-                              sim_params=RigParams(adc_zero_drift_nm_per_min=drift_per_min)))
+                              sim_params=RigParams(adc_zero_drift_nm_per_min=drift_per_min, ideal=True)))
     assert res["state"] == "done"
     zc = res["torque_zero"]
     true_drift = drift_per_min * (zc["after"]["t_mid_s"] - zc["before"]["t_mid_s"]) / 60.0

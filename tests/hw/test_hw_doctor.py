@@ -70,3 +70,22 @@ def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):
     assert by["gpio"].status == "skip"
     assert by["firmware"].status == "FAIL" and by["thermometer"].status == "FAIL"
     assert not report.ok
+
+
+def test_hw_doctor_reads_the_bme280_the_rig_file_fits(tmp_path):
+    """As a real process: the simulated rig serves a BME280 only when the rig file declares one; doctor
+    reads it through the host's driver and prints the day's J1349 factor; undeclared, it warns."""
+    import os
+    import subprocess
+    import sys
+
+    rig = bad_rig(tmp_path, 'sensor = "none"', 'sensor = "bme280"')
+    env = dict(os.environ, PYTHONPATH=str(DEFAULT_RIG_PATH.parents[1]))
+    out = subprocess.run([sys.executable, "-m", "dyno", "doctor", "--sim", "--rig", str(rig)], capture_output=True,
+                         text=True, timeout=120, env=env).stdout
+    line = next(x for x in out.splitlines() if "ambient" in x)
+    assert line.split()[0] == "ok" and "BME280 0x76" in line and "J1349 factor" in line, out
+    out = subprocess.run([sys.executable, "-m", "dyno", "doctor", "--sim"], capture_output=True, text=True,
+                         timeout=120, env=env).stdout
+    line = next(x for x in out.splitlines() if "ambient" in x)
+    assert line.split()[0] == "warn" and "uncorrected" in line, out
