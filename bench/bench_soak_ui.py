@@ -29,6 +29,7 @@ import sys
 import tempfile
 import time
 import uuid
+from collections import Counter
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,14 +90,16 @@ def ui_pid(name: str, timeout_s: float = 30.0) -> int:
 
 def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
     """GO, the test to its end (or E-STOP mid-test), then re-arm; the state the test ended in."""
-    wait_any(name, [" ARMED "], 150)  # (a busy 2-core machine: the first start is slow)
-    tmux("send-keys", "-t", name, "g")
-    wait_any(name, ["Start the test?"], 20)
-    tmux("send-keys", "-t", name, "y")
-    if estop:
-        wait_any(name, [" MEASURE ", " SETTLE ", " STEP "], 120)
-        tmux("send-keys", "-t", name, "Space")
-    ended, _ = wait_any(name, list(ENDED), test_timeout_s)
+    seen, _ = wait_any(name, [" ARMED ", *ENDED], 150)  # (a busy 2-core machine: the first start is slow)
+    if seen == " ARMED ":  # (else it ended before GO, e.g. the engine did not start: re-armed all the same)
+        tmux("send-keys", "-t", name, "g")
+        wait_any(name, ["Start the test?"], 20)
+        tmux("send-keys", "-t", name, "y")
+        if estop:
+            wait_any(name, [" MEASURE ", " SETTLE ", " STEP "], 120)
+            tmux("send-keys", "-t", name, "Space")
+    ended, screen = wait_any(name, list(ENDED), test_timeout_s)
+    cause = next((line.split("cause:", 1)[1].strip()[:90] for line in screen.splitlines() if " cause: " in line), "")
     t_end = time.monotonic() + 60  # re-arm as the operator does: ask until the release has ended
     while True:
         tmux("send-keys", "-t", name, "r")
@@ -109,7 +112,7 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
             if time.monotonic() > t_end:
                 raise
     tmux("send-keys", "-t", name, "y")
-    return ended.strip()
+    return ended.strip() + (f" ({cause})" if cause else "") + ("" if seen == " ARMED " else " before GO")
 
 
 def check_runs(root: Path) -> dict:
@@ -170,7 +173,7 @@ def soak(args) -> dict:
                     sim_h = (sim_before_s + (time.monotonic() - t0) * args.speed) / 3600.0
                     samples.append({"test": k, "pid": pid, "sim_h": round(sim_h, 3), "state": states[-1],
                                     "wall_s": round(time.monotonic() - wall0, 1), "rss_mb": round(rss, 1), "fds": fds})
-                    print(f"[{sim_h:6.2f} h sim, {samples[-1]['wall_s']:6.0f} s wall] test {k:3d} {states[-1]:8s} "
+                    print(f"[{sim_h:6.2f} h sim, {samples[-1]['wall_s']:6.0f} s wall] test {k:3d} {states[-1]} "
                           f"re-armed; RSS {rss:6.1f} MB fds {fds}", file=log, flush=True)
             except Restart:
                 print(f"soak-ui: test {len(states)}: re-arm refused ({NO_REARM}): quit, start dyno ui again",
@@ -201,11 +204,14 @@ def soak(args) -> dict:
               # (None: too few tests to judge a trend, e.g. --quick)
               "rss_flat": None if growth is None else growth <= RSS_GROWTH_MAX,
               "fds_flat": None if len(fds) < 3 else max(fds) - min(fds) <= 1}
-    shutil.rmtree(work, ignore_errors=True)
-    return {"hours": args.hours, "speed": args.speed, "tests": len(states), "ended": {s: states.count(s) for s in
-            set(states)}, "wall_s": round(time.monotonic() - wall0, 1), "samples": samples,
+    if error is None and not runs["unsafe"] and not runs["unreplayable"]:
+        shutil.rmtree(work, ignore_errors=True)
+    else:  # kept for a look: the runs of a soak that found something
+        print(f"soak-ui: kept {work}", file=log, flush=True)
+    ended = Counter(x.split(" ")[0] for x in states)  # DONE / ABORTED (the causes are in the samples)
+    return {"hours": args.hours, "speed": args.speed, "tests": len(states), "ended": dict(ended),
+            "wall_s": round(time.monotonic() - wall0, 1), "samples": samples, "restarts": restarts,
             "rss_growth": None if growth is None else round(growth, 4), "runs": runs, "error": error,
-            "restarts": restarts,
             "checks": checks, "ok": all(v is not False for v in checks.values())}
 
 
