@@ -104,8 +104,8 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
     while True:
         tmux("send-keys", "-t", name, "r")
         try:
-            seen, _ = wait_any(name, ["Re-arm?", NO_REARM], 2)
-            if seen == NO_REARM:  # after a software fault (the watchdog, ...) the operator starts dyno again
+            answer, _ = wait_any(name, ["Re-arm?", NO_REARM], 2)
+            if answer == NO_REARM:  # after a software fault (the watchdog, ...) the operator starts dyno again
                 raise Restart(pane(name))
             break
         except AssertionError:
