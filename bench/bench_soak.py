@@ -17,10 +17,10 @@ Per simulated hour (``--report-min``) one line: runs, points, aborts by cause, u
 RSS, open file descriptors, run directories vs library entries, replay mismatches, brake violations,
 events lost — flushed as it comes, so a soak that is stopped still leaves its figures.
 
-    python bench/bench_soak.py [--hours 8] [--quick] [--json] [--runs-dir DIR] [--seed S]
+    python bench/bench_soak.py [--hours 8] [--quick] [--json] [--runs-dir DIR] [--seed S] [--plans a,b]
 
-``--quick`` (CI's smoke run): 10 simulated minutes, a report every 5, a drill every 2 (about a minute of wall
-time);
+``--quick`` (CI's smoke run): 6 simulated minutes of the short plans (engine-hold, torque-hold, coast-down), a
+report every 3, a drill every 1.5 (under a minute of wall time);
 ``--hours 0.5 --report-min 10`` is the CI soak (tests/e2e/test_soak_short.py).  Runs go to a temporary
 runs directory (deleted at the end unless ``--runs-dir`` is given), never to the repository's ``runs/``.
 Exit 0 when every acceptance check holds (docs/safety.md, "Soak"), 1 otherwise.
@@ -53,6 +53,7 @@ DRILLS = ("device-reset", "hall-dead:primary", "hall-dead:secondary", "hall-dead
           "loop-stall:800", "controller-crash", "disk-full", "sigint", "sigterm", "sighup")
 #: onsets: phases of the test (dyno.drills.PHASES) and plain times from the first frame
 ONSETS = ("armed", "warmup+1", "loaded+2", "measure+1", "after+0.5", "20", "45")
+QUICK_PLANS = "engine-hold,torque-hold,coast-down"  # the shortest ones with points (~1-2 simulated min each)
 RSS_GROWTH_MAX = 0.10  # the issue's bound on RSS growth after the first hour
 
 
@@ -267,8 +268,9 @@ def soak(args) -> dict:
     k = failed_in_a_row = 0
     print(f"soak: {args.hours:g} simulated h, fault rate {args.fault_rate}, a drill every {args.drill_every_min:g} "
           f"simulated min, runs in {root}; start RSS {rss_mb():.1f} MB fds {open_fds()}", file=log, flush=True)
+    plans = args.plans.split(",") if args.plans else PLANS
     while sim_s < end_s:
-        plan = PLANS[k % len(PLANS)]
+        plan = plans[k % len(plans)]
         drill = None
         if sim_s >= next_drill_s:  # the drill due: on this run, at a random onset
             drill = parse_drill(f"{rng.choice(DRILLS)}@{rng.choice(ONSETS)}")
@@ -321,13 +323,15 @@ def main(argv=None) -> int:
     ap.add_argument("--drill-every-min", type=float, default=10.0, help="simulated minutes between drills")
     ap.add_argument("--fault-rate", type=float, default=0.01, help="mixed transfer faults (default 0.01)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--plans", help=f"comma-separated plans, in turn (default: {','.join(PLANS)})")
     ap.add_argument("--runs-dir", help="keep the runs here (default: a temporary directory, deleted)")
     ap.add_argument("--quick", action="store_true",
-                    help="CI smoke run: 10 simulated minutes, a line every 5, a drill every 2")
+                    help="CI smoke run: 6 simulated minutes of the short plans, a line every 3, a drill every 1.5")
     ap.add_argument("--json", action="store_true", help="the final document as JSON on stdout")
     args = ap.parse_args(argv)
     if args.quick:
-        args.hours, args.report_min, args.drill_every_min = 10 / 60, 5.0, 2.0
+        args.hours, args.report_min, args.drill_every_min = 6 / 60, 3.0, 1.5
+        args.plans = args.plans or QUICK_PLANS
     if not (args.hours > 0 and args.report_min > 0 and args.drill_every_min > 0 and 0 <= args.fault_rate < 1):
         ap.error("--hours, --report-min, --drill-every-min must be > 0 and --fault-rate in [0, 1)")
     out = soak(args)
