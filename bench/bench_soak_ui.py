@@ -111,7 +111,13 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
         except AssertionError:
             if time.monotonic() > t_end:
                 raise
+    title = pane(name).splitlines()[0]  # names the run directory: a new one once the re-arm has been done
     tmux("send-keys", "-t", name, "y")
+    t_end = time.monotonic() + 60
+    while pane(name).splitlines()[0] == title:  # (else the next test would read this one's stale screen)
+        if time.monotonic() > t_end:
+            raise AssertionError(f"re-armed, but the screen still shows {title!r}")
+        time.sleep(0.3)
     return ended.strip() + (f" ({cause})" if cause else "") + ("" if seen == " ARMED " else " before GO")
 
 
