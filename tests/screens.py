@@ -43,3 +43,34 @@ def wait_screen(session: str, needles, timeout_s: float, poll_s: float = 0.3) ->
             break  # the program is gone (a start-up crash): fail now, with what it printed
         time.sleep(poll_s)
     raise AssertionError(f"{needles!r} not on screen (waited up to {timeout_s} s or the program exited):\n{screen}")
+
+
+def pids_matching(marker: str) -> list[int]:
+    """The processes whose command line contains ``marker`` (pgrep -f)."""
+    p = subprocess.run(["pgrep", "-f", marker], capture_output=True, text=True, timeout=20)
+    return [int(x) for x in p.stdout.split()]
+
+
+def seconds_until_gone(pids, timeout_s: float, poll_s: float = 0.02) -> float:
+    """Wall seconds until none of ``pids`` exists (``timeout_s`` if some still do; those are then killed)."""
+    import os
+
+    def alive(pid: int) -> bool:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().split(") ", 1)[1][:1] != "Z"  # a zombie has ended: only its parent's wait is left
+        except (OSError, IndexError):
+            return False
+
+    t0 = time.monotonic()
+    while any(alive(p) for p in pids) and time.monotonic() - t0 < timeout_s:
+        time.sleep(poll_s)
+    dt = time.monotonic() - t0
+    for p in pids:
+        if alive(p):
+            try:
+                os.kill(p, 9)  # do not leave it behind for the next test
+            except OSError:
+                pass
+            dt = timeout_s
+    return dt
