@@ -149,7 +149,11 @@ def soak(args) -> dict:
     name = f"dyno-soak-ui-{uuid.uuid4().hex[:8]}"
     log = sys.stderr if args.json else sys.stdout
     # (in the command: a tmux server that is already running gives a new session its own environment)
+    from dyno.model.overlay import default_cache_dir
+
+    cache = default_cache_dir()  # the belt-model table's cache (HOME is the work dir: a cold cache costs minutes)
     cmd = (f"env PYTHONPATH={shlex.quote(str(REPO))} DYNO_RUNS_DIR={shlex.quote(str(root))} "
+           f"DYNO_MODEL_CACHE={shlex.quote(str(cache))} "
            f"{shlex.quote(sys.executable)} -m dyno ui --sim --speed {args.speed:g} --plan {shlex.quote(args.plan)} "
            f"--seed {args.seed} ; echo EXITED=$? ; sleep 30")
     env = {"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""), "HOME": str(work)}
@@ -161,7 +165,7 @@ def soak(args) -> dict:
             subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", name, "-c", str(work), cmd],
                            check=True, timeout=20, env=env)
             pid = ui_pid(name)
-            wait_any(name, [" ARMED "], 150)
+            wait_any(name, [" ARMED "], 300)  # (start-up on a loaded 2-core machine: seen > 150 s)
             t0 = time.monotonic()  # the UI's simulated clock runs from about here (its first frame)
             print(f"soak-ui: dyno ui pid {pid}, x{args.speed:g}, {args.hours:g} simulated h, runs in {root}",
                   file=log, flush=True)
