@@ -14,6 +14,12 @@ The systematic part is one draw per run, so coverage is also given per run (its 
 
     python bench/bench_uncertainty.py            # 100 seeds (about 10 min on 2 cores)
     python bench/bench_uncertainty.py --quick    # 8 seeds
+
+``--compare``: instead, ``dyno compare``'s difference uncertainty on pairs of runs of one rig
+(:mod:`bench_compare_cancel`: stock vs heavy flyweights, same and different days, air known or not).
+
+    python bench/bench_uncertainty.py --compare           # 50 rigs: 100 runs, 150 pairs (about 10 min)
+    python bench/bench_uncertainty.py --compare --quick   # 4 rigs
 """
 
 from __future__ import annotations
@@ -139,13 +145,17 @@ def bias_by_term(runs: list[dict]) -> list[dict]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, default=100, help="simulated rigs (default 100)")
+    ap.add_argument("--seeds", type=int, default=None, help="simulated rigs (default 100; --compare 50)")
     ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--quick", action="store_true", help="8 seeds: a smoke run")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    ap.add_argument("--compare", action="store_true",
+                    help="the compare bench instead: pairs of runs of one rig (--seeds rigs, default 50)")
     args = ap.parse_args(argv)
-    n = 8 if args.quick else args.seeds
+    if args.compare:
+        return main_compare(args)
+    n = 8 if args.quick else (args.seeds or 100)
     seeds = list(range(args.first_seed, args.first_seed + n))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench-unc-") as tmp:
@@ -171,6 +181,30 @@ def main(argv=None) -> int:
         print(f"{t['term']:<13}{100 * t['true_rms']:>11.2f}{100 * t['true_mean']:>12.2f}{100 * t['stated_u']:>11.2f}")
     if args.json:
         args.json.write_text(json.dumps({"cases": cases, "terms": terms, "seeds": seeds, "wall_s": wall_s}, indent=1))
+    return 0
+
+
+def main_compare(args) -> int:
+    """The compare bench (bench_compare_cancel): coverage of U_d over pairs of runs of one rig."""
+    import bench_compare_cancel as bc
+
+    n = 4 if args.quick else (args.seeds or 50)
+    worlds = list(range(args.first_seed, args.first_seed + n))
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="bench-cmp-") as tmp:
+        plan = Path(tmp) / "short.toml"
+        plan.write_text(SHORT_PLAN)
+        results = bc.run(worlds, args.jobs, tmp, str(_rig_with_sensor(Path(tmp))), str(plan))
+    rows = bc.summarise(results)
+    print(f"bench_uncertainty --compare: {n} rigs ({worlds[0]}..{worlds[-1]}), stock vs heavy flyweights, "
+          f"short speed-hold plan, {time.monotonic() - t0:.0f} s wall")
+    bc.print_table(rows)
+    for w in results:  # a pair compare refused (e.g. no common speed range) or without a truth to judge
+        for p in w["pairs"]:
+            if not p.get("rows"):
+                print(f"  rig {w['world']} {p['case']}: not judged ({p.get('error', 'no grid point with a truth')})")
+    if args.json:
+        args.json.write_text(json.dumps({"compare": rows, "worlds": worlds}, indent=1))
     return 0
 
 

@@ -37,7 +37,7 @@ def load_for_compare(run_dir: Path) -> dict:
     files = read_run_files(run_dir)
     return {"name": run_dir.name, "row": run_row(files, key(run_dir)),
             "points": [d for d in files["documents"] if d.get("type") == "point"],
-            "tune": files["tune"]["data"] if files["tune"] else None}
+            "tune": files["tune"]["data"] if files["tune"] else None, "meta": files["meta"]}
 
 
 def run(args) -> int:
@@ -97,18 +97,31 @@ def print_view(result: dict) -> None:
             if t["key"] not in ("tune_name", "tune_sha256"):
                 print(f"  setup: {t['key']}: {t['from']!r} -> {t['to']!r}")
         q = d["quantities"]
-        print(f"  {'rpm_s':>6} {'eff A %':>7} {'eff B %':>7} {'Δeff %':>13} {'ΔT N·m':>13} {'ΔP W':>15} "
-              f"{'Δrpm_p':>15}")
+        if d.get("terms"):  # what cancels in the efficiency difference, and what is left (U95 column)
+            print("  efficiency difference, its 95 % uncertainty U95 by term:")
+            for k, t in d["terms"].items():
+                top = "-" if t["max_u95"] is None else f"≤{100 * t['max_u95']:.2f} pts"
+                print(f"    {k}: {t['status']} ({top}): {t['reason']}")
+        u95 = q["efficiency"].get("difference_u95")
+        print(f"  {'rpm_s':>6} {'eff A %':>7} {'eff B %':>7} {'Δeff %':>13} {'U95 %':>6} {'ΔT N·m':>13} "
+              f"{'ΔP W':>15} {'Δrpm_p':>15}")
         for i, g in enumerate(result["grid_rpm_secondary"]):
             ea, eb = ref["efficiency"]["value"][i], cur["efficiency"]["value"][i]
+            qe = q["efficiency"]
+            de = _pm(qe["difference"][i], qe["sem"][i], qe["significant"][i], 100.0)
+            ud = None if u95 is None or u95[i] is None else f"{100 * u95[i]:.2f}"
             print(f"  {g:>6.0f} {'-' if ea is None else f'{100 * ea:.1f}':>7} {'-' if eb is None else f'{100 * eb:.1f}':>7} "
+                  + f"{de:>13} {ud or '-':>6} "
                   + " ".join(f"{_pm(q[n]['difference'][i], q[n]['sem'][i], q[n]['significant'][i], k, fmt):>{w}}"
-                             for n, k, fmt, w in (("efficiency", 100.0, "{:+.2f}", 13),
-                                                  ("torque_secondary_nm", 1.0, "{:+.2f}", 13),
+                             for n, k, fmt, w in (("torque_secondary_nm", 1.0, "{:+.2f}", 13),
                                                   ("power_out_w", 1.0, "{:+.0f}", 15),
                                                   ("rpm_primary", 1.0, "{:+.0f}", 15))))
         n_sig = sum(bool(s) for s in q["efficiency"]["significant"])
         print(f"  efficiency: {n_sig} of {len(result['grid_rpm_secondary'])} grid speeds differ significantly "
               "(* = |Δ| > 1.96 s.e., 95 %)")
+        if u95 is not None:
+            n_u = sum(bool(s) for s in q["efficiency"].get("significant_u95") or ())
+            print(f"  efficiency: {n_u} of {len(result['grid_rpm_secondary'])} grid speeds differ by more than U95 "
+                  "(all terms that do not cancel)")
     if result.get("html"):
         print(f"\nreport: {result['html']}")

@@ -16,8 +16,13 @@ The interpolated value's uncertainty has two parts, added in quadrature:
 The difference ``d = y_B - y_A`` has ``s_d = sqrt(s_A^2 + s_B^2)`` (independent runs) and
 is called significant at 95 % when ``|d| > 1.96 s_d``.  Neighbouring grid points share
 points, so their verdicts are correlated: read a run of significant grid points as one
-finding.  No atmospheric correction is applied (dyno runs record no ambient conditions
-yet; the engine map is used as each run recorded it): the report says so.
+finding.
+
+The efficiency difference also has a stated 95 % uncertainty ``difference_u95`` that adds the
+systematic terms (calibration, engine map, air) to the statistical part — only what does not cancel
+between the two runs (:mod:`dyno.library.compare_terms`); each term is reported "residual", "not
+cancelled" (or "unknown") with its reason.  The air each run was corrected to (``meta.ambient``) is
+stated in ``atmosphere``.
 """
 
 from __future__ import annotations
@@ -53,8 +58,20 @@ def _setup_value(row: dict, k: str):
 SETUP_FIELDS = ("mode", "seed", "tune_name", "tune_sha256", "calibration_date", "calibration_slope_counts_per_nm",
                 "engine_map_sha256", "plan_sha256", "settle_mode", "protocol", "firmware_version",
                 "software_version", "atm_pressure_kpa", "atm_temperature_c", "atm_humidity_pct")
+#: runs from before the air was logged (no ``meta.ambient``): what their input power is
 ATMOSPHERE_NOTE = ("atmospheric correction: not applied (the runs record no ambient pressure, temperature or "
                    "humidity; input power is each run's engine map as recorded)")
+
+
+def atmosphere_note(runs: list[dict]) -> str:
+    """What air each run's input power was taken to (its ``meta.ambient``), one clause per run."""
+    from dyno.library.compare_terms import describe_air, run_systematics
+
+    sys_ = [run_systematics(r) for r in runs]
+    if not any(s["has_ambient"] for s in sys_):
+        return ATMOSPHERE_NOTE
+    return "air: " + "; ".join(f"{r['name']}: {describe_air(s['ambient'], s['has_ambient'])}"
+                               for r, s in zip(runs, sys_))
 
 
 def _f(x):
@@ -144,8 +161,44 @@ def dict_diff(a: dict, b: dict) -> list[dict]:
     return [{"key": k, "from": fa.get(k), "to": fb.get(k)} for k in sorted(set(fa) | set(fb)) if fa.get(k) != fb.get(k)]
 
 
+def _tare_on_grid(run: dict, calibration_rel: float, grid: np.ndarray) -> np.ndarray:
+    """Each valid point's tare part of its calibration term (relative), interpolated onto the grid."""
+    from dyno.library.compare_terms import point_tare_rel
+
+    good = sorted((p for p in run["points"] if p.get("valid") and not math.isnan(_f(p.get("rpm_secondary")))
+                   and not math.isnan(_f(p.get("efficiency")))), key=lambda p: _f(p["rpm_secondary"]))
+    x = np.array([_f(p["rpm_secondary"]) for p in good])
+    t = np.array([point_tare_rel(p, calibration_rel) for p in good])
+    return interpolate(x, t, np.zeros(len(x)), grid)[0]
+
+
+def _efficiency_u95(sys_, tare, curves, i: int, sem_d, grid) -> tuple[dict, dict]:
+    """Run ``i`` against run 0: the efficiency difference's ``U_d`` with its terms (compare_terms)."""
+    from dyno.library.compare_terms import difference_terms
+
+    ref, cur = curves[0], curves[i]
+    res = difference_terms(ref["efficiency"]["value"], cur["efficiency"]["value"], ref["rpm_primary"]["value"],
+                           cur["rpm_primary"]["value"], sem_d, tare[0], tare[i], sys_[0], sys_[i])
+    per_point = {k: np.broadcast_to(t["u95"], grid.shape) for k, t in res["terms"].items()}
+    summary = {k: {"status": t["status"], "reason": t["reason"],
+                   "max_u95": float(np.nanmax(per_point[k])) if np.isfinite(per_point[k]).any() else None}
+               for k, t in res["terms"].items()}
+    return {"difference_u95": res["u95"], "difference_u95_terms": per_point}, summary
+
+
+def _torque_u95(sys_, tare, curves, i: int, q: str, sem_d) -> dict:
+    """Torque and output power: the statistics and the calibration (its slope's residual and each run's tare,
+    which a statistical s.e. does not see: every run reads its own zero before GO); no map, no air."""
+    from dyno.library.compare_terms import calibration_term
+
+    cal = calibration_term(curves[0][q]["value"], curves[i][q]["value"], tare[0], tare[i], sys_[0], sys_[i])
+    u95 = np.hypot(Z95 * np.asarray(sem_d, float), np.nan_to_num(cal["u95"]))
+    return {"difference_u95": u95, "difference_u95_terms": {"statistical": Z95 * np.asarray(sem_d, float),
+                                                              "calibration": np.broadcast_to(cal["u95"], u95.shape)}}
+
+
 def compare(runs: list[dict], step_rpm: float = 200.0) -> dict:
-    """Compare ``runs`` (each ``{"name", "row", "points", "tune"}``) against the first.
+    """Compare ``runs`` (each ``{"name", "row", "points", "tune", "meta"?}``) against the first.
 
     Returns the grid, each run's curve on it, per other run the differences with
     their uncertainty and 95 % verdicts, the tune diff and the setup diff; every
@@ -171,8 +224,12 @@ def compare(runs: list[dict], step_rpm: float = 200.0) -> dict:
                 c[q]["truth"] = interpolate(s["rpm_secondary"][ok], t[ok], np.zeros(ok.sum()), grid)[0]
         curves.append(c)
     ref = curves[0]
+    from dyno.library.compare_terms import run_systematics
+
+    sys_ = [run_systematics(r) for r in runs]  # what each run says of its systematic terms (meta.json)
+    tare = [_tare_on_grid(r, s["calibration_rel"], grid) for r, s in zip(runs, sys_)]
     diffs = []
-    for r, c in zip(runs[1:], curves[1:]):
+    for i, (r, c) in enumerate(zip(runs[1:], curves[1:]), start=1):
         entry = {"name": c["name"], "reference": ref["name"], "quantities": {}}
         for q in QUANTITIES:
             d = c[q]["value"] - ref[q]["value"]
@@ -182,15 +239,25 @@ def compare(runs: list[dict], step_rpm: float = 200.0) -> dict:
             qd = {"difference": d, "sem": sd, "z": z, "significant": np.abs(z) > Z95}
             if "truth" in c[q] and "truth" in ref[q]:
                 qd["truth_difference"] = c[q]["truth"] - ref[q]["truth"]
+            if q == "efficiency":  # its stated uncertainty: what does not cancel between the two runs
+                extra, entry["terms"] = _efficiency_u95(sys_, tare, curves, i, sd, grid)
+            elif q in ("torque_secondary_nm", "power_out_w"):
+                extra = _torque_u95(sys_, tare, curves, i, q, sd)
+            else:
+                extra = None
+            if extra is not None:
+                qd.update(extra)
+                with np.errstate(invalid="ignore"):
+                    qd["significant_u95"] = np.abs(d) > extra["difference_u95"]
             entry["quantities"][q] = qd
         entry["tune_diff"] = dict_diff((runs[0].get("tune") or {}), (r.get("tune") or {}))
         entry["setup_diff"] = [{"key": k, "from": _setup_value(runs[0]["row"], k), "to": _setup_value(r["row"], k)}
                                for k in SETUP_FIELDS if runs[0]["row"].get(k) != r["row"].get(k)]
         diffs.append(entry)
     return _plain({"grid_rpm_secondary": grid, "step_rpm": step_rpm, "confidence": 0.95, "curves": curves,
-                   "differences": diffs, "atmosphere": ATMOSPHERE_NOTE,
-                   "runs": [{"name": r["name"], **{k: r["row"].get(k) for k in ("path", "state", "n_points")}}
-                            for r in runs]})
+                   "differences": diffs, "atmosphere": atmosphere_note(runs),
+                   "runs": [{"name": r["name"], **{k: r["row"].get(k) for k in ("path", "state", "n_points")},
+                             "ambient": (r.get("meta") or {}).get("ambient")} for r in runs]})
 
 
 def _plain(obj):

@@ -53,6 +53,9 @@ def figures(result: dict) -> list[tuple[str, str]]:
             diff = np.array(qd["difference"], dtype=float) * k
             sem = np.array(qd["sem"], dtype=float) * k
             sig = np.array([bool(s) for s in qd["significant"]])
+            if qd.get("difference_u95"):  # the stated U95: everything that does not cancel between the runs
+                u = np.array(qd["difference_u95"], dtype=float) * k
+                ax.fill_between(grid, -u, u, color="0.93", label="±U95 (all terms not cancelled)")
             ax.fill_between(grid, -1.96 * sem, 1.96 * sem, color="0.85", label="±1.96 s.e. (95 %)")
             ax.axhline(0.0, color="0.5", lw=0.8)
             ax.plot(grid, diff, "-", color="C0", lw=1)
@@ -108,6 +111,14 @@ def render(result: dict) -> str:
                          "<th>to</th></tr>")
             parts += [f"<tr><td class=l>{e(t['key'])}</td><td>{_cell(t['from'])}</td><td>{_cell(t['to'])}</td></tr>"
                       for t in d["setup_diff"]]
+            parts.append("</table>")
+        if d.get("terms"):
+            parts.append("<h3>What cancels in the efficiency difference</h3><table><tr><th class=l>term</th>"
+                         "<th class=l>status</th><th>largest U95 (points)</th><th class=l>why</th></tr>")
+            for k, t in d["terms"].items():
+                top = "—" if t["max_u95"] is None else f"{100 * t['max_u95']:.2f}"
+                parts.append(f"<tr><td class=l>{e(k)}</td><td class=l>{e(t['status'])}</td><td>{top}</td>"
+                             f"<td class=l>{e(t['reason'])}</td></tr>")
             parts.append("</table>")
         parts.append("<h3>Point-wise differences</h3><table><tr><th>rpm_s</th>")
         parts += [f"<th>Δ {e(QUANTITIES[q][3])} ({SCALE[q][1]})</th>" for q in QUANTITIES]

@@ -186,5 +186,5 @@ def compare_with_first(rs: ReplaySet, i: int, step_rpm: float = 200.0) -> dict:
     for rr in (rs.runs[0], rs.runs[i]):
         files = read_run_files(rr.run_dir)
         runs.append({"name": rr.label, "row": run_row(files, key(rr.run_dir)), "points": rr.points,
-                     "tune": files["tune"]["data"] if files["tune"] else None})
+                     "tune": files["tune"]["data"] if files["tune"] else None, "meta": files["meta"]})
     return compare(runs, step_rpm=step_rpm)
