@@ -22,7 +22,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.app import RunOptions, run_test  # noqa: E402
+from dyno.app import RunOptions, run_test
+from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 
 PART_MAP = Path(__file__).resolve().parent.parent / "calibration" / "engine_maps" / \
@@ -41,8 +42,10 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(1, a.seeds + 1):
             t0 = time.perf_counter()
+            # perfect knowledge (RigParams(ideal=True)): the CI coverage below is of the statistics alone;
+            # the total uncertainty against a rig unlike its map is bench_uncertainty.py's
             r = run_test(RunOptions(sim=True, seed=seed, plan=plan_named(a.plan), out_dir=Path(tmp) / f"s{seed}",
-                                    engine_map_path=PART_MAP))
+                                    engine_map_path=PART_MAP, sim_params=RigParams(ideal=True)))
             wall = time.perf_counter() - t0
             cells = r["drive_grid"]["cells"]
             pts = [p for p in r["points"] if p.get("efficiency") is not None]

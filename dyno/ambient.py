@@ -57,3 +57,14 @@ def end_reading(sensor) -> dict | None:
         return read_sensor(sensor, "BME280").to_dict()
     except ConfigError as exc:
         return {"error": str(exc)}
+
+
+def log_end(ctx) -> None:
+    """The air after the run, beside the reading it was corrected to (``ctx.ambient["end"]`` and an
+    ``ambient`` document).  Each BME280 transfer is one I2C_RDWR, serialised by the kernel with the
+    firmware polls, so reading it while a UI session still polls is safe."""
+    end = end_reading(ctx.ambient_sensor)
+    if end is not None:
+        ctx.ambient = {**ctx.ambient, "end": end}
+    if ctx.writer.error is None:
+        ctx.writer.doc("ambient", **ctx.ambient)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import datetime as _dt
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,6 +14,7 @@ from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
 from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
+from dyno.ambient import log_end as log_end_ambient
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
@@ -424,24 +424,13 @@ async def run_test_async(opts: RunOptions) -> dict:
         await asyncio.gather(poll_task, return_exceptions=True)
         stop_watchdog()
         restore_signals()
-        log_end_ambient(ctx)
+        log_end_ambient(ctx)  # the air after the run, beside the reading it was corrected to
         result = summarize(ctx)
         record_safety(ctx, result)
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
                          events_lost=ctx.poller.reader.events_lost)
         close_rig(ctx)
     return result
-
-
-def log_end_ambient(ctx: RunContext) -> None:
-    """The air after the run, beside the reading it was corrected to (an ``ambient`` document)."""
-    from dyno.ambient import end_reading
-
-    end = end_reading(ctx.ambient_sensor)
-    if end is not None:
-        ctx.ambient = {**ctx.ambient, "end": end}
-    if ctx.writer.error is None:
-        ctx.writer.doc("ambient", **ctx.ambient)
 
 
 def record_safety(ctx: RunContext, summary: dict) -> None:
@@ -518,94 +507,3 @@ def run_test(opts: RunOptions) -> dict:
     if opts.sim:
         return run(run_test_async(opts), virtual=True, speed=opts.speed)
     return run(run_test_async(opts), virtual=False)  # pragma: no cover - needs the rig
-
-
-# --- the calibration wizard's rig --------------------------------------------------------------------
-@dataclass
-class CalibrationContext:
-    """What ``dyno calibrate`` acquires from, with the same safety as a test.
-
-    ``sim`` is the simulated fixture (:class:`dyno.ui.sim_fixture.FixtureRig`) or None;
-    ``hw`` the real rig (:class:`dyno.hw.rig.HardwareRig`) or None.  Nothing moves in a
-    calibration (the secondary is locked by hand), so the safety here is the link and the
-    torque sensor: a trip ends the calibration (``on_trip``) and keeps the outputs safe.
-    """
-
-    poller: Poller
-    sim: object = None
-    hw: object = None
-    monitor: object = None
-    watchdog: object = None
-    drills: object = None
-    trip: object = None  # the first dyno.control.safety.Trip
-    controller: object = None  # (none: drills that need one are refused for calibration)
-    writer: object = None
-
-
-def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig_path=None,
-                      fixture_kw: dict | None = None, drills=(), on_trip=None) -> CalibrationContext:
-    from dyno.control.safety import SafetyLimits, SafetyMonitor
-    from dyno.rigconfig import load_rig
-
-    rig_cfg = load_rig(rig_path)
-    if sim:
-        from dyno.ui.sim_fixture import build_fixture_poller
-
-        t0 = loop.time()
-
-        def sim_now() -> float:
-            return (loop.time() - t0) * speed
-
-        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **(fixture_kw or {}))
-        # each real-time poll spans `speed` x more fixture time: drain and buffer as much more
-        poller.max_burst = max(8, math.ceil(8 * speed))
-        fixture.firmware.ring_capacity = max(64, math.ceil(64 * speed))
-        ctx = CalibrationContext(poller, sim=fixture)
-    else:
-        hw = open_rig(rig_cfg)
-        try:
-            poller = Poller(make_reader(rig_cfg.protocol, hw.transport), poll_hz=rig_cfg.poll_hz, blocking_io=True)
-        except BaseException:
-            hw.__exit__(None, None, None)
-            raise
-        ctx = CalibrationContext(poller, hw=hw, watchdog=hw.watchdog)
-        sim_now = None
-    lim = rig_cfg.limits
-    ctx.monitor = SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s), poller)
-
-    def check(events, now_s: float) -> None:
-        if ctx.watchdog is not None:
-            ctx.watchdog.kick()
-        if ctx.trip is not None:
-            return
-        trip = ctx.monitor.check(now_s, loaded=False)
-        if trip is not None:
-            ctx.trip = trip
-            if ctx.hw is not None:
-                from dyno.control.outputs import enter_safe_state
-
-                enter_safe_state(ctx.hw.actuators, latch=True)
-            if on_trip is not None:
-                on_trip(trip)
-
-    poller.listeners.append(check)
-    if drills:
-        from dyno.drills import DrillRunner
-
-        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
-
-        def first(events, now_s: float) -> None:
-            if poller.last_valid_frame_s is not None:
-                ctx.drills.on_first_frame(poller.last_valid_frame_s)
-                poller.listeners.remove(first)
-
-        poller.listeners.append(first)
-    return ctx
-
-
-def close_calibration(ctx: CalibrationContext) -> None:
-    if ctx.drills is not None:
-        ctx.drills.cancel()
-    if ctx.hw is not None:
-        ctx.hw.__exit__(None, None, None)
-        ctx.hw = None

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from dyno.sim.physics import RigModel, _resolve_map_path
+from dyno.sim.physics import RigModel, RigParams, _resolve_map_path
 
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv"
 DEFAULT_THROTTLES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -66,7 +66,9 @@ def write_map(out: Path, throttles=DEFAULT_THROTTLES) -> float:
     """Write the CSV; returns the host interpolation's largest torque error vs the model, N·m."""
     from dyno.analysis.engine_map import load_engine_map
 
-    model = RigModel()
+    # the nominal engine (its map exactly, the reference day): the shipped map is the representative
+    # engine's, not one seed's (dyno.sim.world)
+    model = RigModel(RigParams(ideal=True))
     eng, p = model.engine, model.params
     src = _resolve_map_path(p.engine_map_path)
     full_rows = [ln for ln in Path(src).read_text().splitlines()

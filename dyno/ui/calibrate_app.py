@@ -78,7 +78,7 @@ class CalibrateApp(DynoApp):
         self.feeder: WizardFeeder | None = None
         self.poller = None
         self.rig = None  # FixtureRig (sim) or HardwareRig
-        self.cal_ctx = None  # dyno.app.CalibrationContext
+        self.cal_ctx = None  # dyno.app_calibration.CalibrationContext
         self._old_signals: dict = {}
         self.calibration_in_force = None
         self._poll_task = None
@@ -127,7 +127,7 @@ class CalibrateApp(DynoApp):
         self.refresh_view()
 
     def _start_acquisition(self) -> None:
-        from dyno.app import build_calibration
+        from dyno.app_calibration import build_calibration
 
         loop = asyncio.get_running_loop()
         self.cal_ctx = build_calibration(sim=self.opts.sim, loop=loop, seed=self.opts.seed, speed=self.opts.speed,
@@ -377,7 +377,7 @@ class CalibrateApp(DynoApp):
             await asyncio.gather(self._poll_task, return_exceptions=True)
             self._poll_task = None
         if self.cal_ctx is not None:
-            from dyno.app import close_calibration
+            from dyno.app_calibration import close_calibration
 
             close_calibration(self.cal_ctx)  # the rig: release stroke finished, pins released
             self.rig = None

@@ -410,8 +410,10 @@ class LiveSession:
     def _close_log(self) -> None:
         """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
         document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
+        from dyno.ambient import log_end
         from dyno.summary import safety_document, summarize
 
+        log_end(self.ctx)  # the air after the run (a BME280 read again), as dyno run logs it
         if self.ctx.writer.error is None:
             try:
                 doc = safety_document(summarize(self.ctx, drills_from=self._drills_fired_before))

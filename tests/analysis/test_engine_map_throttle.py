@@ -76,9 +76,9 @@ def test_shipped_synthetic_map_is_reproducible_and_follows_the_sim(tmp_path):
     assert np.array_equal(m.rpm, full.rpm) and np.array_equal(m.torque_nm_knots, full.torque_nm_knots)
     assert m.throttles == [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
     # The host's interpolation of the grid against the model, independently evaluated here.
-    from dyno.sim.physics import RigModel
+    from dyno.sim.physics import RigModel, RigParams
 
-    eng = RigModel().engine
+    eng = RigModel(RigParams(ideal=True)).engine  # the nominal engine (a seed's own deviates: dyno.sim.world)
     for u in m.throttles[:-1]:
         c = m.at_throttle(u)
         n = np.linspace(c.rpm_min, c.rpm_max, 1500)

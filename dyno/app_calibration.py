@@ -1,0 +1,103 @@
+"""The calibration wizard's rig (``dyno calibrate``): a poller on the simulated fixture or the real rig, with
+the same link and sensor safety as a test.  Composition, split from :mod:`dyno.app` (whose ``open_rig`` it
+uses); nothing below the faces imports it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from dyno.acquisition.poller import Poller
+from dyno.acquisition.reader import make_reader
+from dyno.app import open_rig
+
+
+@dataclass
+class CalibrationContext:
+    """What ``dyno calibrate`` acquires from, with the same safety as a test.
+
+    ``sim`` is the simulated fixture (:class:`dyno.ui.sim_fixture.FixtureRig`) or None;
+    ``hw`` the real rig (:class:`dyno.hw.rig.HardwareRig`) or None.  Nothing moves in a
+    calibration (the secondary is locked by hand), so the safety here is the link and the
+    torque sensor: a trip ends the calibration (``on_trip``) and keeps the outputs safe.
+    """
+
+    poller: Poller
+    sim: object = None
+    hw: object = None
+    monitor: object = None
+    watchdog: object = None
+    drills: object = None
+    trip: object = None  # the first dyno.control.safety.Trip
+    controller: object = None  # (none: drills that need one are refused for calibration)
+    writer: object = None
+
+
+def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig_path=None,
+                      fixture_kw: dict | None = None, drills=(), on_trip=None) -> CalibrationContext:
+    from dyno.control.safety import SafetyLimits, SafetyMonitor
+    from dyno.rigconfig import load_rig
+
+    rig_cfg = load_rig(rig_path)
+    if sim:
+        from dyno.ui.sim_fixture import build_fixture_poller
+
+        t0 = loop.time()
+
+        def sim_now() -> float:
+            return (loop.time() - t0) * speed
+
+        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **(fixture_kw or {}))
+        # each real-time poll spans `speed` x more fixture time: drain and buffer as much more
+        poller.max_burst = max(8, math.ceil(8 * speed))
+        fixture.firmware.ring_capacity = max(64, math.ceil(64 * speed))
+        ctx = CalibrationContext(poller, sim=fixture)
+    else:
+        hw = open_rig(rig_cfg)
+        try:
+            poller = Poller(make_reader(rig_cfg.protocol, hw.transport), poll_hz=rig_cfg.poll_hz, blocking_io=True)
+        except BaseException:
+            hw.__exit__(None, None, None)
+            raise
+        ctx = CalibrationContext(poller, hw=hw, watchdog=hw.watchdog)
+        sim_now = None
+    lim = rig_cfg.limits
+    ctx.monitor = SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s), poller)
+
+    def check(events, now_s: float) -> None:
+        if ctx.watchdog is not None:
+            ctx.watchdog.kick()
+        if ctx.trip is not None:
+            return
+        trip = ctx.monitor.check(now_s, loaded=False)
+        if trip is not None:
+            ctx.trip = trip
+            if ctx.hw is not None:
+                from dyno.control.outputs import enter_safe_state
+
+                enter_safe_state(ctx.hw.actuators, latch=True)
+            if on_trip is not None:
+                on_trip(trip)
+
+    poller.listeners.append(check)
+    if drills:
+        from dyno.drills import DrillRunner
+
+        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
+
+        def first(events, now_s: float) -> None:
+            if poller.last_valid_frame_s is not None:
+                ctx.drills.on_first_frame(poller.last_valid_frame_s)
+                poller.listeners.remove(first)
+
+        poller.listeners.append(first)
+    return ctx
+
+
+def close_calibration(ctx: CalibrationContext) -> None:
+    if ctx.drills is not None:
+        ctx.drills.cancel()
+    if ctx.hw is not None:
+        ctx.hw.__exit__(None, None, None)
+        ctx.hw = None
