@@ -115,8 +115,9 @@ def detach_terminal() -> None:
 
     Textual's output thread dies on the first write to a hung-up terminal (EIO); its queue then fills and
     the app's shut-down waits on it for ever (``dyno calibrate`` stayed behind).  Writes to /dev/null
-    succeed and reads see end of file, so the app ends as if the operator had quit.  Only a descriptor
-    on a hung-up terminal (its ioctl says EIO) is replaced: a pipe, a file or a live terminal is kept.
+    succeed and reads see end of file, so the app ends as if the operator had quit.  Every descriptor on
+    a terminal is replaced, the hung-up one (its ioctl says EIO) and one that still answers (the signal can
+    come before the pty is gone: the soak of docs/safety.md saw it); a pipe or a file is kept (tests).
     """
     import errno
     import os
@@ -126,6 +127,7 @@ def detach_terminal() -> None:
     for k in (0, 1, 2):
         try:
             termios.tcgetattr(k)
+            gone.append(k)  # a terminal, still answering: going
         except termios.error as exc:
             if exc.args and exc.args[0] == errno.EIO:
                 gone.append(k)

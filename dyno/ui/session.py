@@ -458,6 +458,10 @@ class LiveSession:
             await asyncio.wait(self._reports, timeout=60.0)
         if self.guard is not None:  # pragma: no cover - rig only
             self.guard.__exit__(None, None, None)
+        if getattr(self, "hung_up", False):  # safe state reached, record closed: should the app's shut-down
+            from dyno.ui.common import exit_after  # still wait on the terminal that went, end anyway
+
+            exit_after(128 + 1, grace_s=0.8)
         if self._nothing_ran():
             # A simulated session closed before GO records nothing worth keeping: no empty run
             # directory left behind.  (On the rig the directory always stays: it is where an
