@@ -127,3 +127,12 @@ def print_table(rows: list[dict]) -> None:
         print(f"{r['case']:<12}{r['day']:<10}{r['pairs']:>6}{r['points']:>7}{r['coverage']:>9.3f}"
               f"{r['coverage_per_pair']:>9.3f}{r['z_sd']:>6.2f}{100 * r['mean_u95']:>8.2f}"
               f"{100 * r['mean_abs_true_d']:>11.2f}{100 * r['mean_own_u95']:>11.2f}  {st}")
+
+
+if __name__ == "__main__":  # the same bench as `bench_uncertainty.py --compare` (this module is its worker)
+    import sys
+
+    sys.path.insert(0, str(REPO / "bench"))
+    from bench_uncertainty import main
+
+    raise SystemExit(main(["--compare", *sys.argv[1:]]))

@@ -13,13 +13,13 @@ systematic term's true contribution (RMS over seeds) beside the standard uncerta
 The systematic part is one draw per run, so coverage is also given per run (its middle point).
 
     python bench/bench_uncertainty.py            # 100 seeds (about 10 min on 2 cores)
-    python bench/bench_uncertainty.py --quick    # 8 seeds
+    python bench/bench_uncertainty.py --quick    # 4 seeds
 
 ``--compare``: instead, ``dyno compare``'s difference uncertainty on pairs of runs of one rig
 (:mod:`bench_compare_cancel`: stock vs heavy flyweights, same and different days, air known or not).
 
     python bench/bench_uncertainty.py --compare           # 50 rigs: 100 runs, 150 pairs (about 10 min)
-    python bench/bench_uncertainty.py --compare --quick   # 4 rigs
+    python bench/bench_uncertainty.py --compare --quick   # 2 rigs
 """
 
 from __future__ import annotations
@@ -148,14 +148,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=None, help="simulated rigs (default 100; --compare 50)")
     ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    ap.add_argument("--quick", action="store_true", help="8 seeds: a smoke run")
+    ap.add_argument("--quick", action="store_true", help="4 seeds: a smoke run")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
     ap.add_argument("--compare", action="store_true",
                     help="the compare bench instead: pairs of runs of one rig (--seeds rigs, default 50)")
     args = ap.parse_args(argv)
     if args.compare:
         return main_compare(args)
-    n = 8 if args.quick else (args.seeds or 100)
+    n = 4 if args.quick else (args.seeds or 100)
     seeds = list(range(args.first_seed, args.first_seed + n))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench-unc-") as tmp:
@@ -188,7 +188,7 @@ def main_compare(args) -> int:
     """The compare bench (bench_compare_cancel): coverage of U_d over pairs of runs of one rig."""
     import bench_compare_cancel as bc
 
-    n = 4 if args.quick else (args.seeds or 50)
+    n = 2 if args.quick else (args.seeds or 50)
     worlds = list(range(args.first_seed, args.first_seed + n))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench-cmp-") as tmp:

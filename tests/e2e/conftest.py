@@ -17,6 +17,14 @@ from dyno.sim.rig_params import RigParams
 # tests/e2e/test_e2e_honest_numbers.py and bench/bench_uncertainty.py.
 IDEAL = RigParams(ideal=True)
 
+def tare_allowance(result: dict, point: dict) -> float:
+    """What the tare (the zero read at rest before GO, ±u_nm) can move a point's efficiency by (~99 %):
+    even with perfect knowledge the zero is *measured*, so a test of the statistics alone allows it."""
+    tare = result.get("torque_tare") or {}
+    t = abs(point.get("torque_secondary_nm") or 0.0)
+    return 2.6 * point["efficiency"] * tare.get("u_nm", 0.0) / t if t > 0 else 0.0
+
+
 # A shorter plan for tests that only need a few points (aborts, kills).
 QUICK_PLAN = replace(TestPlan(), max_measure_s=3.0, warmup_s=2.0)
 

@@ -45,5 +45,9 @@ def _mean_truth(truths, name):
 @pytest.fixture
 def make_driver():
     def _make(seed: int = 0, **overrides) -> Driver:
+        # the thesis rig as specified (its engine exactly its map, the reference day) unless a test says
+        # otherwise: these check the signal chain and the drivetrain at that rig's operating points; a
+        # seed's own engine, sensor and day (dyno.sim.world) are tests/sim/test_sim_world.py's
+        overrides.setdefault("ideal", True)
         return Driver(RigModel(RigParams(**overrides), seed=seed))
     return _make
