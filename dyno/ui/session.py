@@ -350,6 +350,13 @@ class LiveSession:
             for k in ("software_version", "created_unix_s", "format"):
                 meta.pop(k, None)
             meta["rearmed_after"] = str(old_dir)
+            engine_map = old.engine_map
+            if self.ctx.ambient_sensor is not None:  # each run its own air, read when it is armed
+                from dyno.ambient import read_sensor
+
+                amb = read_sensor(self.ctx.ambient_sensor, "BME280")
+                engine_map = engine_map.at_ambient(amb.temp_c, amb.dry_pressure_kpa)
+                meta["ambient"] = amb.to_dict()
             tune = old_dir / "tune.toml"
             writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
                                engine_map_text=(old_dir / "engine_map.csv").read_text(),
@@ -367,7 +374,8 @@ class LiveSession:
         self._close_log()
         self.poller.listeners.remove(old_writer.events)
         self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
-        ctrl = TestController(self.poller, old.act, old.calibration, old.engine_map, plan=old.plan,
+        self.ctx.ambient = dict(meta.get("ambient") or {})
+        ctrl = TestController(self.poller, old.act, old.calibration, engine_map, plan=old.plan,
                               limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
                               runner_for=old.runner_for, from_idle=old.from_idle)
         ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)

@@ -295,8 +295,13 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
     keeps its abort record and gets its report.html; the new run arms without moving anything; GO works."""
     from dyno.protocol import v1
 
+    from dyno.rigconfig import DEFAULT_RIG_PATH
+
+    rig = tmp_path / "rig-bme280.toml"  # (a BME280 fitted: each run reads its own air)
+    rig.write_text(DEFAULT_RIG_PATH.read_text().replace('sensor = "none"', 'sensor = "bme280"', 1))
+
     async def scenario():
-        app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=3, out_dir=tmp_path / "run"))
+        app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=3, out_dir=tmp_path / "run", rig_path=rig))
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None
                                   and app.session.controller.state is State.ARMED, 30), armed_why(app)
@@ -337,6 +342,13 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
             await pilot.press("y")
             assert await wait_for(pilot, lambda: s.controller is not first, 5), screen_text(app)
             assert (tmp_path / "run-2" / "meta.json").is_file() and s.run_dirs == [tmp_path / "run", tmp_path / "run-2"]
+            # the air: read for the first run, after it (its `ambient` document), and again for the new one
+            chip = s.sim.bus.devices[0x76]
+            assert chip.conversions == 3
+            meta2 = json.loads((tmp_path / "run-2" / "meta.json").read_text())
+            assert meta2["ambient"]["source"] == "sensor" and meta2["ambient"]["j1349_factor"] > 0.8
+            docs1 = [json.loads(x) for x in (tmp_path / "run" / "documents.jsonl").read_text().splitlines() if x]
+            assert [d for d in docs1 if d.get("type") == "ambient"][0]["end"]["source"] == "sensor"
             # armed again: the engine restarted by the (simulated) operator, nothing moved by the software
             assert await wait_for(pilot, lambda: s.controller.state is State.ARMED, 30), s.controller.reason
             assert await wait_for(pilot, lambda: "g GO  p pause" in screen_text(app) and "run-2" in screen_text(app)
