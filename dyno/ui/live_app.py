@@ -210,10 +210,10 @@ class LiveApp(OverlayMixin, DynoApp):
         # throttle ramps, idle, an engine cut).
         loaded = v.state in TEST_STATES and self.session.controller.plan.mode not in FROM_IDLE
         row("effic.", efficiency_text(v, loaded))
-        row("last pt", last_point_text(self.session.controller.points))  # its CI and its total U95 (pp)
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
-        row("points", str(v.points))
+        last = last_point_text(self.session.controller.points)  # (in this row: the panel's height is fixed)
+        row("points", str(v.points) + (f"  {last}" if last else ""))
         nd = len(self.session.controller.discards)
         row("discarded", f"{nd} windows" if nd != 1 else "1 window", "bold yellow" if nd else "")
         row("link", fmt(v.frames_per_s, ".0f", " frames/s"))

@@ -175,15 +175,14 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
 
 
 def last_point_text(points: list) -> str:
-    """The last point's efficiency with both its intervals: the CI (scatter of the window) and the total
-    ``efficiency_u95`` (with the calibration, the engine map and the air: dyno.analysis.systematic)."""
+    """The last point's total 95 % half-width, for the points row: ``U95 ±x pp`` (its ``efficiency_u95``: the
+    window's scatter with the calibration, the engine map and the air, dyno.analysis.systematic; the CI alone
+    is on the measuring line)."""
     p = next((q for q in reversed(points) if isinstance(q.get("efficiency"), float)
               and math.isfinite(q["efficiency"])), None)
     if p is None:
-        return "—"
-    ci, u = p.get("efficiency_ci95", math.nan), p.get("efficiency_u95", math.nan)
-    return (f"{p['efficiency'] * 100:.1f} % ±{fmt(ci * 100, '.1f')} CI "
-            f"±{fmt(u * 100, '.1f')} total")
+        return ""
+    return f"U95 ±{fmt(p.get('efficiency_u95', math.nan) * 100, '.1f')} pp"
 
 
 def efficiency_text(v: LiveValues, loaded: bool) -> str:

@@ -22,15 +22,18 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):
-    """Two short simulated runs (3 points each, different seeds), as fast as the sim goes."""
+    """Two short simulated runs of one rig (3 points each, different seeds), as fast as the sim goes."""
     from dyno.app import RunOptions, run_test
     from dyno.control.controller import TestPlan
+    from dyno.sim.rig_params import RigParams
 
     root = tmp_path_factory.mktemp("runs")
     out = []
     for seed in (0, 1):
         d = root / f"run{seed}"
-        r = run_test(RunOptions(sim=True, seed=seed, out_dir=d, plan=replace(TestPlan(), max_points=3)))
+        # one rig measured twice (world_seed: its engine, sensor and day shared; dyno.sim.world), new noise
+        r = run_test(RunOptions(sim=True, seed=seed, out_dir=d, plan=replace(TestPlan(), max_points=3),
+                                sim_params=RigParams(world_seed=0)))
         assert r["state"] == "done" and len(r["points"]) == 3
         out.append(d)
     return out
