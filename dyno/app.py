@@ -14,6 +14,7 @@ from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
 from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
+from dyno.ambient import ambient_sensor, run_ambient
 from dyno.ambient import log_end as log_end_ambient
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -189,8 +190,6 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
                                      serial_port=opts.serial_port)
         actuators = hw.actuators
         blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
-    from dyno.ambient import ambient_sensor, run_ambient
-
     map_source = engine_map.source
     ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw, seed=opts.seed)
     ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
