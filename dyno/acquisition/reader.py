@@ -16,6 +16,7 @@ from dyno.transports.base import Transport, TransportFault
 
 Event = v1.Event
 WRAP = 1 << 32
+CAPS_TRIES = 4  # data frames in answer to CAPS before the host takes the firmware for one without it
 
 
 class Unwrapper:
@@ -72,10 +73,50 @@ class V1Reader:
         self.more = False
         self._dropped_last: int | None = None
         self._last_frame_s: float | None = None
+        # The engine-side input torque channel (v2 extension): asked for only when the rig file declares
+        # it; enabled in every boot whose capabilities announce it (RAM: a reset disables it again).
+        self.want_input = False
+        self.input_present: bool | None = None  # None: not asked yet in this boot
+        self._caps_pending = False
+        self._caps_data_answers = 0
 
     @property
     def stats(self) -> LinkStats:
         return self.session.stats
+
+    def _negotiate_input(self) -> None:
+        """CAPS, then SET_CHANNELS(input) if the device announced the converter.
+
+        Old firmware ignores CAPS (unknown op) and serves its current data frame, which is not
+        acknowledged here, so the next poll reads it again: nothing is lost, the channel is absent.
+        """
+        try:
+            buf = self.transport.transfer(v2.encode_command(v2.OP_CAPS), self.read_len)
+        except TransportFault:
+            return  # tried again at the next poll
+        try:
+            frame = v2.decode_frame(buf)
+        except FrameError:
+            return
+        if not isinstance(frame, v2.CapsFrame) or frame.boot_id != self.session.boot_id:
+            if isinstance(frame, v2.DataFrame):
+                # Old firmware ignores CAPS and serves its data frame; so does new firmware whose
+                # command the bus corrupted: absent only after CAPS_TRIES such answers in a row.
+                self._caps_data_answers += 1
+                if self._caps_data_answers >= CAPS_TRIES:
+                    self.input_present = False
+                    self._caps_pending = False
+            return  # otherwise asked again at the next poll
+        self._caps_data_answers = 0
+        self.session.caps = frame
+        self.input_present = frame.has_input
+        # pending until the device's own capabilities frame confirms the enable (a write can be lost)
+        self._caps_pending = frame.has_input and not frame.enabled & v2.CHANNEL_INPUT
+        if self._caps_pending:
+            try:
+                self.transport.write(v2.encode_command(v2.OP_SET_CHANNELS, v2.CHANNEL_INPUT))
+            except TransportFault:
+                pass
 
     def poll(self, now_s: float) -> list[Event]:
         """One transaction; returns the new events (possibly none)."""
@@ -90,6 +131,10 @@ class V1Reader:
             self.more = False
             return []
         new_boot = self.session.new_boot if self.version == 2 else frame.flags & v1.FLAG_RESET
+        if self.want_input and self.version == 2 and self.session.new_boot:
+            self._caps_pending = True
+            self._caps_data_answers = 0
+            self.input_present = None
         if new_boot and self._last_frame_s is not None:
             self.unwrap.new_epoch(int((now_s - self._last_frame_s) * 1e6))
             self._dropped_last = None
@@ -105,6 +150,8 @@ class V1Reader:
         t_dev = unwrap.peek(frame.t0_us) if not out else max(e.t_us for e in out)
         if self.device_time_us is None or t_dev > self.device_time_us:
             self.device_time_us = t_dev
+        if self._caps_pending:
+            self._negotiate_input()
         return out
 
     @property

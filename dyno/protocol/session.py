@@ -98,6 +98,7 @@ class LinkSession:
         self.frame_listeners: list = []  # callables(raw) on every accepted frame
         self._suspect: bytes | None = None  # a CRC-valid frame out of sequence
         self.info = None
+        self.caps = None  # v2: the last capabilities frame read (the input channel's announcement)
         self.new_boot = False  # the last accepted frame started a new boot (v2) / had RESET (v1)
         self._foreign: str | None = None  # another version seen on the last read
 
@@ -137,6 +138,9 @@ class LinkSession:
         self._foreign = None
         if isinstance(frame, (v1.InfoFrame, v2.InfoFrame)):
             self.info = frame
+            return None
+        if isinstance(frame, v2.CapsFrame):
+            self.caps = frame
             return None
         length = buf[1]
         raw = bytes(buf[:length])

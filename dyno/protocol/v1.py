@@ -111,14 +111,15 @@ def event_size(ev: Event) -> int:
     return EVENT_LEN[ev.channel]
 
 
-def fit_events(events, t0_us: int | None = None, payload_max: int = PAYLOAD_MAX) -> int:
-    """How many leading ``events`` fit one frame (size and i16 time offset)."""
+def fit_events(events, t0_us: int | None = None, payload_max: int = PAYLOAD_MAX, event_len=None) -> int:
+    """How many leading ``events`` fit one frame (size and i16 time offset; ``event_len``: bytes per tag)."""
+    event_len = EVENT_LEN if event_len is None else event_len
     used = n = 0
     for ev in events:
         if t0_us is None:
             t0_us = ev.t_us
         dt = _signed32((ev.t_us - t0_us) & 0xFFFFFFFF)
-        size = EVENT_LEN[ev.channel]
+        size = event_len[ev.channel]
         if used + size > payload_max or not DT_MIN <= dt <= DT_MAX:
             break
         used += size

@@ -24,6 +24,13 @@ Data frame (kind ``'D'``)::
 ACK_POLL carries the boot id: a device retires its current frame only if both
 the boot id and the seq are its own, so an acknowledgement written to a device
 that has since rebooted never retires a frame of the new boot.
+
+The engine-side input torque channel (a second AD7171, issue 27) is an extension
+an old host never sees: the device announces it only in answer to ``CAPS``
+(a capabilities frame, kind ``'C'``), and queues its conversions (tag 4, the
+layout of tag 3) only after the host enabled it with ``SET_CHANNELS`` in this
+boot.  Old firmware ignores both commands (unknown op), so the host finds no
+announcement and nothing changes.
 """
 
 from __future__ import annotations
@@ -59,7 +66,21 @@ OP_ACK_POLL = v1.OP_ACK_POLL  # u16 boot_id, u8 seq
 OP_SET_DEBOUNCE = v1.OP_SET_DEBOUNCE
 OP_CLEAR_COUNTERS = v1.OP_CLEAR_COUNTERS
 OP_INFO = v1.OP_INFO
-COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0}
+OP_SET_CHANNELS = 0x22  # u8 mask of optional channels to queue (CHANNEL_INPUT); the device's reply: none
+OP_CAPS = 0x31          # the next read returns one capabilities frame, then data frames again
+COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0,
+                OP_SET_CHANNELS: 1, OP_CAPS: 0}
+
+# The optional engine-side torque channel: a second AD7171 (tag 4, tag 3's 6-byte layout).
+CH_INPUT = 4
+EVENT_LEN = {**EVENT_LEN, CH_INPUT: 6}
+CHANNEL_NAMES = {**CHANNEL_NAMES, CH_INPUT: "input"}
+ADC_TAGS = (CH_ADC, CH_INPUT)
+
+KIND_CAPS = 0x43  # 'C'
+CAPS_LEN = 20
+CHANNEL_INPUT = 0x01          # SET_CHANNELS / capabilities bit: the input torque converter
+CONVERTER_NONE, CONVERTER_AD7171 = 0, 1
 
 INFO_LEN = 32
 TAG_GAP = 0x80
@@ -110,11 +131,32 @@ class InfoFrame:
         return self.flags >> CAUSE_SHIFT
 
 
+@dataclass(frozen=True, slots=True)
+class CapsFrame:
+    """What the device found at boot: its optional channels (the announcement of docs/protocol.md).
+
+    ``channels`` is the mask of channels this boot can queue (``CHANNEL_INPUT``: a second converter
+    answered at boot), ``enabled`` the mask the host set with SET_CHANNELS in this boot (0 at boot).
+    """
+
+    seq: int
+    flags: int
+    boot_id: int
+    channels: int
+    enabled: int
+    input_converter: int = CONVERTER_NONE   # CONVERTER_AD7171 when fitted
+    input_rate_mhz: int = 0                 # the converter's nominal rate in mHz (125 S/s: 125000)
+
+    @property
+    def has_input(self) -> bool:
+        return bool(self.channels & CHANNEL_INPUT)
+
+
 # --- encoding -----------------------------------------------------------------------
 
 def fit_events(events, t0_us: int | None = None) -> int:
     """How many leading ``events`` fit one v2 frame (size and i16 time offset)."""
-    return v1.fit_events(events, t0_us, payload_max=PAYLOAD_MAX)
+    return v1.fit_events(events, t0_us, payload_max=PAYLOAD_MAX, event_len=EVENT_LEN)
 
 
 def _finish(body: bytes) -> bytes:
@@ -130,7 +172,7 @@ def encode_data_frame(seq: int, flags: int, boot_id: int, events_dropped: int, e
     for ev in events:
         dt = v1._signed32((ev.t_us - t0) & 0xFFFFFFFF)
         tag = ev.channel | (TAG_GAP if ev.gap else 0)
-        if ev.channel == CH_ADC:
+        if ev.channel in ADC_TAGS:
             body += struct.pack(">BhHB", tag, dt, ev.code & 0xFFFF, ev.status & 0xFF)
         else:
             body += struct.pack(">Bh", tag, dt)
@@ -155,11 +197,26 @@ def encode_info_frame(info: InfoFrame) -> bytes:
     return _finish(body)
 
 
+_CAPS = struct.Struct(">BBBBBHBBBIxxx")
+
+
+def encode_caps_frame(caps: CapsFrame) -> bytes:
+    """The capabilities frame: 0-4 as the info frame, 5-6 boot_id, 7 channels, 8 enabled,
+    9 input converter, 10-13 its nominal rate (mHz), 14-15 reserved zero, 16-19 CRC-32C."""
+    body = _CAPS.pack(VERSION, CAPS_LEN, KIND_CAPS, caps.seq & 0xFF, caps.flags & 0xFF, caps.boot_id & 0xFFFF,
+                      caps.channels & 0xFF, caps.enabled & 0xFF, caps.input_converter & 0xFF,
+                      caps.input_rate_mhz & 0xFFFFFFFF)[:16]
+    return _finish(body)
+
+
 def encode_command(op: int, *args: int) -> bytes:
     """Commands keep v1's CRC-16 (checked byte by byte in the TWI ISR)."""
     if op not in COMMAND_ARGS:
         raise ValueError(f"unknown command op 0x{op:02x}")
-    if op == OP_SET_DEBOUNCE:
+    if op == OP_SET_CHANNELS:
+        (mask,) = args
+        body = struct.pack(">BB", op, mask & 0xFF)
+    elif op == OP_SET_DEBOUNCE:
         body = struct.pack(">BHH", op, *args)
     elif op == OP_ACK_POLL:
         boot_id, seq = args
@@ -181,7 +238,7 @@ def poll(ack: tuple[int, int] | None = None) -> bytes:
 _HEAD = struct.Struct(">BBBBBHHI")
 
 
-def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
+def decode_frame(buf: bytes) -> DataFrame | InfoFrame | CapsFrame:
     """Check and decode one read; raises :class:`FrameError` with a cause (v1's causes)."""
     length = v1.check_envelope(buf, VERSION, HEADER_LEN, CRC_LEN, crc32c)
     kind = buf[2]
@@ -195,6 +252,13 @@ def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
          berr) = _INFO.unpack_from(buf)
         return InfoFrame(seq, flags, boot, (major, minor, patch), uptime, dbp, dbs, (lp, ls), (gp, gs),
                          tmo, berr)
+    if kind == KIND_CAPS:
+        if length != CAPS_LEN:
+            raise FrameError("length", f"capabilities frame of {length} bytes")
+        if any(buf[14:16]):
+            raise FrameError("padding", "capabilities reserved bytes")
+        _, _, _, seq, flags, boot, chans, enabled, conv, rate = _CAPS.unpack_from(buf[:16] + bytes(3))
+        return CapsFrame(seq, flags, boot, chans, enabled, conv, rate)
     if kind != KIND_DATA:
         raise FrameError("kind", f"0x{kind:02x}")
     _, _, _, seq, flags, boot, dropped, t0 = _HEAD.unpack_from(buf)
@@ -213,7 +277,7 @@ def decode_frame(buf: bytes) -> DataFrame | InfoFrame:
         if dt >= 0x8000:
             dt -= 0x10000
         t = (t0 + dt) & 0xFFFFFFFF
-        if tag == CH_ADC:
+        if tag in ADC_TAGS:
             events.append(Event(tag, t, buf[i + 3] << 8 | buf[i + 4], buf[i + 5], gap))
         else:
             events.append(Event(tag, t, gap=gap))
@@ -237,4 +301,6 @@ def decode_command(buf: bytes) -> v1.Command:
         return v1.Command(op, struct.unpack(">HH", buf[1:5]))
     if op == OP_ACK_POLL:
         return v1.Command(op, struct.unpack(">HB", buf[1:4]))
+    if op == OP_SET_CHANNELS:
+        return v1.Command(op, (buf[1],))
     return v1.Command(op, ())

@@ -17,7 +17,8 @@ from collections import deque
 from dyno.errors import FrameError
 from dyno.protocol import v0, v1, v2
 
-CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
+CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC, "input": v2.CH_INPUT}
+INPUT_RATE_MHZ = 125_000  # the second AD7171's nominal rate, as announced
 FW_VERSION = (2, 0, 0)
 LOCKOUT_FLOOR_US = 1000  # firmware config.h: DEBOUNCE_*_US_DEFAULT
 LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
@@ -32,11 +33,16 @@ class EmulatedFirmware:
     ring_capacity : events the ring holds (the firmware's is 64)
     clock_offset_us : device counter value at boot; set near 2**32 to test the wrap
     clock_ppm : crystal error of the device's time base
+    knows_caps : False emulates the firmware from before the input channel (CAPS, SET_CHANNELS unknown)
+    input_fitted : a second AD7171 (the engine-side input torque) answers at boot: announced in the
+        capabilities frame (v2 only), queued as tag 4 once the host enabled it in this boot
     """
 
     def __init__(self, protocol: str = "v2", ring_capacity: int = 64, clock_offset_us: int = 0,
-                 clock_ppm: float = 0.0) -> None:
+                 clock_ppm: float = 0.0, input_fitted: bool = False, knows_caps: bool = True) -> None:
         self.protocol = protocol
+        self.knows_caps = knows_caps  # False: firmware from before the input channel (CAPS is an unknown op)
+        self.input_fitted = bool(input_fitted) and protocol == "v2"
         self.ring_capacity = ring_capacity
         self.clock_offset_us = clock_offset_us
         self.clock_scale = 1.0 + clock_ppm * 1e-6
@@ -70,6 +76,8 @@ class EmulatedFirmware:
         self.frame_events: tuple = ()
         self.frame_sent = False
         self.info_pending = False
+        self.caps_pending = False
+        self.channels_enabled = 0  # SET_CHANNELS mask; RAM, so every boot starts with the input off
         self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self.lockout_rejected = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}  # since boot, as on the device
         self._period_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
@@ -100,8 +108,10 @@ class EmulatedFirmware:
     # --- capture (what the ISRs and the ADC loop do) ----------------------------
     def capture(self, channel: str, t_s: float, code: int = 0, status: int = 0) -> None:
         tag = CHANNEL_TAG[channel]
+        if tag == v2.CH_INPUT and not (self.input_fitted and self.channels_enabled & v2.CHANNEL_INPUT):
+            return  # not fitted, or not enabled by this boot's host: its RDY is not serviced
         t_us = self.device_us(t_s)
-        if tag != v1.CH_ADC:
+        if tag not in v2.ADC_TAGS:
             last = self._last_edge_us[tag]
             if last is not None and ((t_us - last) & 0xFFFFFFFF) < self._lockout_us(tag):
                 self.bounces_rejected += 1
@@ -144,6 +154,8 @@ class EmulatedFirmware:
             cmd = proto.decode_command(bytes(data))
         except FrameError:
             return  # ignored, as the firmware does: the current frame is served again
+        if not self.knows_caps and cmd.op in (v2.OP_CAPS, v2.OP_SET_CHANNELS):
+            return  # older firmware: an unknown op, ignored the same way
         if cmd.op == v1.OP_ACK_POLL:
             if self.protocol == "v2":
                 boot, seq = cmd.args
@@ -167,6 +179,11 @@ class EmulatedFirmware:
             self.overflow = False
         elif cmd.op == v1.OP_INFO:
             self.info_pending = True
+        elif self.protocol == "v2" and cmd.op == v2.OP_CAPS:
+            self.caps_pending = True
+        elif self.protocol == "v2" and cmd.op == v2.OP_SET_CHANNELS:
+            fitted = v2.CHANNEL_INPUT if self.input_fitted else 0
+            self.channels_enabled = cmd.args[0] & fitted  # a channel not fitted stays off
 
     def read(self, n: int, now_s: float) -> bytes:
         """The master reads ``n`` bytes; returns what the device puts on the bus."""
@@ -175,6 +192,13 @@ class EmulatedFirmware:
             out = v0.encode_legacy_frame(v0.LegacyFrame(rp, tp, rs, ts, adc, ta))
             self.served_v0.append(out)  # truth for the corrupted-accepted audit
             return out[:n].ljust(n, b"\xff")
+        if self.caps_pending and self.protocol == "v2":
+            self.caps_pending = False
+            fitted = v2.CHANNEL_INPUT if self.input_fitted else 0
+            caps = v2.CapsFrame(self.seq, self._flags(), self.boot_id, fitted, self.channels_enabled,
+                                v2.CONVERTER_AD7171 if fitted else v2.CONVERTER_NONE,
+                                INPUT_RATE_MHZ if fitted else 0)
+            return v2.encode_caps_frame(caps)[:n].ljust(n, b"\xff")
         if self.info_pending and self.protocol == "v2":
             self.info_pending = False
             info2 = v2.InfoFrame(self.seq, self._flags(), self.boot_id, FW_VERSION,
