@@ -52,7 +52,9 @@ def add_arguments(p) -> None:
                         "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, controller-crash, "
                         "disk-full, sigint, sigterm, sighup (docs/safety.md)")
     from dyno.rigconfig import add_rig_argument
+    from dyno.web.attach import add_web_arguments
 
+    add_web_arguments(p)  # --web [ADDR:PORT], --web-stop (docs/web.md)
     add_rig_argument(p)
 
 
@@ -173,14 +175,20 @@ def run(args) -> int:
     if tty.wanted(args.json):  # a person at a terminal: one live status line on stderr
         bar = tty.TtyProgress()
         opts.setup = bar.attach
+    web = _web(args, opts)
+    if web is False:
+        return 2
     import time
 
     wall0_s = time.monotonic()
+    result = None
     try:
         result = run_test(opts)
     finally:
         if bar is not None:
             bar.finish()
+        if web is not None:
+            web.end(result)
     if driven_loss is not None:
         from dyno.analysis.coastdown import driven_loss_keys
 
@@ -202,6 +210,35 @@ def run(args) -> int:
     if result.get("signal") != 1:  # SIGHUP: the terminal went, end now (`dyno report RUN` writes it later)
         _write_report(result, announce=not args.json)
     return exit_code(result)
+
+
+def _web(args, opts):
+    """--web: the server started (its URL on stderr) and hooked to the run when it is built; None without
+    --web, False after one line saying why not.  The page is for people: the run goes at real time
+    (--speed 1) unless --speed says otherwise."""
+    if args.web is None and not args.web_stop:
+        return None
+    from dyno.web.attach import WebView
+
+    web = WebView.start("dyno run", args)
+    if web is None:
+        return False
+    if opts.speed is None:
+        opts.speed = 1.0
+    before = opts.setup
+
+    def setup(ctx) -> None:
+        import asyncio
+
+        from dyno.web.feed import RunSource
+
+        if before is not None:
+            before(ctx)
+        loop = asyncio.get_running_loop()
+        web.attach(RunSource(ctx, loop, opts.speed), loop)
+
+    opts.setup = setup
+    return web
 
 
 def _driven_loss(args):

@@ -1,0 +1,112 @@
+// The live page: one EventSource (SSE) stream of frames; the browser reconnects by itself after a drop.
+"use strict";
+const token = new URLSearchParams(location.search).get("token");
+const Q = token ? "?token=" + encodeURIComponent(token) : "";
+const $ = id => document.getElementById(id);
+const hist = { t: [], rp: [], rs: [], tq: [] };  // the time plot's last 60 s (wall clock of the rig's host)
+const SPAN_S = 60;
+window.dynoLog = [];  // (for tests and curious people) what arrived when
+let last = null, shownPoints = -1, es = null, ended = false;
+
+function fmt(v, d, unit) {
+  if (v === null || v === undefined || !isFinite(v)) return "—";
+  let s = Number(v).toFixed(d); if (/^-0(\.0*)?$/.test(s)) s = s.slice(1);
+  return s + (unit || "");
+}
+function dur(s) { s = Math.round(s); return s >= 60 ? Math.floor(s / 60) + ":" + String(s % 60).padStart(2, "0") : s + " s"; }
+
+function render(f) {
+  last = f;
+  $("state").textContent = (f.state || "—").toUpperCase() + (f.paused ? " (paused)" : "");
+  $("reason").textContent = f.reason || "";
+  $("progress").textContent = "point " + f.points_done + (f.points_total_est ? "/~" + f.points_total_est : "");
+  $("eta").textContent = f.eta_s !== null && f.eta_s !== undefined ? "ETA " + dur(f.eta_s) : "";
+  $("rundir").textContent = f.run_dir ? "run: " + f.run_dir : "";
+  $("rpm-primary").textContent = fmt(f.rpm_primary, 0);
+  $("rpm-secondary").textContent = fmt(f.rpm_secondary, 0);
+  $("ratio").textContent = fmt(f.ratio, 3);
+  $("torque").textContent = fmt(f.torque_secondary_nm, 2);
+  $("rotor-temp").textContent = fmt(f.rotor_temp_c, 0) + (f.rotor_temp_limit_c ? " / " + fmt(f.rotor_temp_limit_c, 0) : "");
+  $("efficiency").textContent = fmt(f.efficiency === null ? null : f.efficiency * 100, 1, " %");
+  $("eff-ci").textContent = f.efficiency_ci95 !== null && f.efficiency_ci95 !== undefined
+    ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp" : "";
+  const ban = $("banner");
+  if (f.abort_cause) {
+    ban.hidden = false;
+    $("abort-cause").textContent = f.abort_cause;
+    $("abort-detail").textContent = f.abort_detail || "";
+    $("rig-safe").textContent = f.rig_safe === true ? "rig SAFE: throttle idle, engine killed, pads off the rotor"
+      : f.rig_safe === false ? "rig NOT SAFE" + (f.rig_unsafe_because ? ": " + f.rig_unsafe_because : " (yet: the release stroke may still be under way)")
+      : "safe state commanded (the outputs cannot report more)";
+    $("rig-safe").dataset.safe = String(f.rig_safe);
+  } else { ban.hidden = true; }
+  $("stopcard").hidden = !f.web_stop;
+  if (f.wall_unix_s) {
+    hist.t.push(f.wall_unix_s); hist.rp.push(f.rpm_primary); hist.rs.push(f.rpm_secondary); hist.tq.push(f.torque_secondary_nm);
+    while (hist.t.length && f.wall_unix_s - hist.t[0] > SPAN_S) for (const k in hist) hist[k].shift();
+  }
+  if ((f.points || []).length !== shownPoints) table(f.points || []);
+  plots();
+}
+
+function table(points) {
+  shownPoints = points.length;
+  $("n-points").textContent = String(points.length);
+  const body = document.querySelector("#points tbody");
+  body.textContent = "";
+  for (const p of points.slice().reverse()) {  // newest first: on a phone it is the one in view
+    const tr = document.createElement("tr");
+    if (p.valid === false) tr.className = "invalid";
+    for (const v of [p.index, fmt(p.rpm_primary, 0), fmt(p.rpm_secondary, 0), fmt(p.ratio, 3), fmt(p.torque_secondary_nm, 2),
+                     fmt(p.power_out_w, 0), fmt(p.efficiency === null ? null : p.efficiency * 100, 1),
+                     fmt(p.efficiency_ci95 === null ? null : p.efficiency_ci95 * 100, 1),
+                     fmt(p.efficiency_u95 === null ? null : p.efficiency_u95 * 100, 1)]) {
+      const td = document.createElement("td"); td.textContent = v; tr.appendChild(td);
+    }
+    body.appendChild(tr);
+  }
+}
+
+function plots() {
+  if (hist.t.length) {
+    const t0 = hist.t[hist.t.length - 1];
+    const x = hist.t.map(t => t - t0);
+    DynoPlot.draw($("plot-time"), [
+      { x, y: hist.rp, color: "#4fc3f7", label: "rpm primary" },
+      { x, y: hist.rs, color: "#ffb74d", label: "rpm secondary" },
+      { x, y: hist.tq, color: "#ce93d8", axis: "right", label: "torque N·m (right)" },
+    ], { xRange: [-SPAN_S, 0], xFmt: v => v + " s" });
+  }
+  const pts = (last && last.points || []).filter(p => p.efficiency !== null && p.ratio !== null);
+  const pct = v => v === null || v === undefined ? null : v * 100;
+  DynoPlot.draw($("plot-eff"), [{ kind: "points", x: pts.map(p => p.ratio), y: pts.map(p => pct(p.efficiency)),
+    err95: pts.map(p => pct(p.efficiency_ci95)), u95: pts.map(p => pct(p.efficiency_u95)), color: "#81c784",
+    label: "points: eff % (thick: CI95, thin: U95)" }]);
+}
+
+function link(text, down) { const l = $("link"); l.textContent = text; l.className = "link" + (down ? " down" : ""); }
+
+function connect() {
+  es = new EventSource("/api/events" + Q);
+  es.onopen = () => link("live", false);
+  es.onmessage = ev => {
+    const f = JSON.parse(ev.data);
+    window.dynoLog.push({ recv_ms: Date.now(), wall_unix_s: f.wall_unix_s, t_sim_s: f.t_sim_s, state: f.state, abort_cause: f.abort_cause });
+    if (window.dynoLog.length > 5000) window.dynoLog.splice(0, 1000);
+    render(f);
+  };
+  es.addEventListener("bye", () => { ended = true; es.close(); link("the process has ended: last values shown", true); });
+  es.onerror = () => {
+    if (ended) return;
+    link("connection lost: reconnecting…", true);
+    if (es.readyState === EventSource.CLOSED) setTimeout(connect, 2000);  // (the browser gave up: start again)
+  };
+}
+
+$("stop").addEventListener("click", async () => {
+  if (!confirm("STOP the test? (software stop: throttle idle, engine killed, brake released)")) return;
+  try { const r = await fetch("/api/stop" + Q, { method: "POST" }); link("STOP: " + (await r.json()).stop, false); }
+  catch (e) { link("STOP not sent: " + e, true); }
+});
+window.addEventListener("resize", plots);
+connect();
