@@ -16,6 +16,7 @@ from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-e
 from dyno.acquisition.reader import make_reader
 from dyno.ambient import ambient_sensor, run_ambient
 from dyno.ambient import log_end as log_end_ambient
+from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
@@ -176,7 +177,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         from dyno.sim.rig import SimRig
 
         faults = opts.faults or (BusFaults.mixed(opts.fault_rate) if opts.fault_rate else None)
-        sim = SimRig(now_s, seed=opts.seed, params=opts.sim_params, protocol=protocol, faults=faults,
+        sim = SimRig(now_s, seed=opts.seed, params=app_input.sim_params_for(opts.sim_params, rig_cfg),
+                     protocol=protocol, faults=faults,
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
         sim.model.brake_hold_relay = rig_cfg.actuator.brake_hold_relay  # K3: wiring, as rig.toml declares it
         bus, actuators = sim.bus, sim.actuators
@@ -191,6 +193,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         actuators = hw.actuators
         blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
     map_source = engine_map.source
+    input_channel = app_input.load_input_channel(rig_cfg)  # rig.toml [input_torque], or None
     ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw, seed=opts.seed)
     ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
@@ -218,6 +221,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "uncertainty": holder["uncertainty"],
         "ambient": ambient.to_dict(),  # the one place the air is read from (library, report, replay)
         "limits": _asdict(limits),
+        **app_input.input_meta(input_channel),
     }
     tune_path = opts.tune_path
     if tune_path is None and sim is not None:
@@ -267,6 +271,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
             point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
             unc["engine_map_rel"], unc["air_rel"])))
+    app_input.attach(ctx, input_channel, reader, unc or {})  # after the map's terms: its figure stays beside
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -502,7 +507,11 @@ def _install_signal_handlers(ctx: RunContext, loop):
 
 def run_test(opts: RunOptions) -> dict:
     from dyno.clock import run
+    from dyno.heap import return_free_heap
 
-    if opts.sim:
-        return run(run_test_async(opts), virtual=True, speed=opts.speed)
-    return run(run_test_async(opts), virtual=False)  # pragma: no cover - needs the rig
+    try:
+        if opts.sim:
+            return run(run_test_async(opts), virtual=True, speed=opts.speed)
+        return run(run_test_async(opts), virtual=False)  # pragma: no cover - needs the rig
+    finally:  # a process that runs test after test must not keep each run's freed pages (dyno.heap)
+        return_free_heap()

@@ -13,6 +13,8 @@ import numpy as np
 
 from dyno.protocol import v1
 
+CH_INPUT = 4  # dyno.protocol.v2.CH_INPUT (the acquisition layer reads v1 and v2 events alike)
+
 
 class Streams:
     def __init__(self) -> None:
@@ -25,7 +27,39 @@ class Streams:
         self.adc_t = array("q")
         self.adc_code = array("H")
         self.adc_status = array("B")
+        # the engine-side input torque converter (protocol v2 tag 4; empty on a rig without it)
+        self.input_t = array("q")
+        self.input_code = array("H")
+        self.input_status = array("B")
         self.out_of_order = 0
+        #: ADC samples dropped from the front by ``trim_before``: a reader that walks the samples by index
+        #: (the safety monitor) counts in ``adc_trimmed + local index`` so a trim never replays or skips one
+        self.adc_trimmed = 0
+
+    @property
+    def adc_total(self) -> int:
+        """ADC samples appended since the stream began (trimmed ones included)."""
+        return self.adc_trimmed + len(self.adc_t)
+
+    def trim_before(self, t_us: int) -> int:
+        """Forget every event older than ``t_us`` (device time); returns how many were dropped.
+
+        A long-lived poller (the UI's session re-arms run after run on one poller) would otherwise
+        keep every event since start-up: ~10 bytes each at a few hundred events/s, tens of MB over a
+        working day.  Each run's events are in its own log; only windows after ``t_us`` stay readable.
+        """
+        dropped = 0
+        for ch, ts in self.edges.items():
+            i = bisect_left(ts, t_us)
+            if i:
+                del ts[:i], self.edge_rpm[ch][:i], self.edge_gap[ch][:i]
+                dropped += i
+        i = bisect_left(self.adc_t, t_us)
+        if i:
+            del self.adc_t[:i], self.adc_code[:i], self.adc_status[:i]
+            self.adc_trimmed += i
+            dropped += i
+        return dropped
 
     def extend(self, events) -> None:
         pending = self._gap_pending
@@ -39,6 +73,13 @@ class Streams:
                 self.adc_t.append(e.t_us)
                 self.adc_code.append(e.code)
                 self.adc_status.append(e.status)
+            elif e.channel == CH_INPUT:
+                if self.input_t and e.t_us <= self.input_t[-1]:
+                    self.out_of_order += 1
+                    continue
+                self.input_t.append(e.t_us)
+                self.input_code.append(e.code)
+                self.input_status.append(e.status)
             else:
                 ts = self.edges[e.channel]
                 if ts and e.t_us <= ts[-1]:
@@ -69,6 +110,13 @@ class Streams:
                 np.frombuffer(self.adc_code, dtype=np.uint16)[i:j].astype(float),
                 np.frombuffer(self.adc_status, dtype=np.uint8)[i:j].copy())
 
+    def input_window(self, t0_us: int, t1_us: int):
+        """The input torque converter's conversions in ``[t0_us, t1_us]``: times, codes, status."""
+        i, j = bisect_left(self.input_t, t0_us), bisect_right(self.input_t, t1_us)
+        return (np.frombuffer(self.input_t, dtype=np.int64)[i:j].copy(),
+                np.frombuffer(self.input_code, dtype=np.uint16)[i:j].astype(float),
+                np.frombuffer(self.input_status, dtype=np.uint8)[i:j].copy())
+
     def edge_gap_window(self, channel: int, t0_us: int, t1_us: int) -> np.ndarray:
         ts = self.edges[channel]
         i, j = bisect_left(ts, t0_us), bisect_right(ts, t1_us)
@@ -91,5 +139,8 @@ class Streams:
         return max(cands) if cands else None
 
     def counts(self) -> dict:
-        return {"primary_edges": len(self.edges[1]), "secondary_edges": len(self.edges[2]),
-                "adc_samples": len(self.adc_t)}
+        out = {"primary_edges": len(self.edges[1]), "secondary_edges": len(self.edges[2]),
+               "adc_samples": len(self.adc_t)}
+        if self.input_t:
+            out["input_samples"] = len(self.input_t)
+        return out

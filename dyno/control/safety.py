@@ -101,19 +101,20 @@ class SafetyMonitor:
     # ------------------------------------------------------------------ inputs
     def _update_adc(self) -> None:
         s = self.poller.streams
-        n = len(s.adc_t)
+        n = s.adc_total  # (absolute counts: a trim of the stream's front moves local indices, not these)
         if n == self._adc_seen:
             return
-        codes, status = s.adc_code, s.adc_status
+        codes, status, base = s.adc_code, s.adc_status, s.adc_trimmed
+        self._adc_seen = max(self._adc_seen, base)
         err_flag = v1.ADC_STATUS_ERR
         good_sum = 0.0
         good_n = 0
         for i in range(self._adc_seen, n):
-            if status[i] & err_flag:
+            if status[i - base] & err_flag:
                 self._adc_err_run += 1
                 continue
             self._adc_err_run = 0
-            c = codes[i]
+            c = codes[i - base]
             if c == self._adc_last_code:
                 self._adc_same_run += 1
             else:

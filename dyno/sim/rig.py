@@ -221,13 +221,13 @@ def physical_outputs(model) -> dict:
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
-    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip")
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip", "te")
 
     def __init__(self, model) -> None:
         self.model = model
         self.t = array("d")
         (self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c, self.ratio_geo,
-         self.slip) = (array("d") for _ in self.FIELDS)
+         self.slip, self.te) = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -240,6 +240,16 @@ class TruthRecorder:
         self.rotor_c.append(tr.rotor_temp_c)
         self.ratio_geo.append(tr.ratio_geometric)
         self.slip.append(tr.belt_slip)
+        self.te.append(tr.torque_engine_nm)
+
+    def trim_before(self, t_s: float) -> int:
+        """Forget the samples older than ``t_s`` (a UI session re-arms on one rig: each run's truth is
+        averaged into its points when they are taken, so only the windows still to come need samples)."""
+        i = bisect_left(self.t, t_s)
+        if i:
+            for a in (self.t, *(getattr(self, f) for f in self.FIELDS)):
+                del a[:i]
+        return i
 
     def crossing_s(self, field: str, level: float, after_s: float = 0.0) -> float | None:
         """First time (linear interpolation between samples) ``field`` rises above ``level``."""
@@ -267,7 +277,10 @@ class TruthRecorder:
             return float(np.mean(np.frombuffer(a, dtype=np.float64)[i:j]))
 
         p_in, p_out = mean(self.p_in), mean(self.p_out)
-        return {"efficiency_true": p_out / p_in if p_in > 0 else math.nan,
+        extra = {}
+        if getattr(self.model, "input_fitted", False):  # the engine's true torque the cradle carries
+            extra["torque_input_true_nm"] = mean(self.te)
+        return extra | {"efficiency_true": p_out / p_in if p_in > 0 else math.nan,
                 "rpm_primary_true": mean(self.rp), "rpm_secondary_true": mean(self.rs),
                 "torque_secondary_true_nm": mean(self.tq), "power_in_true_w": p_in, "power_out_true_w": p_out,
                 # the belt's truth for the slip-consistent inverse (dyno.model.inverse)
@@ -294,7 +307,8 @@ class SimRig:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating
 
         self.model = RigModel(params, seed=seed)
-        self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm)
+        self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
+                                         input_fitted=self.model.input_fitted)
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
         self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)
         self.truth = TruthRecorder(self.model)

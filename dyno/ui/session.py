@@ -390,6 +390,7 @@ class LiveSession:
         self.poller.listeners.append(writer.events)
         self.ctx.writer, self.ctx.controller, self.controller = writer, ctrl, ctrl
         self._rehook_watchdog()
+        self._trim_history()
         if self.ctx.drills is not None:
             self._drills_fired_before = len(self.ctx.drills.fired)
         self._pause_points = 0
@@ -399,6 +400,23 @@ class LiveSession:
         self.run_dirs.append(new_dir)
         self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
         return new_dir, f"re-armed: new run {new_dir} (report of the last one: {old_dir / 'report.html'})"
+
+    def _trim_history(self) -> None:
+        """Forget the ended run's events and the sim's truth samples (kept: the last ``HISTORY_KEEP_S``).
+
+        The poller and the simulated rig live as long as the session; without this each re-arm adds the
+        last run's events (~10 bytes each, a few hundred a second) to memory that no later run reads:
+        the UI soak's RSS grew 17 % over two simulated hours.  The ended run is in its log by now.
+        """
+        dev_now_us = self.poller.device_now_us()
+        if dev_now_us is not None:
+            self.poller.streams.trim_before(int(dev_now_us - HISTORY_KEEP_S * 1e6))
+        truth = getattr(self.ctx.sim, "truth", None)
+        if truth is not None and len(truth.t):
+            truth.trim_before(truth.t[-1] - HISTORY_KEEP_S)
+        from dyno.heap import return_free_heap
+
+        return_free_heap()
 
     def _rehook_watchdog(self) -> None:
         """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
@@ -490,6 +508,9 @@ class LiveSession:
 # inertias on newer trees): a re-armed controller gets the same.
 REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia")
 INPUT_COPIES = ("plan.toml",)
+
+#: seconds of events and truth a re-arm keeps (more than any window or drill check looks back over)
+HISTORY_KEEP_S = 120.0
 
 # Aborts after which the session is not re-armed: a software or host fault wants a fresh start.
 NO_REARM = {"watchdog": "the control loop stalled", "error": "the controller crashed",
