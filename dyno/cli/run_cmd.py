@@ -76,6 +76,10 @@ def add_air_arguments(p) -> None:
     p.add_argument("--sim-world-seed", type=int, default=None, metavar="N",
                    help="with --sim: draw the engine, sensor and day from this seed instead of --seed (the same "
                         "rig measured again: compare runs that share it)")
+    p.add_argument("--sim-tune-deviation", type=float, default=None, metavar="REL",
+                   help="with --sim: each CVT part's true value (spring rate and preload, flyweight mass, helix "
+                        "angle) differs from its label by up to REL (uniform), drawn per part and world seed: the "
+                        "same part keeps its deviation on the same rig across runs (default 0)")
     p.add_argument("--sim-ideal", action="store_true",
                    help="with --sim: perfect knowledge (the engine exactly its map, the sensor exactly its "
                         "calibration, the J1349 reference day): for checks of statistics alone")
@@ -104,6 +108,11 @@ def air_options(args, sim_kw: dict, prog: str = "dyno run"):
             sim_kw[key] = float(v)
     if args.sim_ideal:
         sim_kw["ideal"] = True
+    dev = getattr(args, "sim_tune_deviation", None)
+    if dev is not None:
+        if not (0.0 <= dev <= 0.5):  # (NaN fails too)
+            return None, f"{prog}: --sim-tune-deviation: expected a number 0..0.5, got {dev:g}"
+        sim_kw["tune_deviation_rel"] = float(dev)
     if args.sim_world_seed is not None:
         if not 0 <= args.sim_world_seed < 2**32:
             return None, f"{prog}: --sim-world-seed: expected 0..{2**32 - 1}, got {args.sim_world_seed}"

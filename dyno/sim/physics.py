@@ -67,6 +67,7 @@ parameters in :mod:`dyno.sim.rig_params`; both are re-exported here.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -75,6 +76,7 @@ from dyno.sim.brake import Brake
 from dyno.sim.cvt import CVT
 from dyno.sim.driven import Engagement, clamp_radius_m, parasitic_nm
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
+from dyno.sim.input_torque import InputTorqueSignals
 # The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
 # keep importing them from dyno.sim.physics.
 from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_table_for
@@ -87,7 +89,7 @@ __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel",
            "Truth"]
 
 
-class RigModel(RigSignals):
+class RigModel(RigSignals, InputTorqueSignals):
     """The simulated rig.  See the module docstring for the physics.
 
     Inputs (attributes set by the device/actuator emulation):
@@ -114,7 +116,14 @@ class RigModel(RigSignals):
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
-        tune = _load_tune(p.cvt_tune_path)
+        tune = labelled = _load_tune(p.cvt_tune_path)
+        if p.tune_deviation_rel and tune is not None:  # the parts on the rig are not their labels
+            from dyno.sim.tune_deviation import deviate_tune
+
+            world_seed = int(seed if p.world_seed is None else p.world_seed)
+            tune, parts = deviate_tune(tune, p.tune_deviation_rel, world_seed)
+            self.world = dataclasses.replace(self.world, tune_parts=parts)
+        self.tune_true = tune  # the sim's truth (tests); the host only ever has the labelled file
         self.cvt = CVT(ratio_low=p.cvt_ratio_low, ratio_high=p.cvt_ratio_high,
                        primary_radius_max_m=p.cvt_primary_radius_max_m,
                        sheave_half_angle_deg=p.cvt_sheave_half_angle_deg,
@@ -134,7 +143,9 @@ class RigModel(RigSignals):
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       belt_table=_belt_table_for(p, tune))
+                       # the belt's efficiency share at the labelled tune's clamp: a table per true tune
+                       # would cost ~90 s per part draw; clamp, engagement and shift use the true parts
+                       belt_table=_belt_table_for(p, labelled))
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
         self.engagement = None
@@ -230,6 +241,7 @@ class RigModel(RigSignals):
         self._phase_rev = float(rng_phase.uniform(0.0, TWO_PI))
         self._phase_brake = float(rng_phase.uniform(0.0, TWO_PI))
         self._next_adc_t = float(rng_phase.uniform(0.0, self._adc_period_s))
+        self._init_input(p, seed)  # the engine cradle's load cell, when fitted (dyno.sim.input_torque)
         self._buffer: list[SensorEvent] = []    # events computed ahead of the caller's time
         self._h = p.max_substep_s
         self._cell_index = 0
@@ -477,6 +489,8 @@ class RigModel(RigSignals):
             y = y0 + (y1 - y0) * (tau / h)
             events.append(self._adc_event(ta, tau, y, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge))
             self._next_adc_t = ta + self._adc_period_s
+        if self.input_fitted:
+            self._input_events(t0, h, th_e0, w_e0, a_e, t_e, rpm_e, running, events)
 
     def _locked_accel(self, t_e, i, k, eta_m, t_d, t_load):
         """Crank acceleration and belt input torque with the belt gripping."""

@@ -95,6 +95,9 @@ class RigParams:
     # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
     # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
     cvt_tune_path: str | None = DEFAULT_TUNE
+    # Each CVT part's true value differs from its label by up to this fraction (uniform), drawn per part
+    # and world seed (dyno.sim.tune_deviation, --sim-tune-deviation); 0 = every part exactly its label.
+    tune_deviation_rel: float = 0.0
     # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
     # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
     # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
@@ -179,6 +182,23 @@ class RigParams:
     ripple_engine_rev_frac: float = 0.22
     ripple_brake_shaft_frac: float = 0.08
     adc_error_prob: float = 0.0
+    # ---- engine-side input torque channel (issue 27, dyno.sim.input_torque): a load cell on the engine
+    # cradle's reaction arm, read by a second AD7171.  Fitted when rig.toml declares [input_torque].
+    input_torque_fitted: bool = False
+    input_gain_counts_per_nm: float = 600.0      # counts per N m of crank torque (nominal; 0.2 m arm, 2 mV/V cell)
+    input_offset_counts: float = 33500.0
+    # drawn per seed (dyno.sim.world) with the reproducibility of a calibration history like the
+    # brake-side channel's (its four slopes: 1.57 %), and an offset scatter
+    input_gain_drift_rel_sd: float = 0.016
+    input_offset_drift_counts_sd: float = 60.0
+    input_noise_counts: float = 60.0             # bridge + amplifier white noise per conversion
+    input_noise_counts_per_nm: float = 4.0       # more under load (engine vibration on the cradle)
+    input_zero_drift_nm_per_min: float = 0.0
+    input_rate_hz: float = 125.0
+    input_clock_error_frac: float = 0.012        # its own RC clock, not the first converter's
+    input_cutoff_hz: float = 5.0                 # its anti-alias filter (2nd order): the means are what is read
+    cradle_bearing_loss_sd_nm: float = 0.08      # trunnion bearing friction held off the load cell, |N(0, sd)|
+    input_error_prob: float = 0.0
     # ---- rotor thermometer (MLX90614): first-order optical/filter lag and read noise;
     # quantisation (0.02 K) comes from its word format in dyno.sim.bus
     thermometer_time_constant_s: float = 0.15

@@ -54,6 +54,14 @@ class World:
     adc_gain_drift_rel: float = 0.0
     adc_offset_drift_counts: float = 0.0
     ideal: bool = False
+    # the engine-side input torque channel (issue 27), drawn from a stream of its own (the draws above do
+    # not move when it is fitted); NaN when the rig has none
+    input_gain_counts_per_nm: float = math.nan
+    input_offset_counts: float = math.nan
+    input_gain_drift_rel: float = 0.0
+    cradle_bearing_loss_nm: float = 0.0
+    # --sim-tune-deviation: each CVT part's label and true value (dyno.sim.tune_deviation); () = as labelled
+    tune_parts: tuple = ()
 
     def engine_dev_rel_at(self, rpm: float) -> float:
         """The engine's relative deviation from its map at ``rpm`` (ageing and air not included)."""
@@ -68,6 +76,7 @@ class World:
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d["engine_dev_rpm"], d["engine_dev_rel"] = list(self.engine_dev_rpm), list(self.engine_dev_rel)
+        d["tune_parts"] = [dict(x) for x in self.tune_parts]
         return d
 
 
@@ -104,6 +113,9 @@ def realise(p, seed: int, map_rpm: np.ndarray, map_torque_nm: np.ndarray):
         t, pr, rh = p.ambient_day or REFERENCE_DAY
         w = World(t, pr, rh, j1349_factor_of(t, pr, rh), adc_gain_counts_per_nm=p.adc_gain_counts_per_nm,
                   adc_offset_counts=p.adc_offset_counts, ideal=True)
+        if p.input_torque_fitted:
+            w = dataclasses.replace(w, input_gain_counts_per_nm=p.input_gain_counts_per_nm,
+                                    input_offset_counts=p.input_offset_counts)
         q = dataclasses.replace(p, ambient_temp_c=t)
         return q, map_rpm, map_torque_nm / w.j1349_factor, w
     seed = int(seed if p.world_seed is None else p.world_seed)
@@ -118,7 +130,20 @@ def realise(p, seed: int, map_rpm: np.ndarray, map_torque_nm: np.ndarray):
     w = World(t, pr, rh, cf, tuple(float(x) for x in dev_rpm), tuple(float(x) for x in dev_rel),
               p.engine_ageing_loss_frac, p.adc_gain_counts_per_nm * (1.0 + gain_drift),
               p.adc_offset_counts + offset_drift, gain_drift, offset_drift)
+    if p.input_torque_fitted:
+        w = _with_input(w, p, seed)
     torque = np.array([tq * w.true_over_map(n) for n, tq in zip(map_rpm, map_torque_nm)])
     q = dataclasses.replace(p, adc_gain_counts_per_nm=w.adc_gain_counts_per_nm,
                             adc_offset_counts=w.adc_offset_counts, ambient_temp_c=t)
     return q, map_rpm, torque, w
+
+
+def _with_input(w: World, p, seed: int) -> World:
+    """This seed's input torque channel: gain, offset and the cradle bearings' friction torque."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x27]))  # (0x27: the input channel's stream)
+    gain_drift = float(rng.normal(0.0, 1.0)) * p.input_gain_drift_rel_sd
+    offset = p.input_offset_counts + float(rng.normal(0.0, 1.0)) * p.input_offset_drift_counts_sd
+    bearing = abs(float(rng.normal(0.0, 1.0))) * p.cradle_bearing_loss_sd_nm
+    return dataclasses.replace(w, input_gain_counts_per_nm=p.input_gain_counts_per_nm * (1.0 + gain_drift),
+                               input_offset_counts=offset, input_gain_drift_rel=gain_drift,
+                               cradle_bearing_loss_nm=bearing)

@@ -1,0 +1,88 @@
+"""--sim-tune-deviation: the simulated CVT's parts are not their labels, each part keeps its own
+deviation on the same rig (world seed) across runs, and the sim's physics runs on the true parts."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.tune_deviation import deviate_tune
+from dyno.tuning.tune import load_tune
+
+STOCK = "calibration/tunes/cvtech-stock.toml"
+HEAVY = "calibration/tunes/heavy-flyweights.toml"
+
+
+def _model(seed, tune=STOCK, **kw):
+    return RigModel(RigParams(cvt_tune_path=tune, tune_deviation_rel=0.1, belt_efficiency_source="loss_model",
+                              **kw), seed=seed)
+
+
+def _parts(model):
+    return {p["kind"]: p for p in model.world.tune_parts}
+
+
+def test_each_part_deviates_within_rel_and_keeps_it_on_the_same_rig():
+    a, b = _model(1, world_seed=7), _model(2, world_seed=7)  # one rig measured twice
+    c = _model(1, world_seed=8)                              # another rig
+    pa, pb, pc = _parts(a), _parts(b), _parts(c)
+    assert set(pa) == {"flyweights", "primary_spring", "secondary_spring", "helix"}
+    devs = [v["deviation_rel"] for p in pa.values() for v in p.values() if isinstance(v, dict)]
+    assert len(devs) == 6 and all(abs(d) <= 0.1 for d in devs) and len(set(devs)) == 6
+    assert pa == pb
+    assert all(pa[k] != pc[k] for k in pa)
+    # the physics is the true parts': the model's tune carries the drawn values
+    t = a.tune_true
+    assert t.flyweights.mass_each_kg == pytest.approx(pa["flyweights"]["mass_each_kg"]["true"])
+    assert t.primary_spring.rate_n_per_m == pytest.approx(pa["primary_spring"]["rate_n_per_m"]["true"])
+    assert t.helix.angle_from_axis_deg == pytest.approx(pa["helix"]["angle_from_axis_deg"]["true"])
+
+
+def test_a_swapped_part_brings_its_own_deviation_the_others_keep_theirs():
+    stock, heavy = _parts(_model(3, world_seed=5)), _parts(_model(3, HEAVY, world_seed=5))
+    assert stock["flyweights"]["mass_each_kg"]["deviation_rel"] != heavy["flyweights"]["mass_each_kg"]["deviation_rel"]
+    for kind in ("primary_spring", "secondary_spring", "helix"):
+        assert stock[kind] == heavy[kind]
+
+
+def test_engagement_truth_follows_the_true_parts():
+    """Engagement at zero load is where the flyweights' force meets the spring at the sim's low stop
+    (Messick eq. 9.3 with the true mass, preload and rate), not where the labels would put it."""
+    from dyno.sim.driven import clamp_radius_m
+    from dyno.tuning import actuators as act
+
+    label = RigModel(RigParams(cvt_tune_path=STOCK, belt_efficiency_source="loss_model"), seed=0)
+    dev = _model(0, world_seed=11)
+    r_m = clamp_radius_m(dev.params, dev.cvt)
+    n0, n1 = label.engagement.rpm_for_capacity(0.0), dev.engagement.rpm_for_capacity(0.0)
+    assert n1 == pytest.approx(float(act.primary_speed_for_force_rpm(dev.tune_true, 0.0, r_m)), abs=1.0)
+    assert n0 == pytest.approx(float(act.primary_speed_for_force_rpm(load_tune(STOCK), 0.0, r_m)), abs=1.0)
+    assert abs(n1 - n0) > 5.0
+
+
+def test_zero_deviation_is_the_label():
+    t = load_tune(STOCK)
+    assert deviate_tune(t, 0.0, 3) == (t, ())
+
+
+def test_cli_flag_and_its_bad_value(tmp_path):
+    bad = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--sim-tune-deviation", "0.9",
+                          "--out", str(tmp_path / "r")], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--sim-tune-deviation" in bad.stderr
+    assert not (tmp_path / "r").exists()
+    out = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--plan", "engagement",
+                          "--json", "--sim-tune-deviation", "0.1", "--sim-world-seed", "11", "--seed", "4",
+                          "--out", str(tmp_path / "e")], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    d = json.loads(out.stdout)
+    parts = {p["kind"]: p for p in d["sim_world"]["tune_parts"]}
+    assert parts == _parts(_model(0, world_seed=11))
+    # the measurement sees the true parts: the measured engagement is the deviated rig's truth
+    assert abs(d["engagement_rpm"] - d["engagement_rpm_true"]) < 10.0
+    label_eng = RigModel(RigParams(cvt_tune_path=STOCK, belt_efficiency_source="loss_model"), seed=0)
+    assert abs(d["engagement_rpm_true"] - label_eng.engagement.rpm_for_capacity(0.0)) > 5.0
