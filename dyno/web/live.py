@@ -26,7 +26,7 @@ class LiveHub:
         self.feed = feed
         self.allow_stop = allow_stop
         self.seq = 0
-        self.state_json = b"{}"
+        self.state_json = b'{"state": "starting", "points": []}'  # (before the rig's first frame)
         self.event_bytes = b""
         self._changed: asyncio.Event | None = None
         self.closing = False
