@@ -30,6 +30,7 @@ from typing import Any, Mapping
 
 from dyno.errors import ConfigError
 from dyno.rig_ambient import AmbientConfig, ambient_table
+from dyno.rig_input import InputTorqueConfig, input_torque_table
 from dyno.rig_inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
 
 SCHEMA = "dyno.rig/1"
@@ -216,6 +217,7 @@ class RigConfig:
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
     ambient: AmbientConfig = AmbientConfig()
+    input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig_input)
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
     @property
@@ -329,7 +331,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
-             "uncertainty", "driven", "torque_zero", "ambient"}
+             "uncertainty", "driven", "torque_zero", "ambient", "input_torque"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -508,7 +510,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
         uncertainty=uncertainty, driven=driven, torque_zero=torque_zero, deprecations=deprecations,
-        ambient=ambient_table(r, data),
+        ambient=ambient_table(r, data), input_torque=input_torque_table(r, data),
     )
 
 

@@ -142,6 +142,9 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
                        "calibration or the engine map does not fit this run"})
     point["faults"] = faults
     point["valid"] = not any(f.get("severity", "error") == "error" for f in faults)
+    # what the efficiency divides by: the map's input power (an input torque channel replaces it:
+    # dyno.analysis.input_torque, which sets "input_torque")
+    point["efficiency_source"] = "engine_map"
     return point
 
 

@@ -240,7 +240,7 @@ class TruthRecorder:
         self.rotor_c.append(tr.rotor_temp_c)
         self.ratio_geo.append(tr.ratio_geometric)
         self.slip.append(tr.belt_slip)
-        self.te.append(tr.torque_engine_nm)
+        self.te.append(getattr(tr, "torque_engine_nm", math.nan))  # (a stand-in truth may not have it)
 
     def trim_before(self, t_s: float) -> int:
         """Forget the samples older than ``t_s`` (a UI session re-arms on one rig: each run's truth is

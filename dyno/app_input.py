@@ -1,0 +1,96 @@
+"""The engine-side input torque channel in a run (issue 27): composition, split from :mod:`dyno.app`.
+
+rig.toml ``[input_torque]`` declares the channel.  Then the simulated rig has it (its cradle load cell and
+second converter, :mod:`dyno.sim.input_torque`), the reader asks the firmware for it at every boot
+(docs/protocol.md), the run's ``meta.json`` keeps its calibration, and every point gets its measured input
+power, its efficiency ``P_out / (T_in ω_p)`` with that path's ``efficiency_u95``, and the map's figure
+beside it (:mod:`dyno.analysis.input_torque`).  Without the table nothing here runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+def calibration_path(cfg) -> Path:
+    """The channel's calibration history: as given, else relative to the repository (the shipped one)."""
+    p = Path(cfg.calibration)
+    if p.is_absolute() or p.exists():
+        return p
+    return REPO_ROOT / p
+
+
+def load_input_channel(rig_cfg):
+    """The declared channel (:class:`~dyno.analysis.input_torque.InputChannel`), or None."""
+    cfg = getattr(rig_cfg, "input_torque", None)
+    if cfg is None:
+        return None
+    from dyno.analysis.input_torque import load_channel
+    from dyno.errors import ConfigError
+
+    path = calibration_path(cfg)
+    if not path.is_file():
+        raise ConfigError(rig_cfg.path, "input_torque.calibration", f"a calibration history file (no {path})")
+    return load_channel(cfg, path)
+
+
+def sim_params_for(params, rig_cfg):
+    """The simulated rig's parameters with the channel fitted when rig.toml declares it."""
+    if getattr(rig_cfg, "input_torque", None) is None:
+        return params
+    from dyno.sim.physics import RigParams
+
+    return dataclasses.replace(params if params is not None else RigParams(), input_torque_fitted=True)
+
+
+def input_meta(channel) -> dict:
+    """``meta.json``'s ``input_torque`` (what a replay needs), or nothing without the channel."""
+    if channel is None:
+        return {}
+    return {"input_torque": {"calibration": channel.calibration.to_dict(), "calibration_rel": channel.calibration_rel,
+                             "bearing_loss_nm": channel.bearing_loss_nm,
+                             "bearing_loss_u_nm": channel.bearing_loss_u_nm, "source": channel.source}}
+
+
+def channel_from_meta(meta: dict):
+    """The channel a run was measured with (its ``meta.json``), or None."""
+    rec = (meta or {}).get("input_torque")
+    if not rec:
+        return None
+    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.input_torque import InputChannel
+
+    return InputChannel(CalibrationEntry.from_dict(rec["calibration"]), rec["calibration_rel"],
+                        rec["bearing_loss_nm"], rec["bearing_loss_u_nm"], source=rec.get("source", ""))
+
+
+def attach(ctx, channel, reader, uncertainty: dict) -> None:
+    """Ask the firmware for the channel and add the input path to every point (after the map's terms)."""
+    if channel is None:
+        return
+    from dyno.analysis.input_torque import input_point, input_systematic, input_zero
+    from dyno.analysis.systematic import calibration_rel_for
+
+    if getattr(reader, "version", None) == 2:
+        reader.want_input = True
+    controller, streams = ctx.controller, ctx.poller.streams
+    state = {"channel": channel, "tared": False}
+
+    def hook(point: dict, t0_s, t1_s) -> None:
+        if not state["tared"]:
+            state["tared"] = True
+            zb = getattr(controller, "zero_before", None) or {}
+            if controller.tare is not None and "t_start_us" in zb:  # as the brake-side channel: from GO's zero
+                zero = input_zero(streams, zb["t_start_us"], zb["t_end_us"], channel)
+                state["channel"] = channel.with_zero(zero)
+                if state["channel"].tare is not None:
+                    controller._log("tare_input", **state["channel"].tare)
+        ch = state["channel"]
+        point.update(input_point(streams, point, ch))
+        rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
+        point.update(input_systematic(point, rel_out, ch))
+
+    controller.point_hooks.append(hook)
