@@ -233,6 +233,9 @@ def print_row(row: dict, out) -> None:
 
 def verdict(rows: list[dict], total: Interval, errors: Errors, run_dirs: list[str]) -> dict:
     """The issue's acceptance checks on what was measured (RSS: growth after the first hour, if it got there)."""
+    if not rows:  # stopped before its first report line (e.g. every run raised): nothing passed
+        return {"checks": {"no_unhandled_exceptions": errors.count == 0, "ran": False},
+                "rss_growth_after_first_hour": None, "ok": False}
     last = rows[-1]
     after_first = [r for r in rows if r["sim_h"] > 1.0 + 1e-9]
     base = next((r for r in rows if r["sim_h"] >= 1.0 - 1e-9), None)
