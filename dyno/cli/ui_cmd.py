@@ -25,7 +25,10 @@ def add_arguments(p) -> None:
     from dyno.cli.run_cmd import add_air_arguments
     from dyno.rigconfig import add_rig_argument
 
+    from dyno.web.attach import add_web_arguments
+
     add_air_arguments(p)
+    add_web_arguments(p)  # --web [ADDR:PORT], --web-stop (docs/web.md)
     add_rig_argument(p)
 
 
@@ -69,8 +72,19 @@ def run(args) -> int:
         from dyno.sim.physics import RigParams
 
         opts.sim_params = RigParams(**sim_kw)
-    app = LiveApp(opts)
-    app.run()
+    web = None
+    if args.web is not None or args.web_stop:  # before the screen is taken over: a bad --web is one line
+        from dyno.web.attach import WebView
+
+        web = WebView.start("dyno ui", args)
+        if web is None:
+            return 2
+    app = (_with_web(LiveApp, web) if web is not None else LiveApp)(opts)
+    try:
+        app.run()
+    finally:
+        if web is not None:
+            web.end()
     rc = app.return_code or 0
     session = getattr(app, "session", None)
     if session is not None and getattr(session, "ctx", None) is not None:
@@ -83,6 +97,27 @@ def run(args) -> int:
         finish_run(run_dir, announce=True, only_if_missing=k < len(runs) - 1,
                    report=rc != 128 + 1)
     return rc
+
+
+def _with_web(app_class, web):
+    """The live app, its session also shown on the web (the feed hooks the session's poller when it starts;
+    the URL is on the screen's message line and the title, as the terminal hides the stderr line)."""
+
+    class WebLiveApp(app_class):
+        def _start_session(self) -> None:
+            super()._start_session()
+            if self.session is None or self.session.closed:
+                return
+            import asyncio
+
+            from dyno.web.feed import SessionSource
+
+            web.attach(SessionSource(self.session), asyncio.get_running_loop())
+            self._mode += f" │ web :{web.server.port}"
+            self._show_run()
+            self.say(f"web: {web.server.url}")
+
+    return WebLiveApp
 
 
 def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False, report: bool = True) -> None:
