@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("dyno.cli.report_cmd", "(re)build a run's report.html: plots, points, faults, calibration"),
     "runs": ("dyno.cli.runs_cmd", "the run library: list and filter runs (reindex rebuilds the index)"),
     "compare": ("dyno.cli.compare_cmd", "compare runs side by side: curves, differences, tune diff"),
+    "serve": ("dyno.cli.serve_cmd", "the run library in a browser: runs, reports, compare, downloads (read-only)"),
     "import-legacy": ("dyno.cli.legacy_cmd", "import a folder of the thesis rig's logs"),
     "model": ("dyno.cli.model_cmd", "belt-model library: point, sweep, study"),
     "firmware-sim": ("dyno.cli.firmware_sim_cmd", "run the real firmware ELF in simavr against the host"),
@@ -30,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("dyno.cli.calibrate_cmd", "torque calibration wizard"),
     "doctor": ("dyno.cli.doctor_cmd", "check the rig's hardware and report what works"),
     "shift-curve": ("dyno.cli.shift_curve_cmd", "predicted shift curve for a tune"),
+    "tune": ("dyno.cli.tune_cmd", "tune advise: which catalogue parts reach target engagement/shift-out rpm"),
     "design": ("dyno.cli.design_cmd", "CVT design method (Arango & Munoz 2020)"),
     "arcvt": ("dyno.cli.arcvt_cmd", "AR-CVT actuation model (van Kerkhoven 2006)"),
 }

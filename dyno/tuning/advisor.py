@@ -1,0 +1,144 @@
+"""The tune advisor: from measured runs to the parts to fit (``dyno tune advise``).
+
+1. calibrate the parts' effective values from the runs (:mod:`dyno.tuning.advisor_model`);
+2. enumerate every tune that changes at most ``max_changes`` parts of the latest run's tune, with
+   catalogue parts that fit its clutch family and are not marked incompatible with each other
+   (exhaustive: the shipped catalogue gives ~1,600 tunes at 2 changes);
+3. predict each tune's targeted figures (a first pass at the calibrated values for every tune, then
+   value and uncertainty for the :data:`REFINE` best);
+4. rank by the probability that every target is met within ``tolerance_rpm`` (the prediction taken as
+   normal with its u), then fewer changes, then the smaller normalised miss.
+
+Beyond a catalogue of a few thousand combinations the first pass is what grows; a documented
+optimiser (coordinate descent over parts from the best first-pass tunes) is the way to go then --
+not needed for the shipped catalogue, so not built.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+from dyno.tuning.advisor_model import (UNKNOWN_PART_TOLERANCE_REL, Calibration, RunData, calibrate,
+                                       effective_tune, predict_figure, predict_with_u, tune_params)
+from dyno.tuning.parts import DEVIATED, Part, apply_part, match_parts, part_identity
+
+REFINE = 120            # tunes whose uncertainty is computed after the first pass
+TARGET_FIGURES = ("engagement", "shift_out", "full_load")
+
+
+@dataclass
+class Candidate:
+    tune: object
+    changes: list[Part]
+    first_pass: dict = field(default_factory=dict)
+    predicted: dict = field(default_factory=dict)   # figure -> (rpm, u_rpm)
+    p_hit: float = 0.0
+    miss: float = math.inf
+
+
+def _phi(x: float) -> float:
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
+def p_within(mean: float, u: float, target: float, tol: float) -> float:
+    if not (math.isfinite(mean) and math.isfinite(u)) or u <= 0:
+        return 0.0
+    return _phi((target + tol - mean) / u) - _phi((target - tol - mean) / u)
+
+
+def tolerance_lookup(catalogue: list[Part], tunes) -> callable:
+    """``tolerance_of(identity, kind)``: a catalogue part's stated tolerance, else the default."""
+    table: dict[str, float] = {}
+    for t in tunes:
+        for p in catalogue:
+            table.setdefault(part_identity(apply_part(t, p), p.kind), p.tolerance_rel)
+    return lambda ident, kind: table.get(ident, UNKNOWN_PART_TOLERANCE_REL)
+
+
+def candidates(base, catalogue: list[Part], max_changes: int) -> tuple[list[Candidate], dict]:
+    """Every tune with at most ``max_changes`` parts of ``base`` replaced by catalogue parts that fit."""
+    current = match_parts(base, catalogue)
+    families = {p.fits for p in current.values() if p is not None}
+    usable = [p for p in catalogue if (not families or p.fits in families) and p.kind in DEVIATED
+              and getattr(base, p.kind, None) is not None]
+    by_kind: dict[str, list[Part]] = {}
+    for p in usable:
+        if part_identity(apply_part(base, p), p.kind) != part_identity(base, p.kind):
+            by_kind.setdefault(p.kind, []).append(p)
+    out = [Candidate(base, [])]
+    kinds = sorted(by_kind)
+    for n in range(1, max_changes + 1):
+        for combo in itertools.combinations(kinds, n):
+            for parts in itertools.product(*(by_kind[k] for k in combo)):
+                fitted = set(parts) | {p for k, p in current.items() if p is not None and k not in combo}
+                ids = {p.id.split("@")[0] for p in fitted}
+                if any(i in ids for p in fitted for i in p.incompatible_with):
+                    continue
+                t = base
+                for p in parts:
+                    t = apply_part(t, p)
+                out.append(Candidate(t, list(parts)))
+    info = {"families": sorted(families), "current": {k: (p.id if p else None) for k, p in current.items()},
+            "choices_per_kind": {k: len(v) for k, v in by_kind.items()}}
+    return out, info
+
+
+def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float], *, max_changes: int = 2,
+           tolerance_rpm: float = 50.0, top: int = 5) -> dict:
+    """Calibrate, search, rank. ``targets``: figure -> rpm (``engagement``, ``shift_out``, ``full_load``)."""
+    base_run = runs[-1]
+    base = base_run.tune
+    tol_of = tolerance_lookup(catalogue, [r.tune for r in runs])
+    cal = calibrate(runs, tol_of)
+    idx = cal.index()
+    load = base_run.light_load_nm
+    low = base_run.low_ratio
+    engine = base_run.engine
+    if "full_load" in targets and engine is None:
+        from dyno.errors import ConfigError
+
+        raise ConfigError(base_run.path, "engine_map.csv", "the run's engine map (a full_load target needs it)")
+    cands, info = candidates(base, catalogue, max_changes)
+    # first pass: the calibrated values only (cheap), full load last (a root solve per tune)
+    light = [f for f in targets if f != "full_load"]
+    for c in cands:
+        ps = tune_params(c.tune, tol_of)
+        d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
+        eff = effective_tune(c.tune, ps, d)
+        c.first_pass = {f: predict_figure(eff, f, load, low, engine) for f in light}
+        c.miss = sum(((c.first_pass[f] - targets[f]) / tolerance_rpm) ** 2 for f in light)
+        c.miss = c.miss if math.isfinite(c.miss) else math.inf
+    cands.sort(key=lambda c: (c.miss, len(c.changes)))
+    refined = cands[:REFINE] + [c for c in cands[REFINE:] if not c.changes]  # the current tune always
+    for c in refined:
+        for f in targets:
+            c.predicted[f] = predict_with_u(cal, c.tune, f, load, low, tol_of, engine)
+        c.p_hit = math.prod(p_within(*c.predicted[f], targets[f], tolerance_rpm) for f in targets)
+        c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
+    refined.sort(key=lambda c: (-round(c.p_hit, 3), len(c.changes), c.miss))
+    current = next(c for c in refined if not c.changes)
+    return {"targets": {f"{f}_rpm": v for f, v in targets.items()}, "tolerance_rpm": tolerance_rpm,
+            "max_changes": max_changes, "runs": [str(r.path) for r in runs], "base_tune": base.name,
+            "load_nm": load, "low_ratio": low, "searched": len(cands), "refined": len(refined),
+            "catalogue": info, "calibration": cal.to_dict(),
+            "current": _row(current, targets), "ranked": [_row(c, targets) for c in refined[:top]],
+            "_candidates": refined[:top], "_calibration": cal}
+
+
+def _row(c: Candidate, targets) -> dict:
+    return {"changes": [{"kind": p.kind, "part": p.id, "label": p.label, "source": p.source} for p in c.changes],
+            "predicted": {f: {"rpm": c.predicted[f][0], "u_rpm": c.predicted[f][1],
+                              "u95_rpm": 2.0 * c.predicted[f][1]} for f in c.predicted},
+            "p_within_tolerance": c.p_hit}
+
+
+def curve_for(cal: Calibration, tune, engine, tol_of, n_points: int = 30):
+    """The predicted shift curve of a tune at its calibrated part values (for the page)."""
+    from dyno.tuning.shift_curve import predict_shift_curve
+
+    ps = tune_params(tune, tol_of)
+    idx = cal.index()
+    d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
+    return predict_shift_curve(effective_tune(tune, ps, d), engine, n_points=n_points)

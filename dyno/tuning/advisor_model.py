@@ -1,0 +1,299 @@
+"""The tune advisor's model: what a run measured, what a tune predicts, and the calibration between.
+
+**Figures** (what the engagement plan measures, docs/control.md "Characterisation"), each predicted from
+a tune with the host's actuator relations (:mod:`dyno.tuning.actuators`) at the belt's measured low stop
+(the primary pitch radius whose geometric ratio is the run's ``low_ratio``):
+
+* ``engagement`` at a secondary load ``T``: the belt breaks away when the primary's slip torque
+  ``2 mu r_p F_p / sin(alpha)`` (flank friction mu = 0.4, the thesis's f) carries ``T / i_low``, so
+  ``F_p(n) = T sin(alpha) / (2 mu r_p i_low)`` with ``F_p`` the flyweights minus the spring (Messick
+  eq. 9.3);
+* ``shift_out`` at a load ``T``: the primary clamp equals the secondary's (springs + helix, Sorge
+  eq. 22) at the low stop -- the upshift begins;
+* ``full_load``: the engine speed of the force balance at the low stop at full throttle
+  (:meth:`dyno.tuning.shift_curve.Solver.balance_rpm`, closed-form belt thrusts, the run's engine map).
+
+**Effective parameters**: a part's true values are not its labels. Each part fitted in any given run
+(identified by its labelled values, :func:`dyno.tuning.parts.part_identity`) gets a relative deviation
+per deviated field (flyweight mass; spring preload and rate; helix angle): true = label x (1 + d).
+The prior on ``d`` is the part's stated tolerance as a uniform distribution (sd = tol / sqrt 3);
+catalogue parts state it, parts of a run's tune that no catalogue lists get 0.1.
+
+**Calibration**: maximum a posteriori over every ``d`` (``scipy.optimize.least_squares`` on the
+whitened residuals: each measured figure over its sigma -- its 95 % interval / 1.96 and a model floor
+:data:`MODEL_SD_RPM` in quadrature -- and each ``d`` over its prior sd). The covariance is
+``(J^T J)^-1`` of the whitened problem, scaled up by the data's chi^2 per figure when that exceeds 1.
+An engagement run pins the combinations the figures see (preload / mass, (preload + secondary
+clamp) / mass, the helix / mass across loads); the rest stays at its prior, and the covariance says so.
+
+**Prediction** of a tune: its parts' ``d`` (calibrated where a run saw the part, prior where not:
+independent, mean 0), the figure and its Jacobian in ``d`` (central differences); ``u^2 = g^T C g +
+MODEL_SD_RPM^2``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import brentq, least_squares
+
+from dyno.errors import ConfigError
+from dyno.tuning import actuators as act
+from dyno.tuning.parts import DEVIATED, part_identity
+
+#: belt flank friction while it slips at engagement (the thesis's f = 0.4)
+FLANK_FRICTION = 0.4
+#: model floor per figure (rpm): what the quasi-static relations leave out (ramp lag, creep, losses)
+MODEL_SD_RPM = {"engagement": 6.0, "shift_out": 8.0, "full_load": 60.0}
+UNKNOWN_PART_TOLERANCE_REL = 0.1
+FIGURES = ("engagement", "shift_out", "full_load")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measured figure of a run."""
+
+    run: str
+    figure: str          # engagement | shift_out | full_load
+    load_nm: float       # secondary load it was measured at (full_load: nan)
+    rpm: float
+    ci95_rpm: float
+
+    @property
+    def sigma_rpm(self) -> float:
+        ci = self.ci95_rpm if math.isfinite(self.ci95_rpm) else 10.0
+        return math.hypot(ci / 1.96, MODEL_SD_RPM[self.figure])
+
+
+@dataclass
+class RunData:
+    name: str
+    path: Path
+    tune: object
+    low_ratio: float
+    figures: list[Figure]
+    engine: object = None   # EngineMap (full_load only)
+    light_load_nm: float = 0.2
+
+
+def _f(x) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return v
+
+
+def load_run_data(run_dir) -> RunData:
+    """An engagement run's measured figures (never its ``*_true`` entries: those are the sim's secret)."""
+    from dyno.runlog.reader import load_run
+    from dyno.tuning.tune import load_tune
+
+    run_dir = Path(run_dir)
+    run = load_run(run_dir, with_events=False)
+    if not (run_dir / "tune.toml").exists():
+        raise ConfigError(run_dir, "tune.toml", "the run's tune (dyno run --tune stores it)")
+    tune = load_tune(run_dir / "tune.toml")
+    chars = run.docs("characterisation")
+    if not chars:
+        raise ConfigError(run_dir, "characterisation", "an engagement run (dyno run --plan engagement)")
+    c = chars[-1]
+    low = _f(c.get("low_ratio"))
+    figs: list[Figure] = []
+    rows = c.get("shift_out_vs_load") or [{"torque_secondary_nm": c.get("shift_out_torque_nm"),
+                                           "engagement_rpm": c.get("engagement_rpm"),
+                                           "shift_out_rpm": c.get("shift_out_rpm"),
+                                           "shift_out_rpm_ci95": c.get("shift_out_rpm_ci95")}]
+    eng_ci = _f(c.get("engagement_rpm_ci95"))
+    for r in rows:
+        t = _f(r.get("torque_secondary_nm"))
+        if not math.isfinite(t):
+            continue
+        if math.isfinite(_f(r.get("engagement_rpm"))):
+            figs.append(Figure(run_dir.name, "engagement", t, _f(r["engagement_rpm"]), eng_ci))
+        if math.isfinite(_f(r.get("shift_out_rpm"))):
+            figs.append(Figure(run_dir.name, "shift_out", t, _f(r["shift_out_rpm"]), _f(r.get("shift_out_rpm_ci95"))))
+    if not figs or not math.isfinite(low):
+        raise ConfigError(run_dir, "characterisation", "an engagement and a shift-out with the low-gear ratio "
+                                                       "(the engagement plan found none)")
+    engine = None
+    if run.engine_map_path is not None and Path(run.engine_map_path).exists():
+        from dyno.tuning.shift_curve import load_engine_map
+
+        engine = load_engine_map(run.engine_map_path)
+    light = min((f.load_nm for f in figs), default=0.2)
+    return RunData(run_dir.name, run_dir, tune, low, figs, engine, light)
+
+
+# ------------------------------------------------------------------ forward model
+
+
+def low_stop_radii_m(tune, low_ratio: float) -> tuple[float, float]:
+    """(primary, secondary) pitch radius where the geometric ratio is ``low_ratio`` (clipped to the travel)."""
+    return _radii(tune.drive, round(float(low_ratio), 9))
+
+
+@lru_cache(maxsize=256)
+def _radii(d, low_ratio: float) -> tuple[float, float]:
+    from dyno.tuning.tune import Tune
+
+    tune = Tune("geometry", d, None, None, None)  # the radii depend on the drive alone
+
+    def g(r):
+        return float(act.secondary_radius_m(tune, r)) / r - low_ratio
+
+    a, b = d.primary_radius_min_m, d.primary_radius_max_m
+    if g(a) <= 0:
+        r = a
+    elif g(b) >= 0:
+        r = b
+    else:
+        r = brentq(g, a, b, xtol=1e-9)
+    return r, float(act.secondary_radius_m(tune, r))
+
+
+def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None) -> float:
+    """A figure of ``tune`` (the true or effective values) at a secondary load."""
+    r_p, r_s = low_stop_radii_m(tune, low_ratio)
+    if figure == "engagement":
+        sin_a = math.sin(math.radians(tune.drive.sheave_half_angle_deg))
+        f_need = max(load_nm, 0.0) * sin_a / (2.0 * FLANK_FRICTION * r_p * low_ratio)
+        return float(act.primary_speed_for_force_rpm(tune, f_need, r_p))
+    if figure == "shift_out":
+        f_s = float(act.secondary_axial_force_n(tune, max(load_nm, 0.0), r_s))
+        return float(act.primary_speed_for_force_rpm(tune, f_s, r_p))
+    if figure == "full_load":
+        if engine is None:
+            return math.nan
+        from dyno.tuning.shift_curve import Solver, model_params_for
+
+        return float(Solver(tune, engine, model_params_for(tune)).balance_rpm(low_ratio))
+    raise ValueError(figure)
+
+
+# ------------------------------------------------------------------ parameters
+
+
+@dataclass(frozen=True)
+class Param:
+    part: str       # part identity
+    kind: str       # tune attribute
+    field: str
+    prior_sd: float
+
+
+def tune_params(tune, tolerance_of) -> list[Param]:
+    """The deviated fields of a tune's parts; ``tolerance_of(identity, kind)`` gives a part's tolerance."""
+    out = []
+    for kind, fields in DEVIATED.items():
+        if getattr(tune, kind, None) is None:
+            continue
+        ident = part_identity(tune, kind)
+        tol = tolerance_of(ident, kind)
+        out.extend(Param(ident, kind, f, tol / math.sqrt(3.0)) for f in fields)
+    return out
+
+
+def effective_tune(tune, params: list[Param], d: np.ndarray):
+    changes = {}
+    for p, x in zip(params, d):
+        label = getattr(getattr(tune, p.kind), p.field)
+        changes[f"{p.kind}.{p.field}"] = label * (1.0 + float(x))
+    return tune.with_changes(**changes) if changes else tune
+
+
+@dataclass
+class Calibration:
+    params: list[Param]                  # every part seen in the runs
+    d: np.ndarray                        # MAP deviations
+    cov: np.ndarray
+    chi2_per_figure: float
+    n_figures: int
+    residuals: list[dict] = field(default_factory=list)
+
+    def index(self) -> dict[tuple[str, str], int]:
+        return {(p.part, p.field): i for i, p in enumerate(self.params)}
+
+    def to_dict(self) -> dict:
+        sd = np.sqrt(np.diag(self.cov)) if self.cov.size else np.array([])
+        return {"parameters": [{"part": p.part, "field": p.field, "deviation_rel": float(x),
+                                "u_rel": float(s), "prior_sd_rel": p.prior_sd}
+                               for p, x, s in zip(self.params, self.d, sd)],
+                "chi2_per_figure": self.chi2_per_figure, "n_figures": self.n_figures,
+                "residuals": self.residuals}
+
+
+def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
+    """MAP deviations of every part the runs saw, with their covariance (see the module docstring)."""
+    params: list[Param] = []
+    seen = set()
+    per_run = []
+    for r in runs:
+        ps = tune_params(r.tune, tolerance_of)
+        for p in ps:
+            if (p.part, p.field) not in seen:
+                seen.add((p.part, p.field))
+                params.append(p)
+        per_run.append(ps)
+    idx = {(p.part, p.field): i for i, p in enumerate(params)}
+    prior = np.array([p.prior_sd for p in params])
+
+    def model(d):
+        out = []
+        for r, ps in zip(runs, per_run):
+            t = effective_tune(r.tune, ps, np.array([d[idx[(p.part, p.field)]] for p in ps]))
+            out.extend(predict_figure(t, f.figure, f.load_nm, r.low_ratio, r.engine) for f in r.figures)
+        return np.array(out)
+
+    meas = np.array([f.rpm for r in runs for f in r.figures])
+    sig = np.array([f.sigma_rpm for r in runs for f in r.figures])
+
+    def resid(d):
+        pred = model(d)
+        pred = np.where(np.isfinite(pred), pred, meas + 1e4)
+        return np.concatenate([(meas - pred) / sig, d / prior])
+
+    sol = least_squares(resid, np.zeros(len(params)), diff_step=1e-4, xtol=1e-12, ftol=1e-12)
+    j = sol.jac
+    cov = np.linalg.inv(j.T @ j)
+    r_data = sol.fun[:meas.size]
+    chi2 = float(r_data @ r_data) / max(meas.size, 1)
+    if chi2 > 1.0:
+        cov = cov * chi2
+    pred = model(sol.x)
+    rows = [{"run": f.run, "figure": f.figure, "load_nm": f.load_nm, "measured_rpm": f.rpm,
+             "calibrated_rpm": float(p), "residual_rpm": float(f.rpm - p)}
+            for f, p in zip([f for r in runs for f in r.figures], pred)]
+    return Calibration(params, sol.x, cov, chi2, int(meas.size), rows)
+
+
+def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_ratio: float, tolerance_of,
+                   engine=None, step: float = 1e-3) -> tuple[float, float]:
+    """(figure, standard uncertainty) of ``tune`` with the calibrated (or prior) part deviations."""
+    ps = tune_params(tune, tolerance_of)
+    idx = cal.index()
+    d = np.array([cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps])
+    y0 = predict_figure(effective_tune(tune, ps, d), figure, load_nm, low_ratio, engine)
+    if not math.isfinite(y0):
+        return math.nan, math.nan
+    g = np.zeros(len(ps))
+    for i in range(len(ps)):
+        dp, dm = d.copy(), d.copy()
+        dp[i] += step
+        dm[i] -= step
+        g[i] = (predict_figure(effective_tune(tune, ps, dp), figure, load_nm, low_ratio, engine)
+                - predict_figure(effective_tune(tune, ps, dm), figure, load_nm, low_ratio, engine)) / (2 * step)
+    seen = [i for i, p in enumerate(ps) if (p.part, p.field) in idx]
+    new = [i for i, p in enumerate(ps) if (p.part, p.field) not in idx]
+    var = MODEL_SD_RPM[figure] ** 2
+    if seen:
+        ci = [idx[(ps[i].part, ps[i].field)] for i in seen]
+        gs = g[seen]
+        var += float(gs @ cal.cov[np.ix_(ci, ci)] @ gs)
+    for i in new:
+        var += (g[i] * ps[i].prior_sd) ** 2
+    return float(y0), math.sqrt(var)
