@@ -31,7 +31,8 @@ needs_tmux = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is no
 EXERCISED = {"run", "replay", "export", "import-legacy", "model", "firmware-sim", "calibrate", "doctor",
              "shift-curve", "design", "arcvt"}
 EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py",
-                       "runs": "tests/library/test_index.py", "compare": "tests/library/test_compare.py"}
+                       "runs": "tests/library/test_index.py", "compare": "tests/library/test_compare.py",
+                       "serve": "tests/web/test_web_serve.py"}
 
 
 def _env(**extra: str) -> dict:

@@ -106,7 +106,7 @@ def http_status(url: str, method: str = "GET") -> tuple[int, str]:
     req = urllib.request.Request(url, method=method)
     try:
         with urllib.request.urlopen(req, timeout=10) as r:
-            return r.status, r.read(2000).decode(errors="replace")
+            return r.status, r.read().decode(errors="replace")
     except urllib.error.HTTPError as e:
         return e.code, e.read(2000).decode(errors="replace")
 
