@@ -55,18 +55,6 @@ def input_meta(channel) -> dict:
                              "bearing_loss_u_nm": channel.bearing_loss_u_nm, "source": channel.source}}
 
 
-def channel_from_meta(meta: dict):
-    """The channel a run was measured with (its ``meta.json``), or None."""
-    rec = (meta or {}).get("input_torque")
-    if not rec:
-        return None
-    from dyno.analysis.calibration import CalibrationEntry
-    from dyno.analysis.input_torque import InputChannel
-
-    return InputChannel(CalibrationEntry.from_dict(rec["calibration"]), rec["calibration_rel"],
-                        rec["bearing_loss_nm"], rec["bearing_loss_u_nm"], source=rec.get("source", ""))
-
-
 def attach(ctx, channel, reader, uncertainty: dict) -> None:
     """Ask the firmware for the channel and add the input path to every point (after the map's terms)."""
     if channel is None:

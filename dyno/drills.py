@@ -14,8 +14,9 @@ device-reset           the Nano resets (watchdog; current bootloader restarts in
 hall-dead:CH           the Hall sensor(s) give no more edges (CH: primary|secondary|both)
 thermometer-stuck      the rotor thermometer repeats its last word forever
 thermometer-lost       the rotor thermometer stops answering (NACK)
-adc-error              the AD7171 sets its error bit on every conversion
-adc-stuck              the AD7171 repeats one code forever
+adc-error[:input]      the AD7171 (``:input``: the engine-side input torque one) sets its error bit on every
+                       conversion
+adc-stuck[:input]      the AD7171 (``:input``: the input torque one) repeats one code forever
 bus-lost               the I2C cable falls out: every device NACKs
 overtemp               a dragging pad heats the rotor at 20 C/s while the engine runs
 overspeed              the governor fails: throttle stuck wide open
@@ -45,8 +46,8 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "hall-dead": (True, ("primary", "secondary", "both"), True),
     "thermometer-stuck": (False, None, True),
     "thermometer-lost": (False, None, True),
-    "adc-error": (False, None, False),
-    "adc-stuck": (False, None, False),
+    "adc-error": (False, ("input",), False),  # (an optional argument: the input torque channel's converter)
+    "adc-stuck": (False, ("input",), False),
     "bus-lost": (False, None, False),
     "overtemp": (False, None, True),
     "overspeed": (False, None, True),
@@ -114,9 +115,9 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     arg = arg.strip() or None
     if needs_arg and arg is None:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:ARG@T)")
-    if not needs_arg and arg is not None:
+    if not needs_arg and arg is not None and allowed is None:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
-    if allowed is not None and arg not in allowed:
+    if allowed is not None and arg is not None and arg not in allowed:
         raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
     if name == "loop-stall":
         try:
@@ -147,6 +148,11 @@ class DrillRunner:
         self.t_first_frame_s: float | None = None
         self._handles: list = []
         self._phased: list[Drill] = []  # waiting for their phase (checked on every poll)
+        sim = getattr(ctx, "sim", None)
+        for d in self.drills:  # a drill that cannot happen must not pass as done
+            if d.arg == "input" and sim is not None and not getattr(sim.model, "input_fitted", False):
+                raise ConfigError("command line", "--drill", f"{d}: the rig has no input torque channel "
+                                  "(rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")
         poller = getattr(ctx, "poller", None)
         if any(d.phase for d in self.drills) and poller is not None:
             poller.listeners.append(self._on_poll)
@@ -221,10 +227,16 @@ class DrillRunner:
         self.ctx.sim.bus.thermometer_lost = True
 
     def _adc_error(self, d: Drill, rec: dict) -> None:
-        self.ctx.sim.model.adc_error_prob = 1.0
+        if d.arg == "input":
+            self.ctx.sim.model.input_error_prob = 1.0
+        else:
+            self.ctx.sim.model.adc_error_prob = 1.0
 
     def _adc_stuck(self, d: Drill, rec: dict) -> None:
-        self.ctx.sim.model.adc_stuck = True
+        if d.arg == "input":
+            self.ctx.sim.model.input_stuck = True
+        else:
+            self.ctx.sim.model.adc_stuck = True
 
     def _bus_lost(self, d: Drill, rec: dict) -> None:
         self.ctx.sim.bus.lost = True

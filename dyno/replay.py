@@ -19,7 +19,7 @@ PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "ste
                 "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
                 "power_out_true_w", "ratio_geometric_true", "belt_slip_true", "legacy_point", "discarded",
                 "legacy_faults", "thesis_torque_nm", "legacy_channels", "setpoint_rpm", "setpoint", "hold_variable",
-                "ramp_rate_rpm_s")
+                "ramp_rate_rpm_s", "torque_input_true_nm")
 # Fields a fault found at import/acquisition time withholds (the raw data cannot support them).
 WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 
@@ -51,6 +51,10 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
     air_rel = ambient.air_rel_u() if "ambient" in run.meta or ambient.corrected else 0.0
     if ambient.corrected:  # the run's day (SAE J1349), as the run itself took it
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
+    from dyno.analysis.input_torque import channel_from_meta
+
+    tares_in = run.docs("tare_input")
+    input_channel = channel_from_meta(run.meta, tares_in[-1] if tares_in else None)  # None: no input channel
     points = []
     for doc in run.points:
         # the throttle the point was measured at, as recorded (runs before it was recorded: full)
@@ -71,6 +75,14 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
             p.update(point_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
                                                              else None), unc["engine_map_rel"],
                                       air_rel))
+        if input_channel is not None:  # as the run did: the measured input power, the map's figure beside
+            from dyno.analysis.input_torque import input_point, input_systematic
+            from dyno.analysis.systematic import calibration_rel_for
+
+            p.update(input_point(run.streams, p, input_channel))
+            if unc:
+                p.update(input_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
+                                                                 else None), input_channel))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still
@@ -97,7 +109,8 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
 CSV_COLUMNS = ("index", "throttle_frac", "rpm_primary", "rpm_primary_std", "rpm_secondary", "rpm_secondary_std", "ratio",
                "torque_secondary_nm", "torque_secondary_std_nm", "power_out_w", "power_in_w", "efficiency",
                "efficiency_sem", "n_primary_edges", "n_secondary_edges", "n_adc", "n_adc_error", "duration_s",
-               "t_start_us", "t_end_us", "settled_by", "valid", "efficiency_true", "efficiency_reason")
+               "t_start_us", "t_end_us", "settled_by", "valid", "efficiency_true", "efficiency_reason",
+               "efficiency_source", "torque_input_nm", "efficiency_engine_map", "efficiency_u95")
 
 
 def points_csv(points) -> str:
@@ -128,4 +141,9 @@ def export(run_dir, out_dir=None, **kw) -> list[Path]:
     rows = "t_us,adc_code,status\n" + "".join(f"{t},{c},{st}\n" for t, c, st in zip(s.adc_t, s.adc_code, s.adc_status))
     write_atomic(out / "adc.csv", rows)
     written.append(out / "adc.csv")
+    if s.input_t:  # the engine-side input torque converter (issue 27)
+        rows = "t_us,input_code,status\n" + "".join(
+            f"{t},{c},{st}\n" for t, c, st in zip(s.input_t, s.input_code, s.input_status))
+        write_atomic(out / "input_adc.csv", rows)
+        written.append(out / "input_adc.csv")
     return written

@@ -35,11 +35,17 @@ class Streams:
         #: ADC samples dropped from the front by ``trim_before``: a reader that walks the samples by index
         #: (the safety monitor) counts in ``adc_trimmed + local index`` so a trim never replays or skips one
         self.adc_trimmed = 0
+        self.input_trimmed = 0  # the same for the input torque converter
 
     @property
     def adc_total(self) -> int:
         """ADC samples appended since the stream began (trimmed ones included)."""
         return self.adc_trimmed + len(self.adc_t)
+
+    @property
+    def input_total(self) -> int:
+        """Input torque conversions appended since the stream began (trimmed ones included)."""
+        return self.input_trimmed + len(self.input_t)
 
     def trim_before(self, t_us: int) -> int:
         """Forget every event older than ``t_us`` (device time); returns how many were dropped.
@@ -58,6 +64,11 @@ class Streams:
         if i:
             del self.adc_t[:i], self.adc_code[:i], self.adc_status[:i]
             self.adc_trimmed += i
+            dropped += i
+        i = bisect_left(self.input_t, t_us)
+        if i:
+            del self.input_t[:i], self.input_code[:i], self.input_status[:i]
+            self.input_trimmed += i
             dropped += i
         return dropped
 

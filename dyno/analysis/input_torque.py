@@ -181,3 +181,18 @@ def load_channel(cfg, path) -> InputChannel:
     entry = latest(history)
     return InputChannel(entry, calibration_rel_u(history, entry), cfg.bearing_loss_nm, cfg.bearing_loss_u_nm,
                         source=str(path))
+
+
+def channel_from_meta(meta: dict, tare: dict | None = None) -> InputChannel | None:
+    """The channel a run was measured with (its ``meta.json`` ``input_torque``; ``tare``: its
+    ``tare_input`` record), or None for a run without one."""
+    rec = (meta or {}).get("input_torque")
+    if not rec:
+        return None
+    from dyno.analysis.calibration import CalibrationEntry
+
+    cal = CalibrationEntry.from_dict(rec["calibration"])
+    if tare:
+        cal = dataclasses.replace(cal, intercept_counts=float(tare["zero_counts"]))
+    return InputChannel(cal, rec["calibration_rel"], rec["bearing_loss_nm"], rec["bearing_loss_u_nm"], tare=tare,
+                        source=rec.get("source", ""))

@@ -97,6 +97,8 @@ class SafetyMonitor:
         self._adc_same_run = 0
         self._adc_last_code = -1
         self._torque_nm = 0.0
+        # the engine-side input torque converter (issue 27): the same checks, once it has converted
+        self._in = _ConverterRuns()
 
     # ------------------------------------------------------------------ inputs
     def _update_adc(self) -> None:
@@ -125,6 +127,12 @@ class SafetyMonitor:
         self._adc_seen = n
         if good_n and self.torque_from_code is not None:
             self._torque_nm = float(self.torque_from_code(good_sum / good_n))
+
+    def _update_input(self) -> None:
+        s = self.poller.streams
+        total = getattr(s, "input_total", 0)
+        if total != self._in.seen:
+            self._in.walk(s.input_code, s.input_status, s.input_trimmed, total)
 
     def _update_thermal(self, now: float, dt: float, rpm_secondary: float) -> None:
         p = self.poller
@@ -180,6 +188,7 @@ class SafetyMonitor:
         dt = 0.0 if self._last_check_s is None else max(0.0, now - self._last_check_s)
         self._last_check_s = now
         self._update_adc()
+        self._update_input()
         rp, rs = p.rpm(v1.CH_PRIMARY), p.rpm(v1.CH_SECONDARY)
         self._update_thermal(now, dt, rs)
 
@@ -259,6 +268,17 @@ class SafetyMonitor:
         dev_now = self.poller.device_now_us()
         if s.adc_t and dev_now is not None and (dev_now - s.adc_t[-1]) * 1e-6 > lim.adc_quiet_s:
             return Trip("sensor_fault", f"no torque ADC conversion for {(dev_now - s.adc_t[-1]) * 1e-6:.2f} s", now)
+        # the input torque converter, treated as the brake-side one (rails show as a stuck code: 0 / 65535
+        # repeat, and an error bit on a whole run of conversions is its own alarm)
+        r = self._in
+        if r.err_run >= lim.adc_error_run:
+            return Trip("sensor_fault", f"input torque ADC error bit on {r.err_run} conversions in a row", now)
+        if r.same_run >= lim.adc_stuck_run:
+            return Trip("sensor_fault", f"input torque ADC stuck: code {r.last_code} on {r.same_run} conversions "
+                        "in a row (its noise alone makes a repeat rare)", now)
+        it = getattr(s, "input_t", None)
+        if it and dev_now is not None and (dev_now - it[-1]) * 1e-6 > lim.adc_quiet_s:
+            return Trip("sensor_fault", f"no input torque ADC conversion for {(dev_now - it[-1]) * 1e-6:.2f} s", now)
         return None
 
     def _check_halls(self, now: float, rp: float, rs: float) -> Trip | None:
@@ -298,3 +318,29 @@ class SafetyMonitor:
             return Trip("sensor_fault", f"secondary Hall silent for {q_s:.2f} s (last {last_rpm:.0f} rpm) while the "
                         f"engine turns at {rp:.0f} rpm", now)
         return None
+
+
+class _ConverterRuns:
+    """Error-bit and identical-code runs of a converter's conversions, walked by absolute index."""
+
+    def __init__(self) -> None:
+        self.seen = 0
+        self.err_run = 0
+        self.same_run = 0
+        self.last_code = -1
+
+    def walk(self, codes, status, base: int, total: int) -> None:
+        self.seen = max(self.seen, base)
+        err_flag = v1.ADC_STATUS_ERR
+        for i in range(self.seen, total):
+            if status[i - base] & err_flag:
+                self.err_run += 1
+                continue
+            self.err_run = 0
+            c = codes[i - base]
+            if c == self.last_code:
+                self.same_run += 1
+            else:
+                self.same_run = 1
+                self.last_code = c
+        self.seen = total
