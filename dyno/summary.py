@@ -92,7 +92,7 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               "efficiency_sys95_air", "efficiency_u95", "efficiency_u95_terms", "torque_zero_tare_nm",
               # which power the efficiency divides by ("input_torque" | "engine_map"); the input channel's
               # torque, its own terms, and the map's figure beside it (dyno.analysis.input_torque)
-              "efficiency_source", "torque_input_nm", "torque_input_std_nm", "n_input",
+              "efficiency_source", "torque_input_nm", "torque_input_std_nm", "torque_input_u95_nm", "n_input",
               "efficiency_sys95_calibration_input", "efficiency_sys95_cradle", "efficiency_engine_map",
               "efficiency_engine_map_u95", "power_in_engine_map_w", "torque_input_true_nm")
 

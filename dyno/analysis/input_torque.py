@@ -158,13 +158,17 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
     u_tare = (channel.tare or {}).get("u_nm", 0.0) or 0.0
     cal_in_rel = math.hypot(channel.calibration_rel, u_tare / t_in)
     cradle_rel = channel.bearing_loss_u_nm / t_in
+    # the engine's measured torque itself (its curve against the map: dyno.analysis.measured_map)
+    sem = point.get("torque_input_sem_nm", 0.0)
+    sem = sem if isinstance(sem, float) and math.isfinite(sem) else 0.0
+    torque_u95 = 2.0 * math.sqrt((t_in * cal_in_rel) ** 2 + channel.bearing_loss_u_nm ** 2 + sem ** 2)
     cal = 2.0 * eff * calibration_rel_out
     cal_in = 2.0 * eff * cal_in_rel
     cradle = 2.0 * eff * cradle_rel
     sys95 = math.sqrt(cal * cal + cal_in * cal_in + cradle * cradle)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
-    return {"efficiency_sys95": sys95, "efficiency_sys95_calibration": cal,
+    return {"torque_input_u95_nm": torque_u95, "efficiency_sys95": sys95, "efficiency_sys95_calibration": cal,
             "efficiency_sys95_calibration_input": cal_in, "efficiency_sys95_cradle": cradle,
             "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0,
             "efficiency_u95": math.hypot(ci, sys95),
