@@ -11,7 +11,8 @@ shift-out. The loop a team runs:
 until both figures are within ±50 rpm (at most 3 advised trips are run; "≤ 2" is the issue's bar). Beside
 it, a one-part-at-a-time rule-of-thumb tuner following the tuning guides ("more flyweight weight =
 lower rpm": the flyweights set the shift-out; "a stiffer primary spring engages higher": the primary
-spring sets the engagement), one catalogue step per ~40 rpm of miss (at most 3 steps), one part per
+spring sets the engagement; "a stiffer secondary spring shifts higher": once the engagement is right),
+one catalogue step per ~40 rpm of miss (at most 3 steps), one part per
 trip, the part with the larger miss first, up to 10 trips. Also the advisor's coverage: how often the
 measured figure falls within the predicted ± u (k = 1) and ± U95 (k = 2).
 
@@ -108,7 +109,9 @@ def _step(cat, tune, kind: str, key, direction: int, steps: int):
     """The catalogue part ``steps`` steps from the current one along ``key`` (a rule of thumb's 'next size')."""
     cur = match_parts(tune, cat)[kind]
     parts = sorted((p for p in cat if p.kind == kind and not p.id.startswith("team-")), key=key)
-    i = parts.index(cur) if cur in parts else min(range(len(parts)), key=lambda j: abs(key(parts[j]) - key(cur)))
+    if cur not in parts:
+        return None  # a part no catalogue lists: the guide has no 'next size'
+    i = parts.index(cur)
     j = min(max(i + direction * steps, 0), len(parts) - 1)
     return None if j == i else apply_part(tune, parts[j])
 
@@ -124,11 +127,19 @@ def rule_of_thumb(start, tgt: dict, world_seed: int, tmp: Path, cat, max_trips: 
             if abs(miss[f]) <= TOL_RPM:
                 continue
             steps = min(3, max(1, round(abs(miss[f]) / 40.0)))
-            if f == "shift_out":  # heavier flyweights shift lower
-                new = _step(cat, tune, "flyweights", lambda p: p.value("mass_each_kg"), 1 if miss[f] > 0 else -1, steps)
+            up = miss[f] > 0  # the figure is too high
+            fly = ("flyweights", lambda p: p.value("mass_each_kg"), 1 if up else -1)  # heavier: lower rpm
+            sec = ("secondary_spring", lambda p: (p.value("preload_n"), p.value("torsion_preload_nm")),
+                   -1 if up else 1)  # stiffer secondary: higher shift rpm
+            prim = ("primary_spring", lambda p: p.value("force_at_full_shift_n", 0.0), -1 if up else 1)
+            if f == "shift_out":  # flyweights; the secondary once the engagement is right (the guides)
+                options = [sec, fly] if abs(miss.get("engagement", 0.0)) <= TOL_RPM else [fly, sec]
             else:  # a stiffer primary spring engages higher
-                new = _step(cat, tune, "primary_spring", lambda p: p.value("force_at_full_shift_n", 0.0),
-                            -1 if miss[f] > 0 else 1, steps)
+                options = [prim, fly]
+            for kind, key, direction in options:
+                new = _step(cat, tune, kind, key, direction, steps)
+                if new is not None:
+                    break
             if new is not None:
                 break
         if new is None:

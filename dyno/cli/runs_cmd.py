@@ -49,6 +49,12 @@ def run(args) -> int:
             return 0
         lib.sync(conn, root)  # runs added, changed or removed since (the directories are the truth)
         rows = lib.query(conn, tune=args.tune, since=args.since, state=args.state)
+        from dyno.library.advice import advised_vs_measured
+
+        for r in rows:  # a run on a tune dyno tune advise proposed: its prediction beside the measurement
+            adv = advised_vs_measured(root, r)
+            if adv is not None:
+                r["advised"] = adv
         if args.json:
             for r in rows:
                 r.pop("files_sig", None)
@@ -72,4 +78,8 @@ def _print_table(rows: list[dict]) -> None:
         rpm = "-" if r["peak_efficiency_rpm_secondary"] is None else f"{r['peak_efficiency_rpm_secondary']:.0f}"
         print(f"{(r['created_utc'] or '-'):<20} {r['name'][:24]:<24} {(r['tune_name'] or '-')[:16]:<16} "
               f"{r['state'][:10]:<10} {(r['abort_cause'] or '')[:10]:<10} {r['n_points']:>4} {peak:>14} {rpm:>7}")
+        if r.get("advised"):
+            from dyno.library.advice import format_line
+
+            print(f"    {format_line(r['advised'])}")
     print(f"{len(rows)} runs")

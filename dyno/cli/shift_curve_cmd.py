@@ -61,22 +61,32 @@ def run(args) -> int:
     from dyno.tuning.tune import load_tune
 
     tune = load_tune(args.tune)
-    map_path = args.engine_map or default_engine_map()
+    # One engine map on both sides: the fit uses each run's stored map, so the curve and the comparison
+    # with --run use the run's (or the first fitted run's) stored map too unless --engine-map says otherwise
+    # (the default calibration/engine_maps/*.csv is the part-throttle file: another prediction altogether).
+    map_path = args.engine_map
+    for run_dir in ([args.run] if args.run else []) + list(args.fit or []):
+        if map_path is None and (Path(run_dir) / "engine_map.csv").exists():
+            map_path = Path(run_dir) / "engine_map.csv"
+    map_path = map_path or default_engine_map()
     if map_path is None:
         raise ConfigError("<engine map>", "--engine-map", "an engine map CSV (none found in calibration/engine_maps)")
     engine = load_engine_map(map_path)
     closing = {"steady": None, "upshift": False, "downshift": True}[args.phase]
     fit = None
     params, solver_kw = None, {}
-    if args.fit:
-        from dyno.tuning.fit import fit_runs, load_fit_run, solver_for
+    from dyno.tuning.fit import NOMINAL, fit_runs, load_fit_run, residual_summary, solver_for
 
+    theta = list(NOMINAL)
+    if args.fit:
         runs = []
         for run_dir in args.fit:
             has_tune = (Path(run_dir) / "tune.toml").exists()
-            runs.append(load_fit_run(run_dir, tune=None if has_tune else tune))
+            runs.append(load_fit_run(run_dir, tune=None if has_tune else tune,
+                                     engine=engine if args.engine_map else None))
         fit = fit_runs(runs)
-        fitted = solver_for(tune, engine, list(fit.parameters.values()))
+        theta = list(fit.parameters.values())
+        fitted = solver_for(tune, engine, theta)
         params = fitted.params
         solver_kw = {"secondary_friction_torque_nm": fitted.secondary_friction_torque_nm,
                      "flyweight_radius_offset_m": fitted.flyweight_radius_offset_m}
@@ -85,6 +95,12 @@ def run(args) -> int:
         curve.sensitivities = sensitivities(tune, engine, params, closing=closing, **solver_kw)
     measured = measured_points(args.run) if args.run else []
     comparison = compare_to_measured(curve, measured) if measured else None
+    if comparison:
+        # the same prediction the fit's residuals are of: each point at its measured secondary rpm and load
+        has_tune = (Path(args.run) / "tune.toml").exists()
+        at_load = residual_summary([load_fit_run(args.run, tune=None if has_tune else tune, engine=engine)], theta)
+        comparison["at_measured_load"] = {k: at_load[k] for k in ("n", "rms_rpm", "mean_rpm", "max_abs_rpm")}
+        comparison["engine_map"] = str(map_path)
 
     data = curve.to_dict()
     data["engine_map"] = str(map_path)
@@ -121,7 +137,12 @@ def run(args) -> int:
                   f"{s['full_shift_rpm']:11.2f}")
     if comparison:
         print(f"  measured run {args.run}: {comparison['n']} points, engine rpm residual "
-              f"mean {comparison['mean_rpm']:+.0f}, rms {comparison['rms_rpm']:.0f}, max |{comparison['max_abs_rpm']:.0f}| rpm")
+              f"mean {comparison['mean_rpm']:+.0f}, rms {comparison['rms_rpm']:.0f}, max |{comparison['max_abs_rpm']:.0f}| rpm "
+              f"(on the full-throttle curve)")
+        c = comparison["at_measured_load"]
+        print(f"    at each point's measured load (the fit's prediction{', fitted' if fit else ', nominal'}): "
+              f"mean {c['mean_rpm']:+.0f}, rms {c['rms_rpm']:.0f}, max |{c['max_abs_rpm']:.0f}| rpm; "
+              f"engine map {Path(map_path).name}")
     if args.png:
         print(f"  plot saved to {args.png}")
     return 0

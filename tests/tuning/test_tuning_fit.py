@@ -162,3 +162,17 @@ def test_run_without_a_tune_names_the_missing_file(tmp_path, run_dirs):
     with pytest.raises(ConfigError, match="tune.toml"):
         load_fit_run(bare)
     assert load_fit_run(bare, tune=STOCK).tune.name == "cvtech-stock"
+
+
+def test_fit_and_run_comparison_are_one_prediction_on_one_engine_map(run_dirs, capsys):
+    """issue 25: `--fit A --run B` compared B with the default (part-throttle) map while the fit used the
+    runs' own; now the curve and the comparison use the run's stored map, and the comparison at each
+    point's measured load is the fit's own prediction: fitted and compared on one run, the two agree."""
+    from dyno.cli import main
+
+    assert main(["shift-curve", str(STOCK), "--fit", run_dirs[1], "--run", run_dirs[1], "--no-sensitivity",
+                 "--json", "--points", "10"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert Path(data["engine_map"]) == Path(run_dirs[1]) / "engine_map.csv"
+    assert data["comparison"]["at_measured_load"]["rms_rpm"] == pytest.approx(data["fit"]["after"]["rms_rpm"],
+                                                                               rel=1e-9)

@@ -1,0 +1,108 @@
+"""dyno tune advise as a team uses it, on a simulated rig whose parts are not their labels
+(--sim-tune-deviation 0.1): engagement run -> advise -> fit the advised parts -> run again. Judged on
+the sim's truth, not on what the advisor says about itself."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dyno.app import RunOptions, run_test
+from dyno.control.plans import plan_named
+from dyno.sim.physics import RigParams
+
+STOCK = Path("calibration/tunes/cvtech-stock.toml").resolve()
+WORLD = 23
+TARGETS = {"engagement": 2100.0, "shift_out": 2750.0}
+
+
+def _run(tune: Path, seed: int, out: Path) -> dict:
+    # in-process on the sim's loss-model efficiency: the belt-model table costs ~90 s per new tune
+    return run_test(RunOptions(sim=True, seed=seed, out_dir=out, tune_path=tune, plan=plan_named("engagement"),
+                               sim_params=RigParams(cvt_tune_path=str(tune), tune_deviation_rel=0.1,
+                                                    world_seed=WORLD, belt_efficiency_source="loss_model")))
+
+
+def _dyno(*args, env=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "dyno", *args], capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, **(env or {})})
+
+
+@pytest.fixture(scope="module")
+def loop(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("advise")
+    runs = tmp / "runs"
+    env = {"DYNO_RUNS_DIR": str(runs)}
+    first = _run(STOCK, 1, runs / "r1")
+    adv = _dyno("tune", "advise", str(runs / "r1"), "--target", "engagement=2100", "--target", "shift_out=2750",
+                "--out", str(tmp / "advice"), "--json", env=env)
+    assert adv.returncode == 0, adv.stderr[-2000:]
+    advice = json.loads(adv.stdout)
+    second = _run(Path(advice["tunes"][0]["tune_file"]), 2, runs / "r2")
+    return {"tmp": tmp, "env": env, "first": first, "advice": advice, "second": second}
+
+
+def test_advice_moves_the_true_figures_to_the_targets_within_its_uncertainty(loop):
+    first, second, best = loop["first"], loop["second"], loop["advice"]["tunes"][0]
+    for fig, target in TARGETS.items():
+        before = abs(first[f"{fig}_rpm_true"] - target)
+        after = abs(second[f"{fig}_rpm_true"] - target)
+        assert after < max(before, 50.0), (fig, before, after)
+        pred = best["predicted"][fig]
+        assert abs(second[f"{fig}_rpm_true"] - pred["rpm"]) <= pred["u95_rpm"], (fig, pred, second[f"{fig}_rpm_true"])
+    # the start was off target on the true rig, so there was something to advise
+    assert max(abs(first[f"{f}_rpm_true"] - t) for f, t in TARGETS.items()) > 50.0
+
+
+def test_advice_documents_and_files(loop):
+    a = loop["advice"]
+    assert 1 <= len(a["tunes"]) <= 5 and a["searched"] > 1000
+    p = [t["p_within_tolerance"] for t in a["tunes"]]
+    assert p == sorted(p, reverse=True)
+    for t in a["tunes"]:
+        assert len(t["changes"]) <= 2 and Path(t["tune_file"]).is_file()
+        assert set(t["predicted"]) == {"engagement", "shift_out"}
+        assert all(v["u_rpm"] > 0 for v in t["predicted"].values())
+    html = Path(a["html"]).read_text()
+    assert "<svg" in html and "Ranked tunes" in html
+    # the calibration: the stock parts' effective values with their uncertainty below the prior's
+    cal = a["calibration"]["parameters"]
+    assert any(c["u_rel"] < c["prior_sd_rel"] for c in cal)
+
+
+def test_the_run_library_shows_advised_beside_measured(loop):
+    r = _dyno("runs", "--json", env=loop["env"])
+    assert r.returncode == 0, r.stderr
+    rows = {Path(x["path"]).name: x for x in json.loads(r.stdout)["runs"]}
+    assert "advised" not in rows["r1"]
+    adv = rows["r2"]["advised"]["figures"]
+    assert adv["engagement"]["measured_rpm"] == pytest.approx(loop["second"]["engagement_rpm"])
+    assert adv["engagement"]["predicted_rpm"] == pytest.approx(loop["advice"]["tunes"][0]["predicted"]["engagement"]["rpm"])
+    table = _dyno("runs", env=loop["env"])
+    assert "advised: engagement predicted" in table.stdout and "measured" in table.stdout
+
+
+@pytest.mark.parametrize("args, what", [
+    (["--target", "engagment=2100"], "--target"),
+    (["--target", "engagement=fast"], "--target engagement"),
+    (["--target", "engagement=2100", "--catalogue", "nowhere"], "nowhere"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(loop, tmp_path, args, what):
+    out = tmp_path / "adv"
+    r = _dyno("tune", "advise", str(loop["tmp"] / "runs" / "r1"), *args, "--out", str(out), env=loop["env"])
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and what in r.stderr, r.stderr
+    assert not out.exists()
+
+
+def test_a_run_that_is_not_an_engagement_run_is_refused(tmp_path):
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "meta.json").write_text("{}")
+    (tmp_path / "r" / "tune.toml").write_text(STOCK.read_text())
+    r = _dyno("tune", "advise", str(tmp_path / "r"), "--target", "engagement=2100", "--out", str(tmp_path / "a"))
+    assert r.returncode == 2 and "characterisation" in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "a").exists()
