@@ -123,3 +123,34 @@ def test_cli_run_with_the_input_rig_as_a_process(tmp_path):
                          capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
     assert bad.returncode == 2 and "--drill" in bad.stderr and "Traceback" not in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+def test_measured_engine_curve_against_the_simulated_engines_true_curve(honest_input_run, tmp_path):
+    """The curve the channel measures holds the sim's true full-throttle torque within its stated U95,
+    and saved as a map it is what the map path then uses (dyno replay --measured-map, a real process)."""
+    from dyno.analysis.engine_map import load_engine_map
+    from dyno.analysis.measured_map import measured_curve
+
+    r, ctx = honest_input_run
+    curve = measured_curve(r["points"])
+    assert len(curve) >= 2
+    eng = ctx.sim.model.engine  # the simulated engine (its own, not the host's map) on this day
+    for row in curve:
+        true_nm = eng.torque_nm(row["rpm"], 1.0, True)
+        assert abs(row["torque_nm"] - true_nm) <= row["torque_u95_nm"], (row, true_nm)
+    out = tmp_path / "measured.csv"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.run([sys.executable, "-m", "dyno", "replay", r["run_dir"], "--measured-map", str(out)],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "than its map" in proc.stdout and out.is_file()
+    emap = load_engine_map(out)  # a map file like any other
+    cf = r["ambient"]["j1349_factor"] if r["ambient"].get("corrected") else 1.0
+    for row in curve:
+        assert emap.torque_nm(round(row["rpm"], 1)) == pytest.approx(row["torque_nm"] * cf, rel=1e-3)
+    # the map path with the measured map: within its speeds it now agrees with the measured input power
+    rep = replay(r["run_dir"], engine_map_path=out)["points"]
+    both = [p for p in rep if math.isfinite(p["efficiency_engine_map"])]
+    assert both
+    for p in both:
+        assert p["efficiency_engine_map"] == pytest.approx(p["efficiency"], abs=0.03), p
