@@ -14,15 +14,13 @@ host time and measured in device time, which no longer agree).
 from __future__ import annotations
 
 import asyncio
-import json
 import math
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
 from dyno.ui.pacing import SimTimeActuators, scaled_plan  # noqa: F401 (scaled_plan: re-exported)
-from dyno.ui.run_dirs import _finish_in_background, _next_run_dir
+from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
 
 FINISHED = (State.DONE, State.ABORTED)
 
@@ -44,7 +42,7 @@ class LiveOptions:
     sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
 
 
-class LiveSession:
+class LiveSession(RearmMixin):
     """Owns the run: start the tasks, forward the operator's commands, shut down safely."""
 
     def __init__(self, opts: LiveOptions) -> None:
@@ -66,6 +64,23 @@ class LiveSession:
             run_opts.engine_map_path = opts.engine_map_path
         self.guard = None
         self.run_dir_removed = False  # set by close() when a simulated session never started a test
+        self.started = False
+        self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
+        self._old_signals: dict = {}
+        # A hang-up while the rig is being built (run directory, pins, bus) must not kill the process with
+        # the run log half-made: the handlers go in first, a signal that comes before the controller
+        # exists waits for it (a run directory with a `start` record alone was left behind otherwise).
+        self._signal_pending: int | None = None
+        self._install_signal_handlers()
+        try:
+            self._build(opts, run_opts, build, loop)
+        except BaseException:
+            self._restore_signals()
+            raise
+        if self._signal_pending is not None:
+            loop.call_soon(self._on_signal_loop, self._signal_pending)
+
+    def _build(self, opts, run_opts, build, loop) -> None:
         if opts.sim:
             self.ctx = build(run_opts, self.sim_now)
             # the plan runners' own durations (hold periods, approach times) shrink like the plan's
@@ -92,8 +107,6 @@ class LiveSession:
         self.poller = self.ctx.poller
         self.controller = self.ctx.controller
         self._stop_watchdog = None
-        self._old_signals: dict = {}
-        self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
         self._tasks: list[asyncio.Task] = []
         self.closed = False
         self.manual = False
@@ -116,6 +129,9 @@ class LiveSession:
         return self.ctx.sim.actuators if self.ctx.sim is not None else self.controller.act
 
     def start(self) -> None:
+        if self.closed or self.controller.state in FINISHED:  # (a signal during start-up: nothing starts)
+            return
+        self.started = True
         if self.ctx.sim is not None and self.ctx.sim.model.t_s == 0.0:
             # Rig time starts now, not when assembly began: building took a few hundred ms
             # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
@@ -129,7 +145,6 @@ class LiveSession:
                    speed=self.speed)
         self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
-        self._install_signal_handlers()
 
     def _install_signal_handlers(self) -> None:
         """SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone) and SIGINT sent by ``kill -INT``:
@@ -142,26 +157,45 @@ class LiveSession:
         if threading.current_thread() is not threading.main_thread():
             return
 
-        def on_loop(signum: int) -> None:
-            name = signal.Signals(signum).name
-            self.controller.abort("signal", f"{name} received: safe state, session closed")
-            if self.on_signal is not None:
-                self.on_signal(128 + signum)
-
         def handler(signum, frame) -> None:
-            if self.ctx.sim is None:
-                from dyno.control.outputs import enter_safe_state
-
-                enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
             if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
                 from dyno.ui.common import detach_terminal
 
                 detach_terminal()
                 self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
-            self.loop.call_soon_threadsafe(on_loop, signum)
+            if not hasattr(self, "controller"):  # still building: the session acts once it exists
+                if self._signal_pending is None:
+                    self._signal_pending = signum
+                return
+            if self.ctx.sim is None:
+                from dyno.control.outputs import enter_safe_state
+
+                enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
+            self.loop.call_soon_threadsafe(self._on_signal_loop, signum)
 
         for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
             self._old_signals[sig] = signal.signal(sig, handler)
+
+    def _on_signal_loop(self, signum: int) -> None:
+        import signal
+
+        name = signal.Signals(signum).name
+        self.controller.abort("signal", f"{name} received: safe state, session closed")
+        if self.on_signal is not None:
+            self.on_signal(128 + signum)
+        else:  # the app has not hooked the session yet: it will find the abort (asked again on the next turn)
+            self.loop.call_later(0.05, self._signal_to_app, signum)
+
+    def _signal_to_app(self, signum: int) -> None:
+        if self.on_signal is not None and not self.closed:
+            self.on_signal(128 + signum)
+
+    def _restore_signals(self) -> None:
+        import signal
+
+        for sig, old in self._old_signals.items():
+            signal.signal(sig, old)
+        self._old_signals = {}
 
     @property
     def finished(self) -> bool:
@@ -293,146 +327,6 @@ class LiveSession:
             self._jog_handle = None
             self.controller.brake(STOP)  # (refused after the safe state: the release runs on)
 
-    # --- acknowledge + re-arm: a new run on the same rig ------------------------------------
-    def rearm_refusal(self) -> str | None:
-        """Why the rig cannot be re-armed now (None: it can).
-
-        Only after a test has ended, with the outputs in their safe state, the engine
-        stopped and no limit or plausibility check failing (rotor too hot, link lost, ...);
-        never after a software fault (watchdog, crashed controller or safety task, a run
-        log that cannot be written): those want a fresh start of ``dyno``.
-        """
-        c = self.controller
-        if not self.finished:
-            return f"re-arm only after a test has ended (state: {c.state.value}; E-STOP first)"
-        cause = c.aborts[-1]["cause"] if c.aborts else None
-        if cause in NO_REARM:
-            return f"not re-armed after {cause} ({NO_REARM[cause]}): quit and start dyno again"
-        if self.ctx.watchdog is not None and getattr(self.ctx.watchdog, "tripped", False):
-            return "not re-armed: the watchdog tripped: quit and start dyno again"
-        outs = self.actuators.output_states()
-        if getattr(self.actuators, "releasing", False) or outs.get("brake_actuator") == "releasing":
-            return "not re-armed: the brake is still releasing (wait for the release stroke to end)"
-        if not outs.get("safe"):
-            return (f"not re-armed: the rig is not in its safe state (throttle {outs.get('throttle')}, engine "
-                    f"{outs.get('engine_kill')}, brake {outs.get('brake_actuator')}): E-STOP")
-        from dyno.protocol import v1
-
-        rp = self.poller.rpm(v1.CH_PRIMARY)
-        if rp > c.plan.engine_running_rpm:
-            return f"not re-armed: the engine still turns ({rp:.0f} rpm): wait until it has stopped"
-        trip = c.check_limits()
-        if trip is not None:
-            return f"not re-armed: {trip.cause}: {trip.detail}"
-        return None
-
-    def rearm(self) -> tuple[Path | None, str]:
-        """Acknowledge the ended test and arm a new one in a new run directory.
-
-        The ended run's log is closed (its abort record stays) and its report.html is
-        written in the background; the poller, the rig and its safety keep running; the
-        new controller starts from WAIT_ENGINE, which only re-enables the ignition (the
-        engine is started by the operator, the test by GO).  Returns (new run dir, message);
-        (None, why) if refused.
-        """
-        why = self.rearm_refusal()
-        if why:
-            return None, why
-        from dyno.control.controller import TestController
-        from dyno.errors import DynoError
-        from dyno.runlog.writer import RunWriter
-
-        old, old_writer = self.controller, self.ctx.writer
-        old_dir = Path(old_writer.run_dir)
-        new_dir = _next_run_dir(old_dir, self.opts.out_dir)
-        try:  # first the new log: if it cannot be written, nothing changes
-            meta = json.loads((old_dir / "meta.json").read_text())
-            for k in ("software_version", "created_unix_s", "format"):
-                meta.pop(k, None)
-            meta["rearmed_after"] = str(old_dir)
-            engine_map = old.engine_map
-            if self.ctx.ambient_sensor is not None:  # each run its own air, read when it is armed
-                from dyno.ambient import read_sensor
-
-                amb = read_sensor(self.ctx.ambient_sensor, "BME280")
-                engine_map = engine_map.at_ambient(amb.temp_c, amb.dry_pressure_kpa)
-                meta["ambient"] = amb.to_dict()
-            tune = old_dir / "tune.toml"
-            writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
-                               engine_map_text=(old_dir / "engine_map.csv").read_text(),
-                               tune_text=tune.read_text() if tune.is_file() else None)
-            for name in INPUT_COPIES:  # any other input the run keeps beside its log (e.g. its plan file)
-                if (old_dir / name).is_file() and not (new_dir / name).exists():
-                    shutil.copy2(old_dir / name, new_dir / name)
-        except (DynoError, OSError, ValueError) as exc:
-            return None, f"not re-armed: new run directory {new_dir}: {exc}"
-        self.cancel_jog()
-        self.manual = False
-        clear = getattr(old.act, "clear_latch", None)
-        if clear is not None:  # the explicit re-arm: the released rig accepts commands again
-            clear()
-        self._close_log()
-        self.poller.listeners.remove(old_writer.events)
-        self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
-        self.ctx.ambient = dict(meta.get("ambient") or {})
-        ctrl = TestController(self.poller, old.act, old.calibration, engine_map, plan=old.plan,
-                              limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
-                              runner_for=old.runner_for, from_idle=old.from_idle)
-        ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)
-        ctrl.result_hooks = list(getattr(old, "result_hooks", []))  # (the characterisations' sim truths)
-        for name in REBUILT_ATTRS:  # what the composition root sets on a controller after building it
-            if hasattr(old, name):
-                setattr(ctrl, name, getattr(old, name))
-        ctrl.listeners.append(self._on_controller)
-        writer.on_error = lambda exc: ctrl.abort(
-            "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or new_dir}): "
-            "safe state; what was recorded before stays readable")
-        self.poller.listeners.append(writer.events)
-        self.ctx.writer, self.ctx.controller, self.controller = writer, ctrl, ctrl
-        self._rehook_watchdog()
-        self._trim_history()
-        if self.ctx.drills is not None:
-            self._drills_fired_before = len(self.ctx.drills.fired)
-        self._pause_points = 0
-        self.state_since_s = self.loop.time()
-        self._tasks = [t for t in self._tasks if t.get_name() != "controller"]
-        self._tasks.append(asyncio.create_task(ctrl.run(), name="controller"))
-        self.run_dirs.append(new_dir)
-        self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
-        return new_dir, f"re-armed: new run {new_dir} (report of the last one: {old_dir / 'report.html'})"
-
-    def _trim_history(self) -> None:
-        """Forget the ended run's events and the sim's truth samples (kept: the last ``HISTORY_KEEP_S``).
-
-        The poller and the simulated rig live as long as the session; without this each re-arm adds the
-        last run's events (~10 bytes each, a few hundred a second) to memory that no later run reads:
-        the UI soak's RSS grew 17 % over two simulated hours.  The ended run is in its log by now.
-        """
-        dev_now_us = self.poller.device_now_us()
-        if dev_now_us is not None:
-            self.poller.streams.trim_before(int(dev_now_us - HISTORY_KEEP_S * 1e6))
-        truth = getattr(self.ctx.sim, "truth", None)
-        if truth is not None and len(truth.t):
-            truth.trim_before(truth.t[-1] - HISTORY_KEEP_S)
-        from dyno.heap import return_free_heap
-
-        return_free_heap()
-
-    def _rehook_watchdog(self) -> None:
-        """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
-        from dyno.app import _attach_watchdog, start_watchdog
-
-        self.poller.listeners[:] = [fn for fn in self.poller.listeners
-                                    if not getattr(fn, "__qualname__", "").startswith("_attach_watchdog.")]
-        timeout_s = self.ctx.rig_cfg.actuator.watchdog_s
-        if self.ctx.hw is None:  # the session's own watchdog: a new one beside the new controller
-            if self._stop_watchdog is not None:
-                self._stop_watchdog()
-            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
-            self._stop_watchdog = start_watchdog(self.ctx, self.loop)
-        else:  # pragma: no cover - the rig's watchdog (its thread runs on) reports to the new controller
-            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
-
     def _close_log(self) -> None:
         """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
         document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
@@ -475,10 +369,7 @@ class LiveSession:
             self.ctx.drills.cancel()
         if self._stop_watchdog is not None:
             self._stop_watchdog()
-        import signal
-
-        for sig, old in self._old_signals.items():
-            signal.signal(sig, old)
+        self._restore_signals()
         self._close_log()
         if self._reports:  # the re-armed-from runs' reports (usually long done)
             await asyncio.wait(self._reports, timeout=60.0)
@@ -500,19 +391,7 @@ class LiveSession:
 
     def _nothing_ran(self) -> bool:
         c = self.controller
+        if self.opts.sim and not self.started:  # closed (a signal) before the rig's first poll: nothing ran
+            return True
         return (self.opts.sim and c.go_s is None and all(a.get("cause") == "quit" for a in c.aborts)
                 and not (self.ctx.drills is not None and len(self.ctx.drills.fired) > self._drills_fired_before))
-
-
-# Attributes dyno.app.build may set on a controller after constructing it (rig.toml's control gains and
-# inertias on newer trees): a re-armed controller gets the same.
-REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia")
-INPUT_COPIES = ("plan.toml",)
-
-#: seconds of events and truth a re-arm keeps (more than any window or drill check looks back over)
-HISTORY_KEEP_S = 120.0
-
-# Aborts after which the session is not re-armed: a software or host fault wants a fresh start.
-NO_REARM = {"watchdog": "the control loop stalled", "error": "the controller crashed",
-            "safety_error": "the safety task failed", "disk_full": "the run log cannot be written",
-            "signal": "the session is closing"}
