@@ -42,7 +42,7 @@ from dyno.drills import parse_drill  # noqa: E402
 TEST_STATES = {"warmup", "step", "settle", "measure"}
 
 CLIENTS = textwrap.dedent(r'''
-    import json, socket, sys, threading, time
+    import json, os, signal, socket, sys, threading, time
     host, port, token, n, dur = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), float(sys.argv[5])
     counts = [0] * n
     req = f"GET /api/events?token={token} HTTP/1.1\r\nHost: {host}\r\nAccept: text/event-stream\r\n\r\n".encode()
@@ -64,9 +64,13 @@ CLIENTS = textwrap.dedent(r'''
     if n:  # the one that never reads: a small receive buffer that fills, then the server's writes wait
         s = socket.socket(); s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         s.connect((host, port)); s.sendall(req); socks.append(s)
+    def report(*_):
+        print(json.dumps({"frames_per_reader": counts[: max(0, n - 1)]}), flush=True)
+        os._exit(0)
+    signal.signal(signal.SIGTERM, report)
     print("ready", flush=True)
     time.sleep(dur)
-    print(json.dumps({"frames_per_reader": counts[: max(0, n - 1)]}), flush=True)
+    report()
 ''')
 
 
@@ -133,9 +137,11 @@ def run_config(n_clients: int, drill: str, *, rate_hz: float, web: bool, out: Pa
     cpu0, t0 = thread_cpu_s(), time.monotonic()
     result = run_test(opts)
     cpu1, wall_s = thread_cpu_s(), time.monotonic() - t0
+    reader_frames = None
     if clients is not None:
         clients.terminate()
-        clients.wait(10)
+        out_text, _ = clients.communicate(timeout=10)
+        reader_frames = json.loads(out_text.strip().splitlines()[-1])["frames_per_reader"]
     if server is not None:
         server.stop()
     iv = [(b[0] - a[0], a[2]) for a, b in zip(polls, polls[1:]) if a[1] in TEST_STATES and b[1] in TEST_STATES]
@@ -150,7 +156,9 @@ def run_config(n_clients: int, drill: str, *, rate_hz: float, web: bool, out: Pa
             "server_cpu_pct": 100 * (cpu1[1] - cpu0[1]) / wall_s, "loop_cpu_pct": 100 * (cpu1[0] - cpu0[0]) / wall_s,
             "feed_cpu_pct": 100 * feed_s[0] / wall_s,
             "frames": feed.published if feed else 0, "dropped": feed.dropped if feed else 0,
-            "rig_safe": result.get("rig_safe")}
+            "rig_safe": result.get("rig_safe"),
+            # frames each reading client got (the one never reading does not hold them up)
+            "reader_frames_min": min(reader_frames) if reader_frames else None}
 
 
 def main() -> int:
@@ -186,13 +194,14 @@ def main() -> int:
         return 0
     print(f"dyno run --sim --speed {speed:g}, feed at {a.rate:g} frames/s, clients in another process (one never reads)")
     print("| drill | server | clients | polls | jitter p99 ms | late p99 ms | latency s (bound) | server CPU % "
-          "| feed on loop % | frames (dropped) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| feed on loop % | frames (dropped) | least frames a reader got |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         lat = "-" if r["latency_s"] is None else f"{r['latency_s']:.3f}"
         print(f"| {r['drill']} | {'yes' if r['web'] else 'no'} | {r['clients']} | {r['polls']} | {r['jitter_p99_ms']:.2f} "
               f"| {r['late_p99_ms']:.2f} | {lat} ({r['bound_s']}) {'ok' if r['within_bound'] else 'OUT'} "
-              f"| {r['server_cpu_pct']:.2f} | {r['feed_cpu_pct']:.2f} | {r['frames']} ({r['dropped']}) |")
+              f"| {r['server_cpu_pct']:.2f} | {r['feed_cpu_pct']:.2f} | {r['frames']} ({r['dropped']}) "
+              f"| {'-' if r['reader_frames_min'] is None else r['reader_frames_min']} |")
     for drill in drills:
         by = {(r["web"], r["clients"]): r for r in rows if r["drill"] == drill}
         base, zero, many = by.get((False, 0), by[(True, 0)]), by[(True, 0)], by[(True, n)]
