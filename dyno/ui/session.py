@@ -353,11 +353,14 @@ class LiveSession(RearmMixin):
         self.controller.latch_safe_state()
         if not self.finished:
             self.controller.abort("quit", why)
-        if self.ctx.sim is not None and self.controller.go_s is not None:
-            # the simulated brake releases while the polls still advance its physics, so the run records
-            # where it ended (the rig's own release is finished by its SafetyGuard on the way out)
-            from dyno.safe_outputs import finish_release
+        from dyno.safe_outputs import finish_release, release_done
 
+        if self.ctx.sim is not None and self.started and (self.controller.go_s is not None
+                                                          or not release_done(self.ctx)):
+            # the simulated brake releases while the polls still advance its physics, so the run records
+            # where it ended (the rig's own release is finished by its SafetyGuard on the way out); also
+            # before GO: a safe state entered then (a watchdog trip when re-armed) powers the stroke too,
+            # and a quit at once recorded it still "releasing" (rig_safe false, the pads never on the rotor)
             await finish_release(self.ctx, poll_s=0.05, pads_only=getattr(self, "hung_up", False))
         for t in reversed(self._tasks):
             if t.get_name() == "poller":

@@ -47,3 +47,31 @@ def test_signal_during_build_aborts_once_built_and_leaves_nothing(tmp_path, monk
     s = asyncio.run(scenario())
     assert s.run_dir_removed and not built["run_dir"].exists() and s.run_dirs == []
     assert signal.getsignal(signal.SIGTERM) == before  # the process's own handler back
+
+
+def test_quit_right_after_a_watchdog_trip_before_go_records_the_rig_safe(tmp_path):
+    """A watchdog trip before GO powers the release stroke; a quit at once must let it end before the record
+    is written (it said `rig_safe: false`, "actuator releasing", though the pads were never on the rotor)."""
+    import json
+
+    from dyno.drills import parse_drill
+
+    async def scenario():
+        s = LiveSession(LiveOptions(sim=True, speed=4.0, seed=12, out_dir=tmp_path / "run",
+                                    drills=[parse_drill("loop-stall:900@2")]))
+        s.start()
+        for _ in range(600):
+            if s.controller.state is State.ABORTED:
+                break
+            await asyncio.sleep(0.05)
+        assert s.controller.go_s is None and s.controller.aborts[0]["cause"] == "watchdog", s.controller.aborts
+        await s.close("operator quit")  # at once, as the soak's operator did
+        m = s.sim.model
+        assert m.actuator_dir == 0 and m.pads_off and m.throttle_frac == 0.0 and not m.engine_enabled
+        return s
+
+    s = asyncio.run(scenario())
+    docs = [json.loads(x) for x in (tmp_path / "run" / "documents.jsonl").read_text().splitlines() if x.strip()]
+    (safety,) = [d for d in docs if d["type"] == "safety"]
+    assert safety["rig_safe"] is True, safety.get("rig_unsafe_because")
+    assert safety["outputs"]["brake_actuator"] != "releasing"
