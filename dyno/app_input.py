@@ -66,6 +66,7 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
         reader.want_input = True
     controller, streams = ctx.controller, ctx.poller.streams
     state = {"channel": channel, "tared": False}
+    controller.input_channel = channel  # the live screen's T_in (dyno.ui.live_model); tared below
 
     def hook(point: dict, t0_s, t1_s) -> None:
         if not state["tared"]:
@@ -73,7 +74,7 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
             zb = getattr(controller, "zero_before", None) or {}
             if controller.tare is not None and "t_start_us" in zb:  # as the brake-side channel: from GO's zero
                 zero = input_zero(streams, zb["t_start_us"], zb["t_end_us"], channel)
-                state["channel"] = channel.with_zero(zero)
+                state["channel"] = controller.input_channel = channel.with_zero(zero)
                 if state["channel"].tare is not None:
                     controller._log("tare_input", **state["channel"].tare)
         ch = state["channel"]

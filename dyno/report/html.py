@@ -160,6 +160,8 @@ def _summary(data: ReportData) -> str:
 
 def _points_table(data: ReportData) -> str:
     rows = []
+    # the engine-side input torque channel (issue 27): its torque, and the map's figure beside the measured one
+    has_input = any(p.get("efficiency_source") == "input_torque" for p in data.docs("point"))
     for i, p in enumerate(data.docs("point")):
         why = exclusion_reason(p)
         notes = [f.get("reason", "") for f in (p.get("faults") or []) + (p.get("legacy_faults") or [])
@@ -171,11 +173,20 @@ def _points_table(data: ReportData) -> str:
                      _f(p.get("efficiency"), ".1f", 100), _f(p.get("efficiency_ci95"), ".1f", 100),
                      _f(p.get("efficiency_sys95"), ".1f", 100), _f(p.get("efficiency_u95"), ".1f", 100),
                      state + "".join(f'<br><span class="warn">{escape(n)}</span>' for n in notes)])
+        if has_input:
+            rows[-1][5:5] = [_f(p.get("torque_input_nm"), ".2f")]
+            rows[-1][-1:-1] = [_f(p.get("efficiency_engine_map"), ".1f", 100),
+                               _f(p.get("efficiency_engine_map_u95"), ".1f", 100)]
     if not rows:
         return "<p>No points were recorded.</p>"
-    return _table(["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
-                   "efficiency %", "± pp (95 %, stat.)", "± pp (95 %, syst.)", "± pp (95 %, total)", "state / notes"],
-                  rows, left={11})
+    head = ["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
+            "efficiency %", "± pp (95 %, stat.)", "± pp (95 %, syst.)", "± pp (95 %, total)", "state / notes"]
+    if has_input:  # P in and the efficiency from the measured input torque; the map's figure beside
+        head[5:5] = ["engine torque N·m (measured)"]
+        head[-1:-1] = ["efficiency % (engine map)", "± pp (95 %, map)"]
+        return ("<p>Efficiency from the engine-side input torque channel: P out / (T in · ω p); the engine "
+                "map's figure beside it for comparison.</p>" + _table(head, rows, left={14}))
+    return _table(head, rows, left={11})
 
 
 def _faults(data: ReportData) -> str:

@@ -204,7 +204,8 @@ class LiveApp(OverlayMixin, DynoApp):
         row("ratio", fmt(v.ratio, ".2f"))
         row("torque", fmt(v.torque_secondary_nm, ".2f", " N·m"))
         row("P out", fmt(v.power_out_w, ".0f", " W"))
-        row("P engine", fmt(v.power_engine_w, ".0f", " W (map)"))
+        # with the input torque channel the engine's power is measured (T_in w_p), else the map's
+        row("P engine", fmt(v.power_engine_w, ".0f", " W (T_in)" if v.power_source == "input" else " W (map)"))
         # The denominator is the map's curve at the commanded throttle (n/a without one); the efficiency
         # means something only while the test holds a steady load (never in the characterisations:
         # throttle ramps, idle, an engine cut).

@@ -42,6 +42,9 @@ class LiveValues:
     abort_detail: str | None
     throttle_frac: float = 1.0  # as commanded: the engine-map curve power_engine_w comes from
     efficiency_reason: str | None = None  # why power_engine_w (and so the efficiency) is NaN, if known
+    # the engine-side input torque channel (issue 27): then power_engine_w is T_in w_p, measured, not the map's
+    torque_input_nm: float = math.nan
+    power_source: str = "map"  # "map" | "input"
 
 
 def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQUE_WINDOW_US) -> float:
@@ -53,6 +56,18 @@ def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQU
     if good.size == 0:
         return math.nan
     return float(calibration.torque_secondary_nm(float(good.mean())))
+
+
+def recent_input_torque_nm(streams, device_now_us, channel, window_us: int = TORQUE_WINDOW_US) -> float:
+    """Mean engine torque from the input channel over the last ``window_us`` (NaN if none)."""
+    if device_now_us is None or channel is None or not hasattr(streams, "input_window"):
+        return math.nan
+    _, codes, status = streams.input_window(device_now_us - window_us, device_now_us)
+    good = codes[((status & v1.ADC_STATUS_ERR) == 0) & (codes > 0) & (codes < 0xFFFF)]
+    if good.size == 0:
+        return math.nan
+    cal = channel.calibration
+    return float((good.mean() - cal.intercept_counts) / cal.slope_counts_per_nm + channel.bearing_loss_nm)
 
 
 def engine_power_w(engine_map, rpm: float, throttle_frac: float = 1.0) -> tuple[float, str | None]:
@@ -108,7 +123,14 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
     ratio = rp / rs if rs > 1.0 else math.nan
     torque = recent_torque_nm(poller.streams, poller.device_now_us(), controller.calibration)
     p_out = torque * rs * RAD_S_PER_RPM if not math.isnan(torque) else math.nan
-    p_eng, eff_reason = engine_power_w(controller.engine_map, rp, controller.throttle_frac)
+    channel = getattr(controller, "input_channel", None)  # rig.toml [input_torque] (dyno.app_input)
+    t_in, source = math.nan, "map"
+    if channel is not None:  # the engine's power measured: the map not needed
+        t_in, source = recent_input_torque_nm(poller.streams, poller.device_now_us(), channel), "input"
+        p_eng = t_in * rp * RAD_S_PER_RPM if math.isfinite(t_in) else math.nan
+        eff_reason = None if math.isfinite(t_in) else "no input torque conversions"
+    else:
+        p_eng, eff_reason = engine_power_w(controller.engine_map, rp, controller.throttle_frac)
     eff = p_out / p_eng if p_eng > 0 and not math.isnan(p_out) else math.nan
     st = poller.reader.stats
     abort = controller.aborts[-1] if controller.aborts else None
@@ -121,7 +143,8 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
         nacks=int(st.transport_errors.get("nack", 0)), events_lost=int(poller.reader.events_lost),
         rejected_total=int(sum(st.rejected.values())),
         abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None,
-        throttle_frac=controller.throttle_frac, efficiency_reason=eff_reason)
+        throttle_frac=controller.throttle_frac, efficiency_reason=eff_reason, torque_input_nm=t_in,
+        power_source=source)
 
 
 TEST_STATES = ("warmup", "step", "settle", "measure")  # a test is under way (the ETA means something)

@@ -154,3 +154,18 @@ def test_measured_engine_curve_against_the_simulated_engines_true_curve(honest_i
     assert both
     for p in both:
         assert p["efficiency_engine_map"] == pytest.approx(p["efficiency"], abs=0.03), p
+
+
+def test_live_values_and_report_carry_the_input_channel(honest_input_run):
+    from dyno.ui.live_model import RateMeter, live_values
+
+    r, ctx = honest_input_run
+    v = live_values(ctx.poller, ctx.controller, 0.0, RateMeter())
+    assert v.power_source == "input"
+    # the run has ended (engine cut): the live input torque is what the cradle carries now, in the truth
+    truth_nm = ctx.sim.model.truth().torque_engine_nm
+    assert not ctx.sim.model.engine_running and v.torque_input_nm == pytest.approx(truth_nm, abs=0.3)
+    from dyno.report.writer import write_report
+
+    html = write_report(r["run_dir"]).read_text()
+    assert "engine torque N·m (measured)" in html and "efficiency % (engine map)" in html
