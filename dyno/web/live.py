@@ -16,6 +16,7 @@ from aiohttp import web
 
 from dyno.web.server import STATIC, TOKEN_COOKIE, WebServer
 
+PUMP_S = 0.05  # how often the server looks for a new frame (adds at most this to a frame's way to the page)
 KEEPALIVE_S = 10.0  # a comment line on a quiet stream: proxies and phones keep the connection
 
 
@@ -53,16 +54,22 @@ class LiveHub:
         self._pump_task.cancel()
 
     async def _pump(self) -> None:
-        loop = asyncio.get_running_loop()
+        """Look at the queue every PUMP_S and publish the newest frame.  Polling, not a blocking get: the
+        rig's ``put_nowait`` then never wakes a waiting thread (a woken thread asks for the GIL at once; the
+        rig's loop would pay for that hand-over on every frame)."""
         frames = self.feed.frames
         while not self.closing:
-            try:  # (a thread of the server's executor blocks on the queue, not the server's loop)
-                snap = await loop.run_in_executor(None, _get, frames)
-            except asyncio.CancelledError:
-                raise
-            if snap is None:
-                continue
-            self.publish(snap)
+            snap = None
+            while True:
+                try:
+                    snap = frames.get_nowait()
+                except queue.Empty:
+                    break
+                if snap.get("ended"):  # (the last frame is never skipped for a newer one: there is none)
+                    break
+            if snap is not None:
+                self.publish(snap)
+            await asyncio.sleep(PUMP_S)
 
     def publish(self, snap: dict) -> None:
         snap["web_stop"] = self.allow_stop
@@ -121,13 +128,6 @@ class LiveHub:
         self.stops += 1
         print("dyno web: STOP from the web page (" + (request.remote or "?") + ")", file=sys.stderr)
         return web.json_response({"stop": "sent" if ok else "the run has ended"})
-
-
-def _get(q: queue.Queue):
-    try:
-        return q.get(timeout=1.0)
-    except queue.Empty:
-        return None
 
 
 STATIC_TYPES = {".js": "text/javascript", ".css": "text/css", ".html": "text/html", ".svg": "image/svg+xml"}
