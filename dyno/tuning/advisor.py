@@ -21,10 +21,12 @@ import math
 from dataclasses import dataclass, field
 
 from dyno.tuning.advisor_model import (UNKNOWN_PART_TOLERANCE_REL, Calibration, RunData, calibrate,
-                                       effective_tune, predict_figure, predict_with_u, tune_params)
+                                       calibrated_theta, effective_tune, predict_figure, predict_with_u,
+                                       tune_params)
 from dyno.tuning.parts import DEVIATED, Part, apply_part, match_parts, part_identity
 
-REFINE = 120            # tunes whose uncertainty is computed after the first pass
+REFINE = 120            # tunes whose uncertainty is computed after the first pass (half with a full-load target)
+FULL_LOAD_PASS = 300    # with a full-load target: tunes (best by the light figures) whose full load is solved
 TARGET_FIGURES = ("engagement", "shift_out", "full_load")
 
 
@@ -93,25 +95,46 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
     tol_of = tolerance_lookup(catalogue, [r.tune for r in runs])
     cal = calibrate(runs, tol_of)
     idx = cal.index()
-    load = base_run.light_load_nm
-    low = base_run.low_ratio
-    engine = base_run.engine
+    # the light load and the low-gear ratio the figures are predicted at: the latest engagement run's
+    # (a steady run has neither; the tune's geometric low stop then)
+    eng_runs = [r for r in runs if r.figures and math.isfinite(r.low_ratio)]
+    load = eng_runs[-1].light_load_nm if eng_runs else 0.2
+    if eng_runs:
+        low = eng_runs[-1].low_ratio
+    else:
+        from dyno.tuning.shift_curve import Solver, model_params_for
+
+        low = Solver(base, None, model_params_for(base)).ratio_low_stop
+    engine = base_run.engine or next((r.engine for r in reversed(runs) if r.engine is not None), None)
     if "full_load" in targets and engine is None:
         from dyno.errors import ConfigError
 
         raise ConfigError(base_run.path, "engine_map.csv", "the run's engine map (a full_load target needs it)")
     cands, info = candidates(base, catalogue, max_changes)
-    # first pass: the calibrated values only (cheap), full load last (a root solve per tune)
+    theta = calibrated_theta(cal)
+    # first pass: the calibrated values only (cheap)
     light = [f for f in targets if f != "full_load"]
     for c in cands:
         ps = tune_params(c.tune, tol_of)
         d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
         eff = effective_tune(c.tune, ps, d)
-        c.first_pass = {f: predict_figure(eff, f, load, low, engine) for f in light}
+        c.first_pass = {f: predict_figure(eff, f, load, low, engine, theta) for f in light}
         c.miss = sum(((c.first_pass[f] - targets[f]) / tolerance_rpm) ** 2 for f in light)
         c.miss = c.miss if math.isfinite(c.miss) else math.inf
     cands.sort(key=lambda c: (c.miss, len(c.changes)))
-    refined = cands[:REFINE] + [c for c in cands[REFINE:] if not c.changes]  # the current tune always
+    n_refine = REFINE
+    if "full_load" in targets:  # a root solve per tune: for the light figures' best FULL_LOAD_PASS only
+        n_refine = REFINE // 2
+        for c in cands[:FULL_LOAD_PASS]:
+            ps = tune_params(c.tune, tol_of)
+            d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
+            c.first_pass["full_load"] = predict_figure(effective_tune(c.tune, ps, d), "full_load", load, low,
+                                                       engine, theta)
+            c.miss += ((c.first_pass["full_load"] - targets["full_load"]) / tolerance_rpm) ** 2
+        for c in cands[FULL_LOAD_PASS:]:
+            c.miss = math.inf
+        cands.sort(key=lambda c: (c.miss, len(c.changes)))
+    refined = cands[:n_refine] + [c for c in cands[n_refine:] if not c.changes]  # the current tune always
     for c in refined:
         for f in targets:
             c.predicted[f] = predict_with_u(cal, c.tune, f, load, low, tol_of, engine)
@@ -136,9 +159,14 @@ def _row(c: Candidate, targets) -> dict:
 
 def curve_for(cal: Calibration, tune, engine, tol_of, n_points: int = 30):
     """The predicted shift curve of a tune at its calibrated part values (for the page)."""
+    from dyno.tuning.fit import NOMINAL, solver_for
     from dyno.tuning.shift_curve import predict_shift_curve
 
     ps = tune_params(tune, tol_of)
     idx = cal.index()
     d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
-    return predict_shift_curve(effective_tune(tune, ps, d), engine, n_points=n_points)
+    eff = effective_tune(tune, ps, d)
+    sv = solver_for(eff, engine, calibrated_theta(cal) or NOMINAL)
+    return predict_shift_curve(eff, engine, n_points=n_points, params=sv.params,
+                               secondary_friction_torque_nm=sv.secondary_friction_torque_nm,
+                               flyweight_radius_offset_m=sv.flyweight_radius_offset_m)

@@ -48,7 +48,9 @@ from dyno.tuning.parts import DEVIATED, part_identity
 #: belt flank friction while it slips at engagement (the thesis's f = 0.4)
 FLANK_FRICTION = 0.4
 #: model floor per figure (rpm): what the quasi-static relations leave out (ramp lag, creep, losses)
-MODEL_SD_RPM = {"engagement": 6.0, "shift_out": 8.0, "full_load": 60.0}
+MODEL_SD_RPM = {"engagement": 6.0, "shift_out": 8.0, "full_load": 60.0, "steady": 60.0}
+#: a steady run needs this many points off the ratio stops to count (as dyno.tuning.fit's own fit)
+MIN_STEADY_POINTS = 4
 UNKNOWN_PART_TOLERANCE_REL = 0.1
 FIGURES = ("engagement", "shift_out", "full_load")
 
@@ -76,8 +78,10 @@ class RunData:
     tune: object
     low_ratio: float
     figures: list[Figure]
-    engine: object = None   # EngineMap (full_load only)
+    engine: object = None   # EngineMap (full_load and steady points)
     light_load_nm: float = 0.2
+    steady: list = field(default_factory=list)  # dyno.tuning.fit.MeasuredPoint, off the ratio stops
+    full_shift_ratio: float = math.nan  # the engagement plan's high stop (creep included)
 
 
 def _f(x) -> float:
@@ -99,34 +103,60 @@ def load_run_data(run_dir) -> RunData:
         raise ConfigError(run_dir, "tune.toml", "the run's tune (dyno run --tune stores it)")
     tune = load_tune(run_dir / "tune.toml")
     chars = run.docs("characterisation")
-    if not chars:
-        raise ConfigError(run_dir, "characterisation", "an engagement run (dyno run --plan engagement)")
-    c = chars[-1]
-    low = _f(c.get("low_ratio"))
     figs: list[Figure] = []
-    rows = c.get("shift_out_vs_load") or [{"torque_secondary_nm": c.get("shift_out_torque_nm"),
-                                           "engagement_rpm": c.get("engagement_rpm"),
-                                           "shift_out_rpm": c.get("shift_out_rpm"),
-                                           "shift_out_rpm_ci95": c.get("shift_out_rpm_ci95")}]
-    eng_ci = _f(c.get("engagement_rpm_ci95"))
-    for r in rows:
-        t = _f(r.get("torque_secondary_nm"))
-        if not math.isfinite(t):
-            continue
-        if math.isfinite(_f(r.get("engagement_rpm"))):
-            figs.append(Figure(run_dir.name, "engagement", t, _f(r["engagement_rpm"]), eng_ci))
-        if math.isfinite(_f(r.get("shift_out_rpm"))):
-            figs.append(Figure(run_dir.name, "shift_out", t, _f(r["shift_out_rpm"]), _f(r.get("shift_out_rpm_ci95"))))
-    if not figs or not math.isfinite(low):
-        raise ConfigError(run_dir, "characterisation", "an engagement and a shift-out with the low-gear ratio "
-                                                       "(the engagement plan found none)")
+    low = high = math.nan
+    if chars:
+        c = chars[-1]
+        low, high = _f(c.get("low_ratio")), _f(c.get("full_shift_ratio"))
+        rows = c.get("shift_out_vs_load") or [{"torque_secondary_nm": c.get("shift_out_torque_nm"),
+                                               "engagement_rpm": c.get("engagement_rpm"),
+                                               "shift_out_rpm": c.get("shift_out_rpm"),
+                                               "shift_out_rpm_ci95": c.get("shift_out_rpm_ci95")}]
+        eng_ci = _f(c.get("engagement_rpm_ci95"))
+        for r in rows:
+            t = _f(r.get("torque_secondary_nm"))
+            if not math.isfinite(t):
+                continue
+            if math.isfinite(_f(r.get("engagement_rpm"))):
+                figs.append(Figure(run_dir.name, "engagement", t, _f(r["engagement_rpm"]), eng_ci))
+            if math.isfinite(_f(r.get("shift_out_rpm"))):
+                figs.append(Figure(run_dir.name, "shift_out", t, _f(r["shift_out_rpm"]),
+                                   _f(r.get("shift_out_rpm_ci95"))))
+    steady = _steady_points(run, tune)
+    if (not figs or not math.isfinite(low)) and len(steady) < MIN_STEADY_POINTS:
+        raise ConfigError(run_dir, "characterisation", "an engagement run's engagement and shift-out with the "
+                                                       f"low-gear ratio, or >= {MIN_STEADY_POINTS} steady points "
+                                                       "off the ratio stops (a speed-hold or sweep run)")
     engine = None
     if run.engine_map_path is not None and Path(run.engine_map_path).exists():
         from dyno.tuning.shift_curve import load_engine_map
 
         engine = load_engine_map(run.engine_map_path)
     light = min((f.load_nm for f in figs), default=0.2)
-    return RunData(run_dir.name, run_dir, tune, low, figs, engine, light)
+    if steady and engine is None:
+        raise ConfigError(run_dir, "engine_map.csv", "the run's engine map (its steady points need it)")
+    return RunData(run_dir.name, run_dir, tune, low, figs, engine, light, steady, high)
+
+
+def _steady_points(run, tune) -> list:
+    """A steady run's valid points off the tune's ratio stops (the stop, not the balance, sets those)."""
+    from dyno.tuning.fit import MeasuredPoint
+
+    lo = hi = None
+    out = []
+    for p in run.points:
+        n_e, n_s, t = (_f(p.get(k)) for k in ("rpm_primary", "rpm_secondary", "torque_secondary_nm"))
+        if not (p.get("valid", True) and all(math.isfinite(v) for v in (n_e, n_s, t)) and n_s > 0):
+            continue
+        if lo is None:
+            from dyno.tuning.shift_curve import Solver, model_params_for
+
+            s = Solver(tune, None, model_params_for(tune))
+            lo, hi = s.ratio_low_stop, s.ratio_high_stop
+        ratio = n_e / n_s
+        if hi * 1.01 < ratio < lo * 0.99:
+            out.append(MeasuredPoint(n_e, n_s, t))
+    return out
 
 
 # ------------------------------------------------------------------ forward model
@@ -156,8 +186,9 @@ def _radii(d, low_ratio: float) -> tuple[float, float]:
     return r, float(act.secondary_radius_m(tune, r))
 
 
-def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None) -> float:
-    """A figure of ``tune`` (the true or effective values) at a secondary load."""
+def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None, theta=None) -> float:
+    """A figure of ``tune`` (the true or effective values) at a secondary load; ``theta``: the closed-form
+    shift model's effective (f, dr, T_fr) of :mod:`dyno.tuning.fit` for the full-load figure."""
     r_p, r_s = low_stop_radii_m(tune, low_ratio)
     if figure == "engagement":
         sin_a = math.sin(math.radians(tune.drive.sheave_half_angle_deg))
@@ -169,9 +200,9 @@ def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=N
     if figure == "full_load":
         if engine is None:
             return math.nan
-        from dyno.tuning.shift_curve import Solver, model_params_for
+        from dyno.tuning.fit import NOMINAL, solver_for
 
-        return float(Solver(tune, engine, model_params_for(tune)).balance_rpm(low_ratio))
+        return float(solver_for(tune, engine, NOMINAL if theta is None else theta).balance_rpm(low_ratio))
     raise ValueError(figure)
 
 
@@ -184,6 +215,24 @@ class Param:
     kind: str       # tune attribute
     field: str
     prior_sd: float
+
+
+#: the closed-form shift model's effective parameters (dyno.tuning.fit), calibrated when steady points are
+#: given: they take the belt thrust model's error, so the parts' deviations do not have to. Prior sd in the
+#: fit's scaled units (f 0.1, dr 3 mm, T_fr 2 N m).
+BELT_PRIOR_SD_SCALED = (2.0, 3.0, 4.0)
+
+
+def belt_params() -> list[Param]:
+    from dyno.tuning.fit import PARAMETERS
+
+    return [Param("belt", "belt", name, sd) for name, sd in zip(PARAMETERS, BELT_PRIOR_SD_SCALED)]
+
+
+def theta_of(d_belt) -> list[float]:
+    from dyno.tuning.fit import NOMINAL, SCALE
+
+    return [n + s * float(x) for n, s, x in zip(NOMINAL, SCALE, d_belt)]
 
 
 def tune_params(tune, tolerance_of) -> list[Param]:
@@ -239,8 +288,12 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
                 seen.add((p.part, p.field))
                 params.append(p)
         per_run.append(ps)
+    if any(r.steady for r in runs):
+        params.extend(belt_params())
     idx = {(p.part, p.field): i for i, p in enumerate(params)}
     prior = np.array([p.prior_sd for p in params])
+
+    from dyno.tuning.fit import newton_residual_rpm, solver_for
 
     def model(d):
         out = []
@@ -249,26 +302,62 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
             out.extend(predict_figure(t, f.figure, f.load_nm, r.low_ratio, r.engine) for f in r.figures)
         return np.array(out)
 
+    def steady(d):
+        # measured minus predicted engine rpm at each steady point's secondary rpm and load (Newton step of
+        # dyno.tuning.fit: the closed-form balance with the effective parts, the run's engine map)
+        out = []
+        theta = theta_of([d[idx[(p.part, p.field)]] for p in belt_params()])
+        for r, ps in zip(runs, per_run):
+            if r.steady:
+                t = effective_tune(r.tune, ps, np.array([d[idx[(p.part, p.field)]] for p in ps]))
+                sv = solver_for(t, r.engine, theta)
+                out.extend(newton_residual_rpm(sv, p) for p in r.steady)
+        return np.array(out)
+
+    lows = [r.low_ratio for r in runs if math.isfinite(r.low_ratio)]
+    highs = [r.full_shift_ratio for r in runs if math.isfinite(r.full_shift_ratio)]
+    # an engagement run measured the rig's ratio stops: steady points on them carry no balance
+    for r in runs:
+        r.steady = [p for p in r.steady if (not lows or p.engine_rpm / p.secondary_rpm < 0.99 * max(lows))
+                    and (not highs or p.engine_rpm / p.secondary_rpm > 1.01 * min(highs))]
     meas = np.array([f.rpm for r in runs for f in r.figures])
     sig = np.array([f.sigma_rpm for r in runs for f in r.figures])
+    n_steady = sum(len(r.steady) for r in runs)
+    steady_sd = [MODEL_SD_RPM["steady"]]
 
     def resid(d):
         pred = model(d)
         pred = np.where(np.isfinite(pred), pred, meas + 1e4)
-        return np.concatenate([(meas - pred) / sig, d / prior])
+        parts = [(meas - pred) / sig]
+        if n_steady:
+            parts.append(steady(d) / steady_sd[0])
+        return np.concatenate(parts + [d / prior])
 
-    sol = least_squares(resid, np.zeros(len(params)), diff_step=1e-4, xtol=1e-12, ftol=1e-12)
+    sol = least_squares(resid, np.zeros(len(params)), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
+    if n_steady:
+        # the steady points' scatter about the closed form is model error, not noise: weigh them by the
+        # scatter they show (at least the floor), once, so they cannot outvote the engagement figures
+        rms = float(np.sqrt(np.mean(steady(sol.x) ** 2)))
+        if rms > steady_sd[0]:
+            steady_sd[0] = rms
+            sol = least_squares(resid, sol.x, diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     j = sol.jac
     cov = np.linalg.inv(j.T @ j)
-    r_data = sol.fun[:meas.size]
-    chi2 = float(r_data @ r_data) / max(meas.size, 1)
+    # the engagement figures' chi^2 per figure scales the covariance up when their scatter exceeds their sigmas
+    r_fig = sol.fun[:meas.size]
+    chi2 = float(r_fig @ r_fig) / max(meas.size, 1) if meas.size else 1.0
     if chi2 > 1.0:
         cov = cov * chi2
     pred = model(sol.x)
     rows = [{"run": f.run, "figure": f.figure, "load_nm": f.load_nm, "measured_rpm": f.rpm,
              "calibrated_rpm": float(p), "residual_rpm": float(f.rpm - p)}
             for f, p in zip([f for r in runs for f in r.figures], pred)]
-    return Calibration(params, sol.x, cov, chi2, int(meas.size), rows)
+    if n_steady:
+        rows += [{"run": r.name, "figure": "steady", "secondary_rpm": p.secondary_rpm, "load_nm": p.secondary_torque_nm,
+                  "measured_rpm": p.engine_rpm, "residual_rpm": float(x)}
+                 for r, p, x in zip([r for r in runs for _ in r.steady], [p for r in runs for p in r.steady],
+                                    steady(sol.x))]
+    return Calibration(params, sol.x, cov, chi2, int(meas.size + n_steady), rows)
 
 
 def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_ratio: float, tolerance_of,
@@ -276,8 +365,17 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
     """(figure, standard uncertainty) of ``tune`` with the calibrated (or prior) part deviations."""
     ps = tune_params(tune, tolerance_of)
     idx = cal.index()
+    if figure == "full_load" and ("belt", belt_params()[0].field) in idx:
+        ps = ps + belt_params()  # the calibrated shift model's effective parameters
+    n_part = sum(p.kind != "belt" for p in ps)
     d = np.array([cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps])
-    y0 = predict_figure(effective_tune(tune, ps, d), figure, load_nm, low_ratio, engine)
+
+    def f(x):
+        theta = theta_of(x[n_part:]) if len(ps) > n_part else None
+        return predict_figure(effective_tune(tune, ps[:n_part], x[:n_part]), figure, load_nm, low_ratio, engine,
+                              theta)
+
+    y0 = f(d)
     if not math.isfinite(y0):
         return math.nan, math.nan
     g = np.zeros(len(ps))
@@ -285,8 +383,7 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
         dp, dm = d.copy(), d.copy()
         dp[i] += step
         dm[i] -= step
-        g[i] = (predict_figure(effective_tune(tune, ps, dp), figure, load_nm, low_ratio, engine)
-                - predict_figure(effective_tune(tune, ps, dm), figure, load_nm, low_ratio, engine)) / (2 * step)
+        g[i] = (f(dp) - f(dm)) / (2 * step)
     seen = [i for i, p in enumerate(ps) if (p.part, p.field) in idx]
     new = [i for i, p in enumerate(ps) if (p.part, p.field) not in idx]
     var = MODEL_SD_RPM[figure] ** 2
@@ -297,3 +394,12 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
     for i in new:
         var += (g[i] * ps[i].prior_sd) ** 2
     return float(y0), math.sqrt(var)
+
+
+def calibrated_theta(cal: Calibration):
+    """The calibrated (f, dr, T_fr) when steady points were given, else None (the nominal model)."""
+    idx = cal.index()
+    bp = belt_params()
+    if (bp[0].part, bp[0].field) not in idx:
+        return None
+    return theta_of([cal.d[idx[(p.part, p.field)]] for p in bp])
