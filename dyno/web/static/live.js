@@ -5,6 +5,7 @@ const Q = token ? "?token=" + encodeURIComponent(token) : "";
 const $ = id => document.getElementById(id);
 const hist = { t: [], rp: [], rs: [], tq: [] };  // the time plot's last 60 s (wall clock of the rig's host)
 const SPAN_S = 60;
+const TEST_STATES = ["warmup", "step", "settle", "measure"];
 window.dynoLog = [];  // (for tests and curious people) what arrived when
 let last = null, shownPoints = -1, es = null, ended = false;
 
@@ -19,8 +20,9 @@ function render(f) {
   last = f;
   $("state").textContent = (f.state || "—").toUpperCase() + (f.paused ? " (paused)" : "");
   $("reason").textContent = f.reason || "";
-  $("progress").textContent = "point " + f.points_done + (f.points_total_est ? "/~" + f.points_total_est : "");
-  $("eta").textContent = f.eta_s !== null && f.eta_s !== undefined ? "ETA " + dur(f.eta_s) : "";
+  const testing = TEST_STATES.includes(f.state);  // an estimate means something only while the test runs
+  $("progress").textContent = "point " + f.points_done + (testing && f.points_total_est ? "/~" + f.points_total_est : "");
+  $("eta").textContent = testing && f.eta_s !== null && f.eta_s !== undefined ? "ETA " + dur(f.eta_s) : "";
   $("rundir").textContent = f.run_dir ? "run: " + f.run_dir : "";
   $("rpm-primary").textContent = fmt(f.rpm_primary, 0);
   $("rpm-secondary").textContent = fmt(f.rpm_secondary, 0);
@@ -79,9 +81,12 @@ function plots() {
   }
   const pts = (last && last.points || []).filter(p => p.efficiency !== null && p.ratio !== null);
   const pct = v => v === null || v === undefined ? null : v * 100;
+  // the axis fits the points and their CI; a U95 bar wider than that is cut at the frame
+  const lo = Math.min(...pts.map(p => pct(p.efficiency - (p.efficiency_ci95 || 0)))), hi = Math.max(...pts.map(p => pct(p.efficiency + (p.efficiency_ci95 || 0))));
+  const yRange = pts.length ? [Math.max(0, lo - 5), Math.min(110, hi + 5)] : [0, 100];
   DynoPlot.draw($("plot-eff"), [{ kind: "points", x: pts.map(p => p.ratio), y: pts.map(p => pct(p.efficiency)),
     err95: pts.map(p => pct(p.efficiency_ci95)), u95: pts.map(p => pct(p.efficiency_u95)), color: "#81c784",
-    label: "points: eff % (thick: CI95, thin: U95)" }]);
+    label: "points: eff % (thick: CI95, thin: U95)" }], { yRange });
 }
 
 function link(text, down) { const l = $("link"); l.textContent = text; l.className = "link" + (down ? " down" : ""); }

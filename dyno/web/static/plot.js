@@ -41,7 +41,8 @@ const DynoPlot = (() => {
     g.textAlign = "center";
     for (const v of niceTicks(xs[0], xs[1], 5)) { const x = X(v); g.fillText(o.xFmt ? o.xFmt(v) : String(v), x, T + H + 15); }
     g.strokeRect(L, T, W, H);
-    let lx = L + 4;
+    g.save(); g.beginPath(); g.rect(L, T, W, H); g.clip();  // nothing drawn outside the frame
+    const labels = [];
     for (const s of series) {
       g.strokeStyle = g.fillStyle = s.color; g.lineWidth = 1.6;
       if (s.kind === "points") {
@@ -62,8 +63,12 @@ const DynoPlot = (() => {
         });
         g.stroke();
       }
-      if (s.label) { g.textAlign = "left"; g.fillText(s.label, lx, 12); lx += g.measureText(s.label).width + 14; }
+      if (s.label) labels.push(s);
     }
+    g.restore();
+    let lx = L + 4;
+    g.textAlign = "left";
+    for (const s of labels) { g.fillStyle = s.color; g.fillText(s.label, lx, 12); lx += g.measureText(s.label).width + 14; }
   }
   return { draw };
 })();
