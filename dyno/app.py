@@ -16,6 +16,7 @@ from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-e
 from dyno.acquisition.reader import make_reader
 from dyno.ambient import ambient_sensor, run_ambient
 from dyno.ambient import log_end as log_end_ambient
+from dyno.run_signals import install_run_signal_handlers
 from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -397,12 +398,21 @@ def _asdict(obj):
 
 async def run_test_async(opts: RunOptions) -> dict:
     loop = asyncio.get_running_loop()
-    ctx = build(opts, loop.time)
+    built: dict = {}
+    # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
+    # then ends the run like one that came a moment later (not a directory holding a `start` alone).
+    restore_signals, signals_armed = (install_run_signal_handlers(lambda: built.get("ctx"), loop)
+                                      if opts.handle_signals else (lambda: None, lambda: None))
+    try:
+        ctx = built["ctx"] = build(opts, loop.time)
+    except BaseException:
+        restore_signals()
+        raise
     if opts.setup:
         opts.setup(ctx)
     stop_watchdog = start_watchdog(ctx, loop)
     arm_drills(ctx, opts.drills, loop)
-    restore_signals = _install_signal_handlers(ctx, loop) if opts.handle_signals else (lambda: None)
+    signals_armed()
     poll_task = asyncio.create_task(ctx.poller.run(), name="poller")
     status = "fail"
     try:
@@ -464,45 +474,6 @@ def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.
             poller.listeners.remove(first)
 
     poller.listeners.append(first)
-
-
-def _install_signal_handlers(ctx: RunContext, loop):
-    """SIGINT/SIGTERM/SIGHUP: safe state first, then an abort record; the run ends as aborted.
-
-    ``signal.signal`` (not the loop's handler) so that a real rig's outputs are safed
-    even while the loop is busy; the bookkeeping then runs on the loop.  On the
-    simulated rig the physics must not be re-entered from a handler, so the whole
-    abort runs on the loop at once (same simulated instant).
-    """
-    import signal
-
-    sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    old = {}
-
-    def on_loop(signum: int) -> None:
-        name = signal.Signals(signum).name
-        ctx.controller.abort("signal", f"{name} received: safe state, run closed")
-
-    def handler(signum, frame) -> None:
-        if ctx.signal_received is None:
-            ctx.signal_received = signum
-        if ctx.sim is None:
-            from dyno.control.outputs import enter_safe_state
-
-            enter_safe_state(ctx.controller.act, latch=True)  # at once, latched, whatever the loop is doing
-        loop.call_soon_threadsafe(on_loop, signum)
-
-    for sig in sigs:
-        try:
-            old[sig] = signal.signal(sig, handler)
-        except (ValueError, OSError):  # not the main thread
-            pass
-
-    def restore() -> None:
-        for sig, h in old.items():
-            signal.signal(sig, h)
-
-    return restore
 
 
 def run_test(opts: RunOptions) -> dict:
