@@ -13,11 +13,12 @@ import hmac
 import secrets
 import sys
 import threading
+from pathlib import Path
 
 from aiohttp import web
 
 TOKEN_COOKIE = "dyno_token"
-STATIC = __import__("pathlib").Path(__file__).resolve().parent / "static"
+STATIC = Path(__file__).resolve().parent / "static"
 
 
 def parse_bind(text: str | None, default_port: int = 0) -> tuple[str, int]:

@@ -121,3 +121,10 @@ def test_serve_bad_requests_get_a_status(served, query, code):
     sep = "&" if "?" in query else "?"
     got, body = _raw(served, f"{query}{sep}token={served.token}")
     assert got == code and "Traceback" not in body, body[:300]
+
+
+def test_serve_bad_runs_dir_is_one_line_exit_2(tmp_path):
+    p = DynoProcess(["serve", tmp_path / "no-such-dir"], cwd=tmp_path)
+    assert p.wait(60) == 2
+    err = "".join(p.stderr_lines)
+    assert len(err.strip().splitlines()) == 1 and "no-such-dir" in err and "Traceback" not in err
