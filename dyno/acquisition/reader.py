@@ -16,7 +16,9 @@ from dyno.transports.base import Transport, TransportFault
 
 Event = v1.Event
 WRAP = 1 << 32
-CAPS_TRIES = 4  # data frames in answer to CAPS before the host takes the firmware for one without it
+# data frames in answer to CAPS before the host takes the firmware for one without it: a corrupted CAPS
+# gives one, and the firmware answers none while its boot probes for the converter (20 ms: 3 polls)
+CAPS_TRIES = 8
 
 
 class Unwrapper:

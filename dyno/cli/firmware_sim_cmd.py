@@ -26,6 +26,7 @@ from dyno.acquisition.reader import make_reader
 from dyno.errors import ConfigError
 from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
+from dyno.protocol.v2 import CH_INPUT
 from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 
@@ -58,6 +59,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--adc-error-every", type=number_in(0, 1_000_000, integer=True), default=0,
                         help="set the AD7171 error bit on every Nth conversion (0: never)")
     parser.add_argument("--adc-hz", type=number_in(1.0, 1000.0), default=125.0)
+    parser.add_argument("--input-hz", type=number_in(0.0, 1000.0), default=0.0,
+                        help="fit the engine-side input torque AD7171 (D8/D9) at this rate; the host enables "
+                             "it (protocol v2 CAPS / SET_CHANNELS) and the report adds its events (0: not fitted)")
     parser.add_argument("--seconds", type=number_in(0.0, 3600.0, lo_open=True), default=5.0,
                         help="simulated seconds of signal")
     parser.add_argument("--bounce", action="store_true",
@@ -107,7 +111,7 @@ def simulate(args) -> dict:
     kw = dict(harness=args.harness, primary_rpm=args.primary_rpm,
               secondary_rpm=args.secondary_rpm, adc_code=args.adc_code,
               adc_status=args.adc_status, adc_error_every=args.adc_error_every,
-              adc_hz=args.adc_hz, bounce=args.bounce, i2c_khz=args.i2c_khz,
+              adc_hz=args.adc_hz, bounce=args.bounce, input_hz=getattr(args, "input_hz", 0.0), i2c_khz=args.i2c_khz,
               glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
               fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
     # The host's own transports: I2C (one combined transaction per poll) or USB serial
@@ -115,7 +119,10 @@ def simulate(args) -> dict:
     tr = SimavrSerialTransport(args.elf, **kw) if args.transport == "serial" else SimavrTransport(args.elf, **kw)
     try:
         reader = make_reader(args.protocol, tr)
-        times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: []}
+        if getattr(args, "input_hz", 0.0) > 0 and args.protocol == "v2":
+            reader.want_input = True  # as a rig.toml with [input_torque] does
+        times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: [], CH_INPUT: []}
+        input_codes: list = []
         gaps = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}  # per edge: its period spans lost events
         pending = {v1.CH_PRIMARY: True, v1.CH_SECONDARY: True}
         codes, statuses, slot_rpm = [], [], {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}
@@ -161,6 +168,8 @@ def simulate(args) -> dict:
                     if ev.channel == v1.CH_ADC:
                         codes.append(ev.code)
                         statuses.append(ev.status)
+                    elif ev.channel == CH_INPUT:
+                        input_codes.append(ev.code)
                     elif args.protocol == "v0":
                         slot_rpm[ev.channel].append(ev.code)
                 if not reader.more:
@@ -173,7 +182,34 @@ def simulate(args) -> dict:
     out = _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
                   time.perf_counter() - wall0)
     out["first_frame_s"] = first_frame_s
+    if getattr(args, "input_hz", 0.0) > 0:
+        out["input"] = _input_report(reader, times, input_codes, hs)
     return out
+
+
+def _input_report(reader, times, codes, hs) -> dict:
+    """The input torque converter: enabled, lossless (every conversion the device read after the
+    enable, each its own code), and its timestamps against the harness's RDY edges."""
+    h = hs.get("input") or {}
+    t = times[CH_INPUT]
+    period = h.get("period_us") or 0.0
+    err = None
+    if t and period:
+        # on the harness's clock as the brake-side ADC's times are (the primary Hall edges' offset)
+        hall, tp = hs["hall"][0], times[v1.CH_PRIMARY]
+        if len(tp) >= 2 and hall.get("rpm"):
+            pp = 60e6 / hall["rpm"]
+            d = np.asarray(tp, dtype=float)
+            offset = float(np.median(d - hall["first_us"] - np.round((d - d[0]) / pp) * pp))
+            x = np.asarray(t, dtype=float) - offset - h["rdy_t0_us"]
+            e = x - np.round(x / period) * period
+            err = {"max_abs_us": float(np.max(np.abs(e))), "mean_us": float(np.mean(e))}
+    c = np.asarray(codes, dtype=np.int64)
+    steps = np.diff(c) % 4096 if c.size > 1 else np.zeros(0, dtype=np.int64)
+    return {"present": reader.input_present, "received": len(t), "generated": h.get("generated"),
+            "read_by_device": h.get("read"), "missed_by_device": h.get("missed"),
+            "distinct_codes_consecutive": bool(steps.size == 0 or np.all(steps == 1)),
+            "first_code": int(c[0]) if c.size else None, "time_error_us": err}
 
 
 def _channel(ts) -> dict:

@@ -186,7 +186,7 @@ def render_v2_input() -> str:
         t0 = events[0].t_us if events else now
         lines.append(f"frame {name} seq={seq} flags={flags} boot={boot} dropped={dropped} t0={t0} "
                      f"events={','.join(_ev(e) for e in events)} hex={raw.hex()}")
-    for name, caps in (("fitted_off", v2.CapsFrame(0, v2.FLAG_RESET | por, 5, v2.CHANNEL_INPUT, 0,
+    for name, caps in (("fitted_off", v2.CapsFrame(0, por, 5, v2.CHANNEL_INPUT, 0,
                                                     v2.CONVERTER_AD7171, 125_000)),
                        ("fitted_on", v2.CapsFrame(3, por, 5, v2.CHANNEL_INPUT, v2.CHANNEL_INPUT,
                                                   v2.CONVERTER_AD7171, 125_000)),

@@ -78,6 +78,7 @@ class EmulatedFirmware:
         self.info_pending = False
         self.caps_pending = False
         self.channels_enabled = 0  # SET_CHANNELS mask; RAM, so every boot starts with the input off
+        self._caps_seq = 0  # the data seq when the capabilities frame was built
         self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self.lockout_rejected = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}  # since boot, as on the device
         self._period_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
@@ -184,6 +185,7 @@ class EmulatedFirmware:
         elif self.protocol == "v2" and cmd.op == v2.OP_SET_CHANNELS:
             fitted = v2.CHANNEL_INPUT if self.input_fitted else 0
             self.channels_enabled = cmd.args[0] & fitted  # a channel not fitted stays off
+            self._caps_seq = self.seq
 
     def read(self, n: int, now_s: float) -> bytes:
         """The master reads ``n`` bytes; returns what the device puts on the bus."""
@@ -195,7 +197,10 @@ class EmulatedFirmware:
         if self.caps_pending and self.protocol == "v2":
             self.caps_pending = False
             fitted = v2.CHANNEL_INPUT if self.input_fitted else 0
-            caps = v2.CapsFrame(self.seq, self._flags(), self.boot_id, fitted, self.channels_enabled,
+            # as the firmware builds it: at boot and after each SET_CHANNELS (its seq then), the flags
+            # the reset cause only (as the info frame's)
+            caps = v2.CapsFrame(self._caps_seq, self.reset_cause << v2.CAUSE_SHIFT, self.boot_id, fitted,
+                                self.channels_enabled,
                                 v2.CONVERTER_AD7171 if fitted else v2.CONVERTER_NONE,
                                 INPUT_RATE_MHZ if fitted else 0)
             return v2.encode_caps_frame(caps)[:n].ljust(n, b"\xff")

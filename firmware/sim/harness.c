@@ -89,6 +89,7 @@ static void print_stats(void)
             (unsigned long long)adc_generated, (unsigned long long)adc_read,
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
+    input_print(o);
     /* WDTCSR as the firmware left it (WDE 0x08: the watchdog resets the MCU) */
     fprintf(o, "\"wdtcsr\": %u, \"eeprom_writes\": %llu, ", avr->data[REG_WDTCSR],
             (unsigned long long)eeprom_writes);
@@ -107,6 +108,7 @@ static void start_generators(uint64_t at_cycle)
             hall_start(&hall[c], at_cycle);
     if (!adc_running)
         adc_start(at_cycle);
+    input_start(at_cycle);
 }
 
 static void usage(void)
@@ -115,7 +117,7 @@ static void usage(void)
             "usage: harness FIRMWARE.elf [--primary-rpm R] [--secondary-rpm R] [--adc-code C]\n"
             "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
             "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--duty F]\n"
-            "       [--glitch-hz N] [--glitch-us W] [--profile]\n"
+            "       [--glitch-hz N] [--glitch-us W] [--profile] [--input-hz F] [--input-code C]\n"
             "       [--profile-from-us T]\n");
     exit(2);
 }
@@ -133,6 +135,8 @@ int main(int argc, char **argv)
         else if (OPT("--adc-status")) cfg_adc_status = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--adc-error-every")) cfg_adc_err_every = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--adc-hz")) cfg_adc_hz = atof(v);
+        else if (OPT("--input-hz")) cfg_input_hz = atof(v);
+        else if (OPT("--input-code")) cfg_input_code = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--i2c-khz")) cfg_i2c_khz = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--addr")) cfg_addr = (unsigned)strtoul(v, NULL, 0);
         else if (OPT("--start-us")) cfg_start_us = atof(v);
@@ -168,6 +172,7 @@ int main(int argc, char **argv)
     drive_pin(pin_dout, 5, 1);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 4),
                             adc_sclk_notify, NULL);
+    input_init();
     uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                             uart_out_notify, NULL);
@@ -265,6 +270,7 @@ int main(int argc, char **argv)
             adc_bit = 24;
             adc_ready = 0;
             drive_pin(pin_dout, 5, 1);
+            input_reset();
             if (gen_enabled)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");

@@ -78,4 +78,12 @@ avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param);
 avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param);
 void adc_sclk_notify(avr_irq_t *irq, uint32_t value, void *param);
 
+/* sensors_input.c: the input torque AD7171 on port B (issue 27), absent unless --input-hz > 0 */
+extern double cfg_input_hz;
+extern unsigned cfg_input_code, cfg_input_status;
+void input_init(void);
+void input_start(uint64_t at_cycle);
+void input_reset(void);
+void input_print(FILE *o);
+
 #endif

@@ -142,6 +142,22 @@ static volatile uint16_t adc_rdy_tcnt;
 static volatile uint8_t adc_rdy_tov;
 static volatile uint32_t adc_rdy_us;
 
+/* The input torque converter's RDY state (its ISR and functions are further down). */
+#define RDY2_RAW_BIT 1
+static volatile uint8_t in_rdy_seen;
+static volatile uint16_t in_rdy_tcnt;
+static volatile uint8_t in_rdy_tov;
+static volatile uint32_t in_rdy_us;
+
+static inline __attribute__((always_inline)) void rdy2_snapshot(uint16_t tcnt, uint8_t tov)
+{
+    if ((PCIFR & _BV(PCIF0)) && !(GPIOR0 & _BV(RDY2_RAW_BIT))) {
+        in_rdy_tcnt = tcnt;
+        in_rdy_tov = tov;
+        GPIOR0 |= _BV(RDY2_RAW_BIT);
+    }
+}
+
 static inline __attribute__((always_inline)) void rdy_snapshot(uint16_t tcnt, uint8_t tov)
 {
     if ((PCIFR & _BV(PCIF2)) && !(GPIOR0 & _BV(RDY_RAW_BIT))) {
@@ -149,6 +165,7 @@ static inline __attribute__((always_inline)) void rdy_snapshot(uint16_t tcnt, ui
         adc_rdy_tov = tov;
         GPIOR0 |= _BV(RDY_RAW_BIT);
     }
+    rdy2_snapshot(tcnt, tov);
 }
 
 /* Timer1 first (counter, then its overflow flag: tstamp.h), then the pin. */
@@ -218,6 +235,67 @@ void capture_adc_rearm(void)
     GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
     adc_rdy_seen = 0;
     PCMSK2 = _BV(PIN_ADC_DOUT_BIT);  /* PCINT21 is PD5 */
+    SREG = sreg;
+}
+
+/* The input torque AD7171's RDY (DOUT2/RDY2 falling on PB0 = PCINT0): timed exactly as the
+ * first converter's (above), by whichever ISR runs first after the fall: PCINT0's own, or a Hall
+ * ISR that finds PCIF0 set and keeps Timer1's raw count (GPIOR0 bit 1). (Timer1's input capture
+ * on ICP1 = PB0 would latch it in hardware, but simavr 1.6 does not capture on ICP1, so the FIL
+ * run could not test it; the pin is the ICP1 pin, the option stays open.) */
+
+ISR(PCINT0_vect)
+{
+    uint16_t tcnt = TCNT1;
+    uint8_t tov = TIFR1 & _BV(TOV1);
+    if (GPIOR0 & _BV(RDY2_RAW_BIT)) {  /* a Hall ISR ran first and kept the count */
+        tcnt = in_rdy_tcnt;
+        tov = in_rdy_tov;
+        GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    }
+    if (PINB & _BV(PIN_IN_DOUT_BIT))
+        return;  /* not RDY */
+    in_rdy_us = tstamp_extend(t1_base_us, tcnt, tov & _BV(TOV1));
+    in_rdy_seen = 1;
+    PCMSK0 = 0;
+}
+
+void capture_input_arm(void)
+{
+    uint8_t sreg = SREG;
+    cli();
+    PCIFR = _BV(PCIF0);  /* forget the data bits' changes */
+    GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    in_rdy_seen = 0;
+    PCMSK0 = _BV(PIN_IN_DOUT_BIT);  /* PCINT0 is PB0 */
+    PCICR |= _BV(PCIE0);
+    SREG = sreg;
+}
+
+uint32_t capture_input_rdy_us(void)
+{
+    uint8_t sreg = SREG;
+    cli();
+    uint32_t t;
+    if (in_rdy_seen)
+        t = in_rdy_us;
+    else if (GPIOR0 & _BV(RDY2_RAW_BIT))
+        t = tstamp_extend(t1_base_us, in_rdy_tcnt, in_rdy_tov & _BV(TOV1));
+    else
+        t = now_us_locked();
+    PCMSK0 = 0;
+    PCIFR = _BV(PCIF0);
+    GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    in_rdy_seen = 0;
+    SREG = sreg;
+    return t;
+}
+
+void capture_push_input(uint32_t t_us, uint16_t code, uint8_t status)
+{
+    uint8_t sreg = SREG;
+    cli();
+    ring_push(&g_ring, TAG_INPUT, t_us, code, status);
     SREG = sreg;
 }
 

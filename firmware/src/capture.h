@@ -17,6 +17,12 @@ uint32_t capture_adc_rdy_us(void);
 void capture_adc_rearm(void);
 /* Enqueue an ADC conversion from the main loop (interrupts briefly off). */
 void capture_push_adc(uint32_t t_us, uint16_t code, uint8_t status);
+/* The input torque converter (issue 27): RDY2's falling edge on PB0 (PCINT0), timed as the first
+ * converter's. capture_input_arm() after the boot probe found it and after every read (the data bits
+ * toggle the same pin); capture_input_rdy_us() the time of the RDY being read (DOUT2 is low). */
+void capture_input_arm(void);
+uint32_t capture_input_rdy_us(void);
+void capture_push_input(uint32_t t_us, uint16_t code, uint8_t status);
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us);
 
 /* Rejected edges are counted per cause in g_counters (counters.h). */

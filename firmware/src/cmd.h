@@ -8,6 +8,8 @@
 #define OP_SET_DEBOUNCE 0x20u
 #define OP_CLEAR_COUNTERS 0x21u
 #define OP_INFO 0x30u
+#define OP_SET_CHANNELS 0x22u  /* u8 mask of optional channels to queue (bit 0: input torque) */
+#define OP_CAPS 0x31u          /* the next read returns the capabilities frame */
 
 #define CMD_MAX_LEN 7u  /* SET_DEBOUNCE: op + 4 + crc */
 
@@ -17,7 +19,8 @@ enum { CMD_OK = 0, CMD_ERR_SHORT = 1, CMD_ERR_OP = 2, CMD_ERR_LENGTH = 3, CMD_ER
 static inline uint8_t cmd_length(uint8_t op)
 {
     switch (op) {
-    case OP_POLL: case OP_CLEAR_COUNTERS: case OP_INFO: return 3;
+    case OP_POLL: case OP_CLEAR_COUNTERS: case OP_INFO: case OP_CAPS: return 3;
+    case OP_SET_CHANNELS: return 4;
     case OP_ACK_POLL: return 6;  /* v2: op, u16 boot_id, u8 seq, crc */
     case OP_SET_DEBOUNCE: return 7;
     default: return 0;

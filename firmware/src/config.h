@@ -7,6 +7,9 @@
 #define FW_VERSION_MAJOR 2
 #define FW_VERSION_MINOR 0
 #define FW_VERSION_PATCH 0
+/* The input torque AD7171's nominal rate as announced (mHz): 125 S/s, as the brake-side one. */
+#define INPUT_RATE_MHZ 125000ul
+#define INPUT_PROBE_US 20000ul  /* boot: a fitted converter's RDY falls within 2.5 conversion periods */
 
 /* docs/protocol.md: the Pi addresses the Nano at 0x03 (the thesis rig's address). */
 #define I2C_ADDRESS 0x03

@@ -7,6 +7,7 @@
 #define TAG_PRIMARY 1u
 #define TAG_SECONDARY 2u
 #define TAG_ADC 3u
+#define TAG_INPUT 4u    /* the engine-side input torque AD7171 (issue 27): tag 3's layout */
 #define TAG_GAP 0x80u   /* or-ed into the tag: events were lost just before this one */
 
 /* 8 bytes exactly, so the ring index math is a shift. */

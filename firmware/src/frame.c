@@ -73,7 +73,7 @@ uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boo
             break;
         *p++ = tag;
         p = put_u16(p, (uint16_t)(e->t_us - t0));  /* two's complement i16 */
-        if ((uint8_t)(tag & (uint8_t)~TAG_GAP) == TAG_ADC) {
+        if ((uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC) {  /* TAG_ADC, TAG_INPUT */
             p = put_u16(p, e->code);
             *p++ = e->status;
         }
@@ -105,4 +105,23 @@ uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info)
     *p++ = info->twi_timeouts;
     *p++ = info->bus_errors;
     return finish(out, p);  /* 28 bytes + CRC-32C: exactly the 32-byte buffer */
+}
+
+uint8_t frame_encode_caps(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boot_id, uint8_t channels,
+                          uint8_t enabled, uint8_t converter, uint32_t rate_mhz)
+{
+    uint8_t *p = out;
+    *p++ = FRAME_VERSION;
+    *p++ = FRAME_CAPS_LEN;
+    *p++ = KIND_CAPS;
+    *p++ = seq;
+    *p++ = flags;
+    p = put_u16(p, boot_id);
+    *p++ = channels;
+    *p++ = enabled;
+    *p++ = converter;
+    p = put_u32(p, rate_mhz);
+    *p++ = 0;  /* reserved */
+    *p++ = 0;
+    return finish(out, p);
 }

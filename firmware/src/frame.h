@@ -15,6 +15,10 @@
 
 #define KIND_DATA 0x44u  /* 'D' */
 #define KIND_INFO 0x49u  /* 'I' */
+#define KIND_CAPS 0x43u  /* 'C': capabilities (the optional channels fitted and enabled) */
+#define FRAME_CAPS_LEN 20u
+#define CHANNEL_INPUT 0x01u      /* SET_CHANNELS / capabilities bit: the input torque converter */
+#define CONVERTER_AD7171 1u
 
 #define FLAG_RESET 0x01u     /* first frame since boot */
 #define FLAG_MORE 0x02u      /* events still queued behind this frame */
@@ -33,7 +37,7 @@ typedef struct {
 
 static inline uint8_t frame_event_len(uint8_t tag)
 {
-    return (uint8_t)(tag & (uint8_t)~TAG_GAP) == TAG_ADC ? 6u : 3u;
+    return (uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC ? 6u : 3u;  /* TAG_ADC, TAG_INPUT */
 }
 
 /* How many of the n events (ev[i] from get(ctx, i)) fit one frame, by size and by the
@@ -51,6 +55,9 @@ uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boo
                           const void *ctx, uint8_t n, uint8_t *n_done);
 
 uint8_t frame_encode_info(uint8_t *out, const frame_info_t *info);
+/* The capabilities frame (docs/protocol.md "Input torque channel"), padded to 32 bytes. */
+uint8_t frame_encode_caps(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boot_id, uint8_t channels,
+                          uint8_t enabled, uint8_t converter, uint32_t rate_mhz);
 
 /* An event array as a frame_event_get_t context (tests, simple callers). */
 const dyno_event_t *frame_array_get(const void *ctx, uint8_t i);

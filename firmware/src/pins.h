@@ -9,6 +9,10 @@
 /* AD7171: D4 = PD4 SCLK (output, idles high), D5 = PD5 DOUT/RDY (input). */
 #define PIN_ADC_SCLK_BIT 4
 #define PIN_ADC_DOUT_BIT 5
+/* The input torque AD7171 (issue 27): D8 = PB0 DOUT2/RDY2 (PCINT0; also ICP1), D9 = PB1 SCLK2.
+ * Its own SCLK: the AD7171 has no chip select, two cannot share a clock line. */
+#define PIN_IN_DOUT_BIT 0
+#define PIN_IN_SCLK_BIT 1
 /* I2C: A4 = SDA, A5 = SCL (TWI hardware). USB serial: D0/D1 via the CH340/FT232. */
 
 #endif

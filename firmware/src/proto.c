@@ -103,6 +103,25 @@ void proto_init(proto_t *p, ring_t *ring, const dyno_counters_t *counters, uint1
     p->cur_n = build(p, 0, 0, 0, 1, now_us);
     p->info = 1;
     build_info(p, 1, 0);
+    proto_set_fitted(p, 0);
+    p->caps_ready = 0;  /* until the boot's probe calls proto_set_fitted */
+}
+
+static void build_caps(proto_t *p, uint8_t which)
+{
+    uint8_t fitted = p->channels_fitted;
+    frame_encode_caps(p->caps_buf[which], p->cur_seq, p->cause_flags, p->boot_id, fitted, p->channels_enabled,
+                      (fitted & CHANNEL_INPUT) ? CONVERTER_AD7171 : 0u,
+                      (fitted & CHANNEL_INPUT) ? INPUT_RATE_MHZ : 0ul);
+}
+
+void proto_set_fitted(proto_t *p, uint8_t channels)
+{
+    p->channels_fitted = channels;
+    p->channels_enabled = 0;
+    p->caps_cur = 0;
+    build_caps(p, 0);
+    p->caps_ready = 1;
 }
 
 uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondary_us)
@@ -170,7 +189,17 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
         PORT_CRITICAL_END();
     }
 
-    /* 3. Info frame (uptime), never built in the ISR. */
+    /* 3. The capabilities frame after a SET_CHANNELS, into the buffer the ISR is not serving. */
+    if (p->caps_dirty) {
+        uint8_t other = (uint8_t)(p->caps_cur ^ 1u);
+        p->caps_dirty = 0;
+        build_caps(p, other);
+        PORT_CRITICAL_BEGIN();
+        p->caps_cur = other;
+        PORT_CRITICAL_END();
+    }
+
+    /* 4. Info frame (uptime), never built in the ISR. */
     if (p->info_dirty || (uint32_t)(uptime_ms - p->info_built_ms) >= INFO_REFRESH_MS) {
         PORT_CRITICAL_BEGIN();
         buf = free_buffer(p);

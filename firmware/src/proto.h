@@ -53,6 +53,16 @@ typedef struct {
     uint32_t info_built_ms;
     /* diagnostics, not on the wire: commands ignored (bad CRC/length/op) */
     uint8_t cmds_bad;
+    /* the optional input torque channel (issue 27): fitted at boot, enabled by the host's
+     * SET_CHANNELS in this boot; the capabilities frame double-buffered (the ISR serves one while
+     * the loop may build the other), rebuilt by the loop when SET_CHANNELS changed it */
+    uint8_t channels_fitted;
+    volatile uint8_t channels_enabled;
+    volatile uint8_t serve_caps;
+    volatile uint8_t caps_ready;   /* the boot's probe is done: the capabilities are known */
+    volatile uint8_t caps_dirty;
+    volatile uint8_t caps_cur;
+    uint8_t caps_buf[2][FRAME_MAX];
 } proto_t;
 
 extern proto_t g_proto;
@@ -63,6 +73,11 @@ void proto_init(proto_t *p, ring_t *ring, const dyno_counters_t *counters, uint1
 /* Main loop: 1 and the new Hall lock-out windows if a SET_DEBOUNCE arrived since the
  * last call (the caller applies them: proto does not know the capture module). */
 uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondary_us);
+/* Boot: the optional channels found (CHANNEL_INPUT: the second converter answered); from then on
+ * CAPS is answered. */
+void proto_set_fitted(proto_t *p, uint8_t channels);
+/* Main loop: queue the input converter's conversions? (fitted and enabled in this boot) */
+static inline uint8_t proto_input_enabled(const proto_t *p) { return p->channels_enabled & CHANNEL_INPUT; }
 
 /* The ISR-side functions below are inline and call nothing: in an AVR ISR any call
  * makes gcc save every call-clobbered register, on every TWI interrupt. */
@@ -113,6 +128,15 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
     case OP_INFO:
         p->serve_info = 1;
         break;
+    case OP_CAPS:
+        /* not while the boot still probes for the converter: served the data frame instead, as an
+         * unknown op would be; the host asks again at its next poll */
+        p->serve_caps = p->caps_ready;
+        break;
+    case OP_SET_CHANNELS:
+        p->channels_enabled = (uint8_t)(buf[1] & p->channels_fitted);  /* a channel not fitted stays off */
+        p->caps_dirty = 1;
+        break;
     default:  /* OP_POLL: serve the current frame, retire nothing */
         break;
     }
@@ -124,6 +148,10 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
 static inline __attribute__((always_inline)) const uint8_t *proto_begin_read(proto_t *p)
 {
     uint8_t b;
+    if (p->serve_caps) {  /* not a pool buffer: tx keeps its role holder */
+        p->serve_caps = 0;
+        return p->caps_buf[p->caps_cur];
+    }
     if (p->serve_info) {
         p->serve_info = 0;
         b = p->info;

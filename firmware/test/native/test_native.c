@@ -165,6 +165,47 @@ static void test_vectors(const char *path)
            n_cmd, n_badcmd);
 }
 
+/* The input-channel extension's vectors (dyno/protocol/vectors/v2-input.hex, issue 27): tag 4
+ * events, the capabilities frame, CAPS and SET_CHANNELS. */
+static void test_input_vectors(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL, "cannot open %s", path);
+    if (!f)
+        return;
+    char line[1024];
+    int n_frame = 0, n_caps = 0, n_cmd = 0;
+    while (fgets(line, sizeof line, f)) {
+        uint8_t want[64], got[64], data[64];
+        if (strncmp(line, "frame ", 6) == 0) {
+            dyno_event_t ev[8];
+            uint8_t n = parse_events(field(line, "events="), ev);
+            size_t wn = unhex(field(line, "hex="), want, sizeof want);
+            CHECK(frame_fit(frame_array_get, ev, n) == n, "all events fit: %s", line);
+            uint8_t len = frame_encode_data(got, (uint8_t)atoi(field(line, "seq=")), (uint8_t)atoi(field(line, "flags=")),
+                                            (uint16_t)atoi(field(line, "boot=")), (uint16_t)atoi(field(line, "dropped=")),
+                                            (uint32_t)strtoul(field(line, "t0="), NULL, 10), frame_array_get, ev, n, NULL);
+            CHECK(len == want[1] && memcmp(got, want, wn) == 0, "input frame bytes: %s", line);
+            n_frame++;
+        } else if (strncmp(line, "caps ", 5) == 0) {
+            size_t wn = unhex(field(line, "hex="), want, sizeof want);
+            uint8_t len = frame_encode_caps(got, (uint8_t)atoi(field(line, "seq=")), (uint8_t)atoi(field(line, "flags=")),
+                                            (uint16_t)atoi(field(line, "boot=")), (uint8_t)atoi(field(line, "channels=")),
+                                            (uint8_t)atoi(field(line, "enabled=")), (uint8_t)atoi(field(line, "converter=")),
+                                            (uint32_t)strtoul(field(line, "rate_mhz="), NULL, 10));
+            CHECK(len == FRAME_CAPS_LEN && memcmp(got, want, wn) == 0, "caps bytes: %s", line);
+            n_caps++;
+        } else if (strncmp(line, "cmd ", 4) == 0) {
+            size_t n = unhex(field(line, "hex="), data, sizeof data);
+            CHECK(cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n)) == CMD_OK, "cmd ok: %s", line);
+            n_cmd++;
+        }
+    }
+    fclose(f);
+    CHECK(n_frame >= 4 && n_caps >= 3 && n_cmd >= 3, "input vector counts %d %d %d", n_frame, n_caps, n_cmd);
+    printf("input vectors: %d frames, %d caps, %d cmd\n", n_frame, n_caps, n_cmd);
+}
+
 static void test_crc(void)
 {
     const uint8_t s[] = "123456789";
@@ -355,6 +396,8 @@ int main(int argc, char **argv)
     test_proto_lossless();
     if (argc > 1)
         test_vectors(argv[1]);
+    if (argc > 2)
+        test_input_vectors(argv[2]);
     else
         CHECK(0, "usage: test_native path/to/v1.hex");
     printf("%d checks, %d failures\n", checks, failures);
