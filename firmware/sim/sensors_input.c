@@ -5,7 +5,6 @@
 #include <stdint.h>
 #include <stdio.h>
 #include "avr_ioport.h"
-#include "avr_timer.h"
 #include "sim_avr.h"
 #include "sim_cycle_timers.h"
 #include "sim_irq.h"
@@ -90,8 +89,6 @@ void input_init(void)
     pin_in_dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 0);
     drive_b0(1);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 1), in_sclk_notify, NULL);
-    /* ICP1: simavr's Timer1 latches ICR1 on this IRQ's edges (the pin is PB0) */
-    avr_connect_irq(pin_in_dout, avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ('1'), TIMER_IRQ_IN_ICP));
     /* The converter shares the Nano's supply: it converts from power-up (1 ms to settle), not from
      * when the Hall signals start, so the firmware's boot probe finds it. */
     input_start(CYCLES_PER_US * 1000u);
@@ -123,10 +120,8 @@ void input_reset(void)
 void input_print(FILE *o)
 {
     fprintf(o, "\"input\": {\"fitted\": %s, \"rdy_t0_us\": %.4f, \"period_us\": %.4f, \"generated\": %llu, "
-            "\"read\": %llu, \"missed\": %llu, \"overrun\": %llu, \"code\": %u, \"tifr1\": %u, \"timsk1\": %u, "
-            "\"icr1\": %u, \"pinb\": %u}, ",
+            "\"read\": %llu, \"missed\": %llu, \"overrun\": %llu, \"code\": %u}, ",
             cfg_input_hz > 0 ? "true" : "false", in_t0_cycles / CYCLES_PER_US, in_period_cycles / CYCLES_PER_US,
             (unsigned long long)in_generated, (unsigned long long)in_read, (unsigned long long)in_missed,
-            (unsigned long long)in_overrun, cfg_input_code, avr->data[0x36], avr->data[0x6F],
-            avr->data[0x86] | (avr->data[0x87] << 8), avr->data[0x23]);
+            (unsigned long long)in_overrun, cfg_input_code);
 }
