@@ -333,14 +333,17 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
             parts.append(steady(d) / steady_sd[0])
         return np.concatenate(parts + [d / prior])
 
-    sol = least_squares(resid, np.zeros(len(params)), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
+    # a part's deviation cannot leave its stated tolerance (the uniform prior's support)
+    bound = np.array([p.prior_sd * math.sqrt(3.0) if p.kind != "belt" else np.inf for p in params])
+    x0 = np.zeros(len(params))
+    sol = least_squares(resid, x0, bounds=(-bound, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     if n_steady:
         # the steady points' scatter about the closed form is model error, not noise: weigh them by the
         # scatter they show (at least the floor), once, so they cannot outvote the engagement figures
         rms = float(np.sqrt(np.mean(steady(sol.x) ** 2)))
         if rms > steady_sd[0]:
             steady_sd[0] = rms
-            sol = least_squares(resid, sol.x, diff_step=1e-4, xtol=1e-10, ftol=1e-10)
+            sol = least_squares(resid, sol.x, bounds=(-bound, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     j = sol.jac
     cov = np.linalg.inv(j.T @ j)
     # the engagement figures' chi^2 per figure scales the covariance up when their scatter exceeds their sigmas
