@@ -144,3 +144,29 @@ def test_steady_points_calibrate_the_full_load_figure(loop):
     for r in both.residuals:
         if r["figure"] != "steady":
             assert abs(r["residual_rpm"]) < 3 * sig[(r["figure"], round(r["load_nm"], 6))], r
+
+
+def test_advice_page_in_a_browser(loop):
+    """advice.html in headless Chromium: the ranked table, the curves' figure drawn, no script errors."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("playwright is not installed (pip install -e '.[webtest]'; .ci/run does)")
+    if not Path("/usr/bin/chromium").exists():
+        pytest.skip("/usr/bin/chromium is missing (apt-get install chromium; .ci/run does)")
+    errors = []
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"], headless=True)
+        try:
+            page = b.new_page()
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(Path(loop["advice"]["html"]).resolve().as_uri())
+            rows = page.locator("table").first.locator("tr")
+            assert rows.count() == len(loop["advice"]["tunes"]) + 1
+            box = page.locator("svg").first.bounding_box()
+            assert box is not None and box["width"] > 300 and box["height"] > 200
+            assert page.locator("svg path").count() > 10  # the curves and axes are drawn
+            assert "P(all targets met)" in page.content()
+        finally:
+            b.close()
+    assert not errors
