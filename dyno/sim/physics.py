@@ -67,7 +67,6 @@ parameters in :mod:`dyno.sim.rig_params`; both are re-exported here.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -83,6 +82,7 @@ from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _be
 from dyno.sim.rig_params import _load_tune, _resolve_map_path
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
+from dyno.sim.tune_deviation import parts_on_the_rig
 from dyno.sim.world import realise
 
 __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
@@ -116,14 +116,10 @@ class RigModel(RigSignals, InputTorqueSignals):
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
-        tune = labelled = _load_tune(p.cvt_tune_path)
-        if p.tune_deviation_rel and tune is not None:  # the parts on the rig are not their labels
-            from dyno.sim.tune_deviation import deviate_tune
-
-            world_seed = int(seed if p.world_seed is None else p.world_seed)
-            tune, parts = deviate_tune(tune, p.tune_deviation_rel, world_seed)
-            self.world = dataclasses.replace(self.world, tune_parts=parts)
-        self.tune_true = tune  # the sim's truth (tests); the host only ever has the labelled file
+        labelled = _load_tune(p.cvt_tune_path)
+        # the parts on the rig are not their labels (--sim-tune-deviation); the host only has the labels
+        self.tune_true, self.world = parts_on_the_rig(labelled, p, seed, self.world)
+        tune = self.tune_true
         self.cvt = CVT(ratio_low=p.cvt_ratio_low, ratio_high=p.cvt_ratio_high,
                        primary_radius_max_m=p.cvt_primary_radius_max_m,
                        sheave_half_angle_deg=p.cvt_sheave_half_angle_deg,
@@ -143,9 +139,7 @@ class RigModel(RigSignals, InputTorqueSignals):
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       # the belt's efficiency share at the labelled tune's clamp: a table per true tune
-                       # would cost ~90 s per part draw; clamp, engagement and shift use the true parts
-                       belt_table=_belt_table_for(p, labelled))
+                       belt_table=_belt_table_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
         self.engagement = None

@@ -13,10 +13,14 @@ in ``[-REL, REL]``:
 its labelled values), so the same part keeps its deviation on the same rig across runs and tunes,
 and a different part, or another rig, gets its own. Nothing here reads the host's files: the labels
 are what is physically fitted (the tune the sim is given), the deviation is the sim's secret.
+
+The belt-model efficiency table (``dyno.sim.belt_table``) stays the labelled tune's: a table per true
+tune would cost ~90 s per draw; the clamp, the engagement and the shift balance use the true parts.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import zlib
 
 import numpy as np
@@ -69,3 +73,13 @@ def deviate_tune(tune, rel: float, world_seed: int):
             entry[f] = {"label": label, "true": label * (1.0 + float(dv)), "deviation_rel": float(dv)}
         record.append(entry)
     return tune.with_changes(**changes), tuple(record)
+
+
+def parts_on_the_rig(tune, params, seed: int, world):
+    """``(true tune, world)`` for the rig ``params`` on ``seed``: the world records the parts' truth."""
+    rel = getattr(params, "tune_deviation_rel", 0.0)
+    if not rel or tune is None:
+        return tune, world
+    world_seed = int(seed if params.world_seed is None else params.world_seed)
+    true, parts = deviate_tune(tune, rel, world_seed)
+    return true, dataclasses.replace(world, tune_parts=parts)
