@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from tests.web.conftest import DynoProcess, http_status, needs_browser
+from tests.web.conftest import DroppingProxy, DynoProcess, http_status, needs_browser
 
 pytestmark = needs_browser
 
@@ -95,14 +95,24 @@ def test_run_web_page_live_values_points_and_drill_banner(browser, tmp_path):
         assert abs(float(row[2]) - pt["rpm_secondary_true"]) < 0.02 * pt["rpm_secondary_true"]
 
 
-def test_run_web_stop_button_aborts_through_the_estop_path(browser, tmp_path):
-    """--web-stop: the page's STOP is the E-STOP key's abort (cause estop); the physics ends safe."""
+def test_run_web_reconnects_after_a_network_drop_and_stop_aborts_through_the_estop_path(browser, tmp_path):
+    """The page, through a link that drops for 3 s, says so and comes back live by itself; then --web-stop:
+    the page's STOP is the E-STOP key's abort (cause estop); the physics ends safe."""
     p = DynoProcess(["run", "--sim", "--headless", "--json", "--out", tmp_path / "run", "--speed", SPEED,
                      "--web", "127.0.0.1:0", "--web-stop"], cwd=tmp_path)
+    proxy = None
     try:
+        p.wait_url()
+        proxy = DroppingProxy("127.0.0.1", int(p.base.rsplit(":", 1)[1]))
         page = browser.new_page()
-        page.goto(p.wait_url())
+        page.goto(f"http://127.0.0.1:{proxy.port}/?token={p.token}")
         page.wait_for_function("document.getElementById('rpm-primary').textContent !== '—'", timeout=30_000)
+        assert page.inner_text("#link") == "live"
+        proxy.drop(3.0)
+        page.wait_for_function("document.getElementById('link').textContent.includes('reconnecting')", timeout=5_000)
+        before = page.inner_text("#rpm-primary")
+        page.wait_for_function("document.getElementById('link').textContent === 'live'", timeout=20_000)
+        page.wait_for_function(f"document.getElementById('rpm-primary').textContent !== {before!r}", timeout=10_000)
         page.wait_for_selector("#stop", state="visible")
         page.on("dialog", lambda d: d.accept())
         page.click("#stop")
@@ -111,6 +121,8 @@ def test_run_web_stop_button_aborts_through_the_estop_path(browser, tmp_path):
         assert p.wait(120) == 3
     finally:
         p.stop()
+        if proxy is not None:
+            proxy.close()
     result = json.loads(p.stdout)
     assert result["aborts"][0]["cause"] == "estop" and "web page STOP" in result["aborts"][0]["detail"]
     assert result["rig_safe"] is True
