@@ -21,7 +21,7 @@ pytestmark = needs_browser
 
 @pytest.fixture(scope="module")
 def library(tmp_path_factory):
-    """Three simulated runs made as a user makes them: two complete (seeds 1, 2), one aborted by a drill."""
+    """Three simulated runs made as a user makes them: two complete sweeps (seeds 1, 2), one aborted by a drill."""
     import os
 
     root = tmp_path_factory.mktemp("library")
@@ -29,7 +29,8 @@ def library(tmp_path_factory):
     jobs = {name: subprocess.Popen([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--out",
                                     str(root / name), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                    text=True, env=env, cwd=root)
-            for name, extra in (("done-a", ["--seed", "1"]), ("done-b", ["--seed", "2"]),
+            for name, extra in (("done-a", ["--seed", "1", "--plan", "sweep"]),  # (the quickest complete plan)
+                                ("done-b", ["--seed", "2", "--plan", "sweep"]),
                                 ("aborted-c", ["--seed", "3", "--drill", "bus-lost@5"]))}
     docs = {}
     for name, job in jobs.items():
