@@ -54,7 +54,7 @@ ELF = FW / "build" / "dyno_nano.elf"
 FLASH_BYTES, RAM_BYTES = 30720, 2048
 ISR_TARGET_CYCLES = 200
 ADC_TARGET_US = 20.0
-VECTOR_NAMES = {1: "INT0", 2: "INT1", 5: "PCINT2", 13: "TIMER1_OVF", 16: "TIMER0_OVF", 18: "USART_RX",
+VECTOR_NAMES = {1: "INT0", 2: "INT1", 3: "PCINT0", 5: "PCINT2", 13: "TIMER1_OVF", 16: "TIMER0_OVF", 18: "USART_RX",
                 19: "USART_UDRE", 24: "TWI"}
 
 
@@ -214,10 +214,12 @@ def static_isr(elf: Path = ELF) -> dict:
 
 # -- runs in simavr ----------------------------------------------------------------------
 def polled_run(seconds: float, profile: bool) -> dict:
-    tr = SimavrTransport(ELF, profile=profile, bounce=True)
+    # the two-converter rig (issue 27): the input torque AD7171 fitted and enabled by the host
+    tr = SimavrTransport(ELF, profile=profile, bounce=True, input_hz=125.0)
     wall0 = time.perf_counter()
     try:
         reader = make_reader("v2", tr)
+        reader.want_input = True
         k, n_events = 0, 0
         while k / 150.0 <= seconds:
             t = k / 150.0
@@ -243,11 +245,16 @@ def adc_stress(seconds: float) -> dict:
     firmware_sim_cmd.add_arguments(parser)
     args = parser.parse_args(["--elf", str(ELF), "--seconds", str(seconds), "--primary-rpm", "15000",
                               "--secondary-rpm", "14000", "--bounce", "--glitch-hz", "200",
-                              "--poll-jitter", "0.5", "--seed", "5"])
+                              "--poll-jitter", "0.5", "--seed", "5", "--input-hz", "125"])
     rep = firmware_sim_cmd.simulate(args)
     err = rep["adc_time_error_us"] or {}
+    inp = rep.get("input") or {}
+    ierr = inp.get("time_error_us") or {}
     return {"conversions": rep["events"]["adc"]["received"], "max_abs_us": err.get("max_abs_us"),
-            "mean_us": err.get("mean_us"), "lossless": rep["ok"]}
+            "mean_us": err.get("mean_us"), "lossless": rep["ok"],
+            # the second converter (issue 27): its conversions and RDY time error, lossless by its codes
+            "input_conversions": inp.get("received"), "input_max_abs_us": ierr.get("max_abs_us"),
+            "input_mean_us": ierr.get("mean_us"), "input_lossless": inp.get("distinct_codes_consecutive")}
 
 
 def fuzz(n_frames: int, bers=(1e-4, 1e-3, 1e-2)) -> list[dict]:
@@ -272,7 +279,7 @@ def adc_bound(static: dict, measured_isr: dict, cli_max_cycles: int) -> dict:
     it starts -- another ISR (TWI, serial, timers), a Hall ISR past its Timer1 read, or a
     cli window of the main loop -- then one main-program instruction (<= 4 cycles) and
     the taking ISR's entry up to its Timer1 read."""
-    takers = ("INT0", "INT1", "PCINT2")
+    takers = ("INT0", "INT1", "PCINT2", "PCINT0")
     entry = max((static[n]["to_timer_read_cycles"] or 0) for n in takers if n in static)
     blockers = [cli_max_cycles]
     for name, s in static.items():
@@ -337,6 +344,8 @@ def main(argv=None) -> int:
     }
     report["ok"] = bool(size["flash_pct"] <= 50 and size["ram_pct"] <= 60 and worst_isr <= ISR_TARGET_CYCLES
                         and adc["max_abs_us"] is not None and adc["max_abs_us"] <= ADC_TARGET_US
+                        and adc["input_max_abs_us"] is not None and adc["input_max_abs_us"] <= ADC_TARGET_US
+                        and bool(adc["input_lossless"])
                         and all(r["v2_accepted"] == 0 for r in fz))
     if args.json:
         print(json.dumps(report, indent=2))
@@ -356,6 +365,9 @@ def main(argv=None) -> int:
     print(f"ADC time vs the harness's conversions ({adc['conversions']} in {args.adc_seconds:g} s at "
           f"15,000/14,000 rpm, ringing, spikes): worst {adc['max_abs_us']:.2f} us, mean {adc['mean_us']:.2f} us "
           f"(target <= {ADC_TARGET_US:g})")
+    print(f"input torque ADC (second AD7171, D8/D9): {adc['input_conversions']} conversions, "
+          f"{'lossless' if adc['input_lossless'] else 'NOT LOSSLESS'} (each its own code), RDY time worst "
+          f"{adc['input_max_abs_us']:.2f} us, mean {adc['input_mean_us']:.2f} us (target <= {ADC_TARGET_US:g})")
     print(f"  bound from the code: {bound['us']:.2f} us after RDY ({bound['cycles']} cycles), "
           f"{bound['harness_scale_us']:.2f} us on the harness's scale (zero = a Hall ISR's entry)")
     if fz:

@@ -136,36 +136,29 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
  * the result has been clocked out: the data bits toggle the same pin. */
 /* "A Hall ISR kept RDY's raw count" is a bit of GPIOR0 (an I/O register: tested and set
  * in one cycle each, which keeps the Hall ISRs under 200 cycles; nothing else uses it). */
-#define RDY_RAW_BIT 0
+#define RDY_RAW_BIT PCIF2  /* (GPIOR0's bit for this converter: its PCIFR bit, see rdy_snapshot) */
 static volatile uint8_t adc_rdy_seen;  /* the pin change ISR stamped adc_rdy_us */
-static volatile uint16_t adc_rdy_tcnt;
-static volatile uint8_t adc_rdy_tov;
 static volatile uint32_t adc_rdy_us;
 
 /* The input torque converter's RDY state (its ISR and functions are further down). */
-#define RDY2_RAW_BIT 1
 static volatile uint8_t in_rdy_seen;
-static volatile uint16_t in_rdy_tcnt;
-static volatile uint8_t in_rdy_tov;
 static volatile uint32_t in_rdy_us;
 
-static inline __attribute__((always_inline)) void rdy2_snapshot(uint16_t tcnt, uint8_t tov)
-{
-    if ((PCIFR & _BV(PCIF0)) && !(GPIOR0 & _BV(RDY2_RAW_BIT))) {
-        in_rdy_tcnt = tcnt;
-        in_rdy_tov = tov;
-        GPIOR0 |= _BV(RDY2_RAW_BIT);
-    }
-}
+/* One snapshot serves both converters: GPIOR0 bit PCIF2 / PCIF0 (the PCIFR bit of the RDY's pin
+ * change group) says "this RDY was pending at the snapshot: rdy_raw_* is its count"; a new snapshot
+ * is taken only when neither is waiting to be consumed, so one never overwrites another's. */
+static volatile uint16_t rdy_raw_tcnt;
+static volatile uint8_t rdy_raw_tov;
+#define RAW_BITS (_BV(PCIF2) | _BV(PCIF0))
 
 static inline __attribute__((always_inline)) void rdy_snapshot(uint16_t tcnt, uint8_t tov)
 {
-    if ((PCIFR & _BV(PCIF2)) && !(GPIOR0 & _BV(RDY_RAW_BIT))) {
-        adc_rdy_tcnt = tcnt;
-        adc_rdy_tov = tov;
-        GPIOR0 |= _BV(RDY_RAW_BIT);
+    uint8_t f = PCIFR & RAW_BITS;
+    if (f && !(GPIOR0 & RAW_BITS)) {
+        rdy_raw_tcnt = tcnt;
+        rdy_raw_tov = tov;
+        GPIOR0 |= f;
     }
-    rdy2_snapshot(tcnt, tov);
 }
 
 /* Timer1 first (counter, then its overflow flag: tstamp.h), then the pin. */
@@ -196,8 +189,8 @@ ISR(PCINT2_vect)
     uint16_t tcnt = TCNT1;
     uint8_t tov = TIFR1 & _BV(TOV1);
     if (GPIOR0 & _BV(RDY_RAW_BIT)) {  /* a Hall ISR ran first and kept the count */
-        tcnt = adc_rdy_tcnt;
-        tov = adc_rdy_tov;
+        tcnt = rdy_raw_tcnt;
+        tov = rdy_raw_tov;
         GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
     }
     if (PIND & _BV(PIN_ADC_DOUT_BIT))
@@ -215,7 +208,7 @@ uint32_t capture_adc_rdy_us(void)
     if (adc_rdy_seen)
         t = adc_rdy_us;
     else if (GPIOR0 & _BV(RDY_RAW_BIT))  /* the pin change ISR has not run yet: same base */
-        t = tstamp_extend(t1_base_us, adc_rdy_tcnt, adc_rdy_tov & _BV(TOV1));
+        t = tstamp_extend(t1_base_us, rdy_raw_tcnt, rdy_raw_tov & _BV(TOV1));
     else
         t = now_us_locked();  /* RDY seen before any ISR could stamp it */
     /* The result is clocked out next: its data bits must not look like RDY. */
@@ -248,10 +241,10 @@ ISR(PCINT0_vect)
 {
     uint16_t tcnt = TCNT1;
     uint8_t tov = TIFR1 & _BV(TOV1);
-    if (GPIOR0 & _BV(RDY2_RAW_BIT)) {  /* a Hall ISR ran first and kept the count */
-        tcnt = in_rdy_tcnt;
-        tov = in_rdy_tov;
-        GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    if (GPIOR0 & _BV(PCIF0)) {  /* a Hall ISR ran first and kept the count */
+        tcnt = rdy_raw_tcnt;
+        tov = rdy_raw_tov;
+        GPIOR0 &= (uint8_t)~_BV(PCIF0);
     }
     if (PINB & _BV(PIN_IN_DOUT_BIT))
         return;  /* not RDY */
@@ -265,7 +258,7 @@ void capture_input_arm(void)
     uint8_t sreg = SREG;
     cli();
     PCIFR = _BV(PCIF0);  /* forget the data bits' changes */
-    GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    GPIOR0 &= (uint8_t)~_BV(PCIF0);
     in_rdy_seen = 0;
     PCMSK0 = _BV(PIN_IN_DOUT_BIT);  /* PCINT0 is PB0 */
     PCICR |= _BV(PCIE0);
@@ -279,13 +272,13 @@ uint32_t capture_input_rdy_us(void)
     uint32_t t;
     if (in_rdy_seen)
         t = in_rdy_us;
-    else if (GPIOR0 & _BV(RDY2_RAW_BIT))
-        t = tstamp_extend(t1_base_us, in_rdy_tcnt, in_rdy_tov & _BV(TOV1));
+    else if (GPIOR0 & _BV(PCIF0))
+        t = tstamp_extend(t1_base_us, rdy_raw_tcnt, rdy_raw_tov & _BV(TOV1));
     else
         t = now_us_locked();
     PCMSK0 = 0;
     PCIFR = _BV(PCIF0);
-    GPIOR0 &= (uint8_t)~_BV(RDY2_RAW_BIT);
+    GPIOR0 &= (uint8_t)~_BV(PCIF0);
     in_rdy_seen = 0;
     SREG = sreg;
     return t;
