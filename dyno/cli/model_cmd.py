@@ -53,7 +53,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for p in (sweep, study):
         p.add_argument("--points", type=number_in(2, 1000, integer=True), default=20, help="ratios between --ratio-range ends")
         p.add_argument("--ratio-range", type=number_in(0.1, 10.0), nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"))
-        p.add_argument("--out", type=Path, default=Path("model-out"), help="directory for CSV and PNG")
+        p.add_argument("--out", type=Path, default=Path("model-out"), help="directory for CSV, Parquet and PNG")
+        p.add_argument("--jobs", type=number_in(1, 1024, integer=True), default=None,
+                       help="local worker processes (default: the machine's cores; 1: this process)")
+        p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="a dask.distributed scheduler (tcp://HOST:8786): solve on its workers (extra [cluster])")
+        p.add_argument("--no-cache", action="store_true",
+                       help="solve every task again (default: reuse the solution cache, $DYNO_MODEL_CACHE/studies)")
 
 
 def _params(args) -> ModelParams:
@@ -153,19 +159,58 @@ def _save(out: Path, stem: str, csv_text: str, fig) -> list[str]:
     return [str(out / f"{stem}.csv"), str(out / f"{stem}.png")]
 
 
-def _run_sweep(args) -> int:
-    from dyno.model import sweep
+def _executor(args):
+    from dyno.model.executor import make_executor
 
-    params = _params(args)
-    log = None if args.json else (lambda m: print(m, file=sys.stderr))
-    rows, _ = sweep.sweep_operating_range(args.points, params, _op(args), ratio_range=tuple(args.ratio_range),
-                                          variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol,
-                                          log=log)
-    files = _save(args.out, f"sweep-{args.variant}", sweep.rows_to_csv(rows),
-                  sweep.plot_sweep({args.variant: rows}, "operating-range sweep"))
+    return make_executor(args.jobs, args.scheduler)
+
+
+def _progress(args):
+    """A progress line on a terminal (stderr), one line per task through a pipe; nothing with --json."""
+    if args.json:
+        return None
+    tty = sys.stderr.isatty()
+
+    def show(done, total, label, cached):
+        bar = "#" * round(20 * done / total)
+        text = f"[{bar:<20}] {done}/{total} {label} ({'cached' if cached else 'solved'})"
+        print(("\r" + text.ljust(78)) if tty else text, end="" if tty and done < total else "\n",
+              file=sys.stderr, flush=True)
+
+    return show
+
+
+def _save_parquet(out: Path, stem: str, rows_by_label: dict, column: str | None) -> list[str]:
+    """The rows as Parquet too when pyarrow is installed (extra [export]); otherwise the CSV alone."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return []
+    from dyno.model.sweep import CSV_COLUMNS
+
+    cols = ([column] if column else []) + list(CSV_COLUMNS)
+    flat = [{**({column: label} if column else {}), **row} for label, rows in rows_by_label.items() for row in rows]
+    pq.write_table(pa.table({c: [r.get(c) for r in flat] for c in cols}), out / f"{stem}.parquet")
+    return [str(out / f"{stem}.parquet")]
+
+
+def _run_sweep(args) -> int:
+    from dyno.model import studies, sweep
+
+    ex = _executor(args)
+    try:
+        rows, counts = studies.run_sweep(args.points, _params(args), _op(args), ratio_range=tuple(args.ratio_range),
+                                         variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol,
+                                         executor=ex, use_cache=not args.no_cache, progress=_progress(args))
+    finally:
+        ex.close()
+    stem = f"sweep-{args.variant}"
+    files = _save(args.out, stem, sweep.rows_to_csv(rows), sweep.plot_sweep({args.variant: rows}, "operating-range sweep"))
+    files += _save_parquet(args.out, stem, {args.variant: rows}, None)
     n_ok = sum(bool(r["converged"]) for r in rows)
     result = {"variant": args.variant, "points": len(rows), "converged": n_ok, "files": files,
-              "rows": rows if args.json else None}
+              "executor": ex.name, "tasks": counts, "rows": rows if args.json else None}
     _print({k: v for k, v in result.items() if v is not None}, args.json)
     return 0 if n_ok == len(rows) else 1
 
@@ -173,16 +218,23 @@ def _run_sweep(args) -> int:
 def _run_study(args) -> int:
     from dyno.model import studies, sweep
 
-    log = None if args.json else (lambda m: print(m, file=sys.stderr))
-    result = studies.run_study(args.name, values=args.values, base_params=_params(args), op=_op(args),
-                               n_points=args.points, ratio_range=tuple(args.ratio_range), variant=args.variant,
-                               slip_threshold_m_s=args.slip_threshold, tol=args.tol, log=log)
-    files = _save(args.out, f"study-{args.name}-{args.variant}", studies.study_csv(result),
+    ex = _executor(args)
+    try:
+        result = studies.run_study(args.name, values=args.values, base_params=_params(args), op=_op(args),
+                                   n_points=args.points, ratio_range=tuple(args.ratio_range), variant=args.variant,
+                                   slip_threshold_m_s=args.slip_threshold, tol=args.tol, executor=ex,
+                                   use_cache=not args.no_cache, progress=_progress(args))
+    finally:
+        ex.close()
+    stem = f"study-{args.name}-{args.variant}"
+    files = _save(args.out, stem, studies.study_csv(result),
                   sweep.plot_sweep({f"{args.name}={v:g}": rows for v, rows in result["series"].items()},
                                    f"parameter study: {args.name}"))
+    files += _save_parquet(args.out, stem, result["series"], args.name)
     n_ok = sum(bool(r["converged"]) for rows in result["series"].values() for r in rows)
     n_all = sum(len(rows) for rows in result["series"].values())
-    _print({"study": args.name, "variant": args.variant, "points": n_all, "converged": n_ok, "files": files}, args.json)
+    _print({"study": args.name, "variant": args.variant, "points": n_all, "converged": n_ok, "files": files,
+            "executor": ex.name, "tasks": result["tasks"]}, args.json)
     return 0 if n_ok == n_all else 1
 
 

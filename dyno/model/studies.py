@@ -48,35 +48,80 @@ def run_study(
     slip_threshold_m_s: float = 1e-4,
     tol: float = 1e-3,
     log=None,
+    *,
+    executor=None,
+    cache_dir=None,
+    use_cache: bool = True,
+    progress=None,
 ) -> dict:
-    """Returns ``{"name", "values", "series": {value: rows}}``."""
-    from dyno.model.solution import solve_point
+    """Returns ``{"name", "values", "series": {value: rows}, "tasks": {"computed", "cached"}}``.
+
+    One task per value (:mod:`dyno.model.study_tasks`), run by ``executor`` (default: in this process),
+    each warm-started by homotopy from the baseline's solution at 1:1 (solved here, only if a value is
+    not in the cache).
+    """
+    from dyno.model.executor import InlineExecutor
+    from dyno.model.study_tasks import SweepTask, run_tasks, study_cache_dir, task_key
 
     if name not in DEFAULT_VALUES:
         raise bad_input("study", f"one of {', '.join(DEFAULT_VALUES)}, got {name!r}")
     values = tuple(DEFAULT_VALUES[name] if values is None else values)
-    base = None
-    try:
-        base = solve_point(base_params, replace(op, ratio=1.0), variant=variant,
-                           slip_threshold_m_s=slip_threshold_m_s, tol=tol)
-    except MODEL_FAILURES:
-        base = None  # each value then starts from its own geometric guess
-    series = {}
+    ratios = tuple(float(r) for r in sweep.ratio_grid(n_points, ratio_range))
+    tasks = []
     for value in values:
         params_v, op_v = study_case(name, value, base_params, op)
-        start = None
-        if base is not None:
-            try:
-                start = solve_point(params_v, replace(op_v, ratio=1.0), variant=variant,
-                                    slip_threshold_m_s=slip_threshold_m_s, tol=tol, guess=base)
-            except MODEL_FAILURES:
-                start = None
+        tasks.append(SweepTask(f"{name}={value:g}", params_v, op_v, ratios, variant, slip_threshold_m_s, tol,
+                               homotopy=True))
+    cache = study_cache_dir(cache_dir)
+    if not (use_cache and all((cache / f"{task_key(t)}.json").is_file() for t in tasks)):
+        from dyno.model.solution import solve_point
+
+        try:
+            base = solve_point(base_params, replace(op, ratio=1.0), variant=variant,
+                               slip_threshold_m_s=slip_threshold_m_s, tol=tol)
+            tasks = [replace(t, guess=base) for t in tasks]
+        except MODEL_FAILURES:
+            pass  # each value then starts from its own geometric guess
+
+    def report(done, total, label, cached):
         if log:
-            log(f"{name}={value:g}")
-        rows, _ = sweep.sweep_operating_range(n_points, params_v, op_v, ratio_range=ratio_range, variant=variant,
-                                              slip_threshold_m_s=slip_threshold_m_s, tol=tol, start=start, log=log)
-        series[value] = rows
-    return {"name": name, "values": values, "series": series}
+            log(f"{label}: {'cached' if cached else 'solved'} ({done}/{total})")
+        if progress:
+            progress(done, total, label, cached)
+
+    rows, counts = run_tasks(tasks, executor or InlineExecutor(), cache_dir=cache_dir, use_cache=use_cache,
+                             progress=report)
+    return {"name": name, "values": values, "series": dict(zip(values, rows)), "tasks": counts}
+
+
+def run_sweep(n_points: int = 20, params: ModelParams = TABLE_6_1, op: OperatingPoint = TABLE_6_1_POINT,
+              ratio_range=sweep.DEFAULT_RATIO_RANGE, variant: str = "corrected", slip_threshold_m_s: float = 1e-4,
+              tol: float = 1e-3, *, executor=None, cache_dir=None, use_cache: bool = True, progress=None):
+    """The operating-range sweep as two tasks, one per side of its point nearest 1:1 (both walk outwards
+    from that point's solution, solved here first).  Returns ``(rows in grid order, {"computed", "cached"})``."""
+    import numpy as np
+
+    from dyno.model.executor import InlineExecutor
+    from dyno.model.study_tasks import SweepTask, run_tasks, study_cache_dir, task_key
+
+    ratios = [float(r) for r in sweep.ratio_grid(n_points, ratio_range)]
+    f = int(np.argmin(np.abs(np.log(ratios))))
+    sides = [tuple(ratios[:f + 1]), tuple(ratios[f:])]
+    tasks = [SweepTask(label, params, op, side, variant, slip_threshold_m_s, tol)
+             for label, side in zip(("high ratios", "low ratios"), sides)]
+    cache = study_cache_dir(cache_dir)
+    if not (use_cache and all((cache / f"{task_key(t)}.json").is_file() for t in tasks)):
+        from dyno.model.solution import solve_point
+
+        try:
+            first = solve_point(params, replace(op, ratio=ratios[f]), variant=variant,
+                                slip_threshold_m_s=slip_threshold_m_s, tol=tol)
+            tasks = [replace(t, guess=first) for t in tasks]
+        except MODEL_FAILURES:
+            pass  # each side from the geometric guess (and reports the failure at its first point)
+    (high, low), counts = run_tasks(tasks, executor or InlineExecutor(), cache_dir=cache_dir,
+                                    use_cache=use_cache, progress=progress)
+    return high + low[1:], counts
 
 
 def study_csv(result: dict) -> str:
