@@ -84,6 +84,10 @@ def test_run_web_page_live_values_points_and_drill_banner(browser, tmp_path):
     # the abort the page showed is the run's, and its onset is the drill's (the simulated world's time)
     abort = result["aborts"][0]
     assert abort["cause"] == "comms_lost" and abort["drill"] == f"bus-lost@{DRILL_AT_S:g}"
+    # >= 5 updates a second while the test runs (the page's own receipt times)
+    recv = sorted(f["recv_ms"] for f in log if f["state"] in ("warmup", "step", "settle", "measure"))
+    gaps_s = sorted((b - a) / 1000.0 for a, b in zip(recv, recv[1:]))
+    assert len(gaps_s) > 20 and gaps_s[len(gaps_s) // 2] <= 0.2, gaps_s[len(gaps_s) // 2]
     latency_s = banner_ms / 1000.0 - _onset_wall_s(log, abort["onset_s"])
     assert 0.0 < latency_s < 1.0, f"banner {latency_s:.3f} s after the drill's onset"
     # the rig safe as the physics has it (pads off the rotor, engine killed), as the page said
