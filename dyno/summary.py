@@ -30,6 +30,11 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     zc = getattr(ctx.controller, "zero_check", None)
     if zc is not None:
         out["torque_zero"] = zc
+        channel = getattr(ctx.controller, "input_channel", None)
+        if channel is not None:  # the zero checks cover the engine-side input torque channel too
+            from dyno.analysis.input_torque import input_zero_check
+
+            out["torque_zero_input"] = input_zero_check(ctx.poller.streams, zc, channel)
         if zc.get("correct"):
             from dyno.analysis.zero_check import corrected_point_keys
 

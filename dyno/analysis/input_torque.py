@@ -72,6 +72,20 @@ def input_zero(streams, t0_us: int, t1_us: int, channel: InputChannel) -> dict:
     return zero_reading(codes, status, channel.calibration)
 
 
+def input_zero_check(streams, zero_check: dict, channel: InputChannel) -> dict:
+    """The input channel's zero at rest over the brake-side zero checks' windows (before GO, after the
+    last point) and its drift, judged against the same ``drift_max_nm`` (here crank N m)."""
+    from dyno.analysis.zero_check import drift_check
+
+    def read(z: dict) -> dict:
+        if "t_start_us" not in z:
+            return {"torque_nm": math.nan, "ci95_nm": math.nan, "why": z.get("why", "not read")}
+        return input_zero(streams, z["t_start_us"], z["t_end_us"], channel)
+
+    return drift_check(read(zero_check.get("before") or {}), read(zero_check.get("after") or {}),
+                       zero_check.get("drift_max_nm", 0.15))
+
+
 def input_point(streams, point: dict, channel: InputChannel) -> dict:
     """The input-torque keys of ``point`` (reduced by :func:`~dyno.analysis.points.reduce_point` over
     ``[t_start_us, t_end_us]``): measured input power and efficiency; the map's figure kept beside.

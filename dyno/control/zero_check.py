@@ -32,10 +32,15 @@ async def read_zero(ctrl, *, wait_rest_s: float = 0.0) -> dict:
     cfg = _config(ctrl)
     poller = ctrl.poller
     t_wait = ctrl._now()
-    while poller.rpm(v1.CH_SECONDARY) > 0.0:
+    # with an engine-side input torque channel the zero after the test waits for the crank too: a
+    # coasting engine's friction reacts on its cradle (before GO it idles unloaded: no reaction)
+    crank = wait_rest_s > 0 and getattr(ctrl, "input_channel", None) is not None
+    while poller.rpm(v1.CH_SECONDARY) > 0.0 or (crank and poller.rpm(v1.CH_PRIMARY) > 0.0):
         if ctrl._now() - t_wait >= wait_rest_s:
-            return {"torque_nm": math.nan, "ci95_nm": math.nan,
-                    "why": f"the secondary turns ({poller.rpm(v1.CH_SECONDARY):.0f} rpm): not at rest"}
+            why = f"the secondary turns ({poller.rpm(v1.CH_SECONDARY):.0f} rpm): not at rest"
+            if crank and poller.rpm(v1.CH_PRIMARY) > 0.0:
+                why = f"the engine turns ({poller.rpm(v1.CH_PRIMARY):.0f} rpm): not at rest"
+            return {"torque_nm": math.nan, "ci95_nm": math.nan, "why": why}
         await _sleep(ctrl, 0.1)
     h0, d0 = ctrl._now(), poller.device_now_us()
     await _sleep(ctrl, cfg.read_s)

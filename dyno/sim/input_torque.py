@@ -68,12 +68,13 @@ class InputTorqueSignals:
             self._in_err_buf.extend(self._in_rng_err.random(4096).tolist())
         return self._in_err_buf.pop()
 
-    def _input_events(self, t0: float, h: float, th_e0: float, w_e0: float, a_e: float, t_e: float,
-                      rpm_e: float, running: bool, events: list) -> None:
-        """The cell's conversions of the cradle's load cell (mean reaction through the filter + ripple)."""
+    def _input_events(self, t0: float, h: float, th_e0: float, w_e0: float, a_e: float, r_nm: float,
+                      t_e: float, rpm_e: float, running: bool, events: list) -> None:
+        """The cell's conversions of the cradle's load cell (mean reaction ``r_nm`` through the filter, the
+        firing ripple of the engine's gross torque on it)."""
         p = self.params
-        reaction = t_e - self._in_bearing_nm if t_e > self._in_bearing_nm else (
-            t_e + self._in_bearing_nm if t_e < -self._in_bearing_nm else 0.0)  # the bearings hold a little
+        b = self._in_bearing_nm
+        reaction = r_nm - b if r_nm > b else (r_nm + b if r_nm < -b else 0.0)  # the bearings hold a little
         y0 = self._in_y
         self._in_x, y1 = self._in_filter.advance(self._in_x, reaction, h)
         self._in_y = y1
@@ -89,7 +90,7 @@ class InputTorqueSignals:
                 gm, ph = self._in_filter.gain_phase(0.5 * w_e)
                 th_e = angle_at(th_e0, w_e0, a_e, tau)
                 sig += ripple * gm * math.sin(0.5 * th_e + self._in_phase_firing + ph)
-            sigma = p.input_noise_counts + p.input_noise_counts_per_nm * abs(t_e)
+            sigma = p.input_noise_counts + p.input_noise_counts_per_nm * abs(r_nm)
             code = self._in_offset + self._in_gain * sig + sigma * self._in_normal()
             code += self._in_drift_counts_per_s * ta
             code_i = min(65535, max(0, math.floor(code + 0.5)))

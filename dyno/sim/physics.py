@@ -484,7 +484,9 @@ class RigModel(RigSignals, InputTorqueSignals):
             events.append(self._adc_event(ta, tau, y, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge))
             self._next_adc_t = ta + self._adc_period_s
         if self.input_fitted:
-            self._input_events(t0, h, th_e0, w_e0, a_e, t_e, rpm_e, running, events)
+            # the cradle's reaction R = T_p + J_e a_e (= T_e while the crank turns; 0 at rest, where the
+            # engine's friction holds nothing)
+            self._input_events(t0, h, th_e0, w_e0, a_e, t_p + j_e * a_e, t_e, rpm_e, running, events)
 
     def _locked_accel(self, t_e, i, k, eta_m, t_d, t_load):
         """Crank acceleration and belt input torque with the belt gripping."""
