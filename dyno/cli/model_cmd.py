@@ -28,6 +28,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sweep = sub.add_parser("sweep", help="operating-range sweep by continuation")
     study = sub.add_parser("study", help="thesis Section 7 parameter study")
     inverse = sub.add_parser("inverse", help="geometric ratio and belt slip of each point of a run")
+    overlay = sub.add_parser("overlay", help="the belt model's prediction at each point of a run, with its balances")
+    overlay.add_argument("run_dir", type=Path, metavar="RUN", help="run directory (its tune.toml sets the clamp)")
+    overlay.add_argument("--tune", type=Path, default=None, help="tune TOML instead of RUN/tune.toml")
+    overlay.add_argument("--tier", choices=("closed_form", "full"), default="full",
+                         help="model tier (full: the BVP, seconds per point; closed_form: the creep-only bound)")
+    overlay.add_argument("--json", action="store_true", help="print JSON instead of text")
     inverse.add_argument("run_dir", type=Path, metavar="RUN", help="run directory (its tune.toml sets the clamp)")
     inverse.add_argument("--tune", type=Path, default=None, help="tune TOML instead of RUN/tune.toml")
     inverse.add_argument("--tier", choices=("closed_form", "full"), default="closed_form",
@@ -165,6 +171,11 @@ def _executor(args):
     return make_executor(args.jobs, args.scheduler)
 
 
+def _say_start(args, what: str, ex) -> None:
+    if not args.json:
+        print(f"dyno model {args.action}: {what} on {ex.name}", file=sys.stderr, flush=True)
+
+
 def _progress(args):
     """A progress line on a terminal (stderr), one line per task through a pipe; nothing with --json."""
     if args.json:
@@ -198,13 +209,11 @@ def _save_parquet(out: Path, stem: str, rows_by_label: dict, column: str | None)
 def _run_sweep(args) -> int:
     from dyno.model import studies, sweep
 
-    ex = _executor(args)
-    try:
+    with _executor(args) as ex:
+        _say_start(args, f"{args.points} ratios in 2 tasks (one per side of 1:1)", ex)
         rows, counts = studies.run_sweep(args.points, _params(args), _op(args), ratio_range=tuple(args.ratio_range),
                                          variant=args.variant, slip_threshold_m_s=args.slip_threshold, tol=args.tol,
                                          executor=ex, use_cache=not args.no_cache, progress=_progress(args))
-    finally:
-        ex.close()
     stem = f"sweep-{args.variant}"
     files = _save(args.out, stem, sweep.rows_to_csv(rows), sweep.plot_sweep({args.variant: rows}, "operating-range sweep"))
     files += _save_parquet(args.out, stem, {args.variant: rows}, None)
@@ -218,14 +227,13 @@ def _run_sweep(args) -> int:
 def _run_study(args) -> int:
     from dyno.model import studies, sweep
 
-    ex = _executor(args)
-    try:
+    with _executor(args) as ex:
+        n_values = len(args.values) if args.values else len(studies.DEFAULT_VALUES[args.name])
+        _say_start(args, f"{args.name}: {n_values} values x {args.points} ratios, one task per value", ex)
         result = studies.run_study(args.name, values=args.values, base_params=_params(args), op=_op(args),
                                    n_points=args.points, ratio_range=tuple(args.ratio_range), variant=args.variant,
                                    slip_threshold_m_s=args.slip_threshold, tol=args.tol, executor=ex,
                                    use_cache=not args.no_cache, progress=_progress(args))
-    finally:
-        ex.close()
     stem = f"study-{args.name}-{args.variant}"
     files = _save(args.out, stem, studies.study_csv(result),
                   sweep.plot_sweep({f"{args.name}={v:g}": rows for v, rows in result["series"].items()},
@@ -276,6 +284,10 @@ def _run_inverse(args) -> int:
 def run(args) -> int:
     if args.action == "inverse":
         return _run_inverse(args)
+    if args.action == "overlay":
+        from dyno.cli.model_overlay_cmd import run_overlay
+
+        return run_overlay(args)
     _check_numbers(args)
     if args.action == "point":
         return _run_point(args)

@@ -5,24 +5,38 @@ module-level function and the items picklable (they cross process and machine bo
 :func:`make_executor`:
 
 * ``jobs=1``: :class:`InlineExecutor`, in this process, one after another;
-* ``jobs=N`` (default: the machine's cores): :class:`PoolExecutor`, ``concurrent.futures``' process pool;
+* ``jobs=N`` (default: the machine's cores): :class:`PoolExecutor`, a ``multiprocessing`` pool;
 * ``scheduler="tcp://HOST:8786"``: :class:`DaskExecutor`, a running ``dask.distributed`` scheduler and its
   workers on a lab's machines (the optional extra ``[cluster]``).  The caller keeps the results and the
   cache; workers need only ``dyno`` installed (no shared disk).
 
-Why not a library that already does it all: ``concurrent.futures`` and ``distributed.Client`` are the two
-libraries; this module is the twenty lines that let a study not care which one runs it.
+Why not a library that already does it all: ``multiprocessing`` and ``distributed.Client`` are the two
+libraries; this module is the few lines that let a study not care which one runs it.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import signal
 
 from dyno.errors import ConfigError
 
 
-class InlineExecutor:
+class _Executor:
+    """``with executor:`` — on an exception (Ctrl+C included) the workers are stopped, not waited for."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close(abort=exc_type is not None)
+
+    def close(self, abort: bool = False) -> None:
+        pass
+
+
+class InlineExecutor(_Executor):
     """In this process, in order."""
 
     name = "inline"
@@ -31,32 +45,38 @@ class InlineExecutor:
         for i, item in enumerate(items):
             yield i, fn(item)
 
-    def close(self) -> None:
-        pass
+
+def _ignore_sigint() -> None:
+    # Ctrl+C on a terminal reaches the whole process group: the parent decides (it stops the workers);
+    # a worker that died of it mid-task would leave the pool waiting for it.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-class PoolExecutor:
-    """A local process pool of ``jobs`` workers."""
+def _indexed(args):
+    fn, i, item = args
+    return i, fn(item)
+
+
+class PoolExecutor(_Executor):
+    """A local pool of ``jobs`` worker processes (``multiprocessing.Pool``: it can be terminated)."""
 
     def __init__(self, jobs: int) -> None:
         self.jobs = int(jobs)
         self.name = f"pool of {self.jobs}"
-        self._pool = ProcessPoolExecutor(max_workers=self.jobs)
+        self._pool = multiprocessing.Pool(self.jobs, initializer=_ignore_sigint)
 
     def map_unordered(self, fn, items):
-        futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
-        try:
-            for fut in as_completed(futures):
-                yield futures[fut], fut.result()
-        finally:  # interrupted (Ctrl+C, an error): what has not started never starts
-            for fut in futures:
-                fut.cancel()
+        yield from self._pool.imap_unordered(_indexed, [(fn, i, item) for i, item in enumerate(items)])
 
-    def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+    def close(self, abort: bool = False) -> None:
+        if abort:  # interrupted: what runs is stopped (its result was not stored; a resumed study solves it)
+            self._pool.terminate()
+        else:
+            self._pool.close()
+        self._pool.join()
 
 
-class DaskExecutor:
+class DaskExecutor(_Executor):
     """The workers of a ``dask.distributed`` scheduler (``address``) or of a ``Client`` given."""
 
     def __init__(self, address: str | None = None, *, client=None) -> None:
@@ -84,7 +104,7 @@ class DaskExecutor:
         finally:
             self.client.cancel(futures)
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
         if self._own:
             self.client.close()
 

@@ -221,6 +221,15 @@ RAD_S_PER_RPM = math.pi / 30.0
 INVERSE_TIERS = ("closed_form", "full")
 
 
+def invertible(point: dict) -> bool:
+    """A point the inverse can take: finite positive speeds and speed ratio, and an input power."""
+    rp, rs, sr, p_in = (point.get(k) for k in ("rpm_primary", "rpm_secondary", "ratio", "power_in_w"))
+    if any(v is None or isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+           for v in (rp, rs, sr, p_in)):
+        return False
+    return rp > 0 and rs > 0 and sr > 0
+
+
 def invert_points(points, tune=None, *, tier: str = "closed_form", params: ModelParams | None = None,
                   slack_tension_n: float = 100.0) -> list[tuple[float, InverseResult]]:
     """``(secondary rpm, InverseResult)`` of each measured point with a speed ratio and an input power.
@@ -254,11 +263,9 @@ def invert_points(points, tune=None, *, tier: str = "closed_form", params: Model
                                    for r in (d.primary_radius_max_m, d.primary_radius_min_m)))
     out = []
     for p in points:
+        if not invertible(p):
+            continue
         rp, rs, sr, p_in = (p.get(k) for k in ("rpm_primary", "rpm_secondary", "ratio", "power_in_w"))
-        if any(v is None or not isinstance(v, (int, float)) or not math.isfinite(v) for v in (rp, rs, sr, p_in)):
-            continue
-        if rp <= 0 or rs <= 0 or sr <= 0:
-            continue
         torque = float(p_in) / (float(rp) * RAD_S_PER_RPM)
         if tune is not None:
             res = invert_speed_ratio(sr, rp, torque, slip=slip, clamp=clamp_from_tune(tune, rp),

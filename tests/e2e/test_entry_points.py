@@ -281,8 +281,8 @@ def test_ctrl_c_outside_a_test_is_one_line_and_130(work):
     proc = subprocess.Popen([sys.executable, "-m", "dyno", "model", "sweep", "--points", "60"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=work, env=_env())
     try:
-        first = proc.stderr.readline()  # the sweep's first solved ratio: well inside the command
-        assert first.startswith("ratio"), first
+        first = proc.stderr.readline()  # the sweep's start line: well inside the command (it solves next)
+        assert first.startswith("dyno model sweep: 60 ratios"), first
         proc.send_signal(signal.SIGINT)
         err = proc.stderr.read()
         assert proc.wait(timeout=60) == 130
