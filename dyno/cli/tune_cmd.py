@@ -31,6 +31,11 @@ def add_arguments(p) -> None:
     p.add_argument("--top", type=number_in(1, 50, integer=True), default=5, help="tunes to print and write (default 5)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="where the advised tune files, advice.json and advice.html go (default advice/<UTC time>)")
+    p.add_argument("--jobs", type=number_in(1, 256, integer=True), default=None, metavar="N",
+                   help="refine the best tunes in a local pool of N processes (default: the machine's cores; "
+                        "1: in this process)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="refine them on a running dask.distributed scheduler instead (pip install 'dyno[cluster]')")
     p.add_argument("--json", action="store_true", help="print one JSON document")
 
 
@@ -72,8 +77,11 @@ def run(args) -> int:
     out = args.out or Path("advice") / _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     if out.exists() and any(out.glob("tune-*.toml")):
         raise ConfigError(out, "--out", "a new or empty directory (advice is never overwritten)")
-    result = advise(runs, catalogue, targets, max_changes=args.max_changes, tolerance_rpm=args.tolerance,
-                    top=args.top)
+    from dyno.model.executor import make_executor
+
+    with make_executor(args.jobs, args.scheduler) as executor:
+        result = advise(runs, catalogue, targets, max_changes=args.max_changes, tolerance_rpm=args.tolerance,
+                        top=args.top, executor=executor)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

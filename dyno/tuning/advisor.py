@@ -50,13 +50,29 @@ def p_within(mean: float, u: float, target: float, tol: float) -> float:
     return _phi((target + tol - mean) / u) - _phi((target - tol - mean) / u)
 
 
-def tolerance_lookup(catalogue: list[Part], tunes) -> callable:
-    """``tolerance_of(identity, kind)``: a catalogue part's stated tolerance, else the default."""
+class Tolerances:
+    """``tolerance_of(identity, kind)``: a catalogue part's stated tolerance, else the default (picklable:
+    it travels with the refine tasks to pool or Dask workers)."""
+
+    def __init__(self, table: dict[str, float]) -> None:
+        self.table = table
+
+    def __call__(self, ident: str, kind: str) -> float:
+        return self.table.get(ident, UNKNOWN_PART_TOLERANCE_REL)
+
+
+def tolerance_lookup(catalogue: list[Part], tunes) -> Tolerances:
     table: dict[str, float] = {}
     for t in tunes:
         for p in catalogue:
             table.setdefault(part_identity(apply_part(t, p), p.kind), p.tolerance_rel)
-    return lambda ident, kind: table.get(ident, UNKNOWN_PART_TOLERANCE_REL)
+    return Tolerances(table)
+
+
+def _refine_task(args):
+    """One tune's predicted figures with u (module level: an executor's task)."""
+    cal, tune, figures, load, low, tol_of, engine = args
+    return {f: predict_with_u(cal, tune, f, load, low, tol_of, engine) for f in figures}
 
 
 def candidates(base, catalogue: list[Part], max_changes: int) -> tuple[list[Candidate], dict]:
@@ -88,8 +104,10 @@ def candidates(base, catalogue: list[Part], max_changes: int) -> tuple[list[Cand
 
 
 def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float], *, max_changes: int = 2,
-           tolerance_rpm: float = 50.0, top: int = 5) -> dict:
-    """Calibrate, search, rank. ``targets``: figure -> rpm (``engagement``, ``shift_out``, ``full_load``)."""
+           tolerance_rpm: float = 50.0, top: int = 5, executor=None) -> dict:
+    """Calibrate, search, rank. ``targets``: figure -> rpm (``engagement``, ``shift_out``, ``full_load``).
+    ``executor`` (:func:`dyno.model.executor.make_executor`: a local pool or Dask) runs the refine step's
+    tunes; None: in this process."""
     base_run = runs[-1]
     base = base_run.tune
     tol_of = tolerance_lookup(catalogue, [r.tune for r in runs])
@@ -135,9 +153,12 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
             c.miss = math.inf
         cands.sort(key=lambda c: (c.miss, len(c.changes)))
     refined = cands[:n_refine] + [c for c in cands[n_refine:] if not c.changes]  # the current tune always
+    from dyno.model.executor import InlineExecutor
+
+    tasks = [(cal, c.tune, tuple(targets), load, low, tol_of, engine) for c in refined]
+    for i, pred in (executor or InlineExecutor()).map_unordered(_refine_task, tasks):
+        refined[i].predicted = pred
     for c in refined:
-        for f in targets:
-            c.predicted[f] = predict_with_u(cal, c.tune, f, load, low, tol_of, engine)
         c.p_hit = math.prod(p_within(*c.predicted[f], targets[f], tolerance_rpm) for f in targets)
         c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
     refined.sort(key=lambda c: (-round(c.p_hit, 3), len(c.changes), c.miss))

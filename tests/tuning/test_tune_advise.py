@@ -170,3 +170,16 @@ def test_advice_page_in_a_browser(loop):
         finally:
             b.close()
     assert not errors
+
+
+def test_pool_and_inline_give_the_same_advice(loop, tmp_path):
+    """The refine step through dyno.model.executor: a local pool of 2 gives what this process gives."""
+    docs = []
+    for jobs in ("1", "2"):
+        r = _dyno("tune", "advise", str(loop["tmp"] / "runs" / "r1"), "--target", "engagement=2100",
+                  "--target", "shift_out=2750", "--jobs", jobs, "--out", str(tmp_path / jobs), "--json",
+                  env={"DYNO_RUNS_DIR": str(tmp_path / "runs")})
+        assert r.returncode == 0, r.stderr[-2000:]
+        docs.append(json.loads(r.stdout))
+    assert [t["changes"] for t in docs[0]["tunes"]] == [t["changes"] for t in docs[1]["tunes"]]
+    assert [t["predicted"] for t in docs[0]["tunes"]] == [t["predicted"] for t in docs[1]["tunes"]]
