@@ -64,7 +64,12 @@ def test_progress_draws_at_most_once_per_period_and_erases_itself():
 def test_progress_on_a_terminal(tmp_path):
     session = f"dyno-prog-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
-    cmd = f"{sys.executable} -m dyno run --sim --headless --out {run_dir} ; echo EXITED=$? ; sleep 30"
+    from dyno.model.overlay import default_cache_dir
+
+    # the belt-model table's cache stays the user's (a fresh HOME rebuilds it: 20 s quiet, > 70 s on a loaded
+    # machine, past this test's bound); in the command, as a running tmux server gives a session its own env
+    cmd = (f"env DYNO_MODEL_CACHE={default_cache_dir()} {sys.executable} -m dyno run --sim --headless "
+           f"--out {run_dir} ; echo EXITED=$? ; sleep 30")
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "30", "-s", session, cmd], check=True, timeout=20,
                    env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
                         "HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
