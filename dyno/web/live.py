@@ -23,9 +23,12 @@ KEEPALIVE_S = 10.0  # a comment line on a quiet stream: proxies and phones keep 
 class LiveHub:
     """The newest frame, encoded once, and the streams waiting for the next one."""
 
-    def __init__(self, feed, *, allow_stop: bool = False) -> None:
+    def __init__(self, feed, *, allow_stop: bool = False, model=None) -> None:
         self.feed = feed
         self.allow_stop = allow_stop
+        self.model = model  # dyno.web.model_curve.ModelCurve (the belt model beside the points), or None
+        self._last_snap: dict | None = None
+        self._model_version = None
         self.seq = 0
         self.state_json = b'{"state": "starting", "points": []}'  # (before the rig's first frame)
         self.event_bytes = b""
@@ -68,8 +71,25 @@ class LiveHub:
                 if snap.get("ended"):  # (the last frame is never skipped for a newer one: there is none)
                     break
             if snap is not None:
+                await self._with_model(snap)
+                self.publish(snap)
+            elif self.model is not None and self._last_snap is not None and self.model.version != self._model_version:
+                snap = dict(self._last_snap)  # a full-model value arrived (the run may have ended): send again
+                await self._with_model(snap)
                 self.publish(snap)
             await asyncio.sleep(PUMP_S)
+
+    async def _with_model(self, snap: dict) -> None:
+        """The model's part of the frame, worked out in a thread of the server (the inverse of a new point:
+        tens of ms; the solves themselves run in the model's own process)."""
+        self._last_snap = snap
+        if self.model is None:
+            return
+        try:
+            snap["model"] = await asyncio.get_running_loop().run_in_executor(None, self.model.update, snap)
+        except Exception as exc:  # noqa: BLE001 - the page's curve must never stop the page
+            snap["model"] = {"points": [], "error": f"{type(exc).__name__}: {exc}"}
+        self._model_version = self.model.version
 
     def publish(self, snap: dict) -> None:
         snap["web_stop"] = self.allow_stop
@@ -85,6 +105,8 @@ class LiveHub:
 
     async def _close(self) -> None:
         self.closing = True
+        if self.model is not None:
+            self.model.close()
         self._wake()
 
     async def page(self, request: web.Request) -> web.Response:
@@ -142,12 +164,15 @@ async def static_file(request: web.Request) -> web.Response:
     return web.Response(body=path.read_bytes(), content_type=STATIC_TYPES[path.suffix])
 
 
-def start_live_server(feed, bind: str | None, *, allow_stop: bool = False) -> tuple[WebServer, LiveHub]:
+def start_live_server(feed, bind: str | None, *, allow_stop: bool = False,
+                      model: bool = True) -> tuple[WebServer, LiveHub]:
     """Serve ``feed`` on ``bind`` (ADDR:PORT; default 127.0.0.1, a free port); ValueError/OSError: one line."""
     from dyno.web.server import parse_bind
 
     host, port = parse_bind(bind)
-    hub = LiveHub(feed, allow_stop=allow_stop)
+    from dyno.web.model_curve import ModelCurve
+
+    hub = LiveHub(feed, allow_stop=allow_stop, model=ModelCurve() if model else None)
     server = WebServer(hub.make_app, host, port)
     server.start()
     return server, hub

@@ -84,9 +84,23 @@ function plots() {
   // the axis fits the points and their CI; a U95 bar wider than that is cut at the frame
   const lo = Math.min(...pts.map(p => pct(p.efficiency - (p.efficiency_ci95 || 0)))), hi = Math.max(...pts.map(p => pct(p.efficiency + (p.efficiency_ci95 || 0))));
   const yRange = pts.length ? [Math.max(0, lo - 5), Math.min(110, hi + 5)] : [0, 100];
-  DynoPlot.draw($("plot-eff"), [{ kind: "points", x: pts.map(p => p.ratio), y: pts.map(p => pct(p.efficiency)),
+  const series = [{ kind: "points", x: pts.map(p => p.ratio), y: pts.map(p => pct(p.efficiency)),
     err95: pts.map(p => pct(p.efficiency_ci95)), u95: pts.map(p => pct(p.efficiency_u95)), color: "#81c784",
-    label: "points: eff % (thick: CI95, thin: U95)" }], { yRange });
+    label: "points: eff % (thick: CI95, thin: U95)" }];
+  // the belt model at each point: the full model where solved (a line), the closed form's creep-only upper
+  // bound (grey dots) where not yet
+  const m = last && last.model, mp = (m && m.points || []).filter(p => p.ratio !== null && p.efficiency !== null);
+  const full = mp.filter(p => p.tier === "full").sort((a, b) => a.ratio - b.ratio);
+  const bound = mp.filter(p => p.tier !== "full");
+  if (full.length) series.push({ x: full.map(p => p.ratio), y: full.map(p => pct(p.efficiency)), color: "#ffb74d", label: "model (full)" });
+  if (bound.length) series.push({ kind: "points", x: bound.map(p => p.ratio), y: bound.map(p => pct(p.efficiency)), color: "#78909c", label: "model bound (closed form)" });
+  $("model-status").textContent = !m ? "" : (m.error ? "belt model: " + m.error :
+    `belt model: full at ${m.full}/${m.of} points` + (m.pending ? `, ${m.pending} solving` : "") +
+    (m.no_steady_belt ? `, ${m.no_steady_belt} with no steady belt at the tune's clamp` : "") +
+    " · grey: closed form, creep loss only, an upper bound");
+  const ys = series.slice(1).flatMap(s => s.y).filter(v => v !== null);
+  const yr = ys.length ? [Math.min(yRange[0], Math.min(...ys) - 2), Math.min(110, Math.max(yRange[1], Math.max(...ys) + 2))] : yRange;
+  DynoPlot.draw($("plot-eff"), series, { yRange: yr });
 }
 
 function link(text, down) { const l = $("link"); l.textContent = text; l.className = "link" + (down ? " down" : ""); }
