@@ -32,7 +32,8 @@ POINT_UNITS = {
     "n_primary_edges": "", "n_secondary_edges": "", "n_adc": "", "n_adc_error": "", "valid": "",
     "efficiency_true": "",
 }
-STREAM_UNITS = {"t_us": "us", "adc_code": "counts", "adc_status": "", "device_rpm": "rpm"}
+STREAM_UNITS = {"t_us": "us", "adc_code": "counts", "adc_status": "", "device_rpm": "rpm", "input_code": "counts",
+                "input_status": ""}
 
 
 class MissingExtra(Exception):
@@ -57,6 +58,10 @@ def stream_arrays(streams, protocol: str | None) -> dict:
            "adc_t_us": np.frombuffer(streams.adc_t, dtype=np.int64).copy(),
            "adc_code": np.frombuffer(streams.adc_code, dtype=np.uint16).copy(),
            "adc_status": np.frombuffer(streams.adc_status, dtype=np.uint8).copy()}
+    if len(getattr(streams, "input_t", ())):  # the engine-side input torque converter, where the rig has one
+        out["input_t_us"] = np.frombuffer(streams.input_t, dtype=np.int64).copy()
+        out["input_code"] = np.frombuffer(streams.input_code, dtype=np.uint16).copy()
+        out["input_status"] = np.frombuffer(streams.input_status, dtype=np.uint8).copy()
     if protocol == "v0":  # the v0 firmware reports its own rpm with each Hall edge
         out["primary_device_rpm"] = np.frombuffer(streams.edge_rpm[1], dtype=np.uint16).copy()
         out["secondary_device_rpm"] = np.frombuffer(streams.edge_rpm[2], dtype=np.uint16).copy()
@@ -78,9 +83,12 @@ def write_parquet(run, points: list[dict], path) -> str:
         raise MissingExtra("parquet", "pyarrow") from None
     s = stream_arrays(run.streams, run.meta.get("protocol"))
     n1, n2, na, npt = len(s["primary_edges"]), len(s["secondary_edges"]), len(s["adc_t_us"]), len(points)
-    n = n1 + n2 + na + npt
-    record = np.array(["primary_edge"] * n1 + ["secondary_edge"] * n2 + ["adc"] * na + ["point"] * npt, dtype=object)
+    ni = len(s.get("input_t_us", ()))
+    n = n1 + n2 + na + ni + npt
+    record = np.array(["primary_edge"] * n1 + ["secondary_edge"] * n2 + ["adc"] * na + ["input"] * ni
+                      + ["point"] * npt, dtype=object)
     t_us = np.concatenate([s["primary_edges"], s["secondary_edges"], s["adc_t_us"],
+                           s.get("input_t_us", np.zeros(0, dtype=np.int64)),
                            np.array([int(p["t_start_us"]) for p in points], dtype=np.int64)])
     nulls = np.ones(n, dtype=bool)
 
@@ -97,7 +105,10 @@ def write_parquet(run, points: list[dict], path) -> str:
     if "primary_device_rpm" in s:
         cols["device_rpm"] = column(np.concatenate([s["primary_device_rpm"], s["secondary_device_rpm"]]).astype(np.int32),
                                     0, np.int32)
-    start = n1 + n2 + na
+    if ni:  # the input converter's codes and status (rows "input")
+        cols["input_code"] = column(s["input_code"].astype(np.int32), n1 + n2 + na, np.int32)
+        cols["input_status"] = column(s["input_status"].astype(np.int16), n1 + n2 + na, np.int16)
+    start = n1 + n2 + na + ni
     for k in POINT_UNITS:
         if k == "t_start_us":
             continue  # it is the point row's t_us
@@ -126,6 +137,9 @@ def read_parquet(path) -> dict:
            "adc_t_us": cols["t_us"][record == "adc"], "adc_code": cols["adc_code"][record == "adc"],
            "adc_status": cols["adc_status"][record == "adc"], "units": units,
            "metadata": {k.decode(): v.decode() for k, v in (table.schema.metadata or {}).items()}}
+    if "input_code" in cols:
+        out.update(input_t_us=cols["t_us"][record == "input"], input_code=cols["input_code"][record == "input"],
+                   input_status=cols["input_status"][record == "input"])
     is_pt = record == "point"
     pts = {k[6:]: cols[k][is_pt] for k in cols if k.startswith("point_")}
     pts["t_start_us"] = cols["t_us"][is_pt]
@@ -163,6 +177,14 @@ def write_mdf4(run, points: list[dict], path) -> str:
                                     "calibration" if conv else "AD7171 code"}),
         (s["adc_status"], {"name": "adc_status", "unit": "", "comment": "AD7171 status bits"}),
     ], "strain-gauge ADC (raw events)")
+    if "input_t_us" in s:
+        group("input", s["input_t_us"], [
+            (s["input_t_us"], {"name": "input_t_us", "unit": "us", "comment": "conversion time, unwrapped device clock"}),
+            (s["input_code"], {"name": "input_code", "unit": "counts",
+                               "comment": "engine-side input torque converter (second AD7171) code; its calibration: "
+                                          "the run's meta.json input_torque"}),
+            (s["input_status"], {"name": "input_status", "unit": "", "comment": "AD7171 status bits"}),
+        ], "engine-side input torque converter (raw events)")
     t0 = np.array([int(p["t_start_us"]) for p in points], dtype=np.int64)
     sigs = []
     for k, unit in POINT_UNITS.items():
@@ -192,5 +214,8 @@ def read_mdf4(path) -> dict:
             out["units"][f"point_{k}"] = sig.unit
         for name in ("primary_edge_t_us", "secondary_edge_t_us", "adc_t_us", "adc_code", "adc_status"):
             out["units"][name] = get(name).unit
+        if "input_code" in mdf.channels_db:
+            for name in ("input_t_us", "input_code", "input_status"):
+                out[name] = get(name).samples
         out["points"] = [{k: v[i] for k, v in pts.items()} for i in range(len(pts["index"]))]
     return out
