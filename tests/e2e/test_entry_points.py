@@ -281,7 +281,10 @@ def test_ctrl_c_outside_a_test_is_one_line_and_130(work):
     # (--no-cache and a cache of its own: a sweep read from an earlier run's cache could end before the signal)
     proc = subprocess.Popen([sys.executable, "-m", "dyno", "model", "sweep", "--points", "60", "--no-cache"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=work,
-                            env=_env(DYNO_MODEL_CACHE=str(work / "model-cache")))
+                            env=_env(DYNO_MODEL_CACHE=str(work / "model-cache")),
+                            # as a terminal's foreground job has it: a suite started in the background (`... &`
+                            # from a script) runs with SIGINT ignored, and a child inherits that
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         first = proc.stderr.readline()  # the sweep's start line: well inside the command (it solves next)
         assert first.startswith("dyno model sweep: 60 ratios"), first
