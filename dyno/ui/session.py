@@ -187,8 +187,12 @@ class LiveSession(RearmMixin):
             self.loop.call_later(0.05, self._signal_to_app, signum)
 
     def _signal_to_app(self, signum: int) -> None:
-        if self.on_signal is not None and not self.closed:
+        if self.closed:
+            return
+        if self.on_signal is not None:
             self.on_signal(128 + signum)
+        else:  # still not hooked: ask again (the abort is already done; only the app's exit waits)
+            self.loop.call_later(0.05, self._signal_to_app, signum)
 
     def _restore_signals(self) -> None:
         import signal
