@@ -6,7 +6,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.analysis import calibration as cal
 from dyno.analysis.calibration import (
     HISTORY_COLUMNS, CalibrationEntry, CalibrationRejected, NoCalibration, append_entry,
     fit_calibration, latest, load_history, load_legacy_cal_values, torque_from_mass,
@@ -192,7 +191,7 @@ def test_analysis_append_is_atomic_when_replace_fails(tmp_path, monkeypatch):
     def boom(src, dst):
         raise OSError("disk pulled")
 
-    monkeypatch.setattr(cal.os, "replace", boom)
+    monkeypatch.setattr(os, "replace", boom)  # (dyno.fileio.write_atomic replaces)
     with pytest.raises(OSError, match="disk pulled"):
         append_entry(p, _entry())
     assert p.read_bytes() == before
