@@ -48,15 +48,21 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         def sim_now() -> float:
             return (loop.time() - t0) * speed
 
-        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **(fixture_kw or {}))
+        # the simulated rig has the engine-side channel when rig.toml declares it (as in a run)
+        fixture_kw = {"input_fitted": getattr(rig_cfg, "input_torque", None) is not None, **(fixture_kw or {})}
+        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **fixture_kw)
         # each real-time poll spans `speed` x more fixture time: drain and buffer as much more
         poller.max_burst = max(8, math.ceil(8 * speed))
-        fixture.firmware.ring_capacity = max(64, math.ceil(64 * speed))
+        per_poll = 128 if fixture.fixture.input_fitted else 64  # two converters: twice the events
+        fixture.firmware.ring_capacity = max(per_poll, math.ceil(per_poll * speed))
         ctx = CalibrationContext(poller, sim=fixture)
     else:
         hw = open_rig(rig_cfg)
         try:
-            poller = Poller(make_reader(rig_cfg.protocol, hw.transport), poll_hz=rig_cfg.poll_hz, blocking_io=True)
+            reader = make_reader(rig_cfg.protocol, hw.transport)
+            if getattr(rig_cfg, "input_torque", None) is not None and getattr(reader, "version", None) == 2:
+                reader.want_input = True  # ask the firmware for the engine-side converter, as a run does
+            poller = Poller(reader, poll_hz=rig_cfg.poll_hz, blocking_io=True)
         except BaseException:
             hw.__exit__(None, None, None)
             raise

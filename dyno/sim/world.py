@@ -147,3 +147,15 @@ def _with_input(w: World, p, seed: int) -> World:
     return dataclasses.replace(w, input_gain_counts_per_nm=p.input_gain_counts_per_nm * (1.0 + gain_drift),
                                input_offset_counts=offset, input_gain_drift_rel=gain_drift,
                                cradle_bearing_loss_nm=bearing)
+
+
+def input_channel_truth(p, seed: int) -> tuple[float, float, float]:
+    """This seed's input torque channel as a run's world draws it (:func:`realise`): the cradle load cell's
+    true gain (counts per N m of crank torque), offset (counts) and the bearings' friction (N m).
+
+    For the calibration fixture (``dyno calibrate --sim --channel input``) and the tests that judge a
+    calibration against the physics; from the simulator's parameters ``p`` alone, never the host's history.
+    """
+    w = _with_input(World(math.nan, math.nan, math.nan, math.nan), p, int(seed if p.world_seed is None
+                                                                           else p.world_seed))
+    return w.input_gain_counts_per_nm, w.input_offset_counts, w.cradle_bearing_loss_nm

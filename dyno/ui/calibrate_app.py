@@ -29,6 +29,10 @@ from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, EstopSafeInput, b
 HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"
 DEFAULT_RADIUS_M = 0.15
 DEFAULT_MASSES = "5,10,20,30,40"
+# the engine-side input channel (issue 27): masses on the cradle's arm (hardware/README.md: 0…10 kg on 0.2 m)
+DEFAULT_INPUT_ARM_M = 0.2
+DEFAULT_INPUT_MASSES = "2,4,6,8,10"
+STEPS_SHOWN = 14  # rows of the steps table (a window round the current step when there are more)
 
 CAL_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
@@ -59,6 +63,9 @@ class CalibrateOptions:
     masses: str = DEFAULT_MASSES
     fixture_kw: dict | None = None  # sim only: CalibrationFixture options (tests)
     drills: list = None  # dyno.drills.Drill (sim only), from the first frame
+    channel: str = "output"  # "output" (brake side) | "input" (engine cradle, issue 27)
+    repeats: int = 1  # passes of the load sequence; from 2 on the slope's reproducibility is shown
+    in_force_path: Path | None = None  # the channel's calibration in force when history_path is new
 
 
 class CalibrateApp(DynoApp):
@@ -86,12 +93,14 @@ class CalibrateApp(DynoApp):
 
     def compose(self) -> ComposeResult:
         mode = f"SIM x{self.opts.speed:g} seed {self.opts.seed}" if self.opts.sim else "RIG"
-        yield Static(f" dyno calibrate │ {mode} │ history: {self.opts.history_path}", id="title")
+        yield Static(f" dyno calibrate │ {mode} │ {self.opts.channel} │ history: {self.opts.history_path}",
+                     id="title")
         yield Static(f" E-STOP: {ESTOP_KEYS} (always active)", id="estop")
         yield Static("", id="phase")
         yield Static("", id="instruction")
         with Horizontal(id="setup"):
-            yield EstopSafeInput(str(self.opts.radius_m), placeholder="rope radius m", id="radius",
+            yield EstopSafeInput(str(self.opts.radius_m), id="radius",
+                                 placeholder="arm length m" if self.opts.channel == "input" else "rope radius m",
                                  restrict=r"[0-9.eE+-]*")
             yield EstopSafeInput(self.opts.masses, placeholder="masses kg, comma-separated", id="masses",
                                  restrict=r"[0-9.,eE+-]*")
@@ -109,14 +118,18 @@ class CalibrateApp(DynoApp):
         from dyno.app import DEFAULT_CALIBRATION
         from dyno.errors import DynoError
 
+        history = []
+        hist_path = self.opts.history_path
         try:
-            self.calibration_in_force = latest(load_history(
-                self.opts.history_path if self.opts.history_path and Path(self.opts.history_path).exists()
-                else DEFAULT_CALIBRATION))
+            if hist_path and Path(hist_path).exists():
+                history = load_history(hist_path)
+            self.calibration_in_force = latest(history or load_history(self.opts.in_force_path
+                                                                       or DEFAULT_CALIBRATION))
         except DynoError:
             self.calibration_in_force = None  # first calibration: nothing to compare the tare with
         self.wizard = CalibrationWizard(n_samples=self.opts.n_samples, settle_samples=self.opts.settle_samples,
-                                        previous=self.calibration_in_force)
+                                        previous=self.calibration_in_force, channel=self.opts.channel,
+                                        repeats=self.opts.repeats, history=history)
         try:
             self._start_acquisition()
         except DynoError as exc:
@@ -135,7 +148,7 @@ class CalibrateApp(DynoApp):
                                          drills=self.opts.drills, on_trip=self._on_trip)
         self.rig = self.cal_ctx.sim or self.cal_ctx.hw
         self.poller = self.cal_ctx.poller
-        self.feeder = WizardFeeder(self.wizard)
+        self.feeder = WizardFeeder(self.wizard, reader=self.poller.reader)
         self.feeder.on_step_done = self._step_done
         self.poller.listeners.append(self.feeder)
         self._poll_task = asyncio.create_task(self.poller.run())
@@ -187,7 +200,10 @@ class CalibrateApp(DynoApp):
         step = w.current
         phase = w.phase.value.upper().replace("_", " ")
         if step is not None:
-            phase += f"  step {w.index + 1}/{len(w.steps)}" + ("  COLLECTING" if w.collecting else "")
+            phase += f"  step {w.index + 1}/{len(w.steps)}"
+            if w.repeats > 1 and step.direction != 0:
+                phase += f"  repeat {step.repeat + 1}/{w.repeats}"
+            phase += "  COLLECTING" if w.collecting else ""
         self.query_one("#phase", Static).update(" " + phase)
         self.query_one("#instruction", Static).update(" " + w.instruction())
         self.query_one("#setup").display = w.phase is Phase.SETUP
@@ -205,7 +221,11 @@ class CalibrateApp(DynoApp):
     def _steps_text(self) -> Text:
         w = self.wizard
         t = Text("  # pass     kg    N·m    mean     sd   n\n", style="bold")
-        for i, s in enumerate(w.steps):
+        first = 0
+        if len(w.steps) > STEPS_SHOWN:  # a window round the current step (the last ones in review)
+            at = w.index if w.phase in COLLECTING_PHASES else len(w.steps)
+            first = max(0, min(at - STEPS_SHOWN // 2, len(w.steps) - STEPS_SHOWN))
+        for i, s in enumerate(w.steps[first:first + STEPS_SHOWN], start=first):
             mark = ">" if i == w.index and w.phase in COLLECTING_PHASES else " "
             pas = {1: "load", -1: "unld", 0: "tare"}[s.direction]
             mean = f"{s.mean_counts:7.1f}" if s.n else "      —"
@@ -279,8 +299,9 @@ class CalibrateApp(DynoApp):
         for inp in self.query(Input):
             inp.disabled = True  # nor can a dialog closing hand them the focus back: keys drive the wizard now
         self.set_focus(None)
-        self.say(f"{len(w.steps)} steps planned: tare, {len(w.masses_kg)} loading, "
-                 f"{len(w.masses_kg) - 1} unloading, tare")
+        reps = f"{w.repeats} x " if w.repeats > 1 else ""
+        self.say(f"{len(w.steps)} steps planned: tare, {reps}({len(w.masses_kg)} loading, "
+                 f"{len(w.masses_kg) - 1} unloading), tare")
         self.refresh_view()
         return True
 
@@ -306,7 +327,7 @@ class CalibrateApp(DynoApp):
             return
         s = w.current
         if self.opts.sim:
-            self.rig.hang(s.mass_kg, w.radius_m)  # the simulated operator hangs the load now
+            self.rig.hang(s.mass_kg, w.radius_m, w.channel)  # the simulated operator hangs the load now
         w.begin_step()
         self.say(f"collecting {w.settle_samples} settling + {w.n_samples} samples")
 

@@ -16,9 +16,18 @@ dropped (the rope still swinging, the lock-in filter settling), then
 ``n_samples`` are kept.  Conversions with the AD7171 error bit or at a rail
 are refused and counted, never averaged, as in a test point.
 
-The fit is :func:`dyno.analysis.calibration.fit_calibration` on the raw
-samples per step (so its standard errors come from the step-to-step
-scatter); the tare readings are a drift check, not part of the line.
+The engine-side input channel (issue 27, ``channel="input"``) is calibrated
+the same way with the engine off and its cradle free: masses on the cradle's
+arm at a measured length ``L``, ``T = m g L`` of crank torque (no gear).
+
+``repeats`` applies the whole load sequence (loading, then unloading) that
+many times between the two tares: the line is fitted through every step
+(:func:`dyno.analysis.calibration.fit_repeats`, on the raw samples per step,
+so its standard errors come from the step-to-step scatter), each repeat on
+its own too, and the spread of the repeats' slopes is the calibration's
+reproducibility — shown against the 0.4 % that brings the map-free
+efficiency's U95 to about 2 pp (``REPRODUCIBILITY_TARGET_REL``).  The tare
+readings are a drift check, not part of the line.
 Nothing is written unless :meth:`accept` is called with a fit that passed
 every check, and then through the atomic :func:`append_entry`.
 """
@@ -33,11 +42,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dyno.analysis.calibration import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
-                                       R2_MIN_DEFAULT, CalibrationRejected, append_entry, fit_calibration,
-                                       torque_from_mass)
+                                       R2_MIN_DEFAULT, REPRODUCIBILITY_TARGET_REL, CalibrationRejected,
+                                       append_entry, fit_repeats, torque_from_mass)
 
 ADC_STATUS_ERR = 0x20
 ADC_RAILS = (0, 0xFFFF)
+CHANNELS = ("output", "input")  # the brake-side torque channel; the engine-side one (issue 27)
+MAX_REPEATS = 20
 # The zero drift refuses only beyond this many standard errors (a 3-sigma event is 1 in 370 by noise).
 DRIFT_SIGNIFICANCE = 3.0
 
@@ -64,6 +75,7 @@ class Step:
     mass_kg: float
     torque_nm: float
     direction: int  # +1 loading, -1 unloading, 0 tare
+    repeat: int = 0  # which pass of the load sequence (0-based; tares 0)
     samples: list = field(default_factory=list)
     dropped_settling: int = 0
     refused: int = 0  # error bit or rail
@@ -146,14 +158,34 @@ class CalibrationWizard:
         review says so (:meth:`zero_check_inconclusive`).
     previous : CalibrationEntry, optional
         The calibration in force: the tare before is compared with its intercept.
+    channel : "output" or "input"
+        The brake-side channel (torque at the secondary through the 32:61 gear) or the engine-side one
+        (crank torque on the cradle's arm: gear ratio 1).
+    repeats : int
+        Passes of the load sequence (loading and unloading) between the tares; from 2 on, the slope's
+        reproducibility across them is shown.
+    history : list of CalibrationEntry, optional
+        The channel's history so far: the review shows the calibration term it will give with this
+        entry appended (:func:`dyno.analysis.systematic.calibration_rel_u`).
     """
 
     def __init__(self, *, n_samples: int = 500, settle_samples: int = 125, r2_min: float = R2_MIN_DEFAULT,
                  min_distinct_loads: int = 3, zero_drift_max_nm: float = 0.25,
                  gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
-                 g_m_per_s2: float = G_STANDARD_M_PER_S2, previous=None) -> None:
+                 g_m_per_s2: float = G_STANDARD_M_PER_S2, previous=None, channel: str = "output",
+                 repeats: int = 1, history=None) -> None:
         if n_samples < 2:
             raise ValueError("n_samples must be >= 2")
+        if channel not in CHANNELS:
+            raise ValueError(f"channel must be one of {CHANNELS}, got {channel!r}")
+        if not 1 <= int(repeats) <= MAX_REPEATS:
+            raise ValueError(f"repeats must be 1..{MAX_REPEATS}")
+        self.channel = channel
+        self.repeats = int(repeats)
+        self.history = list(history or [])
+        self.repro = None  # dyno.analysis.calibration.Reproducibility after the fit
+        if channel == "input":
+            gear_ratio_brake_per_secondary = 1.0  # the loads hang on the cradle's own arm: crank torque
         self.n_samples = int(n_samples)
         self.settle_samples = int(settle_samples)
         self.r2_min = r2_min
@@ -172,6 +204,7 @@ class CalibrationWizard:
         self.rejection: str | None = None
         self.entry = None
         self.step_error: str | None = None  # why the current step stopped without completing
+        self.generation = 0  # +1 at every begin_step / redo_step (the feeder's cue to catch up first)
 
     # --- setup --------------------------------------------------------------------------
     aborted: tuple[str, str] | None = None  # (cause, detail) once a fault ended the calibration
@@ -184,7 +217,8 @@ class CalibrationWizard:
         except (TypeError, ValueError):
             radius_m = math.nan
         if not (math.isfinite(radius_m) and 0.01 <= radius_m <= 1.0):
-            problems.append(f"rope radius must be between 0.01 and 1 m, got {radius_m}")
+            what = "arm length" if self.channel == "input" else "rope radius"
+            problems.append(f"{what} must be between 0.01 and 1 m, got {radius_m}")
         masses = [float(m) for m in masses_kg]
         problems += check_loads(masses, min_distinct=self.min_distinct_loads)
         if not problems:
@@ -202,10 +236,11 @@ class CalibrationWizard:
         up = self.masses_kg
         # Unloading revisits every load below the top one: the pairs give the hysteresis.
         down = list(reversed(up[:-1]))
-        self.steps = ([Step(Phase.TARE_BEFORE, 0.0, 0.0, 0)]
-                      + [Step(Phase.LOADING, m, self._torque(m), +1) for m in up]
-                      + [Step(Phase.UNLOADING, m, self._torque(m), -1) for m in down]
-                      + [Step(Phase.TARE_AFTER, 0.0, 0.0, 0)])
+        self.steps = [Step(Phase.TARE_BEFORE, 0.0, 0.0, 0)]
+        for k in range(self.repeats):  # each repeat: the whole sequence again, loading then unloading
+            self.steps += ([Step(Phase.LOADING, m, self._torque(m), +1, k) for m in up]
+                           + [Step(Phase.UNLOADING, m, self._torque(m), -1, k) for m in down])
+        self.steps.append(Step(Phase.TARE_AFTER, 0.0, 0.0, 0))
 
     def start(self) -> None:
         if not self.steps:
@@ -221,18 +256,26 @@ class CalibrationWizard:
     def instruction(self) -> str:
         """What the operator should do now."""
         s = self.current
+        inp = self.channel == "input"
         if self.phase is Phase.SETUP:
-            return "Enter the rope radius and the masses, then start."
+            return ("Enter the cradle arm's length and the masses, then start." if inp
+                    else "Enter the rope radius and the masses, then start.")
         if s is not None:
             where = f"step {self.index + 1}/{len(self.steps)}"
             if s.direction == 0:
                 which = "before" if s.phase is Phase.TARE_BEFORE else "after"
-                todo = ("Lock the secondary. Rope slack, NO mass hanging" if which == "before"
-                        else "Take ALL masses and the rope off")
+                if inp:
+                    todo = ("Engine OFF, cradle free, NO mass on the arm" if which == "before"
+                            else "Take ALL masses off the arm")
+                else:
+                    todo = ("Lock the secondary. Rope slack, NO mass hanging" if which == "before"
+                            else "Take ALL masses and the rope off")
                 return f"{where}: zero check {which}. {todo}; then collect."
             verb = "Add masses to" if s.direction > 0 else "Remove masses down to"
-            return (f"{where} ({s.phase.value}): {verb} a total of {s.mass_kg:g} kg "
-                    f"(T = {s.torque_nm:.2f} N·m at the secondary); wait until it hangs still, then collect.")
+            rep = f", repeat {s.repeat + 1}/{self.repeats}" if self.repeats > 1 else ""
+            at = "crank torque on the cradle" if inp else "at the secondary"
+            return (f"{where} ({s.phase.value}{rep}): {verb} a total of {s.mass_kg:g} kg "
+                    f"(T = {s.torque_nm:.2f} N·m {at}); wait until it hangs still, then collect.")
         if self.phase is Phase.REVIEW:
             return "Review the fit: accept to append it to the history, or reject."
         if self.phase is Phase.ACCEPTED:
@@ -248,6 +291,7 @@ class CalibrationWizard:
         s.dropped_settling = s.refused = 0
         self.step_error = None
         self.collecting = True
+        self.generation += 1
         return s
 
     def add_samples(self, codes, statuses=None) -> bool:
@@ -293,6 +337,7 @@ class CalibrationWizard:
             s.samples.clear()
             s.dropped_settling = s.refused = 0
             self.collecting = False
+            self.generation += 1
 
     def _advance(self) -> None:
         self.index += 1
@@ -346,11 +391,11 @@ class CalibrationWizard:
     def _fit(self) -> None:
         steps = self.load_steps()
         try:
-            self.fit = fit_calibration([s.torque_nm for s in steps], [np.asarray(s.samples) for s in steps],
-                                       direction=[s.direction for s in steps], r2_min=self.r2_min,
-                                       min_distinct_loads=self.min_distinct_loads)
+            self.fit, self.repro = fit_repeats([s.torque_nm for s in steps], [np.asarray(s.samples) for s in steps],
+                                               [s.repeat for s in steps], direction=[s.direction for s in steps],
+                                               r2_min=self.r2_min, min_distinct_loads=self.min_distinct_loads)
         except CalibrationRejected as exc:
-            self.fit = None
+            self.fit = self.repro = None
             self.rejection = str(exc)
             return
         drift_nm = self.zero_drift_counts() / self.fit.slope_counts_per_nm
@@ -383,6 +428,7 @@ class CalibrationWizard:
                       f"± {self.zero_drift_se_counts() / abs(f.slope_counts_per_nm):.3f} N·m"]
             if self.zero_check_inconclusive():
                 lines.append(f"zero check inconclusive: tares too short for {self.zero_drift_max_nm} N·m")
+            lines += self.reproducibility_lines()
         prev = self.previous_zero_offset_nm()
         if prev is not None:
             lines.append(f"tare vs cal. in force {prev:+.3f} N·m")
@@ -390,15 +436,46 @@ class CalibrationWizard:
             lines.append(f"REFUSED: {self.rejection}")
         return lines
 
+    def reproducibility_lines(self) -> list[str]:
+        """The slope's spread across the repeats against the target, and the history's term after this."""
+        r, target = self.repro, REPRODUCIBILITY_TARGET_REL
+        if r is None:
+            return []
+        if r.n < 2:
+            out = ["reproducibility: 1 repeat (--repeats 3)"]
+        else:
+            out = [f"reproducibility {100 * r.rel_sd:.2f} % ({r.n} repeats)",
+                   f"  {'meets' if r.meets(target) else 'ABOVE'} the {100 * target:.1f} % for U95 <= 2 pp"]
+        term = self.history_term()
+        if term is not None and term[1] >= 2:  # the term the runs will use: the history's spread
+            out.append(f"history term {100 * term[0]:.2f} % ({term[1]} entries)")
+        elif term is not None:
+            out.append("history: 1 entry, no spread yet")
+        return out
+
+    def history_term(self) -> tuple[float, int] | None:
+        """The channel's calibration term (relative) with this fit appended to its history, and the
+        entries behind it (the efficiency's ``u_cal``: the history's slope spread and the fit's own)."""
+        if self.fit is None:
+            return None
+        from dyno.analysis.systematic import calibration_rel_u
+
+        entry = self.fit.to_entry("2000-01-01", gear_ratio_brake_per_secondary=self.gear_ratio)
+        hist = self.history + [entry]
+        return calibration_rel_u(hist, entry), len(hist)
+
     # --- decision -------------------------------------------------------------------------------
     def accept(self, history_path, *, date: str | None = None, note: str = ""):
         """Append the fit to the history (atomically); only for a fit that passed every check."""
         if not self.acceptable:
             raise CalibrationRejected(self.rejection or f"nothing to accept in phase {self.phase.value}")
         date = date or _dt.datetime.now().replace(microsecond=0).isoformat()
+        if not note:
+            note = f"dyno calibrate --channel {self.channel}, {len(self.load_steps())} steps"
+            if self.repro is not None and self.repro.n > 1:
+                note += f", {self.repro.n} repeats, reproducibility {100 * self.repro.rel_sd:.3f} %"
         self.entry = self.fit.to_entry(date, lever_arm_m=self.radius_m,
-                                       gear_ratio_brake_per_secondary=self.gear_ratio,
-                                       note=note or f"dyno calibrate, {len(self.load_steps())} steps")
+                                       gear_ratio_brake_per_secondary=self.gear_ratio, note=note)
         append_entry(history_path, self.entry)
         self.phase = Phase.ACCEPTED
         return self.entry
@@ -415,19 +492,38 @@ class CalibrationWizard:
 
 
 class WizardFeeder:
-    """Poller listener: hands the ADC conversions to the wizard while it collects."""
+    """Poller listener: hands the ADC conversions to the wizard while it collects.
 
-    def __init__(self, wizard: CalibrationWizard, adc_channel: int = 3) -> None:
+    With the poller's ``reader``, a step's conversions start only once the host has caught up with the
+    device (a frame without MORE after the step began): conversions still queued in the firmware's ring
+    from before the load was hung are not the load's, and a backlog longer than the settling samples
+    (the simulated fixture at ``--speed N`` buffers N times the Nano's ring; a busy host) would
+    otherwise be averaged into the step (seen: one step 4 % short, R² 0.9999, non-linearity 1.7 %FS).
+    """
+
+    def __init__(self, wizard: CalibrationWizard, adc_channel: int | None = None, reader=None) -> None:
         self.wizard = wizard
+        self.reader = reader
+        self._generation = wizard.generation
+        self._catching_up = False
+        if adc_channel is None:  # the wire's channel of the wizard's converter (v1 CH_ADC; v2 CH_INPUT)
+            adc_channel = 4 if wizard.channel == "input" else 3
         self.adc_channel = adc_channel
         self.on_step_done = None  # callable() after a step completes
         self.last_codes: list[int] = []  # the latest conversions, for the live reading
 
     def __call__(self, events, now_s: float) -> None:
         codes = [e.code for e in events if e.channel == self.adc_channel]
+        if codes:
+            self.last_codes = (self.last_codes + codes)[-250:]
+        if self.wizard.generation != self._generation:  # a step (re)started since the last poll
+            self._generation = self.wizard.generation
+            self._catching_up = self.reader is not None
+        if self._catching_up:
+            self._catching_up = bool(getattr(self.reader, "more", False))
+            return  # these conversions were queued before the step began
         if not codes:
             return
-        self.last_codes = (self.last_codes + codes)[-250:]
         if self.wizard.collecting:
             statuses = [e.status for e in events if e.channel == self.adc_channel]
             if self.wizard.add_samples(codes, statuses) and self.on_step_done is not None:
@@ -447,8 +543,10 @@ async def run_sim_calibration(wizard: CalibrationWizard, *, seed: int = 0, settl
 
     loop = asyncio.get_running_loop()
     t0 = loop.time()
+    if wizard.channel == "input":
+        fixture_kw = {"input_fitted": True, **fixture_kw}
     rig, poller = build_fixture_poller(lambda: loop.time() - t0, seed=seed, **fixture_kw)
-    feeder = WizardFeeder(wizard)
+    feeder = WizardFeeder(wizard, reader=poller.reader)
     poller.listeners.append(feeder)
     done = asyncio.Event()
     feeder.on_step_done = done.set
@@ -457,7 +555,7 @@ async def run_sim_calibration(wizard: CalibrationWizard, *, seed: int = 0, settl
         wizard.start()
         while wizard.phase in COLLECTING_PHASES:
             s = wizard.current
-            rig.hang(s.mass_kg, wizard.radius_m)
+            rig.hang(s.mass_kg, wizard.radius_m, wizard.channel)
             if settle_wait_s:
                 await asyncio.sleep(settle_wait_s)
             done.clear()

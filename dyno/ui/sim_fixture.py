@@ -17,6 +17,18 @@ The true ``gain`` and ``offset`` are hidden: drawn from the seed around the
 thesis values, so a wizard that reproduced the defaults instead of measuring
 would fail the test that compares its fit with :attr:`true_gain_counts_per_nm`
 and :attr:`true_offset_counts`.
+
+With ``input_fitted`` (rig.toml ``[input_torque]``) the fixture also has the
+engine-side channel (issue 27): the engine off on its free cradle, masses hung
+on the cradle's arm (``T = m g L``, crank torque), read by the second AD7171
+("input" events) with the gain and offset a run on the same seed draws
+(:func:`dyno.sim.world.input_channel_truth`: :attr:`true_input_gain_counts_per_nm`,
+:attr:`true_input_offset_counts`) and the converter's own rate, clock and
+noise (``RigParams.input_*``, as :mod:`dyno.sim.input_torque`).  Both channels
+convert throughout; a load hangs on one of them (``hang(..., channel=)``).
+Not modelled here: the cradle bearings' friction (a run's physics has it; on
+the fixture it would show as hysteresis), and any change between repeats but
+the noise (the rope or hook re-seated, temperature).
 """
 
 from __future__ import annotations
@@ -52,6 +64,11 @@ class FixtureParams:
         self.adc_noise_counts = params.adc_noise_counts
         self.adc_noise_counts_per_nm = params.adc_noise_counts_per_nm
         self.ambient_temp_c = params.ambient_temp_c
+        self.rig_params = params  # the simulator's own (the input channel's truth is drawn from them)
+        self.input_rate_hz = params.input_rate_hz
+        self.input_clock_error_frac = params.input_clock_error_frac
+        self.input_noise_counts = params.input_noise_counts
+        self.input_noise_counts_per_nm = params.input_noise_counts_per_nm
 
 
 class CalibrationFixture:
@@ -74,7 +91,7 @@ class CalibrationFixture:
 
     def __init__(self, params=None, seed: int = 0, *, gain_spread_frac: float = 0.03,
                  offset_spread_counts: float = 400.0, settle_tau_s: float = 0.15,
-                 nonlinearity_counts_per_nm2: float = 0.0,
+                 nonlinearity_counts_per_nm2: float = 0.0, input_fitted: bool = False,
                  gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
                  g_m_per_s2: float = G_STANDARD_M_PER_S2) -> None:
         self.params = FixtureParams(params)
@@ -99,15 +116,45 @@ class CalibrationFixture:
         self.adc_stuck = False
         self._adc_stuck_code: int | None = None
         self._rng_err = np.random.default_rng(np.random.SeedSequence([seed, 0xE77]))
+        # the engine-side input channel (issue 27): its truth as a run on this seed draws it
+        self.input_fitted = bool(input_fitted)
+        self.input_error_prob = 0.0  # drill adc-error:input
+        self.input_stuck = False     # drill adc-stuck:input
+        self._input_stuck_code: int | None = None
+        self._in_load = [0.0, 0.0, 0.0]  # target N m, from N m, change time s
+        if self.input_fitted:
+            from dyno.sim.world import input_channel_truth
+
+            self.true_input_gain_counts_per_nm, self.true_input_offset_counts, _ = input_channel_truth(
+                p.rig_params, seed)
+            ss = np.random.SeedSequence([seed, 0x1C])
+            s_noise, s_err, s_phase = ss.spawn(3)
+            self._in_rng = np.random.default_rng(s_noise)
+            self._in_rng_err = np.random.default_rng(s_err)
+            self._in_period_s = 1.0 / (p.input_rate_hz * (1.0 + p.input_clock_error_frac))
+            self._next_in_t = float(np.random.default_rng(s_phase).uniform(0.0, self._in_period_s))
 
     # --- the simulated operator -----------------------------------------------------
-    def hang(self, mass_kg: float, radius_m: float) -> float:
-        """Hang ``mass_kg`` on the rope at ``radius_m``; returns the true secondary torque (N·m)."""
+    def hang(self, mass_kg: float, radius_m: float, channel: str = "output") -> float:
+        """Hang ``mass_kg`` on the rope at ``radius_m`` (``channel="input"``: on the cradle's arm at
+        ``radius_m``); returns the true torque (N·m: secondary, or crank on the input channel)."""
+        if channel == "input":
+            if not self.input_fitted:
+                raise ValueError("the fixture has no input torque channel")
+            torque_nm = mass_kg * self.g_m_per_s2 * radius_m
+            self._in_load = [torque_nm, self._in_signal_nm(self.t_s), self.t_s]
+            return torque_nm
         torque_nm = mass_kg * self.g_m_per_s2 * radius_m * self.gear_ratio
         self._from_nm = self.signal_nm(self.t_s)
         self._target_nm = torque_nm
         self._change_t_s = self.t_s
         return torque_nm
+
+    def _in_signal_nm(self, t_s: float) -> float:
+        target, start, t0 = self._in_load
+        if self.settle_tau_s <= 0:
+            return target
+        return target + (start - target) * math.exp(-max(0.0, t_s - t0) / self.settle_tau_s)
 
     def signal_nm(self, t_s: float) -> float:
         if self.settle_tau_s <= 0:
@@ -138,8 +185,28 @@ class CalibrationFixture:
                 code = self._adc_stuck_code
             out.append(_Event("adc", ta, code, status))
             self._next_adc_t = ta + self._adc_period_s
+        if self.input_fitted:
+            self._input_events(t_end, out)
+            out.sort(key=lambda e: e.t_s)
         self.t_s = t_end
         return out
+
+    def _input_events(self, t_end: float, out: list) -> None:
+        """The second converter's conversions up to ``t_end`` (the noise model of :mod:`dyno.sim.input_torque`)."""
+        p = self.params
+        while self._next_in_t <= t_end:
+            ta = self._next_in_t
+            sig = self._in_signal_nm(ta)
+            sigma = p.input_noise_counts + p.input_noise_counts_per_nm * abs(sig)
+            code = (self.true_input_offset_counts + self.true_input_gain_counts_per_nm * sig
+                    + sigma * float(self._in_rng.standard_normal()))
+            code = min(65535, max(0, math.floor(code + 0.5)))
+            status = 0x20 if self.input_error_prob and self._in_rng_err.random() < self.input_error_prob else 0
+            if self.input_stuck:
+                self._input_stuck_code = code if self._input_stuck_code is None else self._input_stuck_code
+                code = self._input_stuck_code
+            out.append(_Event("input", ta, code, status))
+            self._next_in_t = ta + self._in_period_s
 
 
 class FixtureRig:
@@ -151,20 +218,24 @@ class FixtureRig:
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
         self.model = self.fixture  # what the drills act on (dyno.drills), as SimRig.model
-        self.firmware = EmulatedFirmware("v2")
+        self.firmware = EmulatedFirmware("v2", input_fitted=self.fixture.input_fitted)
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
 
-    def hang(self, mass_kg: float, radius_m: float) -> float:
+    def hang(self, mass_kg: float, radius_m: float, channel: str = "output") -> float:
         self.bus.sync()  # the load changes now, not at the last poll
-        return self.fixture.hang(mass_kg, radius_m)
+        return self.fixture.hang(mass_kg, radius_m, channel)
 
 
 def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, address: int = 0x03, **fixture_kw):
-    """(FixtureRig, Poller) over the simulated bus: what ``dyno calibrate --sim`` acquires from."""
+    """(FixtureRig, Poller) over the simulated bus: what ``dyno calibrate --sim`` acquires from.
+
+    ``input_fitted=True`` (a fixture option): the input channel too, asked for at boot as a run does."""
     from dyno.acquisition.poller import Poller
     from dyno.acquisition.reader import make_reader
     from dyno.transports.base import I2CTransport
 
     rig = FixtureRig(now_s, seed=seed, **fixture_kw)
     reader = make_reader("v2", I2CTransport(rig.bus, address))
+    if rig.fixture.input_fitted:
+        reader.want_input = True
     return rig, Poller(reader, poll_hz=poll_hz)
