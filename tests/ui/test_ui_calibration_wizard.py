@@ -134,3 +134,94 @@ def test_ui_wizard_zero_drift_is_judged_against_its_noise():
     # and no drift at all passes the long check quietly
     fine = _feed(500, 0.0)
     assert fine.acceptable and not fine.zero_check_inconclusive()
+
+
+# --- the engine-side input channel (issue 27) and repeats ------------------------------------------------------
+
+
+def _truth_of_a_run(seed: int) -> float:
+    """The input channel's true gain as a *run* on this seed draws its world (the simulator's physics, never
+    what the wizard prints): the fixture must calibrate the same load cell."""
+    from dyno.sim.physics import RigParams
+    from dyno.sim.world import realise
+
+    _, _, _, world = realise(RigParams(input_torque_fitted=True), seed, np.array([1800.0, 3800.0]),
+                             np.array([18.0, 16.0]))
+    return world.input_gain_counts_per_nm
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_ui_wizard_input_channel_recovers_the_simulators_true_gain(seed):
+    true_gain = _truth_of_a_run(seed)
+    wizard = CalibrationWizard(channel="input", repeats=3)
+    assert wizard.configure(0.2, [2, 4, 6, 8, 10]) == []
+    assert wizard.gear_ratio == 1.0 and wizard.steps[5].torque_nm == pytest.approx(10 * 9.80665 * 0.2)
+    rig = run(run_sim_calibration(wizard, seed=seed), virtual=True)
+    assert wizard.acceptable, wizard.rejection
+    f, rep = wizard.fit, wizard.repro
+    assert rig.fixture.true_input_gain_counts_per_nm == true_gain  # the fixture's load cell is the run's
+    # against the physics: within 0.1 % (noise alone: ~0.03 %), far inside the 1.6 % the seeds' gains scatter
+    assert abs(f.slope_counts_per_nm / true_gain - 1.0) < 0.001, (f.slope_counts_per_nm, true_gain)
+    assert abs(f.slope_counts_per_nm - true_gain) < 4 * f.slope_se_counts_per_nm
+    assert abs(f.intercept_counts - rig.fixture.true_input_offset_counts) < 4 * f.intercept_se_counts + 1.0
+    assert rep.n == 3 and rep.rel_sd < 0.004  # noise alone: the fixture re-seats nothing between repeats
+    lines = "\n".join(wizard.result_lines())
+    assert f"reproducibility {100 * rep.rel_sd:.2f} % (3 repeats)" in lines and "meets the 0.4 %" in lines
+
+
+def test_ui_wizard_input_channel_is_not_the_nominal_gain():
+    """Seed 3's load cell is 1.8 % below the nominal 600 counts/N·m (the shipped history's latest slope):
+    a wizard that echoed the host's calibration would be 60 standard errors off."""
+    assert abs(_truth_of_a_run(3) / 600.0 - 1.0) > 0.01
+
+
+def test_ui_wizard_repeats_plan_and_instructions():
+    w = CalibrationWizard(channel="input", repeats=3)
+    assert w.configure(0.2, [2, 4, 6]) == []
+    loads = w.load_steps()
+    assert len(w.steps) == 2 + 3 * 5 and len(loads) == 15
+    assert [s.repeat for s in loads] == [0] * 5 + [1] * 5 + [2] * 5
+    assert [s.mass_kg for s in loads[:5]] == [2, 4, 6, 4, 2] and [s.direction for s in loads[:5]] == [1, 1, 1, -1, -1]
+    w.start()
+    assert "Engine OFF" in w.instruction() and "cradle" in w.instruction()
+    w.index, w.phase = 7, Phase.LOADING
+    assert "repeat 2/3" in w.instruction() and "crank torque" in w.instruction()
+    with pytest.raises(ValueError):
+        CalibrationWizard(channel="brake")
+    with pytest.raises(ValueError):
+        CalibrationWizard(repeats=0)
+
+
+def test_ui_wizard_feeder_waits_for_the_host_to_catch_up():
+    """Conversions queued in the device before the load was hung are not the step's: the feeder counts from
+    the first poll after the device says it has nothing more queued."""
+    from types import SimpleNamespace
+
+    from dyno.ui.calibration_wizard import WizardFeeder
+
+    w = CalibrationWizard(n_samples=5, settle_samples=0)
+    assert w.configure(0.15, MASSES_KG) == []
+    w.start()
+    reader = SimpleNamespace(more=True)
+    feeder = WizardFeeder(w, reader=reader)
+    ev = [SimpleNamespace(channel=3, code=30000, status=0)] * 3
+    w.begin_step()
+    feeder(ev, 0.0)  # backlog, more queued
+    reader.more = False
+    feeder(ev, 0.0)  # the last of the backlog: caught up after it
+    assert w.current.n == 0
+    feeder(ev, 0.0)
+    assert w.current.n == 3
+
+
+def test_ui_wizard_history_term_after_append():
+    """The review shows the term the runs will use: the channel history's slope spread with this fit in."""
+    from pathlib import Path
+
+    shipped = load_history(Path(__file__).resolve().parents[2] / "calibration/input_torque_calibration.csv")
+    w = CalibrationWizard(channel="input", repeats=2, history=shipped)
+    assert w.configure(0.2, [2, 4, 6, 8, 10]) == []
+    run(run_sim_calibration(w, seed=3), virtual=True)
+    term, n = w.history_term()
+    assert n == 5 and 0.01 < term < 0.03  # the representative history scatters 1.6 %: one good entry keeps it
+    assert f"history term {100 * term:.2f} % (5 entries)" in "\n".join(w.result_lines())
