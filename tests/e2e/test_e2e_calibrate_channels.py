@@ -5,6 +5,7 @@ line, exit 2, nothing written."""
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import shutil
 import subprocess
@@ -119,3 +120,30 @@ def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(
     assert e.gear_ratio_brake_per_secondary == 1.0 and e.lever_arm_m == 0.2 and e.n_samples == 27 * 500
     assert "--channel input" in e.note and "3 repeats, reproducibility" in e.note
     assert not (tmp_path / "runs").exists()  # --history given: nothing else written
+
+
+def test_a_runs_zero_checks_see_the_input_channels_own_drift(tmp_path):
+    """The zero checks of a run cover both channels, each from its own converter: a simulated cradle load cell
+    whose zero creeps (0.6 N·m/min, the brake-side bridge left still) is flagged in ``torque_zero_input`` by
+    the amount the physics drifted between the two windows, and ``torque_zero`` is not."""
+    import dataclasses
+
+    from dyno.app import RunOptions, run_test
+    from dyno.sim.rig_params import RigParams
+    from tests.e2e.conftest import QUICK_PLAN
+
+    rate = 0.6  # crank N m per minute
+    captured = {}
+    r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", rig_path=INPUT_RIG, plan=QUICK_PLAN,
+                            sim_params=dataclasses.replace(RigParams(), input_zero_drift_nm_per_min=rate),
+                            setup=lambda ctx: captured.setdefault("ctx", ctx)))
+    zi, zo = r["torque_zero_input"], r["torque_zero"]
+    world = captured["ctx"].sim.model.world
+    b, a = zi["before"], zi["after"]
+    assert math.isfinite(b["torque_nm"]) and math.isfinite(a["torque_nm"]), zi
+    # the physics: counts creep at rate * true gain / 60 per second; the host reads them with its 600
+    span_s = (zo["after"]["t_mid_s"] - zo["before"]["t_mid_s"])
+    expected = rate / 60.0 * span_s * world.input_gain_counts_per_nm / 600.0
+    assert zi["drift_nm"] == pytest.approx(expected, abs=0.05 + 2 * zi["drift_ci95_nm"]), (zi, expected)
+    assert zi["flagged"] and "drifted" in zi["note"]
+    assert not zo["flagged"] and abs(zo["drift_nm"]) <= zo["drift_ci95_nm"] + 0.05, zo
