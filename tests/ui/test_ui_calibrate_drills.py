@@ -78,3 +78,32 @@ def test_calibrate_drill_in_a_real_terminal(tmp_path):
     finally:
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
     assert not (tmp_path / "h.csv").exists()
+
+
+@pytest.mark.parametrize("drill, what", [("adc-error:input@1", "input torque ADC error bit"),
+                                         ("adc-stuck:input@1", "input torque ADC stuck")])
+def test_input_channel_calibration_drill_aborts_and_writes_nothing(tmp_path, drill, what):
+    """The engine-side converter's faults end its calibration as the brake-side one's do (the same monitor)."""
+    hist = tmp_path / "hist.csv"
+    rig = Path(__file__).resolve().parents[2] / "hardware" / "rig-input-torque.toml"
+
+    async def scenario():
+        app = CalibrateApp(CalibrateOptions(sim=True, seed=4, speed=2.0, n_samples=100, settle_samples=60,
+                                            history_path=hist, rig_path=rig, channel="input", radius_m=0.2,
+                                            masses="2,4,6,8,10", drills=[parse_drill(drill, engine=False)]))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("enter", "enter")
+            t_end = time.monotonic() + 30
+            while app.wizard.aborted is None and time.monotonic() < t_end:
+                if not app.wizard.collecting and app.wizard.aborted is None:
+                    await pilot.press("c")
+                await pilot.pause(0.1)
+            await pilot.pause(0.4)
+            shot = screen_text(app)
+            await pilot.press("q")
+            return app.wizard.aborted, shot
+
+    aborted, screen = asyncio.run(scenario())
+    assert aborted is not None and aborted[0] == "sensor_fault" and what in aborted[1], aborted
+    assert "ABORTED" in screen and "rig SAFE" in screen
+    assert not hist.exists()
