@@ -114,7 +114,9 @@ def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(
     entries = load_history(hist)
     assert len(entries) == 5
     e = entries[-1]
-    assert abs(e.slope_counts_per_nm / true_gain - 1.0) < 0.001, (e.slope_counts_per_nm, true_gain)
+    # 0.15 %: 4x the rms error of 3-repeat calibrations over 8 seeds (0.037 %; the terminal's timing moves
+    # which conversions a step keeps), a tenth of the 1.6 % the seeds' gains scatter
+    assert abs(e.slope_counts_per_nm / true_gain - 1.0) < 0.0015, (e.slope_counts_per_nm, true_gain)
     assert abs(e.intercept_counts - true_offset) < 10.0, (e.intercept_counts, true_offset)
     assert abs(true_gain / 600.0 - 1.0) > 0.01  # the host's nominal: echoing it would fail the line above
     assert e.gear_ratio_brake_per_secondary == 1.0 and e.lever_arm_m == 0.2 and e.n_samples == 27 * 500
