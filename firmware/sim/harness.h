@@ -30,6 +30,7 @@ avr_int_vector_t *find_vector(int num);
 void print_profile(FILE *o);
 void guard_check(void);
 extern uint64_t eeprom_writes;
+extern FILE *trace_out;
 #define REG_WDTCSR 0x60
 void print_guard(FILE *o);
 

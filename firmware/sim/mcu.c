@@ -34,8 +34,46 @@ static int in_isr = -1;
 static uint64_t isr_start;
 static uint64_t cli_start, cli_max, cli_max_at;
 
+/* DYNO_HARNESS_TRACE=<file> (a debugging aid, found for issue 27's spikes; no profile meanwhile):
+ * one line per Hall line change ("P cycle ch level s=sensor g=spike", sensors.c), per ISR entry
+ * ("E cycle vector pind=PIND") and per RETI ("X cycle vector", and for INT0/INT1 the channel's
+ * state after it, read from capture.c's hall[2]: hall_ch_t's layout, 14 bytes, is assumed). */
+FILE *trace_out;
+static uint32_t trace_hall_addr;
+static int trace_vec = -1;
+static void trace_isr_exit(int v, uint64_t c)
+{
+    if (v != 1 && v != 2) {
+        fprintf(trace_out, "X %llu %d\n", (unsigned long long)c, v);
+        return;
+    }
+    const uint8_t *h = avr->data + trace_hall_addr + 14u * (unsigned)(v - 1);
+    uint32_t fall = (uint32_t)h[0] | (uint32_t)h[1] << 8 | (uint32_t)h[2] << 16 | (uint32_t)h[3] << 24;
+    fprintf(trace_out, "X %llu %d st=%u acc=%u fall=%lu end16=%u lock=%u\n", (unsigned long long)c, v,
+            h[12], h[13], (unsigned long)fall, (unsigned)(h[8] | h[9] << 8), (unsigned)(h[10] | h[11] << 8));
+}
+
 void step(void)
 {
+    if (trace_out) {
+        uint32_t pc = avr->pc;
+        uint16_t op = (uint16_t)(avr->flash[pc] | avr->flash[pc + 1] << 8);
+        int st = avr_run(avr);
+        if (st == cpu_Crashed || st == cpu_Done)
+            crashed = 1;
+        if (trace_vec >= 0 && op == 0x9518) {
+            trace_isr_exit(trace_vec, avr->cycle);
+            trace_vec = -1;
+        } else if (trace_vec < 0) {
+            uint32_t npc = avr->pc;
+            if (npc && npc < N_VECTORS * 4 && !(npc & 3)) {
+                trace_vec = (int)(npc / 4);
+                fprintf(trace_out, "E %llu %d pind=%02x eifr=%02x gpior0=%02x\n", (unsigned long long)avr->cycle, trace_vec,
+                        avr->data[0x29], avr->data[0x3C], avr->data[0x3E]);
+            }
+        }
+        return;
+    }
     if (!cfg_profile) {
         int st = avr_run(avr);
         if (st == cpu_Crashed || st == cpu_Done)
@@ -154,6 +192,23 @@ static void pcifr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *para
         }
 }
 
+/* EIFR likewise (INTF0/INTF1): 1.6 stores a 1 written to clear a flag, so after capture_init's
+ * EIFR = INTF0 | INTF1 the register read INTF1 set with no INT1 pending (the firmware's INT0 ISR reads
+ * INTF1 to give INT1's edge its Timer1 snapshot). Cleared as on silicon. */
+#define REG_EIFR 0x3C
+static avr_int_vector_t *int_vec[2];
+
+static void eifr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    (void)param;
+    for (int b = 0; b < 2; b++)
+        if (v & (1u << b)) {
+            a->data[addr] &= (uint8_t)~(1u << b);
+            if (int_vec[b])
+                int_vec[b]->pending = 0;
+        }
+}
+
 /* ---- EEPROM writes (wear: the firmware must not write per boot) ------------------- */
 /* Counted at the write strobe (EEPE set in EECR); simavr's EEPROM module, registered on
  * the same address first, still performs the write. */
@@ -178,6 +233,7 @@ static uint32_t guard_addr[2];
 static int guard_found, guard_armed;
 static uint64_t guard_checks, guard_violations, guard_first_cycle;
 
+/* A data symbol of the ELF by name; a file-static one may carry LTO's suffix ("hall.lto_priv.32"). */
 static int elf_symbol(const char *path, const char *name, uint32_t *value, uint32_t *size)
 {
     int fd = open(path, O_RDONLY), found = 0;
@@ -194,7 +250,8 @@ static int elf_symbol(const char *path, const char *name, uint32_t *value, uint3
             GElf_Sym sym;
             gelf_getsym(d, (int)i, &sym);
             const char *n = elf_strptr(e, sh.sh_link, sym.st_name);
-            if (n && strcmp(n, name) == 0) {
+            size_t len = strlen(name);
+            if (n && strncmp(n, name, len) == 0 && (n[len] == 0 || n[len] == '.')) {
                 *value = (uint32_t)sym.st_value;
                 *size = (uint32_t)sym.st_size;
                 found = 1;
@@ -278,8 +335,17 @@ int mcu_load(const char *elf)
     for (int b = 0; b < 3; b++)
         pcint_vec[b] = find_vector(3 + b);  /* PCINT0..2 are vectors 3..5 */
     avr_register_io_write(avr, REG_PCIFR, pcifr_write_hook, NULL);
+    for (int b = 0; b < 2; b++)
+        int_vec[b] = find_vector(1 + b);  /* INT0, INT1 */
+    avr_register_io_write(avr, REG_EIFR, eifr_write_hook, NULL);
     avr_register_io_write(avr, REG_EECR, eecr_write_hook, NULL);
     guard_init(elf);
+    const char *tp = getenv("DYNO_HARNESS_TRACE");
+    uint32_t sz;
+    if (tp && elf_symbol(elf, "hall", &trace_hall_addr, &sz) && sz == 28) {  /* 2 x hall_ch_t */
+        trace_hall_addr &= 0xFFFFu;
+        trace_out = fopen(tp, "w");
+    }
     return 1;
 }
 
@@ -288,7 +354,7 @@ void mcu_reset(uint8_t mcusr)
     avr_reset(avr);
     /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
     avr->data[MCUSR_ADDR] = mcusr;
-    in_isr = -1;
+    in_isr = trace_vec = -1;
     cli_start = 0;
     guard_armed = 0;  /* RAM is kept; the new boot's ring_init rewrites the guards */
 }

@@ -62,6 +62,9 @@ static void hall_drive(hall_t *h)
     int level = h->sensor_level && h->glitch_level;
     if (level != h->out_level) {
         h->out_level = level;
+        if (trace_out)
+            fprintf(trace_out, "P %llu %d %d s=%d g=%d\n", (unsigned long long)avr->cycle, h->ch,
+                    level, h->sensor_level, h->glitch_level);
         drive_pin(h->pin, 2 + h->ch, level);
     }
 }
