@@ -240,6 +240,32 @@ def _adc_time_error(times, hs) -> dict | None:
     return {"max_abs_us": float(np.max(np.abs(err))), "mean_us": float(np.mean(err))}
 
 
+def _hall_edge_error(times, hs) -> dict | None:
+    """Each channel's received Hall edges against the harness's true falling edges (us), on the
+    harness's clock (the primary edges' median offset, as for the ADC): ``off_edge`` counts events
+    more than 100 us from any true edge (a spike or a ringing pulse taken for an edge; a real edge
+    is late by its ISR latency, or early by at most a spike merged into its start), ``max_abs_us``
+    is the worst of the others."""
+    hall = hs["hall"]
+    t_p = times[v1.CH_PRIMARY]
+    if len(t_p) < 2 or not hall[0].get("rpm"):
+        return None
+    period_p = 60e6 / hall[0]["rpm"]
+    d = np.asarray(t_p, dtype=float)
+    offset = float(np.median(d - hall[0]["first_us"] - np.round((d - d[0]) / period_p) * period_p))
+    out = {}
+    for c, (name, ch) in enumerate((("primary", v1.CH_PRIMARY), ("secondary", v1.CH_SECONDARY))):
+        if not times[ch] or not hall[c].get("rpm"):
+            continue
+        period = 60e6 / hall[c]["rpm"]
+        x = np.asarray(times[ch], dtype=float) - offset - hall[c]["first_us"]
+        e = x - np.round(x / period) * period
+        off = np.abs(e) > 100.0
+        out[name] = {"off_edge": int(np.count_nonzero(off)),
+                     "max_abs_us": float(np.max(np.abs(e[~off]))) if np.any(~off) else None}
+    return out
+
+
 def _accounting(events: dict, lost: int) -> dict:
     generated = (events["primary"]["expected"] + events["secondary"]["expected"]
                  + events["adc"]["read_by_device"])
@@ -300,6 +326,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
         # (Events queued in the MCU at a reset vanish with its RAM: not exact across resets.)
         "accounting": _accounting(events, reader.events_lost),
         "adc_time_error_us": _adc_time_error(times, hs) if stats["device_resets"] == 0 else None,
+        "hall_edge_error": _hall_edge_error(times, hs) if stats["device_resets"] == 0 else None,
         "events": events,
         "faults_injected": faults,
         "bounce": bool(args.bounce),
