@@ -110,6 +110,11 @@ class CalibrationFit:
         direction was given or no load was visited in both directions.
     within_step_sd_counts : float or None
         Pooled within-step standard deviation (raw input only): the ripple.
+    friction_counts : float or None
+        With ``friction_term``: the fitted offset of the loading branch from the line (the unloading
+        branch's is its negative), counts; None otherwise.  A cradle's bearings hold ``b`` of the load
+        off the cell while it is loaded and add it while it is unloaded: ``-friction_counts / slope``
+        is ``b`` (N·m), half the hysteresis.
     """
 
     slope_counts_per_nm: float
@@ -129,6 +134,13 @@ class CalibrationFit:
     hysteresis_counts: float | None = None
     hysteresis_pct_fs: float | None = None
     within_step_sd_counts: float | None = None
+    friction_counts: float | None = None
+    friction_se_counts: float | None = None
+
+    @property
+    def friction_nm(self) -> float | None:
+        """The friction torque the loading/unloading offset stands for (N·m; None without the term)."""
+        return None if self.friction_counts is None else -self.friction_counts / self.slope_counts_per_nm
 
     def to_entry(self, date: str, *, lever_arm_m: float | None = None,
                  gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
@@ -171,7 +183,7 @@ def _direction_sign(d) -> int:
 
 def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
                     r2_min: float = R2_MIN_DEFAULT, full_scale_nm: float | None = None,
-                    min_distinct_loads: int = 3) -> CalibrationFit:
+                    min_distinct_loads: int = 3, friction_term: bool = False) -> CalibrationFit:
     """Fit ``counts = slope * T + intercept`` to a calibration run.
 
     Parameters
@@ -195,6 +207,14 @@ def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
     min_distinct_loads : int
         Refuse with fewer distinct loads (default 3: two points always lie on
         a line, so they cannot show non-linearity or a bad point).
+    friction_term : bool
+        Fit ``counts = slope * T + intercept + f * s`` with ``s`` = +1 loading,
+        -1 unloading (needs ``direction`` with both; ignored otherwise): the
+        line between the two branches of a sensor with Coulomb friction in
+        its load path (the engine cradle's bearings).  Without it a sequence
+        that visits its top load only while loading tilts the line by about
+        ``-0.036 b`` per N·m of friction ``b`` (2…10 kg on 0.2 m: -0.25 % at
+        the simulated cradle's typical 0.07 N·m).
 
     Returns
     -------
@@ -276,20 +296,37 @@ def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
             f"only {n_distinct} distinct load(s); at least {min_distinct_loads} are needed to "
             f"check linearity (add more masses)")
 
+    sign = None
+    if direction is not None:
+        if len(direction) != n_steps:
+            raise ValueError(f"fit_calibration: {n_steps} torques but {len(direction)} directions")
+        sign = np.array([_direction_sign(d) for d in direction])
     t_bar = t.mean()
     c_bar = c_mean.mean()
     s_tt = float(np.sum((t - t_bar) ** 2))
-    slope = float(np.sum((t - t_bar) * (c_mean - c_bar)) / s_tt)
-    intercept = float(c_bar - slope * t_bar)
-    resid = c_mean - (slope * t + intercept)
-    ss_res = float(np.sum(resid ** 2))
+    friction = friction_se = None
+    if friction_term and sign is not None and np.any(sign > 0) and np.any(sign < 0) and n_steps > 3:
+        # least squares on [T, 1, s]; standard errors from (X'X)^-1 with n - 3 dof
+        x = np.column_stack([t, np.ones(n_steps), sign.astype(float)])
+        beta, *_ = np.linalg.lstsq(x, c_mean, rcond=None)
+        slope, intercept, friction = (float(v) for v in beta)
+        resid = c_mean - x @ beta
+        ss_res = float(np.sum(resid ** 2))
+        cov = ss_res / (n_steps - 3) * np.linalg.inv(x.T @ x)
+        slope_se, intercept_se, friction_se = (math.sqrt(cov[i, i]) for i in range(3))
+        cov_ab = float(cov[0, 1])
+    else:
+        slope = float(np.sum((t - t_bar) * (c_mean - c_bar)) / s_tt)
+        intercept = float(c_bar - slope * t_bar)
+        resid = c_mean - (slope * t + intercept)
+        ss_res = float(np.sum(resid ** 2))
+        s2 = ss_res / (n_steps - 2)
+        slope_se = math.sqrt(s2 / s_tt)
+        intercept_se = math.sqrt(s2 * (1.0 / n_steps + t_bar ** 2 / s_tt))
+        cov_ab = -t_bar * s2 / s_tt
     ss_tot = float(np.sum((c_mean - c_bar) ** 2))
     r2 = 1.0 - ss_res / ss_tot if ss_tot > 0 else 0.0
     r2 = min(max(r2, 0.0), 1.0)  # guard rounding just outside [0, 1]
-    s2 = ss_res / (n_steps - 2)
-    slope_se = math.sqrt(s2 / s_tt)
-    intercept_se = math.sqrt(s2 * (1.0 / n_steps + t_bar ** 2 / s_tt))
-    cov_ab = -t_bar * s2 / s_tt
 
     if not slope > 0:
         raise CalibrationRejected(
@@ -308,10 +345,7 @@ def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
     nonlin = float(np.max(np.abs(resid)) / fs_counts * 100.0)
 
     hyst = hyst_pct = None
-    if direction is not None:
-        if len(direction) != n_steps:
-            raise ValueError(f"fit_calibration: {n_steps} torques but {len(direction)} directions")
-        sign = np.array([_direction_sign(d) for d in direction])
+    if sign is not None:
         diffs = []
         for g in range(n_distinct):
             up = c_mean[(groups == g) & (sign > 0)]
@@ -329,6 +363,7 @@ def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
         residuals_counts=resid, n_samples_per_step=n_per, n_samples=int(n_per.sum()),
         n_distinct_loads=n_distinct, full_scale_counts=fs_counts, nonlinearity_pct_fs=nonlin,
         hysteresis_counts=hyst, hysteresis_pct_fs=hyst_pct, within_step_sd_counts=within_sd,
+        friction_counts=friction, friction_se_counts=friction_se,
     )
 
 
@@ -377,7 +412,7 @@ def slope_reproducibility(slopes) -> Reproducibility:
 
 
 def fit_repeats(torques_nm, counts, repeat, *, direction=None, r2_min: float = R2_MIN_DEFAULT,
-                min_distinct_loads: int = 3) -> tuple[CalibrationFit, Reproducibility]:
+                min_distinct_loads: int = 3, friction_term: bool = False) -> tuple[CalibrationFit, Reproducibility]:
     """The line through every step of every repeat, and the slope's reproducibility across the repeats.
 
     ``repeat`` gives each step's repeat (any hashable; the order of first appearance is kept).  Each
@@ -388,7 +423,8 @@ def fit_repeats(torques_nm, counts, repeat, *, direction=None, r2_min: float = R
     t = list(torques_nm)
     if len(repeat) != len(t) or len(counts) != len(t) or (direction is not None and len(direction) != len(t)):
         raise ValueError("fit_repeats: one torque, one counts entry, one repeat (and direction) per step")
-    whole = fit_calibration(t, counts, direction=direction, r2_min=r2_min, min_distinct_loads=min_distinct_loads)
+    whole = fit_calibration(t, counts, direction=direction, r2_min=r2_min, min_distinct_loads=min_distinct_loads,
+                            friction_term=friction_term)
     order = list(dict.fromkeys(repeat))
     slopes = []
     if len(order) > 1:
@@ -397,7 +433,8 @@ def fit_repeats(torques_nm, counts, repeat, *, direction=None, r2_min: float = R
             try:
                 f = fit_calibration([t[i] for i in idx], [counts[i] for i in idx],
                                     direction=None if direction is None else [direction[i] for i in idx],
-                                    r2_min=r2_min, min_distinct_loads=min_distinct_loads)
+                                    r2_min=r2_min, min_distinct_loads=min_distinct_loads,
+                                    friction_term=friction_term)
             except CalibrationRejected as exc:
                 raise CalibrationRejected(f"repeat {k + 1} of {len(order)}: {exc}") from None
             slopes.append(f.slope_counts_per_nm)

@@ -326,8 +326,10 @@ class CalibrateApp(DynoApp):
             self.say("collecting… (r restarts this step)")
             return
         s = w.current
-        if self.opts.sim:
-            self.rig.hang(s.mass_kg, w.radius_m, w.channel)  # the simulated operator hangs the load now
+        if self.opts.sim:  # the simulated operator hangs the load now (a repeat's first: all off first)
+            if s.from_zero:
+                self.rig.hang(0.0, w.radius_m, w.channel)
+            self.rig.hang(s.mass_kg, w.radius_m, w.channel)
         w.begin_step()
         self.say(f"collecting {w.settle_samples} settling + {w.n_samples} samples")
 

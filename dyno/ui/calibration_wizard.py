@@ -76,6 +76,7 @@ class Step:
     torque_nm: float
     direction: int  # +1 loading, -1 unloading, 0 tare
     repeat: int = 0  # which pass of the load sequence (0-based; tares 0)
+    from_zero: bool = False  # a repeat's first load: every mass off first, so it is approached from below
     samples: list = field(default_factory=list)
     dropped_settling: int = 0
     refused: int = 0  # error bit or rail
@@ -238,7 +239,11 @@ class CalibrationWizard:
         down = list(reversed(up[:-1]))
         self.steps = [Step(Phase.TARE_BEFORE, 0.0, 0.0, 0)]
         for k in range(self.repeats):  # each repeat: the whole sequence again, loading then unloading
-            self.steps += ([Step(Phase.LOADING, m, self._torque(m), +1, k) for m in up]
+            # From the second repeat on, its first load follows the unloading's last step at the same load:
+            # every mass comes off first, or that "loading" step would be the unloading's state again
+            # (the friction in a cradle's bearings then reads +b there, not -b).
+            self.steps += ([Step(Phase.LOADING, m, self._torque(m), +1, k, from_zero=k > 0 and i == 0)
+                            for i, m in enumerate(up)]
                            + [Step(Phase.UNLOADING, m, self._torque(m), -1, k) for m in down])
         self.steps.append(Step(Phase.TARE_AFTER, 0.0, 0.0, 0))
 
@@ -272,6 +277,8 @@ class CalibrationWizard:
                             else "Take ALL masses and the rope off")
                 return f"{where}: zero check {which}. {todo}; then collect."
             verb = "Add masses to" if s.direction > 0 else "Remove masses down to"
+            if s.from_zero:
+                verb = "Take ALL masses off, then hang"
             rep = f", repeat {s.repeat + 1}/{self.repeats}" if self.repeats > 1 else ""
             at = "crank torque on the cradle" if inp else "at the secondary"
             return (f"{where} ({s.phase.value}{rep}): {verb} a total of {s.mass_kg:g} kg "
@@ -393,7 +400,9 @@ class CalibrationWizard:
         try:
             self.fit, self.repro = fit_repeats([s.torque_nm for s in steps], [np.asarray(s.samples) for s in steps],
                                                [s.repeat for s in steps], direction=[s.direction for s in steps],
-                                               r2_min=self.r2_min, min_distinct_loads=self.min_distinct_loads)
+                                               r2_min=self.r2_min, min_distinct_loads=self.min_distinct_loads,
+                                               # the cradle's bearings: the line between the two branches
+                                               friction_term=self.channel == "input")
         except CalibrationRejected as exc:
             self.fit = self.repro = None
             self.rejection = str(exc)
@@ -428,6 +437,8 @@ class CalibrationWizard:
                       f"± {self.zero_drift_se_counts() / abs(f.slope_counts_per_nm):.3f} N·m"]
             if self.zero_check_inconclusive():
                 lines.append(f"zero check inconclusive: tares too short for {self.zero_drift_max_nm} N·m")
+            if f.friction_nm is not None:  # the input channel: half the hysteresis, rig.toml bearing_loss_nm
+                lines.append(f"cradle friction {f.friction_nm:+.3f} ± {f.friction_se_counts / f.slope_counts_per_nm:.3f} N·m")
             lines += self.reproducibility_lines()
         prev = self.previous_zero_offset_nm()
         if prev is not None:
@@ -555,6 +566,8 @@ async def run_sim_calibration(wizard: CalibrationWizard, *, seed: int = 0, settl
         wizard.start()
         while wizard.phase in COLLECTING_PHASES:
             s = wizard.current
+            if s.from_zero:
+                rig.hang(0.0, wizard.radius_m, wizard.channel)
             rig.hang(s.mass_kg, wizard.radius_m, wizard.channel)
             if settle_wait_s:
                 await asyncio.sleep(settle_wait_s)

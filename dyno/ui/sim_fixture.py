@@ -26,9 +26,13 @@ on the cradle's arm (``T = m g L``, crank torque), read by the second AD7171
 :attr:`true_input_offset_counts`) and the converter's own rate, clock and
 noise (``RigParams.input_*``, as :mod:`dyno.sim.input_torque`).  Both channels
 convert throughout; a load hangs on one of them (``hang(..., channel=)``).
-Not modelled here: the cradle bearings' friction (a run's physics has it; on
-the fixture it would show as hysteresis), and any change between repeats but
-the noise (the rope or hook re-seated, temperature).
+The cradle's trunnion bearings hold up to ``b`` (the run's
+``cradle_bearing_loss_nm`` for the seed) off the cell, Coulomb friction: after
+a load change the cell reads the load moved by as little as it can, i.e. the
+previous reading clamped to ``[T - b, T + b]`` — ``T - b`` while loading,
+``T + b`` while unloading, up to ``+b`` at no load after unloading: a
+hysteresis of ``2b``.  Not modelled: any change between repeats but the noise
+(the rope or hook re-seated, temperature).
 """
 
 from __future__ import annotations
@@ -92,6 +96,7 @@ class CalibrationFixture:
     def __init__(self, params=None, seed: int = 0, *, gain_spread_frac: float = 0.03,
                  offset_spread_counts: float = 400.0, settle_tau_s: float = 0.15,
                  nonlinearity_counts_per_nm2: float = 0.0, input_fitted: bool = False,
+                 cradle_friction: bool = True,
                  gear_ratio_brake_per_secondary: float = GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
                  g_m_per_s2: float = G_STANDARD_M_PER_S2) -> None:
         self.params = FixtureParams(params)
@@ -125,8 +130,9 @@ class CalibrationFixture:
         if self.input_fitted:
             from dyno.sim.world import input_channel_truth
 
-            self.true_input_gain_counts_per_nm, self.true_input_offset_counts, _ = input_channel_truth(
+            self.true_input_gain_counts_per_nm, self.true_input_offset_counts, bearing = input_channel_truth(
                 p.rig_params, seed)
+            self.cradle_bearing_nm = bearing if cradle_friction else 0.0
             ss = np.random.SeedSequence([seed, 0x1C])
             s_noise, s_err, s_phase = ss.spawn(3)
             self._in_rng = np.random.default_rng(s_noise)
@@ -142,7 +148,9 @@ class CalibrationFixture:
             if not self.input_fitted:
                 raise ValueError("the fixture has no input torque channel")
             torque_nm = mass_kg * self.g_m_per_s2 * radius_m
-            self._in_load = [torque_nm, self._in_signal_nm(self.t_s), self.t_s]
+            b = self.cradle_bearing_nm  # the bearings move the cell's reading as little as they can
+            cell_nm = min(max(self._in_load[0], torque_nm - b), torque_nm + b)
+            self._in_load = [cell_nm, self._in_signal_nm(self.t_s), self.t_s]
             return torque_nm
         torque_nm = mass_kg * self.g_m_per_s2 * radius_m * self.gear_ratio
         self._from_nm = self.signal_nm(self.t_s)

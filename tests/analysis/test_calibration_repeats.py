@@ -82,3 +82,22 @@ def test_a_bad_repeat_is_refused_by_name():
         fit_repeats(torques, counts, repeat, r2_min=0.95)  # the whole passes (0.967); the second repeat alone does not
     with pytest.raises(ValueError):
         fit_repeats(torques, counts, repeat[:-1])
+
+
+def test_the_friction_term_takes_a_cradles_bearings_out_of_the_slope():
+    """A load cell with Coulomb friction b in its load path reads T - b loading, T + b unloading; the up/down
+    sequence visits its top load only loading, so the plain line tilts (about -0.036 b per N·m here); the
+    friction term fits the line between the branches and returns b."""
+    a, c0, b = 600.0, 33500.0, 0.07
+    means = [a * (t - sgn * b) + c0 for t, sgn in zip(LOADS_NM, DIRECTION)]
+    plain = fit_calibration(LOADS_NM, means, direction=DIRECTION)
+    assert plain.slope_counts_per_nm / a - 1.0 == pytest.approx(-0.036 * b, rel=0.05)  # -0.25 %
+    assert plain.friction_counts is None and plain.friction_nm is None
+    f = fit_calibration(LOADS_NM, means, direction=DIRECTION, friction_term=True)
+    assert f.slope_counts_per_nm == pytest.approx(a) and f.intercept_counts == pytest.approx(c0)
+    assert f.friction_nm == pytest.approx(b) and f.friction_se_counts == pytest.approx(0.0, abs=1e-6)
+    # without both directions there is no branch to separate: the plain line
+    up = [i for i, d in enumerate(DIRECTION) if d > 0]
+    g = fit_calibration([LOADS_NM[i] for i in up], [means[i] for i in up], direction=[1] * len(up),
+                        friction_term=True)
+    assert g.friction_counts is None and g.slope_counts_per_nm == pytest.approx(a)

@@ -186,6 +186,10 @@ def test_ui_wizard_repeats_plan_and_instructions():
     assert "Engine OFF" in w.instruction() and "cradle" in w.instruction()
     w.index, w.phase = 7, Phase.LOADING
     assert "repeat 2/3" in w.instruction() and "crank torque" in w.instruction()
+    # a repeat's first load follows the unloading's last step at the same load: all masses off first
+    assert [s.from_zero for s in loads] == [False] * 5 + [True] + [False] * 4 + [True] + [False] * 4
+    w.index = 6
+    assert "Take ALL masses off, then hang a total of 2 kg" in w.instruction()
     with pytest.raises(ValueError):
         CalibrationWizard(channel="brake")
     with pytest.raises(ValueError):
@@ -225,3 +229,22 @@ def test_ui_wizard_history_term_after_append():
     term, n = w.history_term()
     assert n == 5 and 0.01 < term < 0.03  # the representative history scatters 1.6 %: one good entry keeps it
     assert f"history term {100 * term:.2f} % (5 entries)" in "\n".join(w.result_lines())
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_ui_wizard_input_channel_measures_the_cradle_bearings_friction(seed):
+    """The fixture's cradle holds its seed's bearing friction off the cell (the run's draw): the wizard's
+    line between the branches keeps the gain on the truth, and its friction is the physics' b."""
+    from dyno.sim.physics import RigParams
+    from dyno.sim.world import input_channel_truth
+
+    true_gain, _, b_true = input_channel_truth(RigParams(), seed)
+    wizard = CalibrationWizard(channel="input", repeats=3)
+    assert wizard.configure(0.2, [2, 4, 6, 8, 10]) == []
+    rig = run(run_sim_calibration(wizard, seed=seed), virtual=True)
+    f = wizard.fit
+    assert rig.fixture.cradle_bearing_nm == b_true > 0.05
+    se_nm = f.friction_se_counts / f.slope_counts_per_nm
+    assert abs(f.friction_nm - b_true) < 4 * se_nm + 0.005, (f.friction_nm, b_true, se_nm)
+    assert abs(f.slope_counts_per_nm / true_gain - 1.0) < 0.001
+    assert "cradle friction" in "\n".join(wizard.result_lines())
