@@ -93,16 +93,29 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
                                                             uint16_t tcnt, uint8_t tov)
 {
     if (low) {
-        if (h->state != HALL_IDLE)
-            return;  /* the rise in between was missed: one longer pulse */
+        uint8_t st = h->state;
+        if (st == HALL_LOCKED)
+            return;  /* a rise and a fall missed while locked out: still locked out */
         uint32_t t = tstamp_extend(t1_base_us, tcnt, tov & _BV(TOV1));
-        if (!(uint16_t)((t - h->last_us) >> 16) &&
-            (uint16_t)((uint16_t)t - h->end_us16) < h->lockout_us) {
+        if (st == HALL_PULSE) {
+            /* Low again: the rise in between was missed (it came, and a new fall, before this
+             * ISR read the pin). Low since the fall for at least the minimum even counted to
+             * now: a real pulse and a spike or ring right after it, one longer pulse (its fall
+             * kept). Shorter: that low was a glitch (two spikes a few us apart measured as one
+             * pulse passed the filter: issue 27's stress run); the pulse starts now. */
+            if ((uint16_t)((uint16_t)t - (uint16_t)h->fall_us) >= HALL_MIN_PULSE_US)
+                return;
+            g_counters.glitch[ch]++;
+            h->fall_us = t;
+            return;
+        }
+        h->fall_us = t;  /* first (unused while LOCKED): t's registers are free for the test */
+        if ((uint16_t)((uint16_t)t - h->end_us16) < h->lockout_us &&
+            !(uint16_t)((t - h->last_us) >> 16)) {
             g_counters.lockout[ch]++;
             h->state = HALL_LOCKED;
             return;
         }
-        h->fall_us = t;
         h->state = HALL_PULSE;
         return;
     }
@@ -122,7 +135,7 @@ static inline __attribute__((always_inline)) void hall_edge(uint8_t tag, volatil
     h->last_us = fall;
     h->end_us16 = t16;
     h->accepted++;
-    ring_push(&g_ring, tag, fall, 0, 0);
+    ring_push_edge(&g_ring, tag, fall);
 }
 
 /* AD7171 RDY (DOUT/RDY falling on PD5 = PCINT21): its time is Timer1 read first thing
@@ -144,16 +157,24 @@ static volatile uint32_t adc_rdy_us;
 static volatile uint8_t in_rdy_seen;
 static volatile uint32_t in_rdy_us;
 
-/* One snapshot serves both converters: GPIOR0 bit PCIF2 / PCIF0 (the PCIFR bit of the RDY's pin
- * change group) says "this RDY was pending at the snapshot: rdy_raw_* is its count"; a new snapshot
- * is taken only when neither is waiting to be consumed, so one never overwrites another's. */
+/* One snapshot serves both converters and INT1: GPIOR0 bit PCIF2 / PCIF0 (the PCIFR bit of the RDY's
+ * pin change group) says "this RDY was pending at the snapshot: rdy_raw_* is its count", and bit INTF1
+ * (bit 1: PCINT1 is unused) the same for an INT1 edge pending when INT0 took it; a new snapshot is
+ * taken only when none is waiting to be consumed, so one never overwrites another's.
+ * Why INT1 too (issue 27): INT0 outranks INT1, so an INT1 edge could wait behind a running ISR, INT0,
+ * a main-loop cli window and INT0 again (measured 32 us: a TWI ISR, then both edges of a spike on the
+ * primary line); a 20 us spike on the secondary line then measured 51 us and passed the glitch
+ * filter. With INT0's entry snapshot, INT1's edge is late by no more than INT0's edges can be
+ * (unless a RDY's snapshot is still unconsumed when INT0 runs: then INT1 reads Timer1 itself).
+ * INT1 takes its own count for the RDYs (one may have fallen after INT0's snapshot) and INT0's for
+ * its edge; neither can wait behind the overflow ISR (both outrank it), so the base is the same. */
 static volatile uint16_t rdy_raw_tcnt;
 static volatile uint8_t rdy_raw_tov;
-#define RAW_BITS (_BV(PCIF2) | _BV(PCIF0))
+#define RDY_BITS (_BV(PCIF2) | _BV(PCIF0))
+#define RAW_BITS (_BV(PCIF2) | _BV(INTF1) | _BV(PCIF0))
 
-static inline __attribute__((always_inline)) void rdy_snapshot(uint16_t tcnt, uint8_t tov)
+static inline __attribute__((always_inline)) void rdy_snapshot(uint8_t f, uint16_t tcnt, uint8_t tov)
 {
-    uint8_t f = PCIFR & RAW_BITS;
     if (f && !(GPIOR0 & RAW_BITS)) {
         rdy_raw_tcnt = tcnt;
         rdy_raw_tov = tov;
@@ -166,15 +187,22 @@ ISR(INT0_vect)
 {
     uint16_t tcnt = TCNT1;
     uint8_t tov = TIFR1;  /* TOV1 is masked where used (saves a cycle on every path) */
-    rdy_snapshot(tcnt, tov);
+    rdy_snapshot((uint8_t)((PCIFR & RDY_BITS) | (EIFR & _BV(INTF1))), tcnt, tov);
     hall_edge(TAG_PRIMARY, &hall[0], !(PIND & _BV(PIN_HALL_PRIMARY_BIT)), 0, tcnt, tov);
 }
 ISR(INT1_vect)
 {
     uint16_t tcnt = TCNT1;
     uint8_t tov = TIFR1;  /* TOV1 is masked where used (saves a cycle on every path) */
-    rdy_snapshot(tcnt, tov);
-    hall_edge(TAG_SECONDARY, &hall[1], !(PIND & _BV(PIN_HALL_SECONDARY_BIT)), 1, tcnt, tov);
+    uint16_t etcnt = tcnt;
+    uint8_t etov = tov;
+    if (GPIOR0 & _BV(INTF1)) {  /* INT0 ran first and kept the count: this edge came before it */
+        etcnt = rdy_raw_tcnt;
+        etov = rdy_raw_tov;
+        GPIOR0 &= (uint8_t)~_BV(INTF1);
+    }
+    rdy_snapshot((uint8_t)(PCIFR & RDY_BITS), tcnt, tov);
+    hall_edge(TAG_SECONDARY, &hall[1], !(PIND & _BV(PIN_HALL_SECONDARY_BIT)), 1, etcnt, etov);
 }
 
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us)
@@ -375,7 +403,7 @@ void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
     EIMSK = _BV(INT0) | _BV(INT1);
     /* AD7171 RDY on PD5: pin change interrupt group 2. */
     adc_rdy_seen = 0;
-    GPIOR0 &= (uint8_t)~_BV(RDY_RAW_BIT);
+    GPIOR0 &= (uint8_t)~(_BV(RDY_RAW_BIT) | _BV(INTF1));
     PCIFR = _BV(PCIF2);
     PCMSK2 = _BV(PIN_ADC_DOUT_BIT);
     PCICR |= _BV(PCIE2);

@@ -44,8 +44,8 @@ static inline uint8_t ring_count(const ring_t *r) { return (uint8_t)(r->head - r
 
 /* Caller guarantees no other producer runs meanwhile (ISR context, or interrupts off).
  * Always inlined: a call from a Hall ISR would save every call-clobbered register. */
-static inline __attribute__((always_inline)) uint8_t ring_push(ring_t *r, uint8_t tag, uint32_t t_us,
-                                                               uint16_t code, uint8_t status)
+static inline __attribute__((always_inline)) uint8_t ring_push_(ring_t *r, uint8_t tag, uint32_t t_us,
+                                                                uint16_t code, uint8_t status, uint8_t data)
 {
     uint8_t h = r->head;
     if ((uint8_t)(h - r->tail) >= RING_SIZE) {
@@ -62,12 +62,27 @@ static inline __attribute__((always_inline)) uint8_t ring_push(ring_t *r, uint8_
 #endif
     dyno_event_t *e = &ev[h & RING_MASK];
     e->t_us = t_us;
-    e->code = code;
-    e->status = status;
+    if (data) {  /* a constant: the Hall ISRs' pushes store no code and status */
+        e->code = code;
+        e->status = status;
+    }
     e->tag = (uint8_t)(tag | r->gap);
     r->gap = 0;
     r->head = (uint8_t)(h + 1u);  /* publish only after the entry is complete */
     return 1;
+}
+
+static inline __attribute__((always_inline)) uint8_t ring_push(ring_t *r, uint8_t tag, uint32_t t_us,
+                                                               uint16_t code, uint8_t status)
+{
+    return ring_push_(r, tag, t_us, code, status, 1);
+}
+
+/* A Hall edge: its time only. The encoder reads code and status for TAG_ADC and TAG_INPUT only
+ * (frame.c), so an edge's entry keeps whatever they held: 3 stores (6 cycles) less in the Hall ISRs. */
+static inline __attribute__((always_inline)) uint8_t ring_push_edge(ring_t *r, uint8_t tag, uint32_t t_us)
+{
+    return ring_push_(r, tag, t_us, 0, 0, 0);
 }
 
 /* k-th oldest unacknowledged event (k < ring_count). */
