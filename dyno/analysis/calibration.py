@@ -35,7 +35,7 @@ from dyno.analysis.calibration_history import (  # noqa: F401  (re-exported: the
 __all__ = ["G_STANDARD_M_PER_S2", "GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY", "HISTORY_COLUMNS", "R2_MIN_DEFAULT",
            "CalibrationEntry", "CalibrationRejected", "NoCalibration", "append_entry", "latest", "load_history",
            "load_legacy_cal_values", "torque_from_mass", "CalibrationFit", "fit_calibration",
-           "REPRODUCIBILITY_TARGET_REL", "Reproducibility", "slope_reproducibility", "fit_repeats"]
+           "REPRODUCIBILITY_TARGET_REL", "Reproducibility", "slope_reproducibility", "fit_repeats", "check_loads"]
 
 # --------------------------------------------------------------------------
 # applying known loads and fitting the line
@@ -365,6 +365,36 @@ def fit_calibration(torques_nm, counts, *, n_samples=None, direction=None,
         hysteresis_counts=hyst, hysteresis_pct_fs=hyst_pct, within_step_sd_counts=within_sd,
         friction_counts=friction, friction_se_counts=friction_se,
     )
+
+
+# --------------------------------------------------------------------------
+# the load plan
+
+
+def check_loads(masses_kg, *, min_distinct: int = 3) -> list[str]:
+    """Why a list of masses would not calibrate well ([] if it is fine).
+
+    At least ``min_distinct`` distinct non-zero loads, and spread over the
+    range: the lightest at most 40 % of the heaviest, and no gap between
+    neighbouring loads wider than 60 % of the span (a line through two
+    clusters cannot show non-linearity in between).
+    """
+    problems = []
+    m = sorted({round(float(x), 9) for x in masses_kg})
+    if any(not math.isfinite(x) or x <= 0 for x in m):
+        problems.append("masses must be finite and > 0 kg")
+        return problems
+    if len(m) < min_distinct:
+        problems.append(f"{len(m)} distinct load(s): at least {min_distinct} are needed to check linearity")
+        return problems
+    span = m[-1] - m[0]
+    if m[0] > 0.4 * m[-1]:
+        problems.append(f"lightest load {m[0]:g} kg is over 40 % of the heaviest ({m[-1]:g} kg): "
+                        f"add a light load so the fit covers the low end")
+    gaps = [b - a for a, b in zip(m, m[1:])]
+    if span > 0 and max(gaps) > 0.6 * span:
+        problems.append(f"a gap of {max(gaps):g} kg between loads (over 60 % of the range): add a load in between")
+    return problems
 
 
 # --------------------------------------------------------------------------

@@ -23,7 +23,8 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Input, ProgressBar, Static
 from textual_plotext import PlotextPlot
 
-from dyno.ui.calibration_wizard import COLLECTING_PHASES, CalibrationWizard, Phase, WizardFeeder, parse_masses
+from dyno.ui.calibration_feed import WizardFeeder
+from dyno.ui.calibration_wizard import COLLECTING_PHASES, CalibrationWizard, Phase, parse_masses
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, EstopSafeInput, bottom_lines, detach_terminal, exit_after
 
 HELP = "Enter/c collect  r redo  a accept  x reject  q quit │ SPACE/^C E-STOP"

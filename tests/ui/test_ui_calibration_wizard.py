@@ -7,7 +7,8 @@ import pytest
 
 from dyno.analysis.calibration import CalibrationRejected, load_history
 from dyno.clock import run
-from dyno.ui.calibration_wizard import CalibrationWizard, Phase, check_loads, parse_masses, run_sim_calibration
+from dyno.ui.calibration_feed import run_sim_calibration
+from dyno.ui.calibration_wizard import CalibrationWizard, Phase, check_loads, parse_masses
 
 MASSES_KG = [5, 10, 20, 30, 40]
 RADIUS_M = 0.15
@@ -201,7 +202,7 @@ def test_ui_wizard_feeder_waits_for_the_host_to_catch_up():
     the first poll after the device says it has nothing more queued."""
     from types import SimpleNamespace
 
-    from dyno.ui.calibration_wizard import WizardFeeder
+    from dyno.ui.calibration_feed import WizardFeeder
 
     w = CalibrationWizard(n_samples=5, settle_samples=0)
     assert w.configure(0.15, MASSES_KG) == []
