@@ -32,9 +32,12 @@ def summarize(ctx, drills_from: int = 0) -> dict:
         out["torque_zero"] = zc
         channel = getattr(ctx.controller, "input_channel", None)
         if channel is not None:  # the zero checks cover the engine-side input torque channel too
-            from dyno.analysis.input_torque import input_zero_check
+            zi = getattr(ctx.controller, "zero_check_input", None)  # as logged (torque_zero_input document)
+            if zi is None:
+                from dyno.analysis.input_torque import input_zero_check
 
-            out["torque_zero_input"] = input_zero_check(ctx.poller.streams, zc, channel)
+                zi = input_zero_check(ctx.poller.streams, zc, channel)
+            out["torque_zero_input"] = zi
         if zc.get("correct"):
             from dyno.analysis.zero_check import corrected_point_keys
 

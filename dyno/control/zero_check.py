@@ -66,4 +66,10 @@ async def after_test(ctrl, *, wait_rest_s: float = 30.0) -> dict:
     check["correct"] = _config(ctrl).correct
     ctrl.zero_check = check
     ctrl._log("torque_zero", **check)
+    channel = getattr(ctrl, "input_channel", None)
+    if channel is not None:  # the engine-side input channel (issue 27): its zero over the same two windows
+        from dyno.analysis.input_torque import input_zero_check
+
+        ctrl.zero_check_input = input_zero_check(ctrl.poller.streams, check, channel)
+        ctrl._log("torque_zero_input", **ctrl.zero_check_input)
     return check

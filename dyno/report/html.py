@@ -316,6 +316,8 @@ def render_report(data: ReportData) -> str:
         ("<h2>Characterisation</h2>" + sections.characterisation(data.docs("characterisation")))
         if data.docs("characterisation") else "",
         ("<h2>Torque zero</h2>" + sections.torque_zero(data.docs("torque_zero"))) if data.docs("torque_zero") else "",
+        ("<h3>Torque zero, input channel (crank N·m)</h3>" + sections.torque_zero(data.docs("torque_zero_input")))
+        if data.docs("torque_zero_input") else "",
         ('<h2 id="drive-grid">Drive grid</h2>' + sections.drive_grid(data.docs("grid_cell"), data.docs("point")))
         if data.docs("grid_cell") else "",
         *([] if characterisation_only else [

@@ -149,3 +149,13 @@ def test_a_runs_zero_checks_see_the_input_channels_own_drift(tmp_path):
     assert zi["drift_nm"] == pytest.approx(expected, abs=0.05 + 2 * zi["drift_ci95_nm"]), (zi, expected)
     assert zi["flagged"] and "drifted" in zi["note"]
     assert not zo["flagged"] and abs(zo["drift_nm"]) <= zo["drift_ci95_nm"] + 0.05, zo
+    # recorded with the run (documents.jsonl), so the report shows it
+    import json
+
+    from dyno.report.writer import write_report
+
+    docs = [json.loads(line) for line in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()]
+    (logged,) = [d for d in docs if d.get("type") == "torque_zero_input"]
+    assert logged["drift_nm"] == pytest.approx(zi["drift_nm"]) and logged["flagged"]
+    html = write_report(tmp_path / "run").read_text()
+    assert "Torque zero, input channel" in html and f"{zi['drift_nm']:+.3f}" in html
