@@ -75,6 +75,9 @@ def run(args) -> int:
     if inp and getattr(rig_cfg, "input_torque", None) is None:
         raise ConfigError("command line", "--channel", f"input: the rig file {rig_cfg.path} declares no input "
                           "torque channel (rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")
+    if inp and not args.sim and rig_cfg.protocol != "v2":  # (the simulated fixture always speaks v2)
+        raise ConfigError(rig_cfg.path, "protocol", f'"v2" for --channel input: the engine-side converter is a '
+                          f'v2 extension (docs/protocol.md), the rig file says "{rig_cfg.protocol}"')
     masses = args.masses if args.masses is not None else (DEFAULT_INPUT_MASSES if inp else DEFAULT_MASSES)
     radius = args.radius if args.radius is not None else (DEFAULT_INPUT_ARM_M if inp else DEFAULT_RADIUS_M)
     _check_masses(masses)

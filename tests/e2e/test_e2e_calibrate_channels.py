@@ -35,6 +35,8 @@ def _snapshot(root: Path) -> dict:
 
 
 def test_calibrate_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path):
+    v1_rig = tmp_path / "rig-v1.toml"
+    v1_rig.write_text(INPUT_RIG.read_text().replace('protocol = "v2"', 'protocol = "v1"', 1))
     bad_hist = tmp_path / "bad_input_history.csv"
     bad_hist.write_text(SHIPPED_INPUT.read_text().replace("586.5", "586,5", 1))  # a comma for a decimal point
     cases = [
@@ -45,6 +47,8 @@ def test_calibrate_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path):
         ("a mass that is not a number", ["calibrate", "--sim", "--masses", "5,ten,20"], ["--masses", "ten"]),
         ("repeats 0", ["calibrate", "--sim", "--repeats", "0"], ["--repeats"]),
         ("unknown channel", ["calibrate", "--sim", "--channel", "engine"], ["--channel"]),
+        ("input channel on v1 firmware (the rig)", ["calibrate", "--channel", "input", "--rig", v1_rig],
+         ["rig-v1.toml", "protocol"]),
         ("malformed input history", ["calibrate", "--sim", "--channel", "input", "--rig", INPUT_RIG,
                                      "--history", bad_hist], ["bad_input_history.csv", "line 3"]),
     ]
