@@ -51,6 +51,8 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         # the simulated rig has the engine-side channel when rig.toml declares it (as in a run)
         fixture_kw = {"input_fitted": getattr(rig_cfg, "input_torque", None) is not None, **(fixture_kw or {})}
         fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **fixture_kw)
+        if getattr(rig_cfg, "input_torque", None) is not None:
+            poller.reader.want_input = True  # asked for as on the rig (a fixture without it: announced absent)
         # each real-time poll spans `speed` x more fixture time: drain and buffer as much more
         poller.max_burst = max(8, math.ceil(8 * speed))
         per_poll = 128 if fixture.fixture.input_fitted else 64  # two converters: twice the events

@@ -236,6 +236,8 @@ class CalibrateApp(DynoApp):
 
     def _reading_text(self) -> str:
         codes = self.feeder.last_codes if self.feeder else []
+        if not codes and self.opts.channel == "input" and getattr(self.poller.reader, "input_present", None) is False:
+            return "NO input converter (firmware)"  # it announced none at boot: old firmware, or not fitted
         if not codes:
             return "ADC: waiting for conversions"
         mean = float(np.mean(codes[-125:]))

@@ -154,3 +154,24 @@ def test_an_error_inside_the_running_app_propagates_instead_of_hanging(tmp_path)
     with pytest.raises(RuntimeError, match="inside the app's context"):
         asyncio.run(asyncio.wait_for(scenario(), 40))
     assert time.monotonic() - t0 < 20, "the app did not shut down: the test body's error waited for a timeout"
+
+
+def test_ui_calibrate_input_channel_without_its_converter_says_so(tmp_path):
+    """The rig file declares the input channel but the firmware announces no second converter (old firmware,
+    or not fitted: the fixture without it): the screen says so instead of waiting for conversions."""
+    from pathlib import Path
+
+    rig = Path(__file__).resolve().parents[2] / "hardware" / "rig-input-torque.toml"
+
+    async def scenario():
+        app = CalibrateApp(_opts(tmp_path, channel="input", rig_path=rig, radius_m=0.2, masses="2,4,6,8,10",
+                                 fixture_kw={"input_fitted": False}))
+        async with app.run_test(size=SIZE) as pilot:
+            await _until(pilot, lambda: "NO input converter" in screen_text(app))
+            shot = screen_text(app)
+            await pilot.press("q")
+        return shot
+
+    shot = asyncio.run(scenario())
+    assert "NO input converter (firmware)" in shot and "input" in shot.splitlines()[0]
+    assert not (tmp_path / "hist.csv").exists()
