@@ -12,15 +12,13 @@ from __future__ import annotations
 import json
 
 
-def _model_point(res, params, tier: str) -> dict:
-    from dyno.model.overlay import predict_overlay
-
+def _model_point(res, pred, tier: str) -> dict:
     if not res.ok:
         return {"efficiency": None, "state": res.state, "reason": res.reason or res.state}
-    (pred,) = predict_overlay([res.operating_point()], params, tier=tier)
     eff = (pred.get("efficiency") or {}).get("overall")
-    out = {"state": "steady" if pred.get("converged") else "failed", "geometric_ratio": res.geometric_ratio,
-           "slip": res.slip, "primary_axial_force_n": res.primary_axial_force_n,
+    out = {"state": "steady" if pred.get("converged") else pred.get("state", "failed"),
+           "geometric_ratio": res.geometric_ratio, "slip": res.slip,
+           "primary_axial_force_n": res.primary_axial_force_n,
            "efficiency": eff if pred.get("converged") else None}
     if pred.get("balance") is not None:
         out["balance"] = pred["balance"]
@@ -39,8 +37,15 @@ def run_overlay(args) -> int:
     tune_path = args.tune if args.tune is not None else args.run_dir / "tune.toml"
     tune = load_tune(tune_path) if args.tune is not None or tune_path.is_file() else None
     params = model_params_for(tune) if tune is not None else None
+    from dyno.model.overlay import predict_overlay
+
     usable = [p for p in run.points if p.get("valid", True) and invertible(p)]
-    inverted = iter(invert_points(usable, tune, tier=args.tier))
+    inverted = invert_points(usable, tune, tier=args.tier)
+    # All the run's points in one batch: each solve warm-starts from its nearest solved neighbour, and a
+    # first point that failed from nothing is tried again from the points solved after it.
+    ops = [res.operating_point() for _, res in inverted if res.ok]
+    preds = iter(predict_overlay(ops, params if params is not None else _table_6_1(), tier=args.tier))
+    inverted = iter(inverted)
     rows = []
     for k, p in enumerate(run.points):
         row = {"index": p.get("index", k), "rpm_primary": p.get("rpm_primary"), "rpm_secondary": p.get("rpm_secondary"),
@@ -51,8 +56,7 @@ def run_overlay(args) -> int:
             row.update(efficiency=None, state="no_input", reason="no finite speeds, speed ratio or input power")
         else:
             _, res = next(inverted)
-            row.update(_model_point(res, params, args.tier) if params is not None
-                       else _model_point(res, _table_6_1(), args.tier))
+            row.update(_model_point(res, next(preds) if res.ok else None, args.tier))
         rows.append(row)
     level = f"tune {tune.name!r}" if tune is not None else "no tune: Table 6.1 drive at 100 N slack"
     if args.json:

@@ -138,6 +138,7 @@ def slip_full(params: ModelParams, *, variant: str = "corrected", slip_threshold
         return 1.0 - float(sol.summary["efficiency"]["speed"])
 
     slip.tier = "full"
+    slip.state = state  # the warm start: invert_points points it at a neighbour to retry a failed point
     return slip
 
 
@@ -261,16 +262,28 @@ def invert_points(points, tune=None, *, tier: str = "closed_form", params: Model
         d = tune.drive
         ratio_range = tuple(sorted(secondary_radius_m(r, d.belt_pitch_length_m, d.centre_distance_m) / r
                                    for r in (d.primary_radius_max_m, d.primary_radius_min_m)))
-    out = []
-    for p in points:
-        if not invertible(p):
-            continue
-        rp, rs, sr, p_in = (p.get(k) for k in ("rpm_primary", "rpm_secondary", "ratio", "power_in_w"))
+    def invert(p) -> InverseResult:
+        rp, sr, p_in = (p.get(k) for k in ("rpm_primary", "ratio", "power_in_w"))
         torque = float(p_in) / (float(rp) * RAD_S_PER_RPM)
         if tune is not None:
-            res = invert_speed_ratio(sr, rp, torque, slip=slip, clamp=clamp_from_tune(tune, rp),
-                                     ratio_range=ratio_range)
-        else:
-            res = invert_speed_ratio(sr, rp, torque, slip=slip, slack_tension_n=slack_tension_n)
-        out.append((float(rs), res))
+            return invert_speed_ratio(sr, rp, torque, slip=slip, clamp=clamp_from_tune(tune, rp),
+                                      ratio_range=ratio_range)
+        return invert_speed_ratio(sr, rp, torque, slip=slip, slack_tension_n=slack_tension_n)
+
+    usable = [p for p in points if invertible(p)]
+    out, solved = [], {}  # solved: index -> the full tier's last solution there (a retry's warm start)
+    for k, p in enumerate(usable):
+        res = invert(p)
+        out.append((float(p["rpm_secondary"]), res))
+        if tier == "full" and res.ok:
+            solved[k] = slip.state["guess"]
+    if tier == "full" and solved:
+        # Each solve starts from the previous point's solution; the first point (or one after a failure)
+        # starts from nothing, which at a heavy clamp can fail where a start from its run's next solved
+        # point converges: retry those once from the nearest solved point.  Gross slip and no clamp are
+        # the physics' answers, not retried.
+        for k, (rs, res) in enumerate(out):
+            if res.state == "failed":
+                slip.state["guess"] = solved[min(solved, key=lambda j: abs(j - k))]
+                out[k] = (rs, invert(usable[k]))
     return out

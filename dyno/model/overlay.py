@@ -164,6 +164,7 @@ def predict_overlay(
         svc = OverlayService(params, executor=InlineExecutor(), variant=variant, slip_threshold_m_s=slip_threshold_m_s,
                              tol=tol, cache_dir=cache_dir, use_cache=use_cache, time_limit_s=time_limit_s)
         keys = [svc.submit(op) for op in ops]
+        svc.retry_failures()  # a failed first point, warm from the points of its run solved after it
         return [dict(svc.get(k)) for k in keys]
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     results: list = [None] * len(ops)

@@ -159,6 +159,32 @@ class OverlayService:
         """Solve ``item`` when nothing else waits (a seed for the warm starts of the points to come)."""
         return self.submit(item, prime=True)
 
+    def retry_failures(self) -> int:
+        """Queue once more every point that did not converge, now warm from the nearest point solved in this
+        session (however far), when that is not where its failed attempt started; returns how many.
+
+        Points are solved in arrival order, so a run's first point starts from nothing or from a stored
+        solution of another run, and at a heavy clamp that can fail where a start from the next point of
+        its own run converges. Gross slip is the physics' answer: never retried; each point is retried once.
+        """
+        n = 0
+        with self._lock:
+            for key, e in self.entries.items():
+                r = e.result
+                if (r is None or r.get("converged") or r.get("state") == "gross_slip" or e.prime
+                        or e.extra.get("retried") or key in self._pending or key == self._busy):
+                    continue
+                _, near_key, ws = self._nearest(e.op, session_only=True)
+                if ws is None or near_key == e.warm_from:
+                    continue  # nothing new to start from
+                e.result, e.done_s = None, None
+                e.extra["retried"] = True
+                self._pending.append(key)
+                n += 1
+        if n:
+            self._pump()
+        return n
+
     def nearest_distance(self, item) -> float:
         """:func:`op_distance` from ``item`` to the nearest solution a warm start could use (inf: none)."""
         op = _as_point(item, self.slack_tension_n, self.primary_axial_force_n)
@@ -199,10 +225,10 @@ class OverlayService:
             self.executor.shutdown(wait=False)
 
     # --- scheduling ---------------------------------------------------------------------------------
-    def _nearest(self, op: OperatingPoint) -> tuple[float, str | None, WarmState | None]:
+    def _nearest(self, op: OperatingPoint, session_only: bool = False) -> tuple[float, str | None, WarmState | None]:
         best = (math.inf, None, None)
         for key, ws in self._warm:
-            if ws.variant != self.variant:
+            if ws.variant != self.variant or (session_only and key not in self.entries):
                 continue
             d = op_distance(op, ws.op, self.slip_threshold_m_s, ws.slip_threshold_m_s)
             if d < best[0]:
@@ -223,8 +249,12 @@ class OverlayService:
             self._pending.remove(key)
             self._busy = key
             e = self.entries[key]
-            d, near_key, ws = self._nearest(e.op)
-            guess = ws if d <= self.warm_max_distance else None
+            # a retry starts from this session's solutions first (its run's neighbours), then from stored ones
+            d, near_key, ws = self._nearest(e.op, session_only=bool(e.extra.get("retried")))
+            if ws is None:
+                d, near_key, ws = self._nearest(e.op)
+            # a retry takes its nearest neighbour of this session however far: its first attempt failed
+            guess = ws if d <= self.warm_max_distance or (e.extra.get("retried") and ws is not None) else None
             e.warm_from = near_key if guess is not None else None
             e.extra["neighbour_distance"] = d
             if guess is not None:

@@ -228,3 +228,54 @@ def test_a_dead_worker_process_is_replaced_by_a_thread(tmp_path):
     svc = service(tmp_path, executor=Broken(), solve=fake_solver(log), use_cache=False)
     key = svc.submit(RUN[0])
     assert svc.wait_idle(10) and svc.get(key)["converged"] and svc.fallbacks == 1 and len(log) == 1
+
+
+# --- a failed point retried from its run's neighbours (issue 25 item 4) ---------------------------------
+
+
+def _retry_service(tmp_path):
+    from dyno.model.overlay_service import InlineExecutor, OverlayService
+
+    calls = []
+
+    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None):
+        """A stand-in solver: the 'heavy' point fails from nothing and converges from any neighbour; the
+        'slip' point is gross slip whatever the start."""
+        calls.append((op.primary_torque_nm, guess is not None))
+        base = {"tier": "full", "ratio": op.ratio, "primary_speed_rpm": op.primary_speed_rpm,
+                "primary_torque_nm": op.primary_torque_nm, "variant": variant, "steps": 1, "job_s": 0.0}
+        if op.primary_torque_nm == 30.0:
+            return {**base, "converged": False, "state": "gross_slip", "error": "gross slip", "start": "cold"}, None
+        if op.primary_torque_nm == 10.0 and guess is None:
+            return {**base, "converged": False, "state": "failed", "error": "singular", "start": "cold"}, None
+        warm = WarmState(case=None, t=np.zeros(2), y=np.zeros((2, 2)), p=np.zeros(1), rms=None, op=op,
+                         variant=variant, slip_threshold_m_s=slip_threshold_m_s)
+        return {**base, "converged": True, "state": "steady", "efficiency": {"overall": 0.9},
+                "start": "warm" if guess is not None else "cold"}, warm
+
+    svc = OverlayService(executor=InlineExecutor(), cache_dir=tmp_path, use_cache=False, solve=solve)
+    return svc, calls
+
+
+def test_a_point_that_failed_cold_is_retried_warm_from_its_runs_next_point(tmp_path):
+    from dyno.model.params import OperatingPoint
+
+    svc, calls = _retry_service(tmp_path)
+    first = svc.submit(OperatingPoint(ratio=0.72, primary_speed_rpm=3670, primary_torque_nm=10.0))
+    assert svc.get(first)["converged"] is False  # solved first, from nothing: failed
+    second = svc.submit(OperatingPoint(ratio=0.72, primary_speed_rpm=3550, primary_torque_nm=14.5))
+    slip = svc.submit(OperatingPoint(ratio=2.0, primary_speed_rpm=3000, primary_torque_nm=30.0))
+    assert svc.get(second)["converged"] is True
+    assert svc.retry_failures() == 1  # the numerical failure only: gross slip is the physics' answer
+    assert svc.get(first)["converged"] is True and svc.get(first)["start"] == "warm"
+    assert svc.get(slip)["state"] == "gross_slip"
+    assert svc.retry_failures() == 0  # once each
+    assert calls.count((30.0, False)) + calls.count((30.0, True)) == 1
+
+
+def test_no_retry_without_a_solved_point_to_start_from(tmp_path):
+    from dyno.model.params import OperatingPoint
+
+    svc, calls = _retry_service(tmp_path)
+    k = svc.submit(OperatingPoint(ratio=0.72, primary_speed_rpm=3670, primary_torque_nm=10.0))
+    assert svc.retry_failures() == 0 and svc.get(k)["converged"] is False and len(calls) == 1
