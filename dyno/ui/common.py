@@ -109,6 +109,27 @@ class ConfirmScreen(ModalScreen[bool]):
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)
 
+    def on_unmount(self) -> None:
+        forget_removed_widgets()
+
+
+def forget_removed_widgets() -> None:
+    """Let the widgets of a screen that has gone be freed: empty Textual's background-style cache.
+
+    ``textual._styles_cache.StylesCache.get_inner_outer`` is an ``lru_cache`` (1,024 entries) on a *method*:
+    each key holds the widget's ``StylesCache``, and with it every line the widget last rendered.  A
+    dismissed dialog's widgets stayed alive through it: 4 per ``ConfirmScreen``, ~180 KB a dialog at
+    120x40, two dialogs a test (GO, re-arm) — the UI soak's RSS grew with every test until the cache's
+    1,024 entries (~250 dialogs) were full (docs/safety.md, "Soak").  The entries are two ``Style`` objects,
+    recomputed on the next draw.  A Textual without that cache (a later version): nothing to do.
+    """
+    try:
+        from textual._styles_cache import StylesCache
+
+        StylesCache.get_inner_outer.cache_clear()
+    except (ImportError, AttributeError):  # pragma: no cover - another Textual
+        pass
+
 
 def detach_terminal() -> None:
     """The terminal went (SIGHUP): point stdin, stdout and stderr at /dev/null, from the signal handler.
