@@ -3,7 +3,6 @@ expected, exit 2, no traceback, nothing written or changed."""
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 import subprocess
@@ -12,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.bad_input import one_line_failures, snapshot
+
 REPO = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
 
@@ -19,14 +20,6 @@ ENV = {**os.environ, "PYTHONPATH": str(REPO)}
 def _dyno(*args, cwd) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "dyno", *map(str, args)], capture_output=True, text=True,
                           timeout=120, env=ENV, cwd=cwd)
-
-
-def _snapshot(root: Path) -> dict:
-    out = {}
-    for p in sorted(root.rglob("*")):
-        rel = str(p.relative_to(root))
-        out[rel] = hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -115,22 +108,10 @@ def test_every_bad_input_is_one_line_exit_2_and_nothing_changes(tmp_path, good_r
     for d in ("r1", "r2", "r3", "r4", "r5"):
         (tmp_path / d).mkdir()
     cases = _cases(tmp_path, good_run)
-    before = _snapshot(tmp_path)
-    failures = []
-    for name, argv, names in cases:
-        r = _dyno(*argv, cwd=tmp_path)
-        err = r.stderr.strip()
-        problems = []
-        if r.returncode != 2:
-            problems.append(f"exit {r.returncode}")
-        if "Traceback" in r.stderr or len(err.splitlines()) != 1:
-            problems.append(f"stderr is not one line: {err[-600:]!r}")
-        if names not in err:
-            problems.append(f"does not name {names!r}: {err[-300:]!r}")
-        if problems:
-            failures.append(f"{name}: {'; '.join(problems)}")
+    before = snapshot(tmp_path)
+    failures = one_line_failures(cases, lambda *argv: _dyno(*argv, cwd=tmp_path))
     assert not failures, "\n".join(failures)
-    assert _snapshot(tmp_path) == before  # nothing written, nothing changed
+    assert snapshot(tmp_path) == before  # nothing written, nothing changed
     assert not (tmp_path / "never").exists() and not (tmp_path / "runs").exists()
 
 

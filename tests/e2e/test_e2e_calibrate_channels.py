@@ -4,7 +4,6 @@ line, exit 2, nothing written."""
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import shutil
@@ -15,6 +14,8 @@ import uuid
 from pathlib import Path
 
 import pytest
+
+from tests.bad_input import one_line_failures, snapshot
 
 from tests.screens import pane, tmux, wait_screen
 
@@ -27,11 +28,6 @@ ENV = {**os.environ, "PYTHONPATH": str(REPO)}
 def _dyno(*args, cwd) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "dyno", *map(str, args)], capture_output=True, text=True,
                           timeout=120, env=ENV, cwd=cwd)
-
-
-def _snapshot(root: Path) -> dict:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
-            for p in sorted(root.rglob("*"))}
 
 
 def test_calibrate_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path):
@@ -52,21 +48,10 @@ def test_calibrate_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path):
         ("malformed input history", ["calibrate", "--sim", "--channel", "input", "--rig", INPUT_RIG,
                                      "--history", bad_hist], ["bad_input_history.csv", "line 3"]),
     ]
-    before = _snapshot(tmp_path)
-    failures = []
-    for name, argv, names in cases:
-        r = _dyno(*argv, cwd=tmp_path)
-        err = r.stderr.strip()
-        problems = []
-        if r.returncode != 2:
-            problems.append(f"exit {r.returncode}")
-        if "Traceback" in r.stderr or len(err.splitlines()) != 1:
-            problems.append(f"stderr is not one line: {err[-600:]!r}")
-        problems += [f"does not name {n!r}: {err[-300:]!r}" for n in names if n not in err]
-        if problems:
-            failures.append(f"{name}: {'; '.join(problems)}")
+    before = snapshot(tmp_path)
+    failures = one_line_failures(cases, lambda *argv: _dyno(*argv, cwd=tmp_path))
     assert not failures, "\n".join(failures)
-    assert _snapshot(tmp_path) == before  # nothing written (no runs/ either), the bad history byte-identical
+    assert snapshot(tmp_path) == before  # nothing written (no runs/ either), the bad history byte-identical
 
 
 def _env(home: Path) -> dict:

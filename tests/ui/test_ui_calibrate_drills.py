@@ -19,6 +19,21 @@ from tests.screens import screen_text
 SIZE = (80, 24)
 
 
+async def _until_aborted(app):
+    """Drive the wizard (defaults, then 'c' at each load) until a drill aborts it: (abort, screen text)."""
+    async with app.run_test(size=SIZE) as pilot:
+        await pilot.press("enter", "enter")  # radius, masses: the defaults; taring starts
+        t_end = time.monotonic() + 30
+        while app.wizard.aborted is None and time.monotonic() < t_end:
+            if not app.wizard.collecting and app.wizard.aborted is None:
+                await pilot.press("c")
+            await pilot.pause(0.1)
+        await pilot.pause(0.4)
+        shot = screen_text(app)
+        await pilot.press("q")  # the user's way out (leaving run_test otherwise never returns)
+        return app.wizard.aborted, shot
+
+
 @pytest.mark.parametrize("drill, cause", [("adc-error@1", "sensor_fault"), ("adc-stuck@1", "sensor_fault"),
                                           ("bus-lost@1", "comms_lost")])
 def test_calibration_drill_aborts_and_writes_nothing(tmp_path, drill, cause):
@@ -27,17 +42,8 @@ def test_calibration_drill_aborts_and_writes_nothing(tmp_path, drill, cause):
     async def scenario():
         app = CalibrateApp(CalibrateOptions(sim=True, seed=4, speed=2.0, n_samples=100, settle_samples=60,
                                             history_path=hist, drills=[parse_drill(drill, engine=False)]))
-        async with app.run_test(size=SIZE) as pilot:
-            await pilot.press("enter", "enter")  # radius, masses: the defaults; taring starts
-            t_end = time.monotonic() + 30
-            while app.wizard.aborted is None and time.monotonic() < t_end:
-                if not app.wizard.collecting and app.wizard.aborted is None:
-                    await pilot.press("c")
-                await pilot.pause(0.1)
-            await pilot.pause(0.4)
-            shot = screen_text(app)
-            await pilot.press("q")  # the user's way out (leaving run_test otherwise never returns)
-            return app.wizard.aborted, shot, app.cal_ctx.trip
+        aborted, shot = await _until_aborted(app)
+        return aborted, shot, app.cal_ctx.trip
 
     aborted, screen, trip = asyncio.run(scenario())
     assert aborted is not None and aborted[0] == cause
@@ -91,17 +97,7 @@ def test_input_channel_calibration_drill_aborts_and_writes_nothing(tmp_path, dri
         app = CalibrateApp(CalibrateOptions(sim=True, seed=4, speed=2.0, n_samples=100, settle_samples=60,
                                             history_path=hist, rig_path=rig, channel="input", radius_m=0.2,
                                             masses="2,4,6,8,10", drills=[parse_drill(drill, engine=False)]))
-        async with app.run_test(size=SIZE) as pilot:
-            await pilot.press("enter", "enter")
-            t_end = time.monotonic() + 30
-            while app.wizard.aborted is None and time.monotonic() < t_end:
-                if not app.wizard.collecting and app.wizard.aborted is None:
-                    await pilot.press("c")
-                await pilot.pause(0.1)
-            await pilot.pause(0.4)
-            shot = screen_text(app)
-            await pilot.press("q")
-            return app.wizard.aborted, shot
+        return await _until_aborted(app)
 
     aborted, screen = asyncio.run(scenario())
     assert aborted is not None and aborted[0] == "sensor_fault" and what in aborted[1], aborted
