@@ -5,7 +5,7 @@ but a solve warm-started from a nearby solution ~0.3-1 s (one continuation
 step).  :class:`OverlayService` therefore
 
 * solves only what is new: each operating point is keyed like the disk cache
-  (:func:`dyno.model.overlay.point_key`: inputs + the model's code hash), a
+  (:func:`dyno.model.cache_keys.point_key`: inputs + the model's code hash), a
   point already solved (in memory or on disk, converged or failed) is answered
   at once, and a failed entry is retried only when the model's code changes;
 * solves one point at a time on an injected executor (anything with
@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dyno.model import overlay as _overlay
-from dyno.model.overlay import _as_point, default_cache_dir, point_key
+from dyno.model import cache_keys as _keys
+from dyno.model.cache_keys import _as_point, default_cache_dir, point_key
 from dyno.model.overlay_worker import (Cancelled, InlineExecutor, WarmState, process_pool,  # noqa: F401  (re-exported)
                                        solve_job)
 from dyno.model.params import TABLE_6_1, ModelParams, OperatingPoint
@@ -121,7 +121,7 @@ class OverlayService:
         self._idle = threading.Condition(self._lock)
         self.solves = 0  # full-model jobs run (cache hits excluded)
         self.fallbacks = 0  # times a dead worker process was replaced by a thread
-        self._code = _overlay.model_code_hash()  # via the module: a test may stand in for it
+        self._code = _keys.model_code_hash()  # via the module: a test may stand in for it
         if use_cache:
             self._load_warm_states()
 

@@ -4,7 +4,7 @@ A task is one continuation walk (:func:`dyno.model.sweep.sweep_ratios`) over som
 set: a study's value, or one side of an operating-range sweep walked outwards from its first point.  Its
 result (the rows) is stored under ``<cache>/studies/<key>.json`` the moment it arrives, keyed by
 everything that decides it — the parameters, the operating point, the ratios, variant, slip threshold,
-tolerance and :func:`dyno.model.overlay.model_code_hash` — so an interrupted study, run again, solves only
+tolerance and :func:`dyno.model.cache_keys.model_code_hash` — so an interrupted study, run again, solves only
 what is missing, and a changed model invalidates the lot.  The warm start a task is handed (a solution
 near its first ratio) is not in the key: it speeds the walk, it does not choose the answer.
 """
@@ -35,7 +35,7 @@ class SweepTask:
 
 
 def task_key(task: SweepTask) -> str:
-    from dyno.model.overlay import model_code_hash
+    from dyno.model.cache_keys import model_code_hash
 
     payload = {"code": model_code_hash(), "params": task.params.as_dict(), "op": asdict(task.op),
                "ratios": [round(float(r), 12) for r in task.ratios], "variant": task.variant,
@@ -61,7 +61,7 @@ def run_task(task: SweepTask) -> list[dict]:
 
 
 def study_cache_dir(cache_dir=None) -> Path:
-    from dyno.model.overlay import default_cache_dir
+    from dyno.model.cache_keys import default_cache_dir
 
     return Path(cache_dir) / "studies" if cache_dir is not None else default_cache_dir() / "studies"
 

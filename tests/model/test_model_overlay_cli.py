@@ -100,7 +100,9 @@ def test_cache_key_covers_the_model_code_and_failures_are_retried_after_a_change
     again = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
     assert again[0]["cached"] and len(calls) == 1  # same code: the failure is remembered
     assert len(overlay.model_code_hash()) == 64
-    monkeypatch.setattr(overlay, "model_code_hash", lambda: "0" * 64)  # the model's code changed
+    from dyno.model import cache_keys
+
+    monkeypatch.setattr(cache_keys, "model_code_hash", lambda: "0" * 64)  # the model's code changed
     retried = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
     assert not retried[0]["cached"] and len(calls) == 2
 

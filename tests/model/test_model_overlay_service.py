@@ -162,7 +162,9 @@ def test_failed_entry_is_cached_and_retried_when_the_model_code_changes(tmp_path
     again = service(tmp_path, solve=fake_solver(log, fail=True))
     r2 = again.get(again.submit(RUN[0]))
     assert r2["cached"] and not r2["converged"] and len(log) == 1  # same code: the failure is remembered
-    monkeypatch.setattr(overlay, "model_code_hash", lambda: "f" * 64)  # the model's code changed
+    from dyno.model import cache_keys
+
+    monkeypatch.setattr(cache_keys, "model_code_hash", lambda: "f" * 64)  # the model's code changed
     changed = service(tmp_path, solve=fake_solver(log))
     r3 = changed.get(changed.submit(RUN[0]))
     assert r3["converged"] and not r3["cached"] and len(log) == 2

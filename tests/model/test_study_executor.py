@@ -62,14 +62,14 @@ def test_an_interrupted_study_resumes_with_what_it_had(inline_study):
 
 
 def test_the_key_follows_the_inputs_and_the_model_code_not_the_warm_start(monkeypatch):
-    import dyno.model.overlay as overlay
-
     t = SweepTask("x", TABLE_6_1, TABLE_6_1_POINT, (1.2, 1.0), tol=1e-2)
     k = task_key(t)
     assert task_key(replace(t, guess=object(), label="other")) == k
     assert task_key(replace(t, tol=1e-3)) != k and task_key(replace(t, ratios=(1.2, 0.9))) != k
     assert task_key(replace(t, params=TABLE_6_1.with_belt(friction_coefficient=0.41))) != k
-    monkeypatch.setattr(overlay, "model_code_hash", lambda: "a changed model")
+    from dyno.model import cache_keys
+
+    monkeypatch.setattr(cache_keys, "model_code_hash", lambda: "a changed model")
     assert task_key(t) != k  # a changed model solves everything again
 
 
