@@ -26,7 +26,9 @@ import math
 
 import numpy as np
 
-from dyno.model import bvp
+# the state layout, the contact terms and RawSolution from equations, not bvp: bvp's boundary conditions
+# use these balances
+from dyno.model import equations as eq
 
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(3)
 
@@ -40,11 +42,11 @@ def _gauss_nodes(t: np.ndarray):
     return (mid[:, None] + half[:, None] * _GAUSS_X[None, :]).ravel(), (half[:, None] * _GAUSS_W[None, :]).ravel()
 
 
-def carries_point_loads(case: bvp.Case) -> bool:
+def carries_point_loads(case: eq.Case) -> bool:
     return case.variant != "as_published"
 
 
-def _span_ei_eff(case: bvp.Case, length_m: float) -> float:
+def _span_ei_eff(case: eq.Case, length_m: float) -> float:
     # as published, the swapped L^2 terms make the span stiffness EI L^4 (module docstring of bvp)
     return case.ei_nm2 * length_m**4 if case.variant == "as_published" else case.ei_nm2
 
@@ -57,45 +59,45 @@ def _cross(a, b) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
 
 
-def _pulley_geometry(case: bvp.Case, p, which: str):
+def _pulley_geometry(case: eq.Case, p, which: str):
     if which == "primary":
-        rows = (bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.P_TH2, bvp.P_X, bvp.P_X1)
-        phi, radius, centre = p[bvp.K_PHIP], case.r_primary_m, np.zeros(2)
-        alpha0 = p[bvp.K_CP]
+        rows = (eq.P_T, eq.P_TH, eq.P_TH1, eq.P_TH2, eq.P_X, eq.P_X1)
+        phi, radius, centre = p[eq.K_PHIP], case.r_primary_m, np.zeros(2)
+        alpha0 = p[eq.K_CP]
     else:
-        rows = (bvp.S_T, bvp.S_TH, bvp.S_TH1, bvp.S_TH2, bvp.S_X, bvp.S_X1)
-        phi, radius, centre = p[bvp.K_PHIS], case.r_secondary_m, np.array([case.centre_distance_m, 0.0])
-        alpha0 = math.pi - p[bvp.K_CS] - p[bvp.K_PHIS]
+        rows = (eq.S_T, eq.S_TH, eq.S_TH1, eq.S_TH2, eq.S_X, eq.S_X1)
+        phi, radius, centre = p[eq.K_PHIS], case.r_secondary_m, np.array([case.centre_distance_m, 0.0])
+        alpha0 = math.pi - p[eq.K_CS] - p[eq.K_PHIS]
     return rows, phi, radius, centre, alpha0
 
 
 def _contact_end(case, y_end, p, which):
     """Internal force, bending moment and position (about the pulley centre) on the contact side of one end."""
     rows, phi, radius, _, _ = _pulley_geometry(case, p, which)
-    t_n = y_end[rows[0]] * bvp.TENSION_REF_N
+    t_n = y_end[rows[0]] * eq.TENSION_REF_N
     th, th1, th2 = y_end[rows[1]], y_end[rows[2]], y_end[rows[3]]
-    x_m, x1_m = y_end[rows[4]] * bvp.PENETRATION_REF_M, y_end[rows[5]] * bvp.PENETRATION_REF_M
-    q = float(bvp.contact_shear(case, th, th1, th2, x_m, x1_m, radius, phi))
+    x_m, x1_m = y_end[rows[4]] * eq.PENETRATION_REF_M, y_end[rows[5]] * eq.PENETRATION_REF_M
+    q = float(eq.contact_shear(case, th, th1, th2, x_m, x1_m, radius, phi))
     kappa = math.cos(th) * (1.0 - th1 / phi) / (radius - x_m)
     return t_n, th, q, case.ei_nm2 * kappa, radius - x_m
 
 
 def _span_end(case, y_end, p, span: str):
-    rows = (bvp.T_TAU, bvp.T_V, bvp.T_V1, bvp.T_V2) if span == "tight" else (bvp.L_TAU, bvp.L_V, bvp.L_V1, bvp.L_V2)
-    length = p[bvp.K_LT] if span == "tight" else p[bvp.K_LS]
+    rows = (eq.T_TAU, eq.T_V, eq.T_V1, eq.T_V2) if span == "tight" else (eq.L_TAU, eq.L_V, eq.L_V1, eq.L_V2)
+    length = p[eq.K_LT] if span == "tight" else p[eq.K_LS]
     ei = _span_ei_eff(case, length)
     direction = y_end[rows[1]]
     shear = -ei * y_end[rows[3]] / length**2
-    force = y_end[rows[0]] * bvp.TENSION_REF_N * _unit(direction) + shear * _unit(direction + math.pi / 2)
+    force = y_end[rows[0]] * eq.TENSION_REF_N * _unit(direction) + shear * _unit(direction + math.pi / 2)
     return force, ei * y_end[rows[2]] / length
 
 
-def interface_loads(raw: bvp.RawSolution) -> dict:
+def interface_loads(raw: eq.RawSolution) -> dict:
     """:func:`interface_loads_at_ends` of a solution."""
     return interface_loads_at_ends(raw.case, raw.y[:, 0], raw.y[:, -1], raw.p)
 
 
-def interface_loads_at_ends(case: bvp.Case, ya, yb, p) -> dict:
+def interface_loads_at_ends(case: eq.Case, ya, yb, p) -> dict:
     """Per (pulley, end): span-side and contact-side force and moment, and the point load on the belt.
 
     Vectors in the drive frame (N), positions relative to the pulley centre (m).
@@ -139,17 +141,17 @@ def point_load_torque_nm(loads: dict, which: str) -> float:
     return sum(_cross(loads[(which, e)]["position_m"], loads[(which, e)]["point_load_n"]) for e in ("entry", "exit"))
 
 
-def _distributed(raw: bvp.RawSolution, which: str):
+def _distributed(raw: eq.RawSolution, which: str):
     """Quadrature over one contact arc: force on the belt, its moment, friction dissipation, normal-force work."""
     case, p = raw.case, raw.p
     rows, phi, radius, _, alpha0 = _pulley_geometry(case, p, which)
     tq, w = _gauss_nodes(raw.t)
     y = raw.sol(tq)
-    omega_s, g = bvp._unpack_params(case, p)
+    omega_s, g = eq._unpack_params(case, p)
     omega = case.omega_primary_rad_s if which == "primary" else omega_s
-    t_n = y[rows[0]] * bvp.TENSION_REF_N
-    x_m, x1_m = y[rows[4]] * bvp.PENETRATION_REF_M, y[rows[5]] * bvp.PENETRATION_REF_M
-    *_, ex = bvp.contact_terms(case, t_n, y[rows[1]], y[rows[2]], y[rows[3]], x_m, x1_m, radius, phi, omega, g)
+    t_n = y[rows[0]] * eq.TENSION_REF_N
+    x_m, x1_m = y[rows[4]] * eq.PENETRATION_REF_M, y[rows[5]] * eq.PENETRATION_REF_M
+    *_, ex = eq.contact_terms(case, t_n, y[rows[1]], y[rows[2]], y[rows[3]], x_m, x1_m, radius, phi, omega, g)
     gam = ex["sliding_angle_rad"]
     cos_g, sin_g = np.cos(gam), np.sin(gam)
     tb = math.tan(case.beta_rad) * cos_g
@@ -172,7 +174,7 @@ def _distributed(raw: bvp.RawSolution, which: str):
     }
 
 
-def balances(raw: bvp.RawSolution) -> dict:
+def balances(raw: eq.RawSolution) -> dict:
     """Force, moment (about each pulley centre) and power balances, each relative to its largest term.
 
     Returns ``{"force_rel", "moment_rel", "power_rel", "detail": {...}}``;

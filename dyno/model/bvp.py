@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -77,7 +77,7 @@ from dyno.model.equations import (  # noqa: F401  (re-exported: layout, scales, 
     make_fun_jac,
     span_terms,
 )
-from dyno.model.equations import _belt_speed, _mass_flow_for_speed, _unpack_params  # noqa: F401
+from dyno.model.equations import RawSolution, _belt_speed, _mass_flow_for_speed, _unpack_params  # noqa: F401
 from dyno.model.guess import (  # noqa: F401  (re-exported)
     _interp_case,
     _span_bending_length_m,
@@ -102,23 +102,6 @@ class StepRecord:
     nodes: int
     seconds: float
     what: str = ""
-
-
-@dataclass
-class RawSolution:
-    """What solve_bvp returned for one case, plus the continuation history."""
-
-    case: Case
-    t: np.ndarray
-    y: np.ndarray
-    p: np.ndarray
-    sol: object  # scipy PPoly-like callable from solve_bvp
-    residual_max: float
-    bc_residual_max: float
-    tol: float
-    history: list = field(default_factory=list)
-    solve_s: float = 0.0
-    rms_residuals: np.ndarray | None = None  # per mesh interval, from solve_bvp (drives re-meshing)
 
 
 def _sanity_problem(case: Case, y: np.ndarray, p: np.ndarray) -> str | None:

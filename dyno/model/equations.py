@@ -98,7 +98,7 @@ nodes), warm starts with homotopy in the physical parameters.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -172,6 +172,24 @@ class Case:
             f"EI={self.ei_nm2:g} N*m^2, beta={math.degrees(self.beta_rad):g} deg, k={self.k_n_m2:.4g} N/m^2, "
             f"mu={self.mu:g}, v_th={self.slip_threshold_m_s:.3g} m/s"
         )
+
+
+@dataclass
+class RawSolution:
+    """What solve_bvp returned for one case, plus the continuation history (here, beside the state layout, so
+    the balances can name it without importing the solver)."""
+
+    case: Case
+    t: np.ndarray
+    y: np.ndarray
+    p: np.ndarray
+    sol: object  # scipy PPoly-like callable from solve_bvp
+    residual_max: float
+    bc_residual_max: float
+    tol: float
+    history: list = field(default_factory=list)
+    solve_s: float = 0.0
+    rms_residuals: np.ndarray | None = None  # per mesh interval, from solve_bvp (drives re-meshing)
 
 
 def make_case(
