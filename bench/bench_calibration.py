@@ -65,7 +65,10 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", default="1,2,3,5")
     ap.add_argument("--samples", type=int, default=500, help="ADC samples kept per step (default 500)")
     ap.add_argument("--no-friction-term", action="store_true", help="also the plain line (input channel)")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: 2 seeds, 2 repeats, 150 samples a step")
     a = ap.parse_args(argv)
+    if a.quick:
+        a.seeds, a.repeats, a.samples = 2, "2", 150
     print(f"dyno calibrate --sim --channel {a.channel} --samples {a.samples}: {a.seeds} seeds; target reproducibility "
           f"{100 * REPRODUCIBILITY_TARGET_REL:.1f} %")
     for reps in (int(x) for x in a.repeats.split(",")):
@@ -73,6 +76,9 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             rs = [one(a.channel, s, reps, friction, a.samples) for s in range(a.seeds)]
             ok = [r for r in rs if "err" in r]
+            if not ok:
+                print(f"repeats {reps}: no calibration completed ({len(rs)} refused)", flush=True)
+                return 1
             errs = [100 * r["err"] for r in ok]
             line = (f"repeats {reps}{'' if friction else ' (plain line)'}: gain error max {max(map(abs, errs)):.3f} %, "
                     f"rms {math.sqrt(statistics.fmean(e * e for e in errs)):.3f} %, mean {statistics.fmean(errs):+.3f} %, "
