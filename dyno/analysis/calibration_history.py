@@ -319,6 +319,18 @@ def _parse_history_text(text: str, path: Path) -> list[CalibrationEntry]:
     return entries
 
 
+def _read_text(path: Path, what: str, encoding: str) -> str:
+    """The file's text, or a ConfigError naming it: missing, not UTF-8, unreadable (a directory, permissions)."""
+    try:
+        return path.read_bytes().decode(encoding)
+    except FileNotFoundError:
+        raise ConfigError(path, "file", f"an existing {what}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(path, "file", "UTF-8 text") from None
+    except OSError as exc:
+        raise ConfigError(path, "file", f"a readable {what} ({exc.strerror or exc})") from None
+
+
 def load_history(path) -> list[CalibrationEntry]:
     """Read a calibration history CSV (new format), validating every field.
 
@@ -341,15 +353,7 @@ def load_history(path) -> list[CalibrationEntry]:
         (the message names the file, the line and the field).
     """
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise ConfigError(path, "file", "an existing calibration history CSV") from None
-    except UnicodeDecodeError:
-        raise ConfigError(path, "file", "UTF-8 text") from None
-    except OSError as exc:  # a directory, no permission, an I/O error
-        raise ConfigError(path, "file", f"a readable calibration history CSV ({exc.strerror or exc})") from None
-    return _parse_history_text(text, path)
+    return _parse_history_text(_read_text(path, "calibration history CSV", "utf-8"), path)
 
 
 def latest(history: Sequence[CalibrationEntry]) -> CalibrationEntry:
@@ -432,12 +436,7 @@ def load_legacy_cal_values(path, *, date: str = "2019-04-18",
         Naming the file, line and field of the first bad row.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except FileNotFoundError:
-        raise ConfigError(path, "file", "an existing cal_values.csv") from None
-    except UnicodeDecodeError:
-        raise ConfigError(path, "file", "UTF-8 text") from None
+    text = _read_text(path, "cal_values.csv", "utf-8-sig")
     names = ("slope_counts_per_nm", "intercept_counts", "r2")
     entries = []
     for lineno, line in enumerate(text.splitlines(), start=1):
