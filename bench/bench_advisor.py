@@ -48,6 +48,7 @@ from dyno.tuning.tune import dumps_tune, load_tune  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TOL_RPM = 50.0
+VERBOSE = False
 REL = 0.1
 #: (starting tune, catalogue parts fitted to it first, engagement target, shift-out target). Engagement
 #: targets stay <= ~2,170 rpm: the plan's loaded ramps engage ~40 rpm higher, and a clutch still slipping
@@ -99,6 +100,10 @@ def advisor_loop(start, tgt: dict, world_seed: int, tmp: Path, cat, max_trips: i
         pred = a["ranked"][0]["predicted"]
         trips += 1
         r = engagement_run(best.tune, 1 + trips, world_seed, tmp / f"adv-{trips}")
+        if VERBOSE:
+            print(f"    trip {trips}: {[p.id for p in best.changes]} p_hit {a['ranked'][0]['p_within_tolerance']:.2f} "
+                  + " ".join(f"{f} {pred[f]['rpm']:.0f}±{pred[f]['u_rpm']:.0f} -> {r.get(f + '_rpm', math.nan):.0f}"
+                             for f in tgt), flush=True)
         try:
             runs.append(load_run_data(tmp / f"adv-{trips}"))
         except ConfigError:  # the run found no engagement/shift-out (e.g. aborted): a trip that taught nothing
@@ -166,9 +171,13 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenarios", type=int, default=10)
     ap.add_argument("--first", type=int, default=1, help="start at this scenario (1-based)")
+    ap.add_argument("--only", type=int, default=0, help="run this scenario alone (1-based)")
+    ap.add_argument("--verbose", action="store_true", help="each advised trip: parts, predicted ± u, measured")
     ap.add_argument("--no-baseline", action="store_true", help="the advisor's loop only")
     ap.add_argument("--quick", action="store_true", help="CI smoke run: one scenario, the advisor only")
     a = ap.parse_args()
+    global VERBOSE
+    VERBOSE = a.verbose
     n = 1 if a.quick else min(a.scenarios, len(SCENARIOS))
     tmp = Path(tempfile.mkdtemp(prefix="bench_adv_"))
     # the shipped catalogue without the team's example part: it states +-2 % (weighed), but the sim draws
@@ -187,7 +196,7 @@ def main() -> None:
     tot = {"ok2": 0, "ok": 0, "c1": 0, "c2": 0, "n": 0, "rot": [], "adv": []}
     try:
         for k, (start_name, fitted, eng, so) in enumerate(SCENARIOS[:n]):
-            if k + 1 < a.first:
+            if k + 1 < a.first or (a.only and k + 1 != a.only):
                 continue
             t0 = time.monotonic()
             start = load_tune(ROOT / "calibration" / "tunes" / f"{start_name}.toml")

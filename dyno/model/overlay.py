@@ -61,12 +61,30 @@ def all_cached(
     cache_dir: str | os.PathLike | None = None,
 ) -> bool:
     """Whether :func:`predict_overlay` with the same arguments would answer every point from the cache."""
+    return all(cached_mask(points, params, tier=tier, variant=variant, slack_tension_n=slack_tension_n,
+                           primary_axial_force_n=primary_axial_force_n, slip_threshold_m_s=slip_threshold_m_s,
+                           tol=tol, cache_dir=cache_dir))
+
+
+def cached_mask(
+    points,
+    params: ModelParams = TABLE_6_1,
+    *,
+    tier: str = "full",
+    variant: str = "corrected",
+    slack_tension_n: float = 100.0,
+    primary_axial_force_n: float | None = None,
+    slip_threshold_m_s: float = 1e-4,
+    tol: float = 1e-3,
+    cache_dir: str | os.PathLike | None = None,
+) -> list[bool]:
+    """Per point: whether the cache already holds its ``tier`` result (no solve needed to show it)."""
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    out = []
     for item in points:
         op = _as_point(item, slack_tension_n, primary_axial_force_n)
-        if not (cache / f"{point_key(params, op, tier, variant, slip_threshold_m_s, tol)}.json").is_file():
-            return False
-    return True
+        out.append((cache / f"{point_key(params, op, tier, variant, slip_threshold_m_s, tol)}.json").is_file())
+    return out
 
 
 def predict_overlay(

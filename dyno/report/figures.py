@@ -65,9 +65,13 @@ def efficiency_svg(series: dict) -> str:
             ax.plot(x["rpm_secondary"], _pct(_plain(x["efficiency"])), "x", color="0.55",
                     label="invalid / discarded", gid="eff-excluded")
         m = series.get("model")
-        if m and m["rpm_secondary"]:
+        if m and m["rpm_secondary"]:  # the full model: a prediction with losses
             ax.plot(m["rpm_secondary"], _pct(m["efficiency"]), "-", color="C3", lw=1.2,
-                    label=f"belt model ({m['label']})", gid="eff-model")
+                    label="belt model (full, thesis BVP)", gid="eff-model")
+        b = (m or {}).get("bound")
+        if b and b["rpm_secondary"]:  # never drawn as if it were the prediction: dashed, named a bound
+            ax.plot(b["rpm_secondary"], _pct(b["efficiency"]), "--", color="0.5", lw=1.0,
+                    label="closed form: creep loss only (upper bound)", gid="eff-model-bound")
         t = series.get("truth")
         if t and t["rpm_secondary"]:
             ax.plot(t["rpm_secondary"], _pct(t["efficiency"]), ".", color="C2", ms=3,

@@ -36,10 +36,16 @@ def _engine_map(path: Path, notes: list) -> dict | None:
             "j1349_factor": m.j1349_factor, "notes": comments}
 
 
+BOUND_LABEL = "closed form, Table 6.1 belt: creep loss only, an upper bound"
+FULL_LABEL = "full model (thesis BVP), Table 6.1 belt"
+
+
 def _model(points: list, notes: list, full: bool = False, tune_path: Path | None = None) -> dict | None:
-    """The belt model at each plotted point: the full model (thesis BVP) when asked or already in the model
-    cache, else its closed form (instant, creep loss only: an upper bound).  Each point's input is the
-    slip-consistent inverse's (geometric ratio and the run's tune's clamp, ``overlay_inputs``)."""
+    """The belt model at each plotted point: the full model (thesis BVP, with its losses) when asked, else
+    wherever the model cache already holds it (the UI's overlay solved it during the run); the closed form
+    (instant, creep loss only: an upper bound) only for the points left, as its own labelled series.  Each
+    point's input is the slip-consistent inverse's (geometric ratio and the run's tune's clamp,
+    ``overlay_inputs``)."""
     from dyno.ui.live_model import overlay_inputs
 
     kept = [p for p in points if not exclusion_reason(p) and (p.get("power_in_w") or 0) > 0]
@@ -52,29 +58,41 @@ def _model(points: list, notes: list, full: bool = False, tune_path: Path | None
     if len(pairs) < len(kept):
         notes.append(f"belt model: {len(kept) - len(pairs)} of {len(kept)} points have no steady belt at the "
                      "tune's clamp (inverse: gross slip or no clamp)")
-    rpm_s = [x for x, _ in pairs]
-    ops = [op for _, op in pairs]
-    if not ops:
-        return None
-    from dyno.model.overlay import all_cached, predict_overlay
-
-    # the full model when asked, or when the UI's overlay already solved these points; else instant
-    tier = "full" if full or all_cached(ops) else "closed_form"
-    try:
-        pred = predict_overlay(ops, tier=tier, time_limit_s=20.0)
-    except _OPTIONAL_ERRORS as exc:
-        notes.append(f"belt-model overlay not shown: {exc}")
-        return None
-    pairs = sorted((x, float(r["efficiency"]["overall"])) for x, r in zip(rpm_s, pred) if r.get("converged"))
-    if len(pairs) < len(ops):
-        notes.append(f"belt model ({tier}): {len(ops) - len(pairs)} of {len(ops)} points did not converge")
     if not pairs:
         return None
-    label = ("full model (thesis BVP), Table 6.1 belt" if tier == "full" else
-             "closed form, Table 6.1 belt: creep loss only, an upper bound; `dyno report RUN --model full` "
-             "solves the full model")
-    return {"rpm_secondary": [x for x, _ in pairs], "efficiency": [e for _, e in pairs], "label": label,
-            "tier": tier}
+    from dyno.model.overlay import cached_mask, predict_overlay
+
+    is_full = [True] * len(pairs) if full else cached_mask([op for _, op in pairs])
+    series = {}
+    for tier, want in (("full", True), ("closed_form", False)):
+        sel = [xo for xo, f in zip(pairs, is_full) if f == want]
+        if not sel:
+            continue
+        try:
+            pred = predict_overlay([op for _, op in sel], tier=tier, time_limit_s=20.0)
+        except _OPTIONAL_ERRORS as exc:
+            notes.append(f"belt-model overlay ({tier}) not shown: {exc}")
+            continue
+        got = sorted((x, float(r["efficiency"]["overall"])) for (x, _), r in zip(sel, pred) if r.get("converged"))
+        if len(got) < len(sel):
+            notes.append(f"belt model ({tier}): {len(sel) - len(got)} of {len(sel)} points did not converge")
+        if got:
+            series[tier] = {"rpm_secondary": [x for x, _ in got], "efficiency": [e for _, e in got]}
+    if not series:
+        return None
+    main = series.get("full") or {"rpm_secondary": [], "efficiency": []}
+    n_full, n = len(main["rpm_secondary"]), len(pairs)
+    if "closed_form" not in series:
+        label = f"{FULL_LABEL} at all {n_full} points"
+    elif n_full:
+        label = (f"{FULL_LABEL} at {n_full} of {n} points (the model cache's); the other "
+                 f"{n - n_full}: {BOUND_LABEL}; `dyno report RUN --model full` solves them")
+    else:
+        label = f"{BOUND_LABEL} (the full model is not solved for this run: `dyno report RUN --model full`)"
+    tier = "full" if "closed_form" not in series else ("mixed" if n_full else "closed_form")
+    return {"rpm_secondary": main["rpm_secondary"], "efficiency": main["efficiency"], "label": label,
+            "tier": tier, "n_full": n_full, "n_points": n,
+            "bound": ({**series["closed_form"], "label": BOUND_LABEL} if "closed_form" in series else None)}
 
 
 def _predicted_shift(run_dir: Path, notes: list) -> dict | None:

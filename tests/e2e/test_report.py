@@ -73,7 +73,11 @@ def test_run_writes_a_self_contained_report_with_its_points(cli_run):
     assert eff["efficiency"] == pytest.approx([p["efficiency"] for p in pts], rel=1e-12)
     assert eff["rpm_secondary"] == pytest.approx([p["rpm_secondary"] for p in pts], rel=1e-12)
     assert eff["efficiency_sem"] == pytest.approx([p["efficiency_sem"] for p in pts], rel=1e-12)
-    assert data["efficiency"]["model"]["efficiency"]  # the belt-model overlay is there
+    model = data["efficiency"]["model"]  # the belt-model overlay is there: the full model where the cache has
+    assert model["efficiency"] or model["bound"]["efficiency"]  # it, else the closed form named a bound
+    if model["tier"] != "full":
+        assert "upper bound" in model["label"] and "--model full" in model["label"]
+        assert "eff-model-bound" in _svg(page, "fig-efficiency")
 
     # the figure draws exactly these points, where they belong: x grows with secondary rpm, y with efficiency
     marks = _markers(_svg(page, "fig-efficiency"), "eff-points")
@@ -96,6 +100,48 @@ def test_dyno_report_rebuilds_it(cli_run, tmp_path):
     assert proc.returncode == 0 and proc.stdout.strip() == str(out), proc.stderr
     before, after = (run_dir / "report.html").read_text(), out.read_text()
     assert _data_block(after)["efficiency"] == _data_block(before)["efficiency"]
+
+
+def test_report_shows_the_full_model_where_cached_and_the_bound_only_as_a_labelled_bound(cli_run, tmp_path):
+    """A run whose UI overlay solved some points: the report shows the full model (with losses) there, the
+    closed form only for the rest, as its own dashed series named an upper bound -- and the physics holds:
+    the full model's efficiency is below the creep-only bound at the same point."""
+    from dyno.report.html import exclusion_reason
+    from dyno.model.overlay import predict_overlay
+    from dyno.runlog.reader import load_run
+    from dyno.ui.live_model import overlay_inputs
+
+    run_dir, _ = cli_run
+    cache = tmp_path / "cache"
+    run = load_run(run_dir, with_events=False)
+    kept = [p for p in run.docs("point") if not exclusion_reason(p) and (p.get("power_in_w") or 0) > 0]
+    pairs = overlay_inputs(kept, run_dir / "tune.toml")
+    assert len(pairs) >= 6
+    # as the UI's overlay would have: the two lightest-loaded points (the default sim's first-estimate clamp
+    # leaves the belt in gross slip at full load -- docs/belt-model.md, "The stock tune's clamp")
+    pairs.sort(key=lambda xo: xo[1].primary_torque_nm)
+    solved = predict_overlay([op for _, op in pairs[:2]], tier="full", cache_dir=cache)
+    assert solved[0]["converged"], solved[0].get("error")
+    n_ok = sum(r["converged"] for r in solved)
+    out = tmp_path / "r.html"
+    proc = subprocess.run([sys.executable, "-m", "dyno", "report", run_dir, "--out", out], capture_output=True,
+                          text=True, timeout=180, cwd=tmp_path,
+                          env=dict(os.environ, PYTHONPATH=str(REPO), DYNO_MODEL_CACHE=str(cache)))
+    assert proc.returncode == 0, proc.stderr
+    page = out.read_text()
+    model = _data_block(page)["efficiency"]["model"]
+    assert model["tier"] == "mixed" and model["n_full"] == n_ok and model["n_points"] == len(pairs)
+    assert "full model" in model["label"] and f"{n_ok} of" in model["label"] and "upper bound" in model["label"]
+    ok = [x for (x, _), r in zip(pairs, solved) if r["converged"]]
+    assert sorted(model["rpm_secondary"]) == pytest.approx(sorted(ok))
+    assert len(model["bound"]["rpm_secondary"]) == len(pairs) - 2
+    bound_same = predict_overlay([op for _, op in pairs[:2]], tier="closed_form", use_cache=False)
+    for r_full, r_cf in zip(solved, bound_same):
+        if r_full["converged"]:
+            assert r_full["efficiency"]["overall"] < r_cf["efficiency"]["overall"] - 1e-3  # losses beyond creep
+    svg = _svg(page, "fig-efficiency")
+    assert len(_markers(svg, "eff-points")) >= 6 and '<g id="eff-model">' in svg and '<g id="eff-model-bound">' in svg
+    assert "Belt model: full model" in page
 
 
 def test_dyno_report_bad_input_is_one_line(cli_run, tmp_path):
