@@ -27,10 +27,9 @@ over ``x`` once at start-up (the inner loop only interpolates):
 * otherwise a self-contained closed form: ``C`` constant (a flyweight
   coefficient), linear springs, constant helix gain ``H``, and the ratio
   from ``r_p + r_s = const`` between the two ratio end stops.
-Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
--------------------------------------------------------------
-By default the belt passes the primary clamp to the secondary unchanged
-(``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
+Belt thrust ratio (``belt_friction_coefficient``: the rig's default 0.4)
+----------------------------------------------------------------------
+With a belt friction coefficient ``f`` (and a
 tune) the primary clamp sets the belt tensions and the belt then *requires* a
 secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
 ``F_s,belt = kappa F_p`` with the thrust ratio ``kappa(x, T_p, F_p; f)``
@@ -43,7 +42,10 @@ from ``belt_thrust_model``: ``"capstan"`` (default: Gerbert's V-belt,
 ``"closed_form"`` (Sorge & Cammalleri eqs. 17-18, the fitted model itself:
 circular, for comparison only).  Together with ``flyweight_radius_offset_m``
 (added to the tune's flyweight radius table) these are the rig's hidden
-"true" parameters that the fit estimates.
+"true" parameters that the fit estimates.  Without ``f`` (``None``) the belt
+passes the primary clamp unchanged (``F_p = F_s`` at balance), which no belt
+does under load (thesis Fig. 6.21): with the stock tune it held the engine
+~350 rpm below the thesis rig's logs.
 
 Slip
 ----
@@ -51,9 +53,9 @@ With a tune the belt's slip (``omega_s = (1 - s) omega_p / i``) is the closed
 form's elastic creep at the tune's clamp ``F_p(x, n)`` and the belt torque
 (0.03-0.2 %), re-evaluated with kappa; the rest of the loss model's speed loss
 moves into the torque loss so the overall efficiency is unchanged.  The
-closed form is the belt tier that carries the tune's loads (the full model
-finds gross slip at the stock clamp from ~10 N m, see
-:mod:`dyno.sim.belt_table`); it is what the overlay's slip-consistent inverse
+closed form is the fast belt tier that carries the tune's loads (the full
+model does too at the stock clamp since its flyweight profile was re-estimated,
+docs/belt-model.md; a full solve per step is too slow); it is what the overlay's slip-consistent inverse
 (:mod:`dyno.model.inverse`) inverts, and the truth records ``belt_slip`` and
 the geometric ratio per point.  Without a tune, or below engagement, the loss
 model's slip ``s_0 + s_1 |T_p|`` applies.
@@ -108,9 +110,9 @@ model's (it stays in the thesis's measured range); away from it, the torque
 dependence of the belt's share (creep grows with load, the seating loss is a
 larger fraction at light load) is the belt model's.  The table covers the
 simulated CVT's whole ratio range 0.72-2.4 at 8 and 18 N m, at the tune's
-clamp at 3150 rpm (100 N slack without a tune); torque is clamped to that
-range.  A cell where the belt model did not converge (at the stock tune's
-clamp: gross slip at 18 N m at every ratio) falls back to the loss model.
+clamp at 2950 rpm (100 N slack without a tune); torque is clamped to that
+range.  A cell where the belt model did not converge falls back to the loss
+model (at the stock tune's clamp every 18 N m cell solves, and 10 of 12 at 8 N m).
 """
 
 from __future__ import annotations
@@ -301,17 +303,22 @@ class CVT:
 
     def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
         """Re-evaluate the belt's slip (and, in belt mode, the thrust ratio ``kappa``) at this state."""
+        creep, kappa = self.belt_state(x, rpm_primary, torque_primary_nm)
+        self._belt_creep = creep
+        if kappa is not None:
+            self._kappa = kappa
+
+    def belt_state(self, x: float, rpm_primary: float, torque_primary_nm: float) -> tuple:
+        """(creep slip or None, thrust ratio kappa or None = keep the current one) at this state; pure."""
         from dyno.errors import MODEL_FAILURES, ConfigError
         from dyno.model.closed_form import closed_form_point
         from dyno.model.params import OperatingPoint
 
         f_p = self.primary_force_n(rpm_primary, x)
         if f_p <= 0.0 or rpm_primary <= 0.0:
-            self._belt_creep = None  # no clamp (clutch open): the loss model's slip
-            return  # no clamp: kappa does not enter (see force_imbalance_n)
+            return None, None  # no clamp (clutch open): the loss model's slip; kappa does not enter
         if not torque_primary_nm > 1e-6:
-            self._belt_creep = 0.0  # no torque, no tension difference, no creep; kappa kept
-            return
+            return 0.0, None  # no torque, no tension difference, no creep; kappa kept
         op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
                             primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
                             primary_axial_force_n=f_p)
@@ -320,23 +327,34 @@ class CVT:
         except (ConfigError, *MODEL_FAILURES):
             # The clamp cannot carry the torque: the secondary wins (as in
             # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
-            self._kappa = 0.0
-            self._belt_creep = None
-            return
-        self._belt_creep = 1.0 - res.efficiency_speed
+            return None, 0.0
+        creep = 1.0 - res.efficiency_speed
         if self._belt_params is None:
-            return
+            return creep, None
         if self.belt_thrust_model == "capstan":
             from dyno.model.capstan import capstan_point
 
             try:
                 cap = capstan_point(self._belt_params, op)
             except (ConfigError, ValueError, *MODEL_FAILURES):
-                self._kappa = 0.0
-                return
-            self._kappa = 0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n
-            return
-        self._kappa = res.axial_force_secondary_n / f_p
+                return creep, 0.0
+            return creep, (0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n)
+        return creep, res.axial_force_secondary_n / f_p
+
+    def quasi_static_imbalance_n(self, rpm_primary: float, torque_secondary_nm: float, x: float,
+                                 torque_primary_nm: float) -> float:
+        """``force_imbalance_n`` with the belt's thrust ratio evaluated at this state (not the running one):
+        for the sim's quasi-static truths; leaves the running state alone."""
+        if self._creep_params is None or self._belt_params is None:
+            return self.force_imbalance_n(rpm_primary, torque_secondary_nm, x)
+        saved = self._kappa
+        _, kappa = self.belt_state(x, rpm_primary, torque_primary_nm)
+        try:
+            if kappa is not None:
+                self._kappa = kappa
+            return self.force_imbalance_n(rpm_primary, torque_secondary_nm, x)
+        finally:
+            self._kappa = saved
 
     def shift(self, x: float, rpm_primary: float, torque_secondary_nm: float, dt_s: float,
               torque_primary_nm: float = 0.0) -> float:

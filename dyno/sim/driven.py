@@ -135,7 +135,9 @@ def characterisation_truth(model) -> dict:
 
     def imbalance(rpm: float) -> float:
         t_l = _load_at_secondary_nm(model, rpm / i_lo * rpm_to_rad)
-        return cvt.force_imbalance_n(rpm, t_l, cvt.x_min)
+        # the belt's thrust ratio at the low stop and this load (not the running state's: the truth is
+        # computed after the ramp, at the high stop)
+        return cvt.quasi_static_imbalance_n(rpm, t_l, cvt.x_min, t_l / i_lo + cvt.drag_nm(i_lo))
 
     lo, hi = 500.0, 6000.0
     if imbalance(lo) < 0.0 < imbalance(hi):
