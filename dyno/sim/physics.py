@@ -136,7 +136,8 @@ class RigModel(RigSignals, InputTorqueSignals):
                        loss_frac_min=p.cvt_loss_frac_min, loss_frac_high_ratio=p.cvt_loss_frac_high_ratio,
                        loss_frac_low_ratio=p.cvt_loss_frac_low_ratio, ratio_best_eff=p.cvt_ratio_best_eff,
                        bending_drag_nm=p.cvt_bending_drag_nm,
-                       belt_friction_coefficient=p.cvt_belt_friction_coefficient,
+                       # the belt's thrust ratio needs its geometry: a tune-less closed-form CVT has none
+                       belt_friction_coefficient=p.cvt_belt_friction_coefficient if tune is not None else None,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
                        belt_table=_belt_table_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)

@@ -281,6 +281,9 @@ class ShiftCurve:
     ratio_low_stop: float
     ratio_high_stop: float
     sensitivities: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: balances the CVT jumps over: along the sweep the secondary speed falls there (a flyweight profile
+    #: whose clamp grows with travel faster than the secondary's), so the drive cannot sit on them
+    jumped: list[ShiftPoint] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
         keys = ("ratio", "engine_rpm", "secondary_rpm", "engine_torque_nm", "secondary_torque_nm",
@@ -321,6 +324,7 @@ def predict_shift_curve(tune: Tune, engine: EngineMap, n_points: int = 50, param
             continue
         pts.append(solver.point(float(R), n, "shifting"))
         prev = n
+    pts, jumped = _stable_branch(pts)
     shift_out = pts[0].engine_rpm if pts else float("nan")
     full_shift = pts[-1].engine_rpm if pts else float("nan")
     engagement = solver.engagement_rpm()
@@ -337,7 +341,25 @@ def predict_shift_curve(tune: Tune, engine: EngineMap, n_points: int = 50, param
                 highs.append(solver.point(r_hi, float(n), "high_stop"))
         pts = lows + pts + highs
     del prev
-    return ShiftCurve(tune.name, pts, engagement, shift_out, full_shift, r_lo, r_hi)
+    return ShiftCurve(tune.name, pts, engagement, shift_out, full_shift, r_lo, r_hi, jumped=jumped)
+
+
+def _stable_branch(pts: list) -> tuple[list, list]:
+    """(the balances the drive can sit on, the ones it jumps over), the sweep running low -> high gear.
+
+    Along a stable shift curve the secondary turns faster as the ratio falls.  Where the primary's clamp
+    grows with travel faster than the secondary's (a steep start of a flyweight profile), the balance's
+    engine speed falls so fast that the secondary's does too: a fold, whose inner branch is unstable (a
+    little more travel raises the clamp above the balance: the sheave snaps on).  Kept: each point whose
+    secondary speed exceeds every one before it."""
+    keep, jumped, top = [], [], -math.inf
+    for p in pts:
+        if p.secondary_rpm > top:
+            keep.append(p)
+            top = p.secondary_rpm
+        else:
+            jumped.append(p)
+    return keep, jumped
 
 
 def key_speeds_rpm(tune: Tune, engine: EngineMap, params: ModelParams | None = None,
