@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field
 
 from dyno.tuning.advisor_model import (UNKNOWN_PART_TOLERANCE_REL, Calibration, RunData, calibrate,
-                                       calibrated_theta, effective_tune, predict_figure, predict_with_u,
+                                       calibrated_theta, calibrated_thrust, effective_tune, predict_figure, predict_with_u,
                                        tune_params)
 from dyno.tuning.parts import DEVIATED, Part, apply_part, match_parts, part_identity
 
@@ -129,14 +129,14 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
 
         raise ConfigError(base_run.path, "engine_map.csv", "the run's engine map (a full_load target needs it)")
     cands, info = candidates(base, catalogue, max_changes)
-    theta = calibrated_theta(cal)
+    theta, thrust = calibrated_theta(cal), calibrated_thrust(cal)
     # first pass: the calibrated values only (cheap)
     light = [f for f in targets if f != "full_load"]
     for c in cands:
         ps = tune_params(c.tune, tol_of)
         d = [cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps]
         eff = effective_tune(c.tune, ps, d)
-        c.first_pass = {f: predict_figure(eff, f, load, low, engine, theta) for f in light}
+        c.first_pass = {f: predict_figure(eff, f, load, low, engine, theta, thrust) for f in light}
         c.miss = sum(((c.first_pass[f] - targets[f]) / tolerance_rpm) ** 2 for f in light)
         c.miss = c.miss if math.isfinite(c.miss) else math.inf
     cands.sort(key=lambda c: (c.miss, len(c.changes)))

@@ -8,8 +8,15 @@ a tune with the host's actuator relations (:mod:`dyno.tuning.actuators`) at the 
   ``2 mu r_p F_p / sin(alpha)`` (flank friction mu = 0.4, the thesis's f) carries ``T / i_low``, so
   ``F_p(n) = T sin(alpha) / (2 mu r_p i_low)`` with ``F_p`` the flyweights minus the spring (Messick
   eq. 9.3);
-* ``shift_out`` at a load ``T``: the primary clamp equals the secondary's (springs + helix, Sorge
-  eq. 22) at the low stop -- the upshift begins;
+* ``shift_out`` at a load ``T``: the belt's thrust ratio times the primary clamp equals the secondary's
+  (springs + helix, Sorge eq. 22) at the low stop -- the upshift begins.  The thrust ratio
+  ``kappa = F_s,belt / F_p`` is not 1: at no load it is the V-belt statics' limit, the ratio of the wrap
+  angles ``theta_s / theta_p`` (1.48 at the 3.0 low stop: the secondary's longer arc needs more thrust for
+  the same tensions), and it falls as the belt carries torque.  The belt models disagree on how fast (the
+  closed form by ~17 %, Gerbert's capstan by ~60 % at ``T_p / (r_p F_p)`` = 0.4; the thesis's BVP sits
+  higher at no load), so the advisor carries an effective ``kappa = (1 + a) (theta_s / theta_p)
+  exp(-c T_p / (r_p F_p))`` whose ``a`` and ``c`` are calibrated with the parts (prior a 0 +- 0.3,
+  c 1 +- 1), shared by every tune (the belt and the pulleys stay);
 * ``full_load``: the engine speed of the force balance at the low stop at full throttle
   (:meth:`dyno.tuning.shift_curve.Solver.balance_rpm`, closed-form belt thrusts, the run's engine map).
 
@@ -186,17 +193,47 @@ def _radii(d, low_ratio: float) -> tuple[float, float]:
     return r, float(act.secondary_radius_m(tune, r))
 
 
-def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None, theta=None) -> float:
+#: the effective thrust ratio's parameters (module docstring): nominal values and prior sds
+THRUST_NOMINAL = (0.0, 1.0)
+THRUST_PRIOR_SD = (0.3, 1.0)
+
+
+def wrap_ratio(tune, low_ratio: float) -> float:
+    """theta_s / theta_p at the low stop: the thrust ratio of a V-belt at no load."""
+    from dyno.model.geometry import wrap_angles_rad
+
+    r_p, r_s = low_stop_radii_m(tune, low_ratio)
+    phi_p, phi_s = wrap_angles_rad(r_p, r_s, tune.drive.centre_distance_m)
+    return float(phi_s / phi_p)
+
+
+def primary_force_for_secondary_n(f_s: float, torque_primary_nm: float, r_p: float, kappa0: float,
+                                  decay: float) -> float:
+    """The primary clamp ``F`` with ``F kappa0 exp(-decay T_p / (r_p F)) = f_s`` (increasing in F: one root
+    in [f_s / kappa0, f_s / kappa0 + decay T_p / r_p])."""
+    a = f_s / kappa0
+    k = max(decay, 0.0) * max(torque_primary_nm, 0.0) / r_p
+    if a <= 0.0 or k == 0.0:
+        return a
+    return float(brentq(lambda f: f * math.exp(-k / f) - a, a, a + k, xtol=1e-6))
+
+
+def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None, theta=None,
+                   thrust=None) -> float:
     """A figure of ``tune`` (the true or effective values) at a secondary load; ``theta``: the closed-form
-    shift model's effective (f, dr, T_fr) of :mod:`dyno.tuning.fit` for the full-load figure."""
+    shift model's effective (f, dr, T_fr) of :mod:`dyno.tuning.fit` for the full-load figure; ``thrust``:
+    the effective thrust ratio's (a, c) for the shift-out (None: nominal)."""
     r_p, r_s = low_stop_radii_m(tune, low_ratio)
     if figure == "engagement":
         sin_a = math.sin(math.radians(tune.drive.sheave_half_angle_deg))
         f_need = max(load_nm, 0.0) * sin_a / (2.0 * FLANK_FRICTION * r_p * low_ratio)
         return float(act.primary_speed_for_force_rpm(tune, f_need, r_p))
     if figure == "shift_out":
+        a, c = THRUST_NOMINAL if thrust is None else thrust
         f_s = float(act.secondary_axial_force_n(tune, max(load_nm, 0.0), r_s))
-        return float(act.primary_speed_for_force_rpm(tune, f_s, r_p))
+        f_p = primary_force_for_secondary_n(f_s, max(load_nm, 0.0) / low_ratio, r_p,
+                                            (1.0 + a) * wrap_ratio(tune, low_ratio), c)
+        return float(act.primary_speed_for_force_rpm(tune, f_p, r_p))
     if figure == "full_load":
         if engine is None:
             return math.nan
@@ -227,6 +264,14 @@ def belt_params() -> list[Param]:
     from dyno.tuning.fit import PARAMETERS
 
     return [Param("belt", "belt", name, sd) for name, sd in zip(PARAMETERS, BELT_PRIOR_SD_SCALED)]
+
+
+def thrust_params() -> list[Param]:
+    return [Param("belt", "thrust", name, sd) for name, sd in zip(("kappa_level", "kappa_decay"), THRUST_PRIOR_SD)]
+
+
+def thrust_of(d_thrust) -> tuple[float, float]:
+    return tuple(n + float(x) for n, x in zip(THRUST_NOMINAL, d_thrust))
 
 
 def theta_of(d_belt) -> list[float]:
@@ -290,6 +335,9 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
         per_run.append(ps)
     if any(r.steady for r in runs):
         params.extend(belt_params())
+    with_thrust = any(f.figure == "shift_out" for r in runs for f in r.figures)
+    if with_thrust:
+        params.extend(thrust_params())
     idx = {(p.part, p.field): i for i, p in enumerate(params)}
     prior = np.array([p.prior_sd for p in params])
 
@@ -297,9 +345,11 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
 
     def model(d):
         out = []
+        thrust = thrust_of([d[idx[(p.part, p.field)]] for p in thrust_params()]) if with_thrust else None
         for r, ps in zip(runs, per_run):
             t = effective_tune(r.tune, ps, np.array([d[idx[(p.part, p.field)]] for p in ps]))
-            out.extend(predict_figure(t, f.figure, f.load_nm, r.low_ratio, r.engine) for f in r.figures)
+            out.extend(predict_figure(t, f.figure, f.load_nm, r.low_ratio, r.engine, thrust=thrust)
+                       for f in r.figures)
         return np.array(out)
 
     def steady(d):
@@ -334,16 +384,21 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
         return np.concatenate(parts + [d / prior])
 
     # a part's deviation cannot leave its stated tolerance (the uniform prior's support)
-    bound = np.array([p.prior_sd * math.sqrt(3.0) if p.kind != "belt" else np.inf for p in params])
+    # (the thrust ratio's decay cannot turn into growth: c >= 0)
+    bound = np.array([p.prior_sd * math.sqrt(3.0) if p.kind not in ("belt", "thrust") else np.inf for p in params])
+    lower = -bound.copy()
+    for i, p in enumerate(params):
+        if p.kind == "thrust":
+            lower[i] = -THRUST_NOMINAL[1] if p.field == "kappa_decay" else -0.9
     x0 = np.zeros(len(params))
-    sol = least_squares(resid, x0, bounds=(-bound, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
+    sol = least_squares(resid, x0, bounds=(lower, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     if n_steady:
         # the steady points' scatter about the closed form is model error, not noise: weigh them by the
         # scatter they show (at least the floor), once, so they cannot outvote the engagement figures
         rms = float(np.sqrt(np.mean(steady(sol.x) ** 2)))
         if rms > steady_sd[0]:
             steady_sd[0] = rms
-            sol = least_squares(resid, sol.x, bounds=(-bound, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
+            sol = least_squares(resid, sol.x, bounds=(lower, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     j = sol.jac
     cov = np.linalg.inv(j.T @ j)
     # the engagement figures' chi^2 per figure scales the covariance up when their scatter exceeds their sigmas
@@ -368,15 +423,19 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
     """(figure, standard uncertainty) of ``tune`` with the calibrated (or prior) part deviations."""
     ps = tune_params(tune, tolerance_of)
     idx = cal.index()
+    n_part = len(ps)
     if figure == "full_load" and ("belt", belt_params()[0].field) in idx:
         ps = ps + belt_params()  # the calibrated shift model's effective parameters
-    n_part = sum(p.kind != "belt" for p in ps)
+    if figure == "shift_out":
+        ps = ps + thrust_params()  # calibrated if a run measured a shift-out, else at their prior
     d = np.array([cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps])
 
     def f(x):
-        theta = theta_of(x[n_part:]) if len(ps) > n_part else None
+        extra = x[n_part:]
+        theta = theta_of(extra) if figure == "full_load" and len(ps) > n_part else None
+        thrust = thrust_of(extra) if figure == "shift_out" else None
         return predict_figure(effective_tune(tune, ps[:n_part], x[:n_part]), figure, load_nm, low_ratio, engine,
-                              theta)
+                              theta, thrust)
 
     y0 = f(d)
     if not math.isfinite(y0):
@@ -406,3 +465,12 @@ def calibrated_theta(cal: Calibration):
     if (bp[0].part, bp[0].field) not in idx:
         return None
     return theta_of([cal.d[idx[(p.part, p.field)]] for p in bp])
+
+
+def calibrated_thrust(cal: Calibration):
+    """The calibrated thrust ratio's (a, c) when a run measured a shift-out, else None (nominal)."""
+    idx = cal.index()
+    tp = thrust_params()
+    if (tp[0].part, tp[0].field) not in idx:
+        return None
+    return thrust_of([cal.d[idx[(p.part, p.field)]] for p in tp])
