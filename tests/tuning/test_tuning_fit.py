@@ -120,7 +120,7 @@ def test_recovered_parameter_error_against_a_different_truth_model(fit):
 
 def test_model_error_shows_in_the_residuals(fit):
     # measured: rms 192 rpm at nominal -> 57 rpm fitted (max 162; the first estimate: 266 -> 89); the closed
-    # form is off by 299 rpm rms: the fitted values buy a better fit with unphysical parameters
+    # form at the TRUE parameters was off by 299 rpm rms (first estimate): better fits from unphysical values
     assert fit.after["rms_rpm"] < 0.5 * fit.before["rms_rpm"]
     assert fit.before["rms_rpm"] > 150.0
     # the residual scatter (63 rpm) is model error, ~60x the measurement's (1.5 rpm with a circular truth)
