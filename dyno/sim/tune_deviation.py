@@ -4,7 +4,9 @@ A team fits "a 228 g flyweight set" or "a 950 N / 18.2 N/mm spring"; the part on
 pushes a little differently. Each part's true value here is its label times ``1 + d``, ``d`` uniform
 in ``[-REL, REL]``:
 
-* flyweight set: ``mass_each_kg``;
+* flyweight set: the weights' body mass (``mass_each_kg`` without its tuning washers); washers added to
+  a body (``washer_mass_each_kg``) are weighed parts, within ``WASHER_REL`` of their label, so a body
+  with washers is the same body, keeping its deviation;
 * primary spring: ``preload_n`` and ``rate_n_per_m`` (independent draws);
 * secondary spring: ``preload_n`` and ``rate_n_per_m`` (independent draws);
 * helix: ``angle_from_axis_deg`` (Sorge's delta).
@@ -29,11 +31,14 @@ import numpy as np
 PARTS: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = (
     ("flyweights", "flyweights", ("count", "mass_each_kg", "sheave_travel_m", "radius_m"), ("mass_each_kg",)),
     ("primary_spring", "primary_spring", ("preload_n", "rate_n_per_m"), ("preload_n", "rate_n_per_m")),
+    # (not its torsion preload: that is the position the spring is clocked to, a setting, not the spring)
     ("secondary_spring", "secondary_spring",
-     ("preload_n", "rate_n_per_m", "torsion_preload_nm", "torsion_rate_nm_per_rad"), ("preload_n", "rate_n_per_m")),
+     ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad"), ("preload_n", "rate_n_per_m")),
     ("helix", "helix", ("angle_from_axis_deg", "radius_m"), ("angle_from_axis_deg",)),
 )
 _STREAM = 0x25  # this deviation's stream (the world's draws use 0x24)
+#: tuning washers: stamped and weighed parts (a kitchen scale's +-2 %), not a cast body's +-REL
+WASHER_REL = 0.02
 
 
 def part_key(kind: str, obj, fields: tuple[str, ...]) -> str:
@@ -64,6 +69,19 @@ def deviate_tune(tune, rel: float, world_seed: int):
         obj = getattr(tune, attr, None)
         if obj is None:
             continue  # e.g. no flyweights on a roller-track tune
+        washers = float(getattr(obj, "washer_mass_each_kg", 0.0)) if kind == "flyweights" else 0.0
+        if washers:  # the body is the part; its washers are weighed additions
+            body = dataclasses.replace(obj, mass_each_kg=obj.mass_each_kg - washers, washer_mass_each_kg=0.0)
+            key = part_key(kind, body, ident)
+            (d_body,) = _draws(world_seed, key, 1, rel)
+            (d_w,) = _draws(world_seed, f"washers:{washers:.6g}", 1, WASHER_REL)
+            label = float(obj.mass_each_kg)
+            true = (label - washers) * (1.0 + float(d_body)) + washers * (1.0 + float(d_w))
+            changes[f"{attr}.mass_each_kg"] = true
+            record.append({"kind": kind, "key": key, "washer_mass_each_kg": washers,
+                           "mass_each_kg": {"label": label, "true": true, "deviation_rel": true / label - 1.0,
+                                            "body_deviation_rel": float(d_body)}})
+            continue
         key = part_key(kind, obj, ident)
         d = _draws(world_seed, key, len(fields), rel)
         entry = {"kind": kind, "key": key}

@@ -83,7 +83,8 @@ def candidates(base, catalogue: list[Part], max_changes: int) -> tuple[list[Cand
               and getattr(base, p.kind, None) is not None]
     by_kind: dict[str, list[Part]] = {}
     for p in usable:
-        if part_identity(apply_part(base, p), p.kind) != part_identity(base, p.kind):
+        if part_identity(apply_part(base, p), p.kind, with_settings=True) != part_identity(base, p.kind,
+                                                                                         with_settings=True):
             by_kind.setdefault(p.kind, []).append(p)
     out = [Candidate(base, [])]
     kinds = sorted(by_kind)
@@ -163,6 +164,9 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
         c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
     refined.sort(key=lambda c: (-round(c.p_hit, 3), len(c.changes), c.miss))
     current = next(c for c in refined if not c.changes)
+    # the tune the runs measured is not advice: another trip on it would measure what they measured
+    # (it is reported as "current", with its own P)
+    refined = [c for c in refined if c.changes]
     return {"targets": {f"{f}_rpm": v for f, v in targets.items()}, "tolerance_rpm": tolerance_rpm,
             "max_changes": max_changes, "runs": [str(r.path) for r in runs], "base_tune": base.name,
             "load_nm": load, "low_ratio": low, "searched": len(cands), "refined": len(refined),

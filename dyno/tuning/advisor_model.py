@@ -295,7 +295,12 @@ def tune_params(tune, tolerance_of) -> list[Param]:
 def effective_tune(tune, params: list[Param], d: np.ndarray):
     changes = {}
     for p, x in zip(params, d):
-        label = getattr(getattr(tune, p.kind), p.field)
+        obj = getattr(tune, p.kind)
+        label = getattr(obj, p.field)
+        if p.kind == "flyweights" and p.field == "mass_each_kg":
+            # the deviation is the body's; tuning washers are weighed (their +-2 % is in the model floor)
+            changes["flyweights.mass_each_kg"] = obj.body_mass_each_kg * (1.0 + float(x)) + obj.washer_mass_each_kg
+            continue
         changes[f"{p.kind}.{p.field}"] = label * (1.0 + float(x))
     return tune.with_changes(**changes) if changes else tune
 

@@ -35,7 +35,7 @@ DEVIATED: dict[str, tuple[str, ...]] = {
 DEFAULT_TOLERANCE_REL = 0.1
 _COMMON = {"id", "label", "source", "tolerance_rel", "fits", "incompatible_with"}
 _FIELDS = {
-    "flyweights": {"count", "mass_each_kg", "profile"},
+    "flyweights": {"count", "mass_each_kg", "washer_mass_each_kg", "profile"},
     "primary_springs": {"rate_n_per_m", "preload_n", "force_at_full_shift_n"},
     "secondary_springs": {"preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad", "torsion_preload_positions_nm",
                           "torsion_preload_nm"},
@@ -132,7 +132,13 @@ def parts_from_dict(data: Mapping[str, Any], path: str | Path = "<parts>") -> li
                 count = row.get("count")
                 if isinstance(count, bool) or not isinstance(count, int) or count < 1:
                     raise ConfigError(path, pre + ".count", f"an integer >= 1, got {count!r}")
-                vals = [("count", count), ("mass_each_kg", need("mass_each_kg", lo=0.0, lo_open=True, hi=5.0))]
+                mass = need("mass_each_kg", lo=0.0, lo_open=True, hi=5.0)
+                vals = [("count", count), ("mass_each_kg", mass)]
+                if "washer_mass_each_kg" in row:  # tuning washers on a body: the body is the same part
+                    w = _num(path, pre + ".washer_mass_each_kg", row["washer_mass_each_kg"], lo=0.0)
+                    if w >= mass:
+                        raise ConfigError(path, pre + ".washer_mass_each_kg", f"less than mass_each_kg, got {w:g}")
+                    vals.append(("washer_mass_each_kg", w))
                 if "profile" in row:
                     prof = row["profile"]
                     if prof not in profiles:
@@ -211,19 +217,26 @@ def apply_part(tune, part: Part):
              "preload_n": v["force_at_full_shift_n"] - v["rate_n_per_m"] * act.primary_full_travel_m(tune)}
     if attr == "flyweights" and tune.flyweights is None:
         raise ConfigError(part.file, part.id, "a tune with sliding flyweights (this one has a roller track)")
+    if attr == "flyweights":
+        v.setdefault("washer_mass_each_kg", 0.0)  # a set without washers takes the old set's off
     return tune.with_changes(**{f"{attr}.{k}": (tuple(x) if isinstance(x, (list, tuple)) else x)
                                 for k, x in v.items()})
 
 
-def part_identity(tune, kind: str) -> str:
-    """The labelled values that identify the ``kind`` part of a tune (same part, same identity)."""
+def part_identity(tune, kind: str, *, with_settings: bool = False) -> str:
+    """The labelled values that identify the ``kind`` part of a tune (same physical part, same identity:
+    what its deviation and calibration belong to).  ``with_settings`` adds how it is set up (a secondary
+    spring's torsion preload: the position it is clocked to), which tells tunes apart."""
     obj = getattr(tune, kind)
     if obj is None:
         return f"{kind}:none"
-    fields = {"flyweights": ("count", "mass_each_kg", "radius_m"),
+    fields = {"flyweights": ("count", "body_mass_each_kg", "radius_m"),  # the body: washers are additions
               "primary_spring": ("preload_n", "rate_n_per_m"),
-              "secondary_spring": ("preload_n", "rate_n_per_m", "torsion_preload_nm", "torsion_rate_nm_per_rad"),
+              "secondary_spring": ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad"),
               "helix": ("angle_from_axis_deg", "radius_m")}[kind]
+    if with_settings:
+        fields = fields + {"flyweights": ("washer_mass_each_kg",),
+                           "secondary_spring": ("torsion_preload_nm",)}.get(kind, ())
     vals = []
     for f in fields:
         x = getattr(obj, f)
@@ -235,7 +248,7 @@ def match_parts(tune, catalogue: list[Part]) -> dict[str, Part | None]:
     """For each kind, the catalogue part the tune carries (None: not in the catalogue)."""
     out: dict[str, Part | None] = {}
     for kind in DEVIATED:
-        ident = part_identity(tune, kind)
+        ident = part_identity(tune, kind, with_settings=True)
         out[kind] = next((p for p in catalogue if p.kind == kind
-                          and part_identity(apply_part(tune, p), kind) == ident), None)
+                          and part_identity(apply_part(tune, p), kind, with_settings=True) == ident), None)
     return out

@@ -72,6 +72,13 @@ class FlyweightProfile:
     mass_each_kg: float
     sheave_travel_m: tuple[float, ...]
     radius_m: tuple[float, ...]
+    #: of ``mass_each_kg``, tuning washers added to the weight's body (a weighed, known mass; the body is
+    #: the same physical part with or without them)
+    washer_mass_each_kg: float = 0.0
+
+    @property
+    def body_mass_each_kg(self) -> float:
+        return self.mass_each_kg - self.washer_mass_each_kg
 
 
 @dataclass(frozen=True)
@@ -300,10 +307,13 @@ def tune_from_dict(data: Mapping[str, Any], path: str | Path = "<tune>") -> Tune
     if actuator == "sliding_mass":
         f = rd.table(p, "flyweights", "primary.")
         pre = "primary.flyweights."
-        rd.no_extra(f, {"count", "mass_each_kg", "sheave_travel_m", "radius_m",
+        rd.no_extra(f, {"count", "mass_each_kg", "washer_mass_each_kg", "sheave_travel_m", "radius_m",
                         "ramp_radius_start_m", "ramp_radial_per_axial"}, pre)
         count = rd.integer(f, "count", pre)
         mass = rd.number(f, "mass_each_kg", pre, lo=0.0, lo_open=True, hi=5.0)
+        washers = rd.number(f, "washer_mass_each_kg", pre, lo=0.0, default=0.0)
+        if washers >= mass:
+            raise rd.err(pre + "washer_mass_each_kg", f"less than mass_each_kg ({mass:g} kg), got {washers:g}")
         if "sheave_travel_m" in f or "radius_m" in f:
             travel = rd.array(f, "sheave_travel_m", pre)
             radius = rd.array(f, "radius_m", pre)
@@ -322,7 +332,7 @@ def tune_from_dict(data: Mapping[str, Any], path: str | Path = "<tune>") -> Tune
             ma = rd.number(f, "ramp_radial_per_axial", pre, lo=0.0, lo_open=True)
             travel = (0.0, travel_full_m)
             radius = (r0, r0 + ma * travel_full_m)
-        flyweights = FlyweightProfile(count, mass, travel, radius)
+        flyweights = FlyweightProfile(count, mass, travel, radius, washers)
     else:
         rt = rd.table(p, "roller_track", "primary.")
         pre = "primary.roller_track."
@@ -418,6 +428,8 @@ def _tune_to_dict(t: Tune) -> dict[str, Any]:
     prim: dict[str, Any] = {"actuator": t.primary_actuator}
     if t.flyweights is not None:
         fw = dataclasses.asdict(t.flyweights)
+        if not fw["washer_mass_each_kg"]:
+            del fw["washer_mass_each_kg"]
         fw["sheave_travel_m"] = list(fw["sheave_travel_m"])
         fw["radius_m"] = list(fw["radius_m"])
         prim["flyweights"] = fw

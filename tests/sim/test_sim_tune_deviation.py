@@ -50,6 +50,45 @@ def test_a_swapped_part_brings_its_own_deviation_the_others_keep_theirs():
         assert stock[kind] == heavy[kind]
 
 
+def test_a_reclocked_secondary_spring_is_the_same_spring():
+    """Moving the secondary spring to another torsion position is a setting, not another spring: its axial
+    preload and rate keep their deviation (the sim's truth, and the advisor's calibration identity)."""
+    from dyno.tuning.parts import part_identity
+
+    tune = load_tune(STOCK)
+    moved = tune.with_changes(**{"secondary_spring.torsion_preload_nm": 1.4})
+    other = tune.with_changes(**{"secondary_spring.preload_n": 165.0})
+    (_, rec), (_, rec_moved), (_, rec_other) = (deviate_tune(t, 0.1, 5) for t in (tune, moved, other))
+    sec = [{k: v for k, v in r.items()} for rr in (rec, rec_moved, rec_other) for r in rr
+           if r["kind"] == "secondary_spring"]
+    assert sec[0]["preload_n"] == sec[1]["preload_n"] and sec[0]["rate_n_per_m"] == sec[1]["rate_n_per_m"]
+    assert sec[2]["preload_n"]["deviation_rel"] != sec[0]["preload_n"]["deviation_rel"]
+    assert part_identity(tune, "secondary_spring") == part_identity(moved, "secondary_spring")
+    assert part_identity(tune, "secondary_spring", with_settings=True) != part_identity(moved, "secondary_spring",
+                                                                                        with_settings=True)
+
+
+def test_washers_on_a_flyweight_body_keep_the_bodys_deviation():
+    """A 232 g set made of the stock 228 g body and 4 g of washers is the stock body: its true mass is the
+    body's true mass plus the weighed washers (+-2 %), not a new +-10 % draw."""
+    from dyno.sim.tune_deviation import WASHER_REL
+    from dyno.tuning.parts import part_identity
+
+    tune = load_tune(STOCK)
+    washed = tune.with_changes(**{"flyweights.mass_each_kg": 0.240, "flyweights.washer_mass_each_kg": 0.012})
+    drilled = tune.with_changes(**{"flyweights.mass_each_kg": 0.240})  # another body of 240 g
+    for world in (5, 6, 7):
+        (t0, r0), (t1, r1), (t2, _) = (deviate_tune(t, 0.1, world) for t in (tune, washed, drilled))
+        body_true = t0.flyweights.mass_each_kg
+        m = t1.flyweights.mass_each_kg
+        assert abs(m - (body_true + 0.012)) <= 0.012 * WASHER_REL + 1e-12
+        fw = next(r for r in r1 if r["kind"] == "flyweights")
+        assert fw["mass_each_kg"]["body_deviation_rel"] == pytest.approx(body_true / 0.228 - 1.0)
+        assert abs(t2.flyweights.mass_each_kg - (body_true + 0.012)) > 1e-6  # a new body draws its own
+    assert part_identity(tune, "flyweights") == part_identity(washed, "flyweights")
+    assert part_identity(tune, "flyweights") != part_identity(drilled, "flyweights")
+
+
 def test_engagement_truth_follows_the_true_parts():
     """Engagement at zero load is where the flyweights' force meets the spring at the sim's low stop
     (Messick eq. 9.3 with the true mass, preload and rate), not where the labels would put it."""
