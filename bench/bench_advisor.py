@@ -54,20 +54,21 @@ REL = 0.1
 #: targets stay <= ~2,160 rpm: the plan's loaded ramps engage ~40 rpm higher, and a clutch still slipping
 #: at 2,300 rpm trips the rig's "the secondary must turn" check (docs/control.md). Shift-out targets sit
 #: where the catalogue reaches from each start (the re-estimated stock tune: engagement ~2,180, shift-out
-#: ~2,500 rpm at the plan's light load).
+#: ~2,500 rpm at the plan's light load), 100-280 rpm from the start's nominal figures in at least one, so
+#: that a start's own part deviations (up to ~100 rpm) do not meet them by chance.
 SCENARIOS = (
-    ("cvtech-stock", (), 2100, 2550),
-    ("cvtech-stock", (), 2050, 2400),
-    ("heavy-flyweights", (), 2100, 2450),
-    ("cvtech-stock", ("ss-190n@1",), 2150, 2500),
-    ("heavy-flyweights", (), 2000, 2320),
+    ("cvtech-stock", (), 2100, 2650),
+    ("cvtech-stock", (), 2060, 2350),
+    ("heavy-flyweights", (), 2100, 2500),
+    ("cvtech-stock", ("ss-190n@1",), 2150, 2400),
+    ("heavy-flyweights", (), 1980, 2180),
     ("cvtech-stock", ("fw-3x240g",), 2120, 2600),
-    ("cvtech-stock", ("ps-900n-17.5k",), 2100, 2480),
+    ("cvtech-stock", ("ps-900n-17.5k",), 2100, 2600),
     ("heavy-flyweights", ("ss-115n@0.6",), 2060, 2550),
-    ("cvtech-stock", ("hx-19deg",), 2160, 2560),
-    ("cvtech-stock", ("fw-3x236g", "ss-165n@1"), 2060, 2500),
+    ("cvtech-stock", ("hx-19deg",), 2160, 2380),
+    ("cvtech-stock", ("fw-3x236g", "ss-165n@1"), 2040, 2380),
     ("heavy-flyweights", ("ps-975n-18.6k",), 2150, 2550),
-    ("cvtech-stock", ("ss-90n@1.4",), 2130, 2450),
+    ("cvtech-stock", ("ss-90n@1.4",), 2130, 2620),
 )
 
 

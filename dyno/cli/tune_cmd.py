@@ -149,6 +149,7 @@ def _print(advice: dict) -> None:
     for row in advice["tunes"]:
         ch = "; ".join(f"{c['kind']} -> {c['label']}" for c in row["changes"]) or "no change"
         pr = ", ".join(f"{f} {v['rpm']:.0f} ± {v['u95_rpm']:.0f}" for f, v in row["predicted"].items())
-        print(f"#{row['rank']} P(met) {row['p_within_tolerance']:.2f}  {ch}\n    predicted (± U95): {pr} rpm\n"
+        print(f"#{row['rank']} P(met) {row['p_within_tolerance']:.2f}, within two trips "
+              f"{row.get('p_within_two_trips', row['p_within_tolerance']):.2f}  {ch}\n    predicted (± U95): {pr} rpm\n"
               f"    {row['tune_file']}")
     print(f"curves and calibration: {advice['html']}")

@@ -31,12 +31,11 @@ that conserves ``i J_e omega_e + J_s omega_s``.
 The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 ``RigParams.cvt_tune_path`` through :mod:`dyno.tuning.actuators` (closed-form
 fallback with ``cvt_tune_path=None``), between the end stops
-``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  Optional
-hidden "true" parameters for the shift-model fit (``cvt_belt_friction_coefficient``:
-belt thrusts in the balance, from the capstan tier by default (``cvt_belt_thrust_model``:
-not the closed form the fit uses); ``cvt_flyweight_radius_offset_m``;
-``cvt_secondary_friction_torque_nm``: shaft drag between the helix and the
-torque gauge, added to the load) are off by default.
+``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  The belt's
+thrust ratio in the balance (``cvt_belt_friction_coefficient``, default 0.4: the
+capstan tier, not the closed form the host's shift model uses) and the hidden
+parameters of the shift-model fit (``cvt_flyweight_radius_offset_m``,
+``cvt_secondary_friction_torque_nm``; off by default) are in :mod:`dyno.sim.rig_params`.
 
 Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
 CVT loss into the full belt model's share, from a ratio x torque table solved
@@ -54,15 +53,13 @@ it reads ``T_brake + J_rotor alpha_b``: equal to the belt's output torque
 ``T_s / g`` only in steady state (in a transient the secondary pulley's own
 inertia torque is not seen).
 
-Integration: a fixed grid of cells of ``max_substep_s`` (4 ms) in absolute
-time, computed ahead of the caller and buffered, so the events do not
-depend on how the host slices time; explicit for the (slow) mean speeds,
-exact exponentials for the rotor temperature and lock-in filter, and exact
-within-cell angle/edge timing for the constant acceleration of each cell.
+Integration: a fixed grid of ``max_substep_s`` (4 ms) cells in absolute time,
+buffered ahead of the caller (the events do not depend on how the host slices
+time); explicit for the mean speeds, exact exponentials for the rotor
+temperature and lock-in filter, exact within-cell edge timing.
 
-The sensor outputs (Hall edges, ADC conversions with the noise measured on the
-thesis rig's logs) and the truth are in :mod:`dyno.sim.rig_signals`, the
-parameters in :mod:`dyno.sim.rig_params`; both are re-exported here.
+Sensor outputs and the truth: :mod:`dyno.sim.rig_signals`; parameters:
+:mod:`dyno.sim.rig_params` (both re-exported here).
 """
 
 from __future__ import annotations

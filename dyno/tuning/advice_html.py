@@ -51,8 +51,9 @@ def render(advice: dict, curves_svg: str | None) -> str:
                          for c in t["changes"]) or "no change"
         pr = "<br>".join(f"{e(f)} {v['rpm']:.0f} ± {v['u95_rpm']:.0f} rpm" for f, v in t["predicted"].items()
                          if math.isfinite(v["rpm"]))
+        p2 = t.get("p_within_two_trips", t["p_within_tolerance"])
         rows.append(f"<tr><td>{i}</td><td>{ch}</td><td>{pr}</td><td>{t['p_within_tolerance']:.2f}</td>"
-                    f"<td><code>{e(t['tune_file'])}</code></td></tr>")
+                    f"<td>{p2:.2f}</td><td><code>{e(t['tune_file'])}</code></td></tr>")
     cur = advice["current"]["predicted"]
     cur_txt = ", ".join(f"{e(f)} {v['rpm']:.0f} ± {v['u95_rpm']:.0f}" for f, v in cur.items())
     cal_rows = "".join(
@@ -68,7 +69,7 @@ padding:3px 8px;vertical-align:top}}table{{border-collapse:collapse}}</style></h
 {advice['searched']} tunes searched. Runs: {e(', '.join(advice['runs']))}.</p>
 <p>The current tune ({e(advice['base_tune'])}), calibrated: {cur_txt} rpm (± U95).</p>
 <h2>Ranked tunes</h2>
-<table><tr><th>#</th><th>parts changed</th><th>predicted (± U95)</th><th>P(all targets met)</th><th>tune file</th></tr>
+<table><tr><th>#</th><th>parts changed</th><th>predicted (± U95)</th><th>P(all targets met)</th><th>P(met, or after one adjustment of the same parts)</th><th>tune file</th></tr>
 {''.join(rows)}</table>
 <h2>Predicted shift curves</h2>
 {curves_svg or '<p>(no engine map with the run: no curves)</p>'}

@@ -37,7 +37,9 @@ class Candidate:
     first_pass: dict = field(default_factory=dict)
     predicted: dict = field(default_factory=dict)   # figure -> (rpm, u_rpm)
     p_hit: float = 0.0
+    p_two: float = 0.0     # P(met now or after one adjustment of the same parts): dyno.tuning.advisor_plan
     miss: float = math.inf
+    adjusted_miss: float = math.inf
 
 
 def _phi(x: float) -> float:
@@ -153,7 +155,13 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
         for c in cands[FULL_LOAD_PASS:]:
             c.miss = math.inf
         cands.sort(key=lambda c: (c.miss, len(c.changes)))
-    refined = cands[:n_refine] + [c for c in cands[n_refine:] if not c.changes]  # the current tune always
+    lookahead = "full_load" not in targets
+    refined = cands[:n_refine]
+    if lookahead:  # and the tunes that washers would bring to the targets (aimed high, trimmed next trip)
+        _adjusted_miss(cands, catalogue, base, targets, tolerance_rpm)
+        chosen = {id(c) for c in refined}
+        refined += [c for c in sorted(cands, key=lambda c: c.adjusted_miss)[:n_refine // 2] if id(c) not in chosen]
+    refined += [c for c in cands if not c.changes and all(c is not r for r in refined)]  # the current tune always
     from dyno.model.executor import InlineExecutor
 
     tasks = [(cal, c.tune, tuple(targets), load, low, tol_of, engine) for c in refined]
@@ -162,7 +170,16 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
     for c in refined:
         c.p_hit = math.prod(p_within(*c.predicted[f], targets[f], tolerance_rpm) for f in targets)
         c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
-    refined.sort(key=lambda c: (-round(c.p_hit, 3), len(c.changes), c.miss))
+    for c in refined:
+        c.p_two = c.p_hit
+        if lookahead and c.changes:
+            from dyno.tuning.advisor_plan import two_trip_probability
+
+            c.p_two = max(c.p_hit, two_trip_probability(cal, c.tune, catalogue, targets, tolerance_rpm, load, low,
+                                                        tol_of))
+    # ranked by the chance of meeting the targets within two trips (this one, then an adjustment of the
+    # parts it brings), then by this trip's
+    refined.sort(key=lambda c: (-round(c.p_two, 2), -round(c.p_hit, 3), len(c.changes), c.miss))
     current = next(c for c in refined if not c.changes)
     # the tune the runs measured is not advice: another trip on it would measure what they measured
     # (it is reported as "current", with its own P)
@@ -179,7 +196,7 @@ def _row(c: Candidate, targets) -> dict:
     return {"changes": [{"kind": p.kind, "part": p.id, "label": p.label, "source": p.source} for p in c.changes],
             "predicted": {f: {"rpm": c.predicted[f][0], "u_rpm": c.predicted[f][1],
                               "u95_rpm": 2.0 * c.predicted[f][1]} for f in c.predicted},
-            "p_within_tolerance": c.p_hit}
+            "p_within_tolerance": c.p_hit, "p_within_two_trips": c.p_two}
 
 
 def curve_for(cal: Calibration, tune, engine, tol_of, n_points: int = 30):
@@ -195,3 +212,24 @@ def curve_for(cal: Calibration, tune, engine, tol_of, n_points: int = 30):
     return predict_shift_curve(eff, engine, n_points=n_points, params=sv.params,
                                secondary_friction_torque_nm=sv.secondary_friction_torque_nm,
                                flyweight_radius_offset_m=sv.flyweight_radius_offset_m)
+
+
+def _adjusted_miss(cands: list[Candidate], catalogue: list[Part], base, targets: dict, tol: float) -> None:
+    """Each first-pass tune's normalised miss after the best washer change on its flyweight bodies (the
+    clamp goes as m n^2, so the figures scale as (m / m')^(1/2)): to bring into the refine step the tunes
+    a second trip could trim onto the targets."""
+    light = [f for f in targets if f != "full_load"]
+    options: dict[str, list[float]] = {}
+    for p in catalogue:
+        if p.kind == "flyweights" and getattr(base, "flyweights", None) is not None:
+            t = apply_part(base, p)
+            options.setdefault(part_identity(t, "flyweights"), []).append(t.flyweights.mass_each_kg)
+    for c in cands:
+        c.adjusted_miss = c.miss
+        fw = getattr(c.tune, "flyweights", None)
+        if fw is None or not math.isfinite(c.miss):
+            continue
+        for m in options.get(part_identity(c.tune, "flyweights"), ()):
+            k = math.sqrt(fw.mass_each_kg / m)
+            miss = sum(((c.first_pass[f] * k - targets[f]) / tol) ** 2 for f in light)
+            c.adjusted_miss = min(c.adjusted_miss, miss)
