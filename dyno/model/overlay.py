@@ -48,22 +48,10 @@ def _closed_form_result(params, op) -> dict:
     }
 
 
-def all_cached(
-    points,
-    params: ModelParams = TABLE_6_1,
-    *,
-    tier: str = "full",
-    variant: str = "corrected",
-    slack_tension_n: float = 100.0,
-    primary_axial_force_n: float | None = None,
-    slip_threshold_m_s: float = 1e-4,
-    tol: float = 1e-3,
-    cache_dir: str | os.PathLike | None = None,
-) -> bool:
-    """Whether :func:`predict_overlay` with the same arguments would answer every point from the cache."""
-    return all(cached_mask(points, params, tier=tier, variant=variant, slack_tension_n=slack_tension_n,
-                           primary_axial_force_n=primary_axial_force_n, slip_threshold_m_s=slip_threshold_m_s,
-                           tol=tol, cache_dir=cache_dir))
+def all_cached(points, params: ModelParams = TABLE_6_1, **kwargs) -> bool:
+    """Whether :func:`predict_overlay` with the same arguments would answer every point from the cache
+    (the keyword arguments of :func:`cached_mask`)."""
+    return all(cached_mask(points, params, **kwargs))
 
 
 def cached_mask(

@@ -117,6 +117,10 @@ model (at the stock tune's clamp every 18 N m cell solves, and 10 of 12 at 8 N m
 
 from __future__ import annotations
 
+#: the low-gear end of the thesis's measured ratios (the 2019 logs: 2.36), where the loss model's
+#: low-ratio term reaches ``loss_frac_low_ratio``
+LOSS_RATIO_LOW = 2.4
+
 import math
 
 import numpy as np
@@ -444,7 +448,9 @@ class CVT:
         if ratio < self.i_opt:
             q = (self.i_opt - ratio) / (self.i_opt - self.ratio_high)
             return self.eps0 + self.a_h * q * q
-        q = (ratio - self.i_opt) / (self.ratio_low - self.i_opt)
+        # (normalised at LOSS_RATIO_LOW, where the thesis's measurements end, not at the end stop: moving the
+        # stop must not change the loss at the ratios that were measured)
+        q = (ratio - self.i_opt) / (LOSS_RATIO_LOW - self.i_opt)
         return self.eps0 + self.a_l * q * q
 
     def drag_nm(self, ratio: float) -> float:

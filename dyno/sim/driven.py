@@ -176,3 +176,12 @@ def coast_down_truth(model, results: dict) -> dict:
     if true and fitted:
         out["loss_torque_max_rel_error"] = max(abs(f - t) / t for f, t in zip(fitted, true) if t > 0)
     return out
+
+
+def after_drag(torque_nm: float, drag_nm: float) -> float:
+    """Torque left for the brake at standstill once the shaft drag holds its share."""
+    if torque_nm > drag_nm:
+        return torque_nm - drag_nm
+    if torque_nm < -drag_nm:
+        return torque_nm + drag_nm
+    return 0.0

@@ -65,12 +65,13 @@ Sensor outputs and the truth: :mod:`dyno.sim.rig_signals`; parameters:
 from __future__ import annotations
 
 import math
+from operator import attrgetter
 
 import numpy as np
 
 from dyno.sim.brake import Brake
 from dyno.sim.cvt import CVT
-from dyno.sim.driven import Engagement, clamp_radius_m, parasitic_nm
+from dyno.sim.driven import Engagement, after_drag, clamp_radius_m, parasitic_nm
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.input_torque import InputTorqueSignals
 # The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
@@ -304,7 +305,7 @@ class RigModel(RigSignals, InputTorqueSignals):
         self.t_s = t_end
         if not buf:
             return []
-        buf.sort(key=_event_time)
+        buf.sort(key=attrgetter("t_s"))
         stuck = self.stuck_hall
         out: list[SensorEvent] = []
         k = 0
@@ -391,7 +392,7 @@ class RigModel(RigSignals, InputTorqueSignals):
             w_s1 = k * w_e1
             t_s = cvt.secondary_torque_nm(t_p, i, eta_m, t_d)
             acc_s = (w_s1 - w_s0) / h
-            t_brake_applied = t_brake_cap if w_s1 > 0.0 else _after_drag(t_s, fric) / g
+            t_brake_applied = t_brake_cap if w_s1 > 0.0 else after_drag(t_s, fric) / g
         else:
             # Belt slipping (or open): torque limited by the engagement capacity.
             v_rel = k * w_e0 - w_s0
@@ -406,7 +407,7 @@ class RigModel(RigSignals, InputTorqueSignals):
             # Karnopp stick/slip for the brake on the secondary side.
             if w_s0 <= 0.0 and abs(t_s) <= t_load_cap:
                 w_s1 = 0.0
-                t_brake_applied = _after_drag(t_s, fric) / g
+                t_brake_applied = after_drag(t_s, fric) / g
             else:
                 w_s1 = w_s0 + h * (t_s - t_load_cap) / j_s
                 t_brake_applied = t_brake_cap
@@ -498,15 +499,3 @@ class RigModel(RigSignals, InputTorqueSignals):
             t_p = t_e - j_e * acc
         return acc, t_p
 
-
-def _after_drag(torque_nm: float, drag_nm: float) -> float:
-    """Torque left for the brake at standstill once the shaft drag holds its share."""
-    if torque_nm > drag_nm:
-        return torque_nm - drag_nm
-    if torque_nm < -drag_nm:
-        return torque_nm + drag_nm
-    return 0.0
-
-
-def _event_time(ev: SensorEvent) -> float:
-    return ev.t_s

@@ -114,7 +114,7 @@ class RigParams:
     cvt_slip_per_20nm_frac: float = 0.015
     cvt_loss_frac_min: float = 0.04
     cvt_loss_frac_high_ratio: float = 0.07       # extra loss toward overdrive (thesis Fig. 9.6)
-    cvt_loss_frac_low_ratio: float = 0.02
+    cvt_loss_frac_low_ratio: float = 0.02        # reached at ratio 2.4, the thesis's measured end (dyno.sim.cvt)
     cvt_ratio_best_eff: float = 1.35
     cvt_bending_drag_nm: float = 0.25
     # Belt efficiency: "loss_model" = the simple loss model above; "belt_model" =

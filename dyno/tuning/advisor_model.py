@@ -463,19 +463,18 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
     return float(y0), math.sqrt(var)
 
 
+def _calibrated(cal: Calibration, params: list[Param], convert):
+    idx = cal.index()
+    if (params[0].part, params[0].field) not in idx:
+        return None
+    return convert([cal.d[idx[(p.part, p.field)]] for p in params])
+
+
 def calibrated_theta(cal: Calibration):
     """The calibrated (f, dr, T_fr) when steady points were given, else None (the nominal model)."""
-    idx = cal.index()
-    bp = belt_params()
-    if (bp[0].part, bp[0].field) not in idx:
-        return None
-    return theta_of([cal.d[idx[(p.part, p.field)]] for p in bp])
+    return _calibrated(cal, belt_params(), theta_of)
 
 
 def calibrated_thrust(cal: Calibration):
     """The calibrated thrust ratio's (a, c) when a run measured a shift-out, else None (nominal)."""
-    idx = cal.index()
-    tp = thrust_params()
-    if (tp[0].part, tp[0].field) not in idx:
-        return None
-    return thrust_of([cal.d[idx[(p.part, p.field)]] for p in tp])
+    return _calibrated(cal, thrust_params(), thrust_of)
