@@ -82,7 +82,7 @@ def add_air_arguments(p) -> None:
                         "same part keeps its deviation on the same rig across runs (default 0)")
     p.add_argument("--sim-belt-thrust", type=float, default=None, metavar="F",
                    help="with --sim: the simulated belt requires the secondary thrust of the capstan tier at "
-                        "belt-sheave friction F, as a real belt under load does (default 0.4, the thesis's); 0: "
+                        "belt-sheave friction F (0.4 is the thesis's), as a real belt under load does; default: "
                         "the primary clamp passes to the secondary unchanged (docs/belt-model.md)")
     p.add_argument("--sim-ideal", action="store_true",
                    help="with --sim: perfect knowledge (the engine exactly its map, the sensor exactly its "
@@ -119,9 +119,9 @@ def air_options(args, sim_kw: dict, prog: str = "dyno run"):
         sim_kw["tune_deviation_rel"] = float(dev)
     thrust = getattr(args, "sim_belt_thrust", None)
     if thrust is not None:
-        if not (thrust == 0.0 or 0.05 <= thrust <= 1.0):  # (NaN fails too)
-            return None, f"{prog}: --sim-belt-thrust: expected 0 or a friction coefficient 0.05..1, got {thrust:g}"
-        sim_kw["cvt_belt_friction_coefficient"] = float(thrust) if thrust else None
+        if not (0.05 <= thrust <= 1.0):  # (NaN fails too)
+            return None, f"{prog}: --sim-belt-thrust: expected a friction coefficient 0.05..1, got {thrust:g}"
+        sim_kw["cvt_belt_friction_coefficient"] = float(thrust)
     if args.sim_world_seed is not None:
         if not 0 <= args.sim_world_seed < 2**32:
             return None, f"{prog}: --sim-world-seed: expected 0..{2**32 - 1}, got {args.sim_world_seed}"

@@ -2,7 +2,7 @@
 
 The full belt model (:mod:`dyno.model`, thesis Table 6.1 belt on the tune's
 drive geometry) is solved once on a grid of geometric ratios x primary torques
-covering the simulated CVT's whole ratio range (0.72 .. 3.0), at the clamping
+covering the simulated CVT's whole ratio range (0.72 .. 2.4), at the clamping
 force the CVT tune puts on the belt there (:func:`tune_clamp_n`: flyweights
 minus spring, Messick eq. 9.3, at :data:`TABLE_RPM`), by continuation: a cold
 solve at ratio 1, 18 N m, warm starts outward in ratio at the reference
@@ -35,16 +35,15 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-#: Default grid: the simulated CVT's whole geometric ratio range (0.72 overdrive .. 3.0 low, the
-#: tune's geometric low stop; the 2019 logs reached 2.36) and two torques.  Cells where the belt model finds gross slip at the
+#: Default grid: the simulated CVT's whole geometric ratio range (0.72 overdrive .. 2.4 low, the
+#: ratio the 2019 logs reached) and two torques.  Cells where the belt model finds gross slip at the
 #: tune's clamp are failed cells (the loss model answers there).
-DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75, 1.95, 2.15, 2.4, 2.7, 3.0)
+DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75, 1.95, 2.15, 2.4)
 DEFAULT_TORQUES_NM = (8.0, 18.0)
 REFERENCE_TORQUE_NM = 18.0
-#: Engine speed of the table's clamp: what the stock tune holds under load on the sim (2,940-2,980 rpm on a
-#: thesis-step run) and the thesis rig's 2019 logs (2,850-3,050 rpm at ratios 0.8-2.0); the flyweights'
-#: clamp goes as rpm^2: +-7 % over that band.
-TABLE_RPM = 2950.0
+#: Engine speed of the table's clamp: the middle of the 3000-3300 rpm the stock tune holds on the
+#: sim and the thesis logs (the flyweights' clamp goes as rpm^2: +-5 % over that band).
+TABLE_RPM = 3150.0
 SLACK_TENSION_N = 100.0
 _DENSE = 200
 

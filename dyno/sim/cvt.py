@@ -27,9 +27,10 @@ over ``x`` once at start-up (the inner loop only interpolates):
 * otherwise a self-contained closed form: ``C`` constant (a flyweight
   coefficient), linear springs, constant helix gain ``H``, and the ratio
   from ``r_p + r_s = const`` between the two ratio end stops.
-Belt thrust ratio (``belt_friction_coefficient``: the rig's default 0.4)
-----------------------------------------------------------------------
-With a belt friction coefficient ``f`` (and a
+Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
+-------------------------------------------------------------
+By default the belt passes the primary clamp to the secondary unchanged
+(``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
 tune) the primary clamp sets the belt tensions and the belt then *requires* a
 secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
 ``F_s,belt = kappa F_p`` with the thrust ratio ``kappa(x, T_p, F_p; f)``
@@ -42,10 +43,7 @@ from ``belt_thrust_model``: ``"capstan"`` (default: Gerbert's V-belt,
 ``"closed_form"`` (Sorge & Cammalleri eqs. 17-18, the fitted model itself:
 circular, for comparison only).  Together with ``flyweight_radius_offset_m``
 (added to the tune's flyweight radius table) these are the rig's hidden
-"true" parameters that the fit estimates.  Without ``f`` (``None``) the belt
-passes the primary clamp unchanged (``F_p = F_s`` at balance), which no belt
-does under load (thesis Fig. 6.21): with the stock tune it held the engine
-~350 rpm below the thesis rig's logs.
+"true" parameters that the fit estimates.
 
 Slip
 ----
@@ -53,9 +51,9 @@ With a tune the belt's slip (``omega_s = (1 - s) omega_p / i``) is the closed
 form's elastic creep at the tune's clamp ``F_p(x, n)`` and the belt torque
 (0.03-0.2 %), re-evaluated with kappa; the rest of the loss model's speed loss
 moves into the torque loss so the overall efficiency is unchanged.  The
-closed form is the fast belt tier that carries the tune's loads (the full
-model does too at the stock clamp since its flyweight profile was re-estimated,
-docs/belt-model.md; a full solve per step is too slow); it is what the overlay's slip-consistent inverse
+closed form is the belt tier that carries the tune's loads (the full model
+finds gross slip at the stock clamp from ~10 N m, see
+:mod:`dyno.sim.belt_table`); it is what the overlay's slip-consistent inverse
 (:mod:`dyno.model.inverse`) inverts, and the truth records ``belt_slip`` and
 the geometric ratio per point.  Without a tune, or below engagement, the loss
 model's slip ``s_0 + s_1 |T_p|`` applies.
@@ -110,16 +108,12 @@ model's (it stays in the thesis's measured range); away from it, the torque
 dependence of the belt's share (creep grows with load, the seating loss is a
 larger fraction at light load) is the belt model's.  The table covers the
 simulated CVT's whole ratio range 0.72-2.4 at 8 and 18 N m, at the tune's
-clamp at 2950 rpm (100 N slack without a tune); torque is clamped to that
-range.  A cell where the belt model did not converge falls back to the loss
-model (at the stock tune's clamp every 18 N m cell solves, and 10 of 12 at 8 N m).
+clamp at 3150 rpm (100 N slack without a tune); torque is clamped to that
+range.  A cell where the belt model did not converge (at the stock tune's
+clamp: gross slip at 18 N m at every ratio) falls back to the loss model.
 """
 
 from __future__ import annotations
-
-#: the low-gear end of the thesis's measured ratios (the 2019 logs: 2.36), where the loss model's
-#: low-ratio term reaches ``loss_frac_low_ratio``
-LOSS_RATIO_LOW = 2.4
 
 import math
 
@@ -448,9 +442,7 @@ class CVT:
         if ratio < self.i_opt:
             q = (self.i_opt - ratio) / (self.i_opt - self.ratio_high)
             return self.eps0 + self.a_h * q * q
-        # (normalised at LOSS_RATIO_LOW, where the thesis's measurements end, not at the end stop: moving the
-        # stop must not change the loss at the ratios that were measured)
-        q = (ratio - self.i_opt) / (LOSS_RATIO_LOW - self.i_opt)
+        q = (ratio - self.i_opt) / (self.ratio_low - self.i_opt)
         return self.eps0 + self.a_l * q * q
 
     def drag_nm(self, ratio: float) -> float:

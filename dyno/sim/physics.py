@@ -32,10 +32,10 @@ The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 ``RigParams.cvt_tune_path`` through :mod:`dyno.tuning.actuators` (closed-form
 fallback with ``cvt_tune_path=None``), between the end stops
 ``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  The belt's
-thrust ratio in the balance (``cvt_belt_friction_coefficient``, default 0.4: the
-capstan tier, not the closed form the host's shift model uses) and the hidden
-parameters of the shift-model fit (``cvt_flyweight_radius_offset_m``,
-``cvt_secondary_friction_torque_nm``; off by default) are in :mod:`dyno.sim.rig_params`.
+thrust ratio in the balance (``cvt_belt_friction_coefficient``: the capstan tier,
+not the closed form the host's shift model uses; ``--sim-belt-thrust``) and the
+hidden parameters of the shift-model fit (``cvt_flyweight_radius_offset_m``,
+``cvt_secondary_friction_torque_nm``) are off by default (:mod:`dyno.sim.rig_params`).
 
 Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
 CVT loss into the full belt model's share, from a ratio x torque table solved

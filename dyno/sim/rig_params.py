@@ -80,12 +80,8 @@ class RigParams:
     # but the real rig's CVT reached a speed ratio of 2.36 at full load in the
     # 2019 logs (n_p 2747 / n_s 1166), and with 1.74 the engine cannot hold a
     # secondary speed below 1500 rpm above its peak-torque speed (it lugs down
-    # to clutch slip).  The logs' 2.36 was still shifting (the engine speed still
-    # falling gently with load, 2,860 -> 2,720 rpm from 1.9 to 2.35), so the stop lies
-    # beyond it: low = 3.0, about the stock tune's geometric stop (3.06; at 2.4 the
-    # re-estimated flyweights engage below idle, docs/belt-model.md); high = 0.72
-    # (thesis model).
-    cvt_ratio_low: float = 3.0
+    # to clutch slip).  So low = 2.4 (the logs), high = 0.72 (thesis model).
+    cvt_ratio_low: float = 2.4
     cvt_ratio_high: float = 0.72
     cvt_primary_radius_max_m: float = 0.093      # belt radius at full shift (thesis 9.4.1)
     cvt_sheave_half_angle_deg: float = 13.0
@@ -114,7 +110,7 @@ class RigParams:
     cvt_slip_per_20nm_frac: float = 0.015
     cvt_loss_frac_min: float = 0.04
     cvt_loss_frac_high_ratio: float = 0.07       # extra loss toward overdrive (thesis Fig. 9.6)
-    cvt_loss_frac_low_ratio: float = 0.02        # reached at ratio 2.4, the thesis's measured end (dyno.sim.cvt)
+    cvt_loss_frac_low_ratio: float = 0.02
     cvt_ratio_best_eff: float = 1.35
     cvt_bending_drag_nm: float = 0.25
     # Belt efficiency: "loss_model" = the simple loss model above; "belt_model" =
@@ -123,11 +119,9 @@ class RigParams:
     belt_efficiency_source: str = "belt_model"
     belt_table_cache_dir: str | None = None      # None = $DYNO_MODEL_CACHE or ~/.cache/dyno/model
     # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
-    # A number = the belt requires the secondary thrust kappa F_p of the tier below, with this
-    # belt-sheave friction coefficient (the thesis's f = 0.4: under load a belt needs less thrust on the
-    # secondary than the primary gives, thesis Fig. 6.21); None = the belt passes the primary clamp
-    # unchanged (F_p = F_s at balance: held the engine ~350 rpm below the thesis rig's logs).
-    cvt_belt_friction_coefficient: float | None = 0.4
+    # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
+    # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
+    cvt_belt_friction_coefficient: float | None = None
     cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
     # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
     # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
