@@ -210,12 +210,16 @@ def wrap_ratio(tune, low_ratio: float) -> float:
 def primary_force_for_secondary_n(f_s: float, torque_primary_nm: float, r_p: float, kappa0: float,
                                   decay: float) -> float:
     """The primary clamp ``F`` with ``F kappa0 exp(-decay T_p / (r_p F)) = f_s`` (increasing in F: one root
-    in [f_s / kappa0, f_s / kappa0 + decay T_p / r_p])."""
+    in [f_s / kappa0, f_s / kappa0 + decay T_p / r_p], since e^-x >= 1 - x)."""
     a = f_s / kappa0
     k = max(decay, 0.0) * max(torque_primary_nm, 0.0) / r_p
     if a <= 0.0 or k == 0.0:
         return a
-    return float(brentq(lambda f: f * math.exp(-k / f) - a, a, a + k, xtol=1e-6))
+    g = lambda f: f * math.exp(-k / f) - a  # noqa: E731
+    hi = a + 2.0 * k + 1e-6  # (a + k would do exactly; the margin keeps the sign under rounding)
+    if g(a) >= 0.0:
+        return a
+    return float(brentq(g, a, hi, xtol=1e-6))
 
 
 def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=None, theta=None,

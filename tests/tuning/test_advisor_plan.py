@@ -60,3 +60,16 @@ def _p(m, u, t, tol=50.0):
     from math import erf, sqrt
 
     return 0.5 * (erf((t + tol - m) / (u * sqrt(2))) - erf((t - tol - m) / (u * sqrt(2))))
+
+
+@pytest.mark.parametrize("f_s, t_p, decay", [(500.0, 1e-9, 1.0), (500.0, 2.0, 1.0), (1e6, 1e-3, 3.0), (80.0, 6.0, 2.5)])
+def test_thrust_ratio_balance_solves_at_any_scale(f_s, t_p, decay):
+    """The shift-out balance kappa(F) F = F_s: a root at every scale (tiny torques once made brentq's
+    bracket lose its sign to rounding)."""
+    import math
+
+    from dyno.tuning.advisor_model import primary_force_for_secondary_n
+
+    r_p, kappa0 = 0.032, 1.39
+    f = primary_force_for_secondary_n(f_s, t_p, r_p, kappa0, decay)
+    assert f * kappa0 * math.exp(-decay * t_p / (r_p * f)) == pytest.approx(f_s, rel=1e-6)
