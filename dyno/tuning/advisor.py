@@ -167,8 +167,14 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
     tasks = [(cal, c.tune, tuple(targets), load, low, tol_of, engine) for c in refined]
     for i, pred in (executor or InlineExecutor()).map_unordered(_refine_task, tasks):
         refined[i].predicted = pred
+    from dyno.tuning.advisor_plan import engagement_limit_rpm
+
+    limit = engagement_limit_rpm()
     for c in refined:
         c.p_hit = math.prod(p_within(*c.predicted[f], targets[f], tolerance_rpm) for f in targets)
+        if "engagement" in c.predicted:  # a tune that may engage too high for the rig's check may abort
+            m, u = c.predicted["engagement"]
+            c.p_hit *= _phi((limit - m) / u) if math.isfinite(m) and u > 0 else 0.0
         c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
     for c in refined:
         c.p_two = c.p_hit

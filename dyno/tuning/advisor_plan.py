@@ -33,6 +33,16 @@ from dyno.tuning.advisor_model import (MODEL_SD_RPM, THRUST_NOMINAL, effective_t
 from dyno.tuning.parts import apply_part, part_identity
 
 N_DRAWS = 2000
+#: below the rig's "the secondary must turn" speed (SafetyLimits.secondary_check_primary_rpm, 2,300): a tune
+#: that engages within this margin of it aborts the engagement plan's loaded ramps (measured: 2,254 rpm
+#: predicted at the light load aborted three times), so such an outcome teaches nothing
+ENGAGEMENT_MARGIN_RPM = 100.0
+
+
+def engagement_limit_rpm() -> float:
+    from dyno.control.safety import SafetyLimits
+
+    return SafetyLimits().secondary_check_primary_rpm - ENGAGEMENT_MARGIN_RPM
 #: what a figure's prediction keeps after the run that calibrated every part it uses (rpm, k = 1)
 U_AFTER_RPM = 12.0
 ADJUSTABLE = ("flyweights", "secondary_spring")
@@ -114,6 +124,11 @@ def two_trip_probability(cal, tune, catalogue, targets: dict, tolerance_rpm: flo
     rng = np.random.default_rng(20251127)
     y = mean + rng.standard_normal((N_DRAWS, len(figures))) @ root.T          # draws x figures
     best = np.all(np.abs(y - t) <= tolerance_rpm, axis=1).astype(float)
+    # a draw that engages too high for the rig aborts: no figure, nothing calibrated, no second chance
+    runs = np.ones(N_DRAWS, dtype=bool)
+    if "engagement" in figures:
+        runs = y[:, figures.index("engagement")] <= engagement_limit_rpm()
+        best = best * runs
     adj = adjustments(tune, catalogue)
     if adj:
         here = _figures(cal, tune, figures, load_nm, low_ratio, tol_of)
@@ -123,5 +138,5 @@ def two_trip_probability(cal, tune, catalogue, targets: dict, tolerance_rpm: flo
             u = np.array([math.hypot(MODEL_SD_RPM[f], U_AFTER_RPM) for f in figures]) * math.sqrt(2.0)
             ya = y[:, None, :] + delta[None, :, :]                              # draws x adj x figures
             p = 0.5 * (erf((t + tolerance_rpm - ya) / u) - erf((t - tolerance_rpm - ya) / u))
-            best = np.maximum(best, np.prod(p, axis=2).max(axis=1))
+            best = np.maximum(best, np.prod(p, axis=2).max(axis=1) * runs)
     return float(best.mean())
