@@ -58,8 +58,7 @@ buffered ahead of the caller (the events do not depend on how the host slices
 time); explicit for the mean speeds, exact exponentials for the rotor
 temperature and lock-in filter, exact within-cell edge timing.
 
-Sensor outputs and the truth: :mod:`dyno.sim.rig_signals`; parameters:
-:mod:`dyno.sim.rig_params` (both re-exported here).
+Sensor outputs, truth: :mod:`dyno.sim.rig_signals`; parameters: :mod:`dyno.sim.rig_params` (re-exported).
 """
 
 from __future__ import annotations
