@@ -21,8 +21,9 @@ import math
 from dataclasses import dataclass, field
 
 from dyno.tuning.advisor_model import (UNKNOWN_PART_TOLERANCE_REL, Calibration, RunData, calibrate,
-                                       calibrated_theta, calibrated_thrust, effective_tune, predict_figure, predict_with_u,
-                                       tune_params)
+                                       calibrated_theta, calibrated_thrust, effective_tune, predict_figure,
+                                       predict_with_u, tune_params)
+from dyno.tuning.advisor_plan import engagement_limit_rpm, two_trip_probability
 from dyno.tuning.parts import DEVIATED, Part, apply_part, match_parts, part_identity
 
 REFINE = 120            # tunes whose uncertainty is computed after the first pass (half with a full-load target)
@@ -167,8 +168,6 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
     tasks = [(cal, c.tune, tuple(targets), load, low, tol_of, engine) for c in refined]
     for i, pred in (executor or InlineExecutor()).map_unordered(_refine_task, tasks):
         refined[i].predicted = pred
-    from dyno.tuning.advisor_plan import engagement_limit_rpm
-
     limit = engagement_limit_rpm()
     for c in refined:
         c.p_hit = math.prod(p_within(*c.predicted[f], targets[f], tolerance_rpm) for f in targets)
@@ -176,11 +175,8 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
             m, u = c.predicted["engagement"]
             c.p_hit *= _phi((limit - m) / u) if math.isfinite(m) and u > 0 else 0.0
         c.miss = sum(((c.predicted[f][0] - targets[f]) / tolerance_rpm) ** 2 for f in targets)
-    for c in refined:
         c.p_two = c.p_hit
         if lookahead and c.changes:
-            from dyno.tuning.advisor_plan import two_trip_probability
-
             c.p_two = max(c.p_hit, two_trip_probability(cal, c.tune, catalogue, targets, tolerance_rpm, load, low,
                                                         tol_of))
     # ranked by the chance of meeting the targets within two trips (this one, then an adjustment of the

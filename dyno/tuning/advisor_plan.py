@@ -66,8 +66,8 @@ def adjustments(tune, catalogue) -> list:
     return out
 
 
-def _figures(cal, tune, figures, load_nm, low_ratio, tol_of, d_of=None):
-    """The light figures of ``tune`` at the calibrated values (``d_of``: params -> deviations)."""
+def _figures(cal, tune, figures, load_nm, low_ratio, tol_of):
+    """The light figures of ``tune`` at the calibrated values."""
     ps = tune_params(tune, tol_of)
     idx = cal.index()
     d = np.array([cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps])
