@@ -15,7 +15,8 @@ step).  :class:`OverlayService` therefore
 * warm-starts each solve from the nearest solved point (:func:`op_distance`),
   when it is near enough (a far neighbour is a worse start than none:
   ratio 1.0 -> 0.73 took 8.8 s warm against 2.6 s cold), else solves cold;
-  a failed warm start is retried cold;
+  a failed warm start is retried cold, a failed cold start warm from the
+  nearest solution however far (:func:`solve_job`'s ``fallback``);
 * keeps the solutions it warm-starts from on disk too (``warm/`` under the cache
   directory, one small ``.npz`` per converged point, same code hash), so the
   first point of the next session warm-starts as well;
@@ -26,7 +27,8 @@ step).  :class:`OverlayService` therefore
   by :meth:`OverlayService.close`.
 
 Results have the format of :func:`dyno.model.overlay.predict_overlay` plus
-``start`` (``"warm"``, ``"cold"``, ``"cold after a failed warm start"``),
+``start`` (``"warm"``, ``"cold"``, ``"cold after a failed warm start"``, ``"warm from a far
+neighbour after a failed cold start"``),
 ``steps`` (continuation steps, i.e. ``solve_bvp`` calls) and ``job_s``.
 """
 
@@ -255,13 +257,16 @@ class OverlayService:
                 d, near_key, ws = self._nearest(e.op)
             # a retry takes its nearest neighbour of this session however far: its first attempt failed
             guess = ws if d <= self.warm_max_distance or (e.extra.get("retried") and ws is not None) else None
-            e.warm_from = near_key if guess is not None else None
+            # too far for a first try, but the start if the cold one fails (see solve_job); not for a seed,
+            # an investment that must not hold the accepted points behind it for a second long solve
+            fallback = ws if guess is None and not e.prime else None
+            e.warm_from = near_key if ws is not None else None
             e.extra["neighbour_distance"] = d
-            if guess is not None:
+            if ws is not None:
                 e.extra["warm_from_op"] = asdict(ws.op)
             self.solves += 1
         try:
-            fut = self._submit_job(e, guess)
+            fut = self._submit_job(e, guess, fallback)
         except RuntimeError:  # the executor was shut down under us
             with self._lock:
                 self._busy = None
@@ -269,14 +274,15 @@ class OverlayService:
             return
         fut.add_done_callback(lambda f, key=key: self._done(key, f))
 
-    def _submit_job(self, e: Entry, guess):
+    def _submit_job(self, e: Entry, guess, fallback=None):
         from concurrent.futures import BrokenExecutor
 
         def submit():
             return self.executor.submit(self._solve, self.params, e.op, variant=self.variant,
                                         slip_threshold_m_s=self.slip_threshold_m_s, tol=self.tol,
                                         time_limit_s=self.time_limit_s, guess=guess,
-                                        **({"cancel": self._cancel} if self._pass_cancel else {}))
+                                        **({"cancel": self._cancel} if self._pass_cancel else {}),
+                                        **({"fallback": fallback} if fallback is not None else {}))
 
         try:
             return submit()
@@ -323,7 +329,7 @@ class OverlayService:
                 self._pump()
             return
         res = {**res, "cached": False}
-        if "warm_from_op" in e.extra:
+        if "warm_from_op" in e.extra and str(res.get("start", "")).startswith("warm"):
             res["warm_from"] = e.extra["warm_from_op"]
         self._write_cache(key, res, warm)
         with self._lock:

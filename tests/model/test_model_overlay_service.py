@@ -105,7 +105,8 @@ def _fake_result(op):
 def fake_solver(log: list, fail: bool = False, gate: threading.Event | None = None):
     """A stand-in for solve_job: records (ratio, warm-from ratio) and returns a warm state at the point."""
 
-    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None):
+    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None,
+              fallback=None):
         if gate is not None:
             gate.wait(5)
         log.append((op.ratio, None if guess is None else guess.op.ratio))
@@ -240,7 +241,8 @@ def _retry_service(tmp_path):
 
     calls = []
 
-    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None):
+    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None,
+              fallback=None):
         """A stand-in solver: the 'heavy' point fails from nothing and converges from any neighbour; the
         'slip' point is gross slip whatever the start."""
         calls.append((op.primary_torque_nm, guess is not None))
@@ -281,3 +283,74 @@ def test_no_retry_without_a_solved_point_to_start_from(tmp_path):
     svc, calls = _retry_service(tmp_path)
     k = svc.submit(OperatingPoint(ratio=0.72, primary_speed_rpm=3670, primary_torque_nm=10.0))
     assert svc.retry_failures() == 0 and svc.get(k)["converged"] is False and len(calls) == 1
+
+
+def _with_solve_point(fake, **job):
+    from dyno.model import solution
+
+    orig = solution.solve_point
+    try:
+        solution.solve_point = fake
+        return solve_job(TABLE_6_1, OperatingPoint(), variant="corrected", slip_threshold_m_s=SLIP, tol=1e-3,
+                         time_limit_s=5, **job)
+    finally:
+        solution.solve_point = orig
+
+
+def test_a_failed_cold_start_starts_again_from_the_far_neighbour_unless_the_belt_slips():
+    from dyno.errors import DidNotConverge, GrossSlip
+
+    far = WarmState(None, np.zeros(2), np.zeros((2, 2)), np.zeros(1), None, OperatingPoint(), "corrected", SLIP)
+    for cold_error, expected in ((DidNotConverge("stalled at v_th = 1 m/s"), [None, far]),
+                                 (GrossSlip("gross slip"), [None])):
+        calls = []
+
+        def cold_fails(params, op, guess=None, **kw):
+            calls.append(guess)
+            if guess is None:
+                raise cold_error
+            return _fake_result(op)
+
+        res, _ = _with_solve_point(cold_fails, fallback=far)
+        assert calls == expected
+        if len(expected) == 2:
+            assert res["converged"] and res["start"] == "warm from a far neighbour after a failed cold start"
+        else:  # the physics' verdict stands: no second try
+            assert not res["converged"] and res["state"] == "gross_slip"
+
+
+def test_the_service_hands_a_far_neighbour_over_as_the_fallback_only(tmp_path):
+    seen = []
+
+    def solve(params, op, *, variant, slip_threshold_m_s, tol, time_limit_s, guess=None, cancel=None,
+              fallback=None):
+        seen.append((op.ratio, None if guess is None else guess.op.ratio,
+                     None if fallback is None else fallback.op.ratio))
+        res = {"converged": True, "tier": "full", "efficiency": {"overall": 0.9}, "ratio": op.ratio,
+               "primary_speed_rpm": op.primary_speed_rpm, "primary_torque_nm": op.primary_torque_nm,
+               "start": "cold" if guess is None else "warm", "steps": 1}
+        return res, WarmState(None, np.zeros(2), np.zeros((2, 2)), np.zeros(1), None, op, variant,
+                              slip_threshold_m_s)
+
+    svc = service(tmp_path, solve=solve, use_cache=False)
+    svc.submit((1.0, 3400.0, 18.0))
+    svc.submit((1.05, 3430.0, 17.6))  # a neighbour: warm from it, no fallback
+    svc.submit((0.72, 3700.0, 9.0))  # far from both: cold first, the nearer (ratio 1.0) as the fallback
+    assert seen == [(1.0, None, None), (1.05, 1.0, None), (0.72, None, 1.0)]
+
+
+def test_a_heavy_point_the_cold_path_stalls_on_converges_from_the_thesis_point(tmp_path):
+    """Real numerics: ratio 0.72 at 17.5 N*m and 856 N of clamp (a full-load point of a simulated run) stalls
+    on the cold path's smoothed friction law at the capstan bound; from Table 6.1's solution it converges."""
+    svc = OverlayService(TABLE_6_1, cache_dir=tmp_path, use_cache=False, time_limit_s=60)
+    seed = svc.get(svc.submit((1.0, 3400.0, 18.0)))
+    assert seed["converged"]
+    heavy = OperatingPoint(ratio=0.72, primary_speed_rpm=3106.4, primary_torque_nm=17.51, slack_tension_n=None,
+                           primary_axial_force_n=856.5)
+    assert svc.nearest_distance(heavy) > svc.warm_max_distance  # too far for a first try
+    res = svc.get(svc.submit(heavy))
+    assert res["converged"], res.get("error")
+    assert res["start"] == "warm from a far neighbour after a failed cold start"
+    assert res["warm_from"]["ratio"] == 1.0
+    assert 0.5 < res["efficiency"]["overall"] < 1.0
+    assert res["axial_force_n"]["primary"] == pytest.approx(856.5, rel=1e-3)  # the clamp asked for

@@ -4,6 +4,7 @@ prediction on screen, solved in the background by dyno.model.overlay_service (it
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 from dyno.control.controller import State
 from dyno.ui.live_app import LiveApp
@@ -12,13 +13,22 @@ from dyno.ui.session import LiveOptions
 
 from tests.ui.test_ui_live import SIZE, screen_text, wait_for
 
+# The stock parts with the flyweight profile re-estimated from the thesis's forces, as in
+# tests/model/test_model_overlay_full_load.py: its clamp carries the full-load points (1,200-2,000 N), so each
+# point of the run has a solution next to its predecessor's. With the sim's default (first-estimate) tune the
+# clamp at full load is 500-670 N, where the model finds gross slip: which points of a run at x8 the overlay
+# can chain then depends on where the adaptive brake steps happen to land.
+TUNE = "calibration/tunes/cvtech-stock-thesis-forces.toml"
+
 
 def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
     async def scenario():
         # the thesis rig as specified (RigParams(ideal=True): its engine exactly its map): the warm-start
         # figures below are of that rig's first points; a seed's own engine (dyno.sim.world) moves them
+        repo = Path(__file__).resolve().parents[2]
         app = LiveApp(LiveOptions(sim=True, speed=8.0, seed=0, out_dir=tmp_path / "run",
-                                  sim_params=RigParams(ideal=True)))
+                                  sim_params=RigParams(ideal=True, cvt_tune_path=str(repo / TUNE),
+                                                       cvt_belt_friction_coefficient=0.4)))
         app.overlay_cache_dir = tmp_path / "model-cache"  # solved here, not answered from an earlier run's cache
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None, 5)
@@ -32,7 +42,10 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             await pilot.press("y")
             assert await wait_for(pilot, lambda: len(s.controller.points) >= 2, 90), s.controller.reason
             svc = app.overlay_service
-            assert await wait_for(pilot, lambda: len(app.overlay_full) >= 2, 60), app.overlay_tier
+            # The first point is at overdrive and a heavy clamp, far from any solution: its cold start fails there
+            # and it is solved warm from the seed (17 continuation steps, 20-45 s on 2 busy cores). A function
+            # test, not a latency bound: the latency's figures are bench/bench_overlay_ui.py's.
+            assert await wait_for(pilot, lambda: len(app.overlay_full) >= 2, 150), app.overlay_tier
             await pilot.pause(0.4)  # one refresh
             text = screen_text(app)
             assert "full 2/" in text or "full 3/" in text, text
@@ -41,8 +54,9 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             res = [svc.get(k) for k in keys]
             dbg = (res, app._overlay_pairs, [(e.op, e.prime, e.result and e.result.get("start")) for e in svc.entries.values()])
             assert all(r and r["converged"] and 0.5 < r["efficiency"]["overall"] <= 1.0 for r in res), dbg
-            # the second point starts from a neighbour's solution, not from scratch
-            assert res[1]["start"] == "warm" and res[1]["steps"] <= 2, res[1]
+            # the second point starts from a neighbour's solution, not from scratch: 1-3 continuation steps (its
+            # brake step moved the torque 3-5 N*m) where a cold start takes 13 or more
+            assert res[1]["start"] == "warm" and res[1]["steps"] <= 3, res[1]
             assert set(app.overlay_latencies_s()) >= set(keys)
             await pilot.press("space")
             await pilot.pause(0.2)
