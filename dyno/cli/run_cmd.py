@@ -331,18 +331,44 @@ def air_line(amb: dict) -> str:
             + f" ({amb.get('source')}): SAE J1349 factor {amb['j1349_factor']:.4f} applied to the engine map")
 
 
+def _print_figures(result: dict) -> None:
+    """A characterisation's figures (the engagement plan's have no points table), the tune's prediction of
+    them, and what ``dyno tune advise`` predicted if the tune is one it advised."""
+    def fig(key, unit="rpm", fmt="{:.0f}"):
+        v, ci = result.get(key), result.get(f"{key}_ci95")
+        if not isinstance(v, (int, float)) or v != v:
+            return None
+        return fmt.format(v) + ("" if not isinstance(ci, (int, float)) or ci != ci else " ± " + fmt.format(ci)) \
+            + (f" {unit}" if unit else "")
+
+    rows = [(name, fig(key, unit, fmt)) for name, key, unit, fmt in (
+        ("engagement", "engagement_rpm", "rpm", "{:.0f}"), ("lock-up", "lockup_rpm", "rpm", "{:.0f}"),
+        ("shift-out", "shift_out_rpm", "rpm", "{:.0f}"), ("full-shift ratio", "full_shift_ratio", "", "{:.3f}"))]
+    rows = [(n, v) for n, v in rows if v is not None]
+    if not rows:
+        return
+    load = result.get("shift_out_torque_nm")
+    at = f" (shift-out at {load:.1f} N·m)" if isinstance(load, (int, float)) and load == load else ""
+    print("figures (± 95 %): " + ", ".join(f"{n} {v}" for n, v in rows) + at)
+    pred = result.get("predicted") or {}
+    pp = [f"{n} {pred[k]:.0f}" for n, k in (("engagement", "engagement_rpm"), ("shift-out", "shift_out_rpm"))
+          if isinstance(pred.get(k), (int, float))]
+    if pp:
+        print(f"tune {result.get('tune') or ''} predicts: " + ", ".join(pp) + " rpm (its labels, uncalibrated)")
+    if result.get("run_dir"):
+        from dyno.library.advice import advised_for_run, format_line
+        from dyno.library.index import runs_dir
+
+        adv = advised_for_run(runs_dir(), result["run_dir"])
+        if adv is not None:
+            print(format_line(adv))
+
+
 def _print_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
-    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5} "
-          f"{'±U95':>5}")
-    for p in result["points"]:
-        def f(k, scale=1.0, fmt="{:.0f}"):
-            v = p.get(k)
-            return "-" if v is None else fmt.format(v * scale)
-        print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
-              f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
-              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5} "
-              f"{f('efficiency_u95', 100, '{:.1f}'):>5}")
+    if result["points"]:
+        _print_points(result["points"])
+    _print_figures(result)
     print(air_line(result.get("ambient") or {}))
     fr = result["frames"]
     print(f"frames: read {fr['read']}, accepted {fr['accepted']}, rejected {fr['rejected']}; "
@@ -352,3 +378,16 @@ def _print_table(result: dict) -> None:
     if result["aborts"]:
         print(f"rig safe: {'yes' if result.get('rig_safe') else 'NO'}  outputs: "
               + ", ".join(f"{k}={v}" for k, v in result.get("outputs", {}).items() if k != "safe"))
+
+
+def _print_points(points: list) -> None:
+    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5} "
+          f"{'±U95':>5}")
+    for p in points:
+        def f(k, scale=1.0, fmt="{:.0f}"):
+            v = p.get(k)
+            return "-" if v is None else fmt.format(v * scale)
+        print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
+              f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
+              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5} "
+              f"{f('efficiency_u95', 100, '{:.1f}'):>5}")

@@ -43,6 +43,16 @@ def lookup(root, tune_sha256: str | None) -> dict | None:
         return None
 
 
+def advised_for_run(root, run_dir) -> dict | None:
+    """:func:`advised_vs_measured` for a run directory (its meta.json's ``tune_sha256``); None if none."""
+    try:
+        meta = json.loads((Path(run_dir) / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    sha = meta.get("tune_sha256") if isinstance(meta, dict) else None
+    return advised_vs_measured(root, {"tune_sha256": sha, "path": str(run_dir)}) if sha else None
+
+
 def measured_figures(run_dir) -> dict:
     """The engagement plan's light-load figures of a run (empty for another plan)."""
     path = Path(run_dir) / "documents.jsonl"

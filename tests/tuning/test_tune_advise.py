@@ -99,6 +99,24 @@ def test_the_run_library_shows_advised_beside_measured(loop):
     assert "advised: engagement predicted" in table.stdout and "measured" in table.stdout
 
 
+def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch, capsys):
+    """`dyno run`'s text summary of an engagement run (no points table): the figures it measured, the tune's
+    label prediction, and the advisor's prediction beside the measurement (the same function prints it)."""
+    from dyno.cli.run_cmd import _print_table
+
+    monkeypatch.setenv("DYNO_RUNS_DIR", loop["env"]["DYNO_RUNS_DIR"])
+    second = loop["second"]
+    _print_table(second)
+    out = capsys.readouterr().out
+    assert "rpm_p" not in out  # no empty table
+    assert f"engagement {second['engagement_rpm']:.0f} ± " in out and f"shift-out {second['shift_out_rpm']:.0f}" in out
+    pred = loop["advice"]["tunes"][0]["predicted"]["engagement"]
+    assert (f"advised: engagement predicted {pred['rpm']:.0f} ± {pred['u95_rpm']:.0f}, "
+            f"measured {second['engagement_rpm']:.0f}") in out
+    _print_table(loop["first"])  # the stock tune was never advised
+    assert "advised:" not in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("args, what", [
     (["--target", "engagment=2100"], "--target"),
     (["--target", "engagement=fast"], "--target engagement"),
