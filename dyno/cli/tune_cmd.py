@@ -133,11 +133,30 @@ def _write(result: dict, out: Path, runs, targets) -> dict:
                 curves.append((f"#{k} {ids}", None))
     advice = {k: v for k, v in result.items() if not k.startswith("_") and k != "ranked"}
     advice["tunes"] = tunes
+    advice["verdict"] = verdict(advice)
     advice["html"] = str(out / "advice.html")
     svg = advice_html.curves_figure(curves, result["targets"]) if curves else None
     (out / "advice.html").write_text(advice_html.render(advice, svg))
     (out / "advice.json").write_text(json.dumps(advice, indent=1, default=_plain))
     return advice
+
+
+#: below this chance of meeting every target within two trips the advice says the targets are out of reach
+LIKELY_P = 0.5
+
+
+def verdict(advice: dict) -> str:
+    """One sentence: whether the catalogue, with at most --max-changes parts, is likely to reach the targets."""
+    n = advice["max_changes"]
+    if not advice["tunes"]:
+        return (f"no tune to advise: with at most {n} parts changed the catalogue offers nothing but the measured "
+                "tune (never advised); raise --max-changes or add parts")
+    best = max(t.get("p_within_two_trips", t["p_within_tolerance"]) for t in advice["tunes"])
+    if best >= LIKELY_P:
+        return f"reachable: the best tune meets every target within two trips with P {best:.2f}"
+    return (f"out of reach: no tune with at most {n} parts changed from this catalogue is likely to meet every "
+            f"target within ±{advice['tolerance_rpm']:.0f} rpm (best P {best:.2f} within two trips); the nearest "
+            "are listed: raise --max-changes, add parts to the catalogue or revisit the targets")
 
 
 def _print(advice: dict) -> None:
@@ -152,4 +171,5 @@ def _print(advice: dict) -> None:
         print(f"#{row['rank']} P(met) {row['p_within_tolerance']:.2f}, within two trips "
               f"{row.get('p_within_two_trips', row['p_within_tolerance']):.2f}  {ch}\n    predicted (± U95): {pr} rpm\n"
               f"    {row['tune_file']}")
+    print(advice["verdict"])
     print(f"curves and calibration: {advice['html']}")

@@ -68,6 +68,7 @@ padding:3px 8px;vertical-align:top}}table{{border-collapse:collapse}}</style></h
 <p>Targets: {targets} (within ±{advice['tolerance_rpm']:.0f} rpm); at most {advice['max_changes']} parts changed;
 {advice['searched']} tunes searched. Runs: {e(', '.join(advice['runs']))}.</p>
 <p>The current tune ({e(advice['base_tune'])}), calibrated: {cur_txt} rpm (± U95).</p>
+<p><strong>{e(advice.get('verdict', ''))}</strong></p>
 <h2>Ranked tunes</h2>
 <table><tr><th>#</th><th>parts changed</th><th>predicted (± U95)</th><th>P(all targets met)</th><th>P(met, or after one adjustment of the same parts)</th><th>tune file</th></tr>
 {''.join(rows)}</table>

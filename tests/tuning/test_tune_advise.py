@@ -117,6 +117,21 @@ def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch
     assert "advised:" not in capsys.readouterr().out
 
 
+def test_the_advice_says_when_the_targets_are_out_of_reach(loop, tmp_path):
+    assert loop["advice"]["verdict"].startswith("reachable")  # (the loop's targets were reached, above)
+    r1 = str(loop["tmp"] / "runs" / "r1")
+    # an engagement far above the catalogue's reach with the shift-out at its stock value: no P worth a trip
+    far = _dyno("tune", "advise", r1, "--target", "engagement=2900", "--target", "shift_out=2750",
+                "--out", str(tmp_path / "far"), env=loop["env"])
+    assert far.returncode == 0, far.stderr[-1500:]
+    assert "out of reach: no tune with at most 2 parts changed" in far.stdout, far.stdout[-1500:]
+    none = _dyno("tune", "advise", r1, "--target", "engagement=2100", "--max-changes", "0", "--json",
+                 "--out", str(tmp_path / "none"), env=loop["env"])
+    assert none.returncode == 0, none.stderr[-1500:]
+    doc = json.loads(none.stdout)
+    assert doc["tunes"] == [] and doc["verdict"].startswith("no tune to advise")
+
+
 @pytest.mark.parametrize("args, what", [
     (["--target", "engagment=2100"], "--target"),
     (["--target", "engagement=fast"], "--target engagement"),
