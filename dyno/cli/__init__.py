@@ -40,8 +40,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
 class OneLineParser(argparse.ArgumentParser):
     """argparse with bad input reported on one line (what and what is expected), exit 2."""
 
+    last_error: str | None = None
+
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.last_error = f"{self.prog}: error: {message} (see {self.prog} --help)"
+        self.exit(2, self.last_error + "\n")
 
 
 def number_in(lo: float, hi: float, *, integer: bool = False, lo_open: bool = False):
@@ -133,6 +136,23 @@ def _detach_stdout() -> None:
         pass
 
 
+def _json_error(line: str, rc: int) -> None:
+    """--json asked: a script reading stdout gets a JSON document on a refusal too (the line stays on stderr)."""
+    import json
+
+    try:
+        print(json.dumps({"error": line, "exit_code": rc}))
+    except OSError:
+        pass
+
+
+def _error(line: str, rc: int, as_json: bool) -> int:
+    print(line, file=sys.stderr)
+    if as_json:
+        _json_error(line, rc)
+    return rc
+
+
 def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] in COMMANDS and _available(argv[0]):
         name = argv[0]
@@ -148,23 +168,22 @@ def _dispatch(argv: list[str]) -> int:
         try:
             args = parser.parse_args(argv[1:])
         except SystemExit as exc:  # --help, or a bad argument (already reported on one line)
+            if exc.code and parser.last_error and "--json" in argv[1:]:
+                _json_error(parser.last_error, int(exc.code))
             return int(exc.code or 0)
+        as_json = bool(getattr(args, "json", False))
         try:
             return int(mod.run(args) or 0)
         except ConfigError as exc:
-            print(f"dyno {name}: error: {exc}", file=sys.stderr)
-            return 2
+            return _error(f"dyno {name}: error: {exc}", 2, as_json)
         except DynoError as exc:
-            print(f"dyno {name}: error: {exc}", file=sys.stderr)
-            return 1
+            return _error(f"dyno {name}: error: {exc}", 1, as_json)
         except UnicodeDecodeError as exc:  # a binary or non-UTF-8 file where text was expected
-            print(f"dyno {name}: error: a file is not UTF-8 text ({exc.reason} at byte {exc.start})",
-                  file=sys.stderr)
-            return 2
+            return _error(f"dyno {name}: error: a file is not UTF-8 text ({exc.reason} at byte {exc.start})", 2,
+                          as_json)
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
             # an input path that is not a readable file (loaders name theirs; this is the net)
-            print(f"dyno {name}: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
-            return 2
+            return _error(f"dyno {name}: error: {exc.filename}: {exc.strerror}", 2, as_json)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.version:

@@ -151,3 +151,19 @@ def test_a_speed_the_machine_cannot_reach_is_said_in_one_line(tmp_path):
     assert r.returncode == 3  # the drill's abort: the pace changes nothing else
     lines = [ln for ln in r.stderr.splitlines() if "not reached" in ln]
     assert len(lines) == 1 and "--speed 1000" in lines[0] and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--sim", "--headless", "--json", "--tune", "no-such-tune.toml"],  # refused by the command
+    ["run", "--sim", "--headless", "--json", "--speed", "fast"],  # refused by the argument parser
+    ["tune", "advise", "no-such-run", "--target", "engagement=2100", "--json"],
+])
+def test_with_json_a_refusal_is_a_json_document_too(tmp_path, argv):
+    """--json promises one JSON document on every way out: a script reading stdout must not get nothing."""
+    import json
+
+    r = _dyno(*argv, cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode == 2 and len(line.splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert json.loads(r.stdout) == {"error": line, "exit_code": 2}
+    assert list(tmp_path.iterdir()) == []  # nothing written

@@ -222,7 +222,7 @@ def test_firmware_fil_version_mismatch_refused(firmware_build, elf_key, protocol
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
     assert f"speaks protocol {device}, the host is set to {protocol}" in lines[0]
-    assert res.stdout == ""
+    assert json.loads(res.stdout) == {"error": lines[0], "exit_code": 2}  # --json: the refusal as a document
 
 
 def test_firmware_fil_ring_saturation_link_survives_and_accounts_exactly(firmware_build, sim_args):
