@@ -19,7 +19,7 @@ from dyno.errors import ConfigError, DynoError
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("dyno.cli.run_cmd", "run a steady-state test (simulated rig with --sim)"),
     "replay": ("dyno.cli.replay_cmd", "re-process a logged run (viewer, or --json)"),
-    "export": ("dyno.cli.export_cmd", "export a run's points and streams to CSV"),
+    "export": ("dyno.cli.export_cmd", "export a run's points and streams (CSV, Parquet, MDF4)"),
     "report": ("dyno.cli.report_cmd", "(re)build a run's report.html: plots, points, faults, calibration"),
     "runs": ("dyno.cli.runs_cmd", "the run library: list and filter runs (reindex rebuilds the index)"),
     "compare": ("dyno.cli.compare_cmd", "compare runs side by side: curves, differences, tune diff"),
@@ -71,7 +71,9 @@ def _available(name: str) -> bool:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dyno", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="dyno", description="dyno: run a CVT dynamometer (or its simulated rig), analyse and compare the "
+                                 "runs, and set them beside the belt model. `dyno COMMAND --help` for each.")
     parser.add_argument("--version", action="store_true", help="print the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():

@@ -15,7 +15,8 @@ FIGURES = ("engagement", "shift_out", "full_load")
 
 
 def add_arguments(p) -> None:
-    p.add_argument("action", choices=("advise",), help="advise: rank catalogue tunes against targets")
+    p.add_argument("action", choices=("advise",), metavar="advise",
+                   help="rank catalogue tunes against targets: dyno tune advise RUN [RUN...] --target FIGURE=RPM")
     p.add_argument("runs", nargs="+", metavar="RUN",
                    help="engagement-plan runs (dyno run --plan engagement), oldest first; the last one's tune "
                         "is the one to change")
@@ -54,6 +55,9 @@ def parse_targets(items: list[str]) -> dict[str, float]:
             rpm = math.nan
         if not (500.0 <= rpm <= 8000.0):
             raise ConfigError("<arguments>", f"--target {name}", f"an engine speed 500..8000 rpm, got {val!r}")
+        if name in out:
+            raise ConfigError("<arguments>", f"--target {name}", f"one target per figure, got {out[name]:g} and "
+                                                               f"{rpm:g}")
         out[name] = rpm
     if not out:
         raise ConfigError("<arguments>", "--target", "at least one target (e.g. --target engagement=2100 "

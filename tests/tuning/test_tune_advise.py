@@ -136,6 +136,7 @@ def test_the_advice_says_when_the_targets_are_out_of_reach(loop, tmp_path):
     (["--target", "engagment=2100"], "--target"),
     (["--target", "engagement=fast"], "--target engagement"),
     (["--target", "engagement=2100", "--catalogue", "nowhere"], "nowhere"),
+    (["--target", "engagement=2100", "--target", "engagement=2000"], "one target per figure"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(loop, tmp_path, args, what):
     out = tmp_path / "adv"
