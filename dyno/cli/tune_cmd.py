@@ -137,6 +137,10 @@ def _write(result: dict, out: Path, runs, targets) -> dict:
                 curves.append((f"#{k} {ids}", None))
     advice = {k: v for k, v in result.items() if not k.startswith("_") and k != "ranked"}
     advice["tunes"] = tunes
+    # what the calibration had to go on: a speed-hold run has no engagement figure, only steady points
+    advice["calibrated_on"] = [{"run": r.name, "engagement_figures": sum(f.figure == "engagement" for f in r.figures),
+                                "shift_out_figures": sum(f.figure == "shift_out" for f in r.figures),
+                                "steady_points": len(r.steady)} for r in runs]
     advice["verdict"] = verdict(advice)
     advice["html"] = str(out / "advice.html")
     svg = advice_html.curves_figure(curves, result["targets"]) if curves else None
@@ -167,6 +171,10 @@ def _print(advice: dict) -> None:
     t = ", ".join(f"{k} {v:.0f}" for k, v in advice["targets"].items())
     print(f"targets: {t} rpm (±{advice['tolerance_rpm']:.0f}); {advice['searched']} tunes searched "
           f"(≤ {advice['max_changes']} parts changed), from {advice['base_tune']}")
+    print("calibrated on: " + "; ".join(
+        f"{c['run']} (" + ", ".join(f"{n} {what}" for n, what in (
+            (c["engagement_figures"], "engagement"), (c["shift_out_figures"], "shift-out"),
+            (c["steady_points"], "steady points")) if n) + ")" for c in advice.get("calibrated_on", [])))
     cur = advice["current"]["predicted"]
     print("current tune, calibrated: " + ", ".join(f"{f} {v['rpm']:.0f} ± {v['u95_rpm']:.0f}" for f, v in cur.items()))
     for row in advice["tunes"]:

@@ -85,6 +85,9 @@ def test_advice_documents_and_files(loop):
     # the calibration: the stock parts' effective values with their uncertainty below the prior's
     cal = a["calibration"]["parameters"]
     assert any(c["u_rel"] < c["prior_sd_rel"] for c in cal)
+    # what it was calibrated on: the engagement run's figures (the engagement plan's shift-out vs load rows)
+    on = a["calibrated_on"]
+    assert [c["run"] for c in on] == ["r1"] and on[0]["engagement_figures"] >= 1 and on[0]["shift_out_figures"] >= 1
 
 
 def test_the_run_library_shows_advised_beside_measured(loop):
