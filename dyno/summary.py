@@ -25,7 +25,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     aborts = [dict(a) for a in ctx.controller.aborts]
     out = {"run_dir": str(ctx.writer.run_dir), "state": ctx.controller.state.value,
            "reason": ctx.controller.reason, "points": [public_point(p) for p in ctx.controller.points],
-           "discarded": list(ctx.controller.discards),
+           "discarded": list(ctx.controller.discards), "skipped": list(getattr(ctx.controller, "skips", [])),
            "frames": frames, "events_lost": reader.events_lost, "aborts": aborts}
     zc = getattr(ctx.controller, "zero_check", None)
     if zc is not None:

@@ -368,6 +368,8 @@ def _print_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
     if result["points"]:
         _print_points(result["points"])
+    for why in result.get("skipped") or []:  # a setpoint the plan asked for that gave no point, and why
+        print(f"skipped: {why}")
     _print_figures(result)
     print(air_line(result.get("ambient") or {}))
     fr = result["frames"]

@@ -74,6 +74,7 @@ class TestController(Measuring):
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
         self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
+        self.skips: list[str] = []  # why a setpoint or step gave no point (each also a "skip" document)
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
         self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
@@ -182,6 +183,8 @@ class TestController(Measuring):
             set_hz(self.limits.armed_poll_hz if self.state in (State.WAIT_ENGINE, State.ARMED) else None)
 
     def _log(self, doc_type: str, **fields) -> None:
+        if doc_type == "skip":
+            self.skips.append(str(fields.get("reason", "")))
         if self.writer is not None:
             try:
                 t = self._now()

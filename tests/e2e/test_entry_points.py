@@ -7,6 +7,8 @@ One simulated run (module fixture) feeds the commands that read a run.
 from __future__ import annotations
 
 import csv
+import contextlib
+import io
 import json
 import os
 import shutil
@@ -105,6 +107,16 @@ def test_entry_run_sim_headless_json(sim_run):
     for name in ("meta.json", "documents.jsonl", "events.bin", "calibration.json"):
         assert (run_dir / name).is_file(), name
     assert '"type": "stop"' in (run_dir / "documents.jsonl").read_text()
+    # each setpoint that gave no point, with why: the run's skip documents, in the JSON and the text summary
+    docs = [json.loads(x) for x in (run_dir / "documents.jsonl").read_text().splitlines() if x.strip()]
+    skips = [d["reason"] for d in docs if d.get("type") == "skip"]
+    assert skips and doc["skipped"] == skips  # (the speed-hold plan's setpoints in the shift region)
+    from dyno.cli.run_cmd import _print_table
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        _print_table(doc)
+    assert all(f"skipped: {why}" in buf.getvalue() for why in skips)
 
 
 def test_entry_replay_json_reproduces_the_run(sim_run, work):
