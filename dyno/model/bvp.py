@@ -297,6 +297,23 @@ def solve_case(
                          _at_least_as_heavy(case, c_prev, _pulleys_at_bound(c_prev, y, p)))
         return best
 
+    def _from_slack_anchor(c0: Case, r_eq: float):
+        """Last resort of a cold start at a clamp force: the geometric guess fails at every anchor of that
+        force (at a heavy clamp and a light torque the wedge estimate of the tension level is far off:
+        1,713 N at 2.6 N*m, ratio 0.72, was a singular Jacobian at all three), but at equal radii and the
+        thesis's own tension level (slack span 100 N) it solves; from there the tension condition is switched
+        and the radii, torque and force marched to ``c0`` as a warm start does."""
+        anchor = replace(c0, r_primary_m=r_eq, r_secondary_m=r_eq, bc="slack_tension", slack_tension_n=100.0)
+        t, y, p = initial_guess(anchor, nodes)
+        res, rms, bc_res, ok = attempt(anchor, t, y, p, "geometric guess at equal radii, slack span 100 N")
+        if not ok:
+            fail("first solve from the geometric initial guess failed (also at equal radii, torque x1, x1.8, x0.5, "
+                 "and at a slack span of 100 N)")
+        start = replace(anchor, bc=c0.bc, axial_force_n=float(res.y[P_A, -1] * AXIAL_REF_N))
+        best = march(start, c0, res.x, res.y, res.p, 1.0, "force continuation from a slack-span anchor",
+                     rms=res.rms_residuals)
+        return best
+
     if guess is not None:
         start = replace(guess.case)
         target = case
@@ -339,8 +356,13 @@ def solve_case(
                 if ok:
                     break
             else:
+                anchor = None
+            if anchor is not None:
+                best = march(anchor, c0, res.x, res.y, res.p, 0.25, "ratio continuation", rms=res.rms_residuals)
+            elif case.bc != "slack_tension":
+                best = _from_slack_anchor(c0, r_eq)
+            else:
                 fail("first solve from the geometric initial guess failed (also at equal radii, torque x1, x1.8, x0.5)")
-            best = march(anchor, c0, res.x, res.y, res.p, 0.25, "ratio continuation", rms=res.rms_residuals)
             res = best[1]
         if v_start > case.slip_threshold_m_s:
             n_steps = math.log(v_start / case.slip_threshold_m_s) / -math.log(slip_factor)

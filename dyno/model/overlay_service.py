@@ -100,10 +100,12 @@ class OverlayService:
     def __init__(self, params: ModelParams = TABLE_6_1, *, executor=None, variant: str = "corrected",
                  slip_threshold_m_s: float = 1e-4, tol: float = 1e-3, slack_tension_n: float = 100.0,
                  primary_axial_force_n: float | None = None, cache_dir=None, use_cache: bool = True,
-                 time_limit_s: float = 20.0, on_result=None, clock=time.monotonic, solve=solve_job,
+                 time_limit_s: float = 45.0, on_result=None, clock=time.monotonic, solve=solve_job,
                  warm_max_distance: float = WARM_MAX_DISTANCE, cancel=None) -> None:
         """``cancel``: the event a process pool's workers got at start (:func:`process_pool`); without it the
-        service makes a threading.Event and hands it to each job (thread or inline executors)."""
+        service makes a threading.Event and hands it to each job (thread or inline executors).
+        ``time_limit_s``: CPU seconds per solve attempt; a cold start at a heavy clamp and a light torque
+        takes 16-26 s (2,000 N at 3-10 N*m, ratios 0.72-2.4), so 45 s lets it finish."""
         self.params, self.variant = params, variant
         self.slip_threshold_m_s, self.tol, self.time_limit_s = slip_threshold_m_s, tol, time_limit_s
         self.slack_tension_n, self.primary_axial_force_n = slack_tension_n, primary_axial_force_n

@@ -77,3 +77,22 @@ def test_infeasible_geometry_is_a_config_error():
         solve_point(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=1e4))  # radii below 10 mm
     with pytest.raises(ConfigError):
         solve_point(TABLE_6_1, TABLE_6_1_POINT, variant="nonsense")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ratio, torque_nm", [(0.72, 3.0), (2.4, 10.0)])
+def test_a_heavy_clamp_at_a_light_torque_solves_cold(table_6_1, ratio, torque_nm):
+    """2,000 N of primary clamp at 3-10 N*m: the geometric guess fails at every clamp-force anchor (every such
+    case of a 4-ratio grid did, before the slack-span anchor); cold it now converges -- to the same solution
+    a warm start from the thesis's point finds (one steady state, not an artefact of the path)."""
+    op = replace(TABLE_6_1_POINT, ratio=ratio, primary_torque_nm=torque_nm, slack_tension_n=None,
+                 primary_axial_force_n=2000.0)
+    cold = solve_point(TABLE_6_1, op, slip_threshold_m_s=1e-3, time_limit_s=60.0)
+    verify(cold)
+    assert "slack span 100 N" in " ".join(h.what for h in cold.raw.history)  # the path this test is about
+    assert cold.summary["axial_force_n"]["primary"] == pytest.approx(2000.0, rel=1e-3)
+    warm = solve_point(TABLE_6_1, op, slip_threshold_m_s=1e-3, guess=table_6_1, time_limit_s=60.0)
+    for k in ("speed", "torque", "overall"):
+        assert cold.summary["efficiency"][k] == pytest.approx(warm.summary["efficiency"][k], abs=1e-4), k
+    assert cold.summary["axial_force_n"]["secondary"] == pytest.approx(warm.summary["axial_force_n"]["secondary"],
+                                                                       rel=1e-3)
