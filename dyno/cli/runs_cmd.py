@@ -69,14 +69,22 @@ def run(args) -> int:
     return 0
 
 
+def _clip(text: str, width: int) -> str:
+    """At most ``width`` characters, cut in the middle: an advised tune's name ends in the parts changed."""
+    if len(text) <= width:
+        return text
+    head = (width - 1) // 2
+    return text[:head] + "…" + text[-(width - 1 - head):]
+
+
 def _print_table(rows: list[dict]) -> None:
-    print(f"{'created (UTC)':<20} {'run':<24} {'tune':<16} {'state':<10} {'abort':<10} {'pts':>4} "
+    print(f"{'created (UTC)':<20} {'run':<24} {'tune':<30} {'state':<10} {'abort':<10} {'pts':>4} "
           f"{'peak eff %':>14} {'@ rpm_s':>7}")
     for r in rows:
         eff = r["peak_efficiency"]
         peak = "-" if eff is None else f"{100 * eff:.1f} ± {100 * (r['peak_efficiency_sem'] or 0):.1f}"
         rpm = "-" if r["peak_efficiency_rpm_secondary"] is None else f"{r['peak_efficiency_rpm_secondary']:.0f}"
-        print(f"{(r['created_utc'] or '-'):<20} {r['name'][:24]:<24} {(r['tune_name'] or '-')[:16]:<16} "
+        print(f"{(r['created_utc'] or '-'):<20} {r['name'][:24]:<24} {_clip(r['tune_name'] or '-', 30):<30} "
               f"{r['state'][:10]:<10} {(r['abort_cause'] or '')[:10]:<10} {r['n_points']:>4} {peak:>14} {rpm:>7}")
         if r.get("advised"):
             from dyno.library.advice import format_line

@@ -100,6 +100,8 @@ def test_the_run_library_shows_advised_beside_measured(loop):
     assert adv["engagement"]["predicted_rpm"] == pytest.approx(loop["advice"]["tunes"][0]["predicted"]["engagement"]["rpm"])
     table = _dyno("runs", env=loop["env"])
     assert "advised: engagement predicted" in table.stdout and "measured" in table.stdout
+    # the advised tune's name ends in the parts changed: the table keeps that end when it clips the name
+    assert rows["r2"]["tune_name"][-12:] in table.stdout
 
 
 def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch, capsys):
