@@ -200,6 +200,12 @@ def run(args) -> int:
 
     wall0_s = time.monotonic()
     result = None
+    if opts.sim:
+        from dyno.sim import belt_table
+
+        belt_table.on_build = lambda name: print(
+            f"dyno run: the simulated CVT solves its belt-model table for tune {name or '(none)'} (once per tune and "
+            "model version, cached; about 1-2 min)", file=sys.stderr, flush=True)
     try:
         result = run_test(opts)
     finally:

@@ -283,6 +283,9 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
 
 _TABLES: dict = {}
+#: called with the tune's name (or None) before a table the cache does not hold is solved (a minute or two):
+#: a command line says so on stderr instead of looking hung (dyno run sets it; a full-screen UI does not)
+on_build = None
 
 
 class _CacheMiss(Exception):
@@ -310,6 +313,8 @@ def belt_table(cache_dir=None, tune=None) -> BeltTable:
         try:
             _TABLES[key] = build_belt_table(cache_dir=cache, tune=tune, solve=_cached_only)
         except _CacheMiss:
+            if on_build is not None:
+                on_build(getattr(tune, "name", None))
             _TABLES[key] = _build_locked(cache, tune)
         t = _TABLES[key]
         log.info("belt table: %d x %d cells, %d solved now, %d failed, %.2f s", t.ratios.size, t.torques_nm.size,

@@ -187,3 +187,23 @@ def test_a_complete_cache_is_read_without_waiting_for_the_build_lock(tmp_path):
     finally:
         holder.close()
         bt._TABLES.pop((str(tmp_path), None), None)
+
+
+def test_a_table_to_solve_is_announced_once_a_cached_one_not(tmp_path, monkeypatch):
+    """`dyno run` says on stderr that the sim is solving its table (a first run of a tune took 80 s in silence)."""
+    from dyno.sim import belt_table as bt
+
+    said = []
+    monkeypatch.setattr(bt, "on_build", said.append)
+    real_build = bt.build_belt_table
+    monkeypatch.setattr(bt, "build_belt_table",
+                        lambda cache_dir=None, tune=None, solve=None: real_build(
+                            cache_dir=cache_dir, tune=tune, solve=solve or _fake_solver()[0]))
+    try:
+        bt.belt_table(cache_dir=tmp_path)  # nothing cached: solved, and said first
+        assert said == [None]
+        bt._TABLES.pop((str(tmp_path), None), None)
+        bt.belt_table(cache_dir=tmp_path)  # all cached now (another process): read, nothing said
+        assert said == [None]
+    finally:
+        bt._TABLES.pop((str(tmp_path), None), None)
