@@ -40,6 +40,7 @@ class ReportData:
     tune_text: str | None = None
     model: dict | None = None            # rpm_secondary, efficiency (fractions), label
     predicted_shift: dict | None = None  # engine_rpm, ratio
+    advised: dict | None = None          # dyno tune advise's prediction for this tune (dyno.library.advice)
     generator_version: str = ""
     generated_unix_s: float = 0.0
     notes: list = field(default_factory=list)  # optional parts that could not be made, with why
@@ -315,6 +316,7 @@ def render_report(data: ReportData) -> str:
         f"<ul>{notes}</ul>" if notes else "",
         ("<h2>Characterisation</h2>" + sections.characterisation(data.docs("characterisation")))
         if data.docs("characterisation") else "",
+        sections.advised(data.advised) if data.advised else "",
         ("<h2>Torque zero</h2>" + sections.torque_zero(data.docs("torque_zero"))) if data.docs("torque_zero") else "",
         ("<h3>Torque zero, input channel (crank N·m)</h3>" + sections.torque_zero(data.docs("torque_zero_input")))
         if data.docs("torque_zero_input") else "",

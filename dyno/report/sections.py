@@ -71,6 +71,19 @@ def _embed(svg: str, fig_id: str, alt: str) -> str:
             f'src="data:image/svg+xml;base64,{base64.b64encode(svg.encode()).decode()}">')
 
 
+def advised(a: dict) -> str:
+    """The tune's advice (``dyno tune advise``) beside what this run measured, figure by figure."""
+    rows = []
+    for fig, r in a.get("figures", {}).items():
+        err = r.get("error_rpm")
+        rows.append([escape(fig), _f(r.get("predicted_rpm"), ".0f"), "± " + _f(r.get("u95_rpm"), ".0f"),
+                     _f(r.get("measured_rpm"), ".0f"), "-" if err is None else f"{err:+.0f}"])
+    src = escape(str(a.get("advice_file") or ""))
+    return (f'<h2 id="advised">Advised</h2><p>This tune is one <code>dyno tune advise</code> proposed ({src}): '
+            "its prediction beside this run's measurement.</p>"
+            + _table(["figure", "predicted rpm", "U95", "measured rpm", "measured − predicted"], rows))
+
+
 def characterisation(docs: list) -> str:
     """Engagement / shift-out / full-shift figures, or the coast-down's loss, with their 95 % intervals."""
     if not docs:

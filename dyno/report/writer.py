@@ -112,6 +112,17 @@ def _predicted_shift(run_dir: Path, notes: list) -> dict | None:
     return {"engine_rpm": [e for e, _ in pairs], "ratio": [r for _, r in pairs]}
 
 
+def _advised(run_dir: Path) -> dict | None:
+    """The run library's record of advice on this run's tune file, if any (best effort)."""
+    try:
+        from dyno.library.advice import advised_for_run
+        from dyno.library.index import runs_dir
+
+        return advised_for_run(runs_dir(), run_dir)
+    except Exception:  # noqa: BLE001  (an extra section: never stop the report)
+        return None
+
+
 def collect(run_dir, *, full_model: bool = False, now_s: float | None = None) -> ReportData:
     """Everything :func:`render_report` needs, read from ``run_dir`` (events are not loaded)."""
     from dyno import __version__
@@ -128,6 +139,7 @@ def collect(run_dir, *, full_model: bool = False, now_s: float | None = None) ->
         engine_map=_engine_map(run.engine_map_path, notes) if run.engine_map_path else None,
         tune_text=tune.read_text(encoding="utf-8") if tune.exists() else None,
         model=_model(run.points, notes, full_model, Path(run_dir) / "tune.toml"), predicted_shift=_predicted_shift(run_dir, notes),
+        advised=_advised(run_dir),
         generator_version=__version__, generated_unix_s=time.time() if now_s is None else now_s, notes=notes)
 
 

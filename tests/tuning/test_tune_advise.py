@@ -120,6 +120,14 @@ def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch
             f"measured {second['engagement_rpm']:.0f}") in out
     _print_table(loop["first"])  # the stock tune was never advised
     assert "advised:" not in capsys.readouterr().out
+    # and its report.html, which `dyno run` writes at the end (and `dyno report RUN` again)
+    from dyno.report.writer import write_report
+
+    page = write_report(second["run_dir"], out=loop["tmp"] / "r2-report.html").read_text()
+    assert 'id="advised"' in page and f"<td>{pred['rpm']:.0f}</td>" in page
+    assert f"<td>{second['engagement_rpm']:.0f}</td>" in page
+    stock = write_report(loop["first"]["run_dir"], out=loop["tmp"] / "r1-report.html").read_text()
+    assert 'id="advised"' not in stock
 
 
 def test_the_advice_says_when_the_targets_are_out_of_reach(loop, tmp_path):
