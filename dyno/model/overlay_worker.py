@@ -161,7 +161,8 @@ def solve_job(params: ModelParams, op: OperatingPoint, *, variant: str, slip_thr
             exc = e
     if sol is None and fallback is not None and type(exc).__name__ != "GrossSlip":
         try:
-            sol, start = solution.solve_point(params, op, guess=fallback, **kwargs), "warm from a far neighbour after a failed cold start"
+            sol = solution.solve_point(params, op, guess=fallback, **kwargs)
+            start = "warm from a far neighbour after a failed cold start"
         except MODEL_FAILURES as e:
             exc = e
     if sol is None:
