@@ -193,7 +193,8 @@ def test_legacy_malformed_csv_exit_2_one_line_nothing_written(tmp_path, capsys, 
     cap = capsys.readouterr()
     err = cap.err.strip()
     assert len(err.splitlines()) == 1 and str(target) in err, err
-    assert cap.out == "" and not out.exists()
+    # --json: the refusal is a document on stdout too (the same line)
+    assert json.loads(cap.out) == {"error": err, "exit_code": 2} and not out.exists()
     with pytest.raises(ConfigError):
         import_legacy(run, out)
     assert not out.exists()
