@@ -28,7 +28,11 @@ def test_ui_tmux_overlay_shows_full_model_and_exits_cleanly(tmp_path):
            "DYNO_MODEL_CACHE": os.environ.get("DYNO_MODEL_CACHE", str(default_cache_dir()))}
     # in the command itself: a tmux server already running (another test's) would not pass env= on
     prefix = "env " + " ".join(f"{k}={shlex.quote(v)}" for k, v in env.items())
-    cmd = f"{prefix} {sys.executable} -m dyno ui --sim --speed 8 --out {run_dir} ; echo EXITED=$? ; sleep 30"
+    # the thesis's open-loop steps: its first points are at part load, where the default (first-estimate) tune's
+    # clamp carries the belt; the default speed-hold plan's are at full load, where the model finds gross slip
+    # at that clamp (8 of 8 in one run: no "full 1/" ever, only "8 fail" -- the physics' answer)
+    cmd = (f"{prefix} {sys.executable} -m dyno ui --sim --speed 8 --plan thesis-step --out {run_dir} ; "
+           "echo EXITED=$? ; sleep 30")
     subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
                    timeout=20, env=env)
     try:
