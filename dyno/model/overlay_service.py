@@ -282,9 +282,8 @@ class OverlayService:
         def submit():
             return self.executor.submit(self._solve, self.params, e.op, variant=self.variant,
                                         slip_threshold_m_s=self.slip_threshold_m_s, tol=self.tol,
-                                        time_limit_s=self.time_limit_s, guess=guess,
-                                        **({"cancel": self._cancel} if self._pass_cancel else {}),
-                                        **({"fallback": fallback} if fallback is not None else {}))
+                                        time_limit_s=self.time_limit_s, guess=guess, fallback=fallback,
+                                        **({"cancel": self._cancel} if self._pass_cancel else {}))
 
         try:
             return submit()
