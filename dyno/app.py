@@ -17,6 +17,7 @@ from dyno.acquisition.reader import make_reader
 from dyno.ambient import ambient_sensor, run_ambient
 from dyno.ambient import log_end as log_end_ambient
 from dyno.run_signals import install_run_signal_handlers
+from dyno.app_safety import _attach_watchdog, start_watchdog  # noqa: F401 (re-exported: the UI session)
 from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -127,6 +128,10 @@ class RunContext:
     host_to_sim: object = None
     ambient: dict = field(default_factory=dict)  # the run's air (meta.json "ambient"; "end": the reading after)
     ambient_sensor: object = None  # the BME280 driver when the rig has one
+    twin: object = None  # dyno.hw.mockpins.SimPinFactory: the wiring twin under --mock-pins
+    estop: object = None  # dyno.hw.estop.EstopInput where rig.toml declares pins.estop_input (rig or twin)
+    pi_outputs: bool = False  # the outputs are the Pi's own code (the rig, or the twin): the rig's signal path
+    estop_hooked: bool = False  # the E-stop input records its stops through this context (start_watchdog)
 
 
 def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
@@ -183,10 +188,10 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
         sim.model.brake_hold_relay = rig_cfg.actuator.brake_hold_relay  # K3: wiring, as rig.toml declares it
         bus, actuators = sim.bus, sim.actuators
-        if opts.mock_pins:
-            from dyno.hw.mockpins import mock_pin_actuators
+        if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
+            from dyno.app_safety import twin_outputs
 
-            actuators, _ = mock_pin_actuators(rig_cfg, sim.actuators, _LoopTimeClock(now_s))
+            actuators, twin, estop = holder["twin"] = twin_outputs(rig_cfg, sim, now_s, opts.seed)
         blocking = False
     else:
         hw = holder["hw"] = open_rig(rig_cfg, pin_factory=opts.pin_factory, bus=opts.rig_bus,
@@ -261,6 +266,11 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller.inertia = rig_cfg.inertia
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
                      ambient=ambient.to_dict(), ambient_sensor=ambient_dev)
+    if "twin" in holder:
+        _, ctx.twin, ctx.estop = holder["twin"]
+    elif hw is not None:
+        ctx.estop = hw.estop
+    ctx.pi_outputs = hw is not None or ctx.twin is not None  # the outputs are the Pi's code (signal path)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
@@ -286,83 +296,6 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
 
         reader.session.frame_listeners.append(audit)
     return ctx
-
-
-class _LoopTimeClock:
-    """The real-rig output code's clock on the host loop's time (virtual in simulations).
-
-    Only the blocking helpers (``step``, ``finish_release``, ``reset_arduino``) sleep;
-    on a virtual loop nothing may block, and the host never calls them there.
-    """
-
-    def __init__(self, now_s) -> None:
-        self.now = now_s
-
-    def sleep(self, dt_s: float) -> None:
-        raise RuntimeError("a blocking sleep on the loop's clock (use the async paths)")
-
-
-def _attach_watchdog(ctx: RunContext, timeout_s: float, now_s) -> None:
-    """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
-
-    On a :class:`~dyno.clock.VirtualTimeLoop` it is a background ticker (the loop's
-    stand-in for an OS thread: it runs while a callback blocks the loop); on a real
-    loop it is a daemon thread.  The controller's safety heartbeat feeds it.
-    """
-    from dyno.hw.safety import Watchdog
-
-    controller = ctx.controller
-    trip: dict = {}
-
-    def on_trip(silent_s: float) -> None:
-        trip["silent_s"] = silent_s
-        trip["t_s"] = wd.clock.now()
-
-    class _Clock:  # until start_watchdog() gives it the loop's clock
-        now = staticmethod(now_s)
-
-    wd = getattr(ctx.hw, "watchdog", None)
-    if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
-        wd.on_trip = on_trip
-    else:
-        wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
-    ctx.watchdog = wd
-
-    def beat() -> None:
-        if wd.tripped and not trip.get("reported"):
-            trip["reported"] = True
-            if "silent_s" in trip:
-                controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
-                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
-            else:  # a look that raised: safed, logged, still watching
-                errs = getattr(wd, "errors", None) or ["tripped"]
-                controller.abort("watchdog", f"{errs[0]}: the watchdog put the rig in its safe state")
-        wd.kick()
-
-    controller.heartbeat_hooks.append(beat)
-    # Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on).
-    ctx.poller.listeners.append(lambda events, now_s: wd.kick())
-
-
-def start_watchdog(ctx: RunContext, loop) -> object:
-    """Start ``ctx.watchdog`` beside ``loop``; returns a stop() callable."""
-    from dyno.clock import LoopClock, VirtualTimeLoop
-
-    wd = ctx.watchdog
-    estop = getattr(ctx.hw, "estop", None) if ctx.hw is not None else None
-    if estop is not None:  # the E-stop chain's input: outputs already safe (its thread); record the stop
-        estop.on_open.append(lambda detail: loop.call_soon_threadsafe(ctx.controller.abort, "estop", detail))
-        if estop.tripped:
-            loop.call_soon(ctx.controller.abort, "estop", "E-stop chain open at start-up")
-    # The loop's liveness is measured on the loop's own clock (the controller's time base):
-    # host time on a real loop (the UI paces the physics on a scaled clock), virtual in simulations.
-    wd.clock = LoopClock(loop)
-    wd.kick()
-    if isinstance(loop, VirtualTimeLoop):
-        entry = loop.add_ticker(wd.check, wd.period_s)
-        return lambda: loop.remove_ticker(entry)
-    wd.start_thread()
-    return wd.stop_thread
 
 
 def _thermometer(bus, address: int):

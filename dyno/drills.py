@@ -25,6 +25,8 @@ controller-crash       the control task raises
 disk-full              the run directory refuses writes (ENOSPC)
 sigint|sigterm|sighup  the process receives the signal
 =====================  ==================================================================
+
+and the wiring drills through the twin (``--mock-pins``): :mod:`dyno.drills_wiring`.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import os
 import signal
 from dataclasses import dataclass
 
+from dyno.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, check_wiring_drill
 from dyno.errors import ConfigError
 
 OVERTEMP_RATE_C_PER_S = 20.0
@@ -57,6 +60,7 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "sigint": (False, None, False),
     "sigterm": (False, None, False),
     "sighup": (False, None, False),
+    **WIRING_DRILLS,
 }
 SIGNAL_DRILLS = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM, "sighup": signal.SIGHUP}
 
@@ -119,6 +123,13 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
     if allowed is not None and arg is not None and arg not in allowed:
         raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
+    if name == "estop-held":
+        try:
+            held_s = float(arg)
+        except ValueError:
+            held_s = math.nan
+        if not (math.isfinite(held_s) and 0 < held_s <= 3600):
+            raise ConfigError("command line", "--drill", f"{text!r}: estop-held:S needs 0 < S <= 3600 seconds")
     if name == "loop-stall":
         try:
             ms = float(arg)
@@ -129,7 +140,7 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     return Drill(name, arg, t_s, phase)
 
 
-class DrillRunner:
+class DrillRunner(WiringDrills):
     """Arms drills on a running rig and records when each fault physically began.
 
     ``ctx`` is the composition root's RunContext (``sim``, ``controller``,
@@ -150,6 +161,7 @@ class DrillRunner:
         self._phased: list[Drill] = []  # waiting for their phase (checked on every poll)
         sim = getattr(ctx, "sim", None)
         for d in self.drills:  # a drill that cannot happen must not pass as done
+            check_wiring_drill(d, ctx)
             if d.arg == "input" and sim is not None and not getattr(sim.model, "input_fitted", False):
                 raise ConfigError("command line", "--drill", f"{d}: the rig has no input torque channel "
                                   "(rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")
@@ -311,7 +323,8 @@ def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     sim = ctx.sim
     lim = ctx.controller.limits
     truth = sim.truth
-    rec = min(fired, key=lambda r: r["onset_s"])
+    # the fault that tripped the run: the earliest that can (a stuck end switch is found, not tripped on)
+    rec = min([r for r in fired if r["name"] not in NO_TRIP_DRILLS] or fired, key=lambda r: r["onset_s"])
     onset = rec["onset_s"]
     t_from = rec["onset_s"] - 1e-9
     safe = [first_safe_s(sim.actuators.history, t_from)]
@@ -443,6 +456,8 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
         elif name == "disk-full":
             arose = getattr(ctx.writer, "error", None) is not None
             note = "no write was attempted after the disk filled"
+        elif name in WIRING_DRILLS:
+            arose, note = drills._wiring_verdict(rec, name)
         rec["hazard_arose"] = bool(arose)
         if not arose:
             rec["hazard_note"] = note

@@ -1,8 +1,10 @@
 """``dyno run``'s signal handling: SIGINT/SIGTERM/SIGHUP end the run safe state first, with an abort record.
 
 ``signal.signal`` (not the loop's handler) so that a real rig's outputs are safed even while the loop is
-busy; the bookkeeping then runs on the loop.  On the simulated rig the physics must not be re-entered from
-a handler, so the whole abort runs on the loop at once (same simulated instant).  Installed before the rig
+busy; the bookkeeping then runs on the loop.  On the simulated rig's own driver the whole abort runs on the
+loop at once (same simulated instant); under ``--mock-pins`` the rig's path is taken, through the twin (the
+driver defers a safe state asked inside one of its own commands to that command's end, and the simulated bus
+does not re-enter a physics step it is in).  Installed before the rig
 is built: a signal that comes while it is (no context yet) is held and acted on once it exists.
 """
 
@@ -29,7 +31,7 @@ def install_run_signal_handlers(get_ctx, loop):
             return
         if ctx.signal_received is None:
             ctx.signal_received = signum
-        if ctx.sim is None:
+        if ctx.sim is None or ctx.pi_outputs:  # the Pi's output code (the rig, or its twin): safe at once
             from dyno.control.outputs import enter_safe_state
 
             enter_safe_state(ctx.controller.act, latch=True)  # at once, latched, whatever the loop is doing

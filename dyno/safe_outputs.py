@@ -52,6 +52,8 @@ def sim_outputs(ctx) -> dict:
         outs["brake_estimate"] = d.get("brake_estimate")
         outs["driver_released"] = d.get("released")
         outs["driver_release_basis"] = d.get("release_basis")
+        outs["driver_faults"] = d.get("faults", [])
+        judge_driver(outs)
     wiring = getattr(sim.actuators, "wiring", None)
     t_cmd, mm_at = last_safe_transition(wiring.history, wiring.history_mm) if wiring is not None else (None, None)
     outs["safe_commanded_s"] = t_cmd
@@ -69,6 +71,21 @@ def sim_outputs(ctx) -> dict:
     if not outs["safe"]:
         outs["unsafe_because"] = _why_not(outs)
     return outs
+
+
+def judge_driver(outs: dict) -> None:
+    """``driver_agrees``: the driver's verdict (released, i.e. pads off and de-energised, as its estimate
+    and its end switch say) equals the physics' (pads off the rotor and the actuator de-energised);
+    ``driver_disagreement`` names the difference when not (in place)."""
+    physics = bool(outs.get("pads_off_rotor")) and outs.get("brake_actuator") == "stopped"
+    said = bool(outs.get("driver_released"))
+    outs["driver_agrees"] = said == physics
+    if said != physics:
+        where = (f"pads {'off' if outs.get('pads_off_rotor') else 'on'} the rotor at "
+                 f"{outs.get('brake_position_mm')} mm, actuator {outs.get('brake_actuator')}")
+        outs["driver_disagreement"] = (
+            f"the driver says {'released' if said else 'not released'} (basis "
+            f"{outs.get('driver_release_basis')}, estimate {outs.get('brake_estimate')}); the physics: {where}")
 
 
 def hw_outputs(act) -> dict:

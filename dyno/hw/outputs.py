@@ -23,12 +23,15 @@ from __future__ import annotations
 
 import math
 import threading
+from contextlib import contextmanager
 
 from gpiozero import DigitalInputDevice, DigitalOutputDevice, PWMOutputDevice
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
 from dyno.hw.clock import MonotonicClock
+from dyno.hw.endswitch import EndSwitch, tolerance
+from dyno.hw.readback import ReadbackMixin
 from dyno.rigconfig import RigConfig
 
 #: Keep driving into an end stop for this fraction of a stroke beyond the
@@ -36,7 +39,7 @@ from dyno.rigconfig import RigConfig
 END_STOP_OVERRUN_FRACTION = 0.10
 
 
-class GpioActuators:
+class GpioActuators(ReadbackMixin):
     """Brake actuator, throttle servo, engine kill and Arduino reset on GPIO.
 
     Parameters
@@ -58,6 +61,9 @@ class GpioActuators:
         self.brake_full_stroke_s = config.actuator.full_stroke_s
         self._settle_s = config.actuator.relay_settle_s
         self._lock = threading.RLock()  # the watchdog thread and signal handlers call in too
+        self._depth = 0  # nesting of _held() in the thread holding the lock (> 1: a handler inside a command)
+        self._pending_safe: bool | None = None  # a safe state asked for inside a command (its latch flag)
+        self.faults: list[dict] = []  # wiring faults the driver found (the end switch contradicting the travel)
         pins = config.pins
         pf = dict(pin_factory=pin_factory)
         self._devices = []
@@ -78,7 +84,8 @@ class GpioActuators:
             # The end-of-travel switch (optional): closed to ground when fully retracted, pull-up on,
             # so a cut wire reads "not released" (the stroke's full time then decides).
             eot = getattr(pins, "brake_released_input", None)
-            self._end_switch = self._add(DigitalInputDevice(eot, pull_up=True, **pf)) if eot is not None else None
+            self._end_switch = (EndSwitch(self._add(DigitalInputDevice(eot, pull_up=True, **pf)), self.faults)
+                                if eot is not None else None)
         except Exception:
             self.close()
             raise
@@ -91,6 +98,11 @@ class GpioActuators:
         self._relay_changed_s = now - 10 * self._settle_s
         self._last_integrated_s = now
         self._position = 1.0  # 0 released .. 1 full apply; unknown at start -> assume worst
+        # The same travel as integrated since the brake was last known at a stop (never forced to full apply
+        # as _position is after a fault): what the end switch's readings are judged against.  None: unknown.
+        self._tracked: float | None = None
+        self._excursion = 0.0  # farthest _tracked since that stop
+        self._moved_since_release = True  # a command moved the brake since the last confirmed release
         self._step_s: float | None = None  # pending timed step: duration once powered
         self._stop_at_s: float | None = None
         self._generation = 0  # bumps on every new command, so a stale step never stops a newer one
@@ -114,7 +126,7 @@ class GpioActuators:
 
     def brake(self, direction: int) -> None:
         """Start moving (APPLY/RELEASE) until told to STOP or an end stop is reached."""
-        with self._lock:
+        with self._held():
             self._command(direction, None)
 
     def brake_step(self, direction: int, duration_s: float) -> None:
@@ -123,12 +135,12 @@ class GpioActuators:
         The stop happens at the first :meth:`tick` after the time is up, so
         the step is accurate to one control period; :meth:`step` is exact.
         """
-        with self._lock:
+        with self._held():
             self._command(direction, float(duration_s))
 
     def throttle(self, fraction: float) -> None:
         f = min(1.0, max(0.0, float(fraction)))
-        with self._lock:
+        with self._held():
             if f > 0 and self._latched:
                 self.refused.append((self.clock.now(), "throttle", f))
                 raise SafetyAbort("throttle refused: safe state latched")
@@ -136,7 +148,7 @@ class GpioActuators:
             self._throttle.value = self.config.throttle.pulse_us(f) / self.config.throttle.frame_us
 
     def engine_kill(self, killed: bool) -> None:
-        with self._lock:
+        with self._held():
             if not killed and self._latched:
                 self.refused.append((self.clock.now(), "engine_run", True))
                 raise SafetyAbort("engine run refused: safe state latched")
@@ -149,29 +161,64 @@ class GpioActuators:
         ``latch=True`` (every trip: the controller's abort, the watchdog, the signal path, the E-stop)
         also refuses every later command but the release — throttle, run, and the brake in any
         direction, STOP included, since stopping a release freezes the load — until :meth:`clear_latch`.
+
+        Called again while its release runs (a held E-stop's level check, every look), it re-asserts the
+        throttle and ignition and lets that release carry on; after a confirmed release with nothing moved
+        since, it starts none.  Called from a signal handler that interrupted one of this driver's own
+        commands (the lock is re-entrant), it acts the moment that command returns, so no half-written
+        command can follow the latch.
         """
-        with self._lock:
-            if self.closed:
+        with self._held():
+            if self._depth > 1:
+                self._pending_safe = bool(latch) or bool(self._pending_safe)
                 return
-            self._throttle_fraction = 0.0
-            th = self.config.throttle
-            self._throttle.value = th.idle_pulse_us / th.frame_us
-            self._kill.value = True
-            self._killed = True
-            now = self.clock.now()
-            self._integrate(now)
-            self._power_off(now)  # immediately, before any wait: the one non-negotiable action
-            self._latched = self._latched or latch
-            # A full stroke from wherever the estimate says, or from full apply:
-            # after a fault the estimate is not trusted.
-            self._position = max(self._position, 1.0)
-            if not self._safe_release or self.release_basis is not None:
-                self.release_basis = None  # a new release to confirm (a running one carries on)
-            self._safe_release = True
-            self.release_interrupted = ""
-            self._generation += 1
-            self._target, self._step_s, self._stop_at_s = RELEASE, None, None
-            self._advance(now)
+            self._safe_state_now(latch)
+
+    def _safe_state_now(self, latch: bool) -> None:
+        if self.closed:
+            return
+        self._throttle_fraction = 0.0
+        th = self.config.throttle
+        self._throttle.value = th.idle_pulse_us / th.frame_us
+        self._kill.value = True
+        self._killed = True
+        now = self.clock.now()
+        self._integrate(now)
+        self._latched = self._latched or latch
+        running = self._safe_release and self.release_basis is None
+        done = (self.release_basis is not None and not self._moved_since_release
+                and self._target == STOP and self._moving == STOP)
+        if running or done:
+            return
+        self._power_off(now)  # immediately, before any wait: the one non-negotiable action
+        # A full stroke from wherever the estimate says, or from full apply:
+        # after a fault the estimate is not trusted.
+        self._position = max(self._position, 1.0)
+        self.release_basis = None  # a new release to confirm
+        self._safe_release = True
+        self.release_interrupted = ""
+        if self._end_switch is not None:
+            self._end_switch.closed_seen = False
+        self._generation += 1
+        self._target, self._step_s, self._stop_at_s = RELEASE, None, None
+        self._advance(now)
+
+    @contextmanager
+    def _held(self):
+        """The lock, and a safe state asked for inside it by a signal handler applied on the way out."""
+        with self._lock:
+            self._depth += 1
+            try:
+                yield
+            finally:
+                self._depth -= 1
+                if self._depth == 0 and self._pending_safe is not None:
+                    latch, self._pending_safe = self._pending_safe, None
+                    self._depth = 1
+                    try:
+                        self._safe_state_now(latch)
+                    finally:
+                        self._depth = 0
 
     def tick(self, now_s: float | None = None) -> None:
         """Called every control period; also the watchdog's sign of life.
@@ -179,7 +226,7 @@ class GpioActuators:
         ``now_s`` is accepted for the protocol; the injected clock is used so
         all timing shares one time base.
         """
-        with self._lock:
+        with self._held():
             self.last_tick_s = self.clock.now()
             self.service()
 
@@ -187,7 +234,7 @@ class GpioActuators:
 
     def service(self) -> None:
         """Advance time-based behaviour without counting as a control-loop tick."""
-        with self._lock:
+        with self._held():
             if not self.closed:
                 self._advance(self.clock.now())
 
@@ -197,13 +244,13 @@ class GpioActuators:
         If anything interrupts it (exception, signal) the enable is switched off
         on the way out, unless a newer command (e.g. the safe state) owns it.
         """
-        with self._lock:
+        with self._held():
             gen = self._command(direction, float(duration_s))
         if gen < 0:  # refused (latched): the release owns the actuator
             return
         try:
             while True:
-                with self._lock:
+                with self._held():
                     if self._generation != gen or self.closed:
                         return
                     now = self.clock.now()
@@ -214,7 +261,7 @@ class GpioActuators:
                     wait = self._next_event_s(now)
                 self.clock.sleep(max(0.0, wait - now) if wait is not None else self._settle_s)
         finally:
-            with self._lock:
+            with self._held():
                 if self._generation == gen and not self.closed:
                     self._command(STOP, None)
 
@@ -223,7 +270,7 @@ class GpioActuators:
         limit = timeout_s if timeout_s is not None else 2 * self.brake_full_stroke_s + 10 * self._settle_s + 1
         t_end = self.clock.now() + limit
         while True:
-            with self._lock:
+            with self._held():
                 if self.closed:
                     return False
                 now = self.clock.now()
@@ -241,19 +288,33 @@ class GpioActuators:
     def reset_arduino(self) -> None:
         """Pulse the Nano's RESET, then wait for its bootloader to hand over (blocking)."""
         r = self.config.reset
-        with self._lock:
+        with self._held():
             self._reset.on()
         try:
             self.clock.sleep(r.pulse_s)
         finally:
-            with self._lock:
+            with self._held():
                 self._reset.off()
         self.clock.sleep(r.boot_s)
 
     def clear_latch(self) -> None:
-        """The explicit re-arm: commands are accepted again."""
-        with self._lock:
+        """The explicit re-arm: commands are accepted again.  Refused (:class:`SafetyAbort`) while the
+        release stroke runs or a wiring fault stands (:meth:`rearm_refusal`)."""
+        with self._held():
+            why = self.rearm_refusal()
+            if why:
+                raise SafetyAbort(f"re-arm refused: {why}")
             self._latched = False
+
+    def rearm_refusal(self) -> str | None:
+        """Why the latch may not be cleared now (None: it may)."""
+        if self._safe_release and self.release_basis is None:
+            return "the brake's release stroke is still running"
+        es = self._end_switch
+        if es is not None and es.fault:
+            return (f"the end-of-travel switch {es.fault.partition(':')[0]}: fix it, then `dyno doctor --toggle` "
+                    "must pass before the rig is armed again")
+        return None
 
     @property
     def latched(self) -> bool:
@@ -283,51 +344,13 @@ class GpioActuators:
     def engine_killed(self) -> bool:
         return self._killed  # kept in Python: readable after close()
 
-    def pin_states(self) -> dict[str, float]:
-        """Electrical state of every output pin (1 = driven high), for doctor and tests."""
-        p = self.config.pins
-        devs = {"brake_enable": (p.brake_enable, self._enable), "brake_direction": (p.brake_direction, self._direction),
-                "engine_kill": (p.engine_kill, self._kill), "arduino_reset": (p.arduino_reset, self._reset),
-                "throttle_servo": (p.throttle_servo, self._throttle)}
-        return {name: (float(d.pin.state) if d.pin is not None else float("nan")) for name, (_, d) in devs.items()}
-
-    def output_states(self) -> dict:
-        """The outputs by name, read back from the pins (as ``SimActuators.output_states``), and ``safe``.
-
-        After :meth:`close` the pins are released: every output is at its de-energised
-        value, which the wiring makes the safe one (hardware/README.md).
-        """
-        with self._lock:
-            basis = {"released": self.release_confirmed, "release_basis": self.release_basis}
-            if self.release_interrupted:
-                basis["release_interrupted"] = self.release_interrupted
-            if self.closed:
-                # pins released: every output at its de-energised value, which the wiring makes the safe
-                # one (hardware/README.md) — but the brake is only known off if its release completed
-                return {"throttle": "idle", "engine_kill": "killed", "brake_actuator": "stopped",
-                        "brake_estimate": round(self.brake_position, 3), "pins": "released", **basis,
-                        "safe": self.release_confirmed}
-            th = self.config.throttle
-            pulse_us = float(self._throttle.value) * th.frame_us
-            idle = abs(pulse_us - th.idle_pulse_us) < 1.0
-            killed = bool(self._kill.value)
-            if not self._enable.value:
-                brake = "stopped"
-            else:
-                brake = "applying" if self._direction.value else "releasing"
-            span = th.full_pulse_us - th.idle_pulse_us
-            return {"throttle": "idle" if idle else f"{(pulse_us - th.idle_pulse_us) / span:.2f}",
-                    "engine_kill": "killed" if killed else "run", "brake_actuator": brake,
-                    "brake_estimate": round(self.brake_position, 3), **basis,
-                    "safe": idle and killed and brake == "stopped" and self.release_confirmed}
-
     def close(self) -> None:
         """Drive every output to its safe value, then release the pins.
 
         Does not wait for a release stroke (call :meth:`finish_release` first,
         as :class:`dyno.hw.safety.SafetyGuard` does).
         """
-        with self._lock:
+        with self._held():
             if getattr(self, "closed", False):
                 return
             if getattr(self, "_safe_release", False) and getattr(self, "release_basis", None) is None:
@@ -368,6 +391,10 @@ class GpioActuators:
         now = self.clock.now()
         self._integrate(now)
         self._generation += 1
+        if direction != STOP:
+            self._moved_since_release = True
+            if self._end_switch is not None and direction == RELEASE:
+                self._end_switch.closed_seen = False
         if self._safe_release and self.release_basis is None:
             self.release_interrupted = f"brake command {direction:+d} stopped the release (not latched)"
         self._safe_release = False
@@ -384,7 +411,11 @@ class GpioActuators:
         dt = now - self._last_integrated_s
         self._last_integrated_s = now
         if self._moving != STOP and dt > 0:
-            self._position += self._moving * dt / self.brake_full_stroke_s
+            d = self._moving * dt / self.brake_full_stroke_s
+            self._position += d
+            if self._tracked is not None:
+                self._tracked = min(self._tracked + d, 1.0 + END_STOP_OVERRUN_FRACTION)
+                self._excursion = max(self._excursion, self._tracked)
 
     def _power_off(self, now: float) -> None:
         if self._enable.value:
@@ -402,11 +433,25 @@ class GpioActuators:
         self._integrate(now)
         if self._stop_at_s is not None and now >= self._stop_at_s - 1e-12:
             self._target, self._stop_at_s = STOP, None
-        switch = self._target == RELEASE and self._end_switch is not None and self._end_switch.value
+        es = self._end_switch
+        switch = False  # the switch (plausibly closed) and the estimate agree: at the retracted stop
+        if es is not None and es.trusted:
+            if es.judge(now, self._tracked, self._excursion, self.brake_full_stroke_s, self._doing()) \
+                    and self._target == RELEASE:
+                es.closed_seen = True
+                if self._tracked is None:  # position unknown (start-up): the switch gives the first zero
+                    self._tracked = self._excursion = 0.0
+            switch = (self._target == RELEASE and es.closed_seen and self._tracked is not None
+                      and self._tracked <= -tolerance(self._excursion))
         if self._target != STOP and (switch or self._end_stop_reached(self._target)):
+            confirmed = es is not None and es.trusted and es.closed_seen
+            if self._target == RELEASE and es is not None and es.trusted and not confirmed:
+                es.never_closed(now, self.brake_full_stroke_s)
             self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
+            self._tracked, self._excursion = self._position, self._position
             if self._target == RELEASE and self._safe_release:
-                self.release_basis = "end_of_travel" if switch else "full_stroke_time"
+                self.release_basis = "end_of_travel" if confirmed else "full_stroke_time"
+                self._moved_since_release = False
             self._target, self._stop_at_s, self._step_s = STOP, None, None
             self._safe_release = False
         target = self._target
@@ -434,6 +479,10 @@ class GpioActuators:
                 self._stop_at_s = now + self._step_s
                 self._step_s = None
 
+    def _doing(self) -> str:
+        return ("while applying" if self._moving == APPLY else
+                "during a release" if self._target == RELEASE else "at rest")
+
     def _next_event_s(self, now: float) -> float | None:
         """Earliest time at which :meth:`_advance` would change something."""
         t = []
@@ -449,5 +498,7 @@ class GpioActuators:
                 over = END_STOP_OVERRUN_FRACTION
                 dist = (1.0 + over - self._position) if self._moving == APPLY else (self._position + over)
                 t.append(now + max(0.0, dist) * self.brake_full_stroke_s)
+                if self._end_switch is not None and self._end_switch.trusted:  # read it while moving
+                    t.append(now + self._settle_s)
         t = [x for x in t if math.isfinite(x)]
         return max(now, min(t)) if t else None

@@ -22,10 +22,15 @@ from __future__ import annotations
 
 import asyncio
 import atexit
+import logging
 import signal
 import threading
 
+from dyno.control.outputs import enter_safe_state
 from dyno.hw.clock import MonotonicClock
+
+#: distinct look errors a watchdog keeps (each further one is counted in ``errors_dropped``)
+MAX_ERRORS = 20
 
 DEFAULT_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
@@ -122,6 +127,9 @@ class Watchdog:
         self.tripped = False
         self.level_checks = []  # callables run on every look, e.g. the E-stop input's level
         self.errors: list[str] = []  # exceptions caught inside a look (each one safed the rig; it kept watching)
+        self.error_counts: dict[str, int] = {}  # how often each of them came (a stuck input: every look)
+        self.errors_dropped = 0  # distinct errors beyond MAX_ERRORS (counted, not kept)
+        self.log = logging.getLogger("dyno.watchdog")
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -144,18 +152,35 @@ class Watchdog:
             return self.tripped
 
     def _failed(self, exc: BaseException) -> None:
-        import logging
-
-        msg = f"watchdog look failed: {type(exc).__name__}: {exc}"
-        self.errors.append(msg)
+        """A look raised: latch the safe state, say so once (a failing input repeats every look: its
+        count grows, not the log), keep watching.  Nothing here may raise: each step has its own guard."""
         self.tripped = True  # the loop's beat reports it (an abort record); servicing goes on
-        logging.getLogger("dyno.watchdog").error("%s: safe state", msg)
         try:
-            self.actuators.safe_state(latch=True)
-        except TypeError:
-            self.actuators.safe_state()
-        except Exception as exc2:  # noqa: BLE001 - still keep watching
-            self.errors.append(f"safe state failed too: {type(exc2).__name__}: {exc2}")
+            msg = f"watchdog look failed: {type(exc).__name__}: {exc}"
+        except BaseException:  # noqa: BLE001 - an exception whose str() raises
+            msg = f"watchdog look failed: {type(exc).__name__}"
+        try:
+            enter_safe_state(self.actuators)
+        except BaseException as exc2:  # noqa: BLE001 - still keep watching (the next look tries again)
+            msg += f"; safe state failed too: {type(exc2).__name__}"
+        try:
+            self._note(msg)
+        except BaseException:  # noqa: BLE001 - a log that cannot be written must not stop the watching
+            pass
+
+    def _note(self, msg: str) -> None:
+        """Keep ``msg`` in :attr:`errors` (bounded: the first :data:`MAX_ERRORS` distinct ones, each with its
+        count in :attr:`error_counts`) and log it the first time only."""
+        n = self.error_counts.get(msg)
+        if n is not None:
+            self.error_counts[msg] = n + 1
+            return
+        if len(self.errors) >= MAX_ERRORS:
+            self.errors_dropped += 1
+            return
+        self.error_counts[msg] = 1
+        self.errors.append(msg)
+        self.log.error("%s: safe state (logged once; repeats are counted)", msg)
 
     def _look(self) -> bool:
         for level_check in self.level_checks:
@@ -166,10 +191,7 @@ class Watchdog:
         now = self.clock.now()
         if not self.tripped and now - self.last_alive_s() > self.timeout_s:
             self.tripped = True
-            try:
-                self.actuators.safe_state(latch=True)
-            except TypeError:  # an Actuators implementation without latching
-                self.actuators.safe_state()
+            enter_safe_state(self.actuators)
             if self.on_trip is not None:
                 self.on_trip(now - self.last_alive_s())
         if self.tripped:
@@ -179,6 +201,17 @@ class Watchdog:
             else:
                 self.actuators.tick(now)
         return self.tripped
+
+    def step(self) -> None:
+        """One turn of the watchdog thread's body: a look, and the last guard around it.  The thread
+        (:meth:`start_thread`) runs it every :attr:`period_s`; a virtual loop steps the same body."""
+        try:
+            self.check()  # (check() catches everything itself; this is the last line of defence)
+        except BaseException as exc:  # noqa: BLE001
+            try:
+                self._failed(exc)
+            except BaseException:  # noqa: BLE001 - _failed guards itself; belt and braces
+                self.tripped = True
 
     @property
     def period_s(self) -> float:
@@ -201,10 +234,7 @@ class Watchdog:
 
         def loop():
             while not self._stop.wait(period):
-                try:
-                    self.check()  # (check() catches everything itself; this is the last line of defence)
-                except BaseException as exc:  # noqa: BLE001
-                    self._failed(exc)
+                self.step()
 
         self._thread = threading.Thread(target=loop, name="dyno-watchdog", daemon=True)
         self._thread.start()

@@ -62,6 +62,7 @@ class SimSMBus:
         # The physics is stepped by whoever asks first: the poller, an actuator command, or
         # the watchdog thread safing the rig while the loop is stalled.  One at a time.
         self._lock = threading.RLock()
+        self._stepping = False  # inside rig.step: a re-entrant sync (a signal handler's safe state) waits
         self._rng_thermo = np.random.default_rng(seed + 104729)
         # drills: the cable falls out (every device NACKs); the thermometer stops answering,
         # or answers with one frozen word forever
@@ -92,11 +93,15 @@ class SimSMBus:
 
     def _advance(self, t_s: float) -> None:
         dt = t_s - self.rig.t_s
-        if dt <= 0:
+        if dt <= 0 or self._stepping:  # (a signal handler inside a step: its inputs act from the step's end)
             return
         capture = self.firmware.capture
-        for ev in self.rig.step(dt):
-            capture(ev.channel, ev.t_s, ev.code, ev.status)
+        self._stepping = True
+        try:
+            for ev in self.rig.step(dt):
+                capture(ev.channel, ev.t_s, ev.code, ev.status)
+        finally:
+            self._stepping = False
 
     # --- smbus2 API ---------------------------------------------------------------------
     def i2c_rdwr(self, *msgs) -> None:

@@ -35,6 +35,13 @@ class RearmMixin:
             return f"not re-armed after {cause} ({NO_REARM[cause]}): quit and start dyno again"
         if self.ctx.watchdog is not None and getattr(self.ctx.watchdog, "tripped", False):
             return "not re-armed: the watchdog tripped: quit and start dyno again"
+        driver_refusal = getattr(c.act, "rearm_refusal", None)  # the Pi's output code: its release, its wiring
+        why = driver_refusal() if callable(driver_refusal) else None
+        if why:
+            return f"not re-armed: {why}"
+        estop = getattr(self.ctx, "estop", None)
+        if estop is not None and estop.is_open:
+            return "not re-armed: the E-stop chain is open (release the E-stop button first)"
         outs = self.actuators.output_states()
         if getattr(self.actuators, "releasing", False) or outs.get("brake_actuator") == "releasing":
             return "not re-armed: the brake is still releasing (wait for the release stroke to end)"

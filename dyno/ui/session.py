@@ -167,7 +167,7 @@ class LiveSession(RearmMixin):
                 if self._signal_pending is None:
                     self._signal_pending = signum
                 return
-            if self.ctx.sim is None:
+            if self.ctx.sim is None or self.ctx.pi_outputs:  # the Pi's output code (rig or twin): at once
                 from dyno.control.outputs import enter_safe_state
 
                 enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does

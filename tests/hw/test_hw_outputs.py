@@ -158,6 +158,10 @@ def test_hw_latch_refuses_run_commands(actuators):
         with pytest.raises(SafetyAbort):
             bad()
     actuators.brake(RELEASE)  # always allowed
+    with pytest.raises(SafetyAbort, match="release stroke is still running"):
+        actuators.clear_latch()  # not while the release runs: the re-arm would let a command stop it
+    assert actuators.latched
+    assert actuators.finish_release()
     actuators.clear_latch()
     actuators.engine_kill(False)
 

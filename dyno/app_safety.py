@@ -1,0 +1,110 @@
+"""The run's safety parts, wired by the composition root (:mod:`dyno.app`): the watchdog beside the loop,
+the E-stop input's record, and under ``--mock-pins`` the Pi's own output code over the wiring twin.
+"""
+
+from __future__ import annotations
+
+
+class _LoopTimeClock:
+    """The real-rig output code's clock on the host loop's time (virtual in simulations).
+
+    Only the blocking helpers (``step``, ``finish_release``, ``reset_arduino``) sleep;
+    on a virtual loop nothing may block, and the host never calls them there.  ``on_now`` (a drill's
+    hook, :mod:`dyno.drills_wiring`) runs inside each reading: a signal delivered there arrives in the
+    middle of whatever output command asked the time.
+    """
+
+    def __init__(self, now_s) -> None:
+        self._now = now_s
+        self.on_now = None
+
+    def now(self) -> float:
+        if self.on_now is not None:
+            self.on_now()
+        return self._now()
+
+    def sleep(self, dt_s: float) -> None:
+        raise RuntimeError("a blocking sleep on the loop's clock (use the async paths)")
+
+
+def twin_outputs(rig_cfg, sim, now_s, seed: int):
+    """``--mock-pins``: ``GpioActuators`` (and ``EstopInput`` where ``pins.estop_input`` is declared) on the
+    wiring twin (:mod:`dyno.hw.mockpins`) over ``sim``'s physics; returns (actuators, twin, estop or None)."""
+    from dyno.hw.mockpins import mock_pin_actuators
+
+    actuators, twin = mock_pin_actuators(rig_cfg, sim.actuators, _LoopTimeClock(now_s), seed=seed)
+    estop = None
+    if rig_cfg.pins.estop_input is not None:
+        from dyno.hw.estop import EstopInput
+
+        estop = EstopInput(rig_cfg.pins.estop_input, actuators, pin_factory=twin)
+    return actuators, twin, estop
+
+
+def _attach_watchdog(ctx, timeout_s: float, now_s) -> None:
+    """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
+
+    On a :class:`~dyno.clock.VirtualTimeLoop` it is a background ticker (the loop's
+    stand-in for an OS thread: it runs while a callback blocks the loop); on a real
+    loop it is a daemon thread.  The controller's safety heartbeat feeds it.
+    """
+    from dyno.hw.safety import Watchdog
+
+    controller = ctx.controller
+    trip: dict = {}
+
+    def on_trip(silent_s: float) -> None:
+        trip["silent_s"] = silent_s
+        trip["t_s"] = wd.clock.now()
+
+    class _Clock:  # until start_watchdog() gives it the loop's clock
+        now = staticmethod(now_s)
+
+    wd = getattr(ctx.hw, "watchdog", None)
+    if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
+        wd.on_trip = on_trip
+    else:
+        wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
+        if ctx.estop is not None:  # the twin's E-stop input: the rig's level check, every look
+            wd.level_checks.append(ctx.estop.poll)
+    ctx.watchdog = wd
+
+    def beat() -> None:
+        if wd.tripped and not trip.get("reported"):
+            trip["reported"] = True
+            if "silent_s" in trip:
+                controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
+                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
+            else:  # a look that raised: safed, logged, still watching
+                errs = getattr(wd, "errors", None) or ["tripped"]
+                controller.abort("watchdog", f"{errs[0]}: the watchdog put the rig in its safe state")
+        wd.kick()
+
+    controller.heartbeat_hooks.append(beat)
+    # Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on).
+    ctx.poller.listeners.append(lambda events, now_s: wd.kick())
+
+
+def start_watchdog(ctx, loop) -> object:
+    """Start ``ctx.watchdog`` beside ``loop``; returns a stop() callable."""
+    from dyno.clock import LoopClock, VirtualTimeLoop
+
+    wd = ctx.watchdog
+    estop = ctx.estop
+    if estop is not None and not ctx.estop_hooked:
+        # the E-stop chain's input: outputs already safe (its callback); record the stop with whichever
+        # controller runs then (a re-armed session's new one: a second E-stop is a stop of its own)
+        ctx.estop_hooked = True
+        estop.on_open.append(lambda detail: loop.call_soon_threadsafe(
+            lambda: ctx.controller.abort("estop", detail)))
+        if estop.tripped:
+            loop.call_soon(ctx.controller.abort, "estop", "E-stop chain open at start-up")
+    # The loop's liveness is measured on the loop's own clock (the controller's time base):
+    # host time on a real loop (the UI paces the physics on a scaled clock), virtual in simulations.
+    wd.clock = LoopClock(loop)
+    wd.kick()
+    if isinstance(loop, VirtualTimeLoop):  # the thread's own body, stepped by the virtual loop
+        entry = loop.add_ticker(wd.step, wd.period_s)
+        return lambda: loop.remove_ticker(entry)
+    wd.start_thread()
+    return wd.stop_thread
