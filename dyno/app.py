@@ -177,6 +177,10 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
 
     protocol = opts.protocol or rig_cfg.protocol
     limits = opts.limits or limits_from_config(rig_cfg)
+    from dyno.drills_wiring import check_wiring_drill
+
+    for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
+        check_wiring_drill(d, rig_cfg, opts.sim and opts.mock_pins)
     sim = hw = None
     if opts.sim:
         from dyno.sim.bus import BusFaults

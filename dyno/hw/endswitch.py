@@ -8,13 +8,13 @@ brake was known at its stop) and takes a closed reading only where that estimate
 
 .. math::
 
-    x \\le \\tau(x_{max}) = \\tau_0 + k\\,x_{max}
+    x \\le \\tau(s) = \\tau_0 + k\\,s
 
-with :math:`x_{max}` the farthest excursion since the stop (the estimate's error grows with the travel it
-integrated: the actuator's speed moves with load and supply, ~10-15 %), :math:`\\tau_0` =
-:data:`ABS_TOL`, :math:`k` = :data:`REL_TOL`.  A closed reading beyond it is a **fault** (named, kept,
-re-arm refused until ``dyno doctor --toggle`` checks the switch again); so is a release that reaches the
-end of its full stroke + 10 % without the switch ever closing.  After a fault the switch is ignored and
+with :math:`s` the travel integrated since the stop, both ways (the estimate's error grows with it: the
+actuator's speed moves with load and supply, ~10-15 %, and each pulse starts and stops a little late or
+early), :math:`\\tau_0` = :data:`ABS_TOL`, :math:`k` = :data:`REL_TOL`.  A closed reading beyond it is a
+**fault** (named, kept, re-arm refused until ``dyno doctor --toggle`` checks the switch again); so is a
+release that reaches the end of its full stroke + 10 % without the switch ever closing.  After a fault the switch is ignored and
 every release runs its full stroke time.
 
 Even a plausible closing does not end a release at once: the release runs on until the estimate is
@@ -26,16 +26,16 @@ travel it needs (about a second from a loaded brake), not the full stroke from a
 
 from __future__ import annotations
 
-#: a closed reading is plausible within this fraction of the stroke of the retracted end (1 mm of 40 mm:
-#: the brake's free travel) ...
-ABS_TOL = 0.025
-#: ... plus this share of the farthest excursion since the last zero (the integrated estimate's drift)
+#: a closed reading is plausible within this fraction of the stroke of the retracted end (0.5 mm of 40 mm,
+#: 0.1 s: the switch closes in the last 0.3 mm) ...
+ABS_TOL = 0.0125
+#: ... plus this share of the travel integrated since the last zero (the dead reckoning's drift)
 REL_TOL = 0.20
 
 
-def tolerance(excursion: float) -> float:
-    """:math:`\\tau_0 + k\\,x_{max}` (fractions of the stroke)."""
-    return ABS_TOL + REL_TOL * max(0.0, excursion)
+def tolerance(travel: float) -> float:
+    """:math:`\\tau_0 + k\\,s` (fractions of the stroke)."""
+    return ABS_TOL + REL_TOL * max(0.0, travel)
 
 
 class EndSwitch:
@@ -70,17 +70,17 @@ class EndSwitch:
 
         logging.getLogger("dyno.outputs").error("end-of-travel switch: %s", detail)
 
-    def judge(self, t_s: float, tracked: float | None, excursion: float, stroke_s: float, doing: str) -> bool:
+    def judge(self, t_s: float, tracked: float | None, travel: float, stroke_s: float, doing: str) -> bool:
         """Read the switch once; True for a plausible closed reading.  A closed reading the travel rules out
         sets the fault (and returns False).  ``tracked`` None: the position is unknown (start-up), any
         closing is plausible."""
         if self.fault is not None or not self.closed():
             return False
-        if tracked is None or tracked <= tolerance(excursion):
+        if tracked is None or tracked <= tolerance(travel):
             return True
         self.set_fault(t_s, f"closed {doing} at an estimated {tracked * stroke_s:.2f} s of travel "
                             f"({100 * tracked:.1f} % of the stroke) from the retracted end, beyond the "
-                            f"{tolerance(excursion) * stroke_s:.2f} s the estimate allows: stuck closed, shorted "
+                            f"{tolerance(travel) * stroke_s:.2f} s the estimate allows: stuck closed, shorted "
                             "to ground or a loose contact? (check the switch and its wire)")
         return False
 

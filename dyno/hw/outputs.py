@@ -101,7 +101,7 @@ class GpioActuators(ReadbackMixin):
         # The same travel as integrated since the brake was last known at a stop (never forced to full apply
         # as _position is after a fault): what the end switch's readings are judged against.  None: unknown.
         self._tracked: float | None = None
-        self._excursion = 0.0  # farthest _tracked since that stop
+        self._travel = 0.0  # travel integrated since that stop, both ways (the estimate's error grows with it)
         self._moved_since_release = True  # a command moved the brake since the last confirmed release
         self._step_s: float | None = None  # pending timed step: duration once powered
         self._stop_at_s: float | None = None
@@ -415,7 +415,7 @@ class GpioActuators(ReadbackMixin):
             self._position += d
             if self._tracked is not None:
                 self._tracked = min(self._tracked + d, 1.0 + END_STOP_OVERRUN_FRACTION)
-                self._excursion = max(self._excursion, self._tracked)
+                self._travel += abs(d)
 
     def _power_off(self, now: float) -> None:
         if self._enable.value:
@@ -436,19 +436,19 @@ class GpioActuators(ReadbackMixin):
         es = self._end_switch
         switch = False  # the switch (plausibly closed) and the estimate agree: at the retracted stop
         if es is not None and es.trusted:
-            if es.judge(now, self._tracked, self._excursion, self.brake_full_stroke_s, self._doing()) \
+            if es.judge(now, self._tracked, self._travel, self.brake_full_stroke_s, self._doing()) \
                     and self._target == RELEASE:
                 es.closed_seen = True
                 if self._tracked is None:  # position unknown (start-up): the switch gives the first zero
-                    self._tracked = self._excursion = 0.0
+                    self._tracked = self._travel = 0.0
             switch = (self._target == RELEASE and es.closed_seen and self._tracked is not None
-                      and self._tracked <= -tolerance(self._excursion))
+                      and self._tracked <= -tolerance(self._travel))
         if self._target != STOP and (switch or self._end_stop_reached(self._target)):
             confirmed = es is not None and es.trusted and es.closed_seen
             if self._target == RELEASE and es is not None and es.trusted and not confirmed:
                 es.never_closed(now, self.brake_full_stroke_s)
             self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
-            self._tracked, self._excursion = self._position, self._position
+            self._tracked, self._travel = self._position, self._position
             if self._target == RELEASE and self._safe_release:
                 self.release_basis = "end_of_travel" if confirmed else "full_stroke_time"
                 self._moved_since_release = False

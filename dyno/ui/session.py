@@ -56,7 +56,7 @@ class LiveSession(RearmMixin):
         self.sim_now = lambda: (loop.time() - self.t0) * self.speed
         run_opts = RunOptions(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
                               rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed),
-                              mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient,
+                              mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient, drills=list(opts.drills),
                               sim_params=opts.sim_params if opts.sim else None)
         if opts.calibration_path:
             run_opts.calibration_path = opts.calibration_path
