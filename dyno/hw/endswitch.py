@@ -14,8 +14,8 @@ with :math:`s` the travel integrated since the stop, both ways (the estimate's e
 actuator's speed moves with load and supply, ~10-15 %, and each pulse starts and stops a little late or
 early), :math:`\\tau_0` = :data:`ABS_TOL`, :math:`k` = :data:`REL_TOL`.  A closed reading beyond it is a
 **fault** (named, kept, re-arm refused until ``dyno doctor --toggle`` checks the switch again); so is a
-release that reaches the end of its full stroke + 10 % without the switch ever closing.  After a fault the switch is ignored and
-every release runs its full stroke time.
+release that reaches the end of its full stroke + 10 % without the switch ever closing.  After a fault the
+switch is ignored and every release runs its full stroke time.
 
 Even a plausible closing does not end a release at once: the release runs on until the estimate is
 :math:`\\tau` past the stop (``x <= -tau``), so a switch that closes early within the tolerance still
