@@ -153,6 +153,10 @@ def close_rig(ctx) -> None:
     hw = getattr(ctx, "hw", None)
     if hw is not None:
         hw.__exit__(None, None, None)
+    if getattr(ctx, "twin", None) is not None:  # --mock-pins: the run is recorded; release the mock pins
+        from dyno.app_safety import close_twin
+
+        close_twin(ctx)
 
 
 def build(opts: RunOptions, now_s) -> RunContext:

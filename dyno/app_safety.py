@@ -41,6 +41,18 @@ def twin_outputs(rig_cfg, sim, now_s, seed: int):
     return actuators, twin, estop
 
 
+def close_twin(ctx) -> None:
+    """Release the twin's pins (the run's record is written): the wiring no longer carries them to the
+    physics, so the pins' release (to their de-energised levels, as on the rig) moves nothing there."""
+    twin = ctx.twin
+    twin.bridge = twin.twin_end_switch = None
+    if ctx.estop is not None:
+        ctx.estop.close()
+    close = getattr(ctx.controller.act, "close", None)
+    if close is not None:
+        close()
+
+
 def _attach_watchdog(ctx, timeout_s: float, now_s) -> None:
     """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
 

@@ -382,6 +382,10 @@ class LiveSession(RearmMixin):
             await asyncio.wait(self._reports, timeout=60.0)
         if self.guard is not None:  # pragma: no cover - rig only
             self.guard.__exit__(None, None, None)
+        if self.ctx.twin is not None:  # --mock-pins: release the mock pins (the record is closed)
+            from dyno.app_safety import close_twin
+
+            close_twin(self.ctx)
         if getattr(self, "hung_up", False):  # safe state reached, record closed: should the app's shut-down
             from dyno.ui.common import exit_after  # still wait on the terminal that went, end anyway
 
