@@ -11,14 +11,18 @@ the physical onset against its bound, the brake position when the safe state cam
 killed), the points kept and replayed, and whether ``dyno runs --json`` lists the run with its state.
 
 Modes: ``sim`` (the simulated driver), ``mock`` (``--mock-pins``: the real-rig output code on gpiozero's
-MockFactory), ``sim+faults`` (``--fault-rate 0.01``).
+MockFactory), ``sim+faults`` (``--fault-rate 0.01``), and the wiring twin: ``twin`` (``--mock-pins`` with a rig
+file declaring the end switch and the E-stop monitor input, K3 not fitted: the driver's own release is judged)
+and ``twin+k3`` (the same with K3 fitted).  The wiring drills (:mod:`dyno.drills_wiring`) run on the twin modes
+only; on every ``mock``/``twin`` row the driver's verdict must agree with the physics (``driver_agrees``).
 
     python bench/bench_safe_state.py [--quick] [--plans a,b] [--drills x,y] [--phases p,q]
-                                     [--modes sim,mock,sim+faults] [--workers N] [--markdown] [--json]
+                                     [--modes sim,mock,sim+faults,twin,twin+k3] [--workers N] [--markdown] [--json]
 
-``--quick`` (CI's smoke run): every plan once, one mid-test drill each, on ``sim``; plus one ``mock`` row.
-The full matrix is 8 plans x 19 drills x 4 phases x 3 modes (~1,800 runs, ~2-3 h on 2 cores): run by hand,
-or a slice of it with the filters; docs/safety.md has the figures.
+``--quick`` (CI's smoke run): every plan once, one mid-test drill each, on ``sim``; plus one ``mock`` row and
+two ``twin`` rows.  The full matrix is 8 plans x 24 drills x 4 phases x 5 modes, less the wiring drills off the
+twin (~2,800 runs, hours on 2 cores): run by hand, or a slice of it with the filters
+(``--modes twin,twin+k3 --drills wiring``: the wiring drills alone); docs/safety.md has the figures.
 """
 
 from __future__ import annotations
@@ -41,13 +45,31 @@ DRILLS = {
     "thermometer-stuck": 5.0, "thermometer-lost": 5.0, "adc-error": 0.1, "adc-stuck": 2.0, "bus-lost": 0.35,
     "overtemp": 0.3, "overspeed": 0.1, "loop-stall:300": None, "loop-stall:800": 0.6, "controller-crash": 0.1,
     "disk-full": 0.1, "sigint": 0.1, "sigterm": 0.1, "sighup": 0.1,
+    # the wiring drills (twin modes only): a stuck or chattering end switch does not trip the run (the driver
+    # finds it, names it, falls back to the full stroke time: judged on the physics at the end)
+    "endswitch-stuck-closed": None, "endswitch-stuck-open": None, "endswitch-bounce": None,
+    "estop-held:3": 0.1, "watchdog-error": 0.1, "sigint-in-command": 0.1,
 }
+WIRING = ("endswitch-stuck-closed", "endswitch-stuck-open", "endswitch-bounce", "estop-held:3", "watchdog-error",
+          "sigint-in-command")
 PHASES = ("armed", "loaded+2", "measure+1", "after+0.5")
-MODES = ("sim", "mock", "sim+faults")
+MODES = ("sim", "mock", "sim+faults", "twin", "twin+k3")
+TWIN_MODES = ("twin", "twin+k3")
 QUICK = {"speed-hold": "bus-lost@loaded+2", "thesis-step": "adc-stuck@loaded+2",
          "torque-hold": "controller-crash@loaded+2", "engine-hold": "loop-stall:800@loaded+2",
          "sweep": "hall-dead:both@loaded+1", "engagement": "sigterm@loaded+0.5",
          "coast-down": "disk-full@settle+1", "drive-grid": "adc-error@measure+1"}
+
+
+def wired_rig_file(out_dir: Path, k3: bool) -> Path:
+    """hardware/rig.toml with the end switch and the E-stop monitor input declared, K3 as asked."""
+    text = (Path(__file__).resolve().parent.parent / "hardware" / "rig.toml").read_text()
+    text = text.replace("# estop_input = 22 ", "estop_input = 22 ")
+    text = text.replace("# brake_released_input = 27 ", "brake_released_input = 27 ")
+    text = text.replace("brake_hold_relay = false", f"brake_hold_relay = {'true' if k3 else 'false'}")
+    path = out_dir.parent / f"{out_dir.name}.rig.toml"
+    path.write_text(text)
+    return path
 
 
 def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> dict:
@@ -58,9 +80,11 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
     from dyno.runlog.reader import load_run
 
     held: dict = {}
+    rig = wired_rig_file(Path(out), k3=mode == "twin+k3") if mode in TWIN_MODES else None
     opts = RunOptions(sim=True, seed=seed, out_dir=Path(out), drills=[parse_drill(drill_text)],
                       handle_signals=True, plan=plan_named(plan), setup=lambda ctx: held.update(ctx=ctx),
-                      mock_pins=mode == "mock", fault_rate=0.01 if mode == "sim+faults" else 0.0)
+                      mock_pins=mode in ("mock", *TWIN_MODES), fault_rate=0.01 if mode == "sim+faults" else 0.0,
+                      rig_path=rig)
     if plan == "drive-grid":
         opts.engine_map_path = DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv")
     r = run_test(opts)
@@ -80,6 +104,8 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
             "latency_s": a.get("latency_s"), "detection_s": a.get("detection_s"),
             "brake_mm_at_safe": out_s.get("brake_position_at_safe_mm"), "release_s": out_s.get("release_s"),
             "release_bound_s": out_s.get("release_bound_s"), "rig_safe": r["rig_safe"],
+            "driver_agrees": out_s.get("driver_agrees"), "driver_disagreement": out_s.get("driver_disagreement"),
+            "rig_faults": len(r.get("rig_faults") or []),
             "physics_safe": bool(physics_safe), "points": len(r["points"]), "replayed": replayed,
             "exit": exit_code(r), "run_dir": r["run_dir"]}
 
@@ -93,6 +119,8 @@ def judge(row: dict) -> list[str]:
         bad.append("physics not safe")
     if row["rig_safe"] != row["physics_safe"]:
         bad.append("rig_safe disagrees with the physics")
+    if row["mode"] in ("mock", *TWIN_MODES) and row.get("driver_agrees") is not True:
+        bad.append(f"driver disagrees: {row.get('driver_disagreement')}")
     if row["release_s"] is None or row["release_bound_s"] is None or row["release_s"] > row["release_bound_s"]:
         bad.append("release out of bound")
     if row["replayed"] != row["points"]:
@@ -109,12 +137,15 @@ def judge(row: dict) -> list[str]:
 
 def matrix(args) -> list[tuple[str, str, str]]:
     if args.quick:
-        return [(p, d, "sim") for p, d in QUICK.items()] + [("speed-hold", "bus-lost@loaded+2", "mock")]
+        return [(p, d, "sim") for p, d in QUICK.items()] + [("speed-hold", "bus-lost@loaded+2", "mock"),
+                                                             ("speed-hold", "endswitch-stuck-closed@loaded+2", "twin"),
+                                                             ("thesis-step", "estop-held:3@loaded+2", "twin+k3")]
     plans = args.plans.split(",") if args.plans else PLANS
-    drills = args.drills.split(",") if args.drills else list(DRILLS)
+    drills = WIRING if args.drills == "wiring" else (args.drills.split(",") if args.drills else list(DRILLS))
     phases = args.phases.split(",") if args.phases else PHASES
     modes = args.modes.split(",") if args.modes else MODES
-    return [(p, f"{d}@{ph}", m) for m in modes for p in plans for d in drills for ph in phases]
+    return [(p, f"{d}@{ph}", m) for m in modes for p in plans for d in drills for ph in phases
+            if m in TWIN_MODES or d not in WIRING]
 
 
 def _listed(runs_root: Path, rows: list[dict]) -> None:
@@ -155,7 +186,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="every plan once (CI smoke)")
     ap.add_argument("--plans", default=None)
-    ap.add_argument("--drills", default=None)
+    ap.add_argument("--drills", default=None, help="comma-separated, or \"wiring\": the wiring drills")
     ap.add_argument("--phases", default=None, help=f"comma-separated, default {','.join(PHASES)}")
     ap.add_argument("--modes", default=None, help=f"comma-separated, default {','.join(MODES)}")
     ap.add_argument("--workers", type=int, default=1, help="processes (signal drills need their own process)")
@@ -178,7 +209,8 @@ def main() -> int:
                     row = {"plan": p, "drill": d, "mode": m, "state": "crashed", "cause": repr(exc)[:80],
                            "fired": False, "hazard_arose": None, "latency_s": None, "brake_mm_at_safe": None,
                            "release_s": None, "release_bound_s": None, "rig_safe": None, "physics_safe": False,
-                           "points": 0, "replayed": 0, "run_dir": "", "state_at_onset": None}
+                           "points": 0, "replayed": 0, "run_dir": "", "state_at_onset": None,
+                           "driver_agrees": None}
                 rows.append(row)
         _listed(Path(tmp), rows)
     for row in rows:
@@ -195,9 +227,11 @@ def main() -> int:
         print(markdown(rows))
     rel = [r["release_s"] / r["release_bound_s"] for r in rows
            if r.get("release_s") is not None and r.get("release_bound_s")]
+    driven = [r for r in rows if r["mode"] in ("mock", *TWIN_MODES)]
     print(f"{len(rows)} runs, {n_bad} out of bound; release/bound max {max(rel) if rel else math.nan:.3f}; "
           f"rig_safe agrees with the physics in {sum(r['rig_safe'] == r['physics_safe'] for r in rows)}"
-          f"/{len(rows)}", file=sys.stderr)
+          f"/{len(rows)}; driver_agrees in {sum(r.get('driver_agrees') is True for r in driven)}/{len(driven)} "
+          f"rows through the Pi's code", file=sys.stderr)
     return 1 if n_bad else 0
 
 
