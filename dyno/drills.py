@@ -123,20 +123,16 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
     if allowed is not None and arg is not None and arg not in allowed:
         raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
-    if name == "estop-held":
+    numeric = {"estop-held": (3600, "estop-held:S needs 0 < S <= 3600 seconds"),
+               "loop-stall": (60_000, "loop-stall:MS needs 0 < MS <= 60000")}
+    if name in numeric:
+        hi, why = numeric[name]
         try:
-            held_s = float(arg)
+            value = float(arg)
         except ValueError:
-            held_s = math.nan
-        if not (math.isfinite(held_s) and 0 < held_s <= 3600):
-            raise ConfigError("command line", "--drill", f"{text!r}: estop-held:S needs 0 < S <= 3600 seconds")
-    if name == "loop-stall":
-        try:
-            ms = float(arg)
-        except ValueError:
-            ms = math.nan
-        if not (math.isfinite(ms) and 0 < ms <= 60_000):
-            raise ConfigError("command line", "--drill", f"{text!r}: loop-stall:MS needs 0 < MS <= 60000")
+            value = math.nan
+        if not (math.isfinite(value) and 0 < value <= hi):
+            raise ConfigError("command line", "--drill", f"{text!r}: {why}")
     return Drill(name, arg, t_s, phase)
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import sys
-import time
 from pathlib import Path
 
 from dyno.control.controller import State
@@ -14,16 +13,9 @@ from dyno.drills import parse_drill
 from dyno.ui.session import LiveOptions, LiveSession
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "e2e"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_e2e_wiring_drills import wired_rig  # noqa: E402
-
-
-async def _until(cond, timeout_s: float) -> bool:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        await asyncio.sleep(0.05)
-    return cond()
+from test_ui_session_rest import _until  # noqa: E402
 
 
 def test_a_second_estop_after_a_rearm_is_an_estop_abort(tmp_path):
