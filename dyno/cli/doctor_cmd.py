@@ -56,6 +56,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--transport", choices=("i2c", "serial"), default=None,
                         help="firmware link (default: the rig file's)")
     parser.add_argument("--sim", action="store_true", help="diagnose the simulated rig (no hardware)")
+    parser.add_argument("--mock-pins", action="store_true",
+                        help="--sim: the output checks (as --toggle) through the Pi's own code on the wiring twin")
+    parser.add_argument("--drill", action="append", default=[], metavar="NAME",
+                        help="--sim --mock-pins: a wiring fault present from the start (endswitch-stuck-closed, "
+                             "endswitch-stuck-open, endswitch-bounce)")
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:
@@ -191,15 +196,64 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
                        f"{what} {before} -> {after}" + ("" if moved else ": reset line not wired?"))
         else:
             report.add("arduino reset", WARN, "pulsed; cannot confirm without an INFO frame", essential=False)
+        at_stop = _switch_sample(act)
         act.step(APPLY, cfg.actuator.step_s)
+        out = _switch_sample(act)
         act.step(RELEASE, cfg.actuator.step_s)
         if hw.watchdog.tripped:
             report.add("brake step", FAIL, "the watchdog tripped during the step")
             return
         report.add("brake step", OK, f"{cfg.actuator.step_s:.2f} s out and back (watch the actuator move)",
                    essential=False)
+        if at_stop is not None:
+            act.safe_state()  # back to the retracted stop, the switch confirming (or the full stroke)
+            act.finish_release()
+            check_end_switch(report, cfg, act, at_stop, out, _switch_sample(act), hw.persist_faults)
     finally:
         hw.__exit__(None, None, None)  # release stroke finished, outputs de-energised, pins released
+
+
+#: end-switch reads per position (0.1 s of them): a loose contact that closes on a few % of reads shows
+SWITCH_READS = 200
+
+
+def _switch_sample(act) -> str | None:
+    """"closed", "open" or "chatters" over :data:`SWITCH_READS` reads (None: no switch declared)."""
+    if act.end_switch_closed() is None:
+        return None
+    reads = set()
+    for _ in range(SWITCH_READS):
+        reads.add(act.end_switch_closed())
+        act.clock.sleep(0.1 / SWITCH_READS)
+    return "chatters" if len(reads) > 1 else ("closed" if True in reads else "open")
+
+
+def check_end_switch(report: Report, cfg, act, at_stop: str, out: str, back: str, persisted: bool) -> None:
+    """The end-of-travel switch against a measured stroke: closed at the retracted stop, open one brake step
+    out, closed again back at the stop — each over :data:`SWITCH_READS` reads — and no fault found by the
+    driver on the way.  A pass clears a standing end-switch fault (:mod:`dyno.hw.rig_faults`): the rig may be
+    armed again."""
+    wire = f"GPIO{cfg.pins.brake_released_input} (pins.brake_released_input)"
+    why = []
+    if "chatters" in (at_stop, out, back):
+        why.append("chatters (reads both ways at one position): a loose contact or a worn switch?")
+    elif at_stop != "closed" or back != "closed":
+        why.append("reads open at the retracted stop: stuck open, wire cut or connector off?")
+    elif out != "open":
+        why.append(f"reads closed {cfg.actuator.step_s:.2f} s out from the stop: stuck closed or shorted to ground?")
+    found = [f for f in act.faults if f.get("channel") == "end_switch" and not f.get("inherited")]
+    if found and not why:
+        why.append(found[0]["detail"])
+    if why:
+        report.add("end switch", FAIL, f"{wire} {'; '.join(why)} (check the switch and its wire)")
+        return
+    cleared = False
+    if persisted:
+        from dyno.hw import rig_faults
+
+        cleared = rig_faults.clear("end_switch")
+    report.add("end switch", OK, f"{wire}: closed at the stop, open {cfg.actuator.step_s:.2f} s out, closed back"
+               + ("; the standing end-switch fault is cleared" if cleared else ""))
 
 
 def _boots(cfg, transport):
@@ -275,47 +329,54 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     return report
 
 
-def _sim_pin_factory(sim, reset_bcm: int, active_high: bool, now_s):
-    """Mock pins whose reset pin really resets the emulated firmware (for ``--sim --toggle``)."""
-    from gpiozero.pins.mock import MockFactory, MockPWMPin
-
-    class ResetWiredPin(MockPWMPin):
-        def _change_state(self, value):
-            changed = super()._change_state(value)
-            if changed and self.info.name == f"GPIO{reset_bcm}" and bool(value) == active_high:
-                sim.firmware.reset(now_s())
-            return changed
-
-    return MockFactory(pin_class=ResetWiredPin)
-
-
 def run(args) -> int:
     cfg = load_rig(args.rig)
     bus = pin_factory = clock = None
-    if args.sim:
-        import time
+    toggle = args.toggle
+    if (args.mock_pins or args.drill) and not args.sim:
+        from dyno.errors import ConfigError
 
+        raise ConfigError("command line", "--mock-pins/--drill", "the wiring twin and its drills are for --sim")
+    if args.sim:
+        from dyno.hw.clock import FakeClock
         from dyno.sim.rig import SimRig
 
-        t0 = time.monotonic()
-
-        def now_s():  # simulated time starts at 0, or the sim would first simulate the host's uptime
-            return time.monotonic() - t0
-
-        sim = SimRig(now_s, protocol=cfg.protocol)
+        # one clock for the physics and the output code (an 8 s release stroke need not take 8 s off the rig);
+        # simulated time starts at 0
+        clock = FakeClock(start_s=0.0)
+        sim = SimRig(clock.now, protocol=cfg.protocol, seed=getattr(args, "seed", 0) or 0)
+        sim.model.brake_hold_relay = cfg.actuator.brake_hold_relay
         bus = sim.bus
         if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
             from dyno.sim.bme280_chip import SimBME280
 
             bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
-        if args.toggle:
-            from dyno.hw.clock import FakeClock
+        if args.toggle or args.mock_pins:
+            from dyno.hw.mockpins import SimPinFactory
 
-            clock = FakeClock()  # an 8 s release stroke need not take 8 s off the rig
-            pin_factory = _sim_pin_factory(sim, cfg.pins.arduino_reset, cfg.reset.active_high, now_s)
-    report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=args.toggle,
+            pin_factory = SimPinFactory(cfg, sim.actuators, clock, armed=True,
+                                        reset=lambda: sim.firmware.reset(clock.now()))
+            for name in args.drill:
+                _doctor_drill(pin_factory, cfg, name)
+            toggle = True  # on the twin the output checks run (nothing moves but the simulation)
+    report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=toggle,
                       clock=clock, pin_factory=pin_factory)
     print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""))
     print(report.render())
     sys.stdout.flush()
     return 0 if report.ok else 1
+
+
+def _doctor_drill(twin, cfg, name: str) -> None:
+    """``--drill NAME`` on the doctor's twin: the fault is there from the start (no ``@T``)."""
+    from dyno.errors import ConfigError
+
+    modes = {"endswitch-stuck-closed": "stuck_closed", "endswitch-stuck-open": "stuck_open",
+             "endswitch-bounce": "bounce"}
+    if name not in modes:
+        raise ConfigError("command line", "--drill", f"{name!r}: dyno doctor takes {', '.join(modes)} (no @T: "
+                          "the fault is there from the start)")
+    if cfg.pins.brake_released_input is None:
+        raise ConfigError("command line", "--drill", f"{name}: the rig file declares no end-of-travel switch "
+                          "(pins.brake_released_input in its [pins])")
+    twin.end_switch_fault(modes[name])

@@ -70,6 +70,11 @@ class EndSwitch:
 
         logging.getLogger("dyno.outputs").error("end-of-travel switch: %s", detail)
 
+    def inherit(self, fault: dict) -> None:
+        """A fault an earlier session found and nobody has cleared (:mod:`dyno.hw.rig_faults`)."""
+        self.fault = str(fault.get("detail", "a fault recorded earlier"))
+        self._faults.append({**fault, "inherited": True})
+
     def judge(self, t_s: float, tracked: float | None, travel: float, stroke_s: float, doing: str) -> bool:
         """Read the switch once; True for a plausible closed reading.  A closed reading the travel rules out
         sets the fault (and returns False).  ``tracked`` None: the position is unknown (start-up), any

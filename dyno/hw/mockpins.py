@@ -67,7 +67,7 @@ class SimPinFactory(RecordingFactory):
     """A MockFactory whose output pins drive a simulated rig's inputs (:class:`dyno.sim.rig.SimWiring`)
     and whose declared input pins read the physics."""
 
-    def __init__(self, rig_cfg, sim_actuators, clock=None, seed: int = 0) -> None:
+    def __init__(self, rig_cfg, sim_actuators, clock=None, seed: int = 0, reset=None, armed: bool = False) -> None:
         super().__init__(clock)
         self.pin_class = _BridgePin
         self.rig_cfg = rig_cfg
@@ -75,9 +75,13 @@ class SimPinFactory(RecordingFactory):
         self.sim = getattr(sim_actuators, "wiring", sim_actuators)
         p = rig_cfg.pins
         self._role = {f"GPIO{p.brake_enable}": "enable", f"GPIO{p.brake_direction}": "direction",
-                      f"GPIO{p.engine_kill}": "kill", f"GPIO{p.throttle_servo}": "throttle"}
+                      f"GPIO{p.engine_kill}": "kill", f"GPIO{p.throttle_servo}": "throttle",
+                      f"GPIO{p.arduino_reset}": "reset"}
+        self._reset = reset  # callable: the Nano's RESET line pulled (``dyno doctor --sim``'s reset check)
         self._level = {"enable": 0.0, "direction": 0.0, "kill_run": 0.0}
-        self.bridge = None  # armed once every output exists (construction drives them one by one)
+        # armed once every output exists (construction drives them one by one), or from the start (``armed``:
+        # a driver built later, e.g. by HardwareRig inside dyno doctor, each pin carried as it is claimed)
+        self.bridge = self._on_change if armed else None
         self.chain_closed = True
         self.end_switch_mode: str | None = None  # None | "stuck_closed" | "stuck_open" | "bounce"
         self._rng = np.random.default_rng(seed + 7919)
@@ -92,9 +96,10 @@ class SimPinFactory(RecordingFactory):
             self.estop_pin = self.pin(p.estop_input, pin_class=EstopTwinPin)
 
     def arm(self) -> None:
+        self.bridge = self._on_change
         for name, role in self._role.items():
-            self.bridge = self._on_change
-            self._on_change(name, float(self.pin(name).state))
+            if role != "reset":  # (its idle level says nothing; only a pulse resets)
+                self._on_change(name, float(self.pin(name).state))
 
     # --- outputs: the pins -> the physics' inputs ----------------------------------------------------
     def _on_change(self, name: str, value: float) -> None:
@@ -111,6 +116,9 @@ class SimPinFactory(RecordingFactory):
             high_kills = self.rig_cfg.kill_relay == "energise_to_kill"
             self._level["kill_run"] = float((value >= 0.5) != high_kills)
             self._ignition()
+        elif role == "reset":
+            if self._reset is not None and (value >= 0.5) == self.rig_cfg.reset.active_high:
+                self._reset()
         elif role == "throttle":
             th = self.rig_cfg.throttle
             pulse_us = value * th.frame_us

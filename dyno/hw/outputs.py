@@ -31,6 +31,7 @@ from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
 from dyno.hw.clock import MonotonicClock
 from dyno.hw.endswitch import EndSwitch, tolerance
+from dyno.hw.blocking import BlockingMixin
 from dyno.hw.readback import ReadbackMixin
 from dyno.rigconfig import RigConfig
 
@@ -39,7 +40,7 @@ from dyno.rigconfig import RigConfig
 END_STOP_OVERRUN_FRACTION = 0.10
 
 
-class GpioActuators(ReadbackMixin):
+class GpioActuators(BlockingMixin, ReadbackMixin):
     """Brake actuator, throttle servo, engine kill and Arduino reset on GPIO.
 
     Parameters
@@ -55,7 +56,7 @@ class GpioActuators(ReadbackMixin):
     stroke, because the brake position at start-up is unknown.
     """
 
-    def __init__(self, config: RigConfig, pin_factory=None, clock=None) -> None:
+    def __init__(self, config: RigConfig, pin_factory=None, clock=None, known_faults=()) -> None:
         self.config = config
         self.clock = clock or MonotonicClock()
         self.brake_full_stroke_s = config.actuator.full_stroke_s
@@ -86,6 +87,9 @@ class GpioActuators(ReadbackMixin):
             eot = getattr(pins, "brake_released_input", None)
             self._end_switch = (EndSwitch(self._add(DigitalInputDevice(eot, pull_up=True, **pf)), self.faults)
                                 if eot is not None else None)
+            for f in known_faults:  # found in an earlier session and not yet cleared by `dyno doctor --toggle`
+                if f.get("channel") == "end_switch" and self._end_switch is not None:
+                    self._end_switch.inherit(f)
         except Exception:
             self.close()
             raise
@@ -238,65 +242,6 @@ class GpioActuators(ReadbackMixin):
             if not self.closed:
                 self._advance(self.clock.now())
 
-    def step(self, direction: int, duration_s: float) -> None:
-        """Blocking timed step: the enable is on for exactly ``duration_s``.
-
-        If anything interrupts it (exception, signal) the enable is switched off
-        on the way out, unless a newer command (e.g. the safe state) owns it.
-        """
-        with self._held():
-            gen = self._command(direction, float(duration_s))
-        if gen < 0:  # refused (latched): the release owns the actuator
-            return
-        try:
-            while True:
-                with self._held():
-                    if self._generation != gen or self.closed:
-                        return
-                    now = self.clock.now()
-                    self.last_tick_s = now  # this loop is the control loop while it runs
-                    self._advance(now)
-                    if self._moving == STOP and self._target == STOP:
-                        return
-                    wait = self._next_event_s(now)
-                self.clock.sleep(max(0.0, wait - now) if wait is not None else self._settle_s)
-        finally:
-            with self._held():
-                if self._generation == gen and not self.closed:
-                    self._command(STOP, None)
-
-    def finish_release(self, timeout_s: float | None = None) -> bool:
-        """Block until the brake is released and de-energised (exit paths)."""
-        limit = timeout_s if timeout_s is not None else 2 * self.brake_full_stroke_s + 10 * self._settle_s + 1
-        t_end = self.clock.now() + limit
-        while True:
-            with self._held():
-                if self.closed:
-                    return False
-                now = self.clock.now()
-                self.last_tick_s = now  # servicing the release: the control loop is alive
-                self._advance(now)
-                if self.released:
-                    return True
-                if now >= t_end:
-                    self._power_off(now)
-                    return False
-                wait = self._next_event_s(now)
-            step = (wait - now) if wait is not None else self._settle_s
-            self.clock.sleep(min(max(step, 1e-3), max(t_end - now, 1e-3)))
-
-    def reset_arduino(self) -> None:
-        """Pulse the Nano's RESET, then wait for its bootloader to hand over (blocking)."""
-        r = self.config.reset
-        with self._held():
-            self._reset.on()
-        try:
-            self.clock.sleep(r.pulse_s)
-        finally:
-            with self._held():
-                self._reset.off()
-        self.clock.sleep(r.boot_s)
-
     def clear_latch(self) -> None:
         """The explicit re-arm: commands are accepted again.  Refused (:class:`SafetyAbort`) while the
         release stroke runs or a wiring fault stands (:meth:`rearm_refusal`)."""
@@ -315,6 +260,10 @@ class GpioActuators(ReadbackMixin):
             return (f"the end-of-travel switch {es.fault.partition(':')[0]}: fix it, then `dyno doctor --toggle` "
                     "must pass before the rig is armed again")
         return None
+
+    def end_switch_closed(self) -> bool | None:
+        """The end switch's raw reading (None: none declared) — for ``dyno doctor``, whatever its verdict."""
+        return None if self._end_switch is None else self._end_switch.closed()
 
     @property
     def latched(self) -> bool:

@@ -32,8 +32,10 @@ class _CurrentBus:
 
 class HardwareRig:
     def __init__(self, config, *, pin_factory=None, clock=None, bus=None, serial_port=None,
-                 install_signals: bool = True) -> None:
+                 install_signals: bool = True, persist_faults: bool | None = None) -> None:
         self.config = config
+        # the wiring faults its driver finds outlive the process (dyno.hw.rig_faults): on the real pins only
+        self.persist_faults = pin_factory is None if persist_faults is None else persist_faults
         self._pin_factory = pin_factory
         self._clock = clock
         self._bus = bus
@@ -49,7 +51,12 @@ class HardwareRig:
         from dyno.transports.serial import open_serial
 
         cfg = self.config
-        self.actuators = GpioActuators(cfg, pin_factory=self._pin_factory, clock=self._clock)
+        known = ()
+        if self.persist_faults:
+            from dyno.hw import rig_faults
+
+            known = rig_faults.load()
+        self.actuators = GpioActuators(cfg, pin_factory=self._pin_factory, clock=self._clock, known_faults=known)
         if cfg.pins.estop_input is not None:
             from dyno.hw.estop import EstopInput
 
@@ -89,6 +96,7 @@ class HardwareRig:
             if self.guard is not None:
                 self.guard.__exit__(exc_type, exc, tb)
         finally:
+            self._keep_faults()
             if self.estop is not None:
                 self.estop.close()
             for link in {id(x): x for x in (self.transport, self._i2c) if x is not None}.values():
@@ -97,3 +105,16 @@ class HardwareRig:
                 except OSError:
                     pass
         return False
+
+    def _keep_faults(self) -> None:
+        if not self.persist_faults or self.actuators is None:
+            return
+        new = [f for f in self.actuators.faults if not f.get("inherited")]
+        try:
+            from dyno.hw import rig_faults
+
+            rig_faults.record(new)
+        except OSError as exc:  # the fault is still in this run's record; say that it will not outlive it
+            import logging
+
+            logging.getLogger("dyno.outputs").error("cannot keep the wiring faults (%s): %s", exc, new)

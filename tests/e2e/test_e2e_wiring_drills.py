@@ -137,3 +137,28 @@ def test_a_signal_inside_a_brake_command_as_a_real_process(tmp_path):
     assert d["delivered_s"] is not None and d["hazard_arose"]
     assert r["aborts"][0]["cause"] == "signal" and r["aborts"][0]["latency_s"] <= 0.1
     _judged(r)
+
+
+@pytest.mark.parametrize("drill,word", [(None, None), ("endswitch-stuck-closed", "stuck closed"),
+                                        ("endswitch-stuck-open", "stuck open"), ("endswitch-bounce", "chatters")])
+def test_doctor_checks_the_end_switch_through_the_twin(tmp_path, capsys, drill, word):
+    """``dyno doctor --sim --mock-pins --drill NAME``: the fault there from the start, found by the switch check
+    against a measured stroke (closed at the stop, open a step out, closed back), the wire named."""
+    from dyno.cli import main
+
+    args = ["doctor", "--sim", "--mock-pins", "--rig", str(wired_rig(tmp_path))] + (["--drill", drill] if drill else [])
+    code = main(args)
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if "end switch" in ln)
+    if drill is None:
+        assert code == 0 and "rig OK" in out and line.strip().startswith("ok"), out
+    else:
+        assert code == 1 and "FAIL" in line and word in line and "GPIO27" in line, out
+
+
+def test_doctor_drills_are_refused_off_the_twin(tmp_path, capsys):
+    from dyno.cli import main
+
+    assert main(["doctor", "--sim", "--mock-pins", "--drill", "endswitch-stuck-open"]) == 2  # no switch declared
+    assert "brake_released_input" in capsys.readouterr().err
+    assert main(["doctor", "--mock-pins"]) == 2

@@ -257,3 +257,60 @@ def test_clear_latch_refuses_while_the_release_runs(rig_wired):
     assert act.finish_release() and toy.pads_off
     act.clear_latch()
     assert not act.latched
+
+
+def test_a_switch_fault_outlives_the_process_until_doctor_passes(rig_wired, tmp_path, monkeypatch):
+    """Found stuck in one session, the switch is not trusted by the next (a new driver would have forgotten):
+    releases run their full stroke and the re-arm is refused until ``dyno doctor --toggle``'s switch check passes."""
+    from dyno.cli.doctor_cmd import Report, check_end_switch
+    from dyno.hw import rig_faults
+    from dyno.hw.rig import HardwareRig
+
+    monkeypatch.setenv("DYNO_STATE_DIR", str(tmp_path))
+
+    class Bus:
+        def i2c_rdwr(self, *msgs):
+            raise OSError(5, "no Nano here")
+
+        def close(self):
+            pass
+
+    clock = FakeClock()
+    toy = ToyWiring(clock, rig_wired.actuator.full_stroke_s)
+    twin = SimPinFactory(rig_wired, toy, clock, armed=True)
+    with HardwareRig(rig_wired, pin_factory=twin, clock=clock, bus=Bus(), install_signals=False,
+                     persist_faults=True) as hw:
+        hw.actuators.finish_release()
+        twin.end_switch_fault("stuck_closed")
+        _apply(hw.actuators, clock, 0.4)
+        assert hw.actuators.faults
+    assert [f["channel"] for f in rig_faults.load()] == ["end_switch"]
+    twin.end_switch_fault(None)  # the wire repaired; the next session does not know that yet
+    twin2 = SimPinFactory(rig_wired, toy, clock, armed=True)
+    with HardwareRig(rig_wired, pin_factory=twin2, clock=clock, bus=Bus(), install_signals=False,
+                     persist_faults=True) as hw:
+        act = hw.actuators
+        assert act.faults and act.faults[0]["inherited"]
+        assert act.finish_release() and act.release_basis == "full_stroke_time"  # the switch not trusted
+        assert "dyno doctor --toggle" in act.rearm_refusal()
+        report = Report()
+        check_end_switch(report, rig_wired, act, "closed", "open", "closed", persisted=True)
+        assert report.ok and "cleared" in report.checks[-1].detail
+    assert rig_faults.load() == []
+
+
+def test_the_nano_reset_wait_keeps_the_watchdog_fed(rig_wired, factory):
+    """``dyno doctor --toggle`` pulses RESET and waits 1.25 s for the bootloader: longer than the watchdog's
+    0.5 s.  The wait is the control loop while it runs (it used to sleep silently: the watchdog thread tripped
+    and the brake step that followed was refused, "the watchdog tripped during the step")."""
+    from dyno.hw.clock import MonotonicClock
+
+    act = GpioActuators(rig_wired, pin_factory=factory, clock=MonotonicClock())
+    wd = Watchdog(act, 0.2, clock=MonotonicClock())
+    wd.start_thread()
+    try:
+        act.reset_arduino()
+    finally:
+        wd.stop_thread()
+        act.close()
+    assert not wd.tripped
