@@ -298,7 +298,9 @@ def first_safe_s(history, t_from_s: float) -> float | None:
                 return t
         else:
             safe_before = safe
-    return None
+    # nothing changed after the onset: safe then (a safe state that found the outputs already safe and its
+    # release done writes nothing), or never
+    return t_from_s if safe_before else None
 
 
 def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:

@@ -162,3 +162,15 @@ def test_doctor_drills_are_refused_off_the_twin(tmp_path, capsys):
     assert main(["doctor", "--sim", "--mock-pins", "--drill", "endswitch-stuck-open"]) == 2  # no switch declared
     assert "brake_released_input" in capsys.readouterr().err
     assert main(["doctor", "--mock-pins"]) == 2
+
+
+def test_a_fault_that_finds_the_outputs_already_safe_has_its_safe_state_at_the_onset():
+    """A watchdog trip during a coast-down (engine cut, brake released and de-energised): the driver's safe
+    state writes nothing, so no output changes after the onset; the outputs were safe at it (latency 0, not
+    unknown: bench_safe_state found `latency None` on those rows)."""
+    from dyno.drills import first_safe_s
+
+    history = [(1.0, "throttle", 0.0), (2.0, "kill", True), (3.0, "brake", -1), (4.0, "brake", 0)]
+    assert first_safe_s(history, 10.0) == 10.0
+    assert first_safe_s(history[:1], 10.0) is None  # ignition still on: never safe
+    assert first_safe_s(history + [(12.0, "throttle", 0.5), (13.0, "throttle", 0.0)], 11.0) == 11.0
