@@ -32,10 +32,13 @@ class CalibrationContext:
     trip: object = None  # the first dyno.control.safety.Trip
     controller: object = None  # (none: drills that need one are refused for calibration)
     writer: object = None
+    twin: object = None  # --mock-pins: the wiring twin (dyno.hw.mockpins) over the fixture's actuator
+    rig_cfg: object = None
 
 
 def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig_path=None,
-                      fixture_kw: dict | None = None, drills=(), on_trip=None) -> CalibrationContext:
+                      fixture_kw: dict | None = None, drills=(), on_trip=None,
+                      mock_pins: bool = False) -> CalibrationContext:
     from dyno.control.safety import SafetyLimits, SafetyMonitor
     from dyno.rigconfig import load_rig
 
@@ -58,6 +61,9 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         per_poll = 128 if fixture.fixture.input_fitted else 64  # two converters: twice the events
         fixture.firmware.ring_capacity = max(per_poll, math.ceil(per_poll * speed))
         ctx = CalibrationContext(poller, sim=fixture)
+        if mock_pins:  # the Pi's own output code (HardwareRig) over the wiring twin and the fixture's actuator
+            ctx.hw, ctx.twin = _twin_rig(rig_cfg, fixture, sim_now, speed)
+            ctx.watchdog = ctx.hw.watchdog
     else:
         hw = open_rig(rig_cfg)
         try:
@@ -70,10 +76,15 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
             raise
         ctx = CalibrationContext(poller, hw=hw, watchdog=hw.watchdog)
         sim_now = None
+    ctx.rig_cfg = rig_cfg
+    if ctx.hw is not None:  # nothing else runs the rig's outputs here: the watchdog thread, and the polls tick
+        ctx.hw.watchdog.start_thread()  # them (the start-up release stroke ends and de-energises on time)
     lim = rig_cfg.limits
     ctx.monitor = SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s), poller)
 
     def check(events, now_s: float) -> None:
+        if ctx.hw is not None:
+            ctx.hw.actuators.tick()
         if ctx.watchdog is not None:
             ctx.watchdog.kick()
         if ctx.trip is not None:
@@ -101,6 +112,24 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
 
         poller.listeners.append(first)
     return ctx
+
+
+def _twin_rig(rig_cfg, fixture, sim_now, speed: float):
+    """``--mock-pins``: :class:`dyno.hw.rig.HardwareRig` on the wiring twin, the fixture's actuator behind it;
+    its clock is the fixture's (paced: a blocking wait sleeps the real time it stands for)."""
+    import time
+
+    from dyno.app_safety import _LoopTimeClock
+    from dyno.hw.mockpins import SimPinFactory
+    from dyno.hw.rig import HardwareRig
+    from dyno.sim.fixture_actuator import FixtureActuatorWiring
+
+    clock = _LoopTimeClock(sim_now, sleep=lambda dt_s: time.sleep(max(0.0, dt_s) / speed))
+    wiring = FixtureActuatorWiring(sim_now)
+    twin = SimPinFactory(rig_cfg, wiring, clock, armed=True, reset=lambda: fixture.firmware.reset(sim_now()))
+    hw = HardwareRig(rig_cfg, pin_factory=twin, clock=clock, bus=fixture.bus, install_signals=False,
+                     persist_faults=False)
+    return hw.__enter__(), twin
 
 
 def close_calibration(ctx: CalibrationContext) -> None:

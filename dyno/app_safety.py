@@ -14,8 +14,9 @@ class _LoopTimeClock:
     middle of whatever output command asked the time.
     """
 
-    def __init__(self, now_s) -> None:
+    def __init__(self, now_s, sleep=None) -> None:
         self._now = now_s
+        self._sleep = sleep  # a paced simulation on a real loop (dyno calibrate): its real-time equivalent
         self.on_now = None
 
     def now(self) -> float:
@@ -24,7 +25,9 @@ class _LoopTimeClock:
         return self._now()
 
     def sleep(self, dt_s: float) -> None:
-        raise RuntimeError("a blocking sleep on the loop's clock (use the async paths)")
+        if self._sleep is None:
+            raise RuntimeError("a blocking sleep on the loop's clock (use the async paths)")
+        self._sleep(dt_s)
 
 
 def twin_outputs(rig_cfg, sim, now_s, seed: int):

@@ -157,7 +157,7 @@ class DrillRunner(WiringDrills):
         self._phased: list[Drill] = []  # waiting for their phase (checked on every poll)
         sim = getattr(ctx, "sim", None)
         for d in self.drills:  # a drill that cannot happen must not pass as done
-            check_wiring_drill(d, ctx.rig_cfg, getattr(ctx, "twin", None) is not None)
+            check_wiring_drill(d, getattr(ctx, "rig_cfg", None), getattr(ctx, "twin", None) is not None)
             if d.arg == "input" and sim is not None and not getattr(sim.model, "input_fitted", False):
                 raise ConfigError("command line", "--drill", f"{d}: the rig has no input torque channel "
                                   "(rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")

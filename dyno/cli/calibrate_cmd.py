@@ -36,6 +36,9 @@ def add_arguments(p) -> None:
                         "brings the map-free efficiency's U95 to ~2 pp); default 1")
     p.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=0, help="simulation seed")
     p.add_argument("--speed", type=number_in(0.0, 1000.0, lo_open=True), default=1.0, help="simulation pace, multiple of real time")
+    p.add_argument("--mock-pins", action="store_true",
+                   help="--sim: the rig's outputs through the Pi's own code (GpioActuators, E-stop input, watchdog "
+                        "thread) on the wiring twin (docs/safety.md)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
                         "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")
@@ -87,6 +90,8 @@ def run(args) -> int:
         check_rig_present(rig_cfg)
     if drills and not args.sim:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
+    if args.mock_pins and not args.sim:
+        raise ConfigError("command line", "--mock-pins", "the wiring twin drives the simulated rig only (--sim)")
     in_force = None
     if inp:
         from dyno.app_input import calibration_path
@@ -111,5 +116,6 @@ def run(args) -> int:
     opts = CalibrateOptions(sim=args.sim, seed=args.seed, speed=args.speed, n_samples=args.samples,
                             settle_samples=args.settle_samples, history_path=history,
                             rig_path=getattr(args, "rig", None), radius_m=radius, masses=masses,
-                            drills=drills, channel=args.channel, repeats=args.repeats, in_force_path=in_force)
+                            drills=drills, channel=args.channel, repeats=args.repeats, in_force_path=in_force,
+                            mock_pins=args.mock_pins)
     return main(opts)

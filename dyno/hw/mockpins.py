@@ -11,7 +11,7 @@ physics the way the real switches are:
 * ``engine_kill`` → ignition enabled or killed, as ``kill_relay`` wires it — and only while the E-stop
   chain is closed: the chain's NC contact carries the kill relay's coil supply (and K3's, where
   ``actuator.brake_hold_relay`` says it is fitted: the physics then drives the release by wiring);
-* ``throttle_servo`` PWM duty → pulse width → throttle fraction;
+* ``throttle_servo`` PWM duty → pulse width → throttle fraction (no pulses: the return spring idles it);
 * ``pins.brake_released_input`` (declared): the end-of-travel switch, closed to ground while the true
   actuator is within :data:`END_SWITCH_CLOSES_MM` of its retracted stop — or stuck, or chattering
   (the ``endswitch-*`` drills: :meth:`SimPinFactory.end_switch_fault`);
@@ -122,6 +122,9 @@ class SimPinFactory(RecordingFactory):
         elif role == "throttle":
             th = self.rig_cfg.throttle
             pulse_us = value * th.frame_us
+            if pulse_us <= 0.0:  # no pulses (the pin released): the servo goes limp, the return spring idles it
+                self.sim.throttle(0.0)
+                return
             self.sim.throttle((pulse_us - th.idle_pulse_us) / (th.full_pulse_us - th.idle_pulse_us))
 
     def _ignition(self) -> None:
