@@ -171,13 +171,14 @@ def fmt(v, spec="{:.3f}") -> str:
 
 def markdown(rows: list[dict]) -> str:
     head = ("| plan | drill@phase | mode | state | cause | hazard | latency s | brake mm | release s | bound s "
-            "| rig_safe | physics | pts/replayed | ok |\n|" + "---|" * 14)
+            "| rig_safe | physics | driver agrees | rig faults | pts/replayed | ok |\n|" + "---|" * 16)
     lines = [head]
     for r in rows:
         lines.append(f"| {r['plan']} | {r['drill']} | {r['mode']} | {r['state']} | {r['cause']} | "
                      f"{fmt(r['hazard_arose'])} | {fmt(r['latency_s'])} | {fmt(r['brake_mm_at_safe'], '{:.2f}')} | "
                      f"{fmt(r['release_s'])} | {fmt(r['release_bound_s'])} | {r['rig_safe']} | "
-                     f"{r['physics_safe']} | {r['points']}/{r['replayed']} | "
+                     f"{r['physics_safe']} | {fmt(r.get('driver_agrees'))} | {r.get('rig_faults', 0)} | "
+                     f"{r['points']}/{r['replayed']} | "
                      f"{'ok' if not r['bad'] else '; '.join(r['bad'])} |")
     return "\n".join(lines)
 
