@@ -252,9 +252,13 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             self._latched = False
 
     def rearm_refusal(self) -> str | None:
-        """Why the latch may not be cleared now (None: it may)."""
+        """Why the latch may not be cleared now (None: it may): the release running, or a wiring fault."""
         if self._safe_release and self.release_basis is None:
             return "the brake's release stroke is still running"
+        return self.fault_refusal()
+
+    def fault_refusal(self) -> str | None:
+        """A standing wiring fault (the end switch's): no GO, no re-arm, until ``dyno doctor --toggle`` passes."""
         es = self._end_switch
         if es is not None and es.fault:
             return (f"the end-of-travel switch {es.fault.partition(':')[0]}: fix it, then `dyno doctor --toggle` "

@@ -257,7 +257,7 @@ class LiveSession(RearmMixin):
         """Why GO cannot be given now (None: it can)."""
         if self.controller.state is not State.ARMED:
             return f"GO only when armed (state: {self.controller.state.value})"
-        driver_refusal = getattr(self.controller.act, "rearm_refusal", None)  # the Pi's code: a standing fault
+        driver_refusal = getattr(self.controller.act, "fault_refusal", None)  # the Pi's code: a standing fault
         why = driver_refusal() if callable(driver_refusal) else None
         return f"no GO: {why}" if why else None
 
