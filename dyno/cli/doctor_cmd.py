@@ -13,7 +13,7 @@ rig description is invalid (from the CLI's ConfigError handling).
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from dyno.rigconfig import add_rig_argument, load_rig
@@ -58,9 +58,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sim", action="store_true", help="diagnose the simulated rig (no hardware)")
     parser.add_argument("--mock-pins", action="store_true",
                         help="--sim: the output checks (as --toggle) through the Pi's own code on the wiring twin")
-    parser.add_argument("--drill", action="append", default=[], metavar="NAME",
-                        help="--sim --mock-pins: a wiring fault present from the start (endswitch-stuck-closed, "
-                             "endswitch-stuck-open, endswitch-bounce)")
+    parser.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]",
+                        help="--sim: a fault there from the start (no @T): hall-dead:primary|secondary|both, "
+                             "adc-stuck, adc-error, thermometer-lost; with --mock-pins also endswitch-stuck-closed, "
+                             "endswitch-stuck-open, endswitch-bounce")
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:
@@ -95,9 +96,7 @@ def check_firmware(report: Report, cfg, transport) -> object | None:
         if info is not None:
             break
     if info is None:
-        fails = dict(transport.failures)
-        report.add("firmware", FAIL, f"no valid INFO frame at 0x{cfg.i2c.firmware_address:02X} "
-                   f"({fails or f'answers, but not a {cfg.protocol} info frame'}): wrong address, v0 sketch, or not flashed?")
+        report.add("firmware", FAIL, _no_info_hint(cfg, dict(transport.failures), reader))
         return None
     major, minor, patch = info.fw_version
     if cfg.protocol == "v2":
@@ -113,6 +112,35 @@ def check_firmware(report: Report, cfg, transport) -> object | None:
                f"device {have[0]}/{have[1]} us, rig file {want[0]}/{want[1]} us"
                + ("" if have == want else " (dyno sends SET_DEBOUNCE at start)"), essential=False)
     return info
+
+
+def _no_info_hint(cfg, fails: dict, reader) -> str:
+    """Why no INFO frame came, told by how the transfers failed (a NACK is not a CRC failure)."""
+    where = cfg.serial.port if cfg.transport == "serial" else f"0x{cfg.i2c.firmware_address:02X} on /dev/i2c-{cfg.i2c.bus}"
+    rejected = dict(getattr(reader.stats, "rejected", {}) or {})
+    if fails.get("nack"):
+        return (f"no answer at {where} ({fails}): the Nano not powered or not flashed, SDA/SCL swapped or loose, "
+                "the level shifter, or [i2c] firmware_address wrong (i2cdetect -a -y BUS lists it)")
+    if fails.get("stretch_timeout"):
+        return (f"clock-stretch timeouts at {where} ({fails}): the Pi's Broadcom controller and the Nano's stretching "
+                "(hardware/README.md: i2c-gpio or USB serial)")
+    if fails.get("timeout"):
+        return f"bus timeouts at {where} ({fails}): a bus held low (reset the Nano), or the USB cable"
+    if rejected:
+        return (f"answers at {where}, but every frame was rejected ({rejected}): CRC failures are noise or a sketch "
+                f"of another protocol (rig.toml protocol = \"{cfg.protocol}\"; a v0 thesis sketch: protocol = \"v0\")")
+    return f"answers at {where}, but no {cfg.protocol} info frame ({fails or 'no failure counted'}): another sketch?"
+
+
+def check_link_budget(report: Report, cfg) -> None:
+    """The poll rate against the link's clock (dyno.transports.budget): a run refuses what does not fit."""
+    from dyno.transports.budget import MAX_BUSY, clock_hz, planned_busy, poll_s
+
+    busy = planned_busy(cfg)
+    report.add("link budget", OK if busy <= MAX_BUSY else FAIL,
+               f"{cfg.poll_hz:g} polls/s x {poll_s(cfg) * 1e3:.2f} ms on {cfg.transport} at {clock_hz(cfg)} "
+               f"{'Bd' if cfg.transport == 'serial' else 'Hz'} = {100 * busy:.0f} % of the link (limit "
+               f"{100 * MAX_BUSY:.0f} %)")
 
 
 def check_thermometer(report: Report, cfg, bus) -> None:
@@ -167,7 +195,9 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
     from dyno.control.outputs import APPLY, RELEASE
     from dyno.hw.rig import HardwareRig
 
-    hw = HardwareRig(cfg, pin_factory=pin_factory, clock=clock, bus=bus, serial_port=serial_port)
+    # the firmware link diagnose() opened is handed over: a second open of a serial port resets the Nano again
+    hw = HardwareRig(cfg, pin_factory=pin_factory, clock=clock, bus=bus, serial_port=serial_port,
+                     firmware_transport=transport if cfg.transport == "serial" or serial_port is not None else None)
     try:
         hw.__enter__()
     except Exception as exc:  # gpiozero raises a family of pin errors; report, don't crash
@@ -188,7 +218,7 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         report.add("brake release", OK, f"released ({cfg.actuator.full_stroke_s:.1f} s stroke)", essential=False)
         before = _boots(cfg, transport)
         act.reset_arduino()
-        after = _boots(cfg, transport)
+        after = _new_boot(cfg, transport, before, act.clock)
         if cfg.protocol in ("v1", "v2") and before is not None:
             moved = after is not None and after != before
             what = "boot id" if cfg.protocol == "v2" else "boot count"
@@ -256,6 +286,21 @@ def check_end_switch(report: Report, cfg, act, at_stop: str, out: str, back: str
                + ("; the standing end-switch fault is cleared" if cleared else ""))
 
 
+#: after a reset, how long the new boot may take to answer (Optiboot ~1 s after an external reset + start-up)
+BOOT_DEADLINE_S = 3.0
+
+
+def _new_boot(cfg, transport, before, clock):
+    """The boot identity after a reset: asked until it differs from ``before`` or :data:`BOOT_DEADLINE_S` has
+    passed (a fixed wait shorter than the bootloader read the old boot, or none: "reset line not wired?")."""
+    end = clock.now() + BOOT_DEADLINE_S
+    while True:
+        now_boot = _boots(cfg, transport)
+        if (now_boot is not None and now_boot != before) or clock.now() >= end:
+            return now_boot
+        clock.sleep(0.1)
+
+
 def _boots(cfg, transport):
     """The device's boot identity: v2 boot id (new on every boot), v1 EEPROM boot count."""
     if cfg.protocol not in ("v1", "v2"):
@@ -268,8 +313,20 @@ def _boots(cfg, transport):
     return info.boot_id if cfg.protocol == "v2" else info.boot_count
 
 
+def check_data(report: Report, cfg, transport, clock, operator) -> None:
+    """A few seconds of data frames: edges on each Hall channel, the converter's conversions, the link's
+    counters (:mod:`dyno.hw.doctor_data`); one line a channel, naming the wire to check."""
+    from dyno.acquisition.reader import make_reader
+    from dyno.hw import doctor_data
+    from dyno.hw.clock import MonotonicClock
+
+    reader = make_reader(cfg.protocol, transport)
+    for name, ok, detail in doctor_data.check(reader, clock or MonotonicClock(), cfg.poll_hz, operator):
+        report.add(name, OK if ok else FAIL, detail)
+
+
 def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=False,
-             clock=None, pin_factory=None) -> Report:
+             clock=None, pin_factory=None, operator=None) -> Report:
     """All checks; ``bus``/``serial_port`` inject fakes or the simulated bus."""
     from dyno.transports.i2c import open_i2c, smbus_factory
     from dyno.transports.serial import open_serial
@@ -277,11 +334,16 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     report = Report()
     report.add("rig file", OK, f"{cfg.path} (protocol {cfg.protocol}, poll {cfg.poll_hz:g} Hz)", essential=False)
     kind = transport_kind or cfg.transport
+    check_link_budget(report, cfg if kind == cfg.transport else replace(cfg, transport=kind))
 
     # I2C bus: needed for the thermometer even when the firmware is on USB serial.
     if bus is None:
         try:
             bus = smbus_factory(cfg.i2c.bus)()
+        except PermissionError as exc:
+            report.add("i2c bus", FAIL, f"{exc}: add the user to the i2c group (sudo usermod -aG i2c $USER, "
+                       "then log in again)")
+            bus = None
         except OSError as exc:
             report.add("i2c bus", FAIL, str(exc))
             bus = None
@@ -301,16 +363,19 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     transport = None
     if kind == "serial":
         try:
-            transport = open_serial(cfg, port=serial_port)
+            transport = open_serial(cfg, port=serial_port, clock=clock)
             report.add("serial", OK, f"{cfg.serial.port} at {cfg.serial.baud} Bd")
         except OSError as exc:
             report.add("serial", FAIL, str(exc))
     elif bus is not None:
         transport = open_i2c(cfg, bus=bus, clock=clock)
+    info = None
     if transport is not None:
-        check_firmware(report, cfg, transport)
+        info = check_firmware(report, cfg, transport)
     else:
         report.add("firmware", FAIL, "no link to the firmware")
+    if info is not None and cfg.protocol in ("v1", "v2"):
+        check_data(report, cfg, transport, clock, operator)
 
     if bus is not None:
         check_thermometer(report, cfg, bus)
@@ -331,52 +396,34 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
 
 def run(args) -> int:
     cfg = load_rig(args.rig)
-    bus = pin_factory = clock = None
+    bus = pin_factory = clock = operator = serial_port = None
     toggle = args.toggle
     if (args.mock_pins or args.drill) and not args.sim:
         from dyno.errors import ConfigError
 
-        raise ConfigError("command line", "--mock-pins/--drill", "the wiring twin and its drills are for --sim")
-    if args.sim:
-        from dyno.hw.clock import FakeClock
-        from dyno.sim.rig import SimRig
+        raise ConfigError("command line", "--mock-pins/--drill", "the wiring twin and the drills are for --sim")
+    if args.sim:  # the engine idling, the operator simulated, one fake clock (dyno.sim.doctor_rig)
+        from dyno.sim.doctor_rig import build
 
-        # one clock for the physics and the output code (an 8 s release stroke need not take 8 s off the rig);
-        # simulated time starts at 0
-        clock = FakeClock(start_s=0.0)
-        sim = SimRig(clock.now, protocol=cfg.protocol, seed=getattr(args, "seed", 0) or 0)
-        sim.model.brake_hold_relay = cfg.actuator.brake_hold_relay
-        bus = sim.bus
-        if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
-            from dyno.sim.bme280_chip import SimBME280
+        ds = build(cfg, mock_pins=args.mock_pins, drills=args.drill)
+        bus, clock, pin_factory, operator = ds.sim.bus, ds.clock, ds.pin_factory, ds.operator
+        if (args.transport or cfg.transport) == "serial":  # opened as diagnose opens it: the Nano resets
+            from dyno.sim.serial_port import SimSerialPort
 
-            bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
-        if args.toggle or args.mock_pins:
+            serial_port = SimSerialPort(ds.sim, clock)
+        toggle = toggle or args.mock_pins  # on the twin the output checks run (nothing moves but the simulation)
+        if toggle and pin_factory is None:  # --sim --toggle alone: the twin as well (the reset pin wired)
             from dyno.hw.mockpins import SimPinFactory
 
-            pin_factory = SimPinFactory(cfg, sim.actuators, clock, armed=True,
-                                        reset=lambda: sim.firmware.reset(clock.now()))
-            for name in args.drill:
-                _doctor_drill(pin_factory, cfg, name)
-            toggle = True  # on the twin the output checks run (nothing moves but the simulation)
-    report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=toggle,
-                      clock=clock, pin_factory=pin_factory)
+            pin_factory = SimPinFactory(cfg, ds.sim.actuators, clock, armed=True,
+                                        reset=lambda: ds.sim.firmware.reset(clock.now()))
+    elif sys.stdin.isatty():
+        from dyno.hw.doctor_data import TerminalOperator
+
+        operator = TerminalOperator()
+    report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=toggle, serial_port=serial_port,
+                      clock=clock, pin_factory=pin_factory, operator=operator)
     print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""))
     print(report.render())
     sys.stdout.flush()
     return 0 if report.ok else 1
-
-
-def _doctor_drill(twin, cfg, name: str) -> None:
-    """``--drill NAME`` on the doctor's twin: the fault is there from the start (no ``@T``)."""
-    from dyno.errors import ConfigError
-
-    modes = {"endswitch-stuck-closed": "stuck_closed", "endswitch-stuck-open": "stuck_open",
-             "endswitch-bounce": "bounce"}
-    if name not in modes:
-        raise ConfigError("command line", "--drill", f"{name!r}: dyno doctor takes {', '.join(modes)} (no @T: "
-                          "the fault is there from the start)")
-    if cfg.pins.brake_released_input is None:
-        raise ConfigError("command line", "--drill", f"{name}: the rig file declares no end-of-travel switch "
-                          "(pins.brake_released_input in its [pins])")
-    twin.end_switch_fault(modes[name])

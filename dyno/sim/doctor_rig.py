@@ -1,0 +1,107 @@
+"""``dyno doctor --sim``: the simulated rig as the doctor meets it, and the simulated operator.
+
+One fake clock for the physics, the firmware and the Pi's output code (an 8 s release stroke, a few seconds of
+data frames, take no wall time); the engine started and idling (the operator pulled the cord), so the primary
+Hall channel turns; the operator, asked to turn a shaft that showed no edges, revs the idling engine with the
+brake released (the CVT engages: the secondary turns) — nothing prompts.  ``--mock-pins``: the Pi's output code
+on the wiring twin (:mod:`dyno.hw.mockpins`), whose reset pin resets the emulated firmware.  ``--drill
+NAME[:ARG]``: a fault there from the start (no ``@T``): the sensors' (:data:`SENSOR_DRILLS`) on the physics,
+the end switch's (:data:`TWIN_DRILLS`) on the twin.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+SENSOR_DRILLS = ("hall-dead", "adc-stuck", "adc-error", "thermometer-lost")
+TWIN_DRILLS = {"endswitch-stuck-closed": "stuck_closed", "endswitch-stuck-open": "stuck_open",
+               "endswitch-bounce": "bounce"}
+#: the throttle the simulated operator holds to turn the secondary (the CVT engages above ~2,100 rpm)
+REV_THROTTLE = 0.4
+
+
+@dataclass
+class DoctorSim:
+    sim: object
+    clock: object
+    pin_factory: object = None
+    operator: object = None
+
+
+class SimOperator:
+    """Turns a shaft when the doctor asks: revs the idling engine (the brake is released) for the secondary."""
+
+    def __init__(self, sim) -> None:
+        self.sim = sim
+
+    @contextmanager
+    def turning(self, channel: str):
+        wiring = self.sim.actuators.wiring
+        if channel == "secondary":
+            wiring.throttle(REV_THROTTLE)
+        try:
+            yield
+        finally:
+            wiring.throttle(0.0)
+
+
+def parse_doctor_drill(text: str, cfg):
+    """``NAME[:ARG]`` (no ``@T``) -> Drill; ConfigError naming ``--drill`` for anything else."""
+    from dyno.drills import parse_drill
+    from dyno.errors import ConfigError
+
+    if "@" in text:
+        raise ConfigError("command line", "--drill", f"{text!r}: no @T for dyno doctor (the fault is there from "
+                          "the start)")
+    d = parse_drill(f"{text}@0")
+    if d.name not in SENSOR_DRILLS and d.name not in TWIN_DRILLS:
+        raise ConfigError("command line", "--drill", f"{text!r}: dyno doctor takes "
+                          f"{', '.join((*SENSOR_DRILLS, *TWIN_DRILLS))}")
+    if d.name in TWIN_DRILLS and cfg.pins.brake_released_input is None:
+        raise ConfigError("command line", "--drill", f"{text}: the rig file declares no end-of-travel switch "
+                          "(pins.brake_released_input in its [pins])")
+    return d
+
+
+def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0) -> DoctorSim:
+    from dyno.hw.clock import FakeClock
+    from dyno.sim.rig import SimRig
+
+    parsed = [parse_doctor_drill(t, cfg) for t in drills]
+    if any(d.name in TWIN_DRILLS for d in parsed) and not mock_pins:
+        from dyno.errors import ConfigError
+
+        raise ConfigError("command line", "--drill", "the end-switch drills act through the wiring twin: add "
+                          "--mock-pins")
+    clock = FakeClock(start_s=0.0)
+    sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed)
+    sim.model.brake_hold_relay = cfg.actuator.brake_hold_relay
+    if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
+        from dyno.sim.bme280_chip import SimBME280
+
+        sim.bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
+    out = DoctorSim(sim, clock, operator=SimOperator(sim))
+    if mock_pins:
+        from dyno.hw.mockpins import SimPinFactory
+
+        out.pin_factory = SimPinFactory(cfg, sim.actuators, clock, armed=True,
+                                        reset=lambda: sim.firmware.reset(clock.now()))
+    for d in parsed:
+        _apply(out, d)
+    sim.start_engine()  # the operator pulls the cord: the engine idles
+    return out
+
+
+def _apply(ds: DoctorSim, d) -> None:
+    m = ds.sim.model
+    if d.name in TWIN_DRILLS:
+        ds.pin_factory.end_switch_fault(TWIN_DRILLS[d.name])
+    elif d.name == "hall-dead":
+        m.stuck_hall.update(("primary", "secondary") if d.arg == "both" else (d.arg,))
+    elif d.name == "adc-stuck":
+        m.adc_stuck = True
+    elif d.name == "adc-error":
+        m.adc_error_prob = 1.0
+    elif d.name == "thermometer-lost":
+        ds.sim.bus.thermometer_lost = True
