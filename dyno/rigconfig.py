@@ -99,6 +99,7 @@ class SerialConfig:
     port: str
     baud: int
     timeout_s: float = 0.05  # one poll's answer at 115200 Bd takes < 4 ms
+    boot_timeout_s: float = 3.0  # opening the port resets the Nano (DTR): wait this long for its first answer
 
 
 @dataclass(frozen=True)
@@ -331,11 +332,12 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
     # serial
     t = r.table(data, "serial")
-    r.no_extra(t, {"port", "baud", "timeout_s"}, "serial.")
+    r.no_extra(t, {"port", "baud", "timeout_s", "boot_timeout_s"}, "serial.")
     serial = SerialConfig(
         port=r.string(t, "port", "serial."),
         baud=r.integer(t, "baud", "serial.", lo=1200, hi=4_000_000),
         timeout_s=r.number(t, "timeout_s", "serial.", lo=0.001, hi=10.0, required=False, default=0.05),
+        boot_timeout_s=r.number(t, "boot_timeout_s", "serial.", lo=0.5, hi=30.0, required=False, default=3.0),
     )
 
     # gear

@@ -32,8 +32,12 @@ class _CurrentBus:
 
 class HardwareRig:
     def __init__(self, config, *, pin_factory=None, clock=None, bus=None, serial_port=None,
-                 install_signals: bool = True, persist_faults: bool | None = None) -> None:
+                 install_signals: bool = True, persist_faults: bool | None = None,
+                 firmware_transport=None) -> None:
         self.config = config
+        # a firmware link already open (dyno doctor's serial port: opening it again would reset the Nano again);
+        # used as it is, and left to its owner to close
+        self._given_transport = firmware_transport
         # the wiring faults its driver finds outlive the process (dyno.hw.rig_faults): on the real pins only
         self.persist_faults = pin_factory is None if persist_faults is None else persist_faults
         self._pin_factory = pin_factory
@@ -72,7 +76,9 @@ class HardwareRig:
             clock = self.actuators.clock
             # The thermometer is always on I2C; the firmware is on I2C or USB serial.
             self._i2c = open_i2c(cfg, bus=self._bus, reset=self.actuators.reset_arduino, clock=clock)
-            if cfg.transport == "serial":
+            if self._given_transport is not None:
+                self.transport = self._given_transport
+            elif cfg.transport == "serial":
                 self.transport = open_serial(cfg, port=self._serial_port, clock=clock)
             else:
                 self.transport = self._i2c
@@ -99,7 +105,8 @@ class HardwareRig:
             self._keep_faults()
             if self.estop is not None:
                 self.estop.close()
-            for link in {id(x): x for x in (self.transport, self._i2c) if x is not None}.values():
+            owned = (self.transport, self._i2c) if self._given_transport is None else (self._i2c,)
+            for link in {id(x): x for x in owned if x is not None}.values():
                 try:
                     link.close()
                 except OSError:

@@ -143,6 +143,8 @@ class SimSMBus:
     def _firmware_transaction(self, msgs, now: float) -> None:
         f = self.faults
         rng = self.rng
+        if not self.firmware.running(now):  # its bootloader: the I2C slave is not up yet
+            raise OSError(errno.EREMOTEIO, "NACK (the Nano's bootloader after a reset)")
         if f.nack_rate and rng.random() < f.nack_rate:
             self.injected["nack"] += 1
             raise OSError(errno.EREMOTEIO, "NACK (injected)")

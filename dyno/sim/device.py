@@ -24,6 +24,9 @@ LOCKOUT_FLOOR_US = 1000  # firmware config.h: DEBOUNCE_*_US_DEFAULT
 LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
 
 
+#: Optiboot's wait for an upload after an external reset (~1 s on the Nano's new bootloader) + the sketch's setup
+BOOTLOADER_S = 1.1
+
 class EmulatedFirmware:
     """The Nano's behaviour on the bus.
 
@@ -95,11 +98,20 @@ class EmulatedFirmware:
         return max(floor, min(LOCKOUT_CAP_US, period >> 2))
 
     def reset(self, now_s: float, cause: int = v2.CAUSE_WDRF) -> None:
-        """Watchdog (default) or other reset: counters and buffers restart, a new boot id."""
+        """Watchdog (default) or other reset: counters and buffers restart, a new boot id.
+
+        After an external reset (the RESET line: the Pi's transistor, or the USB chip's DTR when its port is
+        opened) the bootloader listens for an upload :data:`BOOTLOADER_S` first: the sketch — its ISRs, its
+        I2C slave, its serial answers — starts only then (:meth:`running`).  Optiboot skips that wait after a
+        watchdog reset."""
         self.boot_count += 1
         self.boot_id = (self.boot_id + 1) & 0xFFFF
         self.reset_cause = cause & 0x0F
-        self._boot(now_s)
+        self._boot(now_s + (BOOTLOADER_S if cause & v2.CAUSE_EXTRF else 0.0))
+
+    def running(self, now_s: float) -> bool:
+        """The sketch runs (not the bootloader after an external reset)."""
+        return now_s >= self.boot_time_s
 
     def device_us(self, t_s: float) -> int:
         """The device's u32 microsecond counter at simulation time ``t_s``."""
@@ -108,6 +120,8 @@ class EmulatedFirmware:
 
     # --- capture (what the ISRs and the ADC loop do) ----------------------------
     def capture(self, channel: str, t_s: float, code: int = 0, status: int = 0) -> None:
+        if t_s < self.boot_time_s:
+            return  # the bootloader: no ISR runs yet
         tag = CHANNEL_TAG[channel]
         if tag == v2.CH_INPUT and not (self.input_fitted and self.channels_enabled & v2.CHANNEL_INPUT):
             return  # not fitted, or not enabled by this boot's host: its RDY is not serviced

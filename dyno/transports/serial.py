@@ -230,8 +230,23 @@ class SerialTransport(Transport):
             close()
 
 
-def open_serial(config, *, port=None, clock=None) -> SerialTransport:
-    """The firmware transport over USB serial for a RigConfig (8N1, ``config.serial``)."""
+#: after opening, nothing is asked before this long: the bootloader would take the bytes for an upload
+BOOT_QUIET_S = 0.5
+#: then the first answer is asked for this often until ``serial.boot_timeout_s``
+BOOT_POLL_S = 0.1
+
+
+def open_serial(config, *, port=None, clock=None, wait_boot: bool = True) -> SerialTransport:
+    """The firmware transport over USB serial for a RigConfig (8N1, ``config.serial``), ready to use.
+
+    Opening a Nano's port pulses its DTR line, which resets it: Optiboot listens for an upload for about a
+    second, then the sketch starts.  So this waits :data:`BOOT_QUIET_S`, then asks for a frame every
+    :data:`BOOT_POLL_S` until one answers or ``serial.boot_timeout_s`` has passed since the open (one line
+    naming the port and what to check).  ``wait_boot=False``: the port as opened (a Nano whose auto-reset is
+    cut answers at once).  The FTDI chip's 16 ms latency timer (~60 answers a second at most) is set low where
+    the driver allows it (docs/install-pi.md has the udev rule that does it for good).
+    """
+    clock = clock or MonotonicClock()
     if port is None:
         import serial  # pyserial, imported lazily so the I2C-only rig never needs it
 
@@ -240,4 +255,35 @@ def open_serial(config, *, port=None, clock=None) -> SerialTransport:
                                          timeout=config.serial.timeout_s)
         except serial.SerialException as exc:
             raise TransportFault("io", f"{config.serial.port}: {exc}") from exc
-    return SerialTransport(port, timeout_s=config.serial.timeout_s, clock=clock)
+        low_latency = getattr(port, "set_low_latency_mode", None)
+        if low_latency is not None:
+            try:
+                low_latency(True)  # FTDI: the latency timer to 1 ms (ASYNC_LOW_LATENCY)
+            except (OSError, ValueError, AttributeError):  # not every driver has it (the CH340's needs none)
+                pass
+    transport = SerialTransport(port, timeout_s=config.serial.timeout_s, clock=clock)
+    if wait_boot:
+        wait_for_firmware(transport, config, clock)
+    return transport
+
+
+def wait_for_firmware(transport: SerialTransport, config, clock) -> float:
+    """Wait for the first valid frame after the port's open (its reset); returns the seconds it took."""
+    from dyno.protocol import v1, v2
+
+    proto = v2 if config.protocol == "v2" else v1
+    ask = proto.encode_command(proto.OP_INFO)
+    t0 = clock.now()
+    deadline = t0 + config.serial.boot_timeout_s
+    clock.sleep(BOOT_QUIET_S)
+    while True:
+        try:
+            transport.transfer(ask, FRAME_MAX)
+            return clock.now() - t0
+        except TransportFault:
+            pass
+        if clock.now() >= deadline:
+            raise TransportFault("timeout", f"{config.serial.port}: no frame within {config.serial.boot_timeout_s:g} s "
+                                 "of opening the port (it resets the Nano; its bootloader listens ~1 s): check the "
+                                 "USB cable, the firmware is flashed, and protocol/baud in rig.toml")
+        clock.sleep(BOOT_POLL_S)
