@@ -86,6 +86,9 @@ def load_inputs(opts: RunOptions):
     from dyno.rigconfig import load_rig
 
     rig_cfg = load_rig(opts.rig_path)
+    from dyno.transports.budget import check_budget
+
+    check_budget(rig_cfg)  # a poll rate the link cannot carry: one line naming poll_hz, before anything runs
     calibration = latest(load_history(opts.calibration_path))
     engine_map = load_engine_map(opts.engine_map_path)
     return rig_cfg, calibration, engine_map
@@ -132,6 +135,7 @@ class RunContext:
     estop: object = None  # dyno.hw.estop.EstopInput where rig.toml declares pins.estop_input (rig or twin)
     pi_outputs: bool = False  # the outputs are the Pi's own code (the rig, or the twin): the rig's signal path
     estop_hooked: bool = False  # the E-stop input records its stops through this context (start_watchdog)
+    link_meter: object = None  # dyno.transports.budget.LinkMeter: the firmware link's time on the wire
 
 
 def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
@@ -213,9 +217,16 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     holder["uncertainty"]["air_rel"] = ambient.air_rel_u()
-    if opts.sim:
-        transport = I2CTransport(bus, rig_cfg.i2c.firmware_address)
-        thermometer = _thermometer(bus, rig_cfg.i2c.thermometer_address)
+    link_meter = None
+    if opts.sim:  # each transaction charged its wire time at the rig file's clock (dyno.transports.budget)
+        from dyno.transports.budget import LinkMeter, MeteredBus
+
+        link_meter = LinkMeter(now_s)
+        firmware_bus = MeteredBus(bus, link_meter, rig_cfg)
+        transport = I2CTransport(firmware_bus, rig_cfg.i2c.firmware_address)
+        # the thermometer shares the firmware's bus on an I2C rig (on a serial rig it has its own)
+        thermometer = _thermometer(firmware_bus if rig_cfg.transport == "i2c" else bus,
+                                   rig_cfg.i2c.thermometer_address)
     else:
         transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
         thermometer = hw.thermometer.object_c
@@ -273,7 +284,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
     controller.inertia = rig_cfg.inertia
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
-                     ambient=ambient.to_dict(), ambient_sensor=ambient_dev)
+                     ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter)
     if "twin" in holder:
         _, ctx.twin, ctx.estop = holder["twin"]
     elif hw is not None:

@@ -43,6 +43,9 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     from dyno.rigconfig import load_rig
 
     rig_cfg = load_rig(rig_path)
+    from dyno.transports.budget import check_budget
+
+    check_budget(rig_cfg)  # the same link budget as a run: a poll rate the link cannot carry is refused
     if sim:
         from dyno.ui.sim_fixture import build_fixture_poller
 

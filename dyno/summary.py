@@ -43,6 +43,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
 
             for pub, p in zip(out["points"], ctx.controller.points):
                 pub.update(corrected_point_keys(p, zc))
+    out["link"] = link_document(ctx)
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)
     if getattr(ctx.controller, "tare", None):
         out["torque_tare"] = ctx.controller.tare  # the zero the points were measured from
@@ -87,6 +88,25 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     from dyno.runlog.files import finite  # JSON-safe: NaN and infinities become null
 
     return finite(out)
+
+
+def link_document(ctx) -> dict:
+    """The firmware link as the run used it: its transport and clock, the poll rate, the worst second's busy
+    share (measured where a meter ran: the simulated rig; planned on the rig) and the frames lost — polls that
+    got no accepted frame (failed transfers, rejected frames: each re-polled, but late)."""
+    from dyno.transports.budget import clock_hz, planned_busy
+
+    rig = getattr(ctx, "rig_cfg", None)
+    st = ctx.poller.reader.stats
+    meter = getattr(ctx, "link_meter", None)
+    out = {"transport": getattr(rig, "transport", None), "clock_hz": clock_hz(rig) if rig else None,
+           "poll_hz": ctx.poller.full_poll_hz,
+           "bus_busy_frac": round(meter.worst_frac(), 4) if meter is not None else (
+               round(planned_busy(rig, ctx.poller.full_poll_hz), 4) if rig else None),
+           "busy_basis": "measured" if meter is not None else "planned",
+           "frames_lost": sum(st.transport_errors.values()) + sum(st.rejected.values()),
+           "events_lost": ctx.poller.reader.events_lost}
+    return out
 
 
 POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_primary", "rpm_secondary", "ratio",

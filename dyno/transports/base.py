@@ -17,9 +17,12 @@ from collections import Counter
 
 from dyno.errors import TransportError
 
-# Linux i2c-dev reports a missing ACK as EREMOTEIO/ENXIO/EIO, a hung bus as ETIMEDOUT.
+# Linux i2c-dev reports a missing ACK as EREMOTEIO/ENXIO (i2c-algo-bit, under i2c-gpio: EIO for a data byte's),
+# a hung bus as ETIMEDOUT.  The Pi's Broadcom controller (i2c-bcm2835) gives EIO for its clock-stretch timeout
+# (CLKT): the transport of a bus on that controller names it so (RecoveringI2CTransport, hardware_controller).
 _ERRNO_CAUSE = {errno.EREMOTEIO: "nack", errno.ENXIO: "nack", errno.EIO: "nack",
                 errno.ETIMEDOUT: "timeout", errno.EAGAIN: "timeout"}
+STRETCH_CAUSES = {**_ERRNO_CAUSE, errno.EIO: "stretch_timeout"}
 
 
 class TransportFault(TransportError):
@@ -33,6 +36,8 @@ class Transport(ABC):
 
     name = "transport"
 
+    errno_cause = _ERRNO_CAUSE  # OSError errno -> failure cause
+
     def __init__(self) -> None:
         self.transfers = 0
         self.failures: Counter = Counter()
@@ -45,7 +50,7 @@ class Transport(ABC):
             self.failures[exc.cause] += 1
             raise
         except OSError as exc:
-            cause = _ERRNO_CAUSE.get(exc.errno, "io")
+            cause = self.errno_cause.get(exc.errno, "io")
             self.failures[cause] += 1
             raise TransportFault(cause, str(exc)) from exc
         return bytes(data)

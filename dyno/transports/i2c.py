@@ -7,10 +7,15 @@
   same request is safe in v1: ``ACK_POLL(seq)`` for a frame the device
   already retired just serves the current frame again (docs/protocol.md);
 * bus recovery after a stuck transfer (ETIMEDOUT): close and reopen
-  ``/dev/i2c-N``, which re-initialises the BCM2835 controller state the
-  driver keeps per open file.  (The classic 9-clock SDA release needs the
-  pins as GPIO; with the ``i2c-gpio`` overlay the kernel does it itself, see
-  hardware/README.md);
+  ``/dev/i2c-N``.  That only renews the open file: it does not reset the
+  controller (the Broadcom driver resets its FIFO and state at every
+  transfer anyway).  A bus held low by the slave needs the classic 9-clock
+  SDA release, which needs the pins as GPIO: with the ``i2c-gpio`` overlay
+  (the shipped rig's bus) the kernel does it itself, on the Broadcom
+  controller only the Nano's reset below frees it (hardware/README.md);
+* on the Broadcom controller (buses 0/1 of a Pi up to the 4) an EIO is its
+  clock-stretch timeout, counted as ``stretch_timeout`` (hardware/README.md:
+  the Nano stretches SCL), not as a NACK;
 * an Arduino reset (via the reset pin) after N consecutive failed transfers,
   because a Nano whose TWI state machine has wedged holding SDA low never
   recovers on its own.  Its RESET flag then starts a new time epoch.
@@ -24,7 +29,11 @@ import errno
 from collections import Counter
 
 from dyno.clock import MonotonicClock
-from dyno.transports.base import _ERRNO_CAUSE, I2CTransport, TransportFault
+from dyno.transports.base import STRETCH_CAUSES, I2CTransport, TransportFault
+
+
+#: after pulsing RESET, no other reset for this long: the new boot answers within it (Optiboot ~1 s + setup)
+RESET_GRACE_S = 3.0
 
 
 class RecoveringI2CTransport(I2CTransport):
@@ -43,6 +52,7 @@ class RecoveringI2CTransport(I2CTransport):
         self.retried: Counter = Counter()  # attempts that failed but were retried, by cause
         self.recoveries = 0
         self.resets = 0
+        self._next_reset_s = float("-inf")
 
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         delay = self.retry_backoff_s
@@ -52,7 +62,7 @@ class RecoveringI2CTransport(I2CTransport):
                 data = super()._transfer(request, read_len)
             except (OSError, TransportFault) as exc:
                 last = exc
-                cause = exc.cause if isinstance(exc, TransportFault) else _ERRNO_CAUSE.get(exc.errno, "io")
+                cause = exc.cause if isinstance(exc, TransportFault) else self.errno_cause.get(exc.errno, "io")
                 if cause == "timeout":
                     self._recover_bus()
                 if attempt < self.retries:
@@ -63,10 +73,14 @@ class RecoveringI2CTransport(I2CTransport):
             self.consecutive_failures = 0
             return data
         self.consecutive_failures += 1
-        if self._reset is not None and self.consecutive_failures >= self.reset_after_failures:
+        if (self._reset is not None and self.consecutive_failures >= self.reset_after_failures
+                and self.clock.now() >= self._next_reset_s):
             self.consecutive_failures = 0
             self.resets += 1
             self._reset()
+            # the Nano's bootloader listens ~1 s after an external reset before the sketch (and its I2C slave)
+            # starts: the NACKs until then are the reset's, not a reason for another one
+            self._next_reset_s = self.clock.now() + RESET_GRACE_S
         assert last is not None
         raise last
 
@@ -112,7 +126,16 @@ def open_i2c(config, *, bus=None, reset=None, clock=None, address=None) -> Recov
     if bus is None:
         reopen = smbus_factory(c.bus)
         bus = reopen()
-    return RecoveringI2CTransport(
+    transport = RecoveringI2CTransport(
         bus, c.firmware_address if address is None else address,
         retries=c.retries, retry_backoff_s=c.retry_backoff_s,
         reset_after_failures=c.reset_after_failures, reopen=reopen, reset=reset, clock=clock)
+    if hardware_controller(c.bus):
+        transport.errno_cause = STRETCH_CAUSES
+    return transport
+
+
+def hardware_controller(bus_number: int) -> bool:
+    """Buses 0 and 1 are the SoC's I2C controller (Broadcom on a Pi up to the 4: the clock-stretching bug);
+    i2c-gpio overlays take the next numbers (the shipped rig: bus 3)."""
+    return bus_number in (0, 1)

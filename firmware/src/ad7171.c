@@ -32,8 +32,10 @@ void ad7171_init(void)
     SCLK_HIGH();
     DDRD |= _BV(PIN_ADC_SCLK_BIT);
     DDRD &= (uint8_t)~_BV(PIN_ADC_DOUT_BIT);
-    /* DOUT/RDY is a push-pull output: no pull-up (and none to fight). */
-    PORTD &= (uint8_t)~_BV(PIN_ADC_DOUT_BIT);
+    /* Pull-up on: DOUT/RDY is push-pull and overrides it, but an unplugged cable then reads 1 ("not ready",
+     * no conversion) instead of floating low and reading "ready" on every pass (a ring full of junk codes;
+     * dyno doctor: "no conversions"). As the input converter's (ad7171_input.c). */
+    PORTD |= _BV(PIN_ADC_DOUT_BIT);
 }
 #endif
 
