@@ -132,6 +132,25 @@ def _no_info_hint(cfg, fails: dict, reader) -> str:
     return f"answers at {where}, but no {cfg.protocol} info frame ({fails or 'no failure counted'}): another sketch?"
 
 
+def check_estop_input(report: Report, cfg, pin_factory=None) -> None:
+    """Read-only: the E-stop chain's monitor input (an input claimed, nothing driven)."""
+    from gpiozero import Button
+
+    bcm = cfg.pins.estop_input
+    try:
+        button = Button(bcm, pull_up=True, pin_factory=pin_factory)
+    except Exception as exc:  # noqa: BLE001 - gpiozero's pin errors: in use (the service runs?), no GPIO here
+        report.add("e-stop input", FAIL, f"GPIO{bcm} (pins.estop_input) cannot be read: {exc} (is dyno running?)")
+        return
+    try:
+        closed = button.is_pressed
+    finally:
+        button.close()
+    report.add("e-stop input", OK if closed else FAIL,
+               f"GPIO{bcm}: chain closed" if closed else
+               f"GPIO{bcm}: chain OPEN (a button pressed, or the chain's wire or connector: check the E-stop chain)")
+
+
 def check_link_budget(report: Report, cfg) -> None:
     """The poll rate against the link's clock (dyno.transports.budget): a run refuses what does not fit."""
     from dyno.transports.budget import MAX_BUSY, clock_hz, planned_busy, poll_s
@@ -332,6 +351,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     from dyno.transports.serial import open_serial
 
     report = Report()
+    injected = bus is not None  # a simulated or fake bus: no real pins behind this doctor
     report.add("rig file", OK, f"{cfg.path} (protocol {cfg.protocol}, poll {cfg.poll_hz:g} Hz)", essential=False)
     kind = transport_kind or cfg.transport
     check_link_budget(report, cfg if kind == cfg.transport else replace(cfg, transport=kind))
@@ -383,6 +403,8 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
         report.add("thermometer", FAIL, "no I2C bus")
     check_ambient(report, cfg, bus)
 
+    if not toggle and cfg.pins.estop_input is not None and (pin_factory is not None or not injected):
+        check_estop_input(report, cfg, pin_factory)
     if toggle:
         if transport is None:
             report.add("gpio", FAIL, "not toggled: no firmware link to confirm the reset")
