@@ -118,7 +118,8 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     needs_arg, allowed, _ = DRILLS[name]
     arg = arg.strip() or None
     if needs_arg and arg is None:
-        raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:ARG@T)")
+        what = "|".join(allowed) if allowed else {"estop-held": "SECONDS", "loop-stall": "MS"}.get(name, "ARG")
+        raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:{what}@T)")
     if not needs_arg and arg is not None and allowed is None:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
     if allowed is not None and arg is not None and arg not in allowed:

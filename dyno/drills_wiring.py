@@ -9,7 +9,8 @@ endswitch-stuck-open       it reads open from now on (wire cut, connector off)
 endswitch-bounce           it wears: 30 ms of chatter at each transition, and a loose contact that
                            reads closed on 5 % of reads while open
 estop-held:S               the E-stop is pressed (its chain opens) and held S seconds
-estop-twice                the E-stop pressed for 0.5 s; again 1 s after the session is re-armed (``dyno ui``)
+estop-twice                the E-stop pressed for 0.5 s; again 1 s after the session is re-armed (``dyno ui``; in
+                           ``dyno run``, which has no re-arm, the first press alone)
 watchdog-error             the watchdog's look raises on every look from now on, and its own logging of the
                            first one raises too (its log file unwritable)
 sigint-in-command          SIGINT delivered inside the driver's next brake-apply command (between its
@@ -50,16 +51,15 @@ def check_wiring_drill(d, rig_cfg, twin: bool) -> None:
     says whether the run has the wiring twin (``--mock-pins`` on the simulated rig)."""
     if d.name not in WIRING_DRILLS:
         return
-    if not twin:
-        raise ConfigError("command line", "--drill", f"{d}: the wiring drills run through the wiring twin "
-                          "(add --mock-pins: the Pi's own output code on the simulated wiring)")
-    pins = rig_cfg.pins
-    if d.name.startswith("endswitch") and pins.brake_released_input is None:
-        raise ConfigError("command line", "--drill", f"{d}: the rig file declares no end-of-travel switch "
-                          "(pins.brake_released_input in its [pins])")
-    if d.name.startswith("estop") and pins.estop_input is None:
-        raise ConfigError("command line", "--drill", f"{d}: the rig file declares no E-stop monitor input "
-                          "(pins.estop_input in its [pins])")
+    pins = getattr(rig_cfg, "pins", None)
+    missing = [] if twin else ["--mock-pins (the Pi's own output code on the simulated wiring)"]
+    if d.name.startswith("endswitch") and getattr(pins, "brake_released_input", None) is None:
+        missing.append("an end-of-travel switch in the rig file (pins.brake_released_input in its [pins])")
+    if d.name.startswith("estop") and getattr(pins, "estop_input", None) is None:
+        missing.append("an E-stop monitor input in the rig file (pins.estop_input in its [pins])")
+    if missing:
+        raise ConfigError("command line", "--drill", f"{d}: the wiring drills run through the wiring twin; this one "
+                          f"needs {' and '.join(missing)}")
 
 
 class _UnwritableLog:

@@ -56,9 +56,8 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))  # the physical state (dyno.safe_outputs), not a wish
-    rig_faults = outputs.get("driver_faults") or outputs.get("faults")
-    if rig_faults:  # wiring faults the Pi's output code found (an end switch contradicting the travel)
-        out["rig_faults"] = list(rig_faults)
+    # wiring faults the Pi's output code found (an end switch contradicting the travel): [] when none
+    out["rig_faults"] = list(outputs.get("driver_faults") or outputs.get("faults") or [])
     if not out["rig_safe"]:
         out["rig_unsafe_because"] = outputs.get("unsafe_because", "not in the safe state")
     refused = list(getattr(ctx.controller, "refused", []))

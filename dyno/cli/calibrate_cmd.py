@@ -74,6 +74,9 @@ def run(args) -> int:
     from dyno.rigconfig import load_rig
 
     rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    from dyno.transports.budget import check_budget
+
+    check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)
     inp = args.channel == "input"
     if inp and getattr(rig_cfg, "input_torque", None) is None:
         raise ConfigError("command line", "--channel", f"input: the rig file {rig_cfg.path} declares no input "

@@ -156,10 +156,15 @@ def check_link_budget(report: Report, cfg) -> None:
     from dyno.transports.budget import MAX_BUSY, clock_hz, planned_busy, poll_s
 
     busy = planned_busy(cfg)
+    fix = ""
+    if busy > MAX_BUSY:
+        fits = int((MAX_BUSY - planned_busy(cfg, 0.0)) / poll_s(cfg))
+        fix = (f": at most {fits} Hz here; lower poll_hz, or a faster link (hardware/README.md, 'The Pi's I²C and "
+               "clock stretching')")
     report.add("link budget", OK if busy <= MAX_BUSY else FAIL,
                f"{cfg.poll_hz:g} polls/s x {poll_s(cfg) * 1e3:.2f} ms on {cfg.transport} at {clock_hz(cfg)} "
                f"{'Bd' if cfg.transport == 'serial' else 'Hz'} = {100 * busy:.0f} % of the link (limit "
-               f"{100 * MAX_BUSY:.0f} %)")
+               f"{100 * MAX_BUSY:.0f} %){fix}")
 
 
 def check_thermometer(report: Report, cfg, bus) -> None:
@@ -340,7 +345,10 @@ def check_data(report: Report, cfg, transport, clock, operator) -> None:
     from dyno.hw.clock import MonotonicClock
 
     reader = make_reader(cfg.protocol, transport)
-    for name, ok, detail in doctor_data.check(reader, clock or MonotonicClock(), cfg.poll_hz, operator):
+    input_expected = getattr(cfg, "input_torque", None) is not None and cfg.protocol == "v2"
+    reader.want_input = input_expected  # the engine-side converter asked for, as a run asks at boot
+    for name, ok, detail in doctor_data.check(reader, clock or MonotonicClock(), cfg.poll_hz, operator,
+                                              input_expected=input_expected):
         report.add(name, OK if ok else FAIL, detail)
 
 
@@ -384,7 +392,8 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     if kind == "serial":
         try:
             transport = open_serial(cfg, port=serial_port, clock=clock)
-            report.add("serial", OK, f"{cfg.serial.port} at {cfg.serial.baud} Bd")
+            report.add("serial", OK, f"{cfg.serial.port} at {cfg.serial.baud} Bd"
+                       + (f" ({type(serial_port).__name__}: injected)" if serial_port is not None else ""))
         except OSError as exc:
             report.add("serial", FAIL, str(exc))
     elif bus is not None:
@@ -427,13 +436,13 @@ def run(args) -> int:
     if args.sim:  # the engine idling, the operator simulated, one fake clock (dyno.sim.doctor_rig)
         from dyno.sim.doctor_rig import build
 
-        ds = build(cfg, mock_pins=args.mock_pins, drills=args.drill)
+        ds = build(cfg, mock_pins=args.mock_pins, drills=args.drill, twin=args.mock_pins or _declares_inputs(cfg))
         bus, clock, pin_factory, operator = ds.sim.bus, ds.clock, ds.pin_factory, ds.operator
         if (args.transport or cfg.transport) == "serial":  # opened as diagnose opens it: the Nano resets
             from dyno.sim.serial_port import SimSerialPort
 
             serial_port = SimSerialPort(ds.sim, clock)
-        toggle = toggle or args.mock_pins  # on the twin the output checks run (nothing moves but the simulation)
+        toggle = toggle or args.mock_pins  # --mock-pins: the output checks run (nothing moves but the simulation)
         if toggle and pin_factory is None:  # --sim --toggle alone: the twin as well (the reset pin wired)
             from dyno.hw.mockpins import SimPinFactory
 
@@ -443,9 +452,18 @@ def run(args) -> int:
         from dyno.hw.doctor_data import TerminalOperator
 
         operator = TerminalOperator()
+    print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""), flush=True)
+    import logging
+
+    logging.getLogger("dyno.outputs").setLevel(logging.CRITICAL)  # the driver's findings are the report's lines
     report = diagnose(cfg, bus=bus, transport_kind=args.transport, toggle=toggle, serial_port=serial_port,
                       clock=clock, pin_factory=pin_factory, operator=operator)
-    print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""))
     print(report.render())
     sys.stdout.flush()
     return 0 if report.ok else 1
+
+
+def _declares_inputs(cfg) -> bool:
+    """The rig file declares an input the twin drives (the E-stop monitor, the end switch): the simulated
+    doctor reads it through the twin even read-only."""
+    return cfg.pins.estop_input is not None or cfg.pins.brake_released_input is not None

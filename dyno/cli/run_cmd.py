@@ -381,11 +381,20 @@ def _print_table(result: dict) -> None:
     fr = result["frames"]
     print(f"frames: read {fr['read']}, accepted {fr['accepted']}, rejected {fr['rejected']}; "
           f"events lost {result['events_lost']}")
+    link = result.get("link") or {}
+    if link.get("transport"):
+        print(f"link: {link['transport']} at {link['clock_hz']} {'Bd' if link['transport'] == 'serial' else 'Hz'}, "
+              f"{link['poll_hz']:g} polls/s, worst second {100 * (link['bus_busy_frac'] or 0):.0f} % busy "
+              f"({link['busy_basis']}), frames lost {link['frames_lost']}")
+    for f in result.get("rig_faults") or []:
+        print(f"RIG FAULT: {f['channel']}: {f['detail']}")
     for a in result["aborts"]:
         print(f"ABORT: {a['cause']}: {a['detail']}")
     if result["aborts"]:
         print(f"rig safe: {'yes' if result.get('rig_safe') else 'NO'}  outputs: "
-              + ", ".join(f"{k}={v}" for k, v in result.get("outputs", {}).items() if k != "safe"))
+              + ", ".join(f"{k}={round(v, 3) if isinstance(v, float) else v}"
+                          for k, v in result.get("outputs", {}).items()
+                          if k != "safe" and not isinstance(v, (list, dict))))
 
 
 def _print_points(points: list) -> None:

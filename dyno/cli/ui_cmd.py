@@ -47,6 +47,9 @@ def run(args) -> int:
 
     plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
     rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    from dyno.transports.budget import check_budget
+
+    check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)
     if not args.sim:  # no GPIO / I2C here: one line and exit 2, not a traceback from inside the app
         from dyno.hw.preflight import check_rig_present
 

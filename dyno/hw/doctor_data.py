@@ -32,7 +32,9 @@ LINK_BAD_SHARE = 0.01
 #: where each channel's wire is (hardware/README.md)
 WIRES = {"primary": "the primary Hall sensor's cable (Nano D2)",
          "secondary": "the secondary Hall sensor's cable (Nano D3)",
-         "adc": "the output torque converter's cable (AD7171: SCLK D4, DOUT D5)"}
+         "adc": "the output torque converter's cable (AD7171: SCLK D4, DOUT D5)",
+         "input": "the input torque converter's cable (second AD7171: DOUT D8, SCLK D9)"}
+CH_INPUT = 4  # dyno.protocol.v2.CH_INPUT
 
 
 @dataclass
@@ -43,6 +45,9 @@ class DataSample:
     conversions: int = 0
     codes: set = field(default_factory=set)
     conversion_errors: int = 0
+    input_conversions: int = 0  # the engine-side converter's (rig.toml [input_torque]), v2 tag 4
+    input_codes: set = field(default_factory=set)
+    input_errors: int = 0
     events_lost: int = 0
     transport_errors: dict = field(default_factory=dict)
     rejected: dict = field(default_factory=dict)
@@ -73,6 +78,11 @@ def sample(reader, clock, poll_hz: float, seconds: float = SECONDS) -> DataSampl
                 s.codes.add(ev.code)
                 if ev.status:
                     s.conversion_errors += 1
+            elif ev.channel == CH_INPUT:
+                s.input_conversions += 1
+                s.input_codes.add(ev.code)
+                if ev.status:
+                    s.input_errors += 1
         clock.sleep(period)
     s.seconds = clock.now() - t0
     st = reader.stats
@@ -83,8 +93,10 @@ def sample(reader, clock, poll_hz: float, seconds: float = SECONDS) -> DataSampl
     return s
 
 
-def check(reader, clock, poll_hz: float, operator=None, seconds: float = SECONDS) -> list[tuple[str, bool, str]]:
-    """:func:`sample`, then for each Hall channel without edges the operator's turn and a second look."""
+def check(reader, clock, poll_hz: float, operator=None, seconds: float = SECONDS,
+          input_expected: bool = False) -> list[tuple[str, bool, str]]:
+    """:func:`sample`, then for each Hall channel without edges the operator's turn and a second look;
+    ``input_expected``: the rig declares the engine-side converter (judged as the output one)."""
     s = sample(reader, clock, poll_hz, seconds)
     for ch in ("primary", "secondary"):
         if s.edges[ch] or operator is None:
@@ -92,7 +104,27 @@ def check(reader, clock, poll_hz: float, operator=None, seconds: float = SECONDS
         with operator.turning(ch):
             again = sample(reader, clock, poll_hz, seconds)
         s.edges[ch] = again.edges[ch]
-    return judge(s)
+    out = judge(s)
+    if input_expected:
+        out.insert(3, _converter("adc (input torque)", "input", s.input_conversions, s.input_codes, s.input_errors,
+                                 s.seconds))
+    return out
+
+
+def _converter(name: str, wire: str, n: int, codes: set, errors: int, seconds: float) -> tuple[str, bool, str]:
+    """One AD7171: converting at its rate, not flooding, not stuck, not flagging errors."""
+    rate = n / seconds if seconds > 0 else 0.0
+    if n == 0:
+        return name, False, f"no conversions in {seconds:.1f} s: check {WIRES[wire]} and the bridge supply"
+    if abs(rate - ADC_RATE_HZ) > ADC_RATE_TOL * ADC_RATE_HZ:
+        why = "flooding: a floating DOUT reads ready on every pass" if rate > ADC_RATE_HZ else "too slow"
+        return name, False, f"{rate:.0f} conversions/s (expected {ADC_RATE_HZ:g}): {why}; check {WIRES[wire]}"
+    if len(codes) <= 1:
+        return name, False, (f"{n} conversions, every one code {min(codes):#08x}: stuck (an open bridge or a dead "
+                             f"converter); check {WIRES[wire]}")
+    if errors > ADC_RATE_TOL * n:
+        return name, False, f"{errors} of {n} conversions flagged in error: check {WIRES[wire]} and the excitation"
+    return name, True, f"{rate:.0f} conversions/s, {len(codes)} distinct codes"
 
 
 def judge(s: DataSample) -> list[tuple[str, bool, str]]:
@@ -105,21 +137,7 @@ def judge(s: DataSample) -> list[tuple[str, bool, str]]:
         else:
             out.append((f"hall {ch}", False, f"no edges in {s.seconds:.1f} s while the shaft should turn: check "
                                             f"{WIRES[ch]}, the sensor's supply and its gap to the trigger"))
-    rate = s.conversions / s.seconds if s.seconds > 0 else 0.0
-    adc = "adc (output torque)"
-    if s.conversions == 0:
-        out.append((adc, False, f"no conversions in {s.seconds:.1f} s: check {WIRES['adc']} and the bridge supply"))
-    elif abs(rate - ADC_RATE_HZ) > ADC_RATE_TOL * ADC_RATE_HZ:
-        why = "flooding: a floating DOUT reads ready on every pass" if rate > ADC_RATE_HZ else "too slow"
-        out.append((adc, False, f"{rate:.0f} conversions/s (expected {ADC_RATE_HZ:g}): {why}; check {WIRES['adc']}"))
-    elif len(s.codes) <= 1:
-        out.append((adc, False, f"{s.conversions} conversions, every one code {min(s.codes):#08x}: stuck (an "
-                                f"open bridge or a dead converter); check {WIRES['adc']}"))
-    elif s.conversion_errors > ADC_RATE_TOL * s.conversions:
-        out.append((adc, False, f"{s.conversion_errors} of {s.conversions} conversions flagged in error: check "
-                                f"{WIRES['adc']} and the bridge's excitation"))
-    else:
-        out.append((adc, True, f"{rate:.0f} conversions/s, {len(s.codes)} distinct codes"))
+    out.append(_converter("adc (output torque)", "adc", s.conversions, s.codes, s.conversion_errors, s.seconds))
     nacks = sum(v for k, v in s.transport_errors.items() if k == "nack")
     other = sum(v for k, v in s.transport_errors.items() if k != "nack")
     crc = sum(v for k, v in s.rejected.items() if "crc" in str(k).lower())

@@ -68,7 +68,8 @@ class EndSwitch:
                                        "until `dyno doctor --toggle` passes"})
         import logging
 
-        logging.getLogger("dyno.outputs").error("end-of-travel switch: %s", detail)
+        logging.getLogger("dyno.outputs").error("dyno: rig fault: end-of-travel switch %s (the switch is ignored: "
+                                                "full-stroke releases)", detail)
 
     def inherit(self, fault: dict) -> None:
         """A fault an earlier session found and nobody has cleared (:mod:`dyno.hw.rig_faults`)."""

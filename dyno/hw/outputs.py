@@ -434,7 +434,7 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
 
     def _doing(self) -> str:
         return ("while applying" if self._moving == APPLY else
-                "during a release" if self._target == RELEASE else "at rest")
+                "during a release" if self._target == RELEASE else "with the actuator stopped")
 
     def _next_event_s(self, now: float) -> float | None:
         """Earliest time at which :meth:`_advance` would change something."""

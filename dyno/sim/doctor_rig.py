@@ -51,20 +51,29 @@ def parse_doctor_drill(text: str, cfg):
     from dyno.drills import parse_drill
     from dyno.errors import ConfigError
 
+    names = (*SENSOR_DRILLS, *TWIN_DRILLS)
+    expected = f"NAME[:ARG] with NAME one of {', '.join(names)} (no @T: the fault is there from the start)"
     if "@" in text:
-        raise ConfigError("command line", "--drill", f"{text!r}: no @T for dyno doctor (the fault is there from "
-                          "the start)")
-    d = parse_drill(f"{text}@0")
-    if d.name not in SENSOR_DRILLS and d.name not in TWIN_DRILLS:
-        raise ConfigError("command line", "--drill", f"{text!r}: dyno doctor takes "
-                          f"{', '.join((*SENSOR_DRILLS, *TWIN_DRILLS))}")
+        raise ConfigError("command line", "--drill", f"{text!r}: {expected}")
+    name = text.partition(":")[0].strip().lower()
+    if name not in names:
+        raise ConfigError("command line", "--drill", f"{text!r}: unknown for dyno doctor; {expected}")
+    try:
+        d = parse_drill(f"{text}@0")
+    except ConfigError as exc:  # its argument: said without the run's @T
+        raise ConfigError("command line", "--drill", str(exc.expected).replace("@0", "").replace("@T)", ")")) from None
+    if d.arg == "input" and getattr(cfg, "input_torque", None) is None:
+        raise ConfigError("command line", "--drill", f"{text}: the rig has no input torque channel (rig.toml "
+                          "[input_torque], e.g. --rig hardware/rig-input-torque.toml)")
     if d.name in TWIN_DRILLS and cfg.pins.brake_released_input is None:
         raise ConfigError("command line", "--drill", f"{text}: the rig file declares no end-of-travel switch "
                           "(pins.brake_released_input in its [pins])")
     return d
 
 
-def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0) -> DoctorSim:
+def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0, twin: bool | None = None) -> DoctorSim:
+    """The doctor's simulated rig; ``twin`` (default: ``mock_pins``) builds the wiring twin even when the output
+    checks do not run (the declared inputs are read through it)."""
     from dyno.hw.clock import FakeClock
     from dyno.sim.rig import SimRig
 
@@ -74,15 +83,17 @@ def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0) -> DoctorSim:
 
         raise ConfigError("command line", "--drill", "the end-switch drills act through the wiring twin: add "
                           "--mock-pins")
+    from dyno.app_input import sim_params_for
+
     clock = FakeClock(start_s=0.0)
-    sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed)
+    sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed, params=sim_params_for(None, cfg))
     sim.model.brake_hold_relay = cfg.actuator.brake_hold_relay
     if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
         from dyno.sim.bme280_chip import SimBME280
 
         sim.bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
     out = DoctorSim(sim, clock, operator=SimOperator(sim))
-    if mock_pins:
+    if mock_pins if twin is None else twin:
         from dyno.hw.mockpins import SimPinFactory
 
         out.pin_factory = SimPinFactory(cfg, sim.actuators, clock, armed=True,
@@ -100,8 +111,14 @@ def _apply(ds: DoctorSim, d) -> None:
     elif d.name == "hall-dead":
         m.stuck_hall.update(("primary", "secondary") if d.arg == "both" else (d.arg,))
     elif d.name == "adc-stuck":
-        m.adc_stuck = True
+        if d.arg == "input":
+            m.input_stuck = True
+        else:
+            m.adc_stuck = True
     elif d.name == "adc-error":
-        m.adc_error_prob = 1.0
+        if d.arg == "input":
+            m.input_error_prob = 1.0
+        else:
+            m.adc_error_prob = 1.0
     elif d.name == "thermometer-lost":
         ds.sim.bus.thermometer_lost = True
