@@ -7,6 +7,8 @@ import pytest
 
 from dyno.heap import return_free_heap
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _rss_mb() -> float:
     for line in Path("/proc/self/status").read_text().splitlines():

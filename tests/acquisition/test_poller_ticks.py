@@ -12,6 +12,8 @@ from dyno.clock import run
 from dyno.sim.rig import SimRig
 from dyno.transports.base import I2CTransport
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _rig_and_poller(loop, *, blocking_io: bool, poll_hz: float = 150.0):
     t0 = loop.time()

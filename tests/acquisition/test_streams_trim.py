@@ -1,3 +1,4 @@
+import pytest
 """A long-lived poller forgets old events (the UI re-arms run after run on one poller) without changing
 what any later window reads, and the safety monitor's ADC checks neither replay nor skip a sample."""
 
@@ -9,6 +10,8 @@ from dyno.acquisition.streams import Streams
 from dyno.control.safety import SafetyLimits, SafetyMonitor
 from dyno.protocol import v1
 from dyno.sim.rig import TruthRecorder
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def _events(t0_us, n, code=lambda k: 30000 + (k % 7), status=0):

@@ -10,6 +10,8 @@ import pytest
 from dyno.analysis.air import (PLAUSIBLE_PRESSURE_KPA, PLAUSIBLE_TEMP_C, Ambient, j1349_correction_factor,
                                j1349_factor_of, known_air_rel_u, parse_ambient, uncorrected_air_rel_u)
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def test_hot_high_day_factor_follows_density_and_friction():
     # 35 C, 90 kPa station, 20 %RH: dry air 89.88 kPa; CF = 1.176 (99/p_d) sqrt(308/298) - 0.176

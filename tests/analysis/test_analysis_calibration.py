@@ -13,6 +13,8 @@ from dyno.analysis.calibration import (
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "calibration/torque_calibration.csv"
 LEGACY = legacy_data_dir() / "cal_values.csv"

@@ -8,6 +8,8 @@ import pytest
 from dyno.analysis.efficiency import batch_mean, point_efficiency
 from dyno.analysis.engine_map import EngineMap, NoMapPower, OutOfMapRange
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 RPM = np.array([1500, 2000, 2500, 3000, 3400, 3600, 3850.0])
 TORQUE = np.array([15.0, 17.5, 18.6, 18.0, 16.3, 13.0, 0.0])
 MAP = EngineMap(RPM, TORQUE, source="test-map", sha256="cafe")

@@ -14,6 +14,8 @@ from dyno.analysis.engine_map import (
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 REPRESENTATIVE = ROOT / "calibration/engine_maps/baja-10hp-representative.csv"
 LEGACY = legacy_data_dir() / "engine_power_RPM.csv"

@@ -10,6 +10,8 @@ import pytest
 from dyno.analysis.calibration import (REPRODUCIBILITY_TARGET_REL, CalibrationRejected, fit_calibration,
                                        fit_repeats, slope_reproducibility)
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 LOADS_NM = [3.9, 7.8, 11.8, 15.7, 19.6, 15.7, 11.8, 7.8, 3.9]
 DIRECTION = [1, 1, 1, 1, 1, -1, -1, -1, -1]
 

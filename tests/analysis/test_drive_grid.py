@@ -1,9 +1,12 @@
+import pytest
 """The drive grid's table (pure): cells join their points; a cell without a point keeps its reason; a point
 without an efficiency gives the cell its efficiency_reason; NaN becomes null."""
 
 import math
 
 from dyno.analysis.drive_grid import grid_table
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_cells_join_points_and_keep_reasons():

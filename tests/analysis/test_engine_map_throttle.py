@@ -12,6 +12,8 @@ import pytest
 from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange, load_engine_map
 from dyno.errors import ConfigError
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 REPO = Path(__file__).resolve().parents[2]
 FULL = REPO / "calibration" / "engine_maps" / "baja-10hp-representative.csv"
 PART = REPO / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv"

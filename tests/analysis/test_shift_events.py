@@ -8,6 +8,8 @@ import pytest
 from dyno.analysis import coastdown as cd
 from dyno.analysis import shift_events as se
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _edges(t_s, omega_rad_s, phase=0.3):
     """Edge times (us) of a shaft with speed samples ``omega`` on the grid ``t``: one per revolution."""

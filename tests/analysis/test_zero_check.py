@@ -8,6 +8,8 @@ import pytest
 
 from dyno.analysis.zero_check import corrected_point_keys, drift_check, zero_at, zero_reading
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 CAL = SimpleNamespace(slope_counts_per_nm=100.0, intercept_counts=30000.0,
                       torque_secondary_nm=lambda c: (c - 30000.0) / 100.0)
 

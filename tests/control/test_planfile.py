@@ -11,6 +11,8 @@ from dyno.control.plans import plan_named, plan_names
 from dyno.control.speed_hold import SpeedHoldPlan, speed_hold_plan_of
 from dyno.errors import ConfigError
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 HEAD = 'schema = "dyno.plan/1"\nname = "mine"\n'
 
 

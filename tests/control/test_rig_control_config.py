@@ -9,6 +9,8 @@ from dyno.control.speed_hold import SpeedHoldGains
 from dyno.errors import ConfigError
 from dyno.rigconfig import DEFAULT_RIG_PATH, ControlConfig, InertiaConfig, rig_from_dict
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 @pytest.fixture(scope="module")
 def base():

@@ -14,6 +14,8 @@ import pytest
 from dyno.errors import ConfigError
 from dyno.rigconfig import DEFAULT_RIG_PATH, rig_from_dict
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 OLD_DRIVEN = {"inertia_kg_m2": 0.0251, "inertia_rel_unc": 0.03, "inertia_beyond_gauge_kg_m2": 0.0121}
 

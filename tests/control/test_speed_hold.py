@@ -1,7 +1,10 @@
+import pytest
 """The speed-hold law (pure): sign, sigma-delta pulses, dead band, anti-windup."""
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.control.speed_hold import SpeedHold, SpeedHoldGains
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_too_fast_applies_too_slow_releases():

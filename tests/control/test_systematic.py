@@ -7,6 +7,8 @@ import pytest
 from dyno.analysis.calibration import CalibrationEntry
 from dyno.analysis.systematic import calibration_rel_u, point_systematic
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _cal(slope, n=0, r2=0.9999):
     return CalibrationEntry(date="2026-01-01", slope_counts_per_nm=slope, intercept_counts=35000.0, r2=r2,

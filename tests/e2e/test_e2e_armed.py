@@ -13,6 +13,8 @@ from dyno.drills import parse_drill
 
 from .conftest import QUICK_PLAN
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ONSET_S = 10.0  # after the first frame: the engine is running and the controller waits in ARMED
 
 # drill -> (causes accepted, bound on latency_s), the same bounds as docs/safety.md

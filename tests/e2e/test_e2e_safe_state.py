@@ -12,6 +12,8 @@ from dyno.control.plans import plan_named
 from dyno.drills import parse_drill
 from dyno.errors import SafetyAbort
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 PART_THROTTLE_MAP = DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv")
 
 # plan -> the mid-test drill: a different fault on each, at a phase where the brake is working

@@ -1,3 +1,4 @@
+import pytest
 """The "secondary must turn" check with the engagement from the clamp: no false trip when the engine revs
 through engagement at full throttle, and a dead secondary sensor still caught within its bound."""
 
@@ -6,6 +7,8 @@ from dataclasses import replace
 from dyno.app import RunOptions, run_test
 from dyno.control.controller import TestPlan as StepPlan
 from dyno.drills import parse_drill
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_dead_secondary_sensor_before_the_warm_up_is_caught_once_the_engine_is_above_the_check_speed(tmp_path):

@@ -4,6 +4,8 @@ with a run directory that holds only its `start` record (issue 23)."""
 
 from __future__ import annotations
 
+import pytest
+
 import json
 import os
 import signal
@@ -11,6 +13,8 @@ import signal
 import dyno.app
 from dyno.app import RunOptions, run_test
 from dyno.control.plans import plan_named
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_signal_during_build_ends_the_run_safe_with_its_records(tmp_path, monkeypatch):

@@ -20,6 +20,8 @@ from dyno.cli.run_cmd import exit_code
 from dyno.drills import parse_drill
 from dyno.errors import ConfigError
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 REPO = Path(__file__).resolve().parents[2]
 
 

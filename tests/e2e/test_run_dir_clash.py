@@ -3,10 +3,14 @@ taken later)."""
 
 from __future__ import annotations
 
+import pytest
+
 import datetime as dt
 import threading
 
 from dyno import app
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 class _Frozen(dt.datetime):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.firmware
+pytestmark = [pytest.mark.quick, pytest.mark.firmware]
 
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_firmware.py"
 

@@ -13,7 +13,7 @@ import pytest
 
 from dyno.cli.firmware_sim_cmd import simulate
 
-pytestmark = pytest.mark.firmware
+pytestmark = [pytest.mark.quick, pytest.mark.firmware]
 
 FW = Path(__file__).resolve().parents[2] / "firmware"
 

@@ -8,7 +8,7 @@ import pytest
 
 from .conftest import make
 
-pytestmark = pytest.mark.firmware
+pytestmark = [pytest.mark.quick, pytest.mark.firmware]
 
 
 def test_firmware_native_unit_tests(toolchain):

@@ -11,6 +11,8 @@ from dyno.hw.bme280 import BME280, AmbientSensorError, compensate, pack_trimming
 from dyno.sim.bme280_chip import TRIMMING, SimBME280, raw_words
 from dyno.sim.world import World
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 class _Bus:
     def __init__(self, dev):

@@ -17,6 +17,8 @@ from dyno.sim.serial_port import SimSerialPort
 from dyno.transports.base import TransportFault
 from dyno.transports.serial import open_serial
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _sim():
     clock = FakeClock(start_s=0.0)

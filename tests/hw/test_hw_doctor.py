@@ -9,6 +9,8 @@ import pytest
 from dyno.cli import main
 from dyno.rigconfig import DEFAULT_RIG_PATH
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 GOOD = DEFAULT_RIG_PATH.read_text()
 
 

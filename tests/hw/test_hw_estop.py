@@ -10,6 +10,8 @@ import pytest
 from dyno.hw.estop import EstopInput
 from dyno.hw.testing import EstopChainPin
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ESTOP_BCM = 17
 
 

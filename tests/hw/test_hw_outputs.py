@@ -12,6 +12,8 @@ from dyno.hw.outputs import END_STOP_OVERRUN_FRACTION, GpioActuators
 
 from dyno.hw.testing import assert_direction_never_switched_with_enable_on, assert_settled_before_enable, gpio
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def on_intervals(log, pin):
     """[(t_on, t_off)] for one pin from the shared log."""

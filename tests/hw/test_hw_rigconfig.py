@@ -8,6 +8,8 @@ import pytest
 from dyno.errors import ConfigError
 from dyno.rigconfig import DEFAULT_RIG_PATH, load_rig, rig_from_dict
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 @pytest.fixture(scope="module")
 def base():

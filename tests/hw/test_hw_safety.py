@@ -20,6 +20,8 @@ from dyno.hw.outputs import GpioActuators
 from dyno.hw.safety import SafetyGuard, Watchdog
 from dyno.hw.testing import assert_direction_never_switched_with_enable_on, assert_settled_before_enable, gpio
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 REPO = Path(__file__).resolve().parents[2]
 
 

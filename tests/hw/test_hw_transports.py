@@ -16,6 +16,8 @@ from dyno.transports.base import TransportFault
 from dyno.transports.i2c import RecoveringI2CTransport
 from dyno.transports.serial import (CobsDeframer, SerialTransport, cobs_decode, cobs_encode, is_v1_frame)
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def frames(n, seed=1):
     rng = random.Random(seed)

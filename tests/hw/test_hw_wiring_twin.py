@@ -20,6 +20,8 @@ from dyno.hw.mockpins import SimPinFactory
 from dyno.hw.outputs import GpioActuators
 from dyno.hw.safety import Watchdog
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 END_SWITCH_BCM, ESTOP_BCM = 27, 22
 TRAVEL_MM = 40.0
 FREE_TRAVEL_MM = 1.0

@@ -17,6 +17,8 @@ from dyno.replay import replay
 from dyno.runlog.legacy import import_legacy
 from dyno.runlog.reader import load_run
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 DATA = legacy_data_dir()
 RUNS = ("2019-04-18_run2", "2019-04-18_run3", "2019-04-18_run4")
 needs_data = pytest.mark.skipif(legacy_data_missing() is not None, reason=str(legacy_data_missing()))

@@ -9,6 +9,8 @@ from dyno.analysis.air import Ambient, known_air_rel_u, uncorrected_air_rel_u
 from dyno.library.compare import ATMOSPHERE_NOTE, compare
 from dyno.library.compare_terms import MAP_DECORRELATION_RPM, difference_terms, run_systematics
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 SENSED = {"temp_c": 30.0, "pressure_kpa": 95.0, "rh_pct": 40.0, "source": "sensor", "j1349_factor": 1.05}
 NONE = {"temp_c": None, "pressure_kpa": None, "rh_pct": None, "source": "none", "j1349_factor": None}
 

@@ -12,6 +12,8 @@ from dyno.model import closed_form as cf
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
 from dyno.model.solution import solve_point
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def test_converged_and_every_boundary_condition_holds(table_6_1):
     raw = table_6_1.raw

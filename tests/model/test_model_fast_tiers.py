@@ -9,6 +9,8 @@ from dyno.errors import ConfigError
 from dyno.model import capstan, closed_form as cf
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT, OperatingPoint
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def test_capstan_formulas():
     assert capstan.capstan_tension_ratio(math.pi, 0.4) == pytest.approx(math.exp(0.4 * math.pi))

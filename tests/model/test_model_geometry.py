@@ -7,6 +7,8 @@ import pytest
 from dyno.errors import ConfigError
 from dyno.model import geometry as g
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 PITCH_M, CENTRES_M = 0.8572, 0.214
 
 

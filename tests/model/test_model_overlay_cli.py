@@ -7,6 +7,8 @@ import pytest
 from dyno.cli import main
 from dyno.model import overlay
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 POINTS = [(1.0, 3400.0, 18.0), (1.3, 3400.0, 18.0)]
 
 

@@ -18,6 +18,8 @@ from dyno.transports.base import Transport, TransportFault
 
 from .test_protocol_vectors import _events
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _lines(name):
     for line in (VECTOR_DIR / name).read_text().splitlines():

@@ -1,3 +1,4 @@
+import pytest
 """Acknowledge/re-send, stale repeats, resets, and the unwrapping of device time."""
 
 import random
@@ -6,6 +7,8 @@ from dyno.acquisition.reader import Unwrapper
 from dyno.protocol import v1, v2
 from dyno.protocol.session import LinkSession
 from dyno.sim.device import EmulatedFirmware
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def _exchange(session, fw, now, corrupt=None):

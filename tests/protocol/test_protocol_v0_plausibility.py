@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
+
 from dyno.acquisition.reader import V0Reader, implausible_v0
 from dyno.protocol import v0
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 # a steady state: primary 3,750 rpm (16 ms period), secondary 7,500 rpm (8 ms), ADC every 8 ms
 BASE = v0.LegacyFrame(3750, 1_000_000, 7500, 1_004_000, 35000, 1_006_000)

@@ -14,6 +14,8 @@ from dyno.sim.device import EmulatedFirmware
 
 from .test_protocol_vectors import _events
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _lines(name):
     for line in (VECTOR_DIR / name).read_text().splitlines():

@@ -7,6 +7,8 @@ from dyno.protocol import v0, v1
 from dyno.protocol.crc import crc16
 from dyno.protocol.vectors import VECTOR_DIR, render
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def _lines(name):
     for line in (VECTOR_DIR / name).read_text().splitlines():

@@ -8,6 +8,8 @@ import pytest
 from dyno.sim.driven import characterisation_truth
 from dyno.sim.physics import RigModel, RigParams
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 FAST = dict(belt_efficiency_source="loss_model")
 
 

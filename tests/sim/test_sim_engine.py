@@ -11,6 +11,8 @@ from dyno.errors import ConfigError
 from dyno.sim.engine import EngineMap, load_engine_map
 from dyno.sim.physics import RigModel, RigParams, _resolve_map_path
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 def test_engine_map_file_is_representative_and_shaped():
     path = _resolve_map_path(RigParams().engine_map_path)

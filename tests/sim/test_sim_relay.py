@@ -11,6 +11,8 @@ from dyno.rigconfig import load_rig
 from dyno.sim.physics import RigModel, RigParams
 from dyno.sim.rig import SimActuators
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 CELL_S = RigParams().max_substep_s  # inputs act from the next physics cell: one cell of slack
 MM_PER_S = RigParams().actuator_speed_mm_s
 TRANSFER_S = RigParams().relay_transfer_s

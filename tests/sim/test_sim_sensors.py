@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 G = 32 / 61
 DEBOUNCE_S = {"primary": 0.010, "secondary": 0.006}   # the thesis firmware's software debounce
 

@@ -7,6 +7,8 @@ import time
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 @pytest.mark.parametrize("tune", ["calibration/tunes/cvtech-stock.toml", None],
                          ids=["tune-file-balance", "closed-form-balance"])

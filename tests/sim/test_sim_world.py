@@ -15,6 +15,8 @@ from dyno.sim.engine import EngineMap
 from dyno.sim.rig_params import RigParams
 from dyno.sim.world import realise
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 MAP = EngineMap.from_csv("calibration/engine_maps/baja-10hp-representative.csv")
 
 

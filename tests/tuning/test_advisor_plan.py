@@ -12,6 +12,8 @@ from dyno.tuning.advisor_plan import adjustments, figure_covariance, two_trip_pr
 from dyno.tuning.parts import load_catalogue, part_identity
 from dyno.tuning.tune import load_tune
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 CAT = load_catalogue("calibration/parts")
 STOCK = load_tune("calibration/tunes/cvtech-stock.toml")
 KINDS = ("flyweights", "primary_spring", "secondary_spring", "helix")

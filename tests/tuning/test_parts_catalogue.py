@@ -10,6 +10,8 @@ from dyno.tuning import actuators as act
 from dyno.tuning.parts import apply_part, load_catalogue, match_parts
 from dyno.tuning.tune import load_tune
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 CAT = "calibration/parts"
 
 

@@ -14,6 +14,8 @@ from dyno.tuning import actuators as act
 from dyno.tuning.geometry import open_belt_length_m, secondary_radius_for_primary_m
 from dyno.tuning.tune import RollerTrack, load_tune
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 TUNE = load_tune(ROOT / "calibration/tunes/cvtech-stock.toml")
 

@@ -7,6 +7,8 @@ import pytest
 
 from dyno.tuning import arcvt
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 P = arcvt.ArcvtParams()
 
 

@@ -15,6 +15,8 @@ import pytest
 from dyno.errors import ConfigError
 from dyno.tuning import design as dm
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 REQ_FILE = ROOT / "calibration/design/arango-munoz-2020-example.toml"
 CAT_FILE = ROOT / "calibration/belt_catalogue.csv"

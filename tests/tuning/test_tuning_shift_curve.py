@@ -17,6 +17,8 @@ from dyno.tuning.shift_curve import (EngineMap, compare_to_measured, key_speeds_
                                      load_engine_map, model_params_for, predict_shift_curve, sensitivities)
 from dyno.tuning.tune import load_tune
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 ROOT = Path(__file__).resolve().parents[2]
 TUNE = load_tune(ROOT / "calibration/tunes/cvtech-stock.toml")
 # Built in the test so it does not depend on other owners' files.

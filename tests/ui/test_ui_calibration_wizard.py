@@ -10,6 +10,8 @@ from dyno.clock import run
 from dyno.ui.calibration_feed import run_sim_calibration
 from dyno.ui.calibration_wizard import CalibrationWizard, Phase, check_loads, parse_masses
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 MASSES_KG = [5, 10, 20, 30, 40]
 RADIUS_M = 0.15
 

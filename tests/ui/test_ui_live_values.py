@@ -13,6 +13,8 @@ from dyno.analysis.engine_map import load_engine_map
 from dyno.protocol import v1
 from dyno.ui.live_model import RAD_S_PER_RPM, RateMeter, efficiency_text, live_values
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 FULL_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
 PART_MAP = "calibration/engine_maps/baja-10hp-representative-part-throttle.csv"
 COUNTS_PER_NM, OFFSET = 108.0, 35000.0

@@ -1,9 +1,12 @@
+import pytest
 """The replay viewer's predicted shift curve comes from the tune stored with the run."""
 
 import shutil
 from pathlib import Path
 
 from dyno.ui.replay_model import predicted_shift_series
+
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 REPO = Path(__file__).resolve().parents[2]
 

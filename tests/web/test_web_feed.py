@@ -13,6 +13,8 @@ pytest.importorskip("aiohttp", reason="the web extra is not installed (pip insta
 from dyno.web.feed import LiveFeed  # noqa: E402
 from dyno.web.server import parse_bind  # noqa: E402
 
+pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
+
 
 class _Boom:
     """A source whose values cannot be read (a half-built controller, say)."""

@@ -16,7 +16,7 @@ import pytest
 
 from tests.web.conftest import REPO, DynoProcess, http_status, needs_browser
 
-pytestmark = needs_browser
+pytestmark = [pytest.mark.quick, needs_browser]
 
 
 @pytest.fixture(scope="module")
