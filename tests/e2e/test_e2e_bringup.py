@@ -134,3 +134,21 @@ def test_the_bus_is_not_reset_again_while_the_nano_boots():
             t.transfer(b"\x10", 32)
         clock.advance(1 / 150)
     assert len(resets) == 1
+
+
+def test_doctor_on_the_twin_as_a_real_process(tmp_path):
+    """`dyno doctor --sim --mock-pins --drill hall-dead:primary` as a user types it: exit 1, the channel named,
+    no traceback; without the drill, exit 0."""
+    import os
+    import subprocess
+    import sys
+
+    rig = _rig(tmp_path, **{"# brake_released_input = 27 ": "brake_released_input = 27 "})
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    base = [sys.executable, "-m", "dyno", "doctor", "--sim", "--mock-pins", "--rig", str(rig)]
+    bad = subprocess.run(base + ["--drill", "hall-dead:primary"], capture_output=True, text=True, timeout=120,
+                         env=env, cwd=tmp_path)
+    assert bad.returncode == 1 and "Traceback" not in bad.stderr, bad.stderr
+    assert any(ln.strip().startswith("FAIL") and "hall primary" in ln for ln in bad.stdout.splitlines()), bad.stdout
+    good = subprocess.run(base, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    assert good.returncode == 0 and good.stdout.rstrip().endswith("rig OK"), good.stdout + good.stderr
