@@ -28,7 +28,7 @@ from dyno.control.api import ENGINE_STATES as _ENGINE_STATES
 from dyno.control.api import LOADED_STATES as _LOADED_STATES
 from dyno.control.api import TRANSITIONS, State, TestPlan
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
-from dyno.control.outputs import APPLY, STOP, enter_safe_state
+from dyno.control.outputs import APPLY, STOP, DeadlineService, enter_safe_state
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.errors import SafetyAbort
 from dyno.protocol import v1
@@ -85,6 +85,7 @@ class TestController(Measuring):
         self._checking = False
         self._silence: asyncio.Future | None = None  # the heartbeat task's wait; set while run() runs
         self._silence_timer: asyncio.TimerHandle | None = None
+        self._output_deadlines = DeadlineService()  # the release sequenced at the driver's deadlines
         self._last_beat_s = -math.inf
         # The throttle as last commanded (the Actuators interface has no read-back): every point records
         # it (``throttle_frac``) and takes its efficiency from the engine map's curve at that throttle.
@@ -138,6 +139,7 @@ class TestController(Measuring):
         state's outputs without its latch, and the Hall checks stop expecting the engine."""
         self.engine_cut = True
         enter_safe_state(self.act, latch=False)
+        self._output_deadlines.start(self.act, self.time_scale)
         self.throttle_frac = 0.0
         self._log("engine_cut")
 
@@ -155,6 +157,7 @@ class TestController(Measuring):
     def latch_safe_state(self) -> None:
         """The engine's last word: the safe state, latched (actuators and this controller's gate)."""
         enter_safe_state(self.act, latch=True)
+        self._output_deadlines.start(self.act, self.time_scale)
         self.outputs_latched = True
         self.throttle_frac = 0.0
 

@@ -13,6 +13,7 @@ and must never reverse the direction relay with the enable on.
 
 from __future__ import annotations
 
+import asyncio
 from typing import Protocol, runtime_checkable
 
 APPLY = +1  # extend the actuator: more brake
@@ -50,3 +51,42 @@ def enter_safe_state(actuators, latch: bool = True) -> None:
         actuators.safe_state(latch=latch)
     except TypeError:
         actuators.safe_state()
+
+
+class DeadlineService:
+    """Services a driver's timed sequence (relay settle, enable, end of stroke) at the driver's own deadlines.
+
+    The engine's beats tick the outputs every ~15 ms; a driver that sequences its relay in two settles
+    (:class:`dyno.hw.outputs.GpioActuators`) would start a release up to two beats late.  One loop timer at
+    the driver's next deadline (``next_event_in_s``, on its clock; ``time_scale`` host s per driver s) starts
+    it a settle after the latch.  Drivers without deadlines (the simulated rig's) are left to the beats.
+    """
+
+    def __init__(self) -> None:
+        self._timer: asyncio.TimerHandle | None = None
+
+    def start(self, actuators, time_scale: float = 1.0) -> None:
+        self.cancel()
+        due = getattr(actuators, "next_event_in_s", None)
+        if due is None:
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop (a unit test, the shutdown path): the beats and finish_release serve
+            return
+        wait_s = due()
+        if wait_s is None:
+            return
+
+        def fire() -> None:
+            self._timer = None
+            actuators.service()
+            self.start(actuators, time_scale)
+
+        # a hair past the deadline: the driver compares `now < deadline`
+        self._timer = loop.call_later(wait_s * time_scale + 1e-4, fire)
+
+    def cancel(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None

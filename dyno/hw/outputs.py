@@ -242,6 +242,16 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             if not self.closed:
                 self._advance(self.clock.now())
 
+    def next_event_in_s(self) -> float | None:
+        """Seconds (this driver's clock) until the relay/enable sequence or a stroke next changes something,
+        or None: the engine services the release at these deadlines, not only on its beats."""
+        with self._held():
+            if self.closed:
+                return None
+            now = self.clock.now()
+            t = self._next_event_s(now)
+            return None if t is None else max(0.0, t - now)
+
     def clear_latch(self) -> None:
         """The explicit re-arm: commands are accepted again.  Refused (:class:`SafetyAbort`) while the
         release stroke runs or a wiring fault stands (:meth:`rearm_refusal`)."""

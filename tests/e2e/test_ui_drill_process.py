@@ -54,5 +54,5 @@ def test_ui_mock_pins_drill_records_the_physical_safe_state(tmp_path):
     o = s["outputs"]
     assert s["rig_safe"] is True and o["pads_off_rotor"] is True and o["brake_actuator"] == "stopped"
     assert o["brake_position_at_safe_mm"] > 1.0  # the brake was on the rotor when the fault came
-    assert o["release_s"] <= o["release_bound_s"]
+    assert o["release_s"] <= o["release_bound_s"], o
     assert o["driver_released"] is True and o["brake_estimate"] == 0.0  # the real-rig output code's own view

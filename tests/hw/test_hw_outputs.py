@@ -184,3 +184,55 @@ def test_hw_close_leaves_nothing_energised(actuators, rig, factory, clock):
         driven = [v for t, n, v in factory.log if n == gpio(bcm)]
         if name != "throttle_servo":
             assert not driven or driven[-1] == 0.0, name
+
+
+def test_hw_release_starts_one_settle_after_the_latch_without_waiting_for_a_beat(rig, factory):
+    """The engine services the driver's relay sequence at the driver's own deadlines (DeadlineService):
+    applied brake, latch, and no beat at all — the enable comes back on in the release direction one relay
+    settle after the latch (not up to two ~15 ms beats later), and the stroke then ends de-energised."""
+    import asyncio
+
+    from dyno.clock import VirtualTimeLoop
+    from dyno.control.outputs import DeadlineService
+    from dyno.hw.outputs import GpioActuators
+
+    loop = VirtualTimeLoop()
+
+    class LoopClock:
+        def now(self):
+            return loop.time()
+
+    act = GpioActuators(rig, pin_factory=factory, clock=LoopClock())
+    service = DeadlineService()
+    seen: dict = {}
+
+    async def scenario():
+        act.safe_state()  # the start of a run: a release from wherever the brake is
+        service.start(act)
+        await asyncio.sleep(rig.actuator.full_stroke_s + 0.5)
+        assert act.released
+        act.brake(APPLY)
+        for _ in range(50):  # apply for ~0.5 s on beats
+            await asyncio.sleep(0.01)
+            act.tick()
+        assert 0.1 < act.brake_position < 1.0 and factory.pin(rig.pins.brake_enable).state == 1
+        t_latch = loop.time()
+        act.safe_state(latch=True)
+        service.start(act)
+        while factory.pin(rig.pins.brake_enable).state == 0 and loop.time() < t_latch + 1.0:
+            await asyncio.sleep(0.001)
+        seen["enable_after_s"] = loop.time() - t_latch
+        seen["direction"] = factory.pin(rig.pins.brake_direction).state
+        await asyncio.sleep(rig.actuator.full_stroke_s + 0.5)
+
+    try:
+        loop.run_until_complete(scenario())
+    finally:
+        service.cancel()
+        loop.close()
+    settle = rig.actuator.relay_settle_s
+    assert seen["direction"] == 0  # the release direction
+    assert 2 * settle - 1e-3 <= seen["enable_after_s"] <= 2 * settle + 0.003, seen  # off, settle, relay, settle
+    assert factory.pin(rig.pins.brake_enable).state == 0 and act.released
+    assert act.release_basis == "full_stroke_time"
+    act.close()
