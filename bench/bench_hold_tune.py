@@ -28,11 +28,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import dyno.control.speed_hold as sh  # noqa: E402
+import dyno.control.plans.speed_hold as sh  # noqa: E402
 from dyno.app import RunOptions, run_test  # noqa: E402
 from dyno.control import plans as plans_mod  # noqa: E402
 from dyno.control.controller import State, TestPlan  # noqa: E402
-from dyno.control.steps import find_contact  # noqa: E402
+from dyno.control.plans.steps import find_contact  # noqa: E402
 
 OPERATING = {"torque": 16.0, "engine": None}  # engine: where it is with the secondary at 3,000 rpm
 SIGN = {"torque": -1.0, "engine": -1.0}  # engine at heavy load: more brake raises it (the CVT back-shifts)
@@ -45,11 +45,11 @@ def figures(trace, sp: float, start: float) -> dict:
             "sd_pc": 100 * statistics.pstdev(x for t, x in trace if t > trace[-1][0] - 3.0) / sp}
 
 
-async def trace_of(ctrl, variable: str, window_s: float, seconds: float):
-    t0, out = ctrl.rig_now(), []
-    while ctrl.rig_now() - t0 < seconds:
-        await ctrl.rig_sleep(0.05)
-        out.append((ctrl.rig_now() - t0, sh.measured(ctrl, variable, window_s)))
+async def trace_of(ctx, variable: str, window_s: float, seconds: float):
+    t0, out = ctx.now(), []
+    while ctx.now() - t0 < seconds:
+        await ctx.sleep(0.05)
+        out.append((ctx.now() - t0, sh.measured(ctx, variable, window_s)))
     return out
 
 
@@ -57,22 +57,22 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         deadband: float | None = None) -> dict:
     found: dict = {}
 
-    async def runner(ctrl):
-        ctrl._enter(State.STEP, "bench: contact")
-        assert await find_contact(ctrl)
+    async def runner(ctx):
+        ctx.phase(State.STEP, "bench: contact")
+        assert await find_contact(ctx)
         if variable == "engine":  # into the heavy-load region first, as the engine-hold plan does
             pre = {"rpm": 3000.0}
-            task = asyncio.create_task(sh._hold_loop(ctrl, sh.SpeedHold(sh.gains_for(ctrl, "secondary")), pre))
-            await ctrl.rig_sleep(8.0)
+            task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(sh.gains_for(ctx, "secondary")), pre), "hold")
+            await ctx.sleep(8.0)
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
-        sp0 = OPERATING[variable] or sh.measured(ctrl, variable, 1.0)
+        sp0 = OPERATING[variable] or sh.measured(ctx, variable, 1.0)
         if identify:
-            from dyno.control.autotune import identify_gain
+            from dyno.control.plans.autotune import identify_gain
 
-            res = await identify_gain(ctrl, variable, sp0, sign=SIGN[variable])
+            res = await identify_gain(ctx, variable, sp0, sign=SIGN[variable])
             found["identify"] = res
-        gains = sh.gains_for(ctrl, variable)
+        gains = sh.gains_for(ctx, variable)
         if kp is not None:
             gains = replace(gains, kp=kp)
         if deadband is not None:
@@ -80,26 +80,26 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         found["kp"] = gains.kp
         hold = sh.SpeedHold(gains)
         target = {"rpm": sp0, "sign": SIGN[variable]}
-        task = asyncio.create_task(sh._hold_loop(ctrl, hold, target, variable))
-        await trace_of(ctrl, variable, gains.speed_window_s, 8.0)
+        task = ctx.hold_task(sh._hold_loop(ctx, hold, target, variable), "hold")
+        await trace_of(ctx, variable, gains.speed_window_s, 8.0)
         steps = []
         for sp in (sp0 * 1.05, sp0):
-            start = sh.measured(ctrl, variable, gains.speed_window_s)
+            start = sh.measured(ctx, variable, gains.speed_window_s)
             target["rpm"] = sp
-            tr = await trace_of(ctrl, variable, gains.speed_window_s, 8.0)
+            tr = await trace_of(ctx, variable, gains.speed_window_s, 8.0)
             steps.append({"from": start, "to": sp, **figures(tr, sp, start)})
         found["steps"] = steps
         # the noise floor: the brake frozen where the hold put it, the same reading's sd over 3 s
         target["frozen"] = True
-        await ctrl.rig_sleep(1.0)
-        tr = await trace_of(ctrl, variable, gains.speed_window_s, 3.0)
+        await ctx.sleep(1.0)
+        tr = await trace_of(ctx, variable, gains.speed_window_s, 3.0)
         found["frozen_sd_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
-        tr = await trace_of(ctrl, variable, 1.0, 3.0)
+        tr = await trace_of(ctx, variable, 1.0, 3.0)
         found["frozen_sd_1s_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl._enter(State.SETTLE, "bench")
-        ctrl._enter(State.DONE, "bench done")
+        ctx.phase(State.SETTLE, "bench")
+        ctx.phase(State.DONE, "bench done")
 
     mp_old = plans_mod.RUNNERS.get("bench-hold")
     plans_mod.RUNNERS["bench-hold"] = runner

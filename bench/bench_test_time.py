@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import dyno.control.speed_hold as sh  # noqa: E402
+import dyno.control.plans.speed_hold as sh  # noqa: E402
 from dyno.app import RunOptions, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.controller import State  # noqa: E402
@@ -80,24 +80,24 @@ def step_responses(tmp: Path, seed: int = 1, rig_path=None) -> tuple[list[dict],
     """The step part on one seed: a row per step, and pulses/reversals per second while holding."""
     rows, rates = [], {}
 
-    async def plan(ctrl, *_a, **_k):
-        hold = sh.SpeedHold(sh.gains_for(ctrl, "secondary"))
-        ctrl._enter(State.STEP, "bench: contact")
-        no_load = sh.secondary_rpm(ctrl, 1.0)
-        ctrl.act.brake(APPLY)
-        while sh.secondary_rpm(ctrl, 0.3) > 0.99 * no_load:
-            await ctrl._sleep(0.02)
-        ctrl.act.brake(STOP)
+    async def plan(ctx, *_a, **_k):
+        hold = sh.SpeedHold(sh.gains_for(ctx, "secondary"))
+        ctx.phase(State.STEP, "bench: contact")
+        no_load = sh.secondary_rpm(ctx, 1.0)
+        ctx.brake(APPLY)
+        while sh.secondary_rpm(ctx, 0.3) > 0.99 * no_load:
+            await ctx.sleep(0.02)
+        ctx.brake(STOP)
         target = {"rpm": 3000.0}
         with PulseCount() as count:
-            task = asyncio.create_task(sh._hold_loop(ctrl, hold, target))
-            await ctrl._sleep(15.0)
+            task = ctx.hold_task(sh._hold_loop(ctx, hold, target), "hold")
+            await ctx.sleep(15.0)
             for sp in STEPS:
                 target["rpm"] = sp
-                t0, trace = ctrl._now(), []
-                while ctrl._now() - t0 < 8.0:
-                    await ctrl._sleep(0.05)
-                    trace.append((ctrl._now() - t0, sh.secondary_rpm(ctrl, 0.1)))
+                t0, trace = ctx.now(), []
+                while ctx.now() - t0 < 8.0:
+                    await ctx.sleep(0.05)
+                    trace.append((ctx.now() - t0, sh.secondary_rpm(ctx, 0.1)))
                 outside = [t for t, r in trace if abs(r - sp) > 0.005 * sp]
                 start = trace[0][1]
                 beyond = [(r - sp) * (1 if sp > start else -1) for _, r in trace]
@@ -107,8 +107,8 @@ def step_responses(tmp: Path, seed: int = 1, rig_path=None) -> tuple[list[dict],
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
         rates["pulses_per_s"], rates["reversals_per_s"] = count.per_s(hold.g.period_s)
-        ctrl._enter(State.SETTLE, "bench")
-        ctrl._enter(State.DONE, "bench done")
+        ctx.phase(State.SETTLE, "bench")
+        ctx.phase(State.DONE, "bench done")
 
     real = sh.run_speed_hold
     sh.run_speed_hold = plan

@@ -76,7 +76,7 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
                 zero = input_zero(streams, zb["t_start_us"], zb["t_end_us"], channel)
                 state["channel"] = controller.input_channel = channel.with_zero(zero)
                 if state["channel"].tare is not None:
-                    controller._log("tare_input", **state["channel"].tare)
+                    controller.plan_context.log("tare_input", **state["channel"].tare)
         ch = state["channel"]
         point.update(input_point(streams, point, ch))
         rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)

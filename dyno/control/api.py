@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 from dyno.analysis.stopping import STOP_QUANTILE
 from dyno.control.steady import SettleCriteria
@@ -93,4 +94,119 @@ class TestPlan:
 LOADED_STATES = frozenset({State.WARMUP, State.STEP, State.SETTLE, State.MEASURE})
 ENGINE_STATES = LOADED_STATES | {State.ARMED}
 
-__all__ = ["State", "TRANSITIONS", "TestPlan", "LOADED_STATES", "ENGINE_STATES"]
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """What a plan may read of the run's configuration (a snapshot; the engine owns the originals).
+
+    ``control``/``inertia``/``rig``: rig.toml's [control], [inertia] and the whole rig description;
+    ``input_channel``: the engine-side torque converter (or None); ``tune_path``: the tune a
+    characterisation compares with; the ``*_plan``/``speed_hold_gains`` fields: a caller's overrides of a
+    mode's own parameters (None: from the plan file).
+    """
+
+    limits: object = None
+    calibration: object = None
+    engine_map: object = None
+    control: object = None
+    inertia: object = None
+    rig: object = None
+    input_channel: object = None
+    tune_path: object = None
+    engagement_plan: object = None
+    coast_down_plan: object = None
+    speed_hold_plan: object = None
+    speed_hold_gains: object = None
+
+
+@runtime_checkable
+class PlanContext(Protocol):
+    """All a plan runner may touch (Bluesky's plans-through-a-run-engine): it is handed one and returns.
+
+    The engine (:class:`dyno.control.engine.EngineContext` over the controller) implements it; so does the
+    fake rig of the tests (``tests/control/fake_rig.py``).  Every output passes the engine's gate; after a
+    safe state the engine has the last word whatever the plan does; tasks a plan needs run under
+    :meth:`hold_task` and end with the run; files go through :meth:`write_artifact`.
+    """
+
+    plan: TestPlan  #: the frozen plan being run
+    config: PlanConfig  #: limits, calibration, engine map, [control], inertias, overrides
+    state: State  #: the state table's current state (read-only)
+    points: tuple  #: the points recorded so far (read-only)
+    throttle_frac: float  #: the throttle as last commanded, 0..1
+
+    def now(self) -> float:
+        """Rig seconds (a paced session's host time divided by its speed-up)."""
+
+    def host_now(self) -> float:
+        """Host (loop) seconds: the time base of the measuring windows and the log."""
+
+    def test_time_s(self) -> float:
+        """Rig seconds since GO."""
+
+    async def sleep(self, dt_s: float) -> None:
+        """Wait ``dt_s`` rig seconds (the outputs are serviced on the way)."""
+
+    async def plan_sleep(self, dt_s: float) -> None:
+        """Wait a duration taken from the plan (already scaled for a paced session)."""
+
+    async def checkpoint(self) -> None:
+        """Return when the operator has not paused the test."""
+
+    def brake(self, direction: int) -> None:
+        """APPLY / RELEASE / STOP the brake actuator, through the engine's gate (APPLY raises after a safe state)."""
+
+    def throttle(self, fraction: float, *, log: bool = True) -> None:
+        """The throttle 0 idle .. 1 full, through the gate; remembered for the points."""
+
+    def cut_engine(self) -> None:
+        """A deliberate engine cut (coast-down): ignition off, throttle idle, brake released, nothing latched."""
+
+    def rpm(self, channel: int) -> float:
+        """The live speed of a Hall channel (``v1.CH_PRIMARY`` / ``v1.CH_SECONDARY``)."""
+
+    def device_now_us(self) -> int:
+        """The newest device time seen (µs): the streams' time base."""
+
+    streams: object  #: the acquired streams (edge and ADC windows), read-only
+
+    def phase(self, state: State, reason: str = "") -> None:
+        """Enter ``state`` (checked against :data:`TRANSITIONS`; logged; the faces follow)."""
+
+    def log(self, doc_type: str, **fields) -> None:
+        """One document of the run's log."""
+
+    async def measure(self, give_up=None, plan: TestPlan | None = None) -> tuple:
+        """MEASURE a steady window into a point (remeasured if disturbed); ``plan``: the window's own targets.
+        Returns (point, host_t0, host_t1)."""
+
+    def record(self, point: dict, host_t0: float, host_t1: float) -> None:
+        """Record an accepted point (the faces, the log, the point hooks)."""
+
+    async def warm_up_at_load(self) -> None:
+        """The plan's warm-up at load, waited out before the first point."""
+
+    def mark_loaded(self) -> None:
+        """The brake has loaded the CVT from now (unless already marked): the warm-up criterion's start."""
+
+    def set_results(self, results: dict, *, hooks: bool = True, log: bool = True) -> None:
+        """A characterisation's figures (``hooks``: the simulator adds its truths; ``log``: a document)."""
+
+    def add_truths(self, results: dict) -> None:
+        """Let the result hooks (the simulator's truths) annotate ``results`` in place."""
+
+    def tune_control(self, control, identified: dict) -> None:
+        """An auto-tune's outcome: the [control] gains for the rest of the run and its record."""
+
+    def hold_task(self, coro, name: str):
+        """Run ``coro`` as an engine-owned task (a closed loop beside the plan); cancelled at the end of the run."""
+
+    def fail(self, cause: str, detail: str) -> None:
+        """Abort the test: the safe state at once, then the record."""
+
+    def write_artifact(self, name: str, doc: dict) -> None:
+        """A JSON file beside the run's log (logged as a warning where it cannot be written)."""
+
+
+__all__ = ["State", "TRANSITIONS", "TestPlan", "LOADED_STATES", "ENGINE_STATES", "PlanConfig", "PlanContext"]

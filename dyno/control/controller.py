@@ -27,8 +27,9 @@ from dyno.control import registry as _registry
 from dyno.control.api import ENGINE_STATES as _ENGINE_STATES
 from dyno.control.api import LOADED_STATES as _LOADED_STATES
 from dyno.control.api import TRANSITIONS, State, TestPlan
+from dyno.control.engine import EngineContext
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
-from dyno.control.outputs import APPLY, STOP, DeadlineService, enter_safe_state
+from dyno.control.outputs import APPLY, DeadlineService, enter_safe_state
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.errors import SafetyAbort
 from dyno.protocol import v1
@@ -50,7 +51,7 @@ class TestController(Measuring):
         self.writer = writer
         self.auto_go = auto_go
         self.on_wait_engine = on_wait_engine  # e.g. the simulated operator pulls the cord
-        # The plan modes other than "step": mode -> coroutine function(controller), and the modes whose
+        # The plan modes: mode -> coroutine function(plan context), and the modes whose
         # runner starts from idle right after GO (no warm-up). Default: dyno.control.registry's table.
         self.runner_for = runner_for if runner_for is not None else _registry.runner_for
         self.from_idle = from_idle if from_idle is not None else _registry.FROM_IDLE
@@ -65,7 +66,6 @@ class TestController(Measuring):
         self._resume = asyncio.Event()
         self._resume.set()
         self._aborted = asyncio.Event()
-        self._step_s = plan.step_s
         cal = calibration
         torque_from_code = None
         if cal is not None and getattr(cal, "slope_counts_per_nm", 0):
@@ -76,7 +76,7 @@ class TestController(Measuring):
         self.discards: list[dict] = []
         self.skips: list[str] = []  # why a setpoint or step gave no point (each also a "skip" document)
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
-        self.results: dict = {}  # a characterisation plan's figures (dyno.control.characterise / coastdown)
+        self.results: dict = {}  # a characterisation plan's figures (dyno.control.plans.characterise / coastdown)
         self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
         self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
@@ -96,6 +96,7 @@ class TestController(Measuring):
         self.outputs_latched = False
         self.refused: list[dict] = []
         poller.listeners.append(self._on_poll)
+        self.plan_context = EngineContext(self)  # all a plan runner is handed (dyno.control.api.PlanContext)
 
     # --- commands (from the UI / CLI) ------------------------------------------------------
     def go(self) -> None:
@@ -253,6 +254,7 @@ class TestController(Measuring):
             for t in (plan_task, aborted, safety):
                 t.cancel()
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
+            await self.plan_context.cancel_tasks()  # what the plan left running beside it
             # The engine has the last word, after the plan's cleanup: whatever the plan did on its way
             # out, the outputs are in the latched safe state (a release already under way keeps going).
             if self.state is State.ABORTED and not getattr(self.act, "latched", False):
@@ -354,45 +356,12 @@ class TestController(Measuring):
         await self._go.wait()
         self.go_s = self._now()
         if p.mode in self.from_idle:  # characterisations start from idle: no full-throttle warm-up
-            await self.runner_for(p.mode)(self)
+            await self.runner_for(p.mode)(self.plan_context)
             return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.set_throttle(1.0)
         await self._sleep(p.warmup_s)
-        if p.mode != "step":
-            await self.runner_for(p.mode)(self)
-            return
-        last_rs = self.poller.rpm(v1.CH_SECONDARY)
-        while True:
-            await self._resume.wait()
-            self._enter(State.STEP, f"brake step {self._step_s * 1e3:.0f} ms")
-            self.brake(APPLY)
-            await self._sleep(self._step_s)
-            self.brake(STOP)
-            if self.load_since_s is None:
-                self.load_since_s = self.rig_now()
-            self._enter(State.SETTLE, "waiting for steady state")
-            settled_by, settle_s = await self._settle()
-            if await self._secondary_below(p.min_secondary_rpm):
-                self._enter(State.DONE, f"secondary below {p.min_secondary_rpm:.0f} rpm")
-                return
-            point, host_t0, host_t1 = await self._measure()
-            if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
-                self._log("skip", reason=f"torque {point['torque_secondary_nm']:.2f} N m below "
-                                         f"{p.min_point_torque_nm} N m: brake not yet loading")
-                self._adapt_step(math.nan, math.nan)
-                continue
-            point.update(settled_by=settled_by, settle_s=settle_s, step_s=self._step_s)
-            self._record_point(point, host_t0, host_t1)
-            rs = point["rpm_secondary"]
-            self._adapt_step(last_rs, rs)
-            last_rs = rs
-            if not math.isnan(rs) and rs < p.min_secondary_rpm:
-                self._enter(State.DONE, f"secondary below {p.min_secondary_rpm:.0f} rpm")
-                return
-            if len(self.points) >= p.max_points:
-                self._enter(State.DONE, f"{p.max_points} points")
-                return
+        await self.runner_for(p.mode)(self.plan_context)
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:

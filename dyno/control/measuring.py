@@ -13,7 +13,6 @@ import math
 from dyno.analysis.points import reduce_point
 from dyno.analysis.stopping import stop_uncertainty
 from dyno.control.api import State
-from dyno.control.steady import is_settled
 from dyno.protocol import v1
 
 MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most this often
@@ -118,48 +117,3 @@ class Measuring:
                 await self._sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)
                 return False
         return True
-
-    async def _secondary_below(self, rpm_min: float) -> bool:
-        """The secondary really turns slower than ``rpm_min`` (measured by its edges, not a silent sensor)."""
-        rs = self.poller.rpm(v1.CH_SECONDARY)
-        if rs >= rpm_min:
-            return False
-        if rs == 0.0 and self._channel_quiet_s(v1.CH_SECONDARY) < 2.0:
-            # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
-            # within secondary_quiet_s; never read it as "the test has reached its end".
-            await self._sleep(self.limits.secondary_quiet_s + 0.1)
-            rs = self.poller.rpm(v1.CH_SECONDARY)
-        return rs < rpm_min
-
-    def _adapt_step(self, rs_before: float, rs_after: float) -> None:
-        """Aim at ~target_points over the range: lengthen short steps, shorten long ones."""
-        p = self.plan
-        if math.isnan(rs_before) or math.isnan(rs_after):
-            return
-        want = p.expected_secondary_span_rpm / p.target_points
-        got = rs_before - rs_after
-        if got < 0.5 * want:
-            self._step_s = min(p.step_max_s, self._step_s * 1.5)
-        elif got > 1.5 * want:
-            self._step_s = max(p.step_min_s, self._step_s * 0.6)
-
-    async def _settle(self) -> tuple[str, float]:
-        p, c = self.plan, self.plan.settle
-        t0 = self._now()
-        if p.settle_mode == "fixed":
-            await self._sleep(c.fixed_settle_s)
-            return "fixed", c.fixed_settle_s
-        await self._sleep(c.min_settle_s)
-        while True:
-            now_dev = self.poller.device_now_us()
-            if now_dev is not None and self._now() - t0 >= c.window_s:
-                ok, _ = is_settled(self.poller.streams, now_dev, self.calibration.slope_counts_per_nm,
-                                   self.calibration.intercept_counts, c)
-                if ok:
-                    return "detected", self._now() - t0
-            if self._now() - t0 >= c.max_settle_s:
-                return "timeout", self._now() - t0
-            if (self.poller.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and self._now() - t0 > c.min_settle_s + 1
-                    and await self._secondary_below(p.min_secondary_rpm)):
-                return "below_min", self._now() - t0
-            await self._sleep(0.1)

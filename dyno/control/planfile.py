@@ -11,7 +11,7 @@
     target_efficiency_ci95 = 0.01
     [test.settle]                # SettleCriteria fields (mode "step")
     [speed_hold]                 # the mode's own table, named after the mode ("-" -> "_")
-    [[step]]                     # mode "steps": the list of steps (dyno.control.steps)
+    [[step]]                     # mode "steps": the list of steps (dyno.control.plans.steps)
 
 Every problem is a :class:`~dyno.errors.ConfigError` naming the file and the field.  The
 plan keeps its file's text, which the run directory stores as ``plan.toml``.
@@ -35,8 +35,8 @@ TOP_KEYS = {"schema", "name", "description", "mode", "test", "step"}
 #: TestPlan fields a file may not set ([test] is for measurement settings; these come from elsewhere)
 _NOT_IN_TEST = {"mode", "name", "params", "steps", "settle", "source", "text"}
 #: a mode's parameter table, checked against these dataclasses' fields (other modes: passed through)
-PARAM_SCHEMAS = {"speed-hold": "dyno.control.speed_hold:SpeedHoldPlan",
-                 "drive-grid": "dyno.control.drive_grid:DriveGridPlan"}
+PARAM_SCHEMAS = {"speed-hold": "dyno.control.plans.speed_hold:SpeedHoldPlan",
+                 "drive-grid": "dyno.control.plans.drive_grid:DriveGridPlan"}
 
 
 def shipped_plans() -> dict[str, Path]:
@@ -111,7 +111,7 @@ def plan_from_dict(data: dict, path="plan", *, text: str = "") -> TestPlan:
             obj.check(lambda field, expected: err(f"{table_key}.{field}", expected))
     steps = ()
     if mode == "steps":
-        from dyno.control.steps import validate_steps
+        from dyno.control.plans.steps import validate_steps
 
         raw = data.get("step")
         if not isinstance(raw, list) or not raw:

@@ -16,14 +16,15 @@ import importlib
 from dyno.control.api import TestPlan
 from dyno.errors import ConfigError
 
-#: mode -> "module:coroutine" (or the coroutine function itself); it takes the controller after the warm-up
-#: (those in FROM_IDLE right after GO)
+#: mode -> "module:coroutine" (or the coroutine function itself); it takes the plan context
+#: (:class:`dyno.control.api.PlanContext`) after the warm-up (those in FROM_IDLE right after GO)
 RUNNERS: dict[str, object] = {
-    "speed-hold": "dyno.control.speed_hold:run_speed_hold",
-    "steps": "dyno.control.steps:run_steps",
-    "engagement": "dyno.control.characterise:run_engagement",
-    "coast-down": "dyno.control.coastdown:run_coast_down",
-    "drive-grid": "dyno.control.drive_grid:run_drive_grid",
+    "step": "dyno.control.plans.thesis_step:run_thesis_step",
+    "speed-hold": "dyno.control.plans.speed_hold:run_speed_hold",
+    "steps": "dyno.control.plans.steps:run_steps",
+    "engagement": "dyno.control.plans.characterise:run_engagement",
+    "coast-down": "dyno.control.plans.coastdown:run_coast_down",
+    "drive-grid": "dyno.control.plans.drive_grid:run_drive_grid",
 }
 
 #: modes whose runner starts from idle (GO, then no full-throttle warm-up): the characterisations
@@ -31,15 +32,15 @@ FROM_IDLE = {"engagement", "coast-down"}
 
 #: plans registered in code (no file); the shipped plan files are added to these by name
 PLANS: dict[str, TestPlan] = {
-    "engagement": TestPlan(mode="engagement", name="engagement"),  # dyno.control.characterise
-    "coast-down": TestPlan(mode="coast-down", name="coast-down"),  # dyno.control.coastdown
+    "engagement": TestPlan(mode="engagement", name="engagement"),  # dyno.control.plans.characterise
+    "coast-down": TestPlan(mode="coast-down", name="coast-down"),  # dyno.control.plans.coastdown
 }
 
 
 def runner_for(mode: str):
     """The coroutine function that runs a plan of ``mode`` (see :data:`RUNNERS`)."""
     if mode not in RUNNERS:
-        raise ConfigError("plan", "mode", f"one of step, {', '.join(sorted(RUNNERS))}, got {mode!r}")
+        raise ConfigError("plan", "mode", f"one of step, {', '.join(sorted(set(RUNNERS) - {'step'}))}, got {mode!r}")
     if callable(RUNNERS[mode]):
         return RUNNERS[mode]
     module, _, fn = RUNNERS[mode].partition(":")

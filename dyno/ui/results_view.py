@@ -1,7 +1,7 @@
 """The live screen's results panel: a characterisation plan's figures as text (pure, no Textual).
 
 The figures are the controller's ``results`` -- the dict the plan's runner computed
-(:mod:`dyno.control.characterise`, :mod:`dyno.control.coastdown`) and stored with the run as its
+(:mod:`dyno.control.plans.characterise`, :mod:`dyno.control.plans.coastdown`) and stored with the run as its
 ``characterisation`` document; ``dyno run --json`` prints the same dict and report.html renders it
 (:func:`dyno.report.sections.characterisation`).  This module only lays it out in ~50 columns.
 """

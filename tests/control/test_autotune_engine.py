@@ -14,10 +14,10 @@ import pytest
 
 from dyno.app import RunOptions, run_test
 from dyno.control import plans as plans_mod
-from dyno.control import speed_hold as sh
-from dyno.control.autotune import identify_gain
+from dyno.control.plans import speed_hold as sh
+from dyno.control.plans.autotune import identify_gain
 from dyno.control.controller import State, TestPlan as Plan
-from dyno.control.steps import find_contact
+from dyno.control.plans.steps import find_contact
 from dyno.sim.physics import RigParams
 
 
@@ -30,41 +30,41 @@ def _figures(trace, sp: float, start: float) -> dict:
             "sd_pc": 100 * statistics.pstdev(x for t, x in trace if t > trace[-1][0] - 3.0) / sp}
 
 
-async def _trace(ctrl, seconds: float, window_s: float):
-    t0, out = ctrl.rig_now(), []
-    while ctrl.rig_now() - t0 < seconds:
-        await ctrl.rig_sleep(0.05)
-        out.append((ctrl.rig_now() - t0, sh.engine_rpm(ctrl, window_s)))
+async def _trace(ctx, seconds: float, window_s: float):
+    t0, out = ctx.now(), []
+    while ctx.now() - t0 < seconds:
+        await ctx.sleep(0.05)
+        out.append((ctx.now() - t0, sh.engine_rpm(ctx, window_s)))
     return out
 
 
 def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
     found = {}
 
-    async def runner(ctrl):
-        ctrl._enter(State.STEP, "test: contact")
-        assert await find_contact(ctrl)
+    async def runner(ctx):
+        ctx.phase(State.STEP, "test: contact")
+        assert await find_contact(ctx)
         pre = {"rpm": 3000.0}  # heavy load, the CVT in low: where the engine-hold plan holds the engine
-        task = asyncio.create_task(sh._hold_loop(ctrl, sh.SpeedHold(sh.gains_for(ctrl, "secondary")), pre))
-        await ctrl.rig_sleep(8.0)
+        task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(sh.gains_for(ctx, "secondary")), pre), "hold")
+        await ctx.sleep(8.0)
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        sp0 = sh.engine_rpm(ctrl, 1.0)
-        found["identify"] = await identify_gain(ctrl, "engine", sp0, sign=-1.0)
-        gains = sh.gains_for(ctrl, "engine")  # the identified kp, applied to the controller's [control]
+        sp0 = sh.engine_rpm(ctx, 1.0)
+        found["identify"] = await identify_gain(ctx, "engine", sp0, sign=-1.0)
+        gains = sh.gains_for(ctx, "engine")  # the identified kp, applied to the controller's [control]
         found["kp"] = gains.kp
         target = {"rpm": sp0, "sign": -1.0}
-        task = asyncio.create_task(sh._hold_loop(ctrl, sh.SpeedHold(gains), target, "engine"))
-        await _trace(ctrl, 8.0, gains.speed_window_s)
+        task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(gains), target, "engine"), "hold")
+        await _trace(ctx, 8.0, gains.speed_window_s)
         found["steps"] = []
         for sp in (sp0 * 1.05, sp0):
-            start = sh.engine_rpm(ctrl, gains.speed_window_s)
+            start = sh.engine_rpm(ctx, gains.speed_window_s)
             target["rpm"] = sp
-            found["steps"].append(_figures(await _trace(ctrl, 8.0, gains.speed_window_s), sp, start))
+            found["steps"].append(_figures(await _trace(ctx, 8.0, gains.speed_window_s), sp, start))
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl._enter(State.SETTLE, "test")
-        ctrl._enter(State.DONE, "test done")
+        ctx.phase(State.SETTLE, "test")
+        ctx.phase(State.DONE, "test done")
 
     mp = pytest.MonkeyPatch()
     mp.setitem(plans_mod.RUNNERS, "test-engine-tune", runner)

@@ -14,17 +14,17 @@ import pytest
 from dyno.app import RunOptions, run_test
 from dyno.sim.rig_params import RigParams
 from dyno.control import plans as plans_mod
-from dyno.control import speed_hold as sh
+from dyno.control.plans import speed_hold as sh
 from dyno.control.controller import State, TestPlan as Plan
-from dyno.control.steps import find_contact
+from dyno.control.plans.steps import find_contact
 
 
-def _trace(ctrl, sp: float, seconds: float):
+def _trace(ctx, sp: float, seconds: float):
     async def go():
-        t0, out = ctrl.rig_now(), []
-        while ctrl.rig_now() - t0 < seconds:
-            await ctrl.rig_sleep(0.05)
-            out.append((ctrl.rig_now() - t0, sh.secondary_rpm(ctrl, 0.1)))
+        t0, out = ctx.now(), []
+        while ctx.now() - t0 < seconds:
+            await ctx.sleep(0.05)
+            out.append((ctx.now() - t0, sh.secondary_rpm(ctx, 0.1)))
         return out
     return go()
 
@@ -41,33 +41,33 @@ def _figures(trace, sp: float, start: float) -> dict:
 def _hold_run(out_dir, seed: int, end_stop: bool) -> dict:
     found = {}
 
-    async def runner(ctrl):
-        ctrl._enter(State.STEP, "test: contact")
-        no_load = sh.secondary_rpm(ctrl, 1.0)
-        t_c = ctrl.rig_now()
-        assert await find_contact(ctrl)
-        found["contact_s"] = ctrl.rig_now() - t_c  # the free travel from the released end to the pads
-        hold = sh.SpeedHold(sh.gains_for(ctrl, "secondary"))
+    async def runner(ctx):
+        ctx.phase(State.STEP, "test: contact")
+        no_load = sh.secondary_rpm(ctx, 1.0)
+        t_c = ctx.now()
+        assert await find_contact(ctx)
+        found["contact_s"] = ctx.now() - t_c  # the free travel from the released end to the pads
+        hold = sh.SpeedHold(sh.gains_for(ctx, "secondary"))
         target = {"rpm": 3000.0}
-        task = asyncio.create_task(sh._hold_loop(ctrl, hold, target))
-        found["from_contact"] = _figures(await _trace(ctrl, 3000.0, 12.0), 3000.0, no_load)
+        task = ctx.hold_task(sh._hold_loop(ctx, hold, target), "hold")
+        found["from_contact"] = _figures(await _trace(ctx, 3000.0, 12.0), 3000.0, no_load)
         for sp in STEPS_RPM:
-            start = sh.secondary_rpm(ctrl, 0.1)
+            start = sh.secondary_rpm(ctx, 0.1)
             target["rpm"] = sp
-            found[sp] = _figures(await _trace(ctrl, sp, 8.0), sp, start)
+            found[sp] = _figures(await _trace(ctx, sp, 8.0), sp, start)
         if end_stop:
             # An unreachable setpoint above the no-load speed: full release into the end stop for 12 s.
             target["rpm"] = 1.3 * no_load
-            await ctrl.rig_sleep(12.0)
+            await ctx.sleep(12.0)
             found["owed_s"], found["integral"] = hold.owed_s, hold.integral
-            start = sh.secondary_rpm(ctrl, 0.1)
+            start = sh.secondary_rpm(ctx, 0.1)
             target["rpm"] = 3000.0
-            trace = await _trace(ctrl, 3000.0, 12.0)
+            trace = await _trace(ctx, 3000.0, 12.0)
             found["after_end_stop"] = _figures(trace, 3000.0, start)
             found["bite_s"] = next(t for t, r in trace if r < 0.99 * start)  # the pads slow the secondary again
         task.cancel()
-        ctrl._enter(State.SETTLE, "test")
-        ctrl._enter(State.DONE, "test done")
+        ctx.phase(State.SETTLE, "test")
+        ctx.phase(State.DONE, "test done")
 
     mp = pytest.MonkeyPatch()
     mp.setitem(plans_mod.RUNNERS, "test-hold", runner)

@@ -8,7 +8,7 @@ from dyno.control import plans as plans_mod
 from dyno.control.controller import TestPlan as Plan
 from dyno.control.planfile import load_plan_file, plan_from_text, shipped_plans
 from dyno.control.plans import plan_named, plan_names
-from dyno.control.speed_hold import SpeedHoldPlan, speed_hold_plan_of
+from dyno.control.plans.speed_hold import SpeedHoldPlan, speed_hold_plan_of
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
@@ -91,7 +91,7 @@ def test_unknown_name_and_missing_file():
 
 def test_a_mode_registered_in_code_is_selectable_and_usable_from_a_file(monkeypatch):
     """Another module adds a mode (e.g. "engagement"): a code plan by name, and plan files may use it."""
-    monkeypatch.setitem(plans_mod.RUNNERS, "engagement", "dyno.control.steps:run_steps")
+    monkeypatch.setitem(plans_mod.RUNNERS, "engagement", "dyno.control.plans.steps:run_steps")
     monkeypatch.setitem(plans_mod.PLANS, "engagement", Plan(mode="engagement", warmup_s=1.0))
     p = plan_named("engagement")
     assert p.mode == "engagement" and p.name == "engagement" and p.warmup_s == 1.0

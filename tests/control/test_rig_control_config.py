@@ -5,7 +5,7 @@ import tomllib
 
 import pytest
 
-from dyno.control.speed_hold import SpeedHoldGains
+from dyno.control.plans.speed_hold import SpeedHoldGains
 from dyno.errors import ConfigError
 from dyno.rigconfig import DEFAULT_RIG_PATH, ControlConfig, InertiaConfig, rig_from_dict
 

@@ -38,7 +38,7 @@ def test_engagement_plan_recovers_the_simulated_cvt(tmp_path, tune):
     assert "<h2>Characterisation</h2>" in report and "<h2>Torque zero</h2>" in report and "sim truth" in report
     assert 'id="fig-ramps"' in report and 'id="fig-efficiency"' not in report  # its own figure, no empty plots
     # the figures are reproduced exactly from the raw events on disk (as a replay would)
-    from dyno.control.characterise import characterise_ramp
+    from dyno.control.plans.characterise import characterise_ramp
     from dyno.protocol import v1
     from dyno.runlog.reader import load_run
 

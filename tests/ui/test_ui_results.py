@@ -8,7 +8,7 @@ import json
 import math
 import re
 
-from dyno.control.characterise import EngagementPlan
+from dyno.control.plans.characterise import EngagementPlan
 from dyno.control.controller import State
 from dyno.control.plans import plan_named
 from dyno.ui.live_app import LiveApp

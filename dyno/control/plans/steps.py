@@ -13,7 +13,7 @@ Step kinds (keys; every time in s, speeds in rpm, torque in N·m):
   under the hold, a point every ``point_s``, each corrected for I·alpha (:mod:`dyno.analysis.inertia`).
 * ``brake``: ``direction`` = "apply" | "release" for ``s``.
 * ``identify``: the auto-tune of the hold of ``variable`` (``secondary``, default, | ``engine`` rpm) at
-  ``setpoint`` (:mod:`dyno.control.autotune`): ``pulse_s``, ``repeats``, ``apply`` (use the identified
+  ``setpoint`` (:mod:`dyno.control.plans.autotune`): ``pulse_s``, ``repeats``, ``apply`` (use the identified
   ``kp`` for the rest of the run; default true), ``load_raises_speed`` (as for ``hold``).
 * ``throttle``: ``fraction`` 0..1.
 * ``wait``: ``s``.
@@ -98,15 +98,15 @@ class LimitReached(Exception):
     pass
 
 
-async def run_steps(ctrl) -> None:
-    for i, st in enumerate(ctrl.plan.steps):
-        task = asyncio.create_task(_run_step(ctrl, st), name=f"step-{i + 1}")
+async def run_steps(ctx) -> None:
+    for i, st in enumerate(ctx.plan.steps):
+        task = ctx.hold_task(_run_step(ctx, st), name=f"step-{i + 1}")
         why = None
-        t0 = ctrl.rig_now()
+        t0 = ctx.now()
         try:
             while not task.done():
                 await asyncio.wait({task}, timeout=0.05)
-                why = None if task.done() else _limit_passed(ctrl, st, ctrl.rig_now() - t0)
+                why = None if task.done() else _limit_passed(ctx, st, ctx.now() - t0)
                 if why:
                     task.cancel()
                     await asyncio.gather(task, return_exceptions=True)
@@ -117,85 +117,84 @@ async def run_steps(ctrl) -> None:
             if not task.done():
                 task.cancel()
                 await asyncio.gather(task, return_exceptions=True)
-            ctrl.brake(STOP)
-        if ctrl.state in (State.DONE, State.ABORTED):
+            ctx.brake(STOP)
+        if ctx.state in (State.DONE, State.ABORTED):
             return
         if why:
-            ctrl._log("limit", step=i + 1, kind=st["kind"], reason=why)
+            ctx.log("limit", step=i + 1, kind=st["kind"], reason=why)
             if st.get("on_limit", "next") == "abort":
-                ctrl.abort("plan_limit", f"step {i + 1} ({st['kind']}): {why}")
+                ctx.fail("plan_limit", f"step {i + 1} ({st['kind']}): {why}")
                 return
-    if ctrl.state is not State.DONE:
-        if ctrl.state is State.WARMUP:
-            ctrl._enter(State.STEP, "plan: no step took a point")
-        ctrl._enter(State.DONE, f"plan {ctrl.plan.name or 'steps'}: {len(ctrl.plan.steps)} steps")
+    if ctx.state is not State.DONE:
+        if ctx.state is State.WARMUP:
+            ctx.phase(State.STEP, "plan: no step took a point")
+        ctx.phase(State.DONE, f"plan {ctx.plan.name or 'steps'}: {len(ctx.plan.steps)} steps")
 
 
-def _limit_passed(ctrl, st: dict, elapsed_s: float) -> str | None:
-    from dyno.control.speed_hold import brake_torque_nm, secondary_rpm
+def _limit_passed(ctx, st: dict, elapsed_s: float) -> str | None:
+    from dyno.control.plans.speed_hold import brake_torque_nm, secondary_rpm
 
     if "limit_s" in st and elapsed_s > st["limit_s"]:
         return f"step time over {st['limit_s']:g} s"
     if "limit_min_secondary_rpm" in st or "limit_max_secondary_rpm" in st:
-        rs = secondary_rpm(ctrl, 0.2)
+        rs = secondary_rpm(ctx, 0.2)
         if rs < st.get("limit_min_secondary_rpm", -math.inf):
             return f"secondary {rs:.0f} rpm below {st['limit_min_secondary_rpm']:g} rpm"
         if rs > st.get("limit_max_secondary_rpm", math.inf):
             return f"secondary {rs:.0f} rpm above {st['limit_max_secondary_rpm']:g} rpm"
     if "limit_max_torque_nm" in st:
-        tq = brake_torque_nm(ctrl, 0.2)
+        tq = brake_torque_nm(ctx, 0.2)
         if tq > st["limit_max_torque_nm"]:
             return f"torque {tq:.1f} N·m above {st['limit_max_torque_nm']:g} N·m"
     return None
 
 
-async def _run_step(ctrl, st: dict) -> None:
+async def _run_step(ctx, st: dict) -> None:
     kind = st["kind"]
-    if ctrl.state is State.WARMUP or ctrl.state is State.MEASURE:
-        ctrl._enter(State.STEP, f"plan step: {kind}")
+    if ctx.state is State.WARMUP or ctx.state is State.MEASURE:
+        ctx.phase(State.STEP, f"plan step: {kind}")
     if kind == "wait":
-        await ctrl.rig_sleep(st["s"])
+        await ctx.sleep(st["s"])
     elif kind == "throttle":
-        ctrl.set_throttle(st["fraction"])
-        await ctrl.rig_sleep(0.05)
+        ctx.throttle(st["fraction"])
+        await ctx.sleep(0.05)
     elif kind == "brake":
-        ctrl.brake(APPLY if st["direction"] == "apply" else RELEASE)
+        ctx.brake(APPLY if st["direction"] == "apply" else RELEASE)
         try:
-            await ctrl.rig_sleep(st["s"])
+            await ctx.sleep(st["s"])
         finally:
-            ctrl.brake(STOP)
+            ctx.brake(STOP)
     elif kind == "contact":
-        await find_contact(ctrl, st.get("drop_rel", 0.01), st.get("limit_s", 10.0))
+        await find_contact(ctx, st.get("drop_rel", 0.01), st.get("limit_s", 10.0))
     elif kind == "hold":
-        await _hold_step(ctrl, st)
+        await _hold_step(ctx, st)
     elif kind == "ramp":
-        await _ramp_step(ctrl, st)
+        await _ramp_step(ctx, st)
     elif kind == "identify":
-        from dyno.control.autotune import identify_gain
+        from dyno.control.plans.autotune import identify_gain
 
-        await identify_gain(ctrl, st.get("variable", "secondary"), st["setpoint"],
+        await identify_gain(ctx, st.get("variable", "secondary"), st["setpoint"],
                             sign=-1.0 if st.get("load_raises_speed") else 1.0, pulse_s=st.get("pulse_s", 0.2),
                             repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
 
 
-async def find_contact(ctrl, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
+async def find_contact(ctx, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
     """Full-speed apply until the secondary drops ``drop_rel`` below its speed now (the pads bite)."""
-    from dyno.control.speed_hold import secondary_rpm
+    from dyno.control.plans.speed_hold import secondary_rpm
 
-    no_load = secondary_rpm(ctrl, 1.0)
-    t_c = ctrl.rig_now()
-    ctrl.brake(APPLY)
+    no_load = secondary_rpm(ctx, 1.0)
+    t_c = ctx.now()
+    ctx.brake(APPLY)
     try:
-        while secondary_rpm(ctrl, 0.15) > no_load * (1.0 - drop_rel):
-            if ctrl.rig_now() - t_c > timeout_s:
-                ctrl.abort("error", f"the brake did not slow the secondary in {timeout_s:g} s")
+        while secondary_rpm(ctx, 0.15) > no_load * (1.0 - drop_rel):
+            if ctx.now() - t_c > timeout_s:
+                ctx.fail("error", f"the brake did not slow the secondary in {timeout_s:g} s")
                 return False
-            await ctrl.rig_sleep(0.02)
+            await ctx.sleep(0.02)
     finally:
-        ctrl.brake(STOP)
-    ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
-    if ctrl.load_since_s is None:
-        ctrl.load_since_s = ctrl.rig_now()  # the CVT is loaded from here (warm-up criterion)
+        ctx.brake(STOP)
+    ctx.log("contact", after_s=ctx.now() - t_c)
+    ctx.mark_loaded()  # the CVT is loaded from here (warm-up criterion)
     return True
 
 
@@ -209,118 +208,116 @@ def _setpoints(st: dict) -> list[float]:
     return [a + (b - a) * i / max(1, n - 1) for i in range(n)]
 
 
-async def _hold_step(ctrl, st: dict) -> None:
+async def _hold_step(ctx, st: dict) -> None:
     """Hold each setpoint, measure a point with the brake frozen there (as the speed-hold plan does)."""
     from dataclasses import replace
 
-    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
+    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
 
     variable = st.get("variable", "secondary")
-    gains = gains_for(ctrl, variable)
+    gains = gains_for(ctx, variable)
     hold = SpeedHold(gains)
     sps = _setpoints(st)
     target = {"rpm": sps[0]}
     if st.get("load_raises_speed"):
         target["sign"] = -1.0
     tol = st.get("tolerance_rel", 0.0075)
-    p = ctrl.plan
+    p = ctx.plan
     measure_plan = replace(p, measure_s=st.get("min_s", p.measure_s), max_measure_s=st.get("max_s", p.max_measure_s),
                            target_efficiency_ci95=st.get("ci95", p.target_efficiency_ci95 or 0.01))
-    task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name=f"hold-{variable}")
+    task = ctx.hold_task(_hold_loop(ctx, hold, target, variable), name=f"hold-{variable}")
     try:
         for sp in sps:
             target["rpm"] = sp
-            if ctrl.state is not State.STEP:
-                ctrl._enter(State.STEP, f"hold {variable} at {sp:g}")
-            ctrl._enter(State.SETTLE, f"holding {variable} at {sp:g} until within {tol:.1%}")
-            t0, since, by = ctrl.rig_now(), None, "held"
+            if ctx.state is not State.STEP:
+                ctx.phase(State.STEP, f"hold {variable} at {sp:g}")
+            ctx.phase(State.SETTLE, f"holding {variable} at {sp:g} until within {tol:.1%}")
+            t0, since, by = ctx.now(), None, "held"
             while True:
-                await ctrl.rig_sleep(0.05)
+                await ctx.sleep(0.05)
                 if task.done():
                     task.result()
-                x = measured(ctrl, variable, gains.speed_window_s)
+                x = measured(ctx, variable, gains.speed_window_s)
                 if abs(x - sp) <= tol * sp:
-                    since = since if since is not None else ctrl.rig_now()
-                    if ctrl.rig_now() - since >= st.get("in_band_s", 0.8):
+                    since = since if since is not None else ctx.now()
+                    if ctx.now() - since >= st.get("in_band_s", 0.8):
                         break
                 else:
                     since = None
-                if ctrl.rig_now() - t0 > st.get("max_approach_s", 8.0):
+                if ctx.now() - t0 > st.get("max_approach_s", 8.0):
                     by = "timeout"
                     break
             if by == "timeout" and not abs(x - sp) <= 2 * tol * sp:
-                ctrl._log("skip", reason=f"cannot hold {variable} at {sp:g} (at {x:.1f} after "
-                                         f"{ctrl.rig_now() - t0:.1f} s)")
+                ctx.log("skip", reason=f"cannot hold {variable} at {sp:g} (at {x:.1f} after "
+                                         f"{ctx.now() - t0:.1f} s)")
                 continue
-            settle_s = ctrl.rig_now() - t0
+            settle_s = ctx.now() - t0
             if not st.get("measure", True):  # a "go to" hold: reach the setpoint, take no point
                 continue
             target["frozen"] = True
-            saved, ctrl.plan = ctrl.plan, measure_plan
             try:
-                point, h0, h1 = await ctrl._measure(give_up=lambda: not abs(
-                    measured(ctrl, variable, 0.5) - sp) <= max(0.02, 2 * tol) * sp)
+                point, h0, h1 = await ctx.measure(give_up=lambda: not abs(
+                    measured(ctx, variable, 0.5) - sp) <= max(0.02, 2 * tol) * sp, plan=measure_plan)
             finally:
-                ctrl.plan = saved
                 target["frozen"] = False
             point.update(settled_by=by, settle_s=settle_s, setpoint=sp, hold_variable=variable)
             mean = point[{"secondary": "rpm_secondary", "engine": "rpm_primary", "torque": "torque_secondary_nm"}[variable]]
             if point.get("gave_up") or not abs(mean - sp) <= max(0.02, 2 * tol) * sp:  # shifted under the brake
-                ctrl._log("skip", reason=f"{variable} drifted to {mean:.1f} while measuring at {sp:g}: not steady")
+                ctx.log("skip", reason=f"{variable} drifted to {mean:.1f} while measuring at {sp:g}: not steady")
                 continue
-            ctrl._record_point(point, h0, h1)
+            ctx.record(point, h0, h1)
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl.brake(STOP)
+        ctx.brake(STOP)
 
 
-async def _ramp_step(ctrl, st: dict) -> None:
+async def _ramp_step(ctx, st: dict) -> None:
     """Move the held setpoint at ``rate_rpm_s``; a point (I·alpha corrected) every ``point_s``."""
     from dyno.analysis.inertia import correct_inertia
     from dyno.analysis.points import reduce_point
-    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
+    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
 
     variable = st.get("variable", "secondary")
-    gains = gains_for(ctrl, variable)
+    gains = gains_for(ctx, variable)
     hold = SpeedHold(gains)
-    a = float(st.get("from", measured(ctrl, variable, 0.3)))
+    a = float(st.get("from", measured(ctx, variable, 0.3)))
     b = float(st["to"])
     rate = float(st["rate_rpm_s"]) * (1.0 if b >= a else -1.0)
     point_s = float(st.get("point_s", 1.0))
     from dyno.rigconfig import InertiaConfig
 
-    inertia = getattr(ctrl, "inertia", None) or InertiaConfig()  # rig.toml [inertia]: the one source
+    inertia = ctx.config.inertia or InertiaConfig()  # rig.toml [inertia]: the one source
     j_e, j_s = inertia.engine_kg_m2, inertia.secondary_kg_m2
     target = {"rpm": a}
-    task = asyncio.create_task(_hold_loop(ctrl, hold, target, variable), name=f"ramp-{variable}")
+    task = ctx.hold_task(_hold_loop(ctx, hold, target, variable), name=f"ramp-{variable}")
     try:
-        if ctrl.state is not State.STEP:
-            ctrl._enter(State.STEP, f"ramp {variable} {a:.0f} -> {b:.0f} rpm at {abs(rate):g} rpm/s")
-        ctrl._enter(State.SETTLE, f"ramp: reaching {a:.0f} rpm")
-        t0 = ctrl.rig_now()
-        while abs(measured(ctrl, variable, gains.speed_window_s) - a) > 0.01 * a and ctrl.rig_now() - t0 < 8.0:
-            await ctrl.rig_sleep(0.05)
-        await ctrl._warm_up_at_load()
-        ctrl._enter(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
-        t_start = ctrl.rig_now()
+        if ctx.state is not State.STEP:
+            ctx.phase(State.STEP, f"ramp {variable} {a:.0f} -> {b:.0f} rpm at {abs(rate):g} rpm/s")
+        ctx.phase(State.SETTLE, f"ramp: reaching {a:.0f} rpm")
+        t0 = ctx.now()
+        while abs(measured(ctx, variable, gains.speed_window_s) - a) > 0.01 * a and ctx.now() - t0 < 8.0:
+            await ctx.sleep(0.05)
+        await ctx.warm_up_at_load()
+        ctx.phase(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
+        t_start = ctx.now()
         duration = abs(b - a) / abs(rate)
-        while ctrl.rig_now() - t_start < duration - 1e-9:
-            h0, d0, r0 = ctrl._now(), ctrl.poller.device_now_us(), ctrl.rig_now()
+        while ctx.now() - t_start < duration - 1e-9:
+            h0, d0, r0 = ctx.host_now(), ctx.device_now_us(), ctx.now()
             t_end = min(r0 + point_s, t_start + duration)
-            while ctrl.rig_now() < t_end - 1e-9:
-                await ctrl.rig_sleep(0.05)
+            while ctx.now() < t_end - 1e-9:
+                await ctx.sleep(0.05)
                 if task.done():
                     task.result()
-                target["rpm"] = a + rate * (ctrl.rig_now() - t_start)
-            h1, d1 = ctrl._now(), ctrl.poller.device_now_us()
-            point = reduce_point(ctrl.poller.streams, d0, d1, ctrl.calibration, ctrl.engine_map,
-                                 index=len(ctrl.points), throttle_frac=ctrl.throttle_frac)
-            point = correct_inertia(point, ctrl.poller.streams, ctrl.engine_map, j_e, j_s)
+                target["rpm"] = a + rate * (ctx.now() - t_start)
+            h1, d1 = ctx.host_now(), ctx.device_now_us()
+            point = reduce_point(ctx.streams, d0, d1, ctx.config.calibration, ctx.config.engine_map,
+                                 index=len(ctx.points), throttle_frac=ctx.throttle_frac)
+            point = correct_inertia(point, ctx.streams, ctx.config.engine_map, j_e, j_s)
             point.update(settled_by="ramp", settle_s=0.0, setpoint=target["rpm"], hold_variable=variable,
                          ramp_rate_rpm_s=rate)
-            ctrl._record_point(point, h0, h1)
+            ctx.record(point, h0, h1)
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-        ctrl.brake(STOP)
+        ctx.brake(STOP)

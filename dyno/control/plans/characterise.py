@@ -45,79 +45,78 @@ class EngagementPlan:
     check_margin_rpm: float = 60.0  # no heavier load once engagement is this close to the Hall check speed
 
 
-def _live_ratio(ctrl, window_s: float = 0.3) -> float:
-    now = ctrl.poller.device_now_us()
+def _live_ratio(ctx, window_s: float = 0.3) -> float:
+    now = ctx.device_now_us()
     if now is None:
         return math.nan
-    st = ctrl.poller.streams
+    st = ctx.streams
     rp = se.rpm_at(st.edge_window(v1.CH_PRIMARY, now - int(window_s * 1e6), now), now - window_s * 5e5, window_s * 5e5)
     rs = se.rpm_at(st.edge_window(v1.CH_SECONDARY, now - int(window_s * 1e6), now), now - window_s * 5e5,
                    window_s * 5e5)
     return rp / rs if rs > 0 else math.nan
 
 
-async def run_engagement(ctrl, ep: EngagementPlan | None = None) -> None:
-    ep = ep or getattr(ctrl, "engagement_plan", None) or EngagementPlan()
-    ctrl._enter(State.WARMUP, "idle, brake released: the secondary must be at rest")
-    ctrl.set_throttle(0.0)
-    await ctrl.rig_sleep(ep.idle_s)
-    if ctrl.poller.rpm(v1.CH_SECONDARY) > 0:
-        ctrl.abort("error", f"engagement: the secondary turns at idle ({ctrl.poller.rpm(v1.CH_PRIMARY):.0f} rpm "
+async def run_engagement(ctx, ep: EngagementPlan | None = None) -> None:
+    ep = ep or ctx.config.engagement_plan or EngagementPlan()
+    ctx.phase(State.WARMUP, "idle, brake released: the secondary must be at rest")
+    ctx.throttle(0.0)
+    await ctx.sleep(ep.idle_s)
+    if ctx.rpm(v1.CH_SECONDARY) > 0:
+        ctx.fail("error", f"engagement: the secondary turns at idle ({ctx.rpm(v1.CH_PRIMARY):.0f} rpm "
                             "engine): the clutch engages below idle, nothing to characterise")
         return
-    p, s, t0_dev, t1_dev, ended = await _ramp(ctrl, ep)
+    p, s, t0_dev, t1_dev, ended = await _ramp(ctx, ep)
     res = characterise_ramp(p, s, t0_dev, t1_dev)
     res["ramp_ended"] = ended
     res["throttle_rate_per_s"] = ep.throttle_rate_per_s
-    res["shift_out_torque_nm"] = _torque_near(ctrl, res.get("shift_out_t_us"))
-    for hook in ctrl.result_hooks:  # the sim's truths for the ramp's load, before the back-shift step
-        hook(res)
+    res["shift_out_torque_nm"] = _torque_near(ctx, res.get("shift_out_t_us"))
+    ctx.add_truths(res)  # the sim's truths for the ramp's load, before the back-shift step
     if ep.back_shift and math.isfinite(res.get("full_shift_ratio", math.nan)):
-        res["back_shift"] = await _back_shift(ctrl, ep, res)
+        res["back_shift"] = await _back_shift(ctx, ep, res)
     if ep.flatness_apply_s:
-        res["shift_out_vs_load"] = [_load_row(res)] + await _flatness(ctrl, ep, res.get("engagement_rpm", math.nan))
+        res["shift_out_vs_load"] = [_load_row(res)] + await _flatness(ctx, ep, res.get("engagement_rpm", math.nan))
         rows = res["shift_out_vs_load"]
         res["shift_out_flatness"] = se.flatness([r["torque_secondary_nm"] for r in rows],
                                                 [r["shift_out_rpm"] for r in rows])
         if all("shift_out_rpm_true" in r for r in rows):
             res["shift_out_flatness_true"] = se.flatness([r["torque_secondary_nm"] for r in rows],
                                                          [r["shift_out_rpm_true"] for r in rows])
-    res.update(predicted_from_tune(ctrl, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
+    res.update(predicted_from_tune(ctx, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
                                    or [res.get("shift_out_torque_nm", math.nan)]))
-    ctrl.set_throttle(0.0)
-    res["test_time_s"] = (ctrl._now() - ctrl.go_s) / ctrl.time_scale  # rig seconds
-    ctrl._set_results(res, hooks=False)
-    ctrl._enter(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
+    ctx.throttle(0.0)
+    res["test_time_s"] = ctx.test_time_s()  # rig seconds
+    ctx.set_results(res, hooks=False)
+    ctx.phase(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
                 else "engagement not found in the ramp")
 
 
-async def _ramp(ctrl, ep: EngagementPlan):
+async def _ramp(ctx, ep: EngagementPlan):
     """From idle with the secondary at rest: the throttle ramp; returns the ramp's edges and times."""
-    ctrl._enter(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
-    t0_rig = ctrl.rig_now()
-    t0_dev = ctrl.poller.device_now_us()
-    over_s = getattr(ctrl.limits, "overspeed_secondary_rpm", 7800.0) * ep.secondary_max_frac
+    ctx.phase(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
+    t0_rig = ctx.now()
+    t0_dev = ctx.device_now_us()
+    over_s = getattr(ctx.config.limits, "overspeed_secondary_rpm", 7800.0) * ep.secondary_max_frac
     recent: deque = deque()
     low_plateau = math.nan  # the live ratio once flat (+-1 %) for 1 s after engagement: the low stop
     ended = "throttle at its maximum"
     while True:
-        el = ctrl.rig_now() - t0_rig
+        el = ctx.now() - t0_rig
         u = min(ep.throttle_max, ep.throttle_rate_per_s * el)
-        ctrl.set_throttle(u, log=False)
-        await ctrl.rig_sleep(0.1)
-        r = _live_ratio(ctrl)
-        recent.append((ctrl.rig_now(), r))
-        while recent and recent[0][0] < ctrl.rig_now() - ep.high_plateau_s:
+        ctx.throttle(u, log=False)
+        await ctx.sleep(0.1)
+        r = _live_ratio(ctx)
+        recent.append((ctx.now(), r))
+        while recent and recent[0][0] < ctx.now() - ep.high_plateau_s:
             recent.popleft()
         rs = [x for _, x in recent if math.isfinite(x)]
-        last_1s = [x for t, x in recent if t > ctrl.rig_now() - 1.0 and math.isfinite(x)]
+        last_1s = [x for t, x in recent if t > ctx.now() - 1.0 and math.isfinite(x)]
         if not math.isfinite(low_plateau) and len(last_1s) >= 9 and max(last_1s) < 1.01 * min(last_1s):
             low_plateau = float(np.median(last_1s))
         shifted = math.isfinite(low_plateau) and rs and max(rs) < 0.6 * low_plateau
         if shifted and len(rs) >= 0.9 * ep.high_plateau_s / 0.1 and (max(rs) - min(rs)) < 0.01 * min(rs):
             ended = f"ratio flat on the high stop for {ep.high_plateau_s:g} s"
             break
-        if ctrl.poller.rpm(v1.CH_SECONDARY) > over_s:
+        if ctx.rpm(v1.CH_SECONDARY) > over_s:
             ended = f"secondary at {ep.secondary_max_frac:.0%} of its over-speed limit"
             break
         if u >= ep.throttle_max and el > ep.throttle_max / ep.throttle_rate_per_s + ep.high_plateau_s:
@@ -125,21 +124,21 @@ async def _ramp(ctrl, ep: EngagementPlan):
         if el > ep.max_ramp_s:
             ended = f"ramp time cap {ep.max_ramp_s:g} s"
             break
-    t1_dev = ctrl.poller.device_now_us()
-    ctrl._log("ramp", ended=ended, t_start_us=t0_dev, t_end_us=t1_dev, throttle_rate_per_s=ep.throttle_rate_per_s)
-    st = ctrl.poller.streams
+    t1_dev = ctx.device_now_us()
+    ctx.log("ramp", ended=ended, t_start_us=t0_dev, t_end_us=t1_dev, throttle_rate_per_s=ep.throttle_rate_per_s)
+    st = ctx.streams
     p = st.edge_window(v1.CH_PRIMARY, t0_dev - 2_000_000, t1_dev)
     s = st.edge_window(v1.CH_SECONDARY, t0_dev - 2_000_000, t1_dev)
     return p, s, t0_dev, t1_dev, ended
 
 
-def _torque_near(ctrl, t_us, half_s: float = 0.5) -> float:
+def _torque_near(ctx, t_us, half_s: float = 0.5) -> float:
     """Mean secondary torque (N m) through the calibration over +- ``half_s`` around ``t_us``."""
     if t_us is None:
         return math.nan
-    _, codes, status = ctrl.poller.streams.adc_window(int(t_us - half_s * 1e6), int(t_us + half_s * 1e6))
+    _, codes, status = ctx.streams.adc_window(int(t_us - half_s * 1e6), int(t_us + half_s * 1e6))
     good = codes[(status & v1.ADC_STATUS_ERR) == 0]
-    return float(ctrl.calibration.torque_secondary_nm(float(good.mean()))) if good.size else math.nan
+    return float(ctx.config.calibration.torque_secondary_nm(float(good.mean()))) if good.size else math.nan
 
 
 def _load_row(r: dict) -> dict:
@@ -151,46 +150,45 @@ def _load_row(r: dict) -> dict:
     return row
 
 
-async def _flatness(ctrl, ep: EngagementPlan, last_eng: float) -> list:
+async def _flatness(ctx, ep: EngagementPlan, last_eng: float) -> list:
     """More ramps, each with the brake preset a little further: shift-out against load."""
     from dyno.control.outputs import RELEASE
 
     rows = []
-    check_rpm = getattr(ctrl.limits, "secondary_check_primary_rpm", math.inf)
+    check_rpm = getattr(ctx.config.limits, "secondary_check_primary_rpm", math.inf)
     for apply_s in ep.flatness_apply_s:
         # A heavier load engages higher: keep the engagement clear of the safety check's "the secondary
         # must turn" speed, which would (rightly) trip while the brake holds the secondary there.
         if not math.isfinite(last_eng) or last_eng > check_rpm - ep.check_margin_rpm:
-            ctrl._log("skip", reason=f"shift-out flatness: engagement {last_eng:.0f} rpm within "
+            ctx.log("skip", reason=f"shift-out flatness: engagement {last_eng:.0f} rpm within "
                                      f"{ep.check_margin_rpm:g} rpm of the safety check at {check_rpm:.0f} rpm: "
                                      "no heavier load")
             break
-        ctrl._enter(State.STEP, f"shift-out flatness: brake preset {apply_s:g} s, back to idle")
-        ctrl.set_throttle(0.0)
-        ctrl.brake(RELEASE)
+        ctx.phase(State.STEP, f"shift-out flatness: brake preset {apply_s:g} s, back to idle")
+        ctx.throttle(0.0)
+        ctx.brake(RELEASE)
         try:
-            await ctrl.rig_sleep(ep.release_s)
+            await ctx.sleep(ep.release_s)
         finally:
-            ctrl.brake(STOP)
-        ctrl.brake(APPLY)
+            ctx.brake(STOP)
+        ctx.brake(APPLY)
         try:
-            await ctrl.rig_sleep(apply_s)
+            await ctx.sleep(apply_s)
         finally:
-            ctrl.brake(STOP)
-        t0 = ctrl.rig_now()
-        while ctrl.poller.rpm(v1.CH_SECONDARY) > 0 and ctrl.rig_now() - t0 < 30.0:
-            await ctrl.rig_sleep(0.1)
-        await ctrl.rig_sleep(1.0)
-        p, s, t0_dev, t1_dev, ended = await _ramp(ctrl, ep)
+            ctx.brake(STOP)
+        t0 = ctx.now()
+        while ctx.rpm(v1.CH_SECONDARY) > 0 and ctx.now() - t0 < 30.0:
+            await ctx.sleep(0.1)
+        await ctx.sleep(1.0)
+        p, s, t0_dev, t1_dev, ended = await _ramp(ctx, ep)
         r = characterise_ramp(p, s, t0_dev, t1_dev)
-        r["shift_out_torque_nm"] = _torque_near(ctrl, r.get("shift_out_t_us"))
-        for hook in ctrl.result_hooks:
-            hook(r)
+        r["shift_out_torque_nm"] = _torque_near(ctx, r.get("shift_out_t_us"))
+        ctx.add_truths(r)
         row = _load_row(r)
         row.update(brake_apply_s=apply_s, ramp_ended=ended, curve=r.get("curve"))
         rows.append(row)
         last_eng = r.get("engagement_rpm", math.nan)
-    ctrl.set_throttle(0.0)
+    ctx.throttle(0.0)
     return rows
 
 
@@ -214,22 +212,22 @@ def characterise_ramp(p_edges, s_edges, t0_us: int, t1_us: int) -> dict:
     return out
 
 
-async def _back_shift(ctrl, ep: EngagementPlan, res: dict) -> dict:
+async def _back_shift(ctx, ep: EngagementPlan, res: dict) -> dict:
     """At full shift: a brake load step; the ratio's rise (the CVT back-shifts) and its time."""
-    r0 = _live_ratio(ctrl, 0.5)
-    t0 = ctrl.rig_now()
-    ctrl.brake(APPLY)
+    r0 = _live_ratio(ctx, 0.5)
+    t0 = ctx.now()
+    ctx.brake(APPLY)
     try:
-        await ctrl.rig_sleep(ep.back_shift_step_s)
+        await ctx.sleep(ep.back_shift_step_s)
     finally:
-        ctrl.brake(STOP)
+        ctx.brake(STOP)
     trace = []
-    while ctrl.rig_now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
-        await ctrl.rig_sleep(0.1)
-        trace.append((ctrl.rig_now() - t0, _live_ratio(ctrl)))
+    while ctx.now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
+        await ctx.sleep(0.1)
+        trace.append((ctx.now() - t0, _live_ratio(ctx)))
     r1 = float(np.nanmedian([r for t, r in trace if t > trace[-1][0] - 1.0]))
-    out = {"ratio_before": r0, "ratio_after": r1, "rpm_primary_after": ctrl.poller.rpm(v1.CH_PRIMARY),
-           "rpm_secondary_after": ctrl.poller.rpm(v1.CH_SECONDARY), "t63_s": math.nan}
+    out = {"ratio_before": r0, "ratio_after": r1, "rpm_primary_after": ctx.rpm(v1.CH_PRIMARY),
+           "rpm_secondary_after": ctx.rpm(v1.CH_SECONDARY), "t63_s": math.nan}
     if math.isfinite(r0) and r1 > r0:
         target = r0 + 0.63 * (r1 - r0)
         for t, r in trace:
@@ -239,10 +237,10 @@ async def _back_shift(ctrl, ep: EngagementPlan, res: dict) -> dict:
     return out
 
 
-def predicted_from_tune(ctrl, loads_nm=()) -> dict:
+def predicted_from_tune(ctx, loads_nm=()) -> dict:
     """The tune's predicted engagement and shift-out (dyno.tuning) and the measured minus predicted."""
-    tune_path = getattr(ctrl, "tune_path", None)
-    src = getattr(ctrl.engine_map, "source", None)
+    tune_path = ctx.config.tune_path
+    src = getattr(ctx.config.engine_map, "source", None)
     if not tune_path or not src:
         return {}
     try:

@@ -5,7 +5,7 @@ throttle, let the engine settle, and read the secondary's speed with the brake r
 this throttle drives it.  Setpoints above that (less a margin) are *unreachable* at this throttle: each
 is skipped with that reason (a property of the engine, not a fault).  Then find the brake's contact
 point and, for each reachable secondary-speed setpoint, high to low, hold it and measure a point with
-the speed hold's machinery (:func:`dyno.control.speed_hold.hold_point`: the same stopping rule and CI,
+the speed hold's machinery (:func:`dyno.control.plans.speed_hold.hold_point`: the same stopping rule and CI,
 the same skips where it cannot hold or the CVT drifts).  Every point records its throttle
 (``throttle_frac``), so its efficiency comes from the engine map's curve at that throttle, or is null
 with the reason.
@@ -35,7 +35,7 @@ class DriveGridPlan:
     reach_margin_rel: float = 0.02  # a setpoint above (1 - this) x the released speed is unreachable
     contact_drop_rel: float = 0.01
     contact_timeout_s: float = 12.0
-    # the speed hold's settings per setpoint (dyno.control.speed_hold.SpeedHoldPlan)
+    # the speed hold's settings per setpoint (dyno.control.plans.speed_hold.SpeedHoldPlan)
     tolerance_rel: float = 0.0075
     in_band_s: float = 0.5
     max_approach_s: float = 6.0
@@ -58,32 +58,32 @@ def drive_grid_plan_of(plan) -> DriveGridPlan:
     return DriveGridPlan(**params)
 
 
-async def release_brake(ctrl, g: DriveGridPlan) -> float:
+async def release_brake(ctx, g: DriveGridPlan) -> float:
     """Release until the secondary has stopped rising for ``release_quiet_s`` (pads clear) or ``release_s``."""
-    from dyno.control.speed_hold import secondary_rpm
+    from dyno.control.plans.speed_hold import secondary_rpm
 
-    t0 = ctrl.rig_now()
-    best, best_t = secondary_rpm(ctrl, 0.3), t0
-    ctrl.brake(RELEASE)
+    t0 = ctx.now()
+    best, best_t = secondary_rpm(ctx, 0.3), t0
+    ctx.brake(RELEASE)
     try:
-        while ctrl.rig_now() - t0 < g.release_s:
-            await ctrl.rig_sleep(0.1)
-            rs = secondary_rpm(ctrl, 0.3)
+        while ctx.now() - t0 < g.release_s:
+            await ctx.sleep(0.1)
+            rs = secondary_rpm(ctx, 0.3)
             if rs > best * 1.002:
-                best, best_t = rs, ctrl.rig_now()
-            elif ctrl.rig_now() - best_t >= g.release_quiet_s:
+                best, best_t = rs, ctx.now()
+            elif ctx.now() - best_t >= g.release_quiet_s:
                 break
     finally:
-        ctrl.brake(STOP)
-    return ctrl.rig_now() - t0
+        ctx.brake(STOP)
+    return ctx.now() - t0
 
 
-async def run_drive_grid(ctrl) -> None:
+async def run_drive_grid(ctx) -> None:
     from dyno.analysis.drive_grid import grid_table
-    from dyno.control.speed_hold import SpeedHold, SpeedHoldPlan, _hold_loop, gains_for, hold_point, secondary_rpm
-    from dyno.control.steps import find_contact
+    from dyno.control.plans.speed_hold import SpeedHold, SpeedHoldPlan, _hold_loop, gains_for, hold_point, secondary_rpm
+    from dyno.control.plans.steps import find_contact
 
-    g = drive_grid_plan_of(ctrl.plan)
+    g = drive_grid_plan_of(ctx.plan)
     sh = SpeedHoldPlan(tolerance_rel=g.tolerance_rel, in_band_s=g.in_band_s, max_approach_s=g.max_approach_s,
                        unholdable_rel=g.unholdable_rel, drift_rel=g.drift_rel)
     setpoints = sorted(g.setpoints_rpm, reverse=True)
@@ -93,16 +93,16 @@ async def run_drive_grid(ctrl) -> None:
         doc = {"throttle_frac": u, "setpoint_rpm": sp, "index": None if point is None else point["index"],
                "reason": reason}
         cells.append(doc)
-        ctrl._log("grid_cell", **doc)
+        ctx.log("grid_cell", **doc)
 
-    hold = SpeedHold(gains_for(ctrl, "secondary"))
+    hold = SpeedHold(gains_for(ctx, "secondary"))
     for u in g.throttles:
-        ctrl._enter(State.STEP, f"drive grid: throttle {u:.2f}, brake released")
-        await release_brake(ctrl, g)
-        ctrl.set_throttle(u)
-        await ctrl.rig_sleep(g.throttle_settle_s)
-        free_rpm = secondary_rpm(ctrl, 1.0)
-        ctrl._log("grid_throttle", throttle_frac=u, secondary_released_rpm=free_rpm)
+        ctx.phase(State.STEP, f"drive grid: throttle {u:.2f}, brake released")
+        await release_brake(ctx, g)
+        ctx.throttle(u)
+        await ctx.sleep(g.throttle_settle_s)
+        free_rpm = secondary_rpm(ctx, 1.0)
+        ctx.log("grid_throttle", throttle_frac=u, secondary_released_rpm=free_rpm)
         reach = [sp for sp in setpoints if sp <= free_rpm * (1.0 - g.reach_margin_rel)]
         for sp in setpoints:
             if sp not in reach:
@@ -110,23 +110,23 @@ async def run_drive_grid(ctrl) -> None:
                                   f"{free_rpm:.0f} rpm with the brake released")
         if not reach:
             continue
-        if not await find_contact(ctrl, g.contact_drop_rel, g.contact_timeout_s):
+        if not await find_contact(ctx, g.contact_drop_rel, g.contact_timeout_s):
             return  # (aborted: the brake did not bite)
         hold.reset()
         target = {"rpm": reach[0], "last_rpm": math.nan}
-        loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="drive-grid-hold")
+        loop_task = ctx.hold_task(_hold_loop(ctx, hold, target), name="drive-grid-hold")
         try:
             for sp in reach:
                 point, why = await hold_point(
-                    ctrl, sp, sh, target, loop_task, hold.g.speed_window_s, throttle_frac=u, setpoint_rpm=sp,
+                    ctx, sp, sh, target, loop_task, hold.g.speed_window_s, throttle_frac=u, setpoint_rpm=sp,
                     unholdable_why=f"at throttle {u:.2f} the brake cannot hold the secondary there "
                                    "(the CVT's shift region, or clutch slip at a low governed speed)")
                 cell(u, sp, point, why)
         finally:
             loop_task.cancel()
             await asyncio.gather(loop_task, return_exceptions=True)
-            ctrl.brake(STOP)
+            ctx.brake(STOP)
     # (not _set_results: the grid is no characterisation document; the grid_cell documents are its record)
-    ctrl.results = {"drive_grid": grid_table(cells, ctrl.points)}
-    ctrl._enter(State.DONE, f"drive grid: {len(g.throttles)} throttles x {len(setpoints)} speeds, "
+    ctx.set_results({"drive_grid": grid_table(cells, ctx.points)}, hooks=False, log=False)
+    ctx.phase(State.DONE, f"drive grid: {len(g.throttles)} throttles x {len(setpoints)} speeds, "
                             f"{sum(c['index'] is not None for c in cells)} points")

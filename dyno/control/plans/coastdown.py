@@ -18,10 +18,8 @@ checks (link, temperature, over-speed, ADC) go on.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -42,94 +40,88 @@ class CoastDownPlan:
     # rig.toml [inertia] (dyno.rigconfig.InertiaConfig), the controller's ``inertia``.
 
 
-def _zero(ctrl, t0_us: int, t1_us: int) -> tuple[float, float]:
+def _zero(ctx, t0_us: int, t1_us: int) -> tuple[float, float]:
     """Mean torque (secondary N m) and its standard error over a window (16 batch means)."""
     from dyno.analysis.zero_check import zero_reading
 
-    _, codes, status = ctrl.poller.streams.adc_window(t0_us, t1_us)
-    z = zero_reading(codes, status, ctrl.calibration)
+    _, codes, status = ctx.streams.adc_window(t0_us, t1_us)
+    z = zero_reading(codes, status, ctx.config.calibration)
     from scipy import stats
 
     return z["torque_nm"], z["ci95_nm"] / float(stats.t.ppf(0.975, 15))
 
 
-async def run_coast_down(ctrl, cp: CoastDownPlan | None = None) -> None:
-    cp = cp or getattr(ctrl, "coast_down_plan", None) or CoastDownPlan()
+async def run_coast_down(ctx, cp: CoastDownPlan | None = None) -> None:
+    cp = cp or ctx.config.coast_down_plan or CoastDownPlan()
     from dyno.rigconfig import InertiaConfig
 
-    jc = getattr(ctrl, "inertia", None) or InertiaConfig()
+    jc = ctx.config.inertia or InertiaConfig()
     inertia, inertia_unc, beyond = jc.driven_kg_m2, jc.driven_rel_unc, jc.beyond_gauge_kg_m2
-    ctrl._enter(State.WARMUP, "idle, brake released: torque zero at rest")
-    ctrl.set_throttle(0.0)
-    d0 = ctrl.poller.device_now_us()
-    await ctrl.rig_sleep(cp.zero_s)
-    zero_before = _zero(ctrl, d0 + 500_000, ctrl.poller.device_now_us())
-    ctrl._enter(State.STEP, "full throttle, brake released: spin up to full shift")
-    ctrl.set_throttle(1.0)
-    await ctrl.rig_sleep(cp.spin_up_s)
-    rs_top = ctrl.poller.rpm(v1.CH_SECONDARY)
-    ctrl._enter(State.SETTLE, "engine cut, brake released: coasting down")
-    ctrl.cut_engine()  # a deliberate cut (brake released, ignition off): not a trip, nothing latched
-    t_cut = ctrl.poller.device_now_us()
+    ctx.phase(State.WARMUP, "idle, brake released: torque zero at rest")
+    ctx.throttle(0.0)
+    d0 = ctx.device_now_us()
+    await ctx.sleep(cp.zero_s)
+    zero_before = _zero(ctx, d0 + 500_000, ctx.device_now_us())
+    ctx.phase(State.STEP, "full throttle, brake released: spin up to full shift")
+    ctx.throttle(1.0)
+    await ctx.sleep(cp.spin_up_s)
+    rs_top = ctx.rpm(v1.CH_SECONDARY)
+    ctx.phase(State.SETTLE, "engine cut, brake released: coasting down")
+    ctx.cut_engine()  # a deliberate cut (brake released, ignition off): not a trip, nothing latched
+    t_cut = ctx.device_now_us()
     t_unc = None
-    t0 = ctrl.rig_now()
+    t0 = ctx.now()
     ratio_max = 0.0
-    from dyno.control.characterise import _live_ratio
+    from dyno.control.plans.characterise import _live_ratio
 
-    while ctrl.rig_now() - t0 < cp.max_coast_s:
-        await ctrl.rig_sleep(0.1)
+    while ctx.now() - t0 < cp.max_coast_s:
+        await ctx.sleep(0.1)
         # Uncoupled: the engine falls away from the secondary (the ratio drops 3 % below the highest
         # it reached while coupled -- the back-shift only raises it), or is below any engagement.
-        r = _live_ratio(ctrl)
+        r = _live_ratio(ctx)
         if t_unc is None and math.isfinite(r):
             ratio_max = max(ratio_max, r)
-            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctrl.rig_now() - t0 > 1.0:
-                t_unc = ctrl.poller.device_now_us() + 300_000  # past the live ratio's window
-        if t_unc is None and ctrl.poller.rpm(v1.CH_PRIMARY) < cp.uncoupled_primary_rpm:
-            t_unc = ctrl.poller.device_now_us()
-        if ctrl.poller.rpm(v1.CH_SECONDARY) == 0.0:
+            if r < (1.0 - cp.uncoupled_ratio_drop) * ratio_max and ctx.now() - t0 > 1.0:
+                t_unc = ctx.device_now_us() + 300_000  # past the live ratio's window
+        if t_unc is None and ctx.rpm(v1.CH_PRIMARY) < cp.uncoupled_primary_rpm:
+            t_unc = ctx.device_now_us()
+        if ctx.rpm(v1.CH_SECONDARY) == 0.0:
             break
-    t_stop = ctrl.poller.device_now_us()
-    ctrl._enter(State.MEASURE, "at rest: torque zero after")
-    await ctrl.rig_sleep(cp.zero_s)
-    zero_after = _zero(ctrl, t_stop + 500_000, ctrl.poller.device_now_us())
+    t_stop = ctx.device_now_us()
+    ctx.phase(State.MEASURE, "at rest: torque zero after")
+    await ctx.sleep(cp.zero_s)
+    zero_after = _zero(ctx, t_stop + 500_000, ctx.device_now_us())
     res: dict = {"secondary_rpm_at_cut": rs_top, "inertia_kg_m2": inertia,
                  "zero_before_nm": zero_before[0], "zero_after_nm": zero_after[0]}
     if t_unc is None:
-        ctrl.abort("error", f"coast-down: the primary never fell below {cp.uncoupled_primary_rpm:.0f} rpm")
+        ctx.fail("error", f"coast-down: the primary never fell below {cp.uncoupled_primary_rpm:.0f} rpm")
         return
-    s = ctrl.poller.streams.edge_window(v1.CH_SECONDARY, t_unc, t_stop)
+    s = ctx.streams.edge_window(v1.CH_SECONDARY, t_unc, t_stop)
     dec = cd.decelerations(s, t_unc)
     keep = dec["omega_rad_s"] > cp.min_secondary_rpm * cd.RAD_PER_RPM
     try:
         fit = cd.fit_loss(dec["omega_rad_s"][keep], dec["alpha_rad_s2"][keep], inertia, inertia_unc)
     except ValueError as exc:
-        ctrl.abort("error", str(exc))
+        ctx.fail("error", str(exc))
         return
     res["loss_fit"] = fit
     # the gauge's share (constant drag beyond it) and the loss it does not see
     t_end = int(dec["t_s"][keep][-1] * 1e6) if keep.any() else t_stop
-    gauge = _zero(ctrl, t_unc, t_end)
+    gauge = _zero(ctx, t_unc, t_end)
     z = zero_after if math.isfinite(zero_after[0]) else zero_before
     mean_alpha = float(np.mean(dec["alpha_rad_s2"][keep]))
     split = cd.split_seen(gauge[0], gauge[1], z[0], z[1], beyond, mean_alpha)
     res.update(split)
     res["unseen_torque_nm"] = (np.asarray(fit["torque_nm"]) - split["seen_nm"]).tolist()
     res["loss_rpm_range"] = [fit["rpm_min"], fit["rpm_max"]]
-    res["test_time_s"] = (ctrl._now() - ctrl.go_s) / ctrl.time_scale  # rig seconds
-    ctrl._set_results(res)
-    _write_loss_file(ctrl, res)
-    ctrl._enter(State.DONE, f"coast-down: loss fitted over {fit['rpm_min']:.0f}-{fit['rpm_max']:.0f} rpm")
+    res["test_time_s"] = ctx.test_time_s()  # rig seconds
+    ctx.set_results(res)
+    _write_loss_file(ctx, res)
+    ctx.phase(State.DONE, f"coast-down: loss fitted over {fit['rpm_min']:.0f}-{fit['rpm_max']:.0f} rpm")
 
 
-def _write_loss_file(ctrl, res: dict) -> None:
+def _write_loss_file(ctx, res: dict) -> None:
     """``driven_loss.json`` beside the run's log (what ``--driven-loss`` reads)."""
-    run_dir = getattr(ctrl.writer, "run_dir", None)
-    if run_dir is None:
-        return
     doc = {"schema": "dyno.driven_loss/1", "loss_fit": res["loss_fit"], "seen_nm": res["seen_nm"],
            "seen_ci95_nm": res["seen_ci95_nm"]}
-    try:
-        Path(run_dir, "driven_loss.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
-    except (OSError, ValueError) as exc:
-        ctrl._log("warning", detail=f"driven_loss.json not written: {exc}")
+    ctx.write_artifact("driven_loss.json", doc)

@@ -144,30 +144,30 @@ class SpeedHoldPlan:
     contact_timeout_s: float = 10.0
 
 
-def channel_rpm(ctrl, channel: int, window_s: float) -> float:
+def channel_rpm(ctx, channel: int, window_s: float) -> float:
     """A Hall channel's rpm by edge count over the last ``window_s`` (NaN before the first frame)."""
-    now = ctrl.poller.device_now_us()
+    now = ctx.device_now_us()
     if now is None:
         return math.nan
-    rpm, _ = rpm_by_count(ctrl.poller.streams.edge_window(channel, now - int(window_s * 1e6), now))
+    rpm, _ = rpm_by_count(ctx.streams.edge_window(channel, now - int(window_s * 1e6), now))
     return rpm
 
 
-def secondary_rpm(ctrl, window_s: float) -> float:
-    return channel_rpm(ctrl, v1.CH_SECONDARY, window_s)
+def secondary_rpm(ctx, window_s: float) -> float:
+    return channel_rpm(ctx, v1.CH_SECONDARY, window_s)
 
 
-def engine_rpm(ctrl, window_s: float) -> float:
-    return channel_rpm(ctrl, v1.CH_PRIMARY, window_s)
+def engine_rpm(ctx, window_s: float) -> float:
+    return channel_rpm(ctx, v1.CH_PRIMARY, window_s)
 
 
-def brake_torque_nm(ctrl, window_s: float) -> float:
+def brake_torque_nm(ctx, window_s: float) -> float:
     """Secondary torque from the ADC mean over the last ``window_s`` (error-bit conversions left out)."""
-    now = ctrl.poller.device_now_us()
-    cal = ctrl.calibration
+    now = ctx.device_now_us()
+    cal = ctx.config.calibration
     if now is None or cal is None:
         return math.nan
-    _, codes, status = ctrl.poller.streams.adc_window(now - int(window_s * 1e6), now)
+    _, codes, status = ctx.streams.adc_window(now - int(window_s * 1e6), now)
     codes = codes[(status & v1.ADC_STATUS_ERR) == 0]
     return float(cal.torque_secondary_nm(codes.mean())) if codes.size else math.nan
 
@@ -176,134 +176,134 @@ def brake_torque_nm(ctrl, window_s: float) -> float:
 VARIABLES = {"secondary": (secondary_rpm, 1.0), "engine": (engine_rpm, 1.0), "torque": (brake_torque_nm, -1.0)}
 
 
-def measured(ctrl, variable: str, window_s: float) -> float:
-    return VARIABLES[variable][0](ctrl, window_s)
+def measured(ctx, variable: str, window_s: float) -> float:
+    return VARIABLES[variable][0](ctx, window_s)
 
 
-def hold_error(ctrl, variable: str, setpoint: float, window_s: float, sign: float | None = None) -> tuple[float, float]:
+def hold_error(ctx, variable: str, setpoint: float, window_s: float, sign: float | None = None) -> tuple[float, float]:
     """(measured value, relative error: + means the brake must apply) for ``variable``; ``sign`` -1 where
     more load raises the variable (the engine while the CVT back-shifts)."""
-    x = measured(ctrl, variable, window_s)
+    x = measured(ctx, variable, window_s)
     if not (setpoint > 0) or not math.isfinite(x) or (variable != "torque" and not x > 0):
         return x, math.nan
     return x, (VARIABLES[variable][1] if sign is None else sign) * (x - setpoint) / setpoint
 
 
-async def _hold_loop(ctrl, hold: SpeedHold, target: dict, variable: str = "secondary") -> None:
+async def _hold_loop(ctx, hold: SpeedHold, target: dict, variable: str = "secondary") -> None:
     """Background task: one actuator pulse per period towards ``target['rpm']`` (the setpoint of
     ``variable``: secondary or engine rpm, or torque in N·m)."""
     g = hold.g
     last_sp = target["rpm"]
     while True:
-        await ctrl._resume.wait()
+        await ctx.checkpoint()
         if target.get("frozen"):
-            await ctrl.rig_sleep(g.period_s)
+            await ctx.sleep(g.period_s)
             continue
         sp = target["rpm"]
         sign = target.get("sign", VARIABLES[variable][1])
         if sp != last_sp:
             hold.feed_forward(last_sp, sp, -sign)
             last_sp = sp
-        x, e = hold_error(ctrl, variable, sp, g.speed_window_s, sign)
+        x, e = hold_error(ctx, variable, sp, g.speed_window_s, sign)
         u = hold.command(e, g.period_s)
         direction, on_s = hold.pulse(u, e)
         target["last_rpm"] = x
         if direction == STOP:
-            await ctrl.rig_sleep(g.period_s)
+            await ctx.sleep(g.period_s)
             continue
-        ctrl.brake(direction)
+        ctx.brake(direction)
         try:
-            await ctrl.rig_sleep(on_s)
+            await ctx.sleep(on_s)
         finally:
-            ctrl.brake(STOP)
-        await ctrl.rig_sleep(max(0.0, g.period_s - on_s))
+            ctx.brake(STOP)
+        await ctx.sleep(max(0.0, g.period_s - on_s))
 
 
-async def run_speed_hold(ctrl, sh: SpeedHoldPlan | None = None, gains: SpeedHoldGains | None = None) -> None:
+async def run_speed_hold(ctx, sh: SpeedHoldPlan | None = None, gains: SpeedHoldGains | None = None) -> None:
     """After the warm-up: hold each setpoint, measure while holding, record the point.
 
     Uses the controller's own measurement (uncertainty target, discards) and states:
     STEP = moving to the next setpoint, SETTLE = holding until in band, MEASURE.
     """
-    p = ctrl.plan
-    sh = sh or getattr(ctrl, "speed_hold_plan", None) or speed_hold_plan_of(p)
-    hold = SpeedHold(gains or getattr(ctrl, "speed_hold_gains", None) or gains_for(ctrl, "secondary"))
-    no_load = secondary_rpm(ctrl, 1.0)
+    p = ctx.plan
+    sh = sh or ctx.config.speed_hold_plan or speed_hold_plan_of(p)
+    hold = SpeedHold(gains or ctx.config.speed_hold_gains or gains_for(ctx, "secondary"))
+    no_load = secondary_rpm(ctx, 1.0)
     high = no_load * (1.0 - sh.high_margin)
     low = max(sh.low_rpm, p.min_secondary_rpm * 1.05)
     if not (high > low):
-        ctrl.abort("error", f"speed hold: no-load secondary {no_load:.0f} rpm leaves no range above {low:.0f} rpm")
+        ctx.fail("error", f"speed hold: no-load secondary {no_load:.0f} rpm leaves no range above {low:.0f} rpm")
         return
     setpoints = [high + (low - high) * (i / max(1, sh.points - 1)) ** sh.spacing for i in range(sh.points)]
     # Contact search first: the pads start clear of the rotor (free travel), and creeping
     # across it at a fraction of full speed wastes seconds. Full-speed apply until it bites.
-    ctrl._enter(State.STEP, "speed hold: finding the brake's contact point")
-    t_c = ctrl.rig_now()
-    ctrl.brake(APPLY)
+    ctx.phase(State.STEP, "speed hold: finding the brake's contact point")
+    t_c = ctx.now()
+    ctx.brake(APPLY)
     try:
-        while secondary_rpm(ctrl, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
-            if ctrl.rig_now() - t_c > sh.contact_timeout_s:
-                ctrl.abort("error", f"speed hold: the brake did not slow the secondary in {sh.contact_timeout_s:g} s")
+        while secondary_rpm(ctx, hold.g.speed_window_s) > no_load * (1.0 - sh.contact_drop_rel):
+            if ctx.now() - t_c > sh.contact_timeout_s:
+                ctx.fail("error", f"speed hold: the brake did not slow the secondary in {sh.contact_timeout_s:g} s")
                 return
-            await ctrl.rig_sleep(0.02)
+            await ctx.sleep(0.02)
     finally:
-        ctrl.brake(STOP)
-    ctrl._log("contact", after_s=ctrl.rig_now() - t_c)
-    ctrl.load_since_s = ctrl.rig_now()  # the pads bite: the CVT is loaded from here (warm-up criterion)
+        ctx.brake(STOP)
+    ctx.log("contact", after_s=ctx.now() - t_c)
+    ctx.mark_loaded()  # the pads bite: the CVT is loaded from here (warm-up criterion)
     target = {"rpm": setpoints[0], "last_rpm": math.nan}
-    loop_task = asyncio.create_task(_hold_loop(ctrl, hold, target), name="speed-hold")
+    loop_task = ctx.hold_task(_hold_loop(ctx, hold, target), name="speed-hold")
     try:
         for sp in setpoints:
-            if secondary_rpm(ctrl, hold.g.speed_window_s) < sp * (1.0 - sh.unholdable_rel) and sp != setpoints[-1]:
+            if secondary_rpm(ctx, hold.g.speed_window_s) < sp * (1.0 - sh.unholdable_rel) and sp != setpoints[-1]:
                 continue  # already below it (the CVT jumped past): next setpoint
-            await hold_point(ctrl, sp, sh, target, loop_task, hold.g.speed_window_s)
-        ctrl._enter(State.DONE, f"speed hold: {len(setpoints)} setpoints")
+            await hold_point(ctx, sp, sh, target, loop_task, hold.g.speed_window_s)
+        ctx.phase(State.DONE, f"speed hold: {len(setpoints)} setpoints")
     finally:
         loop_task.cancel()
         await asyncio.gather(loop_task, return_exceptions=True)
-        ctrl.brake(STOP)
+        ctx.brake(STOP)
 
 
-async def hold_point(ctrl, sp: float, sh: SpeedHoldPlan, target: dict, loop_task, window_s: float,
+async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task, window_s: float,
                      unholdable_why: str = "the CVT's shift region", **skip_fields) -> tuple[dict | None, str | None]:
     """Hold the secondary at ``sp`` (``loop_task`` runs :func:`_hold_loop` on ``target``), then measure with
     the brake frozen and record the point.  Returns (the point, None), or (None, why) when there is no point
     at ``sp``: the why is logged as a ``skip`` document (with ``skip_fields``)."""
-    p = ctrl.plan
+    p = ctx.plan
 
     def skip(reason: str) -> tuple[None, str]:
-        ctrl._log("skip", reason=reason, **skip_fields)
+        ctx.log("skip", reason=reason, **skip_fields)
         return None, reason
 
     target["rpm"] = sp
-    ctrl._enter(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
-    t0 = ctrl.rig_now()
-    ctrl._enter(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
+    ctx.phase(State.STEP, f"speed hold: secondary to {sp:.0f} rpm")
+    t0 = ctx.now()
+    ctx.phase(State.SETTLE, f"holding {sp:.0f} rpm until within {sh.tolerance_rel:.1%}")
     in_band_since = None
     settled_by = "held"
     while True:
-        await ctrl.rig_sleep(0.05)
+        await ctx.sleep(0.05)
         if loop_task.done():
             loop_task.result()  # re-raise: the control task failed
-        rpm = secondary_rpm(ctrl, window_s)
+        rpm = secondary_rpm(ctx, window_s)
         if abs(rpm - sp) <= sh.tolerance_rel * sp:
-            in_band_since = in_band_since if in_band_since is not None else ctrl.rig_now()
-            if ctrl.rig_now() - in_band_since >= sh.in_band_s:
+            in_band_since = in_band_since if in_band_since is not None else ctx.now()
+            if ctx.now() - in_band_since >= sh.in_band_s:
                 break
         else:
             in_band_since = None
-        if ctrl.rig_now() - t0 > sh.max_approach_s:
+        if ctx.now() - t0 > sh.max_approach_s:
             settled_by = "timeout"
             break
-    settle_s = ctrl.rig_now() - t0
+    settle_s = ctx.now() - t0
     if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
         return skip(f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after {settle_s:.1f} s): {unholdable_why}")
     # Measure with the brake where the hold put it: corrections during the window would
     # move the torque and the shift under the average (measured: CI 4-10x wider).
     target["frozen"] = True
     try:
-        point, host_t0, host_t1 = await ctrl._measure(
-            give_up=lambda: not abs(secondary_rpm(ctrl, 0.5) - sp) <= sh.drift_rel * sp)
+        point, host_t0, host_t1 = await ctx.measure(
+            give_up=lambda: not abs(secondary_rpm(ctx, 0.5) - sp) <= sh.drift_rel * sp)
     finally:
         target["frozen"] = False
     point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
@@ -314,7 +314,7 @@ async def hold_point(ctrl, sp: float, sh: SpeedHoldPlan, target: dict, loop_task
                     "not a steady point")
     if not point["torque_secondary_nm"] >= p.min_point_torque_nm:
         return skip(f"torque {point['torque_secondary_nm']:.2f} N m below {p.min_point_torque_nm} N m at {sp:.0f} rpm")
-    ctrl._record_point(point, host_t0, host_t1)
+    ctx.record(point, host_t0, host_t1)
     return point, None
 
 
@@ -324,7 +324,7 @@ def speed_hold_plan_of(plan) -> SpeedHoldPlan:
     return SpeedHoldPlan(**params)
 
 
-def gains_for(ctrl, variable: str) -> SpeedHoldGains:
+def gains_for(ctx, variable: str) -> SpeedHoldGains:
     """The rig's gains (``rig.toml`` [control], set on the controller by the app), else the defaults."""
-    control = getattr(ctrl, "control", None)
+    control = ctx.config.control
     return SpeedHoldGains.from_config(control, variable) if control is not None else SpeedHoldGains()

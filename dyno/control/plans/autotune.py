@@ -36,45 +36,45 @@ REACH_ATTEMPTS = 3  # holds tried before pulsing: kp, kp/2, kp/4 (a too-high kp 
 KP_RANGE = (0.3, 30.0)
 
 
-async def _reach(ctrl, variable: str, setpoint: float, timeout_s: float = 10.0) -> bool:
-    from dyno.control.speed_hold import measured
+async def _reach(ctx, variable: str, setpoint: float, timeout_s: float = 10.0) -> bool:
+    from dyno.control.plans.speed_hold import measured
 
-    t0, since = ctrl.rig_now(), None
-    while ctrl.rig_now() - t0 < timeout_s:
-        await ctrl.rig_sleep(0.05)
-        if abs(measured(ctrl, variable, 0.15) - setpoint) <= 0.0075 * setpoint:
-            since = since if since is not None else ctrl.rig_now()
-            if ctrl.rig_now() - since >= 1.0:
+    t0, since = ctx.now(), None
+    while ctx.now() - t0 < timeout_s:
+        await ctx.sleep(0.05)
+        if abs(measured(ctx, variable, 0.15) - setpoint) <= 0.0075 * setpoint:
+            since = since if since is not None else ctx.now()
+            if ctx.now() - since >= 1.0:
                 return True
         else:
             since = None
     return False
 
 
-async def _pulse(ctrl, direction: int, pulse_s: float) -> None:
-    ctrl.brake(direction)
+async def _pulse(ctx, direction: int, pulse_s: float) -> None:
+    ctx.brake(direction)
     try:
-        await ctrl.rig_sleep(pulse_s)
+        await ctx.sleep(pulse_s)
     finally:
-        ctrl.brake(STOP)
+        ctx.brake(STOP)
 
 
-async def identify_speed_gain(ctrl, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
+async def identify_speed_gain(ctx, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
                               apply: bool = True) -> dict:
     """Identify ``g`` at ``setpoint`` (secondary rpm); returns (and logs) what was found and done."""
-    return await identify_gain(ctrl, "secondary", setpoint, pulse_s=pulse_s, repeats=repeats, apply=apply)
+    return await identify_gain(ctx, "secondary", setpoint, pulse_s=pulse_s, repeats=repeats, apply=apply)
 
 
-async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1.0, pulse_s: float = 0.2,
+async def identify_gain(ctx, variable: str, setpoint: float, *, sign: float = 1.0, pulse_s: float = 0.2,
                         repeats: int = 2, apply: bool = True) -> dict:
     """Identify ``g`` of ``variable`` (secondary | engine rpm) at ``setpoint`` while holding it (``sign``
     -1 where more brake raises the speed: the engine while the CVT back-shifts); returns (and logs) what
     was found and done."""
-    from dyno.control.speed_hold import SpeedHold, _hold_loop, gains_for, measured
+    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
 
     if variable not in LOOP_GAIN_PER_S:
         raise ValueError(f"no auto-tune for {variable!r}: one of {', '.join(LOOP_GAIN_PER_S)}")
-    base = gains_for(ctrl, variable)
+    base = gains_for(ctx, variable)
     target = {"rpm": setpoint, "sign": sign}
     gains = []
     task = None
@@ -84,26 +84,26 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
         reached, hold_kp = False, base.kp
         for attempt in range(REACH_ATTEMPTS):
             hold_kp = base.kp / 2 ** attempt
-            task = asyncio.create_task(_hold_loop(ctrl, SpeedHold(replace(base, kp=hold_kp)), target, variable),
+            task = ctx.hold_task(_hold_loop(ctx, SpeedHold(replace(base, kp=hold_kp)), target, variable),
                                        name="identify-hold")
-            if await _reach(ctrl, variable, setpoint):
+            if await _reach(ctx, variable, setpoint):
                 reached = True
                 break
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
-            ctrl.brake(STOP)
+            ctx.brake(STOP)
         if not reached:
             result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify (kp {base.kp:g} "
                                              f"down to {hold_kp:g})"}
         else:
             target["frozen"] = True
-            await ctrl.rig_sleep(1.0)
+            await ctx.sleep(1.0)
             for _ in range(repeats):
                 for direction in (APPLY, RELEASE):
-                    n0 = measured(ctrl, variable, 0.5)
-                    await _pulse(ctrl, direction, pulse_s)
-                    await ctrl.rig_sleep(1.5)
-                    n1 = measured(ctrl, variable, 0.5)
+                    n0 = measured(ctx, variable, 0.5)
+                    await _pulse(ctx, direction, pulse_s)
+                    await ctx.sleep(1.5)
+                    n1 = measured(ctx, variable, 0.5)
                     gains.append(abs(n1 - n0) / n0 / pulse_s)
             g = statistics.fmean(gains)
             spread = (max(gains) - min(gains)) / g if g > 0 else math.inf
@@ -118,14 +118,16 @@ async def identify_gain(ctrl, variable: str, setpoint: float, *, sign: float = 1
         if task is not None:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
-        ctrl.brake(STOP)
-    control = getattr(ctrl, "control", None)
+        ctx.brake(STOP)
+    control = ctx.config.control
     key = KP_KEY[variable]
     result.update(variable=variable, setpoint_rpm=setpoint, kp_key=key, kp_before=getattr(control, key, None),
                   applied=False)
     if result["ok"] and apply and control is not None:
-        ctrl.control = replace(control, **{key: result["kp_identified"]})
+        control = replace(control, **{key: result["kp_identified"]})
         result["applied"] = True
-    ctrl._log("identify", **result)
-    ctrl.identified = result
+    else:
+        control = None  # (unchanged)
+    ctx.log("identify", **result)
+    ctx.tune_control(control, result)
     return result
