@@ -125,7 +125,7 @@ class PlanContext(Protocol):
     """All a plan runner may touch (Bluesky's plans-through-a-run-engine): it is handed one and returns.
 
     The engine (:class:`dyno.control.engine.EngineContext` over the controller) implements it; so does the
-    fake rig of the tests (``tests/control/fake_rig.py``).  Every output passes the engine's gate; after a
+    fake rig of the tests (:mod:`dyno.control.fake_rig`).  Every output passes the engine's gate; after a
     safe state the engine has the last word whatever the plan does; tasks a plan needs run under
     :meth:`hold_task` and end with the run; files go through :meth:`write_artifact`.
     """

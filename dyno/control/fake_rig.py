@@ -1,4 +1,5 @@
-"""A fake rig for the engine and the plans: milliseconds, not the 150 Hz simulation.
+"""A fake rig for the engine and the plans: milliseconds, not the 150 Hz simulation (a test double, in the
+package as gpiozero's MockFactory and python-can's virtual bus are: tests/control/test_fake_rig.py).
 
 The real engine (:class:`dyno.control.controller.TestController`, its state table, its gate on the
 outputs, its measuring windows, its last word) runs on a :class:`~dyno.clock.VirtualTimeLoop` over
@@ -51,6 +52,8 @@ class FakePlant:
         self.ignition = False
         self.engine_started = False
         self.rpm_primary = 0.0
+        self.rpm_secondary = 0.0
+        self.governor_failed = False  # a fault a test may inject: the engine runs away (over-speed)
 
     def start_engine(self) -> None:
         self.engine_started = True
@@ -63,21 +66,19 @@ class FakePlant:
     def pads_off(self) -> bool:
         return self.brake_pos <= self.free_travel
 
-    @property
-    def rpm_secondary(self) -> float:
-        if self.rpm_primary < 2000.0:  # below engagement
-            return 0.0
-        return self.rpm_primary / (0.75 + 2.0 * max(0.0, self.brake_pos - self.free_travel))
-
     def step(self, dt_s: float) -> None:
         self.brake_pos = min(1.0, max(0.0, self.brake_pos + self.brake_dir * dt_s / self.full_stroke_s))
         running = self.ignition and self.engine_started
         target = (1700.0 + 1900.0 * self.throttle - 500.0 * max(0.0, self.brake_pos - self.free_travel)
-                  if running else 0.0)
+                  + 3000.0 * self.governor_failed if running else 0.0)
         rate = 4000.0 * dt_s  # rpm the engine can change in dt
         self.rpm_primary += max(-rate, min(rate, target - self.rpm_primary))
         if not running and self.rpm_primary < 300.0:
             self.rpm_primary = 0.0
+        if self.rpm_primary >= 2000.0:  # engaged: the belt sets the secondary (heavier load, lower ratio)
+            self.rpm_secondary = self.rpm_primary / (0.75 + 2.0 * max(0.0, self.brake_pos - self.free_travel))
+        else:  # below engagement the driven side coasts down on its drag and the brake
+            self.rpm_secondary = max(0.0, self.rpm_secondary - (400.0 + 4000.0 * self.brake_pos) * dt_s)
 
 
 class FakeActuators:
