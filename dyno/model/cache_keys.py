@@ -18,20 +18,26 @@ from pathlib import Path
 from dyno.model.params import ModelParams, OperatingPoint, bad_input
 
 TIERS = ("closed_form", "full")
-# Every module a prediction depends on: the cache key hashes their source, so a code change (a fix, a
-# new boundary condition) invalidates old entries and retries cached failures, with no version to bump.
+# Every module a prediction's numbers depend on: the cache key hashes their source, so a change of the maths
+# (a fix, a new boundary condition) invalidates old entries and retries cached failures, with no version to
+# bump; the plumbing that carries a job (overlay, overlay_service, overlay_worker, this module) is not hashed,
+# so reshaping it keeps the cache (issue 34: a line split in the worker threw away every cell).
 _MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
-                  "bvp", "balance", "solution", "overlay", "overlay_service", "overlay_worker", "cache_keys")
+                  "bvp", "balance", "solution", "point_solve")
 
 
 @functools.lru_cache(maxsize=1)
 def model_code_hash() -> str:
     """SHA-256 of the model's source files (and scipy's version, whose solver the full tier runs)."""
+    return code_hash(Path(__file__).resolve().parent)
+
+
+def code_hash(model_dir: Path) -> str:
+    """SHA-256 of the :data:`_MODEL_MODULES` found in ``model_dir`` and scipy's version."""
     h = hashlib.sha256()
-    here = Path(__file__).resolve().parent
     for name in _MODEL_MODULES:
         h.update(name.encode())
-        h.update((here / f"{name}.py").read_bytes())
+        h.update((Path(model_dir) / f"{name}.py").read_bytes())
     try:
         from importlib.metadata import version
 

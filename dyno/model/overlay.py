@@ -33,19 +33,7 @@ from dyno.model.params import ModelParams, TABLE_6_1, bad_input
 # the cache's keys and the model's code hash live in cache_keys (the overlay service needs them without this
 # module, which runs the service: no import cycle); re-exported here, where callers have always found them
 from dyno.model.cache_keys import TIERS, _MODEL_MODULES, _as_point, default_cache_dir, model_code_hash, point_key  # noqa: E402,F401
-
-
-def _closed_form_result(params, op) -> dict:
-    from dyno.model.closed_form import closed_form_point
-
-    r = closed_form_point(params, op)
-    return {
-        "converged": True,
-        "tier": "closed_form",
-        "efficiency": {"speed": r.efficiency_speed, "torque": r.efficiency_torque, "overall": r.efficiency_overall},
-        "axial_force_n": {"primary": r.axial_force_primary_n, "secondary": r.axial_force_secondary_n},
-        "span_tension_n": {"tight": r.tight_tension_n, "slack": r.slack_tension_n},
-    }
+from dyno.model.point_solve import closed_form_result as _closed_form_result  # noqa: E402
 
 
 def all_cached(points, params: ModelParams = TABLE_6_1, **kwargs) -> bool:

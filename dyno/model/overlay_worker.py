@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import Future
-from dataclasses import dataclass
-
-import numpy as np
 
 from dyno.model.params import ModelParams, OperatingPoint
+from dyno.model.point_solve import WarmState, solve_strategy  # noqa: F401  (WarmState: where callers find it)
 
 
 class Cancelled(Exception):
@@ -32,42 +30,6 @@ class InlineExecutor:
 
     def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
         pass
-
-
-@dataclass
-class WarmState:
-    """What a warm start needs of a solution (small, picklable): quacks like a BeltSolution for ``guess=``."""
-
-    case: object  # dyno.model.equations.Case
-    t: np.ndarray
-    y: np.ndarray
-    p: np.ndarray
-    rms: np.ndarray | None
-    op: OperatingPoint
-    variant: str
-    slip_threshold_m_s: float
-
-    @property
-    def raw(self):
-        from dyno.model.bvp import RawSolution
-
-        return RawSolution(case=self.case, t=self.t, y=self.y, p=self.p, sol=None, residual_max=0.0,
-                           bc_residual_max=0.0, tol=0.0, rms_residuals=self.rms)
-
-
-def _summary_result(sol) -> dict:
-    s = sol.summary
-    res = {"converged": True, "tier": "full", "efficiency": s["efficiency"], "axial_force_n": s["axial_force_n"],
-           "span_tension_n": s["span_tension_n"], "residual_max": s["residual_max"],
-           "slip_threshold_m_s": s["slip_threshold_m_s"], "solve_s": s["solve_s"], "balance": s["balance"]}
-    if "warning" in s:
-        res["warning"] = s["warning"]
-    return res
-
-
-def _steps(sol) -> int:
-    raw = getattr(sol, "raw", None)
-    return len(getattr(raw, "history", []) or [])
 
 
 _WORKER_CANCEL = None  # a worker process's cancel event, from process_pool()'s initializer
@@ -130,16 +92,8 @@ def _import_solver() -> None:
 
 def solve_job(params: ModelParams, op: OperatingPoint, *, variant: str, slip_threshold_m_s: float, tol: float,
               time_limit_s: float, guess: WarmState | None = None, cancel=None, fallback: WarmState | None = None):
-    """Solve one point (warm from ``guess`` if given, cold if that fails): (result dict, WarmState or None).
-
-    ``fallback``: a solution too far for a first try (a cold start is usually quicker), started from when the
-    cold start fails without a physical verdict.  The cold path's first steps use a smoothed friction law
-    (v_th = 1 m/s) at which a heavy load reaches the capstan bound on the way: e.g. 17.5 N*m at 856 N,
-    ratio 0.72, stalled cold and converged warm from Table 6.1's point in 3 steps.
-    """
-    from dyno.errors import MODEL_FAILURES
-    from dyno.model import solution
-
+    """Solve one point in this process (:func:`dyno.model.point_solve.solve_strategy`), stoppable by the
+    service's ``cancel`` event: (result dict, WarmState or None)."""
     cancel = cancel if cancel is not None else _WORKER_CANCEL
 
     def log(_record) -> None:  # called after every continuation step: the place to stop a closed service
@@ -147,34 +101,9 @@ def solve_job(params: ModelParams, op: OperatingPoint, *, variant: str, slip_thr
             raise Cancelled("overlay service closed")
 
     t0 = time.perf_counter()
-    kwargs = dict(variant=variant, slip_threshold_m_s=slip_threshold_m_s, tol=tol, time_limit_s=time_limit_s, log=log)
-    sol, start, steps, exc = None, "cold", 0, None
-    if guess is not None:
-        try:
-            sol, start = solution.solve_point(params, op, guess=guess, **kwargs), "warm"
-        except MODEL_FAILURES as e:  # a worse start than none: solve cold below
-            exc, start = e, "cold after a failed warm start"
-    if sol is None:
-        try:
-            sol = solution.solve_point(params, op, **kwargs)
-        except MODEL_FAILURES as e:
-            exc = e
-    if sol is None and fallback is not None and type(exc).__name__ != "GrossSlip":
-        try:
-            sol = solution.solve_point(params, op, guess=fallback, **kwargs)
-            start = "warm from a far neighbour after a failed cold start"
-        except MODEL_FAILURES as e:
-            exc = e
-    if sol is None:
-        res = {"converged": False, "tier": "full", "error": str(exc),
-               "state": "gross_slip" if type(exc).__name__ == "GrossSlip" else "failed"}
-        warm = None
-    else:
-        res = _summary_result(sol)
-        steps = _steps(sol)
-        raw = sol.raw
-        warm = WarmState(case=raw.case, t=raw.t, y=raw.y, p=raw.p, rms=raw.rms_residuals, op=op, variant=variant,
-                         slip_threshold_m_s=slip_threshold_m_s)
+    res, warm, start, steps = solve_strategy(params, op, guess=guess, fallback=fallback, variant=variant,
+                                             slip_threshold_m_s=slip_threshold_m_s, tol=tol,
+                                             time_limit_s=time_limit_s, log=log)
     res.update(ratio=op.ratio, primary_speed_rpm=op.primary_speed_rpm, primary_torque_nm=op.primary_torque_nm,
                variant=variant, start=start, steps=steps, job_s=time.perf_counter() - t0)
     return res, warm

@@ -114,7 +114,33 @@ def test_model_code_hash_reads_every_model_module():
 
     here = Path(overlay.__file__).resolve().parent
     # inverse.py builds a prediction's inputs (they are in the key), it is not part of the prediction; the
-    # studies' task and executor modules only say where and in which order solves run
+    # studies' task and executor modules only say where and in which order solves run; the overlay's
+    # service, worker and cache modules carry a job (point_solve.py holds what decides its numbers)
+    plumbing = {"overlay", "overlay_service", "overlay_worker", "cache_keys"}
     on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies", "inverse", "executor",
-                                                      "study_tasks"}
+                                                      "study_tasks"} - plumbing
     assert on_disk <= set(overlay._MODEL_MODULES), on_disk - set(overlay._MODEL_MODULES)
+    assert not plumbing & set(overlay._MODEL_MODULES)
+
+
+def test_the_cache_key_follows_the_maths_not_the_plumbing(tmp_path):
+    """A line split in the overlay worker keeps every cached cell; a changed solver strategy or equation does not."""
+    import shutil
+    from pathlib import Path
+
+    from dyno.model.cache_keys import code_hash
+
+    here = Path(overlay.__file__).resolve().parent
+    copy = tmp_path / "model"
+    shutil.copytree(here, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    before = code_hash(copy)
+    assert before == overlay.model_code_hash()
+    for name in ("overlay_worker", "overlay_service", "overlay", "cache_keys"):
+        f = copy / f"{name}.py"
+        f.write_text(f.read_text() + "\n# a comment, a line split: plumbing\n")
+    assert code_hash(copy) == before
+    for name in ("point_solve", "equations"):
+        f = copy / f"{name}.py"
+        f.write_text(f.read_text() + "\n# the maths changed\n")
+        assert code_hash(copy) != before
+        before = code_hash(copy)

@@ -5,9 +5,9 @@ A plan is a :class:`~dyno.control.api.TestPlan`; the shipped ones are TOML files
 file is the same thing as a shipped one.  ``--plan`` takes a shipped name, a name registered
 in :data:`PLANS` by code, or a path (a value ending in ``.toml`` or containing ``/``).
 
-A plan's ``mode`` names its runner: ``step`` is the controller's own open-loop loop, every
-other mode is a coroutine ``runner(controller)`` registered in :data:`RUNNERS` as
-``"module:function"`` (imported when used).  To add a mode: add its runner to :data:`RUNNERS`
+A plan's ``mode`` names its runner, a coroutine ``runner(ctx)`` handed the plan context
+(:class:`dyno.control.api.PlanContext`) and registered in :data:`RUNNERS` as ``"module:function"``
+(imported when used); this package holds the shipped runners (``step``: :mod:`.thesis_step`).  To add a mode: add its runner to :data:`RUNNERS`
 (kept in :mod:`dyno.control.registry`, re-exported here; and, if it needs no file, a
 :class:`TestPlan` to :data:`PLANS`); a plan file can then use it by name.
 """
