@@ -2,7 +2,7 @@
 
 The full belt model (:mod:`dyno.model`, thesis Table 6.1 belt on the tune's
 drive geometry) is solved once on a grid of geometric ratios x primary torques
-covering the simulated CVT's whole ratio range (0.72 .. 2.4), at the clamping
+covering the simulated CVT's whole ratio range (0.54 .. 3.07), at the clamping
 force the CVT tune puts on the belt there (:func:`tune_clamp_n`: flyweights
 minus spring, Messick eq. 9.3, at :data:`TABLE_RPM`), by continuation: a cold
 solve at ratio 1, 18 N m, warm starts outward in ratio at the reference
@@ -35,11 +35,12 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-#: Default grid: the simulated CVT's whole geometric ratio range (0.72 overdrive .. 2.4 low, the
-#: ratio the 2019 logs reached) and two torques.  Cells where the belt model finds gross slip at the
-#: tune's clamp are failed cells (the loss model answers there).
-DEFAULT_RATIOS = (0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75, 1.95, 2.15, 2.4)
-DEFAULT_TORQUES_NM = (8.0, 18.0)
+#: Default grid: the simulated CVT's whole geometric ratio range (0.54, the overdrive stop of the 2019
+#: logs, .. 3.07, the stock drive's geometric low stop 3.065) and four torques (the thrust ratio falls with
+#: load: dyno.sim.belt_thrust).  Cells where the belt model finds gross slip at the tune's clamp are
+#: failed cells (the loss model answers there; the CVT downshifts).
+DEFAULT_RATIOS = (0.54, 0.62, 0.72, 0.82, 0.92, 1.0, 1.12, 1.25, 1.4, 1.55, 1.75, 1.95, 2.15, 2.4, 2.7, 3.07)
+DEFAULT_TORQUES_NM = (3.0, 8.0, 13.0, 18.0)
 REFERENCE_TORQUE_NM = 18.0
 #: Engine speed of the table's clamp: the middle of the 3000-3300 rpm the stock tune holds on the
 #: sim and the thesis logs (the flyweights' clamp goes as rpm^2: +-5 % over that band).
@@ -62,7 +63,10 @@ class BeltTable:
     solved: int = 0                    # cells solved now (not from the cache)
     rpm: float = TABLE_RPM             # engine speed of the cells (and of the tune's clamp)
     clamp_n: tuple = ()                # primary clamp per ratio (NaN: fixed slack tension)
+    #: the belt's thrust ratio F_s,belt / F_p of the full model per cell (NaN where failed or not stored)
+    kappa: np.ndarray | None = None
     _dense: tuple | None = None
+    _dense_kappa: list | None = None
 
     def __post_init__(self):
         self._prepare()
@@ -96,6 +100,28 @@ class BeltTable:
                     es[(grid > lo) & (grid < hi), j] = np.nan
             okd[:, j] = np.isfinite(et[:, j]) & np.isfinite(es[:, j])
         self._dense = (float(grid[0]), float(grid[-1]), grid.size - 1, et.tolist(), es.tolist(), okd.tolist())
+        self._dense_kappa = None
+        if self.kappa is not None:
+            ek = np.full_like(et, np.nan)
+            for j in range(self.torques_nm.size):
+                m = np.isfinite(self.kappa[:, j])
+                if m.sum() >= 2:
+                    ek[:, j] = PchipInterpolator(r[m], self.kappa[m, j], extrapolate=False)(grid)
+                for k in range(r.size):  # (as for the efficiencies: not across a failed cell)
+                    if not m[k]:
+                        ek[(grid > (r[k - 1] if k > 0 else r[0])) & (grid < (r[k + 1] if k + 1 < r.size else r[-1])), j] = np.nan
+            # Where the full model finds gross slip (the clamp cannot carry that torque: a slipping clutch, whose
+            # capacity dyno.sim.driven limits), the belt keeps the thrust ratio of the highest torque it carries
+            # at that ratio; a ratio with no carried torque at all, its nearest neighbour's.
+            for i in range(ek.shape[0]):
+                for j in range(1, ek.shape[1]):
+                    if not np.isfinite(ek[i, j]):
+                        ek[i, j] = ek[i, j - 1]
+            rows = np.flatnonzero(np.isfinite(ek[:, 0]))
+            if rows.size:
+                for i in np.flatnonzero(~np.isfinite(ek[:, 0])):
+                    ek[i, :] = ek[rows[np.argmin(np.abs(rows - i))], :]
+            self._dense_kappa = ek.tolist()
         span = float(grid[-1] - grid[0])
         self._inv_dr = (grid.size - 1) / span if span > 0.0 else 0.0
         self._tq = [float(t) for t in self.torques_nm]
@@ -134,6 +160,37 @@ class BeltTable:
             hi = ti[j + 1] + fr * (tn[j + 1] - ti[j + 1])
             out.append(lo + ft * (hi - lo))
         return out[0], out[1]
+
+
+    def lookup_kappa(self, ratio: float, torque_nm: float):
+        """The full model's thrust ratio ``F_s,belt / F_p`` at a cell's clamp, or None (failed, or not stored).
+
+        Clamped to the table's range like :meth:`lookup`; pure Python (called every ~0.1 s of sim time).
+        """
+        if self._dense_kappa is None:
+            return None
+        r0, r1, n, _, _, okd = self._dense
+        tq, ek = self._tq, self._dense_kappa
+        u = ((r0 if ratio < r0 else (r1 if ratio > r1 else ratio)) - r0) * self._inv_dr
+        i = min(int(u), n - 1)
+        fr = u - i
+        if len(tq) == 1:
+            a, b = ek[i][0], ek[i + 1][0]
+            v = a + fr * (b - a)
+            return v if v == v else None
+        t = tq[0] if torque_nm < tq[0] else (tq[-1] if torque_nm > tq[-1] else torque_nm)
+        j = 0
+        while j < len(tq) - 2 and t > tq[j + 1]:
+            j += 1
+        ft = (t - tq[j]) / (tq[j + 1] - tq[j])
+        lo = ek[i][j] + fr * (ek[i + 1][j] - ek[i][j])
+        hi = ek[i][j + 1] + fr * (ek[i + 1][j + 1] - ek[i][j + 1])
+        v = lo + ft * (hi - lo)
+        return v if v == v else None  # (NaN: a failed cell nearby)
+
+    def clamp_at(self, ratio: float) -> float:
+        """The primary clamp (N) the cells at ``ratio`` were solved at (interpolated; NaN: slack tension)."""
+        return float(np.interp(ratio, self.ratios, np.asarray(self.clamp_n, dtype=float)))
 
 
 def _cache_entry(cache: Path, key: str):
@@ -261,6 +318,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
     et = np.full((ratios.size, torques.size), np.nan)
     es = np.full_like(et, np.nan)
+    kappa = np.full_like(et, np.nan)
     ok = np.zeros(et.shape, dtype=bool)
     errors = {}
     for a, r in enumerate(ratios):
@@ -270,6 +328,12 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
             good = bool(res.get("converged")) and all(
                 isinstance(eff.get(q), (int, float)) and math.isfinite(eff[q]) and 0.0 < eff[q] <= 1.0
                 for q in ("torque", "speed"))
+            f = res.get("axial_force_n") or {}
+            if res.get("converged") and isinstance(f.get("primary"), (int, float)) and f["primary"] > 0 \
+                    and isinstance(f.get("secondary"), (int, float)):
+                # the thrust ratio of a converged cell, whatever its efficiencies (a speed "efficiency" a
+                # little over 1 in overdrive is the belt's seating radius, not a failed solve)
+                kappa[a, b] = f["secondary"] / f["primary"]
             if good:
                 et[a, b], es[a, b], ok[a, b] = eff["torque"], eff["speed"], True
             else:
@@ -277,7 +341,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
                 # recorded in BeltTable.errors; not a warning on every run's stderr (one-line outputs)
                 log.info("belt table: ratio %.3f, %.1f N m did not converge, the loss model is used there: %s",
                          r, t, errors[(float(r), float(t))])
-    return BeltTable(ratios=ratios, torques_nm=torques, eta_torque=et, eta_speed=es, ok=ok, errors=errors,
+    return BeltTable(ratios=ratios, torques_nm=torques, eta_torque=et, eta_speed=es, ok=ok, errors=errors, kappa=kappa,
                      build_s=time.perf_counter() - t0, solved=solved, rpm=float(rpm),
                      clamp_n=tuple(float(op_of(r, torques[0]).primary_axial_force_n or math.nan) for r in ratios))
 

@@ -170,6 +170,11 @@ def _tables_from_tune(tune, x, flyweight_radius_offset_m=0.0):
     return ratio, c_rpm2, s_p, f0, b_s
 
 
+#: the low-ratio end of the loss model's shape: the thesis's measured efficiencies (Fig. 9.6/9.14) and the
+#: 2019 logs reach ~2.4; beyond it (the stock drive's geometry goes to 3.06) the quadratic carries on
+LOSS_SHAPE_RATIO_LOW = 2.4
+
+
 class CVT:
     """Scalar CVT relations (see the module docstring)."""
 
@@ -185,8 +190,8 @@ class CVT:
                  belt_friction_coefficient: float | None = None, flyweight_radius_offset_m: float = 0.0,
                  belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0,
                  belt_thrust_model: str = "capstan"):
-        if belt_thrust_model not in ("capstan", "closed_form"):
-            raise ValueError(f"belt_thrust_model: 'capstan' or 'closed_form', got {belt_thrust_model!r}")
+        if belt_thrust_model not in ("full", "capstan", "closed_form"):
+            raise ValueError(f"belt_thrust_model: 'full', 'capstan' or 'closed_form', got {belt_thrust_model!r}")
         self.belt_thrust_model = belt_thrust_model
         self.belt_table = belt_table
         self.t_ref = belt_reference_torque_nm
@@ -237,7 +242,17 @@ class CVT:
         self._belt_every = max(int(belt_update_cells), 1)
         self._belt_count = 0
         self._creep_params = None
-        if belt_friction_coefficient is not None:
+        if belt_thrust_model == "full" and belt_friction_coefficient is None:
+            if tune is not None and belt_table is not None and belt_table.kappa is not None:
+                self._belt_params = self._creep_params = "full"  # the table's full-model cells: kappa and creep
+                self.source += ", full-model belt thrusts (the belt table)"
+            elif tune is not None:
+                from dyno.tuning.shift_curve import model_params_for
+
+                self._creep_params = model_params_for(tune)  # no table: no thrust ratio (F_p = F_s)
+        elif belt_friction_coefficient is not None:
+            if belt_thrust_model == "full":
+                belt_thrust_model = self.belt_thrust_model = "capstan"  # a friction given: the capstan tier's
             if tune is None:
                 raise ValueError("belt_friction_coefficient needs a CVT tune (the belt geometry)")
             from dyno.model.params import BeltParams
@@ -307,37 +322,11 @@ class CVT:
             self._kappa = kappa
 
     def belt_state(self, x: float, rpm_primary: float, torque_primary_nm: float) -> tuple:
-        """(creep slip or None, thrust ratio kappa or None = keep the current one) at this state; pure."""
-        from dyno.errors import MODEL_FAILURES, ConfigError
-        from dyno.model.closed_form import closed_form_point
-        from dyno.model.params import OperatingPoint
+        """(creep slip or None, thrust ratio kappa or None = keep the current one) at this state; pure
+        (:func:`dyno.sim.belt_thrust.belt_state`)."""
+        from dyno.sim.belt_thrust import belt_state
 
-        f_p = self.primary_force_n(rpm_primary, x)
-        if f_p <= 0.0 or rpm_primary <= 0.0:
-            return None, None  # no clamp (clutch open): the loss model's slip; kappa does not enter
-        if not torque_primary_nm > 1e-6:
-            return 0.0, None  # no torque, no tension difference, no creep; kappa kept
-        op = OperatingPoint(ratio=self.ratio_of_travel(x), primary_speed_rpm=rpm_primary,
-                            primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
-                            primary_axial_force_n=f_p)
-        try:
-            res = closed_form_point(self._creep_params, op)
-        except (ConfigError, *MODEL_FAILURES):
-            # The clamp cannot carry the torque: the secondary wins (as in
-            # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
-            return None, 0.0
-        creep = 1.0 - res.efficiency_speed
-        if self._belt_params is None:
-            return creep, None
-        if self.belt_thrust_model == "capstan":
-            from dyno.model.capstan import capstan_point
-
-            try:
-                cap = capstan_point(self._belt_params, op)
-            except (ConfigError, ValueError, *MODEL_FAILURES):
-                return creep, 0.0
-            return creep, (0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n)
-        return creep, res.axial_force_secondary_n / f_p
+        return belt_state(self, x, rpm_primary, torque_primary_nm)
 
     def quasi_static_imbalance_n(self, rpm_primary: float, torque_secondary_nm: float, x: float,
                                  torque_primary_nm: float) -> float:
@@ -442,7 +431,7 @@ class CVT:
         if ratio < self.i_opt:
             q = (self.i_opt - ratio) / (self.i_opt - self.ratio_high)
             return self.eps0 + self.a_h * q * q
-        q = (ratio - self.i_opt) / (self.ratio_low - self.i_opt)
+        q = (ratio - self.i_opt) / (LOSS_SHAPE_RATIO_LOW - self.i_opt)
         return self.eps0 + self.a_l * q * q
 
     def drag_nm(self, ratio: float) -> float:

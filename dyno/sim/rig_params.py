@@ -76,13 +76,14 @@ class RigParams:
     world_seed: int | None = None
     engine_start_rpm: float = 1000.0             # speed the pull start leaves the engine at
     # ---- CVT (ratio = primary speed / secondary speed)
-    # Low ratio: the thesis belt-model solutions span 1.74..0.72 (Fig. 6.20),
-    # but the real rig's CVT reached a speed ratio of 2.36 at full load in the
-    # 2019 logs (n_p 2747 / n_s 1166), and with 1.74 the engine cannot hold a
-    # secondary speed below 1500 rpm above its peak-torque speed (it lugs down
-    # to clutch slip).  So low = 2.4 (the logs), high = 0.72 (thesis model).
-    cvt_ratio_low: float = 2.4
-    cvt_ratio_high: float = 0.72
+    # The stops (each inside what the tune's geometry allows, 3.06..0.42 for the stock drive).  Low: the
+    # geometry's (3.1 asks for more than it has): the 2019 logs reached a speed ratio of 2.36 at full load
+    # (n_p 2747 / n_s 1166) still shifting, and the engagement speed is the flyweights' at the geometric low
+    # stop (~2,360 rpm; a stop at 2.4 put it under the idle).  High: from the logs: run3's five light-load
+    # points sit at a speed ratio of 0.547-0.548 (a stop: the load changes, the ratio does not), ~1 % of
+    # creep above a geometric 0.54; the real sheaves stop short of the drawing's 93 mm.
+    cvt_ratio_low: float = 3.1
+    cvt_ratio_high: float = 0.54
     cvt_primary_radius_max_m: float = 0.093      # belt radius at full shift (thesis 9.4.1)
     cvt_sheave_half_angle_deg: float = 13.0
     cvt_flyweight_coeff_kg_m: float = 0.0108     # n m r dr/dz of the flyweights (eq. 9.2), held constant
@@ -118,15 +119,18 @@ class RigParams:
     # the overlay cache) + the loss model's parasitic remainder (see dyno.sim.cvt).
     belt_efficiency_source: str = "belt_model"
     belt_table_cache_dir: str | None = None      # None = $DYNO_MODEL_CACHE or ~/.cache/dyno/model
-    # Hidden "true" CVT parameters for the fit of dyno.tuning.fit (see dyno.sim.cvt).
-    # None = the belt passes the primary clamp unchanged (F_p = F_s at balance);
-    # a number = closed-form belt thrusts with this belt-sheave friction coefficient.
+    # The belt's thrust ratio F_s,belt / F_p (dyno.sim.belt_thrust): by default the full belt model's, from
+    # the belt table's cells; a number = the capstan tier (or the closed form, below) at this belt-sheave
+    # friction coefficient instead (--sim-belt-thrust F).
     cvt_belt_friction_coefficient: float | None = None
-    cvt_flyweight_radius_offset_m: float = 0.0   # added to the tune's flyweight radius table
-    # Which belt tier gives the true thrust ratio in that mode: "capstan" (Gerbert's flat-belt V-belt
-    # limit, dyno.model.capstan) is NOT the closed form the fit uses, so the fit is not validated
-    # against itself; "closed_form" reproduces the fitted model (circular: for comparison only).
-    cvt_belt_thrust_model: str = "capstan"
+    # Added to the tune's flyweight radius table: the real weights' centre of mass, which no drawing gives.
+    # -3 mm: fitted to the 2019 logs' run2 alone (engine speed against speed ratio, default thesis-step, seed
+    # 4; 0.5 mm grid, least RMS) and shown on run3 and run4 (bench/bench_fidelity.py, docs/simulator-fidelity.md).
+    cvt_flyweight_radius_offset_m: float = -0.003
+    # Which belt tier gives the true thrust ratio: "full" (the full model's cells; with a friction given,
+    # the capstan tier), "capstan" (Gerbert's V-belt limit, dyno.model.capstan) or "closed_form" (the
+    # model dyno.tuning.fit fits: circular, for comparison only).
+    cvt_belt_thrust_model: str = "full"
     # Bearing/seal drag on the secondary shaft after the helix: the helix feels
     # the belt torque, the torque gauge (and the brake) that minus this.
     cvt_secondary_friction_torque_nm: float = 0.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dyno.errors import DidNotConverge
-from dyno.sim.belt_table import DEFAULT_RATIOS, TABLE_RPM, build_belt_table, tune_clamp_n
+from dyno.sim.belt_table import DEFAULT_RATIOS, DEFAULT_TORQUES_NM, TABLE_RPM, build_belt_table, tune_clamp_n
 from dyno.sim.physics import RigModel, RigParams
 
 RATIOS = (0.9, 1.0, 1.1)
@@ -154,13 +154,14 @@ def test_default_table_covers_the_sim_range_at_the_tunes_clamp(tmp_path):
         return _fake_solver()[0](op, guess)
 
     tab = build_belt_table(cache_dir=tmp_path, tune=tune, solve=solve)
-    assert tab.ok.all() and len(seen) == len(DEFAULT_RATIOS) * 2
+    assert tab.ok.all() and len(seen) == len(DEFAULT_RATIOS) * len(DEFAULT_TORQUES_NM)
     for op in seen:
         assert op.slack_tension_n is None and op.primary_speed_rpm == TABLE_RPM
         assert op.primary_axial_force_n == pytest.approx(tune_clamp_n(tune, TABLE_RPM, op.ratio))
         assert op.primary_axial_force_n == pytest.approx(clamp_from_tune(tune, TABLE_RPM)(op.ratio))
-    # flyweights minus spring: ~900 N in overdrive .. ~590 N at 2.4 (stock tune, 3150 rpm)
-    assert 850 < tab.clamp_n[0] < 950 and 550 < tab.clamp_n[-1] < 650
+    # flyweights minus spring (stock tune, 3150 rpm): ~1,180 N at the overdrive stop, ~1,520 N round 2, and at the
+    # geometric low stop, the flyweights in at their smallest radius, ~460 N
+    assert 1100 < tab.clamp_n[0] < 1250 and 1450 < max(tab.clamp_n) < 1600 and 400 < tab.clamp_n[-1] < 520
     assert tab.lookup(2.3, 12.0) is not None      # no clamping to 1.75 any more
     assert tab.lookup(2.3, 12.0) != tab.lookup(1.75, 12.0)
 

@@ -29,12 +29,13 @@ def test_power_balance_and_efficiency(make_driver, actuator_on_s):
     g = 32 / 61
     assert tr.torque_brake_shaft_nm * g == pytest.approx(tr.torque_secondary_nm, rel=2e-3)
     assert tr.ratio == pytest.approx(tr.rpm_primary / tr.rpm_secondary)
-    # the belt's slip (closed-form creep at the tune's clamp, 0.03-0.2 %): the speed ratio is the
-    # sheaves' geometric ratio over (1 - slip)
+    # the belt's slip (the full belt model's speed loss at the tune's clamp where its cell answers, else the
+    # loss model's: 0.3-4 %, the V-belt's creep and radial slip): the speed ratio is the sheaves' geometric
+    # ratio over (1 - slip)
     assert tr.ratio / tr.ratio_geometric == pytest.approx(1.0 / (1.0 - tr.belt_slip), rel=1e-9)
-    assert 2e-4 <= tr.belt_slip <= 3e-3
-    if tr.torque_primary_nm > 8:
-        assert 0.80 <= tr.efficiency <= 0.92
+    assert 2e-3 <= tr.belt_slip <= 0.05
+    if tr.torque_primary_nm > 8:  # (the overdrive stop at 0.54, the logs', costs most: ~79 % at light load)
+        assert 0.76 <= tr.efficiency <= 0.92
 
 
 def test_efficiency_is_worse_toward_overdrive(make_driver):

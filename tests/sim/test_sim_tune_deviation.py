@@ -95,8 +95,10 @@ def test_engagement_truth_follows_the_true_parts():
     from dyno.sim.driven import clamp_radius_m
     from dyno.tuning import actuators as act
 
-    label = RigModel(RigParams(cvt_tune_path=STOCK, belt_efficiency_source="loss_model"), seed=0)
-    dev = _model(0, world_seed=11)
+    # (the flyweights' hidden radius offset of the default rig set to none: this compares with the parts alone)
+    label = RigModel(RigParams(cvt_tune_path=STOCK, belt_efficiency_source="loss_model",
+                               cvt_flyweight_radius_offset_m=0.0), seed=0)
+    dev = _model(0, world_seed=11, cvt_flyweight_radius_offset_m=0.0)
     r_m = clamp_radius_m(dev.params, dev.cvt)
     n0, n1 = label.engagement.rpm_for_capacity(0.0), dev.engagement.rpm_for_capacity(0.0)
     assert n1 == pytest.approx(float(act.primary_speed_for_force_rpm(dev.tune_true, 0.0, r_m)), abs=1.0)
