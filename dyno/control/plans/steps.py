@@ -7,7 +7,8 @@ Step kinds (keys; every time in s, speeds in rpm, torque in N·m):
   (or ``setpoint``, or ``from``/``to``/``count``), and measure a point at each: at least ``min_s``, until
   ``ci95`` or ``max_s`` (defaults: the plan's [test] values); ``tolerance_rel``, ``in_band_s``,
   ``max_approach_s`` say when a setpoint is reached or given up; ``load_raises_speed`` = true where more
-  brake raises the held speed (the engine while the CVT back-shifts at heavy load); ``measure`` = false
+  brake raises the held speed (the engine while the CVT back-shifts at heavy load; for the engine, without
+  the key, one apply pulse finds out: :func:`probe_load_sign`); ``measure`` = false
   only moves there (no point), e.g. to enter a region before another hold.
 * ``ramp``: move the setpoint of ``variable`` (secondary | engine) from ``from`` to ``to`` at ``rate_rpm_s``
   under the hold, a point every ``point_s``, each corrected for I·alpha (:mod:`dyno.analysis.inertia`).
@@ -173,9 +174,36 @@ async def _run_step(ctx, st: dict) -> None:
     elif kind == "identify":
         from dyno.control.plans.autotune import identify_gain
 
-        await identify_gain(ctx, st.get("variable", "secondary"), st["setpoint"],
-                            sign=-1.0 if st.get("load_raises_speed") else 1.0, pulse_s=st.get("pulse_s", 0.2),
+        variable = st.get("variable", "secondary")
+        await identify_gain(ctx, variable, st["setpoint"],
+                            sign=await load_sign(ctx, st, variable), pulse_s=st.get("pulse_s", 0.2),
                             repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
+
+
+async def load_sign(ctx, st: dict, variable: str) -> float:
+    """+1 where more brake lowers ``variable`` (the hold's usual sense), -1 where it raises it: as the step
+    says (``load_raises_speed``), else, for the engine, probed (:func:`probe_load_sign`) — a CVT that
+    back-shifts under load raises the engine, one that shifts flat (the stock CVT on the 2019 logs) lowers it."""
+    if "load_raises_speed" in st:
+        return -1.0 if st["load_raises_speed"] else 1.0
+    return await probe_load_sign(ctx, variable) if variable == "engine" else 1.0
+
+
+async def probe_load_sign(ctx, variable: str, pulse_s: float = 0.4, watch_s: float = 1.5) -> float:
+    """One apply pulse, and which way ``variable`` went: +1 down (more brake lowers it), -1 up (logged ``probe``)."""
+    from dyno.control.plans.speed_hold import measured
+
+    before = measured(ctx, variable, 0.5)
+    ctx.brake(APPLY)
+    try:
+        await ctx.sleep(pulse_s)
+    finally:
+        ctx.brake(STOP)
+    await ctx.sleep(watch_s)
+    after = measured(ctx, variable, 0.5)
+    sign = -1.0 if after > before else 1.0
+    ctx.log("probe", variable=variable, before=before, after=after, pulse_s=pulse_s, load_raises_speed=sign < 0)
+    return sign
 
 
 async def find_contact(ctx, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
@@ -219,7 +247,7 @@ async def _hold_step(ctx, st: dict) -> None:
     hold = SpeedHold(gains)
     sps = _setpoints(st)
     target = {"rpm": sps[0]}
-    if st.get("load_raises_speed"):
+    if await load_sign(ctx, st, variable) < 0:
         target["sign"] = -1.0
     tol = st.get("tolerance_rel", 0.0075)
     p = ctx.plan
