@@ -1,9 +1,10 @@
 """The full belt model at full load (issue 25 item 4): on a simulated thesis-step run (seed 4) of the stock parts
-with the flyweight profile re-estimated from the thesis's own forces (`cvtech-stock-thesis-forces.toml`) and a
-belt that needs less secondary thrust than the primary gives (`--sim-belt-thrust 0.4`), `dyno model overlay RUN
---tier full --json` predicts every point, with its balances, as real processes.
+with the flyweight profile re-estimated from the thesis's own forces (`cvtech-stock.toml`, the sim's default) and a
+belt that needs less secondary thrust than the primary gives (the full belt model's thrust ratio, the sim's default), `dyno
+model overlay RUN --tier full --json` predicts every point, with its balances, as real processes.
 
-With the first estimate of the stock tune the same run had a prediction at 2 of 15 points: gross slip or no
+With the first estimate of the stock tune (`cvtech-stock-first-estimate.toml`) the same run had a prediction at
+2 of 15 points: gross slip or no
 convergence wherever the engine delivered its full torque (docs/belt-model.md, "The stock tune's clamp").
 Judged on the simulated world: the engine torque each point ran at is the sim's true one, and the geometric
 ratio the full tier's inverse finds is compared with the sim's true ratio.
@@ -33,8 +34,7 @@ def overlay(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("full-load")
     run = tmp / "run"
     p = _dyno("run", "--sim", "--headless", "--speed", "50", "--seed", "4", "--plan", "thesis-step", "--out", run,
-              "--tune", REPO / "calibration/tunes/cvtech-stock-thesis-forces.toml", "--sim-belt-thrust", "0.4",
-              "--json", cwd=tmp)
+              "--json", cwd=tmp)  # the defaults: the stock tune, the full belt model's thrust ratio
     assert p.returncode == 0, p.stderr[-1500:]
     o = _dyno("model", "overlay", run, "--tier", "full", "--json", cwd=tmp)
     assert o.returncode == 0, o.stderr[-1500:]

@@ -22,7 +22,7 @@ def test_shipped_catalogue_has_every_kind_with_sources_and_matches_the_shipped_t
     assert all(p.source and 0 < p.tolerance_rel <= 0.5 and p.fits == "cvtech-ibc" for p in parts)
     stock = match_parts(load_tune("calibration/tunes/cvtech-stock.toml"), parts)
     assert {k: p.id for k, p in stock.items()} == {"flyweights": "fw-3x228g", "primary_spring": "ps-950n-18.2k",
-                                                   "secondary_spring": "ss-200n@1", "helix": "hx-40deg"}
+                                                   "secondary_spring": "ss-140n@1", "helix": "hx-23deg"}
     heavy = match_parts(load_tune("calibration/tunes/heavy-flyweights.toml"), parts)
     assert heavy["flyweights"].id == "fw-3x262g"
     assert any(p.id.startswith("team-") for p in parts)  # the team's own parts, same format

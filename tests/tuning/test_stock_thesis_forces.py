@@ -1,5 +1,5 @@
 """The stock parts' flyweight profile re-estimated from the thesis's own forces (issue 25 item 4,
-`calibration/tunes/cvtech-stock-thesis-forces.toml`; docs/belt-model.md "The stock tune's clamp").
+`calibration/tunes/cvtech-stock.toml`; the first estimate kept in `cvtech-stock-first-estimate.toml`; docs/belt-model.md "The stock tune's clamp").
 
 Messick §9.4.1: eq. 9.3 at the rig's measured speeds gives primary forces that sit between 100 and 200 N of slack
 tension in the thesis's own model (its code: the `as_published` variant, Fig. 7.14's 3400 rpm and 18 N m) over
@@ -22,8 +22,8 @@ import pytest
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 
 REPO = Path(__file__).resolve().parents[2]
-NEW = REPO / "calibration/tunes/cvtech-stock-thesis-forces.toml"
-OLD = REPO / "calibration/tunes/cvtech-stock.toml"
+NEW = REPO / "calibration/tunes/cvtech-stock.toml"
+OLD = REPO / "calibration/tunes/cvtech-stock-first-estimate.toml"
 pytestmark = pytest.mark.skipif(legacy_data_missing() is not None, reason=str(legacy_data_missing()))
 
 

@@ -53,7 +53,14 @@ def test_curve_shape(curve):
     a = curve.arrays()
     assert np.all(np.diff(a["ratio"][[p.segment == "shifting" for p in curve.points]]) < 0)
     assert np.all(np.diff(a["secondary_rpm"]) > 0)
-    assert curve.engagement_rpm < curve.shift_out_rpm <= curve.full_shift_rpm + 1
+    assert curve.engagement_rpm < curve.shift_out_rpm
+    # the stock profile's steep first 3 mm (docs/belt-model.md): at full throttle the sheave leaves the low
+    # stop late and snaps over a fold; the drive cannot sit on the fold's inner balances, the curve skips them
+    assert curve.jumped and all(p.ratio < curve.ratio_low_stop for p in curve.jumped)
+    landed = min(p.ratio for p in curve.jumped)  # after the jump the engine speed rises with the upshift
+    stable = [p for p in curve.points if p.segment == "shifting" and p.ratio < landed]
+    assert np.all(np.diff([p.engine_rpm for p in stable]) > -15.0)  # (a shallow dip as it lands)
+    assert max(p.engine_rpm for p in stable) <= curve.full_shift_rpm + 1
     assert np.all((a["efficiency"] > 0.9) & (a["efficiency"] <= 1.0))
 
 

@@ -11,7 +11,7 @@ from dyno.tuning.tune import dumps_tune, load_tune, tune_from_dict
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "calibration/tunes/cvtech-stock.toml"
+EXAMPLE = ROOT / "calibration/tunes/cvtech-stock-first-estimate.toml"
 
 
 def _raw():
