@@ -48,7 +48,9 @@ class SafetyLimits:
     sensor_check_rpm: float = 300.0  # a shaft turning faster than this must give Hall edges
     primary_quiet_s: float = 0.25  # no primary edge this long while the engine must run (>= 1300 rpm: 46 ms/rev)
     secondary_quiet_s: float = 0.30
-    secondary_check_primary_rpm: float = 2300.0  # above engagement: the secondary must turn
+    # above engagement: the secondary must turn (the stock CVTech engages at ~2,270 rpm as its tune predicts,
+    # ~2,360 on the simulated rig, whose flyweights sit 3 mm in; 2,300 tripped its engagement plan)
+    secondary_check_primary_rpm: float = 2600.0
     adc_error_run: int = 8  # consecutive conversions with the error bit (64 ms at 125 Hz)
     adc_stuck_run: int = 50  # identical codes in a row (0.4 s); noise makes even 5 improbable
     adc_quiet_s: float = 0.30  # no conversion this long while frames arrive

@@ -33,7 +33,7 @@ from dyno.tuning.advisor_model import (MODEL_SD_RPM, THRUST_NOMINAL, effective_t
 from dyno.tuning.parts import apply_part, part_identity
 
 N_DRAWS = 2000
-#: below the rig's "the secondary must turn" speed (SafetyLimits.secondary_check_primary_rpm, 2,300): a tune
+#: below the rig's "the secondary must turn" speed (SafetyLimits.secondary_check_primary_rpm, 2,600): a tune
 #: that engages within this margin of it aborts the engagement plan's loaded ramps (measured: 2,254 rpm
 #: predicted at the light load aborted three times), so such an outcome teaches nothing
 ENGAGEMENT_MARGIN_RPM = 100.0
