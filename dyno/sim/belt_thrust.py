@@ -29,7 +29,7 @@ def belt_state(cvt, x: float, rpm_primary: float, torque_primary_nm: float) -> t
         return 0.0, None  # no torque, no tension difference, no creep; kappa kept
     ratio = cvt.ratio_of_travel(x)
     if cvt._belt_params == "full":
-        return _full(cvt.belt_table, ratio, f_p, torque_primary_nm)
+        return _full(cvt.thrust_table, ratio, f_p, torque_primary_nm)
     return _tiers(cvt, ratio, rpm_primary, f_p, torque_primary_nm)
 
 

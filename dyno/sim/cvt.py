@@ -189,7 +189,7 @@ class CVT:
                  bending_drag_nm: float, tune=None, n_table: int = 400,
                  belt_friction_coefficient: float | None = None, flyweight_radius_offset_m: float = 0.0,
                  belt_update_cells: int = 25, belt_table=None, belt_reference_torque_nm: float = 18.0,
-                 belt_thrust_model: str = "capstan"):
+                 belt_thrust_model: str = "capstan", thrust_table=None):
         if belt_thrust_model not in ("full", "capstan", "closed_form"):
             raise ValueError(f"belt_thrust_model: 'full', 'capstan' or 'closed_form', got {belt_thrust_model!r}")
         self.belt_thrust_model = belt_thrust_model
@@ -242,8 +242,9 @@ class CVT:
         self._belt_every = max(int(belt_update_cells), 1)
         self._belt_count = 0
         self._creep_params = None
+        self.thrust_table = thrust_table if thrust_table is not None else belt_table
         if belt_thrust_model == "full" and belt_friction_coefficient is None:
-            if tune is not None and belt_table is not None and belt_table.kappa is not None:
+            if tune is not None and self.thrust_table is not None and self.thrust_table.kappa is not None:
                 self._belt_params = self._creep_params = "full"  # the table's full-model cells: kappa and creep
                 self.source += ", full-model belt thrusts (the belt table)"
             elif tune is not None:

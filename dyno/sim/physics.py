@@ -75,7 +75,7 @@ from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.input_torque import InputTorqueSignals
 # The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
 # keep importing them from dyno.sim.physics.
-from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_table_for
+from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for
 from dyno.sim.rig_params import _load_tune, _resolve_map_path
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
@@ -137,7 +137,7 @@ class RigModel(RigSignals, InputTorqueSignals):
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient if tune is not None else None,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       belt_table=_belt_table_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
+                       **_belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
         self.engagement = None

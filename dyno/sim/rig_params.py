@@ -225,3 +225,21 @@ def _belt_table_for(p: RigParams, tune=None):
     from dyno.sim.belt_table import belt_table
 
     return belt_table(p.belt_table_cache_dir, tune)
+
+
+def _belt_tables_for(p: RigParams, tune=None) -> dict:
+    """The CVT's tables: ``belt_table`` (efficiency, :func:`_belt_table_for`) and ``thrust_table`` (the full
+    model's thrust ratio, :mod:`dyno.sim.belt_thrust`).  The thrust ratio is a property of the belt on its drive
+    at a load relative to the clamp, so a tune without its own table (``belt_efficiency_source = "loss_model"``,
+    a tune the advisor proposes) reads the stock tune's where the drive is the same (the conftest and the first
+    run build it once per machine), else its own."""
+    eff = _belt_table_for(p, tune)
+    thrust = eff
+    if (thrust is None and tune is not None and p.cvt_belt_thrust_model == "full"
+            and p.cvt_belt_friction_coefficient is None):
+        from dyno.sim.belt_table import belt_table
+
+        stock = _load_tune(DEFAULT_TUNE)
+        same_drive = stock is not None and stock.to_dict().get("drive") == tune.to_dict().get("drive")
+        thrust = belt_table(p.belt_table_cache_dir, stock if same_drive else tune)
+    return {"belt_table": eff, "thrust_table": thrust}

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from dyno.control.safety import SafetyLimits
+
 ROOT = Path(__file__).resolve().parents[2]
 TUNES = ("cvtech-stock", "heavy-flyweights", "stiff-primary-spring")
 
@@ -52,9 +54,9 @@ def test_engagement_plan_recovers_the_simulated_cvt(tmp_path, tune):
         assert again[key] == d[key]
     # shift-out flatness across load: three ramps, heavier loads shift out higher (the helix), each as the truth
     rows = d["shift_out_vs_load"]
-    if d["engagement_rpm"] > 2300 - 60:
-        # the stiff spring engages at ~2,277 rpm: a heavier load would hold the secondary past the Hall
-        # safety check's 2,300 rpm, so the plan does not load it further (and says so)
+    if d["engagement_rpm"] > SafetyLimits().secondary_check_primary_rpm - 60:
+        # a tune engaging near the Hall safety check's speed: a heavier load would hold the secondary past
+        # it, so the plan does not load it further (and says so)
         assert len(rows) == 1
         return
     assert len(rows) == 3 and rows[0]["torque_secondary_nm"] < rows[1]["torque_secondary_nm"] \

@@ -19,7 +19,7 @@ from dyno.sim.physics import RigParams
 
 STOCK = Path("calibration/tunes/cvtech-stock.toml").resolve()
 WORLD = 23
-TARGETS = {"engagement": 2100.0, "shift_out": 2750.0}
+TARGETS = {"engagement": 2300.0, "shift_out": 2850.0}  # (the stock rig of world 23: 2,305 / 2,650 rpm true)
 
 
 def _run(tune: Path, seed: int, out: Path) -> dict:
@@ -47,7 +47,7 @@ def loop(tmp_path_factory):
         if not f.name.startswith("team-"):
             shutil.copy(f, cat / f.name)
     first = _run(STOCK, 1, runs / "r1")
-    adv = _dyno("tune", "advise", str(runs / "r1"), "--target", "engagement=2100", "--target", "shift_out=2750",
+    adv = _dyno("tune", "advise", str(runs / "r1"), "--target", "engagement=2300", "--target", "shift_out=2850",
                 "--catalogue", str(cat), "--out", str(tmp / "advice"), "--json", env=env)
     assert adv.returncode == 0, adv.stderr[-2000:]
     advice = json.loads(adv.stdout)
@@ -227,8 +227,8 @@ def test_pool_and_inline_give_the_same_advice(loop, tmp_path):
     """The refine step through dyno.model.executor: a local pool of 2 gives what this process gives."""
     docs = []
     for jobs in ("1", "2"):
-        r = _dyno("tune", "advise", str(loop["tmp"] / "runs" / "r1"), "--target", "engagement=2100",
-                  "--target", "shift_out=2750", "--jobs", jobs, "--out", str(tmp_path / jobs), "--json",
+        r = _dyno("tune", "advise", str(loop["tmp"] / "runs" / "r1"), "--target", "engagement=2300",
+                  "--target", "shift_out=2850", "--jobs", jobs, "--out", str(tmp_path / jobs), "--json",
                   env={"DYNO_RUNS_DIR": str(tmp_path / "runs")})
         assert r.returncode == 0, r.stderr[-2000:]
         docs.append(json.loads(r.stdout))
