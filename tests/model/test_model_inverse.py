@@ -85,13 +85,15 @@ def test_without_a_tune_the_slack_tension_sets_the_level():
 
 @pytest.fixture(scope="module")
 def sim_run(tmp_path_factory):
-    """A default simulated steady-state test, started as the user starts it (~10-20 s).  Perfect knowledge
+    """A simulated steady-state test, started as the user starts it (~10-20 s).  Perfect knowledge
     (--sim-ideal): the inverse takes the primary torque from the engine map, so an engine unlike its map
-    (dyno.sim.world) moves its input; this checks the inverse, not the map."""
+    (dyno.sim.world) moves its input; this checks the inverse, not the map.  And the belt of the capstan
+    tier (--sim-belt-thrust 0.4), whose slip is the closed form's creep, the tier this inverse uses: the
+    default rig's slip is the full belt model's (up to ~4 %), which only the full tier's inverse can match."""
     out = tmp_path_factory.mktemp("inverse-run") / "run"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--sim-ideal", "--seed", "3", "--out",
-                           str(out), "--json"],
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--sim-ideal", "--sim-belt-thrust", "0.4",
+                           "--seed", "3", "--out", str(out), "--json"],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     points = [d for d in map(json.loads, (out / "documents.jsonl").read_text().splitlines()) if d["type"] == "point"]
@@ -101,14 +103,14 @@ def sim_run(tmp_path_factory):
 def test_inverse_recovers_the_simulators_true_ratio_and_slip(sim_run):
     """Every point of `dyno run --sim`: geometric ratio and slip against the sim's truth.
 
-    The sim's slip is the closed-form creep at the tune's clamp (the same tier the
-    inverse uses here), so this checks the inversion and its inputs (measured speed
+    The sim's slip here is the closed-form creep at the tune's clamp (the same tier the
+    inverse uses, see the fixture), so this checks the inversion and its inputs (measured speed
     ratio and rpm, engine-map torque, the tune's clamp at the measured rpm), not the
     slip model itself; docs/belt-model.md states the measured errors.
     """
     run_dir, points = sim_run
     valid = [p for p in points if p.get("valid")]
-    assert len(valid) >= 12
+    assert len(valid) >= 10
     results = inv.invert_points(valid, load_tune(run_dir / "tune.toml"))
     assert len(results) == len(valid)
     worst_ratio = worst_slip = 0.0
