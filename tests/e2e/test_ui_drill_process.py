@@ -25,7 +25,12 @@ REPO = Path(__file__).resolve().parents[2]
 def test_ui_mock_pins_drill_records_the_physical_safe_state(tmp_path):
     out = tmp_path / "run"
     name = f"dyno-ui-drill-{uuid.uuid4().hex[:8]}"
-    cmd = " ".join([sys.executable, "-m", "dyno", "ui", "--sim", "--mock-pins", "--speed", "4",
+    from dyno.model.overlay import default_cache_dir
+
+    # the belt-model table's cache stays the user's (a fresh HOME would rebuild it inside the test's bound); in the
+    # command, as a running tmux server gives a session its own environment
+    cmd = " ".join(["env", f"DYNO_MODEL_CACHE={os.environ.get('DYNO_MODEL_CACHE', str(default_cache_dir()))}",
+                    sys.executable, "-m", "dyno", "ui", "--sim", "--mock-pins", "--speed", "4",
                     "--drill", "adc-stuck@loaded+2", "--out", str(out)]) + " ; echo EXITED=$? ; sleep 30"
     subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", name, "-c", str(tmp_path), cmd],
                    check=True, timeout=20, env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""),
