@@ -16,6 +16,7 @@ from dyno.app import RunOptions, run_test
 from dyno.control import plans as plans_mod
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import identify_gain
+from dyno.control.plans.steps import probe_load_sign
 from dyno.control.controller import State, TestPlan as Plan
 from dyno.control.plans.steps import find_contact
 from dyno.sim.physics import RigParams
@@ -49,11 +50,12 @@ def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
         await ctx.sleep(8.0)
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+        sign = found["sign"] = await probe_load_sign(ctx, "engine")  # which way more brake moves the engine here
         sp0 = sh.engine_rpm(ctx, 1.0)
-        found["identify"] = await identify_gain(ctx, "engine", sp0, sign=-1.0)
+        found["identify"] = await identify_gain(ctx, "engine", sp0, sign=sign)
         gains = sh.gains_for(ctx, "engine")  # the identified kp, applied to the controller's [control]
         found["kp"] = gains.kp
-        target = {"rpm": sp0, "sign": -1.0}
+        target = {"rpm": sp0, "sign": sign}
         task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(gains), target, "engine"), "hold")
         await _trace(ctx, 8.0, gains.speed_window_s)
         found["steps"] = []
@@ -123,8 +125,8 @@ def test_identify_engine_step_as_a_real_process(tmp_path):
                     '[test]\nmeasure_s = 2.0\ntarget_efficiency_ci95 = 0.01\nmax_measure_s = 6.0\n'
                     '[[step]]\nkind = "contact"\n'
                     '[[step]]\nkind = "hold"\nvariable = "secondary"\nsetpoint = 3000.0\nmeasure = false\n'
-                    '[[step]]\nkind = "identify"\nvariable = "engine"\nsetpoint = 2860.0\nload_raises_speed = true\n'
-                    '[[step]]\nkind = "hold"\nvariable = "engine"\nsetpoint = 2930.0\nload_raises_speed = true\n')
+                    '[[step]]\nkind = "identify"\nvariable = "engine"\nsetpoint = 2860.0\n'
+                    '[[step]]\nkind = "hold"\nvariable = "engine"\nsetpoint = 2930.0\n')
     proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--mock-pins", "--json", "--plan", str(plan),
                            "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=180,
                           cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(root)))
