@@ -99,4 +99,5 @@ def test_with_a_part_throttle_map_efficiency_follows_the_sims_truth(part_map_run
         assert p["efficiency_sys95"] > 0  # the systematic part is still stated
         # what the full-throttle map would have said (the bug)
         wrong.append(p["power_out_w"] / (full.torque_nm(p["rpm_primary"]) * p["rpm_primary"] * RAD_PER_S_PER_RPM))
-    assert max(abs(w - p["efficiency_true"]) for w, p in zip(wrong, res["points"])) > 0.3
+    # (0.27 on the logs' plant, whose part-throttle points sit at other speeds; 0.3+ on the old one)
+    assert max(abs(w - p["efficiency_true"]) for w, p in zip(wrong, res["points"])) > 0.2
