@@ -4,7 +4,6 @@ prediction on screen, solved in the background by dyno.model.overlay_service (it
 from __future__ import annotations
 
 import asyncio
-from pathlib import Path
 
 from dyno.control.controller import State
 from dyno.ui.live_app import LiveApp
@@ -13,22 +12,16 @@ from dyno.ui.session import LiveOptions
 
 from tests.ui.test_ui_live import SIZE, screen_text, wait_for
 
-# The stock parts with the flyweight profile re-estimated from the thesis's forces, as in
-# tests/model/test_model_overlay_full_load.py: its clamp carries the full-load points (1,200-2,000 N), so each
-# point of the run has a solution next to its predecessor's. With the sim's default (first-estimate) tune the
-# clamp at full load is 500-670 N, where the model finds gross slip: which points of a run at x8 the overlay
-# can chain then depends on where the adaptive brake steps happen to land.
-TUNE = "calibration/tunes/cvtech-stock-thesis-forces.toml"
+# The simulated rig's default plant (the re-estimated stock tune, its belt's thrust ratio the full model's): its
+# clamp carries the full-load points, so each point of the run has a solution next to its predecessor's.
 
 
 def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
     async def scenario():
         # the thesis rig as specified (RigParams(ideal=True): its engine exactly its map): the warm-start
         # figures below are of that rig's first points; a seed's own engine (dyno.sim.world) moves them
-        repo = Path(__file__).resolve().parents[2]
         app = LiveApp(LiveOptions(sim=True, speed=8.0, seed=0, out_dir=tmp_path / "run",
-                                  sim_params=RigParams(ideal=True, cvt_tune_path=str(repo / TUNE),
-                                                       cvt_belt_friction_coefficient=0.4)))
+                                  sim_params=RigParams(ideal=True)))
         app.overlay_cache_dir = tmp_path / "model-cache"  # solved here, not answered from an earlier run's cache
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None, 5)
