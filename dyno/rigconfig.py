@@ -183,12 +183,15 @@ class UncertaintyConfig:
 class ControlConfig:
     """Load-control gains (docs/control.md has the identification procedure).
 
-    Each ``kp_*`` is actuator speed (fraction of full speed) per unit relative error; ``ff_*_s`` is the
-    full-speed travel (s) given at once per unit relative setpoint change (feed-forward)."""
+    Each ``kp_*`` is actuator speed (fraction of full speed) per unit relative error; ``lead_*_s`` the
+    position term's lead (``u = kp·(e + lead·de/dt)``); ``ff_*_s`` is the full-speed travel (s) given at
+    once per unit relative setpoint change (feed-forward)."""
 
-    kp_speed: float = 3.0
+    kp_speed: float = 12.0
+    lead_speed_s: float = 0.5
     ff_speed_s: float = 0.0
     kp_engine: float = 3.0
+    lead_engine_s: float = 0.0
     kp_torque: float = 1.0
     deadband_rel: float = 0.004
     period_s: float = 0.05
@@ -419,7 +422,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     t = data.get("control", {})
     if not isinstance(t, Mapping):
         raise r.err("control", f"expected a table [control], got {type(t).__name__}")
-    ranges = {"kp_speed": (0.01, 100.0), "ff_speed_s": (0.0, 20.0), "kp_engine": (0.01, 100.0),
+    ranges = {"kp_speed": (0.01, 100.0), "lead_speed_s": (0.0, 5.0), "ff_speed_s": (0.0, 20.0),
+              "kp_engine": (0.01, 100.0), "lead_engine_s": (0.0, 5.0),
               "kp_torque": (0.01, 100.0), "deadband_rel": (0.0, 0.2), "period_s": (0.005, 1.0),
               "min_pulse_s": (0.0, 1.0)}
     r.no_extra(t, set(ranges), "control.")

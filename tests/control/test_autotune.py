@@ -24,8 +24,8 @@ def _identify(tmp_path, name, params=None) -> dict:
 
 def test_identify_finds_the_tuned_gain_and_scales_with_the_plant(tmp_path):
     std = _identify(tmp_path, "std")
-    assert std["ok"] and std["applied"] and std["kp_before"] == 3.0
-    assert std["kp_identified"] == pytest.approx(3.0, rel=0.25) and std["spread"] <= 0.5
+    assert std["ok"] and std["applied"] and std["kp_before"] == 12.0
+    assert std["kp_identified"] == pytest.approx(12.0, rel=0.25) and std["spread"] <= 0.5, std
     stiff = _identify(tmp_path, "stiff", replace(RigParams(), brake_spring_rate_n_per_mm=13.0))
     assert stiff["ok"]
     assert stiff["gain_rel_per_s"] / std["gain_rel_per_s"] == pytest.approx(2.0, rel=0.3)
