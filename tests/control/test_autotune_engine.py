@@ -1,10 +1,8 @@
-"""Auto-tune of the engine-speed hold on the simulated rig (through the real output code, mock pins): at
-heavy load (the secondary first held at 3,000 rpm) the identification finds kp, and that kp meets the
-speed hold's step figures on a 5 % engine-speed step up and back -- overshoot <= 3 %, sd <= 0.3 %, within
-the plan's +-0.75 % in <= 2 s every time and within +-0.5 % in <= 2 s for most (one minimum pulse moves the
-speed ~1 %: a step whose last pulse lands just past 0.5 % waits for the brake's fade, docs/control.md) -- on
-three seeds and on a brake twice as stiff (the plant's gain doubled, kp halved).  Simulated time:
-deterministic, not a wall-clock assertion."""
+"""Auto-tune of the engine-speed hold on the simulated rig (through the real output code, mock pins), at
+heavy load (the secondary first held at 3,000 rpm): on the logs' plant the engine sits inside the CVT's shift
+there, and the identification refuses with the physical reason (a pulse moves the secondary, not the engine)
+on three seeds and on a brake twice as stiff; the hold with rig.toml's kp stays near its setpoint.
+Simulated time: deterministic, not a wall-clock assertion."""
 
 import asyncio
 import statistics
@@ -90,29 +88,36 @@ def tunes(tmp_path_factory):
 
 
 @pytest.mark.parametrize("seed, stiff", CASES)
-def test_identified_engine_kp(tunes, seed, stiff):
+def test_engine_identification_refused_where_the_cvt_shifts(tunes, seed, stiff):
+    """On the logs' plant the CVT shifts at a near-flat engine speed: at 3,000 rpm on the secondary the engine
+    sits inside the shift, where the CVT, not the brake, sets its speed.  A brake pulse then moves the secondary
+    ~20x as much as the engine (relative; measured 19-24x on seeds 1-3), the engine's gain is a quarter of what
+    it is at a stop (0.014-0.019 /s against 0.073-0.078 on the former plant, which held the engine in low), and
+    a kp scaled to it (42-60) rings: with it and a 0.5 s lead a 5 % step overshot 9-10 % (sd 4 %).  So the
+    identification refuses, says why, and leaves rig.toml's kp in place -- on either brake (the share is the
+    CVT's, not the brake's)."""
     f = tunes[(seed, stiff)]
     ident = f["identify"]
-    assert ident["ok"] and ident["applied"] and ident["variable"] == "engine" and ident["kp_key"] == "kp_engine"
-    assert ident["kp_before"] == 3.0 and f["kp"] == ident["kp_identified"]
-    # the plant's gain doubles with the stiffer brake, so the kp found halves (~11.0 and ~5.8; it is identified
-    # from the state the hold leaves, so it moves with the hold's pulse timing and the poll phase: 10.6-12.2
-    # and 5.8-6.4 measured across the hold and poll-rate changes of 2026-11-25; bench_hold_tune.py)
-    assert f["kp"] == pytest.approx(5.8 if stiff else 11.0, rel=0.15), ident
+    assert ident["variable"] == "engine" and ident["kp_key"] == "kp_engine" and ident["kp_before"] == 3.0
+    assert not ident["ok"] and not ident["applied"] and f["kp"] == 3.0, ident
+    assert ident["secondary_over_engine"] > 10.0, ident
+    assert ident["reason"].startswith("the CVT shifts here"), ident
+    assert ident["gain_rel_per_s"] < 0.04, ident  # (a quarter to a half of the engine's gain at a stop)
 
 
-def test_identified_engine_kp_meets_the_step_figures(tunes):
-    steps = [(case, tunes[case]["kp"], step) for case in CASES for step in tunes[case]["steps"]]
-    for case, kp, step in steps:
-        assert step["overshoot_pc"] <= 3.0 and step["sd_pc"] <= 0.3, (case, kp, step)
-        assert step["settle_plan_s"] <= 2.0, (case, kp, step)  # the plan's own +-0.75 % "at the setpoint"
-    settle = sorted(step["settle_s"] for _, _, step in steps)
-    assert statistics.median(settle) <= 2.0 and sum(t <= 2.0 for t in settle) >= 6, settle  # of 8: measured 7
+def test_the_engine_hold_stays_near_its_setpoint_inside_the_shift(tunes):
+    """With rig.toml's kp the engine hold inside the shift neither runs away nor rings: after the step back to
+    the starting speed the engine's sd over the last 3 s stays small (measured 0.20 %), though the 5 % step up is
+    never reached (the CVT holds the engine: the brake moves the secondary instead)."""
+    for case in CASES:
+        up, back = tunes[case]["steps"]
+        assert back["sd_pc"] <= 0.3 and back["overshoot_pc"] <= 3.0, (case, back)
 
 
 def test_identify_engine_step_as_a_real_process(tmp_path):
-    """A plan file with the engine's identify step, through `dyno run --sim --mock-pins --json`: the identified
-    kp is recorded with the run and used by the engine hold that follows."""
+    """A plan file with the engine's identify step, through `dyno run --sim --mock-pins --json`: what the
+    identification found (here: refused, the CVT shifting) is recorded with the run, and the engine hold that
+    follows runs on."""
     import json
     import os
     import subprocess
@@ -125,7 +130,7 @@ def test_identify_engine_step_as_a_real_process(tmp_path):
                     '[test]\nmeasure_s = 2.0\ntarget_efficiency_ci95 = 0.01\nmax_measure_s = 6.0\n'
                     '[[step]]\nkind = "contact"\n'
                     '[[step]]\nkind = "hold"\nvariable = "secondary"\nsetpoint = 3000.0\nmeasure = false\n'
-                    '[[step]]\nkind = "identify"\nvariable = "engine"\nsetpoint = 2860.0\n'
+                    '[[step]]\nkind = "identify"\nvariable = "engine"\nsetpoint = 2980.0\n'
                     '[[step]]\nkind = "hold"\nvariable = "engine"\nsetpoint = 2930.0\n')
     proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--mock-pins", "--json", "--plan", str(plan),
                            "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=180,
@@ -135,6 +140,7 @@ def test_identify_engine_step_as_a_real_process(tmp_path):
     assert d["state"] == "done" and len(d["points"]) == 1
     docs = [json.loads(line) for line in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()]
     (ident,) = [x for x in docs if x["type"] == "identify"]
-    assert ident["ok"] and ident["applied"] and ident["variable"] == "engine"
-    assert ident["kp_identified"] == pytest.approx(11.6, rel=0.08)
+    # refused inside the shift (the test above), recorded with the run; the hold that follows keeps rig.toml's kp
+    assert not ident["ok"] and not ident["applied"] and ident["variable"] == "engine"
+    assert ident["reason"].startswith("the CVT shifts here"), ident
     assert abs(d["points"][0]["rpm_primary"] - 2930.0) <= 0.02 * 2930.0

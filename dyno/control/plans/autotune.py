@@ -37,6 +37,10 @@ KP_KEY = {"secondary": "kp_speed", "engine": "kp_engine"}
 MAX_SPREAD = 0.5  # (max - min) / mean of the pulses' gains
 REACH_ATTEMPTS = 3  # holds tried before pulsing: kp, kp/2, kp/4 (a too-high kp rings instead of holding)
 KP_RANGE = (0.3, 30.0)
+# The engine's hold is the brake's only where the CVT sits at a stop: there the secondary follows the engine
+# (a relative move ~1x the engine's); inside the shift the CVT holds the engine and a pulse moves the secondary
+# instead (measured ~10x and more on the logs' plant).
+MAX_SHIFT_SHARE = 3.0
 
 
 async def _reach(ctx, variable: str, setpoint: float, timeout_s: float = 10.0) -> bool:
@@ -101,22 +105,33 @@ async def identify_gain(ctx, variable: str, setpoint: float, *, sign: float = 1.
         else:
             target["frozen"] = True
             await ctx.sleep(1.0)
+            shares = []  # the secondary's relative move over the engine's, per pulse (engine only)
             for _ in range(repeats):
                 for direction in (APPLY, RELEASE):
-                    n0 = measured(ctx, variable, 0.5)
+                    n0, s0 = measured(ctx, variable, 0.5), measured(ctx, "secondary", 0.5)
                     await _pulse(ctx, direction, pulse_s)
                     await ctx.sleep(1.5)
-                    n1 = measured(ctx, variable, 0.5)
+                    n1, s1 = measured(ctx, variable, 0.5), measured(ctx, "secondary", 0.5)
                     gains.append(abs(n1 - n0) / n0 / pulse_s)
+                    if variable == "engine" and n1 != n0 and s0 > 0:
+                        shares.append(abs(s1 - s0) / s0 / (abs(n1 - n0) / n0))
             g = statistics.fmean(gains)
             spread = (max(gains) - min(gains)) / g if g > 0 else math.inf
             kp = LOOP_GAIN_PER_S[variable] / g if g > 0 else math.inf
-            ok = spread <= MAX_SPREAD and KP_RANGE[0] <= kp <= KP_RANGE[1]
+            shifting = statistics.median(shares) if shares else None
+            ok = spread <= MAX_SPREAD and KP_RANGE[0] <= kp <= KP_RANGE[1] and not (
+                shifting is not None and shifting > MAX_SHIFT_SHARE)
             result = {"ok": ok, "gain_rel_per_s": g, "pulse_gains_rel_per_s": gains, "spread": spread,
                       "kp_identified": kp, "kp_held": hold_kp}
+            if shifting is not None:
+                result["secondary_over_engine"] = shifting
             if not ok:
-                result["reason"] = (f"pulses disagree (spread {spread:.0%})" if spread > MAX_SPREAD
-                                    else f"kp {kp:.2f} outside {KP_RANGE[0]}..{KP_RANGE[1]}")
+                result["reason"] = (
+                    f"the CVT shifts here: each pulse moved the secondary {shifting:.1f}x as much as the engine "
+                    "(relative), so the engine speed is the CVT's, not the brake's; hold the engine where the "
+                    "CVT sits at a stop" if shifting is not None and shifting > MAX_SHIFT_SHARE
+                    else f"pulses disagree (spread {spread:.0%})" if spread > MAX_SPREAD
+                    else f"kp {kp:.2f} outside {KP_RANGE[0]}..{KP_RANGE[1]}")
     finally:
         if task is not None:
             task.cancel()
