@@ -48,7 +48,7 @@ def test_owed_travel_survives_the_dead_band_on_the_same_side():
     """At the band's edge kp·e·T is a fraction of a ms a period: if the band dropped the travel already
     owed, the first pulse after the error leaves it would come seconds late (the long step responses
     of docs/control.md "The holds").  Kept, it comes at once; dropped when the error changes side."""
-    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004)
+    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004, lead_s=0.0)
     h = SpeedHold(g)
     e = 0.02  # 2 % too fast: 3 ms of travel a period
     for _ in range(5):  # 15 ms owed, below the minimum pulse
@@ -69,3 +69,35 @@ def test_owed_travel_survives_the_dead_band_on_the_same_side():
     e = -0.0045  # too slow now: the first pulse is a release, after the travel of a minimum pulse is owed
     out = [h.pulse(h.command(e, g.period_s), e)[0] for _ in range(40)]
     assert APPLY not in out and out.index(RELEASE) >= 29
+
+
+def test_the_lead_sets_the_brake_position_by_the_error_and_waits_for_a_correction_under_way():
+    """u = kp·(e + lead·de/dt): integrated by the actuator, the lead part moves the brake by kp·lead·Δe (a
+    position in proportion to the error); and the dead band is judged on e + lead·de/dt, so an error outside the
+    band that is already closing fast enough (a correction the plant's lag still hides) asks for no pulse."""
+    g = SpeedHoldGains(kp=12.0, lead_s=0.5, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004,
+                       derivative_window_s=0.1)
+    h = SpeedHold(g)
+    for _ in range(3):
+        h.command(0.0, g.period_s)
+    # a step of the error from 0 to 1 %: the rate over the 0.1 s window is 0.01/0.1 s -> kp·lead·rate = 0.6
+    u = h.command(0.01, g.period_s)
+    assert u == pytest.approx(12.0 * 0.01 + 12.0 * 0.5 * 0.01 / 0.1)
+    # 0.6 % too fast for three periods: travel owed (3.6 ms a period), not yet a minimum pulse
+    def primed():
+        h = SpeedHold(g)
+        for _ in range(3):
+            assert h.pulse(h.command(0.006, g.period_s), 0.006) == (STOP, 0.0)
+        return h
+    h = primed()
+    owed = h.owed_s
+    assert owed == pytest.approx(3 * 12.0 * 0.006 * 0.05)
+    # then 0.5 %, closing at 1 %/s: one lead ahead it is at 0, inside the band -> no pulse, nothing added
+    for e in (0.0055, 0.0050):
+        assert h.pulse(h.command(e, g.period_s), e) == (STOP, 0.0)
+    assert h.e_lead == pytest.approx(0.0050 - 0.5 * 0.01) and h.owed_s == pytest.approx(owed)
+    # the same 0.5 % then held still: once the rate window has forgotten the step (0.1 s), the error is outside
+    # the band where it is heading too -> the owed travel becomes a pulse
+    h = primed()
+    out = [h.pulse(h.command(0.0050, g.period_s), 0.0050) for _ in range(7)]
+    assert out[:2] == [(STOP, 0.0)] * 2 and any(d == APPLY and on >= g.min_pulse_s for d, on in out[2:]), out

@@ -36,14 +36,21 @@ def test_speed_hold_steady_test_figures(hold_run):
     r = hold_run
     assert r["state"] == "done" and not r["aborts"]
     pts = r["points"]
-    # 13 on this seed: the default plant shifts at a flat engine speed, where no friction brake holds a secondary
-    # speed (those setpoints are skipped, each with its reason); the range now reaches the logs' ratio 2.35
-    assert len(pts) >= 12
-    assert r["test_time_s"] <= 180.0  # GO to the end of the last measurement, simulated seconds
+    # 19 of 20 setpoints on seeds 1-4: the hold (with its position term) holds the secondary across the CVT's
+    # shift, from the overdrive stop to the logs' ratio 2.35 (the lowest setpoint is skipped with its reason)
+    assert len(pts) >= 17
+    assert r["test_time_s"] <= 190.0  # GO to the end of the last measurement, simulated s (167-181 on seeds 1-4)
     assert all(p["efficiency_ci95"] <= 0.01 for p in pts)  # every point to +-1 pp (95 %)
-    inside = sum(abs(p["efficiency"] - p["efficiency_true"]) <= p["efficiency_ci95"] for p in pts)
-    assert inside / len(pts) >= 0.85  # (>= 90 % over 10 seeds: bench/bench_test_time.py)
-    assert statistics.median(abs(p["efficiency"] - p["efficiency_true"]) for p in pts) <= 0.005
+    # The CI is the point's own statistics; the tare (the zero read before GO, ~0.04 N·m standard uncertainty)
+    # is one error for the whole run, stated in the systematic part (efficiency_sys95_calibration).  Seed 2's
+    # tare reads 0.067 N·m off (1.8 of its sigma): +0.2 to +0.9 pp on every point, which the CI does not claim.
+    # --sim-ideal makes the sensor exactly its calibration, so the tare's own error is what it read against the
+    # calibration's intercept (zero_nm); the CI is judged on what is left (mean error then 0.0002).
+    zero_nm = r["torque_tare"]["zero_nm"]
+    err = [p["efficiency"] - p["efficiency_true"] * (1.0 - zero_nm / p["torque_secondary_true_nm"]) for p in pts]
+    inside = sum(abs(e) <= p["efficiency_ci95"] for e, p in zip(err, pts))
+    assert inside / len(pts) >= 0.85  # (90-95 % on seeds 1-4)
+    assert statistics.median(abs(e) for e in err) <= 0.005
     # warm-up criterion met and recorded; the systematic part stated beside the CI (and larger than it)
     assert r["warmup"]["criterion"] == "time at load" and r["warmup"]["at_load_s"] >= r["warmup"]["required_s"] - 1e-6 > 0
     assert all(p["efficiency_sys95"] > p["efficiency_ci95"] for p in pts)
