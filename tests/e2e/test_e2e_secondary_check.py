@@ -7,6 +7,7 @@ from dataclasses import replace
 from dyno.app import RunOptions, run_test
 from dyno.control.controller import TestPlan as StepPlan
 from dyno.drills import parse_drill
+from dyno.control.safety import SafetyLimits
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
@@ -19,7 +20,7 @@ def test_dead_secondary_sensor_before_the_warm_up_is_caught_once_the_engine_is_a
     a = r["aborts"][0]
     assert a["cause"] in ("sensor_fault", "stall") and a["state"] == "warmup"
     truth = got["ctx"].sim.truth
-    crossed = truth.crossing_s("rp", 2300.0)  # the engine passes the check speed at full throttle
+    crossed = truth.crossing_s("rp", SafetyLimits().secondary_check_primary_rpm)  # the check speed, full throttle
     # bound: 0.3 s above the check speed, 0.3 s of silence (both run together), and a poll
     assert crossed is not None and 0.0 < a["trigger_s"] - crossed <= 0.3 + 0.05
 
