@@ -22,8 +22,11 @@ def test_device_reset_mid_run_is_survived(tmp_path):
         # a point whose window spans a reset may lose the events queued at that instant,
         # but its numbers stay within the measurement's own uncertainty: this plan's fixed 3 s windows
         # (6 batches) carry 0.4-0.9 pp of honest noise, so a fixed 1 pp bound was ~2 sigma and failed
-        # on seeds without any reset; twice the point's own 95 % half-width is ~5 of its standard errors
-        assert abs(p["efficiency"] - p["efficiency_true"]) <= 2 * p["efficiency_ci95"], p
+        # on seeds without any reset; twice the point's own 95 % half-width is ~5 of its standard errors --
+        # of the estimated ones: from 6 batches the estimate itself scatters (0.0040 beside 0.0105-0.014 on its
+        # neighbours, seed 6, a window no reset touches), and the tare (the zero read before GO) is one error of
+        # the whole run that no point's CI claims (tare_allowance, as below)
+        assert abs(p["efficiency"] - p["efficiency_true"]) <= 2 * p["efficiency_ci95"] + tare_allowance(r, p), p
 
 
 def test_stuck_primary_hall_aborts(tmp_path):
