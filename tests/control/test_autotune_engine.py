@@ -43,7 +43,7 @@ def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
     async def runner(ctx):
         ctx.phase(State.STEP, "test: contact")
         assert await find_contact(ctx)
-        pre = {"rpm": 3000.0}  # heavy load, the CVT in low: where the engine-hold plan holds the engine
+        pre = {"rpm": 3000.0}  # heavy load: where the engine-hold plan starts
         task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(sh.gains_for(ctx, "secondary")), pre), "hold")
         await ctx.sleep(8.0)
         task.cancel()
