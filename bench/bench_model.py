@@ -275,7 +275,7 @@ def _run_points(plan: str, seed: int, workdir: Path) -> list:
     import json
     import subprocess
 
-    from dyno.ui.live_model import overlay_inputs
+    from dyno.model.overlay_inputs import overlay_inputs
 
     out = workdir / f"{plan}-{seed}"
     subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--seed", str(seed), "--plan", plan,

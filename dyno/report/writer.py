@@ -46,7 +46,7 @@ def _model(points: list, notes: list, full: bool = False, tune_path: Path | None
     (instant, creep loss only: an upper bound) only for the points left, as its own labelled series.  Each
     point's input is the slip-consistent inverse's (geometric ratio and the run's tune's clamp,
     ``overlay_inputs``)."""
-    from dyno.ui.live_model import overlay_inputs
+    from dyno.model.overlay_inputs import overlay_inputs
 
     kept = [p for p in points if not exclusion_reason(p) and (p.get("power_in_w") or 0) > 0]
     tune = tune_path if tune_path is not None and tune_path.is_file() else None

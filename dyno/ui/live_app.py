@@ -22,7 +22,8 @@ from textual_plotext import PlotextPlot
 
 from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
-from dyno.ui.live_model import History, RateMeter, fmt, ideal_engine_rpm, live_values, temp_colour
+from dyno.analysis.live import RateMeter, ideal_engine_rpm, live_values
+from dyno.ui.live_model import History, fmt, temp_colour
 from dyno.ui.live_model import (TEST_STATES, discard_text, efficiency_text, last_point_text, measure_text,
                                 progress_text)
 from dyno.ui.live_overlay import OverlayMixin

@@ -14,7 +14,7 @@ import math
 import threading
 import time
 
-from dyno.ui.live_model import overlay_inputs
+from dyno.model.overlay_inputs import overlay_inputs
 
 
 class OverlayMixin:

@@ -141,7 +141,7 @@ def export_png(rs: ReplaySet, path, ideal_engine_rpm: float | None = None) -> Pa
 
 def ideal_rpm_for(rr: ReplayRun) -> float:
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.ui.live_model import ideal_engine_rpm
+    from dyno.analysis.live import ideal_engine_rpm
 
     src = rr.engine_map_path or rr.run.engine_map_path
     try:

@@ -234,8 +234,8 @@ class LiveSession(RearmMixin):
 
     def test_progress(self) -> tuple[int, int | None, float | None]:
         """(points so far, estimated total, real seconds left) of the running test: the headless
-        progress line's estimate (:func:`dyno.cli.progress.eta_now`) over the points' end times."""
-        from dyno.cli.progress import eta_now
+        progress line's estimate (:func:`dyno.control.progress.eta_now`) over the points' end times."""
+        from dyno.control.progress import eta_now
 
         pts = self.controller.points
         ends = [p.get("host_t_end_s", math.nan) for p in pts]

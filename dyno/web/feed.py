@@ -31,7 +31,7 @@ class RunSource:
         return self.ctx.controller
 
     def progress(self):
-        from dyno.cli.progress import eta_now
+        from dyno.control.progress import eta_now
 
         c = self.ctx.controller
         pts = c.points

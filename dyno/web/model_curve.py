@@ -1,7 +1,7 @@
 """The belt model beside the live page's points (the terminal UI's `o` overlay, for the page).
 
 Each new valid point is taken to the model's operating point by the slip-consistent inverse (the run's
-``tune.toml`` gives the clamp; :func:`dyno.ui.live_model.overlay_inputs`), and the full model (the thesis's
+``tune.toml`` gives the clamp; :func:`dyno.model.overlay_inputs.overlay_inputs`), and the full model (the thesis's
 BVP) is solved for it in its own low-priority process (:class:`dyno.model.overlay_service.OverlayService`
 with :func:`~dyno.model.overlay_worker.process_pool`, sharing the model cache with the UI and the report):
 seconds a point, so the page shows the closed form — creep loss only, an upper bound, marked as such — until
@@ -53,7 +53,7 @@ class ModelCurve:
 
     def _submit(self, rows: list[dict]) -> None:
         from dyno.model.overlay import predict_overlay
-        from dyno.ui.live_model import overlay_inputs
+        from dyno.model.overlay_inputs import overlay_inputs
 
         tune = Path(self._run_dir) / "tune.toml" if self._run_dir else None
         tune = tune if tune is not None and tune.is_file() else None

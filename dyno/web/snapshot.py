@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time
 
-from dyno.ui.live_model import RateMeter, live_values
+from dyno.analysis.live import RateMeter, live_values
 
 #: the points table's columns (a subset of dyno.summary.POINT_KEYS)
 POINT_COLUMNS = ("index", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w",

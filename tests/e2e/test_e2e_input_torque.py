@@ -175,7 +175,7 @@ def test_measured_engine_curve_against_the_simulated_engines_true_curve(honest_i
 
 
 def test_live_values_and_report_carry_the_input_channel(honest_input_run):
-    from dyno.ui.live_model import RateMeter, live_values
+    from dyno.analysis.live import RateMeter, live_values
 
     r, ctx = honest_input_run
     v = live_values(ctx.poller, ctx.controller, 0.0, RateMeter())

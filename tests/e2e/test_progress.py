@@ -16,7 +16,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from dyno.cli.progress import WIDTH, TtyProgress, estimate, status_line
+from dyno.cli.progress import WIDTH, TtyProgress, status_line
+from dyno.control.progress import estimate
 
 REPO = Path(__file__).resolve().parents[2]
 

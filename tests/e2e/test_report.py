@@ -109,7 +109,7 @@ def test_report_shows_the_full_model_where_cached_and_the_bound_only_as_a_labell
     from dyno.report.html import exclusion_reason
     from dyno.model.overlay import predict_overlay
     from dyno.runlog.reader import load_run
-    from dyno.ui.live_model import overlay_inputs
+    from dyno.model.overlay_inputs import overlay_inputs
 
     run_dir, _ = cli_run
     cache = tmp_path / "cache"

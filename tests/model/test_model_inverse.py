@@ -128,7 +128,7 @@ def test_inverse_recovers_the_simulators_true_ratio_and_slip(sim_run):
 
 
 def test_overlay_inputs_use_the_inverse(sim_run):
-    from dyno.ui.live_model import overlay_inputs
+    from dyno.model.overlay_inputs import overlay_inputs
 
     run_dir, points = sim_run
     valid = [p for p in points if p.get("valid")]

@@ -15,7 +15,9 @@ import pytest
 from dyno.control.controller import State
 from dyno.control.controller import TestPlan as Plan
 from dyno.ui.live_app import LiveApp
-from dyno.ui.live_model import RateMeter, fmt, ideal_engine_rpm, overlay_inputs, temp_colour
+from dyno.model.overlay_inputs import overlay_inputs
+from dyno.analysis.live import RateMeter, ideal_engine_rpm
+from dyno.ui.live_model import fmt, temp_colour
 from dyno.ui.session import LiveOptions, scaled_plan
 from tests.screens import screen_text, wait_for
 

@@ -11,7 +11,8 @@ import pytest
 
 from dyno.analysis.engine_map import load_engine_map
 from dyno.protocol import v1
-from dyno.ui.live_model import RAD_S_PER_RPM, RateMeter, efficiency_text, live_values
+from dyno.analysis.live import RAD_S_PER_RPM, RateMeter, live_values
+from dyno.ui.live_model import efficiency_text
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

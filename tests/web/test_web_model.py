@@ -32,7 +32,7 @@ def test_page_shows_the_model_at_each_point_marked_by_tier(browser, tmp_path):
     # the model's values, as the page had them at the end (the last frame), against an independent computation
     # of the same operating points: the closed form's creep-only bound at each point with a steady belt
     from dyno.model.overlay import predict_overlay
-    from dyno.ui.live_model import overlay_inputs
+    from dyno.model.overlay_inputs import overlay_inputs
 
     pts = [q for q in result["points"] if q.get("valid", True) and q.get("efficiency") is not None]
     pairs = overlay_inputs(pts, run_dir / "tune.toml")
