@@ -104,8 +104,8 @@ def j1349_factor_of(temp_c: float, pressure_kpa: float, rh_pct: float) -> float:
 def uncorrected_air_rel_u() -> float:
     """Relative standard uncertainty of an efficiency whose map was NOT taken to the run's air.
 
-    Such an efficiency divides by the standard-day power, so it is off by the factor ``CF`` of the
-    unknown day (efficiency_reported / efficiency_true = CF, the map otherwise exact).  Over the
+    Such an efficiency divides by the standard-day power ``P_std = CF·P_day``, so it is off by the factor
+    ``CF`` of the unknown day (efficiency_true / efficiency_reported = CF, the map otherwise exact).  Over the
     plausible day (``PLAUSIBLE_*``) CF spans [CF_lo, CF_hi]; the error is bounded by
     ``a = max(|CF_lo − 1|, |CF_hi − 1|)`` and taken as rectangular on ±a (GUM 4.3.7): ``u = a/√3``.
     The bound is wide on purpose: it is what not knowing the air costs.

@@ -398,7 +398,9 @@ def _print_table(result: dict) -> None:
 
 
 def _print_points(points: list) -> None:
-    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±':>5} "
+    """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``) and
+    its U95 (statistics and every systematic term, ``efficiency_u95``), both ± half-widths in pp."""
+    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±CI95':>6} "
           f"{'±U95':>5}")
     for p in points:
         def f(k, scale=1.0, fmt="{:.0f}"):
@@ -406,5 +408,5 @@ def _print_points(points: list) -> None:
             return "-" if v is None else fmt.format(v * scale)
         print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
               f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
-              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_sem', 100, '{:.1f}'):>5} "
+              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_ci95', 100, '{:.1f}'):>6} "
               f"{f('efficiency_u95', 100, '{:.1f}'):>5}")
