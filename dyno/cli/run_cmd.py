@@ -82,8 +82,8 @@ def add_air_arguments(p) -> None:
                         "same part keeps its deviation on the same rig across runs (default 0)")
     p.add_argument("--sim-belt-thrust", type=float, default=None, metavar="F",
                    help="with --sim: the simulated belt requires the secondary thrust of the capstan tier at "
-                        "belt-sheave friction F (0.4 is the thesis's), as a real belt under load does; default: "
-                        "the primary clamp passes to the secondary unchanged (docs/belt-model.md)")
+                        "belt-sheave friction F (0.4 is the thesis's); default: the full belt model's thrust "
+                        "ratio, from its table at the operating point (docs/belt-model.md)")
     p.add_argument("--sim-ideal", action="store_true",
                    help="with --sim: perfect knowledge (the engine exactly its map, the sensor exactly its "
                         "calibration, the J1349 reference day): for checks of statistics alone")
