@@ -241,7 +241,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
     t0 = time.perf_counter()
     if tune is not None:
-        from dyno.tuning.shift_curve import model_params_for
+        from dyno.tuning.tune import model_params_for
 
         params = model_params_for(tune)
     else:

@@ -248,7 +248,7 @@ class CVT:
                 self._belt_params = self._creep_params = "full"  # the table's full-model cells: kappa and creep
                 self.source += ", full-model belt thrusts (the belt table)"
             elif tune is not None:
-                from dyno.tuning.shift_curve import model_params_for
+                from dyno.tuning.tune import model_params_for
 
                 self._creep_params = model_params_for(tune)  # no table: no thrust ratio (F_p = F_s)
         elif belt_friction_coefficient is not None:
@@ -257,13 +257,13 @@ class CVT:
             if tune is None:
                 raise ValueError("belt_friction_coefficient needs a CVT tune (the belt geometry)")
             from dyno.model.params import BeltParams
-            from dyno.tuning.shift_curve import model_params_for
+            from dyno.tuning.tune import model_params_for
 
             self._belt_params = model_params_for(tune, BeltParams(friction_coefficient=belt_friction_coefficient))
             self._creep_params = self._belt_params
             self.source += f", {belt_thrust_model} belt thrusts (f = {belt_friction_coefficient:g})"
         elif tune is not None:
-            from dyno.tuning.shift_curve import model_params_for
+            from dyno.tuning.tune import model_params_for
 
             # The belt's slip at the tune's clamp (see "Slip" in the module docstring).
             self._creep_params = model_params_for(tune)

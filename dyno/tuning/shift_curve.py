@@ -42,9 +42,9 @@ from scipy.optimize import brentq
 
 from dyno.errors import ConfigError, DidNotConverge
 from dyno.model.closed_form import closed_form_point
-from dyno.model.params import BeltParams, DriveParams, ModelParams, OperatingPoint
+from dyno.model.params import ModelParams, OperatingPoint
 from dyno.tuning import actuators as act
-from dyno.tuning.tune import Tune
+from dyno.tuning.tune import Tune, model_params_for
 
 
 
@@ -106,18 +106,6 @@ def load_engine_map(path: str | Path) -> EngineMap:
 
 
 # ------------------------------------------------------------ belt params
-
-
-def model_params_for(tune: Tune, belt: BeltParams | None = None) -> ModelParams:
-    """Belt-model parameters for a tune: its drive geometry with the thesis
-    belt (Table 6.1) unless ``belt`` is given."""
-    belt = belt or BeltParams()
-    if belt.pitch_length_m != tune.drive.belt_pitch_length_m:
-        from dataclasses import replace
-
-        belt = replace(belt, pitch_length_m=tune.drive.belt_pitch_length_m)
-    return ModelParams(belt=belt, drive=DriveParams(centre_distance_m=tune.drive.centre_distance_m,
-                                                    sheave_half_angle_deg=tune.drive.sheave_half_angle_deg))
 
 
 # ------------------------------------------------------------ point solve

@@ -475,3 +475,16 @@ def dumps_tune(t: Tune) -> str:
 
     emit(t.to_dict(), "")
     return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def model_params_for(tune: Tune, belt=None):
+    """Belt-model parameters (:class:`dyno.model.params.ModelParams`) for a tune: its drive geometry with the
+    thesis belt (Table 6.1) unless ``belt`` (a ``BeltParams``) is given.  The parts as measured: the simulated
+    rig reads them too (it shares the geometry with the host, not the host's shift model)."""
+    from dyno.model.params import BeltParams, DriveParams, ModelParams
+
+    belt = belt or BeltParams()
+    if belt.pitch_length_m != tune.drive.belt_pitch_length_m:
+        belt = replace(belt, pitch_length_m=tune.drive.belt_pitch_length_m)
+    return ModelParams(belt=belt, drive=DriveParams(centre_distance_m=tune.drive.centre_distance_m,
+                                                    sheave_half_angle_deg=tune.drive.sheave_half_angle_deg))
