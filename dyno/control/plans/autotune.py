@@ -8,7 +8,8 @@ back), and the speed read before and 1.5 s after each pulse (long after the ~0.3
 
 The loop's gain ``kp·g`` is what sets its damping, so ``kp = LOOP_GAIN_PER_S[variable] / g``; each is
 the simulated rig's tuned loop through the real output code (secondary: kp = 12, with its 0.5 s lead, on
-g ≈ 0.38 /s near 3,000 rpm; the lead is kept as found in rig.toml; engine at heavy load: the kp that settles a 5 % step fastest, ``bench/bench_hold_tune.py``).
+g ≈ 0.38 /s near 3,000 rpm; the lead is kept as rig.toml gives it; engine at heavy load: the kp that
+settles a 5 % step fastest, ``bench/bench_hold_tune.py``).
 The result is used only if the pulses agree (spread ≤ ``MAX_SPREAD``) and ``kp`` lands in a sane range;
 otherwise the rig.toml gain stays and an ``identify`` document says why.  Either way it is recorded with
 the run.  The torque hold has none: its gauge reading's own scatter (sd ~2 % of the setpoint over the

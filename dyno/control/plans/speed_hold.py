@@ -45,10 +45,10 @@ class SpeedHoldGains:
     The ``kp`` part moves the brake while the error lasts (it holds a constant load with zero
     error: no ``ki`` needed); the ``lead_s`` part sets the brake's position in proportion to
     the error (a PI on position), which damps a plant whose speed answers the brake slowly.
-    On the logs' plant (a CVT that shifts at a flat engine speed) a 50 ms full-speed pulse
-    near 3,000 rpm moves the secondary ~10 rpm (g ≈ 0.067 /s) with a ~0.5 s lag: the former
-    pure ``kp`` = 3 (tuned on a plant 5× stiffer) took 3.4-8 s and rang 1-2 %, higher kp
-    oscillated; ``kp`` 12 with a 0.5 s lead settles 5 % steps within ±0.5 % in ≤ 1.5 s
+    On the logs' plant (a CVT that shifts at a flat engine speed) a brake pulse near 3,000 rpm
+    shows in the secondary's speed ~0.5 s later (a 0.2 s pulse moves it ~7 %, g ≈ 0.38 /s; a
+    50 ms one only ~0.3 %: the relay eats the first ~30 ms): the former pure ``kp`` = 3 (tuned
+    on the former plant) took 3.4-8 s and rang 1-2 %, higher kp oscillated; ``kp`` 12 with a 0.5 s lead settles 5 % steps within ±0.5 % in ≤ 1.5 s
     (seeds 1-10).  The dead band is judged on the error one lead ahead (where it is heading),
     so a correction already under way is not doubled while the plant's lag hides it."""
 
@@ -77,16 +77,13 @@ class SpeedHold:
 
     def __init__(self, gains: SpeedHoldGains = SpeedHoldGains()) -> None:
         self.g = gains
-        self.integral = 0.0
-        self.owed_s = 0.0  # actuator travel asked for but not yet given (s at full speed)
-        self.e_hist: list[float] = []
-        self.e_lead = math.nan
+        self.reset()
 
     def reset(self) -> None:
         self.integral = 0.0
-        self.owed_s = 0.0
-        self.e_hist: list[float] = []
-        self.e_lead = math.nan
+        self.owed_s = 0.0  # actuator travel asked for but not yet given (s at full speed)
+        self.e_hist: list[float] = []  # the last errors, one a period (the rate over derivative_window_s)
+        self.e_lead = math.nan  # e + lead·de/dt: where the error is heading
 
     def update(self, rpm: float, setpoint_rpm: float, dt_s: float) -> float:
         """Actuator command in [-1, 1] (+: apply more brake) for the measured ``rpm``."""
