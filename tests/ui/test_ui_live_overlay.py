@@ -38,18 +38,23 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             # The first point is at overdrive and a heavy clamp, far from any solution: its cold start fails there
             # and it is solved warm from the seed (17 continuation steps, 20-45 s on 2 busy cores). A function
             # test, not a latency bound: the latency's figures are bench/bench_overlay_ui.py's.
-            assert await wait_for(pilot, lambda: len(app.overlay_full) >= 2, 150), app.overlay_tier
+            assert await wait_for(pilot, lambda: len(app.overlay_full) >= 3, 180), app.overlay_tier
             await pilot.pause(0.4)  # one refresh
             text = screen_text(app)
-            assert "full 2/" in text or "full 3/" in text, text
+            assert any(f"full {n}/" in text for n in (3, 4, 5)), text
             assert "model (full)" in text, text  # the plot's legend
-            keys = app._overlay_keys[:2]
+            keys = app._overlay_keys[:3]
             res = [svc.get(k) for k in keys]
-            dbg = (res, app._overlay_pairs, [(e.op, e.prime, e.result and e.result.get("start")) for e in svc.entries.values()])
+            near = [svc.entries[k].extra.get("neighbour_distance") for k in keys]
+            dbg = (res, near, app._overlay_pairs)
             assert all(r and r["converged"] and 0.5 < r["efficiency"]["overall"] <= 1.0 for r in res), dbg
-            # the second point starts from a neighbour's solution, not from scratch: 1-3 continuation steps (its
-            # brake step moved the torque 3-5 N*m) where a cold start takes 13 or more
-            assert res[1]["start"] == "warm" and res[1]["steps"] <= 3, res[1]
+            # A point next to a solved one (op_distance <= 1: consecutive setpoints, a brake step moving the torque
+            # 3-5 N*m) starts from that solution: 1-3 continuation steps where a cold start takes 13 or more.  Which
+            # points are neighbours depends on where the plan's steps landed (on one CI machine the second point lay
+            # further than that from the first and was solved cold, rightly), so it is judged on those that are.
+            chained = [(r, d) for r, d in zip(res[1:], near[1:]) if d is not None and d <= svc.warm_max_distance]
+            assert chained, dbg
+            assert all(r["start"] == "warm" and r["steps"] <= 3 for r, _ in chained), dbg
             assert set(app.overlay_latencies_s()) >= set(keys)
             await pilot.press("space")
             await pilot.pause(0.2)
