@@ -52,11 +52,12 @@ def _span_ei_eff(case: eq.Case, length_m: float) -> float:
 
 
 def _unit(angle):
-    return np.array([math.cos(angle), math.sin(angle)])
+    # np, not math: the boundary conditions' Jacobian evaluates these on complex (n, B) batches
+    return np.array([np.cos(angle), np.sin(angle)])
 
 
-def _cross(a, b) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
+def _cross(a, b):
+    return a[0] * b[1] - a[1] * b[0]
 
 
 def _pulley_geometry(case: eq.Case, p, which: str):
@@ -77,8 +78,8 @@ def _contact_end(case, y_end, p, which):
     t_n = y_end[rows[0]] * eq.TENSION_REF_N
     th, th1, th2 = y_end[rows[1]], y_end[rows[2]], y_end[rows[3]]
     x_m, x1_m = y_end[rows[4]] * eq.PENETRATION_REF_M, y_end[rows[5]] * eq.PENETRATION_REF_M
-    q = float(eq.contact_shear(case, th, th1, th2, x_m, x1_m, radius, phi))
-    kappa = math.cos(th) * (1.0 - th1 / phi) / (radius - x_m)
+    q = eq.contact_shear(case, th, th1, th2, x_m, x1_m, radius, phi)
+    kappa = np.cos(th) * (1.0 - th1 / phi) / (radius - x_m)
     return t_n, th, q, case.ei_nm2 * kappa, radius - x_m
 
 
@@ -101,7 +102,8 @@ def interface_loads_at_ends(case: eq.Case, ya, yb, p) -> dict:
     """Per (pulley, end): span-side and contact-side force and moment, and the point load on the belt.
 
     Vectors in the drive frame (N), positions relative to the pulley centre (m).
-    Pure and cheap: the boundary conditions call it (torque and axial-force levels).
+    Pure and cheap: the boundary conditions call it (torque and axial-force levels), on single states or,
+    for their Jacobian, on (n, B) batches of complex-stepped ones (every operation here is analytic).
     """
     # (pulley, end) -> (contact state column, span, span state column, span is upstream)
     table = {
@@ -121,7 +123,7 @@ def interface_loads_at_ends(case: eq.Case, ya, yb, p) -> dict:
         jump = f_span - f_contact if span_upstream else f_contact - f_span
         # Tension and direction are continuous (their own BCs): the point load is the normal part.
         n_hat = _unit(psi + math.pi / 2)
-        normal_load = float(np.dot(jump, n_hat)) * n_hat
+        normal_load = np.sum(jump * n_hat, axis=0) * n_hat
         out[(which, end)] = {
             "position_m": r_loc * _unit(alpha),
             "span_force_n": f_span,
