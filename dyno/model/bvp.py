@@ -216,7 +216,7 @@ def solve_case(
     *,
     guess: RawSolution | None = None,
     tol: float = 1e-3,
-    nodes: int = 300,
+    nodes: int = 200,
     max_nodes: int = 8000,
     start_slip_m_s: float = 1.0,
     slip_factor: float = 0.4,

@@ -233,7 +233,7 @@ def solve_point(
     variant: str = "corrected",
     slip_threshold_m_s: float = 1e-4,
     tol: float = 1e-3,
-    nodes: int = 300,
+    nodes: int = 200,
     guess: BeltSolution | None = None,
     time_limit_s: float = 120.0,
     keep_mesh_below: int = 0,
@@ -255,7 +255,8 @@ def solve_point(
         solve_bvp tolerance (relative collocation residual and BC residual on
         O(1)-scaled states).
     nodes : int
-        Mesh size after each re-mesh between continuation steps.
+        Nodes of the geometric initial guess (and of each re-mesh between continuation steps where the
+        mesh is not equidistributed from the last residuals).
     guess : BeltSolution, optional
         A solution at a nearby point: warm start by homotopy in the physical
         parameters instead of continuation from the geometric guess.
