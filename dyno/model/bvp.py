@@ -222,7 +222,7 @@ def solve_case(
     slip_factor: float = 0.4,
     max_halvings: int = 6,
     time_limit_s: float = 120.0,
-    continuation_tol: float = CONTINUATION_TOL,
+    continuation_tol: float | None = None,
     keep_mesh_below: int = 0,
     mesh_mode: str = "equidistribute",
     step_node_factor: float | None = None,
@@ -235,7 +235,7 @@ def solve_case(
     ``case`` itself, to ``tol``.  Raises :class:`~dyno.errors.DidNotConverge` naming the case, the
     continuation step and the last residual.
     """
-    loose_tol = max(tol, continuation_tol)
+    loose_tol = max(tol, CONTINUATION_TOL if continuation_tol is None else continuation_tol)
     t0 = time.perf_counter()
     # The limit counts this thread's CPU time, not wall time: a loaded machine (or two test workers
     # on two cores) must not turn a solvable case into "did not converge".

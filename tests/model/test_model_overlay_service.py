@@ -57,7 +57,8 @@ def test_incremental_warm_started_equal_to_cold_and_cached(tmp_path):
     again = service(tmp_path / "c")
     assert all(again.get(again.submit(p))["cached"] for p in RUN) and again.solves == 0
     new = again.get(again.submit((1.15, 3490.0, 16.8)))
-    assert new["start"] == "warm" and new["steps"] == 1 and again.solves == 1
+    # one homotopy step (to the continuation's tolerance), then that solution refined to tol: two attempts
+    assert new["start"] == "warm" and new["steps"] == 2 and again.solves == 1
     # predict_overlay (the report's path) is the same service, inline
     res = overlay.predict_overlay(RUN, slip_threshold_m_s=SLIP, cache_dir=tmp_path / "c")
     assert [r["cached"] for r in res] == [True, True, True]
