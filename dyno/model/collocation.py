@@ -36,33 +36,50 @@ def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_d
 
     Same formulas (Kierzenka & Shampine's Lobatto IIIA collocation blocks)
     as ``scipy.integrate._bvp.construct_global_jac``, but the n x n products
-    are formed region by region (6, 8, 6, 6 states: 1/15 of the flops) and
-    only structurally non-zero entries enter the sparse matrix (~1/3).
+    are formed region by region (6, 8, 6, 6 states: 1/15 of the flops), only
+    structurally non-zero entries are stored (~1/3), and they are written
+    straight into compressed-column order (no COO sort): column (node i, state
+    c) holds the rows of interval i-1 (its d1 block), of interval i (d0), then
+    the boundary conditions' rows at the two end nodes; a parameter's column
+    is dense.
     """
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import csc_matrix
 
     h3 = h[:, None, None]
-    rows, cols, vals = [], [], []
-    base = (np.arange(m - 1) * n)[:, None, None]
+    n_bc = n + k
+    block_size = np.empty(n, dtype=np.int64)
     for blk in _BLOCKS:
-        idx = np.asarray(blk)
+        block_size[list(blk)] = len(blk)
+    lengths = np.empty(n * m + k, dtype=np.int64)
+    lengths[:n * m] = np.tile(2 * block_size, m)
+    lengths[:n] = block_size + n_bc  # node 0: its d0 rows and the boundary conditions
+    lengths[n * (m - 1):n * m] = block_size + n_bc  # node m-1: its d1 rows and the boundary conditions
+    lengths[n * m:] = (m - 1) * n + n_bc
+    indptr = np.zeros(n * m + k + 1, dtype=np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    data = np.empty(indptr[-1])
+    indices = np.empty(indptr[-1], dtype=np.int32)
+    intervals = np.arange(m - 1)
+    for blk in _BLOCKS:
+        idx = np.sort(np.asarray(blk))
         b = idx.size
         a = np.transpose(df_dy[idx[:, None], idx[None, :], :], (2, 0, 1))
         a_mid = np.transpose(df_dy_middle[idx[:, None], idx[None, :], :], (2, 0, 1))
         eye = np.identity(b)
         d0 = -eye - h3 / 6 * (a[:-1] + 2 * a_mid) - h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[:-1])
         d1 = eye - h3 / 6 * (a[1:] + 2 * a_mid) + h3**2 / 12 * np.einsum("...ij,...jk->...ik", a_mid, a[1:])
-        r = np.broadcast_to(base + idx[None, :, None], (m - 1, b, b))
-        c = np.broadcast_to(base + idx[None, None, :], (m - 1, b, b))
-        rows += [r.ravel(), r.ravel()]
-        cols += [c.ravel(), (c + n).ravel()]
-        vals += [d0.ravel(), d1.ravel()]
-    # boundary conditions on ya, yb
-    bc_r = (m - 1) * n + np.arange(n + k)[:, None]
-    rows += [np.broadcast_to(bc_r, (n + k, n)).ravel()] * 2
-    cols += [np.broadcast_to(np.arange(n)[None, :], (n + k, n)).ravel(),
-             np.broadcast_to((m - 1) * n + np.arange(n)[None, :], (n + k, n)).ravel()]
-    vals += [dbc_dya.ravel(), dbc_dyb.ravel()]
+        rows = (intervals[:, None, None] * n + idx[None, :, None]).astype(np.int32)  # [interval, row a, col c]
+        # d1[i] sits in the columns of node i+1, first; d0[i] in those of node i, after d1[i-1] (none at node 0)
+        start = indptr[(intervals[:, None] + 1) * n + idx[None, :]]
+        pos = start[:, None, :] + np.arange(b)[None, :, None]
+        data[pos], indices[pos] = d1, rows
+        start = indptr[intervals[:, None] * n + idx[None, :]] + np.where(intervals > 0, b, 0)[:, None]
+        pos = start[:, None, :] + np.arange(b)[None, :, None]
+        data[pos], indices[pos] = d0, rows
+    bc_rows = ((m - 1) * n + np.arange(n_bc)).astype(np.int32)[:, None]
+    for node, dbc in ((0, dbc_dya), (m - 1, dbc_dyb)):
+        pos = (indptr[node * n + np.arange(n)] + block_size)[None, :] + np.arange(n_bc)[:, None]
+        data[pos], indices[pos] = dbc, bc_rows
     if k > 0:
         fp = np.transpose(df_dp, (2, 0, 1))
         fp_mid = np.transpose(df_dp_middle, (2, 0, 1)).copy()
@@ -72,15 +89,12 @@ def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_d
             idx = np.asarray(blk)
             fp_mid[:, idx, :] += 0.125 * h3 * np.einsum("...ij,...jk->...ik", a_mid_full[:, idx[:, None], idx[None, :]],
                                                        diff[:, idx, :])
-        d_p = -h3 / 6 * (fp[:-1] + fp[1:] + 4 * fp_mid)
-        rows += [np.broadcast_to((base[:, :, 0] + np.arange(n)[None, :])[:, :, None], (m - 1, n, k)).ravel(),
-                 np.broadcast_to(bc_r, (n + k, k)).ravel()]
-        cols += [np.broadcast_to(n * m + np.arange(k)[None, None, :], (m - 1, n, k)).ravel(),
-                 np.broadcast_to(n * m + np.arange(k)[None, :], (n + k, k)).ravel()]
-        vals += [d_p.ravel(), dbc_dp.ravel()]
+        d_p = -h3 / 6 * (fp[:-1] + fp[1:] + 4 * fp_mid)  # [interval, state, parameter]
+        first = indptr[n * m]
+        data[first:] = np.concatenate([d_p.reshape((m - 1) * n, k), dbc_dp], axis=0).T.ravel()
+        indices[first:] = np.tile(np.arange((m - 1) * n + n_bc, dtype=np.int32), k)
     size = n * m + k
-    jac = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
-    return jac.tocsc()
+    return csc_matrix((data, indices, indptr), shape=(size, size))
 
 
 def _private_bvp_module():
