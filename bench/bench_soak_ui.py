@@ -2,7 +2,7 @@
 """UI soak: ``dyno ui --sim --speed N`` as the operator runs it, test after test with re-arms, its RSS over time.
 
 The real process in tmux (as tests/e2e/test_ui_drill_process.py drives it): wait for ARMED, ``g`` and ``y``
-(GO), wait for the test to end — every ``--estop-every``-th test is stopped mid-test with the E-STOP key
+(GO), wait for the test to end — every ``--estop-every``-th test (the first, then every Nth after it) is stopped mid-test with the E-STOP key
 (space) instead, so re-arms after an abort are soaked too — then ``r`` (repeated while the UI refuses: the
 brake still releasing, the engine still turning) and ``y``, until ``--hours`` simulated hours have passed
 (the UI's simulated clock is its loop's clock x speed).  After every test one line: tests, simulated
@@ -12,7 +12,8 @@ its points replay.
 
     python bench/bench_soak_ui.py [--hours 2] [--speed 8] [--plan speed-hold] [--quick] [--json]
 
-``--quick`` (CI's smoke run): 5 simulated minutes at x4 (about two tests, ~2–3 min of wall time).  Skips in one
+``--quick`` (CI's smoke run): 2.5 simulated minutes at x4: the first test E-stopped mid-test, re-armed, the
+second run to its end (~1.5–2 min of wall time).  Skips in one
 line without tmux.  Exit 0 when the UI ran to the end, every run is safe and replays, and RSS after the
 first quarter grew by at most 10 % (judged from 3 tests on), fds flat; 1 otherwise.
 """
@@ -173,7 +174,7 @@ def soak(args) -> dict:
                 while sim_before_s + (time.monotonic() - t0) * args.speed < args.hours * 3600.0:
                     k = len(states) + 1
                     try:
-                        states.append(one_test(name, args.estop_every > 0 and k % args.estop_every == 0,
+                        states.append(one_test(name, args.estop_every > 0 and (k - 1) % args.estop_every == 0,
                                                args.test_timeout_s))
                     except Restart as why:
                         states.append("ABORTED")
@@ -233,11 +234,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--estop-every", type=int, default=3, help="E-STOP every Nth test mid-test (0: never)")
     ap.add_argument("--test-timeout-s", type=float, default=900.0, help="wall seconds one test may take")
-    ap.add_argument("--quick", action="store_true", help="CI smoke run: 5 simulated minutes at x4")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: an E-stopped test and a whole one at x4")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.quick:  # (x4: a loaded CI machine starves x8's loop into watchdog trips)
-        args.hours, args.speed = 5 / 60, 4.0
+        # a test E-stopped mid-test, re-armed, and one run to its end (~3.5 simulated minutes)
+        args.hours, args.speed, args.estop_every = 2.5 / 60, 4.0, 2
     if shutil.which("tmux") is None:
         print("bench_soak_ui: skipped: tmux is not installed")
         return 0
