@@ -15,7 +15,8 @@ its points replay.
 ``--quick`` (CI's smoke run): 2.5 simulated minutes at x4: the first test E-stopped mid-test, re-armed, the
 second run to its end (~1.5–2 min of wall time).  Skips in one
 line without tmux.  Exit 0 when the UI ran to the end, every run is safe and replays, and RSS after the
-first quarter grew by at most 10 % (judged from 3 tests on), fds flat; 1 otherwise.
+first quarter grew by at most 10 % (judged from 3 tests on), fds flat, and no test that was not E-stopped ended
+without a point; 1 otherwise.
 """
 
 from __future__ import annotations
@@ -212,10 +213,12 @@ def soak(args) -> dict:
     fds = [s["fds"] for s in settled]
     checks = {"ran_to_the_end": error is None and exited == "0", "every_run_safe": not runs["unsafe"],
               "every_run_replays": not runs["unreplayable"],
+              # a test that was not E-stopped measured something (a re-armed x4 session once held no setpoint)
+              "every_test_measured": not any("no_points" in x for x in states),
               # (None: too few tests to judge a trend, e.g. --quick)
               "rss_flat": None if growth is None else growth <= RSS_GROWTH_MAX,
               "fds_flat": None if len(fds) < 3 else max(fds) - min(fds) <= 1}
-    if error is None and not runs["unsafe"] and not runs["unreplayable"]:
+    if error is None and not runs["unsafe"] and not runs["unreplayable"] and checks["every_test_measured"]:
         shutil.rmtree(work, ignore_errors=True)
     else:  # kept for a look: the runs of a soak that found something
         print(f"soak-ui: kept {work}", file=log, flush=True)

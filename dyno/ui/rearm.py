@@ -168,7 +168,9 @@ class RearmMixin:
 
 # Attributes dyno.app.build may set on a controller after constructing it (rig.toml's control gains and
 # inertias on newer trees): a re-armed controller gets the same.
-REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia")
+# (time_scale: the paced session's host seconds per rig second -- lost, a re-armed x4 session's speed hold timed
+# its derivative and settle in host seconds and held no setpoint; input_channel: the live screen's T_in)
+REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "time_scale", "input_channel")
 INPUT_COPIES = ("plan.toml",)
 
 #: seconds of events and truth a re-arm keeps (more than any window or drill check looks back over)

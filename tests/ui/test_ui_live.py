@@ -343,6 +343,8 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
             assert await wait_for(pilot, lambda: "Acknowledge" in screen_text(app), 5)
             await pilot.press("y")
             assert await wait_for(pilot, lambda: s.controller is not first, 5), screen_text(app)
+            # the new controller keeps the paced clock (x SPEED): without it its runners timed in host seconds
+            assert s.controller.time_scale == first.time_scale == pytest.approx(1 / SPEED)
             assert (tmp_path / "run-2" / "meta.json").is_file() and s.run_dirs == [tmp_path / "run", tmp_path / "run-2"]
             # the air: read for the first run, after it (its `ambient` document), and again for the new one
             chip = s.sim.bus.devices[0x76]
