@@ -100,7 +100,10 @@ def test_with_a_part_throttle_map_efficiency_follows_the_sims_truth(part_map_run
     for p in res["points"]:
         assert p["efficiency_reason"] is None
         truth = p["efficiency_true"] * (1.0 - zero_nm / p["torque_secondary_true_nm"])
-        assert abs(p["efficiency"] - truth) <= p["efficiency_ci95"], (p, truth)
+        # one short window's 95 % interval misses 1 point in 20 by design (seeds 1-9: 25 of 27 points within
+        # it, all within 1.9x; seed 4's first point, 1.7x, has a window whose CI came out at half the usual);
+        # the bug this guards put the efficiency 46 pp off
+        assert abs(p["efficiency"] - truth) <= 2.0 * p["efficiency_ci95"], (p, truth)
         assert p["efficiency_sys95"] > 0  # the systematic part is still stated
         # what the full-throttle map would have said (the bug)
         wrong.append(p["power_out_w"] / (full.torque_nm(p["rpm_primary"]) * p["rpm_primary"] * RAD_PER_S_PER_RPM))
