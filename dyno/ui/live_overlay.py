@@ -197,7 +197,21 @@ class OverlayMixin:
                 pass
         now = time.monotonic()
         for k in newly:
-            self._overlay_shown_s.setdefault(k, now)
+            if k not in self._overlay_shown_s:
+                self._overlay_shown_s[k] = now
+                self._overlay_log(k, now)
+
+    def _overlay_log(self, key: str, shown_s: float) -> None:
+        """The run log's record of a full-model value put on screen: which point, how long after its acceptance
+        (wall seconds; bench/bench_pi_budget.py reads the overlay's lag behind the points from these)."""
+        writer = getattr(getattr(self.session, "ctx", None), "writer", None)
+        if writer is None or key not in self._overlay_seen_s:
+            return
+        indices = [i for i, k in enumerate(self._overlay_keys) if k == key]
+        try:
+            writer.doc("overlay", points=indices, lag_s=round(shown_s - self._overlay_seen_s[key], 3))
+        except Exception:  # noqa: BLE001  (a record of the display: never an error on the screen's path)
+            pass
 
     def overlay_latencies_s(self) -> dict:
         """Per point: seconds from its acceptance by the controller to its full-model value in the curve."""
