@@ -106,6 +106,14 @@ def link_document(ctx) -> dict:
            "busy_basis": "measured" if meter is not None else "planned",
            "frames_lost": sum(st.transport_errors.values()) + sum(st.rejected.values()),
            "events_lost": ctx.poller.reader.events_lost}
+    import asyncio
+
+    try:
+        pace = getattr(asyncio.get_running_loop(), "pace_stats", lambda: None)()
+    except RuntimeError:  # (not on a loop)
+        pace = None
+    if pace is not None:  # a paced simulation (--speed N): the wall clock's view of its virtual one
+        out["pace"] = pace
     timing = getattr(ctx.poller, "timing", None)
     if timing is not None and getattr(timing, "rates", None):
         # per rate polled at, over the whole run: the rate held, jitter p99 (|interval - median|), lateness p99
