@@ -2,6 +2,7 @@
 """UI benchmarks (issues 5, 13): CPU, poll-interval jitter with and without the UI, start-up time, peak memory.
 
 Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--cpu-only] [--profile armed|test|ended] [--quick]
+      (the figures: ``--cpu-only --repeat 3``, on a machine otherwise idle)
 
 1. CPU (issue 13): the live screen in an 80x24 pseudo-terminal (Textual's real driver, the output read
    as a terminal would), idle/ARMED, during a test and with the screen left up after it (E-STOP, the rig
@@ -20,12 +21,19 @@ Run:  python bench/bench_ui.py [--seconds S] [--cpu-seconds S] [--repeat N] [--c
    ``dyno replay RUN`` started in a fresh interpreter, headless, until its first
    screen is mounted: wall time from process start, peak RSS, and whether the
    belt-model solver (dyno.model.bvp) was imported.
+4. The faces (issue 42): the process's CPU per second of rig time -- the session alone (the headless host on a
+   real loop), the live screen, the live screen with the web view served (``dyno ui --web``, one page reading
+   its stream from another process) -- idle/ARMED, during a test and at rest after it, with the simulated rig's
+   own work and net of it; and ``dyno run --sim --headless``'s work per rig-second on its unpaced virtual clock
+   (no waits: the work alone).
 
-Prints figures; asserts nothing (the machine is shared and noisy).
+Prints figures.  One criterion (exit 1 when missed; not judged by ``--quick``, whose rig runs at 5x): ``dyno
+ui`` idle/ARMED, the whole process with the simulated rig in it, at most 4 % of one core (median of the
+repeats).  The rest asserts nothing (the machine is shared and noisy: read single runs as +-30-50 %).
 
 ``--quick`` (CI's smoke run, about 80 s): every part once on a smaller problem -- the CPU figures for the
 session alone and the live screen with the rig's bus I/O (the plain live screen's path is within the latter),
-2 s per phase; the jitter without the UI and with the UI + overlay (the plain UI's path is within the latter),
+2 s per phase, and with the web view; the jitter without the UI and with the UI + overlay (the plain UI's path is within the latter),
 2 s each; the entry points -- with the simulated rig at 5x real time so that the waits for ARMED, the warm-up
 and the spin-down are short, and the model cache's entries copied into its fresh cache (else the simulated
 rig's belt table is built anew: about a minute).  Its figures are not the real-time ones.
@@ -46,6 +54,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from ui_cpu import cpu, fmt_cpu  # noqa: E402  (the CPU part: the screen in a pseudo-terminal, its own process)
 
 
 def _summary(poller) -> dict:
@@ -152,176 +163,6 @@ def startup(which: str, arg: str) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-# --- CPU: the live screen in a real terminal (a pseudo-terminal), the simulated rig's own cost apart ----------
-CPU_SCRIPT = r"""
-import asyncio, json, os, sys, threading, time
-from pathlib import Path
-
-mode, out_dir, result_path = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
-armed_s, test_s = float(sys.argv[4]), float(sys.argv[5])
-speed = float(sys.argv[6]) if len(sys.argv) > 6 else 1.0  # x real time (1: the figures; more: a smoke run)
-profile_phase, profile_path = os.environ.get("BENCH_PROFILE", ""), os.environ.get("BENCH_PROFILE_OUT", "")
-
-# The simulated rig's cost: everything behind the I2C transport (emulated firmware + physics, which the
-# real rig does in its own hardware) and the truth recorder (sim only).  Per-thread CPU time, so the
-# watchdog thread safing the rig is counted where it is spent.
-from dyno.sim.bus import SimSMBus
-from dyno.sim.rig import TruthRecorder
-
-SIM = {"cpu_s": 0.0}
-_inside = threading.local()
-
-
-def timed(fn):
-    def wrapper(*a, **k):
-        if getattr(_inside, "on", False):
-            return fn(*a, **k)
-        _inside.on = True
-        t = time.thread_time()
-        try:
-            return fn(*a, **k)
-        finally:
-            SIM["cpu_s"] += time.thread_time() - t
-            _inside.on = False
-    return wrapper
-
-
-if mode.endswith("-rigio"):
-    # The real rig's configuration: a blocking bus, transfers in the poller's I/O thread (the sim's
-    # bus serialises its own access with a lock, as the kernel does a real adapter's).
-    from dyno.acquisition import poller as _poller_mod
-
-    _init = _poller_mod.Poller.__init__
-
-    def _init_blocking(self, *a, **k):
-        k["blocking_io"] = True
-        _init(self, *a, **k)
-
-    _poller_mod.Poller.__init__ = _init_blocking
-    mode = mode[: -len("-rigio")]
-
-SimSMBus.i2c_rdwr = timed(SimSMBus.i2c_rdwr)
-SimSMBus.sync = timed(SimSMBus.sync)
-TruthRecorder.__call__ = timed(TruthRecorder.__call__)
-
-
-async def measure(name, seconds):
-    prof = None
-    if profile_phase == name:
-        import cProfile
-        prof = cProfile.Profile()
-        prof.enable()
-    c0, s0, w0 = time.process_time(), SIM["cpu_s"], time.monotonic()
-    await asyncio.sleep(seconds)
-    c1, s1, w1 = time.process_time(), SIM["cpu_s"], time.monotonic()
-    if prof is not None:
-        prof.disable()
-        prof.dump_stats(profile_path)
-    wall = w1 - w0
-    return {"wall_s": wall, "total_pct": 100 * (c1 - c0) / wall, "sim_pct": 100 * (s1 - s0) / wall,
-            "net_pct": 100 * ((c1 - c0) - (s1 - s0)) / wall}
-
-
-async def drive(get_session, quit):
-    while (s := get_session()) is None or s.controller.state.value != "armed":
-        await asyncio.sleep(0.1)
-    await asyncio.sleep(1.0)  # the state change's own redraws are done
-    armed = await measure("armed", armed_s)
-    s.go()
-    await asyncio.sleep(4.0 / speed)  # through the warm-up: the test proper
-    test = await measure("test", test_s)
-    res = {"armed": armed, "test": test, "state": s.controller.state.value, "points": len(s.controller.points),
-           "events_lost": s.poller.reader.events_lost}
-    # The screen left up after the test: E-STOP, the rig spins down and the brake releases, then it rests.
-    s.estop("bench")
-    idle_period_s = 1.0 / s.controller.limits.armed_poll_hz
-    t_end = time.monotonic() + 40.0
-    while abs(s.poller.poll_period_s - idle_period_s) > 1e-9 and time.monotonic() < t_end:
-        await asyncio.sleep(0.2)
-    await asyncio.sleep(1.0)
-    res["ended"] = await measure("ended", armed_s)
-    Path(result_path).write_text(json.dumps(res))
-    await quit()
-
-
-async def main():
-    from dyno.ui.session import LiveOptions
-    opts = LiveOptions(sim=True, speed=speed, out_dir=out_dir)
-    if mode == "ui":
-        from dyno.ui.live_app import LiveApp
-        app = LiveApp(opts)
-        task = asyncio.get_running_loop().create_task(drive(lambda: app.session, app._quit))
-        await app.run_async()
-        await task
-    else:
-        from dyno.ui.session import LiveSession
-        s = LiveSession(opts)
-        s.start()
-        await drive(lambda: s, lambda: s.close("bench"))
-
-asyncio.run(main())
-"""
-
-
-def cpu(mode: str, out_dir: Path, armed_s: float, test_s: float, profile: str = "", speed: float = 1.0) -> dict:
-    """Run the live screen (``mode`` "ui") or the session alone ("bare") in an 80x24 pseudo-terminal."""
-    import fcntl
-    import pty
-    import select
-    import struct
-    import termios
-
-    result = out_dir.parent / f"cpu-{mode}.json"
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
-    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "80", "LINES": "24"}
-    if profile:
-        prof_path = Path(tempfile.gettempdir()) / f"bench-ui-cpu-{mode}-{profile}.prof"  # kept for pstats
-        env.update(BENCH_PROFILE=profile, BENCH_PROFILE_OUT=str(prof_path))
-    proc = subprocess.Popen([sys.executable, "-c", CPU_SCRIPT, mode, str(out_dir), str(result), str(armed_s),
-                             str(test_s), str(speed)], stdin=slave, stdout=slave, stderr=slave, env=env, cwd=REPO,
-                            start_new_session=True)
-    os.close(slave)
-    tail = b""
-    t_end = time.monotonic() + 2 * armed_s + test_s + 160
-    while time.monotonic() < t_end:  # a terminal reads what the app writes
-        r, _, _ = select.select([master], [], [], 0.5)
-        if r:
-            try:
-                data = os.read(master, 65536)
-            except OSError:
-                break
-            if not data:
-                break
-            tail = (tail + data)[-4000:]
-        elif proc.poll() is not None:
-            break
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait()
-    os.close(master)
-    if not result.is_file():
-        return {"error": tail.decode(errors="replace")[-800:]}
-    out = json.loads(result.read_text())
-    if profile:
-        import pstats
-
-        out["profile"] = str(prof_path)
-        print(f"profile of the {profile} phase: {prof_path}")
-        pstats.Stats(out["profile"]).sort_stats("tottime").print_stats(20)
-    return out
-
-
-def fmt_cpu(name: str, d: dict) -> str:
-    if "error" in d:
-        return f"{name:<24} ERROR {d['error']}"
-    a, t, e = d["armed"], d["test"], d["ended"]
-    return (f"{name:<24} idle/ARMED {a['net_pct']:4.1f} %  (sim {a['sim_pct']:3.1f} %, all {a['total_pct']:4.1f} %)  "
-            f"test {t['net_pct']:4.1f} %  (sim {t['sim_pct']:3.1f} %, all {t['total_pct']:4.1f} %)  "
-            f"ended, at rest {e['net_pct']:4.1f} %  (sim {e['sim_pct']:3.1f} %)  "
-            f"[{d['state']}, {d['points']} points, lost {d['events_lost']}]")
-
-
 def fmt_timing(name: str, d: dict) -> str:
     if d.get("polls", 0) == 0:
         return f"{name:<26} no polls"
@@ -330,7 +171,7 @@ def fmt_timing(name: str, d: dict) -> str:
             f"lost {d['events_lost']}  [{d['state']}]")
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=8.0, help="real-time seconds per jitter measurement")
     ap.add_argument("--quick", action="store_true",
@@ -361,46 +202,94 @@ def main() -> None:
             for entry in default_cache_dir().glob("*.json"):
                 shutil.copy2(entry, quick_cache)
         os.environ["DYNO_MODEL_CACHE"] = str(quick_cache)
+    status = {"failed": False}
     try:
-        _run(a, seconds, cpu_s, speed, pace)
+        _run(a, seconds, cpu_s, speed, pace, status)
     finally:
         if quick_cache is not None:
             import shutil
 
             shutil.rmtree(quick_cache, ignore_errors=True)
+    return 1 if status["failed"] else 0
 
 
-def _run(a, seconds: float, cpu_s: float, speed: float, pace: str) -> None:
+IDLE_UI_MAX_PCT = 4.0  # issue 42: dyno ui --sim idle while ARMED, % of one core, the simulated physics included
+
+
+def headless_floor(quick: bool) -> dict:
+    """``dyno run --sim --headless``'s work per rig-second with nothing to wait for (its virtual clock unpaced)."""
+    from dyno.app import RunOptions, run_test
+    from dyno.cli.run_cmd import plan_named
+
+    plan = plan_named("speed-hold")
+    if quick:
+        plan = replace(plan, target_points=3, max_measure_s=3.0)
+    with tempfile.TemporaryDirectory() as d:
+        c0 = time.process_time()
+        r = run_test(RunOptions(sim=True, seed=0, out_dir=Path(d) / "r", plan=plan, max_sim_s=60.0 if quick else 600.0))
+        cpu_s = time.process_time() - c0
+    return {"ms_per_rig_s": 1e3 * cpu_s / r["sim_time_s"], "sim_s": r["sim_time_s"], "points": len(r["points"])}
+
+
+def _run(a, seconds: float, cpu_s: float, speed: float, pace: str, status: dict) -> None:
     if "DYNO_MODEL_CACHE" not in os.environ:  # (not setdefault: that would make a directory either way)
         os.environ["DYNO_MODEL_CACHE"] = tempfile.mkdtemp(prefix="bench-ui-cache-")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         print(f"CPU, % of one core, simulated rig {pace}, 80x24 pseudo-terminal, {cpu_s:g} s per phase; "
               "'idle/ARMED' and 'test' are net of the simulated rig (its firmware + physics, shown as 'sim'):")
-        runs: dict = {"bare": [], "ui": [], "ui-rigio": []}
+        runs: dict = {"bare": [], "ui": [], "ui-rigio": [], "ui-web": []}
         for k in range(a.repeat):  # alternated: the shared machine's load drifts
             for mode, name in (("bare", "session alone (no UI)"), ("ui", "live screen (dyno ui)"),
-                               ("ui-rigio", "live screen, rig bus I/O")):
+                               ("ui-rigio", "live screen, rig bus I/O"), ("ui-web", "live screen + web view")):
                 if a.quick and mode == "ui" and not a.profile:
                     print(f"{name:<24} left out by --quick (the rig bus I/O run is this one's path and more)")
                     continue
                 d = cpu(mode, tmp / f"cpu_{mode}_{k}", cpu_s, cpu_s, a.profile if mode == "ui" else "", speed)
                 runs[mode].append(d)
                 print(fmt_cpu(name, d))
-        if a.repeat > 1:
-            import statistics
+        import statistics
 
-            med = {m: {ph: statistics.median(d[ph]["net_pct"] for d in r if "error" not in d)
-                       for ph in ("armed", "test", "ended")} for m, r in runs.items()}
+        def med(mode: str, phase: str, key: str):
+            xs = [d[phase][key] for d in runs[mode] if "error" not in d]
+            return statistics.median(xs) if xs else None
+
+        if a.repeat > 1:
             sim = statistics.median(d[ph]["sim_pct"] for r in runs.values() for d in r if "error" not in d
                                     for ph in ("armed", "test"))
-            print(f"median of {a.repeat}: dyno ui idle/ARMED {med['ui']['armed']:.1f} %, test {med['ui']['test']:.1f} % "
-                  f"(the UI's own share {med['ui']['armed'] - med['bare']['armed']:.1f} % / "
-                  f"{med['ui']['test'] - med['bare']['test']:.1f} %; session alone {med['bare']['armed']:.1f} % / "
-                  f"{med['bare']['test']:.1f} %); the simulated rig's own cost, subtracted: {sim:.1f} %")
+            print(f"median of {a.repeat}: dyno ui idle/ARMED {med('ui', 'armed', 'net_pct'):.1f} %, test "
+                  f"{med('ui', 'test', 'net_pct'):.1f} % (the UI's own share "
+                  f"{med('ui', 'armed', 'net_pct') - med('bare', 'armed', 'net_pct'):.1f} % / "
+                  f"{med('ui', 'test', 'net_pct') - med('bare', 'test', 'net_pct'):.1f} %; session alone "
+                  f"{med('bare', 'armed', 'net_pct'):.1f} % / {med('bare', 'test', 'net_pct'):.1f} %); the simulated "
+                  f"rig's own cost, subtracted: {sim:.1f} %")
             print(f"median of {a.repeat}: dyno ui with the rig's blocking bus I/O (transfers in the poller's I/O "
-                  f"thread) idle/ARMED {med['ui-rigio']['armed']:.1f} %, test {med['ui-rigio']['test']:.1f} %, "
-                  f"ended at rest {med['ui-rigio']['ended']:.1f} % (bus read on the loop: {med['ui']['ended']:.1f} %)")
+                  f"thread) idle/ARMED {med('ui-rigio', 'armed', 'net_pct'):.1f} %, test "
+                  f"{med('ui-rigio', 'test', 'net_pct'):.1f} %, ended at rest {med('ui-rigio', 'ended', 'net_pct'):.1f} % "
+                  f"(bus read on the loop: {med('ui', 'ended', 'net_pct'):.1f} %)")
+        # The faces: the poll loop's process CPU per second of rig time (at 1x: 10 ms per rig-second = 1 % of a
+        # core), with the simulated rig's own work (all) and without it (net).
+        print(f"CPU per rig-second, ms (median of {a.repeat}; all = the whole process, the simulated rig's firmware "
+              f"and physics included / net of them){'' if speed == 1.0 else ' -- at ' + format(speed, 'g') + 'x: not the real-time figures'}:")
+        for mode, name in (("bare", "headless (session, no screen)"), ("ui", "UI (dyno ui)"),
+                           ("ui-web", "UI + web view, one page")):
+            if not [d for d in runs[mode] if "error" not in d]:
+                continue
+            cells = [f"{ph_name} {10 * med(mode, ph, 'total_pct') / speed:5.1f} / {10 * med(mode, ph, 'net_pct') / speed:5.1f}"
+                     for ph, ph_name in (("armed", "idle/ARMED"), ("test", "test"), ("ended", "ended, at rest"))]
+            print(f"  {name:<31} " + "   ".join(cells))
+        floor = headless_floor(a.quick)
+        print(f"  headless as fast as it goes     {floor['ms_per_rig_s']:5.1f} ms per rig-second over a whole test "
+              f"(dyno run --sim --headless on its virtual clock, no waits: the work alone; {floor['sim_s']:.0f} rig-s, "
+              f"{floor['points']} points)")
+        if speed == 1.0 and a.repeat and runs["ui"]:
+            idle = med("ui", "armed", "total_pct")
+            ok = idle is not None and idle <= IDLE_UI_MAX_PCT
+            print(f"criterion: dyno ui idle/ARMED <= {IDLE_UI_MAX_PCT:g} % of a core, the simulated rig included "
+                  f"(median of {a.repeat}): {'-' if idle is None else format(idle, '.1f')} % -- "
+                  f"{'met' if ok else 'MISSED'}")
+            if not ok:
+                status["failed"] = True
         if a.cpu_only:
             return
         print(f"poll-interval jitter, simulated rig {pace}, target period {1e3 / 150:.3f} ms "
@@ -432,4 +321,4 @@ def _run(a, seconds: float, cpu_s: float, speed: float, pace: str) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

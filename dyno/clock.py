@@ -62,6 +62,69 @@ class FakeClock:
         self.advance(seconds)
 
 
+class Pace:
+    """A virtual loop paced at ``speed`` x real time against a wall-clock anchor.
+
+    Each wait for the next timer sleeps until the wall instant at which the loop's virtual clock is due
+    there (anchor + virtual elapsed / speed), not for the timeout itself: the work done between waits
+    does not add to the pace (sleeping each whole timeout after the work made ``dyno run --speed 1`` run
+    4-5 % slower than real time on one core here, more on a slower CPU), and a loop that fell behind
+    catches up as a real one is on time again after a late tick.  A debt over ``MAX_DEBT_S`` is written
+    off (the anchor moves: real time lost, as a real loop's poller skips ticks).  Each wake-up's lateness
+    past its deadline is kept (a 20 us histogram): the wall-clock jitter a real-time loop would have had.
+    """
+
+    BIN_S = 20e-6
+    MAX_DEBT_S = 0.1
+
+    def __init__(self, speed: float) -> None:
+        self.speed = float(speed)
+        self.anchor: tuple[float, float] | None = None  # (wall s, virtual s) that the deadlines count from
+        self.started: tuple[float, float] | None = None  # (wall s, virtual s) of the first paced wait
+        self.late: dict[int, int] = {}
+        self.late_max_s = 0.0
+        self.wakes = 0
+        self.written_off_s = 0.0
+
+    def wait(self, virtual_s: float, timeout_s: float) -> None:
+        now = time.monotonic()
+        if self.anchor is None:
+            self.anchor = (now, virtual_s)
+            if self.started is None:
+                self.started = self.anchor
+        deadline = self.anchor[0] + (virtual_s + timeout_s - self.anchor[1]) / self.speed
+        if deadline > now:
+            time.sleep(deadline - now)
+            now = time.monotonic()
+        late = now - deadline
+        self.wakes += 1
+        b = int(late / self.BIN_S + 0.5)
+        self.late[b] = self.late.get(b, 0) + 1
+        if late > self.late_max_s:
+            self.late_max_s = late
+        if late > self.MAX_DEBT_S:
+            self.written_off_s += late
+            self.anchor = (now, virtual_s + timeout_s)
+
+    def stats(self, virtual_s: float) -> dict | None:
+        """``held``: virtual seconds per wall second / speed since the first wait (1.0: the pace kept); the
+        wake-ups' lateness p99 and max (ms); the debt written off (s)."""
+        if self.started is None:
+            return None
+        wall_s = time.monotonic() - self.started[0]
+        rig_s = virtual_s - self.started[1]
+        n, cum, p99 = sum(self.late.values()), 0, 0.0
+        for b in sorted(self.late):
+            cum += self.late[b]
+            if cum >= 0.99 * n:
+                p99 = b * self.BIN_S
+                break
+        return {"speed": self.speed, "wall_s": round(wall_s, 3), "rig_s": round(rig_s, 3),
+                "held": round(rig_s / (wall_s * self.speed), 4) if wall_s > 0 else None, "wakes": self.wakes,
+                "late_p99_ms": round(p99 * 1e3, 3), "late_max_ms": round(self.late_max_s * 1e3, 3),
+                "written_off_s": round(self.written_off_s, 3)}
+
+
 class _VirtualSelector(selectors.BaseSelector):
     """Wraps a real selector; a wait with nothing ready advances virtual time."""
 
@@ -91,10 +154,13 @@ class _VirtualSelector(selectors.BaseSelector):
         if timeout is None:
             # Nothing scheduled and nothing ready: only real I/O (a thread
             # finishing, a signal) can wake us; wait for it in real time.
-            return self._inner.select(None)
+            ready = self._inner.select(None)
+            if self._loop.pace is not None:  # (real time passed that is no rig time: not a debt to catch up)
+                self._loop.pace.anchor = None
+            return ready
         if timeout > 0:
-            if self._loop.speed:
-                time.sleep(timeout / self._loop.speed)  # paced: N x real time
+            if self._loop.pace is not None:
+                self._loop.pace.wait(self._loop.time(), timeout)  # paced: N x real time
             self._loop.advance(timeout)
         return []
 
@@ -112,6 +178,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def __init__(self, start_s: float = 0.0, speed: float | None = None) -> None:
         self._virtual_s = float(start_s)
         self.speed = speed  # None: as fast as possible; N: paced at N x real time
+        self.pace = Pace(speed) if speed else None
         self._tickers: list[list] = []  # [next_due_s, period_s, fn]
         super().__init__(selector=_VirtualSelector(self))
 
@@ -145,6 +212,10 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         if self.speed:
             time.sleep(dt_s / self.speed)
         self.advance(dt_s)
+
+    def pace_stats(self) -> dict | None:
+        """A paced loop's pace as held so far (:meth:`Pace.stats`); None when it runs as fast as it can."""
+        return self.pace.stats(self._virtual_s) if self.pace is not None else None
 
 
 def block_loop(loop, dt_s: float) -> None:

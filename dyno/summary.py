@@ -92,7 +92,8 @@ def summarize(ctx, drills_from: int = 0) -> dict:
 def link_document(ctx) -> dict:
     """The firmware link as the run used it: its transport and clock, the poll rate, the worst second's busy
     share (measured where a meter ran: the simulated rig; planned on the rig) and the frames lost — polls that
-    got no accepted frame (failed transfers, rejected frames: each re-polled, but late)."""
+    got no accepted frame (failed transfers, rejected frames: each re-polled, but late); ``poll_rates``: per
+    rate the poller ran at (the waiting states' and the test's), the rate it held and its interval jitter."""
     from dyno.transports.budget import clock_hz, planned_busy
 
     rig = getattr(ctx, "rig_cfg", None)
@@ -105,6 +106,18 @@ def link_document(ctx) -> dict:
            "busy_basis": "measured" if meter is not None else "planned",
            "frames_lost": sum(st.transport_errors.values()) + sum(st.rejected.values()),
            "events_lost": ctx.poller.reader.events_lost}
+    import asyncio
+
+    try:
+        pace = getattr(asyncio.get_running_loop(), "pace_stats", lambda: None)()
+    except RuntimeError:  # (not on a loop)
+        pace = None
+    if pace is not None:  # a paced simulation (--speed N): the wall clock's view of its virtual one
+        out["pace"] = pace
+    timing = getattr(ctx.poller, "timing", None)
+    if timing is not None and getattr(timing, "rates", None):
+        # per rate polled at, over the whole run: the rate held, jitter p99 (|interval - median|), lateness p99
+        out["poll_rates"] = timing.by_rate()
     return out
 
 

@@ -38,22 +38,66 @@ from dyno.protocol.v2 import cause_name
 
 @dataclass
 class PollTiming:
-    """Poll-interval statistics (for the link-health display and benchmarks)."""
+    """Poll-interval statistics (for the link-health display and benchmarks).
+
+    ``intervals_s``: the latest intervals (at most ``keep``); ``rates``: every interval of the run, by the
+    nominal period that scheduled it (a histogram of 20 us bins: one dict update per tick), so that the
+    rate the poller held and its jitter are known for the whole run at each rate it polled at.
+    """
 
     intervals_s: list = field(default_factory=list)
     keep: int = 20000
+    rates: dict = field(default_factory=dict)  # nominal period (s) -> [ticks, sum of intervals, max, {bin: count}]
 
-    def add(self, dt_s: float) -> None:
+    BIN_S = 20e-6
+
+    def add(self, dt_s: float, nominal_s: float | None = None) -> None:
         self.intervals_s.append(dt_s)
         if len(self.intervals_s) > self.keep:
             del self.intervals_s[: self.keep // 2]
+        if nominal_s is not None:
+            r = self.rates.get(nominal_s)
+            if r is None:
+                r = self.rates[nominal_s] = [0, 0.0, 0.0, {}]
+            r[0] += 1
+            r[1] += dt_s
+            if dt_s > r[2]:
+                r[2] = dt_s
+            hist = r[3]
+            b = int(dt_s / self.BIN_S + 0.5)
+            hist[b] = hist.get(b, 0) + 1
 
     def summary(self) -> dict:
         if not self.intervals_s:
             return {"polls": 0}
         a = np.asarray(self.intervals_s)
-        return {"polls": int(a.size), "mean_ms": float(a.mean() * 1e3), "std_ms": float(a.std() * 1e3),
-                "p99_ms": float(np.percentile(a, 99) * 1e3), "max_ms": float(a.max() * 1e3)}
+        out = {"polls": int(a.size), "mean_ms": float(a.mean() * 1e3), "std_ms": float(a.std() * 1e3),
+               "p99_ms": float(np.percentile(a, 99) * 1e3), "max_ms": float(a.max() * 1e3)}
+        if self.rates:
+            out["by_rate"] = self.by_rate()
+        return out
+
+    def by_rate(self) -> list[dict]:
+        """Per nominal rate, over the whole run: ticks, the rate held (ticks per second of their intervals),
+        jitter p99 (|interval - median|, ms) and lateness p99 (interval - nominal period, ms) to the histogram's
+        20 us, the longest interval."""
+        out = []
+        for nominal_s, (n, total_s, max_s, hist) in sorted(self.rates.items()):
+            bins = np.array(sorted(hist))
+            counts = np.array([hist[int(b)] for b in bins], dtype=float)
+            dt = bins * self.BIN_S
+            cum = np.cumsum(counts)
+            median = dt[np.searchsorted(cum, 0.5 * n)]
+            dev = np.abs(dt - median)
+            order = np.argsort(dev, kind="stable")
+            dev_p99 = dev[order][np.searchsorted(np.cumsum(counts[order]), 0.99 * n)]
+            out.append({"nominal_hz": round(1.0 / nominal_s, 3), "polls": int(n),
+                        "held_hz": round(n / total_s, 3) if total_s > 0 else None,
+                        "jitter_p99_ms": round(float(dev_p99 * 1e3), 3),
+                        "late_p99_ms": round(float(dt[np.searchsorted(cum, 0.99 * n)]
+                                                   - round(nominal_s / self.BIN_S) * self.BIN_S) * 1e3, 3),
+                        "max_ms": round(max_s * 1e3, 3)})
+        return out
 
 
 class Poller:
@@ -112,12 +156,14 @@ class Poller:
             # earlier at the instants it shares with the polls.  Kept as it was tuned.
             next_t = self._next_t
             full_period_s = 1.0 / self.full_poll_hz
+            scheduled_s = self.poll_period_s  # the period that scheduled this tick (its interval's nominal)
             while not self._stop.is_set():
                 now = loop.time()
-                self._note_interval(now)
+                self._note_interval(now, scheduled_s)
                 self._finish_poll(now, *self._read_burst(now), self._read_temperature(now))
                 for _ in range(self._periods_per_tick):
                     next_t += full_period_s
+                scheduled_s = self.poll_period_s
                 now = loop.time()
                 if next_t < now:  # fell behind: skip ticks rather than bunch them
                     next_t = now
@@ -128,6 +174,7 @@ class Poller:
     def _io_thread(self, loop, io_stop: threading.Event) -> None:
         """Blocking transports: transfers paced in this thread, each tick's result handed to the loop."""
         next_t = loop.time()  # a real loop's clock is time.monotonic(): usable from any thread
+        scheduled_s = self.poll_period_s  # the period that scheduled this tick (its interval's nominal)
         while not io_stop.is_set():
             now = loop.time()
             try:
@@ -135,18 +182,19 @@ class Poller:
             except Exception as exc:
                 result = exc
             try:
-                loop.call_soon_threadsafe(self._deliver, result)
+                loop.call_soon_threadsafe(self._deliver, result, scheduled_s)
             except RuntimeError:  # the loop is closed: nothing left to deliver to
                 return
             if isinstance(result, Exception):
                 return
-            next_t += self.poll_period_s
+            scheduled_s = self.poll_period_s
+            next_t += scheduled_s
             now = loop.time()
             if next_t < now:
                 next_t = now
             io_stop.wait(next_t - now)
 
-    def _deliver(self, result) -> None:
+    def _deliver(self, result, scheduled_s: float | None = None) -> None:
         """On the loop: one I/O-thread tick's events to the streams, listeners and safety, in order.
 
         A tick read before :meth:`stop` and handed over after it is still delivered: its frames
@@ -158,7 +206,7 @@ class Poller:
                 self._stop.set()
             return
         now = result[0]
-        self._note_interval(now)
+        self._note_interval(now, scheduled_s)
         lag_s = self._loop.time() - now
         if lag_s > self._gap_limit_s():  # the loop stalled: actions and checks ran late in this window
             self.disturbances.append({"host_t_s": now, "kind": "poll_gap",
@@ -170,9 +218,9 @@ class Poller:
                 self._error = exc
                 self._stop.set()
 
-    def _note_interval(self, now: float) -> None:
+    def _note_interval(self, now: float, scheduled_s: float | None = None) -> None:
         if self._last_tick_s is not None:
-            self.timing.add(now - self._last_tick_s)
+            self.timing.add(now - self._last_tick_s, scheduled_s)
         self._last_tick_s = now
 
     def stop(self) -> None:

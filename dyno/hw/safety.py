@@ -221,6 +221,18 @@ class Watchdog:
         pads left the rotor 0.2 s late: bench_safety, --mock-pins loop-stall:800)."""
         return max(self.timeout_s / 20, 0.005)
 
+    def next_wait_s(self, period_s: float) -> float:
+        """How long the thread may sleep before its next look: ``period_s`` once tripped (its looks service the
+        release) or with level checks (each look reads an input); else until the last sign of life is
+        ``timeout_s`` old (a kick meanwhile moves that on: the look then finds it and sleeps again)."""
+        if self.tripped or self.level_checks:
+            return period_s
+        try:
+            left = self.last_alive_s() + self.timeout_s - self.clock.now()
+        except Exception:  # noqa: BLE001  (a clock that fails: look at the usual rate; the look itself reports it)
+            return period_s
+        return min(max(left, 0.0) + 0.001, self.timeout_s)  # (1 ms past it: the silence is then over the timeout)
+
     async def run(self, period_s: float | None = None) -> None:
         """asyncio task: ``asyncio.create_task(watchdog.run())``; cancel to stop."""
         period = period_s or self.period_s
@@ -229,12 +241,19 @@ class Watchdog:
             await asyncio.sleep(period)
 
     def start_thread(self, period_s: float | None = None) -> threading.Thread:
-        """Same job on a daemon thread: still runs if the event loop itself hangs."""
+        """Same job on a daemon thread: still runs if the event loop itself hangs.
+
+        While nothing needs a look every period (not tripped, no level checks) the thread sleeps to the instant
+        the loop's silence would reach the timeout (:meth:`next_wait_s`): a loop that beats keeps it asleep for
+        a whole timeout at a time (2 wake-ups a second at 0.5 s instead of 40), and a trip is seen at the
+        timeout itself, not up to a period after it."""
         period = period_s or self.period_s
 
         def loop():
-            while not self._stop.wait(period):
+            wait = period
+            while not self._stop.wait(wait):
                 self.step()
+                wait = self.next_wait_s(period)
 
         self._thread = threading.Thread(target=loop, name="dyno-watchdog", daemon=True)
         self._thread.start()

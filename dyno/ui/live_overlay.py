@@ -39,6 +39,7 @@ class OverlayMixin:
         self._overlay_tune_cache = None  # the rig's Tune, False for none, None before the first look
         self._overlay_primed_s = -math.inf
         self._overlay_shown_s: dict = {}
+        self._overlay_logged: set = set()  # keys whose answer is in the run log (an 'overlay' document)
         self._overlay_version = 0
 
     def action_overlay(self) -> None:
@@ -170,14 +171,16 @@ class OverlayMixin:
         svc = self.overlay_service
         if svc is None:
             return
-        full, rough, failed, newly = [], [], 0, []
+        full, rough, failed, newly, refused = [], [], 0, [], []
         for (rs, op), k in zip(self._overlay_pairs, self._overlay_keys):
             r = svc.get(k)
             if r is not None and r.get("converged") and r.get("efficiency"):
                 full.append((rs, float(r["efficiency"]["overall"])))
                 newly.append(k)
                 continue
-            failed += r is not None
+            if r is not None:
+                failed += 1
+                refused.append(k)
             cf = self._overlay_closed.get(op)
             if cf is not None:
                 rough.append((rs, float(cf["efficiency"]["overall"])))
@@ -197,7 +200,26 @@ class OverlayMixin:
                 pass
         now = time.monotonic()
         for k in newly:
-            self._overlay_shown_s.setdefault(k, now)
+            if k not in self._overlay_shown_s:
+                self._overlay_shown_s[k] = now
+                self._overlay_log(k, now, solved=True)
+        for k in refused:  # the model's answer was no solution (gross slip, out of range): answered all the same
+            if k not in self._overlay_logged:
+                self._overlay_log(k, now, solved=False)
+
+    def _overlay_log(self, key: str, shown_s: float, solved: bool) -> None:
+        """The run log's record of the full model's answer on screen (a value, or ``solved`` false: none): which
+        points, how long after their acceptance (wall seconds; bench/bench_pi_budget.py reads the overlay's lag
+        behind the points from these)."""
+        self._overlay_logged.add(key)
+        writer = getattr(getattr(self.session, "ctx", None), "writer", None)
+        if writer is None or key not in self._overlay_seen_s:
+            return
+        indices = [i for i, k in enumerate(self._overlay_keys) if k == key]
+        try:
+            writer.doc("overlay", points=indices, solved=solved, lag_s=round(shown_s - self._overlay_seen_s[key], 3))
+        except Exception:  # noqa: BLE001  (a record of the display: never an error on the screen's path)
+            pass
 
     def overlay_latencies_s(self) -> dict:
         """Per point: seconds from its acceptance by the controller to its full-model value in the curve."""

@@ -44,6 +44,10 @@ def test_loop_ticks_at_the_poll_rate_and_lose_nothing(virtual):
     assert abs(polls - expected) <= (1 if virtual else 0.3 * expected)
     if virtual:  # deterministic: the intervals are exactly the period
         assert poller.timing.summary()["max_ms"] == pytest.approx(1e3 / 150, abs=1e-6)
+        (rate,) = poller.timing.by_rate()  # the whole run's figures at the one rate it polled at
+        assert rate["nominal_hz"] == 150.0 and rate["polls"] == polls - 1
+        assert rate["held_hz"] == pytest.approx(150.0, abs=1e-3)
+        assert rate["jitter_p99_ms"] == rate["late_p99_ms"] == 0.0
     assert set(on_loop) == {threading.get_ident()}
     assert poller.reader.events_lost == 0
     assert sum(poller.streams.counts().values()) == rig.firmware.events_generated > 100
@@ -81,6 +85,26 @@ def test_io_thread_delivers_every_event_on_the_loop_in_real_time():
     # the sim advances only on bus transfers, so after the last one every event it generated has
     # been read: each must have reached the streams exactly once (none dropped at stop)
     assert sum(poller.streams.counts().values()) == rig.firmware.events_generated > 100
+
+
+def test_poll_timing_by_rate_holds_the_whole_run_at_each_rate():
+    """The rate held and the jitter per nominal rate, over every interval (the kept list is bounded)."""
+    from dyno.acquisition.poller import PollTiming
+
+    t = PollTiming(keep=100)
+    for _ in range(970):
+        t.add(1 / 150, 1 / 150)
+    for _ in range(30):  # 3 % of the ticks 20 ms apart: the poller fell behind and skipped
+        t.add(0.020, 1 / 150)
+    for _ in range(50):
+        t.add(0.020, 3 / 150)  # the waiting states' 50 Hz
+    fast, slow = sorted(t.by_rate(), key=lambda r: -r["nominal_hz"])
+    assert fast["polls"] == 1000 and slow["polls"] == 50 and slow["held_hz"] == pytest.approx(50.0)
+    assert fast["held_hz"] == pytest.approx(1000 / (970 / 150 + 30 * 0.020), abs=1e-3)
+    assert fast["jitter_p99_ms"] == pytest.approx(20.0 - 1e3 / 150, abs=0.02)
+    assert fast["late_p99_ms"] == pytest.approx(20.0 - 1e3 / 150, abs=0.02)
+    assert fast["max_ms"] == pytest.approx(20.0)
+    assert len(t.intervals_s) <= 100 and t.summary()["by_rate"] == t.by_rate()
 
 
 @pytest.mark.parametrize("blocking_io", [False, True])

@@ -106,3 +106,38 @@ def test_watchdog_thread_catches_a_real_blocked_event_loop_on_the_real_rig_path(
         assert latency <= wd.timeout_s + wd.period_s + 0.05, latency  # 50 ms: thread scheduling on a busy VM
         assert killed_at[0] < result["resumed_at"], "safed only after the loop came back"
         assert hw.actuators.latched
+
+
+def test_watchdog_thread_sleeps_to_the_deadline_while_the_loop_beats_and_trips_at_the_timeout(rig, factory):
+    """Kicked every 20 ms the thread looks about once per timeout (not every period: the idle host's wake-ups,
+    issue 42); when the kicks stop it trips the timeout after the last one, within a few ms of thread wake-up."""
+    act = GpioActuators(rig, pin_factory=factory, clock=MonotonicClock())
+    dog = Watchdog(act, 0.2, clock=MonotonicClock())
+    looks = {"n": 0, "tripped_at": None}
+    step = dog.step
+
+    def counted() -> None:
+        looks["n"] += 1
+        step()
+        if dog.tripped and looks["tripped_at"] is None:
+            looks["tripped_at"] = time.monotonic()
+
+    dog.step = counted
+    act.tick()
+    dog.start_thread()  # period 10 ms: 100 looks in the second below at the old fixed rate
+    try:
+        t_end = time.monotonic() + 1.0
+        while time.monotonic() < t_end:
+            dog.kick()
+            time.sleep(0.02)
+        beating_looks = looks["n"]
+        last_kick = time.monotonic()
+        dog.kick()
+        while looks["tripped_at"] is None and time.monotonic() < last_kick + 2.0:
+            time.sleep(0.005)
+    finally:
+        dog.stop_thread()
+        act.close()
+    assert beating_looks <= 12, beating_looks
+    assert looks["tripped_at"] is not None and act.engine_killed
+    assert 0.2 <= looks["tripped_at"] - last_kick <= 0.2 + 0.05, looks["tripped_at"] - last_kick

@@ -59,5 +59,12 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             await pilot.press("space")
             await pilot.pause(0.2)
         assert svc._closed  # the app's exit closed the service (queued points dropped, solve cancelled)
+        # each value put on screen is in the run log with its lag behind the point (bench_pi_budget reads them)
+        import json
+
+        docs = [json.loads(line) for line in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()]
+        logged = [d for d in docs if d["type"] == "overlay"]
+        assert len(logged) >= 3 and {0, 1, 2} <= {i for d in logged for i in d["points"]}, logged
+        assert all(0.0 <= d["lag_s"] < 300 for d in logged), logged
 
     asyncio.run(scenario())
