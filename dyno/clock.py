@@ -117,7 +117,7 @@ class Pace:
         for b in sorted(self.late):
             cum += self.late[b]
             if cum >= 0.99 * n:
-                p99 = b * self.BIN_S
+                p99 = min(b * self.BIN_S, self.late_max_s)  # (the bin's upper edge can pass the exact max)
                 break
         return {"speed": self.speed, "wall_s": round(wall_s, 3), "rig_s": round(rig_s, 3),
                 "held": round(rig_s / (wall_s * self.speed), 4) if wall_s > 0 else None, "wakes": self.wakes,
