@@ -121,6 +121,9 @@ class Limits:
     overspeed_primary_rpm: float
     overspeed_secondary_rpm: float
     comms_timeout_s: float
+    # the Nano's run-enable (issue 37): no valid poll for this long -> its output drops (engine cut, K3
+    # releases the brake); sent with the over-speed limits at every boot; 0: never armed (docs/safety.md)
+    supervisor_timeout_s: float = 0.2
 
 
 @dataclass(frozen=True)
@@ -264,7 +267,8 @@ class _Reader(FieldReader):
 
 # limits.*: (lo, hi).  A limit outside its range is a unit mistake or a disabled trip.
 LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500.0, 20000.0),
-                "overspeed_secondary_rpm": (500.0, 20000.0), "comms_timeout_s": (0.02, 5.0)}
+                "overspeed_secondary_rpm": (500.0, 20000.0), "comms_timeout_s": (0.02, 5.0),
+                "supervisor_timeout_s": (0.0, 65.0)}
 
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
@@ -354,9 +358,12 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
     # limits
     t = r.table(data, "limits")
     lim_keys = ("rotor_temp_max_c", "overspeed_primary_rpm", "overspeed_secondary_rpm", "comms_timeout_s")
-    r.no_extra(t, set(lim_keys), "limits.")
+    r.no_extra(t, {*lim_keys, "supervisor_timeout_s"}, "limits.")
     limits = Limits(**{k: r.number(t, k, "limits.", lo=LIMIT_RANGES[k][0], hi=LIMIT_RANGES[k][1])
-                       for k in lim_keys})
+                       for k in lim_keys},
+                    supervisor_timeout_s=r.number(t, "supervisor_timeout_s", "limits.", default=0.2, required=False,
+                                                  lo=LIMIT_RANGES["supervisor_timeout_s"][0],
+                                                  hi=LIMIT_RANGES["supervisor_timeout_s"][1]))
 
     # actuator
     t = r.table(data, "actuator")

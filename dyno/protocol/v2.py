@@ -53,7 +53,8 @@ PAYLOAD_MAX = FRAME_MAX - HEADER_LEN - CRC_LEN  # 15 bytes: five Hall edges, or 
 FLAG_RESET = 0x01
 FLAG_MORE = 0x02
 FLAG_OVERFLOW = 0x04
-FLAGS_KNOWN = FLAG_RESET | FLAG_MORE | FLAG_OVERFLOW | 0xF0
+FLAG_RUN = 0x08  # the Nano's run-enable output (D7) was on when the frame was built (issue 37)
+FLAGS_KNOWN = FLAG_RESET | FLAG_MORE | FLAG_OVERFLOW | FLAG_RUN | 0xF0
 CAUSE_SHIFT = 4
 
 # MCUSR bits of the ATmega328P, as carried in flags bits 4..7.
@@ -68,18 +69,25 @@ OP_CLEAR_COUNTERS = v1.OP_CLEAR_COUNTERS
 OP_INFO = v1.OP_INFO
 OP_SET_CHANNELS = 0x22  # u8 mask of optional channels to queue (CHANNEL_INPUT); the device's reply: none
 OP_CAPS = 0x31          # the next read returns one capabilities frame, then data frames again
+OP_SET_SUPERVISOR = 0x23  # u16 min period primary us, u16 min period secondary us, u16 heartbeat timeout ms
 COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0,
-                OP_SET_CHANNELS: 1, OP_CAPS: 0}
+                OP_SET_CHANNELS: 1, OP_CAPS: 0, OP_SET_SUPERVISOR: 6}
 
 # The optional engine-side torque channel: a second AD7171 (tag 4, tag 3's 6-byte layout).
 CH_INPUT = 4
-EVENT_LEN = {**EVENT_LEN, CH_INPUT: 6}
-CHANNEL_NAMES = {**CHANNEL_NAMES, CH_INPUT: "input"}
-ADC_TAGS = (CH_ADC, CH_INPUT)
+# The run-enable supervisor's changes (issue 37): tag 3's layout, code = the measured value, status = the cause.
+CH_SUPERVISOR = 5
+EVENT_LEN = {**EVENT_LEN, CH_INPUT: 6, CH_SUPERVISOR: 6}
+CHANNEL_NAMES = {**CHANNEL_NAMES, CH_INPUT: "input", CH_SUPERVISOR: "supervisor"}
+ADC_TAGS = (CH_ADC, CH_INPUT, CH_SUPERVISOR)  # (the 6-byte events: code and status)
+SUP_ON, SUP_HEARTBEAT, SUP_OVERSPEED_PRIMARY, SUP_OVERSPEED_SECONDARY = 0, 1, 2, 3
+SUP_CAUSE_NAMES = {SUP_ON: "on", SUP_HEARTBEAT: "heartbeat", SUP_OVERSPEED_PRIMARY: "overspeed_primary",
+                   SUP_OVERSPEED_SECONDARY: "overspeed_secondary"}
 
 KIND_CAPS = 0x43  # 'C'
 CAPS_LEN = 20
 CHANNEL_INPUT = 0x01          # SET_CHANNELS / capabilities bit: the input torque converter
+CHANNEL_SUPERVISOR = 0x02     # capabilities: the run-enable output exists (channels) / is armed in this boot (enabled)
 CONVERTER_NONE, CONVERTER_AD7171 = 0, 1
 
 INFO_LEN = 32
@@ -151,6 +159,10 @@ class CapsFrame:
     def has_input(self) -> bool:
         return bool(self.channels & CHANNEL_INPUT)
 
+    @property
+    def has_supervisor(self) -> bool:
+        return bool(self.channels & CHANNEL_SUPERVISOR)
+
 
 # --- encoding -----------------------------------------------------------------------
 
@@ -218,6 +230,8 @@ def encode_command(op: int, *args: int) -> bytes:
         body = struct.pack(">BB", op, mask & 0xFF)
     elif op == OP_SET_DEBOUNCE:
         body = struct.pack(">BHH", op, *args)
+    elif op == OP_SET_SUPERVISOR:
+        body = struct.pack(">BHHH", op, *(a & 0xFFFF for a in args))
     elif op == OP_ACK_POLL:
         boot_id, seq = args
         body = struct.pack(">BHB", op, boot_id & 0xFFFF, seq & 0xFF)
@@ -303,4 +317,24 @@ def decode_command(buf: bytes) -> v1.Command:
         return v1.Command(op, struct.unpack(">HB", buf[1:4]))
     if op == OP_SET_CHANNELS:
         return v1.Command(op, (buf[1],))
+    if op == OP_SET_SUPERVISOR:
+        return v1.Command(op, struct.unpack(">HHH", buf[1:7]))
     return v1.Command(op, ())
+
+
+def min_period_us(limit_rpm: float | None) -> int:
+    """The shortest Hall period (one pulse per revolution) below an over-speed limit: int(60e6 / rpm),
+    0 (not checked) without a limit; at most 65535 (a limit below 916 rpm is checked at 916)."""
+    if not limit_rpm or limit_rpm <= 0:
+        return 0
+    return min(0xFFFF, int(60e6 / float(limit_rpm)))
+
+
+def supervisor_command(limit_primary_rpm: float | None, limit_secondary_rpm: float | None,
+                       timeout_s: float) -> bytes:
+    """SET_SUPERVISOR: arm (or re-arm) the Nano's run-enable with the rig file's limits (docs/protocol.md).
+
+    ``timeout_s`` is the heartbeat timeout, sent in whole ms (1 ... 65535)."""
+    timeout_ms = max(1, min(0xFFFF, round(float(timeout_s) * 1000.0)))
+    return encode_command(OP_SET_SUPERVISOR, min_period_us(limit_primary_rpm), min_period_us(limit_secondary_rpm),
+                          timeout_ms)
