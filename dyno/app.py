@@ -180,6 +180,16 @@ def build(opts: RunOptions, now_s) -> RunContext:
         raise
 
 
+def _supervisor_command(protocol: str, limits, rig_cfg) -> bytes | None:
+    """SET_SUPERVISOR with the run's over-speed limits and the rig file's heartbeat timeout (v2; 0: not armed)."""
+    from dyno.protocol import v2
+
+    timeout_s = rig_cfg.limits.supervisor_timeout_s
+    if protocol != "v2" or timeout_s <= 0:
+        return None
+    return v2.supervisor_command(limits.overspeed_primary_rpm, limits.overspeed_secondary_rpm, timeout_s)
+
+
 def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) -> RunContext:
     from dyno.runlog.writer import RunWriter
 
@@ -197,7 +207,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         faults = opts.faults or (BusFaults.mixed(opts.fault_rate) if opts.fault_rate else None)
         sim = SimRig(now_s, seed=opts.seed, params=app_input.sim_params_for(opts.sim_params, rig_cfg),
                      protocol=protocol, faults=faults,
-                     clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s)
+                     clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s,
+                     run_enable_wired=rig_cfg.limits.supervisor_timeout_s > 0)  # D7 in the kill chain
         sim.model.brake_hold_relay = rig_cfg.actuator.brake_hold_relay  # K3: wiring, as rig.toml declares it
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
@@ -230,7 +241,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     else:
         transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
         thermometer = hw.thermometer.object_c
-    reader = make_reader(protocol, transport)
+    reader = make_reader(protocol, transport, supervisor_command=_supervisor_command(protocol, limits, rig_cfg))
     poller = Poller(reader, poll_hz=rig_cfg.poll_hz, thermometer=thermometer, blocking_io=blocking)
     meta = {
         "mode": "sim" if opts.sim else "rig",

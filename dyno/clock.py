@@ -218,6 +218,22 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         return self.pace.stats(self._virtual_s) if self.pace is not None else None
 
 
+def freeze_host(loop, dt_s: float, world, chunk_s: float = 0.005) -> None:
+    """The whole host stops for ``dt_s`` (drill ``pi-freeze``): no callback, no background ticker (the
+    watchdog thread) runs, while ``world()`` — the simulated physics and the Nano — is stepped every
+    ``chunk_s`` on the clock.  Tickers due meanwhile run when the loop advances next (the host resumes)."""
+    if not isinstance(loop, VirtualTimeLoop):
+        raise RuntimeError("pi-freeze needs the simulated rig's virtual clock")
+    end = loop._virtual_s + dt_s
+    if loop.speed:
+        time.sleep(dt_s / loop.speed)
+        if loop.pace is not None:  # (frozen wall time is no debt to catch up)
+            loop.pace.anchor = None
+    while loop._virtual_s < end:
+        loop._virtual_s = min(end, loop._virtual_s + chunk_s)
+        world()
+
+
 def block_loop(loop, dt_s: float) -> None:
     """Hold ``loop`` for ``dt_s``: virtual loops advance their clock, real ones really block."""
     if isinstance(loop, VirtualTimeLoop):

@@ -21,6 +21,9 @@ bus-lost               the I2C cable falls out: every device NACKs
 overtemp               a dragging pad heats the rotor at 20 C/s while the engine runs
 overspeed              the governor fails: throttle stuck wide open
 loop-stall:MS          the host's event loop blocks MS milliseconds
+pi-freeze[:S]          the Pi stops entirely for S s (default 5): no polls, no watchdog thread, every output
+                       pin frozen at its level (not released); the physics and the Nano run on; then the host
+                       resumes (the Nano's run-enable cuts the engine: issue 37)
 controller-crash       the control task raises
 disk-full              the run directory refuses writes (ENOSPC)
 sigint|sigterm|sighup  the process receives the signal
@@ -42,6 +45,7 @@ from dyno.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, chec
 from dyno.errors import ConfigError
 
 OVERTEMP_RATE_C_PER_S = 20.0
+PI_FREEZE_DEFAULT_S = 5.0
 
 #: name -> (argument required?, allowed arguments or None, needs an engine?)
 DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
@@ -55,6 +59,7 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "overtemp": (False, None, True),
     "overspeed": (False, None, True),
     "loop-stall": (True, None, False),
+    "pi-freeze": (False, None, False),
     "controller-crash": (False, None, False),
     "disk-full": (False, None, False),
     "sigint": (False, None, False),
@@ -120,13 +125,14 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     if needs_arg and arg is None:
         what = "|".join(allowed) if allowed else {"estop-held": "SECONDS", "loop-stall": "MS"}.get(name, "ARG")
         raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:{what}@T)")
-    if not needs_arg and arg is not None and allowed is None:
+    if not needs_arg and arg is not None and allowed is None and name != "pi-freeze":
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
     if allowed is not None and arg is not None and arg not in allowed:
         raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
     numeric = {"estop-held": (3600, "estop-held:S needs 0 < S <= 3600 seconds"),
-               "loop-stall": (60_000, "loop-stall:MS needs 0 < MS <= 60000")}
-    if name in numeric:
+               "loop-stall": (60_000, "loop-stall:MS needs 0 < MS <= 60000"),
+               "pi-freeze": (600, "pi-freeze:S needs 0 < S <= 600 seconds")}
+    if name in numeric and arg is not None:
         hi, why = numeric[name]
         try:
             value = float(arg)
@@ -264,6 +270,14 @@ class DrillRunner(WiringDrills):
 
         block_loop(self.loop, float(d.arg) / 1000.0)
 
+    def _pi_freeze(self, d: Drill, rec: dict) -> None:
+        from dyno.clock import freeze_host
+
+        rec["freeze_s"] = float(d.arg) if d.arg else PI_FREEZE_DEFAULT_S
+        sim = self.ctx.sim
+        freeze_host(self.loop, rec["freeze_s"] / self.speed, sim.bus.sync)
+        rec["resumed_s"] = self.sim_now()
+
     def _controller_crash(self, d: Drill, rec: dict) -> None:
         self.ctx.controller.inject_crash(RuntimeError("drill controller-crash: the control task raised"))
 
@@ -370,6 +384,10 @@ def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     to_sim = getattr(ctx, "host_to_sim", None) or (lambda t: t)
     a["detection_s"] = to_sim(a["trigger_s"]) - onset if a.get("trigger_s") is not None else math.nan
     a["latency_basis"] = "true time from the physical onset (simulated rig)"
+    if rec["name"] == "pi-freeze":
+        from dyno.drills_freeze import freeze_abort_latency
+
+        freeze_abort_latency(ctx, a, rec)
 
 
 def _extrapolated_crossing_s(truth, field: str, level: float, t_s: float, span_s: float = 0.5) -> float | None:
@@ -457,6 +475,11 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
             note = "no write was attempted after the disk filled"
         elif name in WIRING_DRILLS:
             arose, note = drills._wiring_verdict(rec, name)
+        elif name == "pi-freeze":
+            from dyno.drills_freeze import freeze_verdict
+
+            freeze_verdict(ctx, rec)
+            continue
         rec["hazard_arose"] = bool(arose)
         if not arose:
             rec["hazard_note"] = note

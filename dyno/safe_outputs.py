@@ -68,9 +68,20 @@ def sim_outputs(ctx) -> dict:
         outs["release_within_bound"] = outs["release_s"] is not None and outs["release_s"] <= outs["release_bound_s"]
     outs["release_basis"] = "physics"
     outs["brake_hold_relay"] = bool(model.brake_hold_relay)
+    outs.update(engine_cut(model))
     if not outs["safe"]:
         outs["unsafe_because"] = _why_not(outs)
     return outs
+
+
+def engine_cut(model) -> dict:
+    """Who opened the kill chain for good (the opening that began its last open period: "pi", "nano" or
+    "estop") and when, in true time; None while the chain is closed (:mod:`dyno.sim.kill_chain`)."""
+    log = getattr(model, "ignition_log", [])
+    last_on = max((i for i, (_, on, _) in enumerate(log) if on), default=-1)
+    cut = next(((t, by) for t, on, by in log[last_on + 1:] if not on), None)
+    return {"engine_cut_by": cut[1] if cut else None, "engine_cut_at_s": cut[0] if cut else None,
+            "nano_run_enable": bool(getattr(model, "nano_enable", True))}
 
 
 def judge_driver(outs: dict) -> None:

@@ -44,6 +44,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
             for pub, p in zip(out["points"], ctx.controller.points):
                 pub.update(corrected_point_keys(p, zc))
     out["link"] = link_document(ctx)
+    out["supervisor"] = supervisor_document(reader)
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)
     if getattr(ctx.controller, "tare", None):
         out["torque_tare"] = ctx.controller.tare  # the zero the points were measured from
@@ -160,3 +161,14 @@ def safety_document(summary: dict) -> dict:
     """The ``safety`` document every run directory ends with: what ``dyno run --json`` reports of its
     safety (drill records, true-time latencies from the onset, the physical outputs at the end)."""
     return {k: summary[k] for k in SAFETY_KEYS if k in summary}
+
+
+def supervisor_document(reader) -> dict:
+    """The Nano's run-enable as the host saw it (issue 37): present (capability bit), armed in the current
+    boot, its last RUN flag, and every drop with its cause (device time in us, unwrapped)."""
+    if getattr(reader, "supervisor_command", None) is None and not getattr(reader, "supervisor_present", None):
+        return {"armed_by_host": False}
+    return {"armed_by_host": reader.supervisor_command is not None, "present": reader.supervisor_present,
+            "armed": reader.supervisor_armed, "run_enable": reader.run_enable,
+            "drops": [dict(d) for d in reader.run_enable_drops], "events": len(reader.supervisor_events)}
+

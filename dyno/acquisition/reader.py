@@ -81,6 +81,15 @@ class V1Reader:
         self.input_present: bool | None = None  # None: not asked yet in this boot
         self._caps_pending = False
         self._caps_data_answers = 0
+        # The Nano's run-enable (issue 37): SET_SUPERVISOR with the rig file's limits, sent in every boot whose
+        # capabilities announce it until the device confirms it armed (None: never arm it).
+        self.supervisor_command: bytes | None = None
+        self.supervisor_present: bool | None = None  # None: not asked yet
+        self.supervisor_armed = False          # this boot confirmed it
+        self.supervisor_ever_armed = False
+        self.run_enable: bool | None = None    # the RUN flag of the last data frame (None: not armed yet)
+        self.run_enable_drops: list[dict] = []  # {"cause", "t_us" (device time), "code"} in order
+        self.supervisor_events: list[dict] = []  # every tag-5 event: {"t_us", "cause", "code"}
 
     @property
     def stats(self) -> LinkStats:
@@ -106,19 +115,52 @@ class V1Reader:
                 # command the bus corrupted: absent only after CAPS_TRIES such answers in a row.
                 self._caps_data_answers += 1
                 if self._caps_data_answers >= CAPS_TRIES:
-                    self.input_present = False
+                    if self.want_input:
+                        self.input_present = False
+                    self.supervisor_present = False
                     self._caps_pending = False
             return  # otherwise asked again at the next poll
         self._caps_data_answers = 0
         self.session.caps = frame
-        self.input_present = frame.has_input
+        if self.want_input:
+            self.input_present = frame.has_input
+        self.supervisor_present = frame.has_supervisor
+        self.supervisor_armed = bool(frame.enabled & v2.CHANNEL_SUPERVISOR)
+        self.supervisor_ever_armed |= self.supervisor_armed
         # pending until the device's own capabilities frame confirms the enable (a write can be lost)
-        self._caps_pending = frame.has_input and not frame.enabled & v2.CHANNEL_INPUT
-        if self._caps_pending:
-            try:
+        need_input = self.want_input and frame.has_input and not frame.enabled & v2.CHANNEL_INPUT
+        need_sup = self.supervisor_command is not None and frame.has_supervisor and not self.supervisor_armed
+        self._caps_pending = need_input or need_sup
+        try:
+            if need_input:
                 self.transport.write(v2.encode_command(v2.OP_SET_CHANNELS, v2.CHANNEL_INPUT))
-            except TransportFault:
-                pass
+            if need_sup:
+                self.transport.write(self.supervisor_command)
+        except TransportFault:
+            pass
+
+    def rearm_supervisor(self) -> None:
+        """Send the limits again (the operator's re-arm after a drop: the device latches it off until then)."""
+        if self.supervisor_command is not None and self.version == 2:
+            self.supervisor_armed = False
+            self._caps_pending = True
+            self._caps_data_answers = 0
+
+    def _note_supervisor(self, frame, new_boot: bool, events: list) -> list:
+        """Take the run-enable's state (RUN flag) and its tag-5 events out of a data frame."""
+        if new_boot and self.supervisor_ever_armed:
+            self.run_enable_drops.append({"cause": f"reset ({v2.cause_name(frame.reset_cause)})",
+                                          "t_us": events[0].t_us if events else self.device_time_us, "code": 0})
+            self.supervisor_armed = False
+        sup = [e for e in events if e.channel == v2.CH_SUPERVISOR]
+        for e in sup:
+            cause = v2.SUP_CAUSE_NAMES.get(e.status, f"cause {e.status}")
+            self.supervisor_events.append({"t_us": e.t_us, "cause": cause, "code": e.code})
+            if e.status != v2.SUP_ON:
+                self.run_enable_drops.append({"cause": cause, "t_us": e.t_us, "code": e.code})
+        if self.supervisor_ever_armed:
+            self.run_enable = bool(frame.flags & v2.FLAG_RUN)
+        return [e for e in events if e.channel != v2.CH_SUPERVISOR] if sup else events
 
     def poll(self, now_s: float) -> list[Event]:
         """One transaction; returns the new events (possibly none)."""
@@ -133,10 +175,11 @@ class V1Reader:
             self.more = False
             return []
         new_boot = self.session.new_boot if self.version == 2 else frame.flags & v1.FLAG_RESET
-        if self.want_input and self.version == 2 and self.session.new_boot:
+        if self.version == 2 and self.session.new_boot and (self.want_input or self.supervisor_command):
             self._caps_pending = True
             self._caps_data_answers = 0
-            self.input_present = None
+            if self.want_input:
+                self.input_present = None
         if new_boot and self._last_frame_s is not None:
             self.unwrap.new_epoch(int((now_s - self._last_frame_s) * 1e6))
             self._dropped_last = None
@@ -152,6 +195,8 @@ class V1Reader:
         t_dev = unwrap.peek(frame.t0_us) if not out else max(e.t_us for e in out)
         if self.device_time_us is None or t_dev > self.device_time_us:
             self.device_time_us = t_dev
+        if self.version == 2:
+            out = self._note_supervisor(frame, bool(new_boot), out)
         if self._caps_pending:
             self._negotiate_input()
         return out
@@ -334,9 +379,13 @@ def implausible_v0(f: v0.LegacyFrame, last: v0.LegacyFrame, host_dt_s: float) ->
     return None
 
 
-def make_reader(protocol: str, transport: Transport):
+def make_reader(protocol: str, transport: Transport, *, supervisor_command: bytes | None = None):
+    """The reader for ``protocol``; v2 arms the Nano's run-enable with ``supervisor_command`` in every boot
+    (``dyno.protocol.v2.supervisor_command``; None: never armed)."""
     if protocol == "v2":
-        return V1Reader(transport, 2)
+        reader = V1Reader(transport, 2)
+        reader.supervisor_command = supervisor_command
+        return reader
     if protocol == "v1":
         return V1Reader(transport, 1)
     if protocol == "v0":

@@ -101,6 +101,8 @@ class SafetyMonitor:
         self._torque_nm = 0.0
         # the engine-side input torque converter (issue 27): the same checks, once it has converted
         self._in = _ConverterRuns()
+        # the Nano's run-enable drops (issue 37) seen so far: only later ones trip this monitor
+        self._drops_seen = len(getattr(getattr(poller, "reader", None), "run_enable_drops", None) or ())
 
     # ------------------------------------------------------------------ inputs
     def _update_adc(self) -> None:
@@ -205,7 +207,7 @@ class SafetyMonitor:
         if last is not None and now - attempt > max(1.0, 4 * lim.comms_timeout_s):
             return Trip("comms_lost", f"the poller has not polled for {now - attempt:.2f} s", now)
 
-        trip = self._check_temperature(now)
+        trip = self._check_run_enable(now) or self._check_temperature(now)
         if trip:
             return trip
 
@@ -222,6 +224,19 @@ class SafetyMonitor:
             if trip:
                 return trip
         return None
+
+    def _check_run_enable(self, now: float) -> Trip | None:
+        """The Nano dropped its run-enable (its heartbeat, over-speed or a reset): the engine is already cut by
+        wiring, so the test cannot go on; the host latches its own safe state with the Nano's cause."""
+        drops = getattr(getattr(self.poller, "reader", None), "run_enable_drops", None)
+        if not drops or len(drops) <= self._drops_seen:
+            return None
+        d = drops[self._drops_seen]
+        self._drops_seen = len(drops)
+        if d["cause"].startswith("reset"):
+            return Trip("nano_reset", f"the Nano reset ({d['cause'][7:-1]}): its run-enable dropped and cut the engine",
+                        now)
+        return Trip("nano_cut", f"the Nano's run-enable dropped ({d['cause']}, {d['code']}): the engine is cut", now)
 
     def _check_temperature(self, now: float) -> Trip | None:
         lim = self.limits

@@ -136,12 +136,14 @@ class SimPinFactory(RecordingFactory):
         """The E-stop pressed (or its wire cut): the chain drops the ignition by itself, then the Pi's
         monitor input sees the contact open."""
         self.chain_closed = False
+        self.sim.model.estop_open = True  # (the physics records who opened the chain)
         self._ignition()
         if self.estop_pin is not None:
             self.estop_pin.open_chain()
 
     def close_estop(self) -> None:
         self.chain_closed = True
+        self.sim.model.estop_open = False
         if self.estop_pin is not None:
             self.estop_pin.close_chain()
         self._ignition()  # (the Pi's kill pin decides again: after a trip it holds the ignition killed)

@@ -92,8 +92,23 @@ class SimSMBus:
         self._advance(now)
 
     def _advance(self, t_s: float) -> None:
+        if self._stepping:  # (a signal handler inside a step: its inputs act from the step's end)
+            return
+        # The Nano's heartbeat expires at a known instant: the physics is stepped to it, the output drops
+        # there, and the kill chain acts from then on (not from the next poll, which may never come).
+        deadline = getattr(self.firmware, "next_deadline_s", lambda: None)()
+        while deadline is not None and deadline < t_s:
+            self._step_to(deadline)
+            self.firmware.service(deadline)
+            nxt = self.firmware.next_deadline_s()
+            if nxt is not None and nxt <= deadline:
+                break
+            deadline = nxt
+        self._step_to(t_s)
+
+    def _step_to(self, t_s: float) -> None:
         dt = t_s - self.rig.t_s
-        if dt <= 0 or self._stepping:  # (a signal handler inside a step: its inputs act from the step's end)
+        if dt <= 0:
             return
         capture = self.firmware.capture
         self._stepping = True

@@ -16,10 +16,11 @@ from collections import deque
 
 from dyno.errors import FrameError
 from dyno.protocol import v0, v1, v2
+from dyno.sim.supervisor import NanoSupervisor
 
 CHANNEL_TAG = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC, "input": v2.CH_INPUT}
 INPUT_RATE_MHZ = 125_000  # the second AD7171's nominal rate, as announced
-FW_VERSION = (2, 0, 0)
+FW_VERSION = (2, 1, 0)
 LOCKOUT_FLOOR_US = 1000  # firmware config.h: DEBOUNCE_*_US_DEFAULT
 LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
 
@@ -39,16 +40,24 @@ class EmulatedFirmware:
     knows_caps : False emulates the firmware from before the input channel (CAPS, SET_CHANNELS unknown)
     input_fitted : a second AD7171 (the engine-side input torque) answers at boot: announced in the
         capabilities frame (v2 only), queued as tag 4 once the host enabled it in this boot
+    supervisor : the run-enable output (D7, issue 37; v2 only): :class:`dyno.sim.supervisor.NanoSupervisor`,
+        ``on_run_enable(on, t_s, cause)`` is told every change (the simulated rig's kill chain); False
+        emulates the firmware before it (SET_SUPERVISOR an unknown op, no capability bit)
     """
 
     def __init__(self, protocol: str = "v2", ring_capacity: int = 64, clock_offset_us: int = 0,
-                 clock_ppm: float = 0.0, input_fitted: bool = False, knows_caps: bool = True) -> None:
+                 clock_ppm: float = 0.0, input_fitted: bool = False, knows_caps: bool = True,
+                 supervisor: bool = True) -> None:
         self.protocol = protocol
+        self.has_supervisor = bool(supervisor) and protocol == "v2" and knows_caps
+        self.on_run_enable = None  # f(on, t_s, cause): the wiring behind D7
+        self.supervisor = NanoSupervisor(self._push_supervisor, self._run_enable_changed)
         self.knows_caps = knows_caps  # False: firmware from before the input channel (CAPS is an unknown op)
         self.input_fitted = bool(input_fitted) and protocol == "v2"
         self.ring_capacity = ring_capacity
         self.clock_offset_us = clock_offset_us
         self.clock_scale = 1.0 + clock_ppm * 1e-6
+        self.boot_time_s = 0.0
         self.boot_count = 0
         # v2 boot identity: the firmware's .noinit counter, +1 on every boot (RAM survives
         # a reset; simavr and this model start it at 0, so the first boot is 1).
@@ -56,6 +65,7 @@ class EmulatedFirmware:
         self.reset_cause = v2.CAUSE_PORF
         self.ack_from_old_boot = 0  # v2: ACK_POLLs naming another boot (ignored), for audits
         self.first_served_s: dict[int, float] = {}  # boot_id -> sim time its first frame went out
+        self.run_enable_log: list[tuple[float, bool, str]] = []  # (sim t, D7 on, cause): the truth
         self.retired_log: list | None = None  # set to [] to record (boot_id, raw) of every retired frame
         # v1: fixed lock-outs (the thesis's 10 / 6 ms); v2: the floor of the adaptive lock-out
         self.debounce_us = ({v1.CH_PRIMARY: 10_000, v1.CH_SECONDARY: 6_000} if protocol == "v1"
@@ -83,6 +93,7 @@ class EmulatedFirmware:
         self.channels_enabled = 0  # SET_CHANNELS mask; RAM, so every boot starts with the input off
         self._caps_seq = 0  # the data seq when the capabilities frame was built
         self._last_edge_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
+        self._last_edge_s: dict[int, float] = {v1.CH_PRIMARY: 0.0, v1.CH_SECONDARY: 0.0}
         self.lockout_rejected = {v1.CH_PRIMARY: 0, v1.CH_SECONDARY: 0}  # since boot, as on the device
         self._period_us: dict[int, int | None] = {v1.CH_PRIMARY: None, v1.CH_SECONDARY: None}
         self._legacy = {v1.CH_PRIMARY: [100, 0], v1.CH_SECONDARY: [100, 0], v1.CH_ADC: [0, 0]}
@@ -107,6 +118,8 @@ class EmulatedFirmware:
         self.boot_count += 1
         self.boot_id = (self.boot_id + 1) & 0xFFFF
         self.reset_cause = cause & 0x0F
+        self.supervisor.service(now_s)  # (an expiry before the reset happened first)
+        self.supervisor.boot(now_s, cause="reset")  # the pins go high-Z at the reset: the pull-down holds D7 off
         self._boot(now_s + (BOOTLOADER_S if cause & v2.CAUSE_EXTRF else 0.0))
 
     def running(self, now_s: float) -> bool:
@@ -126,6 +139,8 @@ class EmulatedFirmware:
         if tag == v2.CH_INPUT and not (self.input_fitted and self.channels_enabled & v2.CHANNEL_INPUT):
             return  # not fitted, or not enabled by this boot's host: its RDY is not serviced
         t_us = self.device_us(t_s)
+        self.supervisor.service(t_s)
+        period_from_s = None
         if tag not in v2.ADC_TAGS:
             last = self._last_edge_us[tag]
             if last is not None and ((t_us - last) & 0xFFFFFFFF) < self._lockout_us(tag):
@@ -134,11 +149,40 @@ class EmulatedFirmware:
                 return
             if last is not None:
                 self._period_us[tag] = (t_us - last) & 0xFFFFFFFF
+                period_from_s = self._last_edge_s[tag]
             self._last_edge_us[tag] = t_us
+            self._last_edge_s[tag] = t_s
             code = status = 0  # a Hall edge carries only its time
         if self.protocol == "v0":
             self._capture_v0(tag, t_us, code, status)
             return
+        self._push(tag, t_us, code, status)
+        if period_from_s is not None:  # the loop sees the period after the edge is queued
+            self.supervisor.period(tag, period_from_s, t_s, self._period_us[tag])
+
+    def _push_supervisor(self, tag: int, t_s: float, code: int, status: int) -> None:
+        if self.supervisor.armed:  # queued only once this boot's host armed it (an old host never sees tag 5)
+            self._push(tag, self.device_us(t_s), code, status)
+
+    def _run_enable_changed(self, on: bool, t_s: float, cause: str) -> None:
+        self.run_enable_log.append((t_s, on, cause))
+        if self.on_run_enable is not None:
+            self.on_run_enable(on, t_s, cause)
+
+    @property
+    def run_enable(self) -> bool:
+        """D7's level now (the last decision; :meth:`service` first to take an expired heartbeat)."""
+        return self.supervisor.on
+
+    def service(self, now_s: float) -> None:
+        """The firmware's main loop at ``now_s``: the supervisor's heartbeat check."""
+        self.supervisor.service(now_s)
+
+    def next_deadline_s(self) -> float | None:
+        """When the output drops unless the host polls (the bus steps the physics to it exactly)."""
+        return self.supervisor.deadline_s()
+
+    def _push(self, tag: int, t_us: int, code: int, status: int) -> None:
         if len(self.ring) >= self.ring_capacity:
             self.events_dropped = (self.events_dropped + 1) & 0xFFFF
             self.overflow = True
@@ -171,6 +215,14 @@ class EmulatedFirmware:
             return  # ignored, as the firmware does: the current frame is served again
         if not self.knows_caps and cmd.op in (v2.OP_CAPS, v2.OP_SET_CHANNELS):
             return  # older firmware: an unknown op, ignored the same way
+        if cmd.op == v2.OP_SET_SUPERVISOR and not self.has_supervisor:
+            return  # firmware before the run-enable: an unknown op
+        if self.has_supervisor and cmd.op in (v1.OP_POLL, v1.OP_ACK_POLL, v2.OP_SET_SUPERVISOR):
+            self.supervisor.heartbeat(now_s)
+        if cmd.op == v2.OP_SET_SUPERVISOR:
+            if self.supervisor.arm(now_s, *cmd.args):
+                self._caps_seq = self.seq
+            return
         if cmd.op == v1.OP_ACK_POLL:
             if self.protocol == "v2":
                 boot, seq = cmd.args
@@ -211,10 +263,12 @@ class EmulatedFirmware:
         if self.caps_pending and self.protocol == "v2":
             self.caps_pending = False
             fitted = v2.CHANNEL_INPUT if self.input_fitted else 0
+            sup = v2.CHANNEL_SUPERVISOR if self.has_supervisor else 0
+            enabled = self.channels_enabled | (sup if self.supervisor.armed else 0)
             # as the firmware builds it: at boot and after each SET_CHANNELS (its seq then), the flags
             # the reset cause only (as the info frame's)
-            caps = v2.CapsFrame(self._caps_seq, self.reset_cause << v2.CAUSE_SHIFT, self.boot_id, fitted,
-                                self.channels_enabled,
+            caps = v2.CapsFrame(self._caps_seq, self.reset_cause << v2.CAUSE_SHIFT, self.boot_id, fitted | sup,
+                                enabled,
                                 v2.CONVERTER_AD7171 if fitted else v2.CONVERTER_NONE,
                                 INPUT_RATE_MHZ if fitted else 0)
             return v2.encode_caps_frame(caps)[:n].ljust(n, b"\xff")
@@ -243,6 +297,8 @@ class EmulatedFirmware:
         f = v1.FLAG_RESET if self.reset_flag else 0
         if self.protocol == "v2":
             f |= self.reset_cause << v2.CAUSE_SHIFT
+            if self.supervisor.on:
+                f |= v2.FLAG_RUN
         return f | (v1.FLAG_OVERFLOW if self.overflow else 0)
 
     def _build(self, now_s: float) -> None:

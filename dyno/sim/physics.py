@@ -77,6 +77,7 @@ from dyno.sim.input_torque import InputTorqueSignals
 # keep importing them from dyno.sim.physics.
 from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for
 from dyno.sim.rig_params import _load_tune, _resolve_map_path
+from dyno.sim.kill_chain import KillChain
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
 from dyno.sim.tune_deviation import parts_on_the_rig
@@ -86,12 +87,12 @@ __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel",
            "Truth"]
 
 
-class RigModel(RigSignals, InputTorqueSignals):
+class RigModel(KillChain, RigSignals, InputTorqueSignals):
     """The simulated rig.  See the module docstring for the physics.
 
     Inputs (attributes set by the device/actuator emulation):
-    ``throttle_frac`` (0 idle .. 1 full), ``engine_enabled`` (False = kill
-    relay open), ``actuator_dir`` (the enable: +1/-1 powered, 0 stop),
+    ``throttle_frac`` (0 idle .. 1 full), ``engine_enabled`` (False = the Pi
+    opens the kill chain; :class:`KillChain`), ``actuator_dir`` (the enable: +1/-1 powered, 0 stop),
     ``relay_dir`` (the direction relay's coil: +1 apply, -1 release = rest;
     set by a powered ``actuator_dir``, or alone by a driver that switches it
     with the enable off).  The actuator moves the way the relay's contacts
@@ -175,8 +176,7 @@ class RigModel(RigSignals, InputTorqueSignals):
         self._bounce_buf: list[float] = []
         self._err_buf: list[float] = []
 
-        # inputs
-        self.throttle_frac = 0.0
+        self.throttle_frac = 0.0  # inputs
         self.engine_enabled = True
         self.actuator_dir = 0
         self.relay_dir = -1                 # at rest: release
@@ -245,7 +245,7 @@ class RigModel(RigSignals, InputTorqueSignals):
     # ------------------------------------------------------------ inputs
     def start_engine(self) -> None:
         """Operator pull-start: if enabled and stopped, the engine fires and runs up to idle."""
-        if not self.engine_enabled or self._running:
+        if not self.ignition_on or self._running:
             return
         self._running = True
         self._w_e = max(self._w_e, self.params.engine_start_rpm * RAD_S_PER_RPM)
@@ -326,7 +326,7 @@ class RigModel(RigSignals, InputTorqueSignals):
         g = self._g
         j_e = self._j_e
         j_s = self._j_s
-        if not self.engine_enabled:
+        if not self.note_ignition(t0):
             self._running = False
 
         # --- actuator and brake capacity (inputs act from the start of the step)
@@ -336,7 +336,7 @@ class RigModel(RigSignals, InputTorqueSignals):
             self._relay_goal = self.relay_dir
             self._relay_made_s = t0 + p.relay_transfer_s
         a_before = self._act_mm
-        if self.brake_hold_relay and not self.engine_enabled:
+        if self.brake_hold_relay and not self.ignition_on:
             # K3 (hardware/README.md) off with the kill relay: its NC contacts drive the actuator in release
             # to its end stop, the driver cut off
             self._act_mm = brk.move_actuator_mm(self._act_mm, -1, h)
@@ -456,7 +456,7 @@ class RigModel(RigSignals, InputTorqueSignals):
         # --- rotor heat (exact relaxation over the step)
         w_b = 0.5 * (w_s0 + w_s1) * g
         p_brake = t_brake_cap * w_b if w_b > 0.0 else 0.0
-        if self.extra_rotor_heat_c_per_s and self.engine_enabled:
+        if self.extra_rotor_heat_c_per_s and self.ignition_on:
             p_brake += self.extra_rotor_heat_c_per_s * p.rotor_heat_capacity_j_per_k
         self._rotor_c = min(brk.rotor_temp_after_c(self._rotor_c, p_brake, w_b, h), self._rotor_limit_c)
         # the thermometer sees the rotor through a first-order lag (exact for the held step)

@@ -299,17 +299,25 @@ class SimRig:
     protocol : "v2" (our firmware, default), "v1" (its previous protocol) or "v0" (the thesis sketch)
     faults : bus fault injection
     clock_offset_us : device counter at boot (near 2**32 to cross the wrap early)
+    run_enable_wired : the Nano's run-enable (D7) is in the kill chain (hardware/README.md; the shipped rig:
+        ``[limits] supervisor_timeout_s`` > 0): the engine runs only while the host's polls keep it on
     """
 
     def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v2",
                  faults: BusFaults | None = None, clock_offset_us: int = 0, clock_ppm: float = 0.0,
-                 full_stroke_s: float = 8.0) -> None:
+                 full_stroke_s: float = 8.0, run_enable_wired: bool = False) -> None:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating
 
         self.model = RigModel(params, seed=seed)
         self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
                                          input_fitted=self.model.input_fitted)
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
+        if run_enable_wired and self.firmware.has_supervisor:
+            self.model.nano_enable = False  # off until the host's limits arrive
+
+            def _d7(on: bool, t_s: float, cause: str) -> None:
+                self.model.nano_enable = on
+            self.firmware.on_run_enable = _d7
         self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)
         self.truth = TruthRecorder(self.model)
         self.protocol = protocol
