@@ -180,6 +180,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         self.speed = speed  # None: as fast as possible; N: paced at N x real time
         self.pace = Pace(speed) if speed else None
         self._tickers: list[list] = []  # [next_due_s, period_s, fn]
+        self.blocked = False  # inside :meth:`block`: a callback holds the loop (threads run on)
         super().__init__(selector=_VirtualSelector(self))
 
     def time(self) -> float:  # asyncio's clock
@@ -211,7 +212,11 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         """Simulate a callback that holds the loop for ``dt_s`` (drill ``loop-stall``)."""
         if self.speed:
             time.sleep(dt_s / self.speed)
-        self.advance(dt_s)
+        self.blocked = True
+        try:
+            self.advance(dt_s)
+        finally:
+            self.blocked = False
 
     def pace_stats(self) -> dict | None:
         """A paced loop's pace as held so far (:meth:`Pace.stats`); None when it runs as fast as it can."""

@@ -129,6 +129,7 @@ class Poller:
         self._lost_seen = 0
         self._resets_seen = 0
         self._last_poll_s: float | None = None
+        self._device_us: int | None = None
         self._stop = asyncio.Event()
         self._last_temp_s = -math.inf
 
@@ -156,6 +157,7 @@ class Poller:
             # earlier at the instants it shares with the polls.  Kept as it was tuned.
             next_t = self._next_t
             full_period_s = 1.0 / self.full_poll_hz
+            stall_ticker = _stall_ticker(self, loop)
             scheduled_s = self.poll_period_s  # the period that scheduled this tick (its interval's nominal)
             while not self._stop.is_set():
                 now = loop.time()
@@ -168,6 +170,8 @@ class Poller:
                 if next_t < now:  # fell behind: skip ticks rather than bunch them
                     next_t = now
                 await asyncio.sleep(next_t - now)
+            if stall_ticker is not None:
+                loop.remove_ticker(stall_ticker)
         if self._error is not None:
             raise self._error
 
@@ -276,8 +280,8 @@ class Poller:
     def _read_burst(self, now_s: float) -> tuple[list, bool, int | None]:
         """The bus part of a tick (any thread): the reader polled while the device says MORE.
 
-        Returns the events, whether a frame was accepted, and the first event time of a
-        new boot (None if no reset was seen).
+        Returns the events, whether a frame was accepted, the first event time of a
+        new boot (None if no reset was seen) and the device time known after the burst.
         """
         events: list = []
         accepted = False
@@ -297,7 +301,7 @@ class Poller:
             events.extend(new)
             if not reader.more:
                 break
-        return events, accepted, new_epoch_us
+        return events, accepted, new_epoch_us, reader.device_time_us
 
     def _read_temperature(self, now_s: float):
         """The rotor thermometer every ``temp_period_s`` (any thread): a float, an exception, or None."""
@@ -309,9 +313,14 @@ class Poller:
         except Exception as exc:  # a failed read keeps the last value; counted, monitored
             return exc
 
-    def _finish_poll(self, now_s: float, events: list, accepted: bool, new_epoch_us, temp) -> list:
-        """The loop's part of a tick: streams, disturbances, listeners (run log, safety), temperature."""
+    def _finish_poll(self, now_s: float, events: list, accepted: bool, new_epoch_us, device_us, temp) -> list:
+        """The loop's part of a tick: streams, disturbances, listeners (run log, safety), temperature.
+
+        ``device_us``: the device time the reader knew when this tick was read — not the reader's latest, which
+        an I/O thread may have moved on (ticks read during a loop stall are handled after it, in order)."""
         self.last_poll_s = now_s
+        if device_us is not None:
+            self._device_us = device_us
         if new_epoch_us is not None:
             self.epoch_start_us = new_epoch_us
         if accepted:
@@ -331,7 +340,8 @@ class Poller:
 
     # --- live values ------------------------------------------------------------------
     def device_now_us(self) -> int | None:
-        return self.reader.device_time_us
+        """The device's time as of the last tick handled (the streams hold its events up to then)."""
+        return self._device_us if self._device_us is not None else self.reader.device_time_us
 
     def rpm(self, channel: int) -> float:
         now = self.device_now_us()
@@ -376,3 +386,19 @@ class Poller:
 
 
 CHANNELS = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY}
+
+
+def _stall_ticker(poller: "Poller", loop):
+    """On a virtual-time loop: keep polling while a callback holds the loop (drill ``loop-stall``), as the
+    rig's I/O thread does (``blocking_io``): the Nano's heartbeat and its ring are served; the ticks are
+    handled when the loop is free again, late (``_deliver`` notes the gap).  None on other loops."""
+    if not hasattr(loop, "add_ticker"):
+        return None
+
+    def tick() -> None:
+        if loop.blocked and not poller._stop.is_set():
+            now = loop.time()
+            result = (now, *poller._read_burst(now), poller._read_temperature(now))
+            loop.call_soon(poller._deliver, result, poller.poll_period_s)
+    return loop.add_ticker(tick, poller.poll_period_s)
+

@@ -236,7 +236,13 @@ class SafetyMonitor:
         if d["cause"].startswith("reset"):
             return Trip("nano_reset", f"the Nano reset ({d['cause'][7:-1]}): its run-enable dropped and cut the engine",
                         now)
-        return Trip("nano_cut", f"the Nano's run-enable dropped ({d['cause']}, {d['code']}): the engine is cut", now)
+        if d["cause"].startswith("overspeed"):
+            shaft = d["cause"].rpartition("_")[2]
+            rpm = 60e6 / d["code"] if d["code"] else math.inf
+            return Trip("overspeed", f"{shaft} {rpm:.0f} rpm (a {d['code']} us period) over the limit: the Nano's "
+                        "run-enable cut the engine", now)
+        return Trip("nano_heartbeat", f"the Nano's run-enable dropped ({d['cause']}: no poll for {d['code']} ms): "
+                    "the engine is cut", now)
 
     def _check_temperature(self, now: float) -> Trip | None:
         lim = self.limits

@@ -13,7 +13,7 @@ import pytest
 from dyno.app import RunOptions, run_test
 from dyno.drills import parse_drill
 
-from .conftest import QUICK_PLAN
+from .conftest import QUICK_PLAN, rig_without_run_enable
 
 
 def _run(tmp_path, drills, *, seed, fault_rate, protocol=None):
@@ -27,7 +27,8 @@ def _run(tmp_path, drills, *, seed, fault_rate, protocol=None):
         ctx.poller.reader.session.frame_listeners.append(accepted.add)
 
     r = run_test(RunOptions(sim=True, seed=seed, fault_rate=fault_rate, out_dir=tmp_path / "run", plan=QUICK_PLAN,
-                            protocol=protocol, drills=[parse_drill(d) for d in drills], setup=setup))
+                            protocol=protocol, drills=[parse_drill(d) for d in drills], setup=setup,
+                            rig_path=rig_without_run_enable(tmp_path)))  # the link's own behaviour across resets
     return r, captured
 
 
