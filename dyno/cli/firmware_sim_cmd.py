@@ -356,6 +356,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             "bounce_edges": [hall[0]["bounce_edges"], hall[1]["bounce_edges"]],
             "glitches": [hall[0].get("glitches", 0), hall[1].get("glitches", 0)],
             "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
+            "first_edge_us": [hall[0].get("first_us"), hall[1].get("first_us")],  # each channel's first true edge
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
             # The ring's guard bytes, checked by the harness after every command: a write
@@ -381,6 +382,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
                          "debounce_secondary_us": info.debounce_secondary_us}
         if args.protocol == "v2":
             out["device"].update({"boot_id": info.boot_id, "reset_cause": cause_name(info.reset_cause),
+                                  "run": bool(info.flags & 0x08),  # FLAG_RUN: the run-enable (D7) on
                                   "twi_timeouts": info.twi_timeouts, "bus_errors": info.bus_errors})
             out["edges_rejected"] = {
                 name: {"lockout": info.lockout_rejected[k], "glitch": info.glitch_rejected[k]}
