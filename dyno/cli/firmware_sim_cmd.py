@@ -32,7 +32,7 @@ from dyno.acquisition.reader import make_reader
 from dyno.errors import ConfigError
 from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
-from dyno.protocol.v2 import CH_INPUT
+from dyno.protocol.v2 import CH_INPUT, CH_SUPERVISOR
 from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
 from dyno.cli import firmware_sim_supervisor as supervisor
@@ -168,8 +168,8 @@ def simulate(args) -> dict:
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)
-                if sup:  # the limits to a new boot; the tag-5 events kept apart
-                    new = sup.after_poll(reader, t, new)
+                if sup:  # the limits to a new boot; the tag-5 events noted
+                    sup.after_poll(reader, t, new)
                 if first_frame_s is None and reader.stats.accepted:
                     first_frame_s = t
                 if reader.stats.device_resets != resets_before:  # never a period across a reset
@@ -177,6 +177,8 @@ def simulate(args) -> dict:
                 for ev in new:
                     if ev.gap:
                         pending = dict.fromkeys(pending, True)
+                    if ev.channel == CH_SUPERVISOR:
+                        continue  # (the supervisor's report has them)
                     if ev.channel in gaps:
                         gaps[ev.channel].append(pending[ev.channel])
                         pending[ev.channel] = False

@@ -72,36 +72,35 @@ class SupervisorHost:
         """Does the host poll at t? (not between --host-stop-at and the end of the drain)"""
         return self.stop_at is None or t < self.stop_at or t > t_end
 
-    def after_poll(self, reader, t: float, new: list) -> list:
+    def after_poll(self, reader, t: float, new: list) -> None:
         """After each poll: note the boot and the tag-5 events, send the limits to a new boot (once its first
-        frame is in; again if no ON event of that boot came back); returns the other events."""
+        frame is in; again if no event of that boot came back within RESEND_AFTER_POLLS polls: the command
+        was lost). The caller skips the tag-5 events itself, after their GAP bit (a tag-5 event can be the
+        first one in after a saturation: no Hall period across it)."""
         if self.stop_at is None or t < self.stop_at:
             self.last_poll_s = t
         boot = reader.boot_id
         if boot is not None and boot != self._boot:
             self._boot = boot
             self.boot_seen.append((t, boot))
-        rest = []
         for ev in new:
             if ev.channel == v2.CH_SUPERVISOR:
                 self.events.append((t, boot, ev))
-            else:
-                rest.append(ev)
         if self.command is None or boot is None:
-            return rest
+            return
         if self._sent_boot == boot:
             self._since_send += 1
-            on_seen = any(b == boot and e.status == v2.SUP_ON for _, b, e in self.events)
-            if on_seen or self._since_send < RESEND_AFTER_POLLS:
-                return rest
+            # an ON (or any change) of this boot came back: armed; never again then (that would re-arm
+            # an output the device dropped: only the operator re-arms)
+            if any(b == boot for _, b, _e in self.events) or self._since_send < RESEND_AFTER_POLLS:
+                return
         try:
             reader.command(self.command)
         except TransportFault:
-            return rest  # again after the next poll
+            return  # again after the next poll
         self.sends.append((t, boot))
         self._sent_boot = boot
         self._since_send = 0
-        return rest
 
 
 def _periods(transitions: list) -> list:

@@ -62,36 +62,45 @@ static uint8_t test_hung __attribute__((section(".noinit")));
 
 /* ---- the run-enable supervisor (issue 37): supervisor.c decides, this feeds it and drives D7 ---------- */
 static supervisor_t g_sup;      /* zeroed by the C runtime at every boot: not armed, off */
-static dyno_event_t sup_held;   /* a supervisor event the full ring could not take yet */
+/* Supervisor events the full ring could not take yet, oldest first: two, so an arming and the drop right
+ * after it (a re-arm into an over-speed while the host lags) both wait; a third change while both still
+ * wait loses the oldest, counted as a drop like any event the ring could not take. */
+#define SUP_HELD_MAX 2u
+static dyno_event_t sup_held[SUP_HELD_MAX];
 static uint8_t sup_held_n;
 
-/* Into the ring if there is room (never dropped for lack of room: held until the host has retired some). */
+/* Into the ring while there is room (never dropped for lack of room: held until the host retired some). */
 static void sup_flush(void)
 {
-    if (!sup_held_n)
-        return;
-    uint8_t sreg = SREG;
-    cli();  /* the Hall ISRs push too */
-    if (ring_count(&g_ring) < RING_SIZE) {
-        ring_push(&g_ring, TAG_SUPERVISOR, sup_held.t_us, sup_held.code, sup_held.status);
-        sup_held_n = 0;
+    while (sup_held_n) {
+        uint8_t sreg = SREG, pushed = 0;
+        cli();  /* the Hall ISRs push too */
+        if (ring_count(&g_ring) < RING_SIZE) {
+            ring_push(&g_ring, TAG_SUPERVISOR, sup_held[0].t_us, sup_held[0].code, sup_held[0].status);
+            pushed = 1;
+        }
+        SREG = sreg;
+        if (!pushed)
+            return;
+        sup_held[0] = sup_held[1];
+        sup_held_n--;
     }
-    SREG = sreg;
 }
 
 static void sup_emit(const dyno_event_t *ev)
 {
     sup_flush();
-    if (sup_held_n) {  /* two changes while the ring stayed full: the older one is lost, counted as such */
+    if (sup_held_n == SUP_HELD_MAX) {  /* the oldest is lost, counted as such */
         uint8_t sreg = SREG;
         cli();
         g_ring.dropped++;
         g_ring.overflow = 1;
         g_ring.gap = TAG_GAP;
         SREG = sreg;
+        sup_held[0] = sup_held[1];
+        sup_held_n--;
     }
-    sup_held = *ev;
-    sup_held_n = 1;
+    sup_held[sup_held_n++] = *ev;
     sup_flush();
 }
 
