@@ -27,8 +27,16 @@ Builds the firmware and the harness (``make -C firmware firmware sim``), then:
 * fuzz: N realistic frames per bit-error rate through a bit-error channel to a session
   expecting each (``bench/bench_host.py``'s channel), false accepts for v2 (CRC-32C) and
   v1 (CRC-16) with v2's computed expectation beside them (docs/protocol.md);
-* one unprofiled run for the simulated-to-wall ratio.
-Targets: every ISR <= 200 cycles (12.5 us at 16 MHz), ADC time <= 20 us.
+* one unprofiled run for the simulated-to-wall ratio;
+* the run-enable supervisor's reaction times (issue 37), from D7 as the harness times it: heartbeat
+  (the host stops polling: its last poll -> pin off), over-speed (4,600 rpm against the shipped 4,200:
+  the falling edge that ends the first short period -> pin off, and the output's arming -> pin off), and
+  one main-loop pass, the longest (the old-bootloader build toggles D7 on every pass while on).
+Targets: every ISR <= 200 cycles (12.5 us at 16 MHz), ADC time <= 20 us; the supervisor: heartbeat
+<= timeout + 2 ms (a loop pass < 1 ms, plus the last poll's own transfer, ~0.3 ms), over-speed <= the
+pulse's width + 1 ms after the edge that ends the first short period (the ISR takes a pulse at its end,
+the loop then needs a pass) and <= 2 periods at the limit + 1 ms after the speed is above the limit,
+a loop pass < 1 ms. Exits 1 when a target is missed.
 """
 
 from __future__ import annotations
@@ -214,17 +222,23 @@ def static_isr(elf: Path = ELF) -> dict:
 
 # -- runs in simavr ----------------------------------------------------------------------
 def polled_run(seconds: float, profile: bool) -> dict:
-    # the two-converter rig (issue 27): the input torque AD7171 fitted and enabled by the host
+    # the two-converter rig (issue 27): the input torque AD7171 fitted and enabled by the host; the run-enable
+    # supervisor armed with the shipped limits (issue 37) as the host does at every boot
+    from dyno.protocol import v2
+
     tr = SimavrTransport(ELF, profile=profile, bounce=True, input_hz=125.0)
     wall0 = time.perf_counter()
     try:
         reader = make_reader("v2", tr)
         reader.want_input = True
-        k, n_events = 0, 0
+        k, n_events, armed = 0, 0, False
         while k / 150.0 <= seconds:
             t = k / 150.0
             tr.advance_to(t)
             n_events += len(reader.poll(t))
+            if not armed and reader.boot_id is not None:
+                reader.command(v2.supervisor_command(4200.0, 7800.0, 0.2))
+                armed = True
             k += 1
         stats = tr.harness_stats()
     finally:
@@ -255,6 +269,56 @@ def adc_stress(seconds: float) -> dict:
             # the second converter (issue 27): its conversions and RDY time error, lossless by its codes
             "input_conversions": inp.get("received"), "input_max_abs_us": ierr.get("max_abs_us"),
             "input_mean_us": ierr.get("mean_us"), "input_lossless": inp.get("distinct_codes_consecutive")}
+
+
+SUP_TIMEOUT_S, SUP_LIMIT_RPM, SUP_TEST_RPM, LOOP_PASS_US = 0.2, 4200.0, 4600.0, 1000.0
+
+
+def supervisor_reactions(seconds: float) -> dict:
+    """The run-enable's reaction times in simavr (``dyno firmware-sim`` with hardware/rig.toml's limits)."""
+    import argparse as _ap
+
+    from dyno.cli import firmware_sim_cmd
+
+    parser = _ap.ArgumentParser()
+    firmware_sim_cmd.add_arguments(parser)
+
+    def sim(*argv):
+        return firmware_sim_cmd.simulate(parser.parse_args(["--elf", str(ELF), *argv]))
+
+    stop = max(0.3, seconds / 2)
+    hb = sim("--seconds", str(stop + 0.4), "--host-stop-at", str(stop))["supervisor"]
+    hb_s = hb["off_at_s"] - hb["last_poll_s"] if hb["off_at_s"] is not None else None
+    rep = sim("--seconds", "0.3", "--primary-rpm", str(SUP_TEST_RPM))
+    ov = rep["supervisor"]
+    period_s = 60.0 / SUP_TEST_RPM
+    first_us = rep["harness"]["first_edge_us"][0]
+    width_s = rep["harness"]["pulse_us"][0] / 1e6
+    edge_s, ov_s, onset_s = None, None, None
+    if ov["off_at_s"] is not None:
+        k = 1
+        while first_us / 1e6 + k * period_s <= ov["on_at_s"]:
+            k += 1
+        edge_s = first_us / 1e6 + k * period_s
+        ov_s = ov["off_at_s"] - edge_s
+        onset_s = ov["off_at_s"] - max(ov["on_at_s"], first_us / 1e6)
+    pump = firmware_sim_cmd.simulate(parser.parse_args(
+        ["--elf", str(ELF.with_name("dyno_nano_oldboot.elf")), "--seconds", str(min(seconds, 1.0)), "--bounce",
+         "--input-hz", "125"]))["supervisor"]
+    out = {"timeout_s": SUP_TIMEOUT_S,
+           "heartbeat": {"last_poll_s": hb["last_poll_s"], "off_at_s": hb["off_at_s"], "cause": hb["cause"],
+                         "reaction_s": hb_s, "bound_s": SUP_TIMEOUT_S + 2 * LOOP_PASS_US / 1e6},
+           "overspeed": {"rpm": SUP_TEST_RPM, "limit_rpm": SUP_LIMIT_RPM, "cause": ov["cause"],
+                         "first_short_period_end_s": edge_s, "off_at_s": ov["off_at_s"],
+                         "reaction_s": ov_s, "bound_s": width_s + LOOP_PASS_US / 1e6, "pulse_width_s": width_s,
+                         "from_onset_s": onset_s, "onset_bound_s": 2 * 60.0 / SUP_LIMIT_RPM + LOOP_PASS_US / 1e6},
+           "loop_pass_max_us": pump["max_pulse_interval_us"], "loop_pass_bound_us": LOOP_PASS_US,
+           "pump_pulsing": pump["pulsing"]}
+    out["ok"] = bool(hb_s is not None and "heartbeat" in (hb["cause"] or "") and SUP_TIMEOUT_S < hb_s <= out["heartbeat"]["bound_s"]
+                     and ov_s is not None and "overspeed" in (ov["cause"] or "") and 0 < ov_s <= out["overspeed"]["bound_s"]
+                     and onset_s <= out["overspeed"]["onset_bound_s"]
+                     and pump["pulsing"] and 0 < (pump["max_pulse_interval_us"] or 0) < LOOP_PASS_US)
+    return out
 
 
 def fuzz(n_frames: int, bers=(1e-4, 1e-3, 1e-2)) -> list[dict]:
@@ -324,6 +388,7 @@ def main(argv=None) -> int:
            for name, s in prof["isr"].items()}
     bound = adc_bound(static, prof["isr"], prof["cli_max_cycles"])
     fz = fuzz(args.fuzz_frames) if args.fuzz_frames > 0 else []
+    sup = supervisor_reactions(args.seconds)
     worst_isr = max(max(s["max_cycles"], s["static_worst_cycles"] or 0) for s in isr.values())
     report = {
         "size": size,
@@ -341,15 +406,16 @@ def main(argv=None) -> int:
         "sim_per_wall_profiled": prof["sim_per_wall"],
         "host_sim_per_wall": round(plain["sim_s"] / plain["host_wall_s"], 3),
         "events_lost": plain["events_lost"],
+        "supervisor": sup,
     }
     report["ok"] = bool(size["flash_pct"] <= 50 and size["ram_pct"] <= 60 and worst_isr <= ISR_TARGET_CYCLES
                         and adc["max_abs_us"] is not None and adc["max_abs_us"] <= ADC_TARGET_US
                         and adc["input_max_abs_us"] is not None and adc["input_max_abs_us"] <= ADC_TARGET_US
                         and bool(adc["input_lossless"])
-                        and all(r["v2_accepted"] == 0 for r in fz))
+                        and all(r["v2_accepted"] == 0 for r in fz) and sup["ok"])
     if args.json:
         print(json.dumps(report, indent=2))
-        return 0
+        return 0 if report["ok"] else 1
     print(f"flash  {size['flash_bytes']:6d} B  {size['flash_pct']:5.1f} %   (target <= 50 %)")
     print(f"RAM    {size['ram_bytes']:6d} B  {size['ram_pct']:5.1f} %   (target <= 60 %, static)")
     print(f"ISR cycles, interrupt to end of RETI (target <= {ISR_TARGET_CYCLES}); measured over "
@@ -379,8 +445,22 @@ def main(argv=None) -> int:
                   f"{r['v1_corrupted']:>13,} {r['v1_accepted']:>12}")
     print(f"simavr simulated/wall: {report['sim_per_wall']:.2f}x (harness), "
           f"{report['host_sim_per_wall']:.2f}x with the Python host; profiled {report['sim_per_wall_profiled']:.2f}x")
+    hb, ov = sup["heartbeat"], sup["overspeed"]
+    print(f"run-enable supervisor (D7), shipped limits (timeout {sup['timeout_s']:g} s, {ov['limit_rpm']:g} rpm):")
+    print(f"  heartbeat: last poll -> off {_ms(hb['reaction_s'])} (cause {hb['cause']}; target <= {_ms(hb['bound_s'])}: "
+          f"the timeout + a loop pass + the poll's transfer)")
+    print(f"  over-speed at {ov['rpm']:g} rpm: first short period's end -> off {_ms(ov['reaction_s'])} (cause {ov['cause']}; "
+          f"target <= {_ms(ov['bound_s'])}: the pulse's width {_ms(ov['pulse_width_s'])} + a loop pass); "
+          f"speed above the limit -> off {_ms(ov['from_onset_s'])} (target <= {_ms(ov['onset_bound_s'])}: "
+          f"2 periods at the limit + a loop pass)")
+    print(f"  main-loop pass, longest (the old-bootloader build's pump interval): {sup['loop_pass_max_us']:.1f} us "
+          f"(target < {sup['loop_pass_bound_us']:.0f} us), pump {'pulsing' if sup['pump_pulsing'] else 'NOT PULSING'}")
     print("all targets met" if report["ok"] else "TARGET MISSED")
-    return 0
+    return 0 if report["ok"] else 1
+
+
+def _ms(x) -> str:
+    return "n/a" if x is None else f"{1e3 * x:.3f} ms"
 
 
 if __name__ == "__main__":

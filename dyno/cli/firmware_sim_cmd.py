@@ -7,8 +7,14 @@ polled at 150 Hz of simulated time.  At the end the generators stop and the host
 polling until the device's queue is empty, so every edge and conversion the harness
 generated can be counted against what the host decoded.
 
-Exit status: 0 when the run completed (v2/v1: and nothing was lost), 1 otherwise;
-2 when the device speaks another protocol version than ``--protocol``.
+v2: the host arms the Nano's run-enable supervisor at every boot with the rig file's limits and the
+report says when the output (D7) went on and off and why (``supervisor``; issue 37,
+:mod:`dyno.cli.firmware_sim_supervisor`); ``--host-stop-at S`` stops the host's polls at S s.
+
+Exit status: 0 when the run completed (v2/v1: and nothing was lost; with ``--host-stop-at``, whose stop
+overflows the device's queue on purpose: and every event is either delivered or counted lost by the
+device), 1 otherwise; 2 when the device speaks another protocol version than ``--protocol``. The
+run-enable going off is not a failure by itself.
 """
 
 from __future__ import annotations
@@ -26,9 +32,10 @@ from dyno.acquisition.reader import make_reader
 from dyno.errors import ConfigError
 from dyno.acquisition.rpm import rpm_by_pairs
 from dyno.protocol import v1
-from dyno.protocol.v2 import CH_INPUT
+from dyno.protocol.v2 import CH_INPUT, CH_SUPERVISOR
 from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
+from dyno.cli import firmware_sim_supervisor as supervisor
 
 
 # MCUSR bits the harness sets for a reset at --reset-at S:CAUSE.
@@ -88,6 +95,7 @@ def add_arguments(parser) -> None:
                              "brown-out (repeatable)")
     parser.add_argument("--harness", default=None, help="harness binary (default firmware/build/harness)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
+    supervisor.add_arguments(parser)  # --rig, --host-stop-at, --no-limits, --enable-model (issue 37)
 
 
 def _check_arguments(args) -> tuple:
@@ -113,7 +121,9 @@ def simulate(args) -> dict:
               adc_status=args.adc_status, adc_error_every=args.adc_error_every,
               adc_hz=args.adc_hz, bounce=args.bounce, input_hz=getattr(args, "input_hz", 0.0), i2c_khz=args.i2c_khz,
               glitch_hz=args.glitch_hz, glitch_us=args.glitch_us,
-              fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed)
+              fault_rate=args.fault_rate, fault_kinds=kinds, seed=args.seed,
+              enable_model=getattr(args, "enable_model", "auto"))
+    sup = supervisor.SupervisorHost(args) if args.protocol == "v2" else None
     # The host's own transports: I2C (one combined transaction per poll) or USB serial
     # (COBS packets, dyno.transports.serial) wired to the MCU's UART.
     tr = SimavrSerialTransport(args.elf, **kw) if args.transport == "serial" else SimavrTransport(args.elf, **kw)
@@ -135,12 +145,14 @@ def simulate(args) -> dict:
         # The signals start 50 ms after power-up; they run for args.seconds.
         t_stop = 0.05 + args.seconds
         t_end = t_stop + args.drain_s
+        # a host stopped before the end comes back after the drain, for one more drain (its events)
+        t_final = t_end + (args.drain_s if sup and sup.stop_at is not None and sup.stop_at <= t_end else 0.0)
         stopped = False
         first_frame_s = None  # poll time of the first accepted frame
         while True:
             t = t_next
             t_next += dt * (1.0 + args.poll_jitter * (2.0 * jitter_rng.random() - 1.0))
-            if t > t_end:
+            if t > t_final:
                 break
             if not stopped and t >= t_stop:
                 tr.advance_to(t_stop)
@@ -151,9 +163,13 @@ def simulate(args) -> dict:
                 tr.advance_to(at)
                 tr.reset_device(mcusr)
             tr.advance_to(t)
+            if sup and not sup.polling(t, t_end):
+                continue  # --host-stop-at: the simulation goes on, the host does not poll
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)
+                if sup:  # the limits to a new boot; the tag-5 events noted
+                    sup.after_poll(reader, t, new)
                 if first_frame_s is None and reader.stats.accepted:
                     first_frame_s = t
                 if reader.stats.device_resets != resets_before:  # never a period across a reset
@@ -161,6 +177,8 @@ def simulate(args) -> dict:
                 for ev in new:
                     if ev.gap:
                         pending = dict.fromkeys(pending, True)
+                    if ev.channel == CH_SUPERVISOR:
+                        continue  # (the supervisor's report has them)
                     if ev.channel in gaps:
                         gaps[ev.channel].append(pending[ev.channel])
                         pending[ev.channel] = False
@@ -182,6 +200,12 @@ def simulate(args) -> dict:
     out = _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faults,
                   time.perf_counter() - wall0)
     out["first_frame_s"] = first_frame_s
+    if sup:
+        out["supervisor"] = supervisor.report(sup, hs, first_frame_s)
+        if sup.stop_at is not None:  # the stop overflows the queue on purpose: exact accounting instead
+            out["ok"] = bool(not hs["crashed"] and not hs.get("ring_guard", {}).get("violations")
+                             and out["accounting"]["exact"]
+                             and all(ch["duplicates_or_disorder"] == 0 for ch in out["events"].values()))
     if getattr(args, "input_hz", 0.0) > 0:
         out["input"] = _input_report(reader, times, input_codes, hs)
     return out
@@ -334,6 +358,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
             "bounce_edges": [hall[0]["bounce_edges"], hall[1]["bounce_edges"]],
             "glitches": [hall[0].get("glitches", 0), hall[1].get("glitches", 0)],
             "pulse_us": [hall[0].get("pulse_us"), hall[1].get("pulse_us")],
+            "first_edge_us": [hall[0].get("first_us"), hall[1].get("first_us")],  # each channel's first true edge
             "adc_missed_by_device": adc["missed"],
             "i2c": hs["i2c"],
             # The ring's guard bytes, checked by the harness after every command: a write
@@ -359,6 +384,7 @@ def _report(args, reader, times, gaps, codes, statuses, slot_rpm, info, hs, faul
                          "debounce_secondary_us": info.debounce_secondary_us}
         if args.protocol == "v2":
             out["device"].update({"boot_id": info.boot_id, "reset_cause": cause_name(info.reset_cause),
+                                  "run": bool(info.flags & 0x08),  # FLAG_RUN: the run-enable (D7) on
                                   "twi_timeouts": info.twi_timeouts, "bus_errors": info.bus_errors})
             out["edges_rejected"] = {
                 name: {"lockout": info.lockout_rejected[k], "glitch": info.glitch_rejected[k]}
@@ -394,4 +420,9 @@ def run(args) -> int:
         fr = report["frames"]
         print(f"  frames: {fr['read']} read, {fr['accepted']} accepted, rejected {fr['rejected']}, "
               f"transport errors {fr['transport_errors']}; events lost {report['events_lost']}")
+        sv = report.get("supervisor")
+        if sv:
+            state = "on" if sv["off_at_s"] is None else f"off at {sv['off_at_s']:.4f} s ({sv['cause']})"
+            print(f"  run-enable (D7, {sv['model']}): {state}; on at {sv['on_at_s']} s; "
+                  f"limits sent at {sv['limits_sent_at_s']}")
     return 0 if report["ok"] else 1

@@ -60,7 +60,7 @@ class SimavrTransport(Transport):
                  adc_hz: float = 125.0, bounce: bool = False, i2c_khz: int = 100,
                  address: int = 0x03, start_us: float = 50_000.0, profile: bool = False,
                  profile_from_us: float = 100_000.0, glitch_hz: float = 0.0, glitch_us: float = 20.0,
-                 legacy_pullups: bool = False, input_hz: float = 0.0,
+                 legacy_pullups: bool = False, input_hz: float = 0.0, enable_model: str = "auto",
                  fault_rate: float = 0.0, fault_kinds=FAULT_KINDS, seed: int = 0) -> None:
         super().__init__()
         elf = Path(elf)
@@ -77,6 +77,8 @@ class SimavrTransport(Transport):
                 "--start-us", repr(float(start_us)),
                 "--profile-from-us", repr(float(profile_from_us)),
                 "--glitch-hz", repr(float(glitch_hz)), "--glitch-us", repr(float(glitch_us))]
+        if enable_model != "auto":  # how the harness reads the run-enable on PD7 (issue 37)
+            args += ["--enable-model", str(enable_model)]
         if input_hz > 0:  # the engine-side input torque AD7171 on PB0/PB1 (issue 27)
             args += ["--input-hz", repr(float(input_hz))]
         if bounce:

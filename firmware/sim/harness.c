@@ -7,6 +7,8 @@
  *     every 1/adc_hz s, shifted out on SCLK).
  *   - The host's USB serial on UART0 (uwrite/uread below).
  *   - The Pi's I2C master at the bus's bit rate, with clock stretching: twi_master.c.
+ *   - The run-enable output on PD7 (issue 37), timed to the cycle, read as a static level or as a
+ *     charge pump's pulse train: run_enable.c ("run_enable" in stats).
  *   - The MCU itself (ELF, stepping and profiling, register fixes for simavr 1.6, guard
  *     bytes around the firmware's event ring): mcu.c.
  *
@@ -90,6 +92,7 @@ static void print_stats(void)
             (unsigned long long)adc_missed, (unsigned long long)adc_overrun,
             (unsigned long long)adc_errors_set, cfg_adc_code, cfg_adc_status);
     input_print(o);
+    run_enable_print(o);
     /* WDTCSR as the firmware left it (WDE 0x08: the watchdog resets the MCU) */
     fprintf(o, "\"wdtcsr\": %u, \"eeprom_writes\": %llu, ", avr->data[REG_WDTCSR],
             (unsigned long long)eeprom_writes);
@@ -118,7 +121,7 @@ static void usage(void)
             "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
             "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--duty F]\n"
             "       [--glitch-hz N] [--glitch-us W] [--profile] [--input-hz F] [--input-code C]\n"
-            "       [--profile-from-us T]\n");
+            "       [--profile-from-us T] [--enable-model auto|static|pump]\n");
     exit(2);
 }
 
@@ -145,6 +148,7 @@ int main(int argc, char **argv)
         else if (OPT("--glitch-hz")) cfg_glitch_hz = atof(v);
         else if (OPT("--glitch-us")) cfg_glitch_us = atof(v);
         else if (OPT("--profile-from-us")) cfg_profile_from_us = atof(v);
+        else if (OPT("--enable-model")) cfg_enable_model = strcmp(v, "pump") == 0 ? 2 : strcmp(v, "static") == 0 ? 1 : 0;
         else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
         else if (strcmp(a, "--legacy-pullups") == 0) cfg_legacy_pullups = 1;
         else if (strcmp(a, "--profile") == 0) cfg_profile = 1;

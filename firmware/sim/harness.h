@@ -87,4 +87,18 @@ void input_start(uint64_t at_cycle);
 void input_reset(void);
 void input_print(FILE *o);
 
+/* run_enable.c: the run-enable output on PD7 (issue 37), checked after every instruction */
+extern int cfg_enable_model;
+extern uint8_t run_enable_last;
+void run_enable_edge(void);
+void run_enable_print(FILE *o);
+static inline void run_enable_watch(void)
+{
+    uint8_t v = (uint8_t)(avr->data[0x2A] & avr->data[0x2B] & 0x80u);  /* DDRD7 & PORTD7 */
+    if (v != run_enable_last) {
+        run_enable_last = v;
+        run_enable_edge();
+    }
+}
+
 #endif

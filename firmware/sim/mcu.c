@@ -61,6 +61,7 @@ void step(void)
         int st = avr_run(avr);
         if (st == cpu_Crashed || st == cpu_Done)
             crashed = 1;
+        run_enable_watch();
         if (trace_vec >= 0 && op == 0x9518) {
             trace_isr_exit(trace_vec, avr->cycle);
             trace_vec = -1;
@@ -78,6 +79,7 @@ void step(void)
         int st = avr_run(avr);
         if (st == cpu_Crashed || st == cpu_Done)
             crashed = 1;
+        run_enable_watch();
         return;
     }
     uint32_t pc = avr->pc;
@@ -86,6 +88,7 @@ void step(void)
     int st = avr_run(avr);
     if (st == cpu_Crashed || st == cpu_Done)
         crashed = 1;
+    run_enable_watch();
     int armed = avr->cycle >= (uint64_t)(cfg_profile_from_us * CYCLES_PER_US);
     if (in_isr >= 0) {
         if (op == 0x9518) {  /* RETI */

@@ -40,6 +40,7 @@ typedef struct {
     uint8_t have_last, have_period;
 } hall_loop_t;
 static hall_loop_t hall_loop[2];
+static uint8_t new_periods;  /* bit c: capture_service measured a new period of channel c (the supervisor) */
 
 ISR(TIMER1_OVF_vect)
 {
@@ -350,6 +351,7 @@ void capture_service(void)
             if ((uint8_t)(acc - l->seen_accepted) == 1 && l->have_last) {
                 l->period_us = last - l->seen_last_us;
                 l->have_period = 1;
+                new_periods |= (uint8_t)(1u << c);
             }
             l->seen_accepted = acc;
             l->seen_last_us = last;
@@ -364,6 +366,16 @@ void capture_service(void)
         SREG = sreg;
     }
 }
+
+uint8_t capture_take_periods(void)
+{
+    uint8_t m = new_periods;
+    new_periods = 0;
+    return m;
+}
+
+uint32_t capture_period_us(uint8_t ch) { return hall_loop[ch].period_us; }
+uint32_t capture_last_us(uint8_t ch) { return hall_loop[ch].seen_last_us; }
 
 void capture_init(uint16_t lockout_primary, uint16_t lockout_secondary)
 {

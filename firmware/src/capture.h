@@ -24,6 +24,12 @@ void capture_input_arm(void);
 uint32_t capture_input_rdy_us(void);
 void capture_push_input(uint32_t t_us, uint16_t code, uint8_t status);
 void capture_set_lockout(uint16_t primary_us, uint16_t secondary_us);
+/* Main loop, for the run-enable supervisor: the channels (bit 0 primary, bit 1 secondary) whose period
+ * between two accepted pulses capture_service measured since the last call; that period (us) and the
+ * accepted pulse that ended it (its falling edge's time). */
+uint8_t capture_take_periods(void);
+uint32_t capture_period_us(uint8_t ch);
+uint32_t capture_last_us(uint8_t ch);
 
 /* Rejected edges are counted per cause in g_counters (counters.h). */
 

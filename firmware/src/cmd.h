@@ -10,8 +10,9 @@
 #define OP_INFO 0x30u
 #define OP_SET_CHANNELS 0x22u  /* u8 mask of optional channels to queue (bit 0: input torque) */
 #define OP_CAPS 0x31u          /* the next read returns the capabilities frame */
+#define OP_SET_SUPERVISOR 0x23u  /* u16 min period primary us, u16 min period secondary us, u16 timeout ms */
 
-#define CMD_MAX_LEN 7u  /* SET_DEBOUNCE: op + 4 + crc */
+#define CMD_MAX_LEN 9u  /* SET_SUPERVISOR: op + 6 + crc */
 
 enum { CMD_OK = 0, CMD_ERR_SHORT = 1, CMD_ERR_OP = 2, CMD_ERR_LENGTH = 3, CMD_ERR_CRC = 4 };
 
@@ -23,6 +24,7 @@ static inline uint8_t cmd_length(uint8_t op)
     case OP_SET_CHANNELS: return 4;
     case OP_ACK_POLL: return 6;  /* v2: op, u16 boot_id, u8 seq, crc */
     case OP_SET_DEBOUNCE: return 7;
+    case OP_SET_SUPERVISOR: return 9;
     default: return 0;
     }
 }

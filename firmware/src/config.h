@@ -5,7 +5,7 @@
 /* Reported in the INFO frame; bump on any behaviour change the host may care about.
  * The major version is the wire protocol's (v2). */
 #define FW_VERSION_MAJOR 2
-#define FW_VERSION_MINOR 0
+#define FW_VERSION_MINOR 1
 #define FW_VERSION_PATCH 0
 /* The input torque AD7171's nominal rate as announced (mHz): 125 S/s, as the brake-side one. */
 #define INPUT_RATE_MHZ 125000ul

@@ -8,6 +8,7 @@
 #define TAG_SECONDARY 2u
 #define TAG_ADC 3u
 #define TAG_INPUT 4u    /* the engine-side input torque AD7171 (issue 27): tag 3's layout */
+#define TAG_SUPERVISOR 5u  /* the run-enable output changed (issue 37): tag 3's layout, code/status below */
 #define TAG_GAP 0x80u   /* or-ed into the tag: events were lost just before this one */
 
 /* 8 bytes exactly, so the ring index math is a shift. */

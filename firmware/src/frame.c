@@ -73,7 +73,7 @@ uint8_t frame_encode_data(uint8_t *out, uint8_t seq, uint8_t flags, uint16_t boo
             break;
         *p++ = tag;
         p = put_u16(p, (uint16_t)(e->t_us - t0));  /* two's complement i16 */
-        if ((uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC) {  /* TAG_ADC, TAG_INPUT */
+        if ((uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC) {  /* TAG_ADC, TAG_INPUT, TAG_SUPERVISOR */
             p = put_u16(p, e->code);
             *p++ = e->status;
         }

@@ -18,11 +18,13 @@
 #define KIND_CAPS 0x43u  /* 'C': capabilities (the optional channels fitted and enabled) */
 #define FRAME_CAPS_LEN 20u
 #define CHANNEL_INPUT 0x01u      /* SET_CHANNELS / capabilities bit: the input torque converter */
+#define CHANNEL_SUPERVISOR 0x02u /* capabilities bit: the run-enable output (channels: exists; enabled: armed) */
 #define CONVERTER_AD7171 1u
 
 #define FLAG_RESET 0x01u     /* first frame since boot */
 #define FLAG_MORE 0x02u      /* events still queued behind this frame */
 #define FLAG_OVERFLOW 0x04u  /* ring overflowed since the last CLEAR_COUNTERS */
+#define FLAG_RUN 0x08u       /* the run-enable output was on when the frame was built (issue 37) */
 #define FLAG_CAUSE_SHIFT 4u  /* bits 4..7: reset cause (MCUSR's PORF, EXTRF, BORF, WDRF) */
 
 typedef struct {
@@ -37,7 +39,8 @@ typedef struct {
 
 static inline uint8_t frame_event_len(uint8_t tag)
 {
-    return (uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC ? 6u : 3u;  /* TAG_ADC, TAG_INPUT */
+    /* TAG_ADC, TAG_INPUT, TAG_SUPERVISOR: [tag, i16 dt, u16 code, u8 status]; the Hall edges [tag, i16 dt] */
+    return (uint8_t)(tag & (uint8_t)~TAG_GAP) >= TAG_ADC ? 6u : 3u;
 }
 
 /* How many of the n events (ev[i] from get(ctx, i)) fit one frame, by size and by the

@@ -2,6 +2,7 @@
 #include <Arduino.h>
 #include <avr/wdt.h>
 #include "config.h"
+#include "pins.h"
 #include "link_serial.h"
 extern "C" {
 #include "ad7171.h"
@@ -12,12 +13,16 @@ extern "C" {
 #include "link_i2c.h"
 #include "proto.h"
 #include "ring.h"
+#include "supervisor.h"
 }
 
 static void service_once(void);
 
 void setup()
 {
+    /* The run-enable output (D7) low before anything else: off until the host's limits arrive. */
+    PORTD &= (uint8_t)~_BV(PIN_RUN_BIT);
+    DDRD |= _BV(PIN_RUN_BIT);
     ring_init(&g_ring);
     ad7171_init();
     capture_init(DEBOUNCE_PRIMARY_US_DEFAULT, DEBOUNCE_SECONDARY_US_DEFAULT);
@@ -55,6 +60,89 @@ void setup()
 static uint8_t test_hung __attribute__((section(".noinit")));
 #endif
 
+/* ---- the run-enable supervisor (issue 37): supervisor.c decides, this feeds it and drives D7 ---------- */
+static supervisor_t g_sup;      /* zeroed by the C runtime at every boot: not armed, off */
+/* Supervisor events the full ring could not take yet, oldest first: two, so an arming and the drop right
+ * after it (a re-arm into an over-speed while the host lags) both wait; a third change while both still
+ * wait loses the oldest, counted as a drop like any event the ring could not take. */
+#define SUP_HELD_MAX 2u
+static dyno_event_t sup_held[SUP_HELD_MAX];
+static uint8_t sup_held_n;
+
+/* Into the ring while there is room (never dropped for lack of room: held until the host retired some). */
+static void sup_flush(void)
+{
+    while (sup_held_n) {
+        uint8_t sreg = SREG, pushed = 0;
+        cli();  /* the Hall ISRs push too */
+        if (ring_count(&g_ring) < RING_SIZE) {
+            ring_push(&g_ring, TAG_SUPERVISOR, sup_held[0].t_us, sup_held[0].code, sup_held[0].status);
+            pushed = 1;
+        }
+        SREG = sreg;
+        if (!pushed)
+            return;
+        sup_held[0] = sup_held[1];
+        sup_held_n--;
+    }
+}
+
+static void sup_emit(const dyno_event_t *ev)
+{
+    sup_flush();
+    if (sup_held_n == SUP_HELD_MAX) {  /* the oldest is lost, counted as such */
+        uint8_t sreg = SREG;
+        cli();
+        g_ring.dropped++;
+        g_ring.overflow = 1;
+        g_ring.gap = TAG_GAP;
+        SREG = sreg;
+        sup_held[0] = sup_held[1];
+        sup_held_n--;
+    }
+    sup_held[sup_held_n++] = *ev;
+    sup_flush();
+}
+
+/* Once per pass: the heartbeat and SET_SUPERVISOR the link ISRs noted, the periods capture_service
+ * measured, the heartbeat timeout; then the pin. */
+static void supervisor_pass(void)
+{
+    uint16_t args[3];
+    dyno_event_t ev;
+    uint32_t now = capture_now_us();
+    uint8_t periods = capture_take_periods();
+    uint8_t beat = proto_take_beat(&g_proto);
+    if (proto_take_supervisor(&g_proto, args)) {
+        supervisor_arm(&g_sup, args[0], args[1], args[2], now, &ev);
+        sup_emit(&ev);
+        periods = 0;  /* measured before the command was taken: not counted */
+    } else if (beat) {
+        supervisor_beat(&g_sup, now);
+    }
+    for (uint8_t c = 0; c < 2; c++)
+        if ((periods >> c) & 1u && supervisor_period(&g_sup, c, capture_period_us(c), capture_last_us(c), &ev))
+            sup_emit(&ev);
+    if (supervisor_check(&g_sup, now, &ev))
+        sup_emit(&ev);
+    sup_flush();
+    proto_set_run(&g_proto, g_sup.on, g_sup.armed);
+#if DYNO_OLD_BOOTLOADER
+    /* No watchdog: a charge pump. Toggled on every pass while on (writing 1 to PIND7 toggles PORTD7), so
+     * a hung loop stops the pulses and the pump's output falls; low when off. */
+    if (g_sup.on)
+        PIND = _BV(PIN_RUN_BIT);
+    else
+        PORTD &= (uint8_t)~_BV(PIN_RUN_BIT);
+#else
+    /* The watchdog resets a hung loop, and the reset leaves the pin high-Z (the pull-down: off). */
+    if (g_sup.on)
+        PORTD |= _BV(PIN_RUN_BIT);
+    else
+        PORTD &= (uint8_t)~_BV(PIN_RUN_BIT);
+#endif
+}
+
 /* One pass of the work (both converters, the lock-out, the frames, the links): loop() and the
  * input converter's boot probe run it. */
 static void service_once(void)
@@ -86,6 +174,7 @@ static void service_once(void)
     /* SET_DEBOUNCE reaches capture through here: proto knows nothing of capture. */
     if (proto_take_debounce(&g_proto, &lock_p_us, &lock_s_us))
         capture_set_lockout(lock_p_us, lock_s_us);
+    supervisor_pass();
     proto_service(&g_proto, capture_now_us(), millis());
     link_i2c_service((uint16_t)millis());
     link_serial_service();

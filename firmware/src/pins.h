@@ -13,6 +13,11 @@
  * Its own SCLK: the AD7171 has no chip select, two cannot share a clock line. */
 #define PIN_IN_DOUT_BIT 0
 #define PIN_IN_SCLK_BIT 1
+/* The run-enable output (issue 37): D7 = PD7, output low from the start of setup(); an external
+ * pull-down holds the driver off while the pin is high-Z (reset, bootloader, unpowered). Static high while
+ * on (watchdog build); a pulse train, toggled every main-loop pass, in the old-bootloader build (a charge
+ * pump: a hung loop stops it). */
+#define PIN_RUN_BIT 7
 /* I2C: A4 = SDA, A5 = SCL (TWI hardware). USB serial: D0/D1 via the CH340/FT232. */
 
 #endif

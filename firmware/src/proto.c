@@ -50,7 +50,7 @@ static uint8_t build(proto_t *p, uint8_t buf, uint8_t seq, uint8_t offset, uint8
     ring_view_t view = {r, (uint8_t)(tail + offset)};
     uint8_t n = frame_fit(view_get, &view, avail);
     uint8_t flags = (uint8_t)((reset ? FLAG_RESET : 0u) | (avail > n ? FLAG_MORE : 0u) |
-                              (overflow ? FLAG_OVERFLOW : 0u) | p->cause_flags);
+                              (overflow ? FLAG_OVERFLOW : 0u) | p->run_flag | p->cause_flags);
     frame_encode_data(p->pool[buf], seq, flags, p->boot_id, dropped, now_us, view_get, &view, n, &n);
     proto_meta_t *m = &p->meta[buf];
     m->n = n;
@@ -65,7 +65,7 @@ static void build_info(proto_t *p, uint8_t buf, uint32_t uptime_ms)
     const dyno_counters_t *c = p->counters;
     frame_info_t info;
     info.seq = p->cur_seq;
-    info.flags = p->cause_flags;
+    info.flags = (uint8_t)(p->cause_flags | p->run_flag);
     info.boot_id = p->boot_id;
     info.fw_major = FW_VERSION_MAJOR;
     info.fw_minor = FW_VERSION_MINOR;
@@ -110,7 +110,10 @@ void proto_init(proto_t *p, ring_t *ring, const dyno_counters_t *counters, uint1
 static void build_caps(proto_t *p, uint8_t which)
 {
     uint8_t fitted = p->channels_fitted;
-    frame_encode_caps(p->caps_buf[which], p->cur_seq, p->cause_flags, p->boot_id, fitted, p->channels_enabled,
+    /* CHANNEL_SUPERVISOR: this firmware has the run-enable output; enabled once armed in this boot */
+    frame_encode_caps(p->caps_buf[which], p->cur_seq, p->cause_flags, p->boot_id,
+                      (uint8_t)(fitted | CHANNEL_SUPERVISOR),
+                      (uint8_t)(p->channels_enabled | (p->sup_armed ? CHANNEL_SUPERVISOR : 0u)),
                       (fitted & CHANNEL_INPUT) ? CONVERTER_AD7171 : 0u,
                       (fitted & CHANNEL_INPUT) ? INPUT_RATE_MHZ : 0ul);
 }
@@ -138,6 +141,56 @@ uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondar
     return pending;
 }
 
+uint8_t proto_take_supervisor(proto_t *p, uint16_t args[3])
+{
+    uint8_t pending;
+    PORT_CRITICAL_BEGIN();
+    pending = p->sup_pending;
+    p->sup_pending = 0;
+    for (uint8_t k = 0; k < 3; k++)
+        args[k] = (uint16_t)(p->sup_args[2 * k] << 8 | p->sup_args[2 * k + 1]);
+    if (pending && !args[2]) {  /* timeout 0 would never time out: the command is ignored */
+        p->cmds_bad++;
+        pending = 0;
+    }
+    PORT_CRITICAL_END();
+    return pending;
+}
+
+uint8_t proto_take_beat(proto_t *p)
+{
+#ifdef __AVR__
+    (void)p;
+    if (!(GPIOR0 & _BV(PROTO_BEAT_BIT)))
+        return 0;
+    GPIOR0 &= (uint8_t)~_BV(PROTO_BEAT_BIT);  /* cbi: atomic (a beat in between is this one) */
+    return 1;
+#else
+    uint8_t b = p->beat;
+    p->beat = 0;
+    return b;
+#endif
+}
+
+void proto_set_run(proto_t *p, uint8_t on, uint8_t armed)
+{
+    uint8_t flag = on ? FLAG_RUN : 0u;
+    if (flag != p->run_flag) {
+        p->run_flag = flag;  /* the unsent frames are rebuilt by proto_service (their flags byte differs) */
+        p->info_dirty = 1;
+    }
+    if (armed != p->sup_armed) {
+        p->sup_armed = armed;
+        p->caps_dirty = 1;
+    }
+}
+
+/* The RUN flag of a built data frame differs from the output's state now. */
+static uint8_t run_stale(const proto_t *p, uint8_t buf)
+{
+    return (uint8_t)((p->pool[buf][4] & FLAG_RUN) != p->run_flag);
+}
+
 void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
 {
     ring_t *r = p->ring;
@@ -147,7 +200,7 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
     if (!p->cur_sent) {
         cur = p->cur;
         const proto_meta_t *m = &p->meta[cur];
-        if (m->head != r->head || m->dropped != r->dropped ||
+        if (m->head != r->head || m->dropped != r->dropped || run_stale(p, cur) ||
             (m->n == 0 && (uint32_t)(now_us - m->built_us) >= PROTO_EMPTY_REFRESH_US)) {
             PORT_CRITICAL_BEGIN();
             gen = p->gen;
@@ -171,7 +224,7 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
     /* 2. Pre-build the next frame so an ACK_POLL can swap it in inside the ISR; the
      * host has not seen it, so it too takes new events until the swap. */
     uint8_t nxt = p->nxt;  /* once: the ISR may retire (nxt = NONE) at any moment */
-    if (!p->nxt_valid || nxt >= PROTO_NBUF || p->meta[nxt].head != r->head) {
+    if (!p->nxt_valid || nxt >= PROTO_NBUF || p->meta[nxt].head != r->head || run_stale(p, nxt)) {
         uint8_t offset;
         PORT_CRITICAL_BEGIN();
         gen = p->gen;
@@ -189,7 +242,7 @@ void proto_service(proto_t *p, uint32_t now_us, uint32_t uptime_ms)
         PORT_CRITICAL_END();
     }
 
-    /* 3. The capabilities frame after a SET_CHANNELS, into the buffer the ISR is not serving. */
+    /* 3. The capabilities frame after a SET_CHANNELS or the supervisor's arming, into the buffer the ISR is not serving. */
     if (p->caps_dirty) {
         uint8_t other = (uint8_t)(p->caps_cur ^ 1u);
         p->caps_dirty = 0;

@@ -19,6 +19,7 @@
 #include "cmd.h"
 #include "counters.h"
 #include "frame.h"
+#include "port.h"
 #include "ring.h"
 
 #define PROTO_NBUF 5u
@@ -63,7 +64,26 @@ typedef struct {
     volatile uint8_t caps_dirty;
     volatile uint8_t caps_cur;
     uint8_t caps_buf[2][FRAME_MAX];
+    /* the run-enable supervisor (issue 37): SET_SUPERVISOR's args as the ISR copied them, taken by the
+     * loop (proto_take_supervisor); the output's state as the loop last published it (proto_set_run) */
+    uint8_t sup_args[6];           /* u16 min period primary, secondary (us), timeout (ms), big-endian */
+    volatile uint8_t sup_pending;
+    uint8_t run_flag;              /* FLAG_RUN while the output is on: in data and info frames */
+    uint8_t sup_armed;             /* capabilities: enabled bit CHANNEL_SUPERVISOR */
+#ifndef __AVR__
+    volatile uint8_t beat;         /* natively; on the AVR a bit of GPIOR0 (PROTO_BEAT_SET) */
+#endif
 } proto_t;
+
+/* "A heartbeat came" (a CRC-valid POLL, ACK_POLL or SET_SUPERVISOR): set in the link ISR, taken by the
+ * main loop. On the AVR one bit of GPIOR0 (an I/O register: one 2-cycle sbi in the TWI ISR, no RAM;
+ * capture.c uses bits 0..2, this is bit 3). */
+#ifdef __AVR__
+#define PROTO_BEAT_BIT 3
+#define PROTO_BEAT_SET(p) (GPIOR0 |= (uint8_t)_BV(PROTO_BEAT_BIT))
+#else
+#define PROTO_BEAT_SET(p) ((p)->beat = 1)
+#endif
 
 extern proto_t g_proto;
 
@@ -76,6 +96,14 @@ uint8_t proto_take_debounce(proto_t *p, uint16_t *primary_us, uint16_t *secondar
 /* Boot: the optional channels found (CHANNEL_INPUT: the second converter answered); from then on
  * CAPS is answered. */
 void proto_set_fitted(proto_t *p, uint8_t channels);
+/* Main loop: a SET_SUPERVISOR arrived since the last call? 1 and its args (min periods in us, timeout in
+ * ms), or 0; one with timeout 0 is ignored here (counted in cmds_bad, no heartbeat). */
+uint8_t proto_take_supervisor(proto_t *p, uint16_t args[3]);
+/* Main loop: a heartbeat arrived since the last call? */
+uint8_t proto_take_beat(proto_t *p);
+/* Main loop: the output's state (FLAG_RUN in the frames built from now on) and whether the supervisor is
+ * armed in this boot (the capabilities frame, rebuilt on a change). */
+void proto_set_run(proto_t *p, uint8_t on, uint8_t armed);
 /* Main loop: queue the input converter's conversions? (fitted and enabled in this boot) */
 static inline uint8_t proto_input_enabled(const proto_t *p) { return p->channels_enabled & CHANNEL_INPUT; }
 
@@ -106,15 +134,26 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
         p->cmds_bad++;
         return 0;  /* ignored: the device serves its current frame unchanged */
     }
-    switch (buf[0]) {
-    case OP_ACK_POLL:
+    /* ACK_POLL first, outside the switch: it is the TWI ISR's longest path (a retire), and the test
+     * for it is the switch's first. */
+    if (buf[0] == OP_ACK_POLL) {
         /* Retire only what the host has seen of *this* boot (an ACK written to the boot
          * before a reset must not retire the new boot's frame of the same seq); a next
          * frame must be ready, or the host would have nothing new to read (it then gets
-         * a stale repeat and re-acks). */
+         * a stale repeat and re-acks). A heartbeat whatever boot it names. */
         if (!(uint8_t)((buf[1] ^ p->boot_hi) | (buf[2] ^ p->boot_lo) | (buf[3] ^ p->cur_seq)) &&
             p->cur_sent && p->nxt_valid)
             proto_retire(p);
+        PROTO_BEAT_SET(p);
+        return OP_ACK_POLL;
+    }
+    switch (buf[0]) {
+    case OP_SET_SUPERVISOR:
+        /* copied as sent (big-endian), checked and taken by the loop (proto_take_supervisor), which
+         * also restarts the heartbeat when it arms: the ISR's part is only this copy */
+        for (uint8_t i = 0; i < 6; i++)
+            p->sup_args[i] = buf[1 + i];
+        p->sup_pending = 1;
         break;
     case OP_SET_DEBOUNCE:
         p->debounce_primary_us = (uint16_t)(buf[1] << 8 | buf[2]);
@@ -137,7 +176,8 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
         p->channels_enabled = (uint8_t)(buf[1] & p->channels_fitted);  /* a channel not fitted stays off */
         p->caps_dirty = 1;
         break;
-    default:  /* OP_POLL: serve the current frame, retire nothing */
+    default:  /* OP_POLL: serve the current frame, retire nothing; a heartbeat */
+        PROTO_BEAT_SET(p);
         break;
     }
     return buf[0];

@@ -36,11 +36,11 @@ def firmware_build(toolchain):
     """Builds the firmware, its INPUT_PULLUP, hang and old-bootloader variants, the v0 sketch
     and the simavr harness;
     returns their paths."""
-    res = _make("firmware", "sim", "pullup", "hang", "oldboot")
+    res = _make("firmware", "sim", "pullup", "hang", "oldboot", "oldboot-hang")
     assert res.returncode == 0, res.stdout + res.stderr
     return {"elf": BUILD / "dyno_nano.elf", "v0_elf": BUILD / "v0_sketch.elf",
             "pullup_elf": BUILD / "dyno_nano_pullup.elf", "hang_elf": BUILD / "dyno_nano_hang.elf",
-            "oldboot_elf": BUILD / "dyno_nano_oldboot.elf",
+            "oldboot_elf": BUILD / "dyno_nano_oldboot.elf", "oldboot_hang_elf": BUILD / "dyno_nano_oldboot_hang.elf",
             "harness": BUILD / "harness", "make_output": res.stdout}
 
 

@@ -38,6 +38,9 @@ def test_firmware_bench_budgets(firmware_build, capsys):
     adc = rep["adc_time"]
     assert adc["lossless"] and adc["conversions"] > 400
     assert adc["max_abs_us"] <= rep["adc_time_bound"]["harness_scale_us"] + 1.0 <= 20.0
+    sup = rep["supervisor"]  # issue 37: the run-enable's reaction times within their stated bounds
+    assert sup["ok"] and sup["heartbeat"]["cause"] == "heartbeat" and "overspeed" in sup["overspeed"]["cause"], sup
+    assert sup["heartbeat"]["reaction_s"] <= 0.202 and sup["overspeed"]["reaction_s"] <= sup["overspeed"]["bound_s"]
     assert [r["ber"] for r in rep["fuzz"]] == [1e-4, 1e-3, 1e-2]
     assert all(r["v2_accepted"] == 0 and r["v2_corrupted"] > 0 for r in rep["fuzz"])
 
@@ -47,7 +50,8 @@ def test_firmware_bench_text_output_names_every_figure(firmware_build, capsys):
     assert bench.main(["--seconds", "0.5", "--adc-seconds", "1", "--fuzz-frames", "500"]) == 0
     out = capsys.readouterr().out
     for key in ("flash", "RAM", "INT0", "INT1", "TWI", "TIMER1_OVF", "ISR worst case", "ADC time",
-                "bound from the code", "fuzz", "v2 expected", "v1 accepted", "simulated/wall", "all targets met"):
+                "bound from the code", "fuzz", "v2 expected", "v1 accepted", "simulated/wall", "run-enable supervisor",
+                "heartbeat: last poll -> off", "over-speed at 4600 rpm", "main-loop pass", "all targets met"):
         assert key in out, (key, out)
 
 

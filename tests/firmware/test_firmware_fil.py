@@ -81,7 +81,7 @@ def test_firmware_fil_clean_info_and_adc_error_bit(firmware_build, sim_args):
     # The AD7171's error bit is kept and passed on, never acted on.
     assert rep["adc_error_flags"] == rep["events"]["adc"]["expected"] // 5
     dev = rep["device"]
-    assert dev["fw_version"] == "2.0.0" and dev["reset_cause"] == "power-on"
+    assert dev["fw_version"] == "2.1.0" and dev["reset_cause"] == "power-on"
     assert dev["debounce_primary_us"] == 1000 and dev["debounce_secondary_us"] == 1000  # lock-out floors
     assert 3500 < dev["uptime_ms"] < 5000
     assert dev["bus_errors"] == 0 and dev["twi_timeouts"] == 0

@@ -20,6 +20,8 @@ def test_firmware_native_unit_tests(toolchain):
     assert re.search(r"\b0 failures\b", out), out
     assert re.search(r"vectors: 4 crc32c, 1\d frames, 1 info, [6-9] cmd, [4-9] badcmd", out), out
     assert "proto lossless" in out
+    # issue 37: tag 5, FLAG_RUN, the capabilities' bit 0x02, SET_SUPERVISOR against v2-supervisor.hex
+    assert re.search(r"supervisor vectors: [5-9] frames, [3-9] caps, 1 info, [2-9] cmd, [2-9] badcmd", out), out
 
 
 def test_firmware_build_fits_budget(firmware_build):

@@ -12,7 +12,9 @@
 #include "crc32c.h"
 #include "frame.h"
 #include "proto.h"
+#include "config.h"
 #include "ring.h"
+#include "supervisor.h"
 #include "tstamp.h"
 
 #include "test_native.h"
@@ -206,6 +208,127 @@ static void test_input_vectors(const char *path)
     printf("input vectors: %d frames, %d caps, %d cmd\n", n_frame, n_caps, n_cmd);
 }
 
+/* The run-enable supervisor's vectors (dyno/protocol/vectors/v2-supervisor.hex, issue 37): tag 5 events and
+ * FLAG_RUN in data frames, the capabilities frame's bit 0x02 (encoded directly and as proto builds it),
+ * the info frame with RUN and fw 2.1.0, SET_SUPERVISOR parsed by proto_command as the ISR does. */
+static void test_supervisor_vectors(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL, "cannot open %s", path);
+    if (!f)
+        return;
+    char line[1024];
+    int n_frame = 0, n_caps = 0, n_info = 0, n_cmd = 0, n_bad = 0;
+    while (fgets(line, sizeof line, f)) {
+        uint8_t want[64], got[64], data[64];
+        if (strncmp(line, "frame ", 6) == 0) {
+            dyno_event_t ev[8];
+            uint8_t n = parse_events(field(line, "events="), ev);
+            size_t wn = unhex(field(line, "hex="), want, sizeof want);
+            CHECK(frame_fit(frame_array_get, ev, n) == n, "all events fit: %s", line);
+            for (uint8_t k = 0; k < n; k++)
+                if ((ev[k].tag & (uint8_t)~TAG_GAP) == TAG_SUPERVISOR)
+                    CHECK(frame_event_len(ev[k].tag) == 6, "tag 5 is 6 bytes");
+            uint8_t len = frame_encode_data(got, (uint8_t)atoi(field(line, "seq=")), (uint8_t)atoi(field(line, "flags=")),
+                                            (uint16_t)atoi(field(line, "boot=")), (uint16_t)atoi(field(line, "dropped=")),
+                                            (uint32_t)strtoul(field(line, "t0="), NULL, 10), frame_array_get, ev, n, NULL);
+            CHECK(len == want[1] && memcmp(got, want, wn) == 0, "supervisor frame bytes: %s", line);
+            n_frame++;
+        } else if (strncmp(line, "caps ", 5) == 0) {
+            size_t wn = unhex(field(line, "hex="), want, sizeof want);
+            uint8_t seq = (uint8_t)atoi(field(line, "seq=")), flags = (uint8_t)atoi(field(line, "flags="));
+            uint8_t channels = (uint8_t)atoi(field(line, "channels=")), enabled = (uint8_t)atoi(field(line, "enabled="));
+            uint16_t boot = (uint16_t)atoi(field(line, "boot="));
+            uint8_t len = frame_encode_caps(got, seq, flags, boot, channels, enabled,
+                                            (uint8_t)atoi(field(line, "converter=")),
+                                            (uint32_t)strtoul(field(line, "rate_mhz="), NULL, 10));
+            CHECK(len == FRAME_CAPS_LEN && memcmp(got, want, wn) == 0, "caps bytes: %s", line);
+            /* as proto builds it: boot, cause, seq; the converter fitted or not, enabled by SET_CHANNELS,
+             * the supervisor armed or not */
+            static ring_t r;
+            static proto_t p;
+            static dyno_counters_t cnt;
+            ring_init(&r);
+            proto_init(&p, &r, &cnt, boot, (uint8_t)(flags >> FLAG_CAUSE_SHIFT), 1000, 1000, 0);
+            p.cur_seq = seq;
+            proto_set_fitted(&p, channels & CHANNEL_INPUT);
+            if (enabled & CHANNEL_INPUT) {
+                uint8_t c[CMD_MAX_LEN] = {OP_SET_CHANNELS, CHANNEL_INPUT, 0, 0};
+                uint16_t crc = crc16(c, 2);
+                c[2] = (uint8_t)(crc >> 8);
+                c[3] = (uint8_t)crc;
+                proto_command(&p, c, 4, crc16(c, 4));
+            }
+            proto_set_run(&p, (enabled & CHANNEL_SUPERVISOR) != 0, (enabled & CHANNEL_SUPERVISOR) != 0);
+            proto_service(&p, 0, 0);
+            CHECK(memcmp(p.caps_buf[p.caps_cur], want, wn) == 0, "caps as proto builds it: %s", line);
+            n_caps++;
+        } else if (strncmp(line, "info ", 5) == 0) {
+            unsigned a, b, c, l0, l1, g0, g1;
+            sscanf(field(line, "fw="), "%u.%u.%u", &a, &b, &c);
+            sscanf(field(line, "lock="), "%u,%u", &l0, &l1);
+            sscanf(field(line, "glitch="), "%u,%u", &g0, &g1);
+            CHECK(a == FW_VERSION_MAJOR && b == FW_VERSION_MINOR && c == FW_VERSION_PATCH, "fw version %u.%u.%u", a, b, c);
+            frame_info_t info;
+            info.seq = (uint8_t)atoi(field(line, "seq="));
+            info.flags = (uint8_t)atoi(field(line, "flags="));
+            CHECK(info.flags & FLAG_RUN, "info vector with RUN");
+            info.boot_id = (uint16_t)atoi(field(line, "boot="));
+            info.fw_major = (uint8_t)a;
+            info.fw_minor = (uint8_t)b;
+            info.fw_patch = (uint8_t)c;
+            info.uptime_ms = (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10);
+            info.debounce_primary_us = (uint16_t)atoi(field(line, "deb_p="));
+            info.debounce_secondary_us = (uint16_t)atoi(field(line, "deb_s="));
+            info.lockout[0] = (uint16_t)l0;
+            info.lockout[1] = (uint16_t)l1;
+            info.glitch[0] = (uint16_t)g0;
+            info.glitch[1] = (uint16_t)g1;
+            info.twi_timeouts = (uint8_t)atoi(field(line, "twi_timeouts="));
+            info.bus_errors = (uint8_t)atoi(field(line, "bus_errors="));
+            size_t wn = unhex(field(line, "hex="), want, sizeof want);
+            CHECK(frame_encode_info(got, &info) == FRAME_INFO_LEN && memcmp(got, want, wn) == 0, "info bytes: %s", line);
+            n_info++;
+        } else if (strncmp(line, "cmd ", 4) == 0) {
+            size_t n = unhex(field(line, "hex="), data, sizeof data);
+            unsigned op = (unsigned)atoi(field(line, "op=")), a0, a1, a2;
+            sscanf(field(line, "args="), "%u,%u,%u", &a0, &a1, &a2);
+            CHECK(data[0] == op && op == OP_SET_SUPERVISOR && n == CMD_MAX_LEN, "SET_SUPERVISOR: %s", line);
+            CHECK(cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n)) == CMD_OK, "cmd ok: %s", line);
+            static ring_t r;
+            static proto_t p;
+            static dyno_counters_t cnt;
+            uint16_t args[3];
+            ring_init(&r);
+            proto_init(&p, &r, &cnt, 7, 1, 1000, 1000, 0);
+            CHECK(proto_command(&p, data, (uint8_t)n, crc16(data, (uint8_t)n)) == OP_SET_SUPERVISOR, "taken: %s", line);
+            CHECK(proto_take_supervisor(&p, args) && args[0] == a0 && args[1] == a1 && args[2] == a2,
+                  "args %u,%u,%u: %s", args[0], args[1], args[2], line);
+            n_cmd++;
+        } else if (strncmp(line, "badcmd ", 7) == 0) {
+            size_t n = unhex(field(line, "hex="), data, sizeof data);
+            const char *cause = field(line, "cause=");
+            uint8_t want_err = strcmp(cause, "crc") == 0 ? CMD_ERR_CRC
+                             : strcmp(cause, "op") == 0 ? CMD_ERR_OP
+                             : strcmp(cause, "length") == 0 ? CMD_ERR_LENGTH : CMD_ERR_SHORT;
+            CHECK(cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n)) == want_err, "badcmd %s", cause);
+            static ring_t r;
+            static proto_t p;
+            static dyno_counters_t cnt;
+            uint16_t args[3];
+            ring_init(&r);
+            proto_init(&p, &r, &cnt, 7, 1, 1000, 1000, 0);
+            CHECK(proto_command(&p, data, (uint8_t)n, crc16(data, (uint8_t)n)) == 0 && p.cmds_bad == 1 &&
+                  !proto_take_supervisor(&p, args), "bad SET_SUPERVISOR ignored: %s", line);
+            n_bad++;
+        }
+    }
+    fclose(f);
+    CHECK(n_frame >= 5 && n_caps >= 3 && n_info >= 1 && n_cmd >= 2 && n_bad >= 2,
+          "supervisor vector counts %d %d %d %d %d", n_frame, n_caps, n_info, n_cmd, n_bad);
+    printf("supervisor vectors: %d frames, %d caps, %d info, %d cmd, %d badcmd\n", n_frame, n_caps, n_info, n_cmd, n_bad);
+}
+
 static void test_crc(void)
 {
     const uint8_t s[] = "123456789";
@@ -394,12 +517,16 @@ int main(int argc, char **argv)
     test_cobs();
     test_proto_basics();
     test_proto_lossless();
+    test_supervisor_machine();
+    test_supervisor_proto();
     if (argc > 1)
         test_vectors(argv[1]);
     if (argc > 2)
         test_input_vectors(argv[2]);
+    if (argc > 3)
+        test_supervisor_vectors(argv[3]);
     else
-        CHECK(0, "usage: test_native path/to/v1.hex");
+        CHECK(0, "usage: test_native v2.hex v2-input.hex v2-supervisor.hex");
     printf("%d checks, %d failures\n", checks, failures);
     return failures ? 1 : 0;
 }

@@ -9,5 +9,7 @@ extern int failures, checks;
 
 void test_proto_basics(void);
 void test_proto_lossless(void);
+void test_supervisor_machine(void);
+void test_supervisor_proto(void);
 
 #endif

@@ -1,0 +1,166 @@
+"""``dyno firmware-sim``'s run-enable supervisor (issue 37): the host's side of it and the report.
+
+The host sends the rig file's ``[limits]`` (``overspeed_primary_rpm``, ``overspeed_secondary_rpm``,
+``supervisor_timeout_s``) in one SET_SUPERVISOR at every boot, after the boot's first frame, as the host
+will (:func:`dyno.protocol.v2.supervisor_command`); until then the output stays off. ``--host-stop-at S``
+stops the host's polls at S simulated seconds while the simulation goes on (the host comes back after the
+drain to read what the device kept, as a host recovering from a freeze would, so the cause event can be
+decoded). ``--no-limits`` never sends the limits.
+
+The report, ``supervisor: {on_at_s, off_at_s, cause, ...}``, is on the simulation's time base (seconds
+since power-up): on and off come from the pin (D7 as the harness saw it: the physics' truth; for the
+old-bootloader build the charge pump's output), the cause of each drop from the tag-5 events the host
+decoded, a reset from the boot change the host saw:
+
+* ``off_at_s`` is a number whenever the output is off at the end (when it went off; when it never went on,
+  when the host first found it off: its first frame), null when it is on;
+* ``cause``: ``heartbeat``, ``overspeed_primary`` / ``overspeed_secondary`` (the device's event), ``reset``
+  (the pin dropped and the host then saw a new boot), ``no_limits`` (never armed), ``pump_stopped`` (the
+  pump build's pulses stopped with neither an event nor a reset: a hung loop without a watchdog),
+  ``unknown``; null while on.
+"""
+
+from __future__ import annotations
+
+from dyno.cli import number_in
+from dyno.protocol import v2
+from dyno.transports.base import TransportFault
+
+RESEND_AFTER_POLLS = 20  # no ON event of this boot decoded this many polls after the send: send again
+
+
+def add_arguments(parser) -> None:
+    from dyno.rigconfig import add_rig_argument
+
+    add_rig_argument(parser)  # --rig PATH: its [limits] arm the run-enable at every boot
+    parser.add_argument("--host-stop-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
+                        help="the host stops polling at S simulated seconds (the simulation goes on to --seconds; "
+                             "the host reads what the device kept after the drain)")
+    parser.add_argument("--no-limits", action="store_true",
+                        help="never send the rig file's limits (SET_SUPERVISOR): the run-enable stays off")
+    parser.add_argument("--enable-model", choices=("auto", "static", "pump"), default="auto",
+                        help="how the harness reads D7: a static level (watchdog build), a charge pump's pulse "
+                             "train (old-bootloader build), or auto-detected (default)")
+
+
+class SupervisorHost:
+    """What the host does about the run-enable, and what it decoded of it."""
+
+    def __init__(self, args) -> None:
+        self.command = None
+        self.limits = None
+        if args.protocol == "v2" and not args.no_limits:
+            from dyno.rigconfig import load_rig
+
+            lim = load_rig(args.rig).limits
+            self.limits = {"overspeed_primary_rpm": lim.overspeed_primary_rpm,
+                           "overspeed_secondary_rpm": lim.overspeed_secondary_rpm,
+                           "timeout_s": lim.supervisor_timeout_s}
+            if lim.supervisor_timeout_s > 0:  # 0 in the rig file: the run-enable is not armed
+                self.command = v2.supervisor_command(lim.overspeed_primary_rpm, lim.overspeed_secondary_rpm,
+                                                     lim.supervisor_timeout_s)
+        self.stop_at = args.host_stop_at
+        self.sends: list = []          # (t_s, boot_id)
+        self.events: list = []         # (t_s decoded, boot_id, Event)
+        self.boot_seen: list = []      # (t_s, boot_id): the host's first frame of each boot
+        self.last_poll_s = None        # the last poll before the host stopped
+        self._boot = None
+        self._sent_boot = None
+        self._since_send = 0
+
+    def polling(self, t: float, t_end: float) -> bool:
+        """Does the host poll at t? (not between --host-stop-at and the end of the drain)"""
+        return self.stop_at is None or t < self.stop_at or t > t_end
+
+    def after_poll(self, reader, t: float, new: list) -> None:
+        """After each poll: note the boot and the tag-5 events, send the limits to a new boot (once its first
+        frame is in; again if no event of that boot came back within RESEND_AFTER_POLLS polls: the command
+        was lost). The caller skips the tag-5 events itself, after their GAP bit (a tag-5 event can be the
+        first one in after a saturation: no Hall period across it)."""
+        if self.stop_at is None or t < self.stop_at:
+            self.last_poll_s = t
+        boot = reader.boot_id
+        if boot is not None and boot != self._boot:
+            self._boot = boot
+            self.boot_seen.append((t, boot))
+        for ev in new:
+            if ev.channel == v2.CH_SUPERVISOR:
+                self.events.append((t, boot, ev))
+        if self.command is None or boot is None:
+            return
+        if self._sent_boot == boot:
+            self._since_send += 1
+            # an ON (or any change) of this boot came back: armed; never again then (that would re-arm
+            # an output the device dropped: only the operator re-arms)
+            if any(b == boot for _, b, _e in self.events) or self._since_send < RESEND_AFTER_POLLS:
+                return
+        try:
+            reader.command(self.command)
+        except TransportFault:
+            return  # again after the next poll
+        self.sends.append((t, boot))
+        self._sent_boot = boot
+        self._since_send = 0
+
+
+def _periods(transitions: list) -> list:
+    """[(on_s, off_s | None)] from the harness's [[t_us, level], ...]."""
+    out, on = [], None
+    for t_us, level in transitions:
+        if level and on is None:
+            on = t_us / 1e6
+        elif not level and on is not None:
+            out.append((on, t_us / 1e6))
+            on = None
+    if on is not None:
+        out.append((on, None))
+    return out
+
+
+def report(host: SupervisorHost, hs: dict, first_frame_s) -> dict:
+    re_ = hs.get("run_enable") or {}
+    periods = _periods(re_.get("transitions") or [])
+    off_events: dict = {}
+    for _, boot, ev in host.events:
+        if ev.status != v2.SUP_ON:
+            off_events.setdefault(boot, []).append(ev)
+    per_boot: dict = {}
+    history = []
+    for on_s, off_s in periods:
+        sent = [b for t, b in host.sends if t <= on_s]
+        boot = sent[-1] if sent else None
+        j = per_boot.get(boot, 0)
+        per_boot[boot] = j + 1
+        cause = None
+        if off_s is not None:
+            evs = off_events.get(boot, [])
+            if len(evs) > j:
+                cause = v2.SUP_CAUSE_NAMES.get(evs[j].status, f"status_{evs[j].status}")
+            elif any(b != boot and t >= off_s for t, b in host.boot_seen):
+                cause = "reset"
+            elif re_.get("model") == "pump" and not re_.get("pulsing"):
+                cause = "pump_stopped"
+            else:
+                cause = "unknown"
+        history.append({"on_at_s": round(on_s, 6), "off_at_s": None if off_s is None else round(off_s, 6),
+                        "cause": cause, "boot_id": boot})
+    if history:
+        last = history[-1]
+        on_at, off_at, cause = last["on_at_s"], last["off_at_s"], last["cause"]
+    else:  # never on: off since power-up, found off by the host's first frame
+        on_at, off_at, cause = None, round(first_frame_s if first_frame_s is not None else 0.0, 6), "no_limits"
+    return {
+        "on_at_s": on_at, "off_at_s": off_at, "cause": cause,
+        "on": bool(re_.get("on")),
+        "model": re_.get("model"), "pulsing": re_.get("pulsing"),
+        "max_pulse_interval_us": re_.get("max_pulse_interval_us") if re_.get("model") == "pump" else None,
+        "last_pulse_s": re_["last_edge_us"] / 1e6 if re_.get("model") == "pump" else None,
+        "pump_hold_s": re_["pump_hold_us"] / 1e6 if re_.get("model") == "pump" else None,
+        "limits": host.limits, "limits_sent": host.command is not None,
+        "limits_sent_at_s": [t for t, _ in host.sends],
+        "host_stop_at_s": host.stop_at, "last_poll_s": host.last_poll_s,
+        "history": history,
+        "events": [{"decoded_at_s": round(t, 6), "boot_id": b, "t_us": ev.t_us,
+                    "cause": v2.SUP_CAUSE_NAMES.get(ev.status, f"status_{ev.status}"), "code": ev.code}
+                   for t, b, ev in host.events],
+    }
