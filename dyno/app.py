@@ -12,7 +12,7 @@ from pathlib import Path
 
 from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
-from dyno.summary import POINT_KEYS, public_point, summarize  # noqa: F401 (re-exported: the CLI, tests)
+from dyno.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
 from dyno.ambient import ambient_sensor, run_ambient
 from dyno.ambient import log_end as log_end_ambient
@@ -405,7 +405,8 @@ async def run_test_async(opts: RunOptions) -> dict:
         result = summarize(ctx)
         record_safety(ctx, result)
         ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
-                         events_lost=ctx.poller.reader.events_lost)
+                         events_lost=ctx.poller.reader.events_lost,
+                         supervisor=supervisor_document(ctx.poller.reader))
         close_rig(ctx)
     return result
 

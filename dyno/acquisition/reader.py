@@ -15,6 +15,7 @@ from dyno.protocol.session import LinkSession, LinkStats, ProtocolMismatch, snif
 from dyno.transports.base import Transport, TransportFault
 
 Event = v1.Event
+REARM_EVERY_POLLS = 5  # an operator's re-arm re-sends SET_SUPERVISOR this often until a frame shows RUN
 WRAP = 1 << 32
 # data frames in answer to CAPS before the host takes the firmware for one without it: a corrupted CAPS
 # gives one, and the firmware answers none while its boot probes for the converter (20 ms: 3 polls)
@@ -90,6 +91,8 @@ class V1Reader:
         self.run_enable: bool | None = None    # the RUN flag of the last data frame (None: not armed yet)
         self.run_enable_drops: list[dict] = []  # {"cause", "t_us" (device time), "code"} in order
         self.supervisor_events: list[dict] = []  # every tag-5 event: {"t_us", "cause", "code"}
+        self._gap_carry = False  # a stripped tag-5 event's GAP mark, for the next event kept
+        self._sup_rearm_polls: int | None = None  # an operator's re-arm waiting for RUN: polls since
 
     @property
     def stats(self) -> LinkStats:
@@ -140,11 +143,21 @@ class V1Reader:
             pass
 
     def rearm_supervisor(self) -> None:
-        """Send the limits again (the operator's re-arm after a drop: the device latches it off until then)."""
-        if self.supervisor_command is not None and self.version == 2:
-            self.supervisor_armed = False
-            self._caps_pending = True
-            self._caps_data_answers = 0
+        """Send the limits again (the operator's re-arm after a drop: the device latches it off until then),
+        every few polls until a data frame shows RUN."""
+        if self.supervisor_command is not None and self.version == 2 and self.supervisor_present:
+            self._sup_rearm_polls = 0
+
+    def _rearm_step(self) -> None:
+        if self.run_enable:
+            self._sup_rearm_polls = None
+            return
+        if self._sup_rearm_polls % REARM_EVERY_POLLS == 0:
+            try:
+                self.transport.write(self.supervisor_command)
+            except TransportFault:
+                pass
+        self._sup_rearm_polls += 1
 
     def _note_supervisor(self, frame, new_boot: bool, events: list) -> list:
         """Take the run-enable's state (RUN flag) and its tag-5 events out of a data frame."""
@@ -160,7 +173,20 @@ class V1Reader:
                 self.run_enable_drops.append({"cause": cause, "t_us": e.t_us, "code": e.code})
         if self.supervisor_ever_armed:
             self.run_enable = bool(frame.flags & v2.FLAG_RUN)
-        return [e for e in events if e.channel != v2.CH_SUPERVISOR] if sup else events
+        if not sup and not self._gap_carry:
+            return events
+        # A tag-5 event that entered the ring first after a saturation carries GAP for every channel: the mark
+        # moves to the next event kept, so no Hall period is ever taken across the hole.
+        kept = []
+        for e in events:
+            if e.channel == v2.CH_SUPERVISOR:
+                self._gap_carry |= e.gap
+                continue
+            if self._gap_carry and not e.gap:
+                e = Event(e.channel, e.t_us, e.code, e.status, True)
+            self._gap_carry = False
+            kept.append(e)
+        return kept
 
     def poll(self, now_s: float) -> list[Event]:
         """One transaction; returns the new events (possibly none)."""
@@ -199,6 +225,8 @@ class V1Reader:
             out = self._note_supervisor(frame, bool(new_boot), out)
         if self._caps_pending:
             self._negotiate_input()
+        elif self._sup_rearm_polls is not None:
+            self._rearm_step()
         return out
 
     @property
@@ -377,6 +405,21 @@ def implausible_v0(f: v0.LegacyFrame, last: v0.LegacyFrame, host_dt_s: float) ->
     if f.t_adc_us != last.t_adc_us and abs(f.adc_code - last.adc_code) > V0_ADC_JUMP_COUNTS:
         return "implausible_adc"
     return None
+
+
+def run_enable_text(reader) -> str:
+    """The Nano's run-enable in a few words for a face (live screen, web view, report): ``on``, ``off: CAUSE``
+    (the last drop's), ``not armed`` (its limits not confirmed in this boot), ``absent`` (firmware without it)
+    or ``n/a`` (not armed by this host, or not v2)."""
+    if getattr(reader, "supervisor_command", None) is None:
+        return "n/a"
+    if reader.supervisor_present is False:
+        return "absent"
+    if reader.run_enable:
+        return "on"
+    if reader.run_enable_drops:
+        return f"off: {reader.run_enable_drops[-1]['cause']}"
+    return "off" if reader.run_enable is False else "not armed"
 
 
 def make_reader(protocol: str, transport: Transport, *, supervisor_command: bytes | None = None):

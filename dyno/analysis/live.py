@@ -44,6 +44,7 @@ class LiveValues:
     # the engine-side input torque channel (issue 27): then power_engine_w is T_in w_p, measured, not the map's
     torque_input_nm: float = math.nan
     power_source: str = "map"  # "map" | "input"
+    run_enable: str = "n/a"  # the Nano's run-enable (dyno.acquisition.reader.run_enable_text)
 
 
 def recent_torque_nm(streams, device_now_us, calibration, window_us: int = TORQUE_WINDOW_US) -> float:
@@ -117,6 +118,8 @@ class RateMeter:
 
 
 def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues:
+    from dyno.acquisition.reader import run_enable_text
+
     rp = poller.rpm(v1.CH_PRIMARY)
     rs = poller.rpm(v1.CH_SECONDARY)
     ratio = rp / rs if rs > 1.0 else math.nan
@@ -143,4 +146,4 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
         rejected_total=int(sum(st.rejected.values())),
         abort_cause=abort["cause"] if abort else None, abort_detail=abort["detail"] if abort else None,
         throttle_frac=controller.throttle_frac, efficiency_reason=eff_reason, torque_input_nm=t_in,
-        power_source=source)
+        power_source=source, run_enable=run_enable_text(poller.reader))

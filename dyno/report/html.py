@@ -154,6 +154,11 @@ def _summary(data: ReportData) -> str:
     if link:
         rows.append(("link", f"{link.get('read', '?')} frames read, {link.get('accepted', '?')} accepted, "
                              f"{link.get('rejected_total', 0)} rejected, {link.get('events_lost', 0)} events lost"))
+    sup = stop.get("supervisor") or {}
+    if sup.get("armed_by_host"):
+        drops = sup.get("drops") or []
+        rows.append(("Nano run-enable", ("present: " if sup.get("present") else "absent: ") +
+                     (f"{len(drops)} drop(s), last: {drops[-1]['cause']}" if drops else "never dropped")))
     head = (f'<p>Status: <span class="{cls}">{escape(str(status))}</span>'
             f'{" — " + escape(str(stop["reason"])) if stop.get("reason") else ""}</p>')
     return head + _kv(rows)

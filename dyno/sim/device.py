@@ -27,6 +27,7 @@ LOCKOUT_CAP_US = 50_000  # LOCKOUT_CAP_US
 
 #: Optiboot's wait for an upload after an external reset (~1 s on the Nano's new bootloader) + the sketch's setup
 BOOTLOADER_S = 1.1
+SUP_HELD_MAX = 2  # supervisor events held while the ring is full (firmware main.cpp SUP_HELD_MAX)
 
 class EmulatedFirmware:
     """The Nano's behaviour on the bus.
@@ -80,6 +81,7 @@ class EmulatedFirmware:
     def _boot(self, now_s: float) -> None:
         self.boot_time_s = now_s
         self.ring: deque = deque()
+        self._sup_held: list[tuple] = []  # supervisor events waiting for room in the ring
         self.events_dropped = 0
         self.overflow = False
         self._gap = False
@@ -161,8 +163,22 @@ class EmulatedFirmware:
             self.supervisor.period(tag, period_from_s, t_s, self._period_us[tag])
 
     def _push_supervisor(self, tag: int, t_s: float, code: int, status: int) -> None:
-        if self.supervisor.armed:  # queued only once this boot's host armed it (an old host never sees tag 5)
-            self._push(tag, self.device_us(t_s), code, status)
+        """Queued only once this boot's host armed it (an old host never sees tag 5); never dropped for lack
+        of room: held (two at most, as the firmware's ``sup_held``) until the host retired some."""
+        if not self.supervisor.armed:
+            return
+        self._flush_supervisor()
+        if len(self._sup_held) == SUP_HELD_MAX:  # a third change while two wait: the oldest lost, counted
+            self._sup_held.pop(0)
+            self.events_dropped = (self.events_dropped + 1) & 0xFFFF
+            self.overflow = True
+            self._gap = True
+        self._sup_held.append((tag, self.device_us(t_s), code, status))
+        self._flush_supervisor()
+
+    def _flush_supervisor(self) -> None:
+        while self._sup_held and len(self.ring) < self.ring_capacity:
+            self._push(*self._sup_held.pop(0))
 
     def _run_enable_changed(self, on: bool, t_s: float, cause: str) -> None:
         self.run_enable_log.append((t_s, on, cause))
@@ -175,8 +191,9 @@ class EmulatedFirmware:
         return self.supervisor.on
 
     def service(self, now_s: float) -> None:
-        """The firmware's main loop at ``now_s``: the supervisor's heartbeat check."""
+        """The firmware's main loop at ``now_s``: the supervisor's heartbeat check, its held events."""
         self.supervisor.service(now_s)
+        self._flush_supervisor()
 
     def next_deadline_s(self) -> float | None:
         """When the output drops unless the host polls (the bus steps the physics to it exactly)."""
@@ -306,6 +323,7 @@ class EmulatedFirmware:
         # Put the current frame's events back first: an unsent frame may be rebuilt.
         if self.frame_events:
             self.ring.extendleft(reversed(self.frame_events))
+        self._flush_supervisor()
         proto = v2 if self.protocol == "v2" else v1
         n = proto.fit_events(self.ring)
         events = tuple(self.ring.popleft() for _ in range(n))

@@ -221,6 +221,7 @@ class LiveApp(OverlayMixin, DynoApp):
         row("link", fmt(v.frames_per_s, ".0f", " frames/s"))
         row(" CRC/NACK", f"{v.crc_errors} / {v.nacks} (rej {v.rejected_total})")
         row(" lost", f"{v.events_lost} events", "bold red" if v.events_lost else "")
+        row("Nano run", v.run_enable, "bold red" if v.run_enable.startswith("off") else "")
         if self.overlay_requested:
             row("overlay", self.overlay_tier or "computing…")
         return t

@@ -103,6 +103,9 @@ class RearmMixin:
         clear = getattr(old.act, "clear_latch", None)
         if clear is not None:  # the explicit re-arm: the released rig accepts commands again
             clear()
+        rearm_nano = getattr(self.poller.reader, "rearm_supervisor", None)
+        if rearm_nano is not None:  # the Nano latched its run-enable off after a drop: the limits again
+            rearm_nano()
         self._close_log()
         self.poller.listeners.remove(old_writer.events)
         self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call

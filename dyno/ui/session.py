@@ -337,7 +337,7 @@ class LiveSession(RearmMixin):
         """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
         document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
         from dyno.ambient import log_end
-        from dyno.summary import safety_document, summarize
+        from dyno.summary import safety_document, summarize, supervisor_document
 
         log_end(self.ctx)  # the air after the run (a BME280 read again), as dyno run logs it
         if self.ctx.writer.error is None:
@@ -348,7 +348,8 @@ class LiveSession(RearmMixin):
                 self.ctx.writer.doc("safety", error=f"{type(exc).__name__}: {exc}")
         status = {"done": "success"}.get(self.controller.state.value, "abort")
         self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
-                              events_lost=self.poller.reader.events_lost)
+                              events_lost=self.poller.reader.events_lost,
+                              supervisor=supervisor_document(self.poller.reader))
 
     async def close(self, why: str = "operator quit") -> None:
         """Safe state first, then stop the tasks and close the run log."""

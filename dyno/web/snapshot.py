@@ -69,7 +69,7 @@ class SnapshotBuilder:
             "efficiency_u95": last["efficiency_u95"] if last else None,
             "rotor_temp_c": _num(v.rotor_temp_c), "rotor_temp_limit_c": _num(v.rotor_temp_limit_c),
             "throttle_frac": _num(v.throttle_frac), "frames_per_s": _num(v.frames_per_s),
-            "crc_errors": v.crc_errors, "events_lost": v.events_lost,
+            "crc_errors": v.crc_errors, "events_lost": v.events_lost, "run_enable": v.run_enable,
             "points_done": len(rows) if n is None else n, "points_total_est": total, "eta_s": _num(eta_s),
             "abort_cause": v.abort_cause, "abort_detail": v.abort_detail,
             "aborts": [{"cause": a.get("cause"), "detail": a.get("detail")} for a in aborts],

@@ -29,6 +29,8 @@ function render(f) {
   $("ratio").textContent = fmt(f.ratio, 3);
   $("torque").textContent = fmt(f.torque_secondary_nm, 2);
   $("rotor-temp").textContent = fmt(f.rotor_temp_c, 0) + (f.rotor_temp_limit_c ? " / " + fmt(f.rotor_temp_limit_c, 0) : "");
+  $("run-enable").textContent = f.run_enable || "—";
+  $("run-enable").dataset.off = String((f.run_enable || "").startsWith("off"));
   $("efficiency").textContent = fmt(f.efficiency === null ? null : f.efficiency * 100, 1, " %");
   $("eff-ci").textContent = f.efficiency_ci95 !== null && f.efficiency_ci95 !== undefined
     ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp" : "";
