@@ -45,6 +45,7 @@ DRILLS = {
     "thermometer-stuck": 5.0, "thermometer-lost": 5.0, "adc-error": 0.1, "adc-stuck": 2.0, "bus-lost": 0.35,
     "overtemp": 0.3, "overspeed": 0.1, "loop-stall:300": None, "loop-stall:800": 0.6, "controller-crash": 0.1,
     "disk-full": 0.1, "sigint": 0.1, "sigterm": 0.1, "sighup": 0.1,
+    "pi-freeze": 0.3,  # freeze -> the kill chain opening (the Nano's heartbeat 0.2 s + 0.1 s)
     # the wiring drills (twin modes only): a stuck or chattering end switch does not trip the run (the driver
     # finds it, names it, falls back to the full stroke time: judged on the physics at the end)
     "endswitch-stuck-closed": None, "endswitch-stuck-open": None, "endswitch-bounce": None,
@@ -90,7 +91,7 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
     r = run_test(opts)
     m = held["ctx"].sim.model
     physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0
-                    and not m.engine_enabled)
+                    and not m.ignition_on)
     a = r["aborts"][0] if r["aborts"] else {}
     d = (r.get("drills") or [{}])[0]
     out_s = r["outputs"]

@@ -37,8 +37,8 @@ from dyno.runlog.reader import load_run  # noqa: E402
 
 #: drill -> (onset times in s from the first frame, bound on latency_s, what must first be detected)
 DRILLS = {
-    "device-reset": ((0.05, 0.15, 90.0), None, "survived: new boot seen, run goes on"),
-    "device-reset@2x": ((0.1, 90.0), None, "two resets 5 ms apart: survived"),
+    "device-reset": ((0.05, 0.15, 90.0), None, "the Nano's reset drops its run-enable: engine cut, nano_reset"),
+    "device-reset@2x": ((0.1, 90.0), None, "two resets 5 ms apart: engine cut, nano_reset"),
     "hall-dead:primary": ((8.0, 90.0, 200.0), 0.5, "dead Hall while the engine must turn"),
     "hall-dead:secondary": ((8.0, 90.0, 200.0), 0.5, "dead Hall while the engine must turn"),
     "hall-dead:both": ((8.0, 90.0, 200.0), 0.5, "dead Hall while the engine must turn"),
@@ -51,13 +51,14 @@ DRILLS = {
     "overspeed": ((4.0, 6.0), 0.1, ""),
     "loop-stall:300": ((90.0,), None, "survived (shorter than watchdog_s)"),
     "loop-stall:800": ((8.0, 90.0, 200.0), 0.6, "watchdog_s (0.5 s)"),
+    "pi-freeze": ((8.0, 90.0), 0.3, "the Nano's heartbeat (supervisor_timeout_s 0.2 s) opens the kill chain"),
     "controller-crash": ((8.0, 90.0, 200.0), 0.1, ""),
     "disk-full": ((8.0, 90.0, 200.0), 0.1, ""),
     "sigint": ((8.0, 90.0), 0.1, ""),
     "sigterm": ((8.0, 90.0), 0.1, ""),
     "sighup": ((8.0, 90.0), 0.1, ""),
 }
-SURVIVABLE = {"device-reset", "device-reset@2x", "loop-stall:300"}
+SURVIVABLE = {"loop-stall:300"}  # (a device reset cuts the engine through the Nano's run-enable: issue 37)
 
 
 def _drills_for(name: str, t: float):
@@ -76,7 +77,7 @@ def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, p
     a = r["aborts"][0] if r["aborts"] else {}
     m = held["ctx"].sim.model  # the physics' own verdict: pads off the rotor, actuator off, idle, killed
     physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0
-                    and not m.engine_enabled)
+                    and not m.ignition_on)
     o = r["outputs"]
     try:
         replayed = len(load_run(r["run_dir"]).docs("point"))

@@ -275,7 +275,13 @@ class DrillRunner(WiringDrills):
 
         rec["freeze_s"] = float(d.arg) if d.arg else PI_FREEZE_DEFAULT_S
         sim = self.ctx.sim
-        freeze_host(self.loop, rec["freeze_s"] / self.speed, sim.bus.sync)
+        truth = getattr(sim, "truth", None)
+
+        def world() -> None:  # the physics and the Nano run on; the truth is sampled as if polled
+            sim.bus.sync()
+            if truth is not None:
+                truth([], sim.model.t_s)
+        freeze_host(self.loop, rec["freeze_s"] / self.speed, world)
         rec["resumed_s"] = self.sim_now()
 
     def _controller_crash(self, d: Drill, rec: dict) -> None:
