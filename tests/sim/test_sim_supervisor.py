@@ -183,3 +183,33 @@ def test_a_stripped_supervisor_event_hands_its_gap_to_the_next_event():
         edges += [e for e in reader.poll(clock[0]) if e.channel == v1.CH_PRIMARY]
     assert all(e.channel != v2.CH_SUPERVISOR for e in edges)
     assert any(e.gap for e in edges), "the hole before the supervisor's event must stay marked"
+
+
+def test_new_host_old_firmware_finds_it_absent_and_keeps_reading():
+    from dyno.acquisition.reader import run_enable_text
+
+    for fw in (EmulatedFirmware(supervisor=False), EmulatedFirmware(knows_caps=False)):
+        clock = [0.0]
+        reader = make_reader("v2", _EmuTransport(fw, clock), supervisor_command=LIMITS)
+        got = []
+        for k in range(40):
+            clock[0] = 0.005 * k
+            fw.capture("primary", clock[0] - 0.001) if k else None
+            got += reader.poll(clock[0])
+        assert reader.supervisor_present is False and run_enable_text(reader) == "absent"
+        assert len([e for e in got if e.channel == v1.CH_PRIMARY]) >= 30  # the link goes on
+
+
+def test_old_host_new_firmware_never_sees_tag_5_or_run():
+    """A host without the feature never sends SET_SUPERVISOR: the firmware never arms, never queues tag 5 nor
+    sets RUN (which an old decoder would refuse), and the output stays off: the engine cannot run on a rig
+    whose kill chain has the Nano's enable in it (docs/safety.md)."""
+    fw = EmulatedFirmware()
+    for k in range(50):
+        t = 0.005 * k
+        fw.capture("primary", t)
+        fw.write(v2.poll(), t)
+        fr = v2.decode_frame(fw.read(32, t))
+        assert not fr.flags & v2.FLAG_RUN and all(e.channel != v2.CH_SUPERVISOR for e in fr.events)
+        fw.write(v2.poll((fr.boot_id, fr.seq)), t)
+    assert not fw.run_enable
