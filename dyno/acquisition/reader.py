@@ -92,6 +92,7 @@ class V1Reader:
         self.run_enable_drops: list[dict] = []  # {"cause", "t_us" (device time), "code"} in order
         self.supervisor_events: list[dict] = []  # every tag-5 event: {"t_us", "cause", "code"}
         self._gap_carry = False  # a stripped tag-5 event's GAP mark, for the next event kept
+        self.supervisor_sent: list = []  # the boot id each SET_SUPERVISOR was written to, in order
         self._sup_rearm_polls: int | None = None  # an operator's re-arm waiting for RUN: polls since
 
     @property
@@ -107,7 +108,10 @@ class V1Reader:
         try:
             buf = self.transport.transfer(v2.encode_command(v2.OP_CAPS), self.read_len)
         except TransportFault:
-            return  # tried again at the next poll
+            # tried again at the next poll; no answer at all is what a firmware that does not know CAPS gives
+            # over USB serial (it answers only the ops it knows): absent after CAPS_TRIES of them too
+            self._caps_no_answer()
+            return
         try:
             frame = v2.decode_frame(buf)
         except FrameError:
@@ -116,12 +120,7 @@ class V1Reader:
             if isinstance(frame, v2.DataFrame):
                 # Old firmware ignores CAPS and serves its data frame; so does new firmware whose
                 # command the bus corrupted: absent only after CAPS_TRIES such answers in a row.
-                self._caps_data_answers += 1
-                if self._caps_data_answers >= CAPS_TRIES:
-                    if self.want_input:
-                        self.input_present = False
-                    self.supervisor_present = False
-                    self._caps_pending = False
+                self._caps_no_answer()
             return  # otherwise asked again at the next poll
         self._caps_data_answers = 0
         self.session.caps = frame
@@ -139,8 +138,17 @@ class V1Reader:
                 self.transport.write(v2.encode_command(v2.OP_SET_CHANNELS, v2.CHANNEL_INPUT))
             if need_sup:
                 self.transport.write(self.supervisor_command)
+                self.supervisor_sent.append(self.session.boot_id)
         except TransportFault:
             pass
+
+    def _caps_no_answer(self) -> None:
+        self._caps_data_answers += 1
+        if self._caps_data_answers >= CAPS_TRIES:
+            if self.want_input:
+                self.input_present = False
+            self.supervisor_present = False
+            self._caps_pending = False
 
     def rearm_supervisor(self) -> None:
         """Send the limits again (the operator's re-arm after a drop: the device latches it off until then),
@@ -155,6 +163,7 @@ class V1Reader:
         if self._sup_rearm_polls % REARM_EVERY_POLLS == 0:
             try:
                 self.transport.write(self.supervisor_command)
+                self.supervisor_sent.append(self.session.boot_id)
             except TransportFault:
                 pass
         self._sup_rearm_polls += 1
@@ -168,7 +177,8 @@ class V1Reader:
         sup = [e for e in events if e.channel == v2.CH_SUPERVISOR]
         for e in sup:
             cause = v2.SUP_CAUSE_NAMES.get(e.status, f"cause {e.status}")
-            self.supervisor_events.append({"t_us": e.t_us, "cause": cause, "code": e.code})
+            self.supervisor_events.append({"t_us": e.t_us, "cause": cause, "code": e.code, "status": e.status,
+                                           "boot_id": self.session.boot_id})
             if e.status != v2.SUP_ON:
                 self.run_enable_drops.append({"cause": cause, "t_us": e.t_us, "code": e.code})
         if self.supervisor_ever_armed:

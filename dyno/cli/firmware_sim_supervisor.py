@@ -23,10 +23,8 @@ decoded, a reset from the boot change the host saw:
 from __future__ import annotations
 
 from dyno.cli import number_in
-from dyno.protocol import v2
-from dyno.transports.base import TransportFault
+from dyno.protocol import v1, v2
 
-RESEND_AFTER_POLLS = 20  # no ON event of this boot decoded this many polls after the send: send again
 
 
 def add_arguments(parser) -> None:
@@ -65,42 +63,27 @@ class SupervisorHost:
         self.boot_seen: list = []      # (t_s, boot_id): the host's first frame of each boot
         self.last_poll_s = None        # the last poll before the host stopped
         self._boot = None
-        self._sent_boot = None
-        self._since_send = 0
 
     def polling(self, t: float, t_end: float) -> bool:
         """Does the host poll at t? (not between --host-stop-at and the end of the drain)"""
         return self.stop_at is None or t < self.stop_at or t > t_end
 
     def after_poll(self, reader, t: float, new: list) -> None:
-        """After each poll: note the boot and the tag-5 events, send the limits to a new boot (once its first
-        frame is in; again if no event of that boot came back within RESEND_AFTER_POLLS polls: the command
-        was lost). The caller skips the tag-5 events itself, after their GAP bit (a tag-5 event can be the
-        first one in after a saturation: no Hall period across it)."""
+        """After each poll: note the boot, the limits the reader sent (it arms every boot as ``dyno run``'s
+        does: :func:`dyno.acquisition.reader.make_reader`'s ``supervisor_command``) and the tag-5 events it
+        decoded (it takes them out of the stream, handing their GAP mark to the next event)."""
         if self.stop_at is None or t < self.stop_at:
             self.last_poll_s = t
         boot = reader.boot_id
         if boot is not None and boot != self._boot:
             self._boot = boot
             self.boot_seen.append((t, boot))
-        for ev in new:
-            if ev.channel == v2.CH_SUPERVISOR:
-                self.events.append((t, boot, ev))
-        if self.command is None or boot is None:
-            return
-        if self._sent_boot == boot:
-            self._since_send += 1
-            # an ON (or any change) of this boot came back: armed; never again then (that would re-arm
-            # an output the device dropped: only the operator re-arms)
-            if any(b == boot for _, b, _e in self.events) or self._since_send < RESEND_AFTER_POLLS:
-                return
-        try:
-            reader.command(self.command)
-        except TransportFault:
-            return  # again after the next poll
-        self.sends.append((t, boot))
-        self._sent_boot = boot
-        self._since_send = 0
+        sent = getattr(reader, "supervisor_sent", [])
+        for b in sent[len(self.sends):]:
+            self.sends.append((t, b))
+        evs = getattr(reader, "supervisor_events", [])
+        for d in evs[len(self.events):]:
+            self.events.append((t, d["boot_id"], v1.Event(v2.CH_SUPERVISOR, d["t_us"], d["code"], d["status"])))
 
 
 def _periods(transitions: list) -> list:

@@ -29,8 +29,8 @@ static void handle_packet(void)
     cli();
     uint8_t op = proto_command(&g_proto, cmd, n, residue);
     SREG = sreg;
-    if (op != OP_POLL && op != OP_ACK_POLL && op != OP_INFO)
-        return;  /* SET_DEBOUNCE and CLEAR_COUNTERS get no answer */
+    if (op != OP_POLL && op != OP_ACK_POLL && op != OP_INFO && op != OP_CAPS)
+        return;  /* SET_DEBOUNCE, CLEAR_COUNTERS, SET_CHANNELS and SET_SUPERVISOR get no answer */
     cli();
     const uint8_t *frame = proto_begin_read(&g_proto);
     SREG = sreg;

@@ -109,3 +109,13 @@ def test_firmware_sim_cli_input_hz_as_a_process(firmware_build):
     bad = subprocess.run([sys.executable, "-m", "dyno.cli", "firmware-sim", "--elf", str(firmware_build["elf"]),
                           "--input-hz", "-3"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "--input-hz" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_firmware_fil_input_channel_over_usb_serial(firmware_build, sim_args):
+    """CAPS is answered over USB serial too (the serial link answered only POLL/ACK_POLL/INFO: an input-torque
+    rig on serial waited 50 ms for an answer on every poll, forever). The channel comes up, nothing is lost."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "1", "--input-hz", "125",
+                            "--transport", "serial"))
+    assert rep["input"]["present"] and rep["input"]["received"] >= 110
+    assert rep["supervisor"]["on"] and [e["cause"] for e in rep["supervisor"]["events"]] == ["on"]
+    assert rep["wall_s"] < 30

@@ -89,7 +89,9 @@ def test_supervisor_on_while_polled_below_the_limit(firmware_build, sim_args):
     sv = _sv(rep)
     assert sv["off_at_s"] is None and sv["cause"] is None and sv["on"], sv
     assert len(sv["limits_sent_at_s"]) == 1
-    assert rep["first_frame_s"] <= sv["limits_sent_at_s"][0] < sv["on_at_s"] < sv["limits_sent_at_s"][0] + 0.005
+    # (sent in the tick that read the boot's first frame, after that poll's and the CAPS transfer's ~3.6 ms
+    # each at 100 kHz, as dyno run's reader sends them: on within those + the write + a loop pass)
+    assert rep["first_frame_s"] <= sv["limits_sent_at_s"][0] < sv["on_at_s"] < sv["limits_sent_at_s"][0] + 0.012
     assert [e["cause"] for e in sv["events"]] == ["on"]
     assert rep["device"]["run"] is True and rep["ok"]
 
