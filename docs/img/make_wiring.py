@@ -310,7 +310,7 @@ def actuator_power():
     W((4.6, ys), (7.6, ys), (7.6, 8.4))
     dot(5.6, ys)
     # the freewheel diode: across the relay's input, whose polarity never reverses
-    diode((5.6, 6.0), (5.6, ys), "D5 1N5408\nfreewheel", lx=-0.3, ha="right")
+    diode((5.6, 6.0), (5.6, ys), "D4 1N5408\nfreewheel", lx=-0.3, ha="right")
     # K2: two changeover contacts
     changeover((7.6, 8.4), (9.0, 8.8), (9.0, 8.0), "K2a", lx=-0.3, ly=0.0, ha="right")
     changeover((7.6, 6.0), (9.0, 6.4), (9.0, 5.6), "K2b", lx=0.0, ly=-0.4)
@@ -344,7 +344,7 @@ def actuator_power():
     W((11.2, 6.4), (12.6, 6.4))                             # B -> K3b NO
     W((12.6, 9.2), (12.2, 9.2), (12.2, 9.9))                # K3a NC -> F3 -> +12 V
     W((2.2, ys), (2.2, 9.9))
-    fuse((2.2, 9.9), (12.2, 9.9), "F3 3 A: K3's direct path (from before F2)", lx=0, ly=-0.3, ha="center")
+    fuse((2.2, 9.9), (12.2, 9.9), "F3 5 A: K3's direct path (from before F2)", lx=0, ly=-0.3, ha="center")
     W((12.6, 5.6), (12.2, 5.6), (12.2, 5.2))                # K3b NC -> GND
     gnd(12.2, 5.2)
     # the actuator
@@ -360,7 +360,7 @@ def actuator_power():
     diode((16.4, 6.0), (16.4, 8.8), "TVS\nSMBJ18CA", lx=0.3, both=True)
     T(15.0, 4.9, "linear actuator, 12 V, internal end stops\nM+ positive = retract (release)", ha="center", fs=6.3)
     T(0.6, 1.6, "K2 and K3 rest (de-energised) in the release polarity; K3's NC path never touches K2.\n"
-      "D5 sits where the polarity never reverses: a diode across M itself would short\nthe supply in one "
+      "D4 sits where the polarity never reverses: a diode across M itself would short\nthe supply in one "
       "direction. The TVS clamps the kick when K3 breaks the motor current.\nQ3 is off whenever K2 moves "
       "(actuator.relay_settle_s).", fs=6.3, c=NOTE_C)
     # K2's coil and driver
