@@ -129,8 +129,9 @@ def changeover(com, nc, no, label, lx=0.0, ly=0.0, ha="center"):
     for q in (com, nc, no):
         ax.add_patch(Circle(q, 0.06, fc="white", ec="black", lw=0.9, zorder=4))
     W(com, (nc[0] - 0.08 * (nc[0] - com[0]), nc[1] - 0.12 * (nc[1] - com[1])))
-    T(nc[0], nc[1] + 0.22, "NC", ha="center", fs=5.5)
-    T(no[0], no[1] - 0.22, "NO", ha="center", fs=5.5)
+    s = 0.22 if nc[1] > no[1] else -0.22  # each label on its contact's outer side
+    T(nc[0], nc[1] + s, "NC", ha="center", fs=5.5)
+    T(no[0], no[1] - s, "NO", ha="center", fs=5.5)
     if label:
         T(com[0] + lx, com[1] + ly, label, ha=ha)
 
@@ -339,7 +340,7 @@ def actuator_power():
     flag(2.1, 4.4, "Pi GPIO13", PI_C)
     # K3's contacts: NO = the software's path, NC = +12 V / GND in the release polarity
     changeover((14.0, 8.8), (12.6, 9.2), (12.6, 8.4), "K3a", lx=-0.1, ly=0.4)
-    changeover((14.0, 6.0), (12.6, 6.4), (12.6, 5.6), "K3b", lx=-0.1, ly=-0.4)
+    changeover((14.0, 6.0), (12.6, 5.6), (12.6, 6.4), "K3b", lx=-0.1, ly=-0.4)
     W((10.6, 8.8), (11.9, 8.8), (11.9, 8.4), (12.6, 8.4))  # A -> K3a NO
     W((11.2, 6.4), (12.6, 6.4))                             # B -> K3b NO
     W((12.6, 9.2), (12.2, 9.2), (12.2, 9.9))                # K3a NC -> F3 -> +12 V
