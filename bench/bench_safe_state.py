@@ -11,10 +11,11 @@ the physical onset against its bound, the brake position when the safe state cam
 killed), the points kept and replayed, and whether ``dyno runs --json`` lists the run with its state.
 
 Modes: ``sim`` (the simulated driver), ``mock`` (``--mock-pins``: the real-rig output code on gpiozero's
-MockFactory), ``sim+faults`` (``--fault-rate 0.01``), and the wiring twin: ``twin`` (``--mock-pins`` with a rig
-file declaring the end switch and the E-stop monitor input, K3 not fitted: the driver's own release is judged)
-and ``twin+k3`` (the same with K3 fitted).  The wiring drills (:mod:`dyno.drills_wiring`) run on the twin modes
-only; on every ``mock``/``twin`` row the driver's verdict must agree with the physics (``driver_agrees``).
+MockFactory), ``sim+faults`` (``--fault-rate 0.01``), these three on the shipped rig file (K3 fitted), and the
+wiring twin: ``twin`` (``--mock-pins`` with a rig file declaring the end switch and the E-stop monitor input, K3
+not fitted: the driver's own release is judged) and ``twin+k3`` (the same with K3 fitted).  The wiring drills
+(:mod:`dyno.drills_wiring`) run on the twin modes only; on every ``mock``/``twin`` row the driver's verdict must
+agree with the physics (``driver_agrees``).
 
     python bench/bench_safe_state.py [--quick] [--plans a,b] [--drills x,y] [--phases p,q]
                                      [--modes sim,mock,sim+faults,twin,twin+k3] [--workers N] [--markdown] [--json]
@@ -30,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -67,7 +69,9 @@ def wired_rig_file(out_dir: Path, k3: bool) -> Path:
     text = (Path(__file__).resolve().parent.parent / "hardware" / "rig.toml").read_text()
     text = text.replace("# estop_input = 22 ", "estop_input = 22 ")
     text = text.replace("# brake_released_input = 27 ", "brake_released_input = 27 ")
-    text = text.replace("brake_hold_relay = false", f"brake_hold_relay = {'true' if k3 else 'false'}")
+    text, n = re.subn(r"^brake_hold_relay = (true|false)", f"brake_hold_relay = {'true' if k3 else 'false'}",
+                      text, flags=re.M)
+    assert n == 1, "hardware/rig.toml: no [actuator] brake_hold_relay line to set"
     path = out_dir.parent / f"{out_dir.name}.rig.toml"
     path.write_text(text)
     return path

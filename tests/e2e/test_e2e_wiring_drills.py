@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -32,7 +33,9 @@ def wired_rig(tmp_path: Path, *, k3: bool = False, end_switch: bool = True, esto
         text = text.replace("# estop_input = 22 ", "estop_input = 22 ")
     if end_switch:
         text = text.replace("# brake_released_input = 27 ", "brake_released_input = 27 ")
-    text = text.replace("brake_hold_relay = false", f"brake_hold_relay = {'true' if k3 else 'false'}")
+    text, n = re.subn(r"^brake_hold_relay = (true|false)", f"brake_hold_relay = {'true' if k3 else 'false'}",
+                      text, flags=re.M)
+    assert n == 1, "hardware/rig.toml: no [actuator] brake_hold_relay line to set"
     path = tmp_path / f"rig-wired{'-k3' if k3 else ''}.toml"
     path.write_text(text)
     return path
