@@ -108,6 +108,7 @@ def test_pi_freeze_as_the_user_runs_it(tmp_path):
     assert r["outputs"]["engine_cut_by"] == "nano"
     rec = _freeze_record(r)
     assert rec["latency_s"] <= TIMEOUT_S + 0.1 and rec["pads_off_within_bound"]
-    q = subprocess.run([sys.executable, "-m", "dyno", "replay", str(out)], capture_output=True, text=True,
-                       env=env, timeout=300)
+    q = subprocess.run([sys.executable, "-m", "dyno", "replay", "--json", str(out)], capture_output=True,
+                       text=True, env=env, timeout=300)
     assert q.returncode == 0, q.stderr[-2000:]
+    assert len(json.loads(q.stdout)["points"]) == len(r["points"])  # everything recorded up to the freeze
