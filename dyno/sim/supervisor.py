@@ -17,9 +17,13 @@ from dyno.protocol import v1, v2
 class NanoSupervisor:
     """State of one boot's supervisor; ``push(tag, t_s, code, status)`` queues its events."""
 
-    def __init__(self, push, on_change=None) -> None:
+    def __init__(self, push, on_change=None, pace: float = 1.0) -> None:
         self._push = push
         self.on_change = on_change  # f(on: bool, t_s: float, cause: str): the wiring (the kill chain)
+        # A simulation paced at N x real time (``dyno ui --speed N``) stretches every real-time delay of the host
+        # N times in the rig's time: the heartbeat timeout spans the same real time it does at 1x (as the
+        # emulated ring's size does: dyno.ui.session), or a 25 ms screen refresh at x8 would be a 0.2 s silence.
+        self.pace = float(pace)
         self.boot(0.0, cause="power-on")
 
     def boot(self, t_s: float, cause: str = "reset") -> None:
@@ -51,7 +55,7 @@ class NanoSupervisor:
         if timeout_ms <= 0:
             return False
         self.min_period_us = {v1.CH_PRIMARY: int(min_period_primary_us), v1.CH_SECONDARY: int(min_period_secondary_us)}
-        self.timeout_s = timeout_ms / 1000.0
+        self.timeout_s = timeout_ms / 1000.0 * self.pace
         self.armed = True
         self.armed_at_s = self.last_beat_s = t_s
         self._push(v2.CH_SUPERVISOR, t_s, 0, v2.SUP_ON)
@@ -67,7 +71,7 @@ class NanoSupervisor:
         """The main loop's check at ``t_s``: a heartbeat that expired before it drops the output then."""
         due = self.deadline_s()
         if due is not None and t_s >= due:
-            self._push(v2.CH_SUPERVISOR, due, round(self.timeout_s * 1000.0), v2.SUP_HEARTBEAT)
+            self._push(v2.CH_SUPERVISOR, due, round(self.timeout_s / self.pace * 1000.0), v2.SUP_HEARTBEAT)
             self._change(False, due, "heartbeat")
 
     def period(self, tag: int, prev_edge_s: float, t_s: float, period_us: int) -> None:

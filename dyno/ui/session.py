@@ -95,6 +95,7 @@ class LiveSession(RearmMixin):
             # `speed` x longer for the device and the ring overflows: an artefact of pacing, not the link.
             fw = self.ctx.sim.firmware
             fw.ring_capacity = max(fw.ring_capacity, math.ceil(fw.ring_capacity * self.speed))
+            fw.supervisor.pace = max(1.0, self.speed)  # the Nano's heartbeat: the same real time (dyno.sim.supervisor)
         else:  # pragma: no cover - needs the rig
             from dyno.hw.safety import SafetyGuard
 

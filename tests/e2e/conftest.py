@@ -10,6 +10,7 @@ import pytest
 from dyno.app import RunOptions, run_test
 from dyno.control.controller import TestPlan
 from dyno.sim.rig_params import RigParams
+from tests.rig_files import rig_without_run_enable  # noqa: F401 (the e2e tests import it from here)
 
 # Perfect knowledge (the engine exactly its map, the sensor exactly its calibration, the J1349 reference
 # day: dyno.sim.world): for the tests that check the statistics alone (CI coverage, lost data, replay
@@ -56,13 +57,3 @@ def cli_run(tmp_path_factory):
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
     return run_dir, json.loads(proc.stdout)
 
-
-def rig_without_run_enable(tmp_path) -> Path:
-    """The shipped rig file with the Nano's run-enable out of the kill chain (``[limits] supervisor_timeout_s =
-    0``): for what the link itself does across resets, which a wired run-enable turns into an engine cut."""
-    src = Path(__file__).resolve().parents[2] / "hardware" / "rig.toml"
-    text = src.read_text()
-    assert "\nsupervisor_timeout_s = 0.2" in text
-    out = Path(tmp_path) / "rig-no-run-enable.toml"
-    out.write_text(text.replace("\nsupervisor_timeout_s = 0.2", "\nsupervisor_timeout_s = 0.0"))
-    return out

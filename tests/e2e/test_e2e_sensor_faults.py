@@ -6,13 +6,14 @@ from dataclasses import replace
 from dyno.app import RunOptions, run_test
 from dyno.sim.bus import BusFaults
 
-from .conftest import IDEAL, QUICK_PLAN, tare_allowance
+from .conftest import IDEAL, QUICK_PLAN, rig_without_run_enable, tare_allowance
 
 
 def test_device_reset_mid_run_is_survived(tmp_path):
-    """A watchdog reset of the Nano: counters restart, the host notices and carries on."""
+    """A watchdog reset of the Nano: counters restart, the host notices and carries on (the link's own behaviour:
+    the Nano's run-enable out of the kill chain; wired, a reset cuts the engine: tests/e2e/test_e2e_drills.py)."""
     r = run_test(RunOptions(sim=True, seed=6, out_dir=tmp_path / "reset", plan=QUICK_PLAN, sim_params=IDEAL,
-                            faults=BusFaults(reset_times_s=[45.0, 90.0])))
+                            faults=BusFaults(reset_times_s=[45.0, 90.0]), rig_path=rig_without_run_enable(tmp_path)))
     assert r["state"] == "done", r["reason"]
     assert r["faults_injected"]["reset"] == 2
     assert r["frames"]["device_resets"] == 2
