@@ -91,3 +91,29 @@ def test_hw_doctor_reads_the_bme280_the_rig_file_fits(tmp_path):
                          timeout=120, env=env).stdout
     line = next(x for x in out.splitlines() if "ambient" in x)
     assert line.split()[0] == "warn" and "uncorrected" in line, out
+
+
+def test_hw_doctor_checks_the_nanos_run_enable():
+    """The firmware's capabilities say whether it has the run-enable (issue 37); without it, a rig whose kill
+    chain has the Nano's transistor cannot run the engine: a warning naming the fix."""
+    from dyno.cli.doctor_cmd import Report, check_run_enable
+    from dyno.rigconfig import load_rig
+    from dyno.sim.device import EmulatedFirmware
+    from dyno.transports.base import Transport
+
+    class Emu(Transport):
+        def __init__(self, fw):
+            super().__init__()
+            self.fw = fw
+
+        def _transfer(self, request, read_len):
+            self.fw.write(request, 0.1)
+            return self.fw.read(read_len, 0.1) if read_len else b""
+
+    cfg = load_rig()
+    for fw, status in ((EmulatedFirmware(), "ok"), (EmulatedFirmware(supervisor=False), "warn")):
+        report = Report()
+        check_run_enable(report, cfg, Emu(fw))
+        (check,) = report.checks
+        assert check.name == "run-enable" and check.status == status, check
+    assert "supervisor_timeout_s = 0" in check.detail
