@@ -106,6 +106,7 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
         # as _position is after a fault): what the end switch's readings are judged against.  None: unknown.
         self._tracked: float | None = None
         self._travel = 0.0  # travel integrated since that stop, both ways (the estimate's error grows with it)
+        self._wired_release_maybe = False  # K3 may have moved the brake behind the estimate (see _integrate)
         self._moved_since_release = True  # a command moved the brake since the last confirmed release
         self._step_s: float | None = None  # pending timed step: duration once powered
         self._stop_at_s: float | None = None
@@ -373,6 +374,11 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
     def _integrate(self, now: float) -> None:
         dt = now - self._last_integrated_s
         self._last_integrated_s = now
+        gap = self.config.limits.supervisor_timeout_s
+        if self.config.actuator.brake_hold_relay and 0 < gap < dt:
+            # This driver did not run for longer than the Nano's heartbeat (a frozen Pi): the kill chain may
+            # have opened meanwhile and K3 driven the brake toward its stop by wiring, behind the estimate.
+            self._wired_release_maybe = True
         if self._moving != STOP and dt > 0:
             d = self._moving * dt / self.brake_full_stroke_s
             self._position += d
@@ -398,7 +404,12 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             self._target, self._stop_at_s = STOP, None
         es = self._end_switch
         switch = False  # the switch (plausibly closed) and the estimate agree: at the retracted stop
-        if es is not None and es.trusted:
+        if es is not None and es.trusted and self._wired_release_maybe:
+            # (K3 may have moved it: a closed switch is plausible anywhere, but it neither zeroes the estimate
+            # nor ends the release early: the release runs the estimate's length, the closing confirming it)
+            if self._target == RELEASE and es.closed():
+                es.closed_seen = True
+        elif es is not None and es.trusted:
             if es.judge(now, self._tracked, self._travel, self.brake_full_stroke_s, self._doing()) \
                     and self._target == RELEASE:
                 es.closed_seen = True
@@ -412,6 +423,7 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
                 es.never_closed(now, self.brake_full_stroke_s)
             self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
             self._tracked, self._travel = self._position, self._position
+            self._wired_release_maybe = False
             if self._target == RELEASE and self._safe_release:
                 self.release_basis = "end_of_travel" if confirmed else "full_stroke_time"
                 self._moved_since_release = False

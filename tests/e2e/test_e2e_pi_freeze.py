@@ -112,3 +112,22 @@ def test_pi_freeze_as_the_user_runs_it(tmp_path):
                        text=True, env=env, timeout=300)
     assert q.returncode == 0, q.stderr[-2000:]
     assert len(json.loads(q.stdout)["points"]) == len(r["points"])  # everything recorded up to the freeze
+
+
+def test_pi_freeze_with_the_end_switch_no_false_rig_fault(tmp_path):
+    """K3 released the brake by wiring while the Pi was frozen: when the Pi's code resumes, its estimate says
+    the brake is still out while the end switch is closed. That is K3's doing, not a stuck switch: no rig fault
+    (a fault would refuse every re-arm until ``dyno doctor --toggle``), and the release is still confirmed."""
+    text = (REPO / "hardware" / "rig.toml").read_text()
+    text = text.replace("# estop_input = 22 ", "estop_input = 22 ").replace("# brake_released_input = 27 ",
+                                                                          "brake_released_input = 27 ")
+    assert "\nbrake_released_input = 27" in text and "\nbrake_hold_relay = true" in text
+    rig = tmp_path / "wired.toml"
+    rig.write_text(text)
+    held = {}
+    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=rig,
+                            drills=[parse_drill("pi-freeze@loaded+2")], setup=lambda ctx: held.update(ctx=ctx),
+                            mock_pins=True))
+    _assert_nano_made_it_safe(r, held["ctx"])
+    assert r["rig_faults"] == [], r["rig_faults"]
+    assert r["outputs"]["driver_agrees"] and r["outputs"]["driver_release_basis"] == "end_of_travel"
