@@ -168,6 +168,11 @@ class DrillRunner(WiringDrills):
             if d.arg == "input" and sim is not None and not getattr(sim.model, "input_fitted", False):
                 raise ConfigError("command line", "--drill", f"{d}: the rig has no input torque channel "
                                   "(rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")
+        from dyno.clock import VirtualTimeLoop
+
+        if any(d.name == "pi-freeze" for d in self.drills) and not isinstance(loop, VirtualTimeLoop):
+            raise ConfigError("command line", "--drill", "pi-freeze stops the whole host, its watchdog thread "
+                              "included: only in simulated time (dyno run --sim), not in a live session")
         poller = getattr(ctx, "poller", None)
         if any(d.phase for d in self.drills) and poller is not None:
             poller.listeners.append(self._on_poll)

@@ -131,3 +131,14 @@ def test_pi_freeze_with_the_end_switch_no_false_rig_fault(tmp_path):
     _assert_nano_made_it_safe(r, held["ctx"])
     assert r["rig_faults"] == [], r["rig_faults"]
     assert r["outputs"]["driver_agrees"] and r["outputs"]["driver_release_basis"] == "end_of_travel"
+
+
+def test_pi_freeze_is_refused_in_a_live_session():
+    """A live session's watchdog is a real thread: the drill cannot freeze it; one line, exit 2, before the
+    screen is taken over."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    p = subprocess.run([sys.executable, "-m", "dyno", "ui", "--sim", "--drill", "pi-freeze@5"], capture_output=True,
+                       text=True, env=env, timeout=120)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    (line,) = p.stderr.strip().splitlines()
+    assert "--drill" in line and "pi-freeze" in line and "dyno run --sim" in line
