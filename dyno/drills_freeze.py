@@ -25,9 +25,14 @@ def freeze_verdict(ctx, rec: dict) -> None:
     rec["supervisor_timeout_s"] = timeout_s
     cut = model.engine_cut(onset - 1e-9)
     was_on = _chain_closed_at(model, onset)
-    rec["hazard_arose"] = bool(was_on)
+    long_enough = timeout_s <= 0 or rec.get("freeze_s", 0.0) > timeout_s
+    rec["hazard_arose"] = bool(was_on and long_enough)
     if not was_on:
         rec["hazard_note"] = "the kill chain was already open when the Pi froze: nothing left to cut"
+        return
+    if not long_enough:
+        rec["hazard_note"] = (f"a {rec.get('freeze_s'):g} s freeze is within the Nano's {timeout_s:g} s heartbeat: "
+                              "the host was back in time, nothing had to be cut")
         return
     if cut is None:
         rec["engine_cut_by"] = None
@@ -40,7 +45,7 @@ def freeze_verdict(ctx, rec: dict) -> None:
     rec["latency_s"] = t_cut - onset
     rec["latency_basis"] = "true time from the freeze to the kill chain opening (the physics)"
     if timeout_s > 0:
-        rec["latency_bound_s"] = timeout_s + CUT_ALLOWANCE_S
+        rec["latency_bound_s"] = round(timeout_s + CUT_ALLOWANCE_S, 6)
         rec["latency_within_bound"] = rec["latency_s"] <= rec["latency_bound_s"]
     mm = getattr(model, "ignition_cut_mm", {}).get(t_cut)
     b = model.brake
@@ -72,9 +77,9 @@ def freeze_abort_latency(ctx, abort: dict, rec: dict) -> None:
     after it resumed; both instants are stated (in place)."""
     if rec.get("engine_cut_at_s") is None:
         return
-    abort["pi_safe_commanded_s"] = abort.get("safe_commanded_s")
+    abort["pi_latency_s"] = abort.get("latency_s")  # (the Pi's own safe state, when it resumed)
     abort["engine_cut_by"] = rec["engine_cut_by"]
-    abort["safe_commanded_s"] = rec["engine_cut_at_s"]
+    abort["engine_cut_at_s"] = rec["engine_cut_at_s"]
     abort["latency_s"] = rec["latency_s"]
     abort["latency_basis"] = ("true time from the freeze to the kill chain opening (the Nano's run-enable); the "
-                              "Pi's own safe state followed when it resumed (pi_safe_commanded_s)")
+                              "Pi's own safe state followed when it resumed (safe_commanded_s, pi_latency_s)")

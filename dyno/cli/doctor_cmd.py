@@ -112,36 +112,10 @@ def check_firmware(report: Report, cfg, transport) -> object | None:
                f"device {have[0]}/{have[1]} us, rig file {want[0]}/{want[1]} us"
                + ("" if have == want else " (dyno sends SET_DEBOUNCE at start)"), essential=False)
     if cfg.protocol == "v2":
-        check_run_enable(report, cfg, transport)
+        from dyno.cli.doctor_nano import check_run_enable
+
+        check_run_enable(report, OK, WARN, SKIP, cfg, transport)
     return info
-
-
-def check_run_enable(report: Report, cfg, transport) -> None:
-    """The Nano's run-enable (issue 37): does the firmware have it (its capabilities frame), will dyno arm it."""
-    from dyno.errors import FrameError
-    from dyno.protocol import v2
-    from dyno.transports.base import TransportFault
-
-    timeout_s = cfg.limits.supervisor_timeout_s
-    caps = None
-    for _ in range(3):  # (a data frame answers while the boot still probes, or from a firmware without CAPS)
-        try:
-            frame = v2.decode_frame(transport.transfer(v2.encode_command(v2.OP_CAPS), v2.FRAME_MAX))
-        except (TransportFault, FrameError, OSError):
-            continue
-        if isinstance(frame, v2.CapsFrame):
-            caps = frame
-            break
-    if caps is not None and caps.has_supervisor:
-        how = (f"dyno arms it at every boot (heartbeat {timeout_s:g} s, the [limits] over-speeds)" if timeout_s > 0
-               else "not armed: [limits] supervisor_timeout_s = 0 (its transistor must then be out of the chain)")
-        report.add("run-enable", OK, f"present (D7); {how}", essential=False)
-    elif timeout_s > 0:
-        report.add("run-enable", WARN, "absent (firmware before 2.1.0): with the Nano's transistor in the kill chain "
-                   "the engine cannot run; flash the current firmware or set [limits] supervisor_timeout_s = 0",
-                   essential=False)
-    else:
-        report.add("run-enable", SKIP, "absent, and not armed ([limits] supervisor_timeout_s = 0)", essential=False)
 
 
 def _no_info_hint(cfg, fails: dict, reader) -> str:
@@ -280,6 +254,13 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
                        f"{what} {before} -> {after}" + ("" if moved else ": reset line not wired?"))
         else:
             report.add("arduino reset", WARN, "pulsed; cannot confirm without an INFO frame", essential=False)
+        if cfg.actuator.brake_hold_relay:
+            # K3's NO contacts carry the driver's path: with the ignition killed (doctor never enables it) and
+            # the Nano not armed, the actuator cannot move; a step would prove nothing (hardware/README.md)
+            report.add("brake step", SKIP, "K3 fitted (actuator.brake_hold_relay): the actuator moves only with the "
+                       "kill chain closed, not in doctor; a run's release checks it (the end switch confirming)",
+                       essential=False)
+            return
         at_stop = _switch_sample(act)
         act.step(APPLY, cfg.actuator.step_s)
         out = _switch_sample(act)

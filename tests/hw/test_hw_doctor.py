@@ -47,13 +47,21 @@ def test_hw_doctor_missing_rig_file(tmp_path, capsys):
     assert "file: not found" in capsys.readouterr().err
 
 
-def test_hw_doctor_sim_toggle_report(capsys):
+def test_hw_doctor_sim_toggle_report(capsys, tmp_path):
+    # K3 fitted (the shipped rig): the driver's path runs through K3's NO contacts, open with the ignition
+    # killed: no step (it would prove nothing), said so
     rc = main(["doctor", "--sim", "--toggle"])
     out = capsys.readouterr().out
     assert rc == 0, out
-    for name in ("firmware", "thermometer", "arduino reset", "brake step"):
+    for name in ("firmware", "thermometer", "arduino reset"):
         assert any(line.split()[:1] == ["ok"] and name in line for line in out.splitlines()), (name, out)
+    assert any(line.split()[:1] == ["skip"] and "brake step" in line and "K3" in line for line in out.splitlines())
     assert "boot id 1 -> 2" in out and out.rstrip().endswith("rig OK")  # v2: a new boot id per boot
+    # without K3 the step runs
+    rc = main(["doctor", "--sim", "--toggle", "--rig", str(bad_rig(tmp_path, "brake_hold_relay = true",
+                                                                    "brake_hold_relay = false"))])
+    out = capsys.readouterr().out
+    assert rc == 0 and any(line.split()[:1] == ["ok"] and "brake step" in line for line in out.splitlines()), out
 
 
 def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):
@@ -96,7 +104,8 @@ def test_hw_doctor_reads_the_bme280_the_rig_file_fits(tmp_path):
 def test_hw_doctor_checks_the_nanos_run_enable():
     """The firmware's capabilities say whether it has the run-enable (issue 37); without it, a rig whose kill
     chain has the Nano's transistor cannot run the engine: a warning naming the fix."""
-    from dyno.cli.doctor_cmd import Report, check_run_enable
+    from dyno.cli.doctor_cmd import Report
+    from dyno.cli.doctor_nano import check_run_enable
     from dyno.rigconfig import load_rig
     from dyno.sim.device import EmulatedFirmware
     from dyno.transports.base import Transport
@@ -113,7 +122,7 @@ def test_hw_doctor_checks_the_nanos_run_enable():
     cfg = load_rig()
     for fw, status in ((EmulatedFirmware(), "ok"), (EmulatedFirmware(supervisor=False), "warn")):
         report = Report()
-        check_run_enable(report, cfg, Emu(fw))
+        check_run_enable(report, "ok", "warn", "skip", cfg, Emu(fw))
         (check,) = report.checks
         assert check.name == "run-enable" and check.status == status, check
     assert "supervisor_timeout_s = 0" in check.detail
