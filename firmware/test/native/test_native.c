@@ -79,6 +79,40 @@ static uint8_t parse_events(const char *s, dyno_event_t *ev)
     return n;
 }
 
+/* An ``info`` vector line's fields as the firmware's frame_info_t. */
+static frame_info_t info_from_line(const char *line)
+{
+    unsigned a = 0, b = 0, c = 0, l0 = 0, l1 = 0, g0 = 0, g1 = 0;
+    sscanf(field(line, "fw="), "%u.%u.%u", &a, &b, &c);
+    sscanf(field(line, "lock="), "%u,%u", &l0, &l1);
+    sscanf(field(line, "glitch="), "%u,%u", &g0, &g1);
+    frame_info_t info;
+    info.seq = (uint8_t)atoi(field(line, "seq="));
+    info.flags = (uint8_t)atoi(field(line, "flags="));
+    info.boot_id = (uint16_t)atoi(field(line, "boot="));
+    info.fw_major = (uint8_t)a;
+    info.fw_minor = (uint8_t)b;
+    info.fw_patch = (uint8_t)c;
+    info.uptime_ms = (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10);
+    info.debounce_primary_us = (uint16_t)atoi(field(line, "deb_p="));
+    info.debounce_secondary_us = (uint16_t)atoi(field(line, "deb_s="));
+    info.lockout[0] = (uint16_t)l0;
+    info.lockout[1] = (uint16_t)l1;
+    info.glitch[0] = (uint16_t)g0;
+    info.glitch[1] = (uint16_t)g1;
+    info.twi_timeouts = (uint8_t)atoi(field(line, "twi_timeouts="));
+    info.bus_errors = (uint8_t)atoi(field(line, "bus_errors="));
+    return info;
+}
+
+/* A ``badcmd`` vector's cause as cmd_check's error. */
+static uint8_t cmd_err_named(const char *cause)
+{
+    return strcmp(cause, "crc") == 0 ? CMD_ERR_CRC
+         : strcmp(cause, "op") == 0 ? CMD_ERR_OP
+         : strcmp(cause, "length") == 0 ? CMD_ERR_LENGTH : CMD_ERR_SHORT;
+}
+
 static void test_vectors(const char *path)
 {
     FILE *f = fopen(path, "r");
@@ -115,26 +149,7 @@ static void test_vectors(const char *path)
                 CHECK(got[i] == 0, "padding at %zu", i);
             n_frame++;
         } else if (strncmp(line, "info ", 5) == 0) {
-            unsigned a, b, c, l0, l1, g0, g1;
-            sscanf(field(line, "fw="), "%u.%u.%u", &a, &b, &c);
-            sscanf(field(line, "lock="), "%u,%u", &l0, &l1);
-            sscanf(field(line, "glitch="), "%u,%u", &g0, &g1);
-            frame_info_t info;
-            info.seq = (uint8_t)atoi(field(line, "seq="));
-            info.flags = (uint8_t)atoi(field(line, "flags="));
-            info.boot_id = (uint16_t)atoi(field(line, "boot="));
-            info.fw_major = (uint8_t)a;
-            info.fw_minor = (uint8_t)b;
-            info.fw_patch = (uint8_t)c;
-            info.uptime_ms = (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10);
-            info.debounce_primary_us = (uint16_t)atoi(field(line, "deb_p="));
-            info.debounce_secondary_us = (uint16_t)atoi(field(line, "deb_s="));
-            info.lockout[0] = (uint16_t)l0;
-            info.lockout[1] = (uint16_t)l1;
-            info.glitch[0] = (uint16_t)g0;
-            info.glitch[1] = (uint16_t)g1;
-            info.twi_timeouts = (uint8_t)atoi(field(line, "twi_timeouts="));
-            info.bus_errors = (uint8_t)atoi(field(line, "bus_errors="));
+            frame_info_t info = info_from_line(line);
             size_t wn = unhex(field(line, "hex="), want, sizeof want);
             uint8_t len = frame_encode_info(got, &info);
             CHECK(len == FRAME_INFO_LEN, "info length %u", len);
@@ -151,9 +166,7 @@ static void test_vectors(const char *path)
         } else if (strncmp(line, "badcmd ", 7) == 0) {
             size_t n = unhex(field(line, "hex="), data, sizeof data);
             const char *cause = field(line, "cause=");
-            uint8_t want_err = strcmp(cause, "crc") == 0 ? CMD_ERR_CRC
-                             : strcmp(cause, "op") == 0 ? CMD_ERR_OP
-                             : strcmp(cause, "length") == 0 ? CMD_ERR_LENGTH : CMD_ERR_SHORT;
+            uint8_t want_err = cmd_err_named(cause);
             uint8_t err = cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n));
             CHECK(err == want_err, "badcmd %s: got %u", cause, err);
             n_badcmd++;
@@ -264,28 +277,11 @@ static void test_supervisor_vectors(const char *path)
             CHECK(memcmp(p.caps_buf[p.caps_cur], want, wn) == 0, "caps as proto builds it: %s", line);
             n_caps++;
         } else if (strncmp(line, "info ", 5) == 0) {
-            unsigned a, b, c, l0, l1, g0, g1;
-            sscanf(field(line, "fw="), "%u.%u.%u", &a, &b, &c);
-            sscanf(field(line, "lock="), "%u,%u", &l0, &l1);
-            sscanf(field(line, "glitch="), "%u,%u", &g0, &g1);
-            CHECK(a == FW_VERSION_MAJOR && b == FW_VERSION_MINOR && c == FW_VERSION_PATCH, "fw version %u.%u.%u", a, b, c);
-            frame_info_t info;
-            info.seq = (uint8_t)atoi(field(line, "seq="));
-            info.flags = (uint8_t)atoi(field(line, "flags="));
+            frame_info_t info = info_from_line(line);
+            CHECK(info.fw_major == FW_VERSION_MAJOR && info.fw_minor == FW_VERSION_MINOR &&
+                  info.fw_patch == FW_VERSION_PATCH, "fw version %u.%u.%u", info.fw_major, info.fw_minor,
+                  info.fw_patch);
             CHECK(info.flags & FLAG_RUN, "info vector with RUN");
-            info.boot_id = (uint16_t)atoi(field(line, "boot="));
-            info.fw_major = (uint8_t)a;
-            info.fw_minor = (uint8_t)b;
-            info.fw_patch = (uint8_t)c;
-            info.uptime_ms = (uint32_t)strtoul(field(line, "uptime_ms="), NULL, 10);
-            info.debounce_primary_us = (uint16_t)atoi(field(line, "deb_p="));
-            info.debounce_secondary_us = (uint16_t)atoi(field(line, "deb_s="));
-            info.lockout[0] = (uint16_t)l0;
-            info.lockout[1] = (uint16_t)l1;
-            info.glitch[0] = (uint16_t)g0;
-            info.glitch[1] = (uint16_t)g1;
-            info.twi_timeouts = (uint8_t)atoi(field(line, "twi_timeouts="));
-            info.bus_errors = (uint8_t)atoi(field(line, "bus_errors="));
             size_t wn = unhex(field(line, "hex="), want, sizeof want);
             CHECK(frame_encode_info(got, &info) == FRAME_INFO_LEN && memcmp(got, want, wn) == 0, "info bytes: %s", line);
             n_info++;
@@ -308,9 +304,7 @@ static void test_supervisor_vectors(const char *path)
         } else if (strncmp(line, "badcmd ", 7) == 0) {
             size_t n = unhex(field(line, "hex="), data, sizeof data);
             const char *cause = field(line, "cause=");
-            uint8_t want_err = strcmp(cause, "crc") == 0 ? CMD_ERR_CRC
-                             : strcmp(cause, "op") == 0 ? CMD_ERR_OP
-                             : strcmp(cause, "length") == 0 ? CMD_ERR_LENGTH : CMD_ERR_SHORT;
+            uint8_t want_err = cmd_err_named(cause);
             CHECK(cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n)) == want_err, "badcmd %s", cause);
             static ring_t r;
             static proto_t p;

@@ -12,7 +12,7 @@
 #include "ring.h"
 #include "test_native.h"
 
-static uint8_t mk_cmd(uint8_t *out, uint8_t op, const uint8_t *args, uint8_t nargs)
+uint8_t mk_cmd(uint8_t *out, uint8_t op, const uint8_t *args, uint8_t nargs)
 {
     out[0] = op;
     memcpy(out + 1, args, nargs);

@@ -76,15 +76,6 @@ void test_supervisor_machine(void)
           "wrap: past the timeout");
 }
 
-static uint8_t mk(uint8_t *out, uint8_t op, const uint8_t *args, uint8_t nargs)
-{
-    out[0] = op;
-    memcpy(out + 1, args, nargs);
-    uint16_t c = crc16(out, (uint8_t)(1 + nargs));
-    out[1 + nargs] = (uint8_t)(c >> 8);
-    out[2 + nargs] = (uint8_t)c;
-    return (uint8_t)(3 + nargs);
-}
 
 static uint8_t cmd(proto_t *p, const uint8_t *c, uint8_t n) { return proto_command(p, c, n, crc16(c, n)); }
 
@@ -102,21 +93,21 @@ void test_supervisor_proto(void)
     CHECK(cmd_length(OP_SET_SUPERVISOR) == 9 && CMD_MAX_LEN == 9, "SET_SUPERVISOR is 9 bytes, the longest");
     /* The heartbeat: POLL, ACK_POLL (any boot), not INFO, CAPS, SET_DEBOUNCE, nor a bad CRC. */
     CHECK(!proto_take_beat(&p), "no beat at boot");
-    uint8_t n = mk(c, OP_POLL, NULL, 0);
+    uint8_t n = mk_cmd(c, OP_POLL, NULL, 0);
     cmd(&p, c, n);
     CHECK(proto_take_beat(&p) && !proto_take_beat(&p), "POLL is a heartbeat, taken once");
     uint8_t ack[3] = {0xBE, 0xEF, 9};
-    n = mk(c, OP_ACK_POLL, ack, 3);
+    n = mk_cmd(c, OP_ACK_POLL, ack, 3);
     cmd(&p, c, n);
     CHECK(proto_take_beat(&p), "ACK_POLL naming another boot is a heartbeat");
-    n = mk(c, OP_INFO, NULL, 0);
+    n = mk_cmd(c, OP_INFO, NULL, 0);
     cmd(&p, c, n);
-    n = mk(c, OP_CAPS, NULL, 0);
+    n = mk_cmd(c, OP_CAPS, NULL, 0);
     cmd(&p, c, n);
     uint8_t deb[4] = {0x03, 0xE8, 0x03, 0xE8};
-    n = mk(c, OP_SET_DEBOUNCE, deb, 4);
+    n = mk_cmd(c, OP_SET_DEBOUNCE, deb, 4);
     cmd(&p, c, n);
-    n = mk(c, OP_POLL, NULL, 0);
+    n = mk_cmd(c, OP_POLL, NULL, 0);
     c[2] ^= 1;
     CHECK(proto_command(&p, c, n, crc16(c, n)) == 0, "bad CRC ignored");
     CHECK(!proto_take_beat(&p), "INFO, CAPS, SET_DEBOUNCE and a corrupted POLL are no heartbeat");
@@ -124,14 +115,14 @@ void test_supervisor_proto(void)
 
     /* SET_SUPERVISOR: the ISR copies, the loop takes it once; timeout 0 is ignored and counted. */
     uint8_t a[6] = {0x37, 0xCD, 0x1E, 0x0C, 0x00, 0xC8};
-    n = mk(c, OP_SET_SUPERVISOR, a, 6);
+    n = mk_cmd(c, OP_SET_SUPERVISOR, a, 6);
     CHECK(n == 9 && cmd(&p, c, n) == OP_SET_SUPERVISOR, "SET_SUPERVISOR accepted");
     CHECK(proto_take_supervisor(&p, args) && args[0] == 14285 && args[1] == 7692 && args[2] == 200,
           "args taken: %u %u %u", args[0], args[1], args[2]);
     CHECK(!proto_take_supervisor(&p, args), "taken once");
     uint8_t bad_before = p.cmds_bad;
     uint8_t z[6] = {0x37, 0xCD, 0x1E, 0x0C, 0x00, 0x00};
-    n = mk(c, OP_SET_SUPERVISOR, z, 6);
+    n = mk_cmd(c, OP_SET_SUPERVISOR, z, 6);
     cmd(&p, c, n);
     CHECK(!proto_take_supervisor(&p, args) && p.cmds_bad == bad_before + 1, "timeout 0: ignored, counted bad");
     CHECK(cmd(&p, c, 8) == 0, "8 bytes: a length error");
@@ -160,7 +151,7 @@ void test_supervisor_proto(void)
     /* SET_CHANNELS cannot arm it: the supervisor is not an optional channel the host enables. */
     uint8_t mask = 0x03;
     proto_set_run(&p, 0, 0);
-    n = mk(c, OP_SET_CHANNELS, &mask, 1);
+    n = mk_cmd(c, OP_SET_CHANNELS, &mask, 1);
     cmd(&p, c, n);
     proto_service(&p, 8000, 8);
     CHECK(p.caps_buf[p.caps_cur][8] == 0, "SET_CHANNELS(0x03) enables nothing here");
