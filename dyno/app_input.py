@@ -38,12 +38,19 @@ def load_input_channel(rig_cfg):
 
 
 def sim_params_for(params, rig_cfg):
-    """The simulated rig's parameters with the channel fitted when rig.toml declares it."""
-    if getattr(rig_cfg, "input_torque", None) is None:
+    """The simulated rig's parameters with the channel fitted when rig.toml declares it, and at its site
+    (``[ambient] altitude_m``: where the rig stands is a fact of its world, not knowledge of the host's)."""
+    site_m = getattr(getattr(rig_cfg, "ambient", None), "altitude_m", None)
+    if getattr(rig_cfg, "input_torque", None) is None and site_m is None:
         return params
     from dyno.sim.physics import RigParams
 
-    return dataclasses.replace(params if params is not None else RigParams(), input_torque_fitted=True)
+    params = params if params is not None else RigParams()
+    if site_m is not None and params.site_altitude_m is None:
+        params = dataclasses.replace(params, site_altitude_m=float(site_m))
+    if getattr(rig_cfg, "input_torque", None) is not None:
+        params = dataclasses.replace(params, input_torque_fitted=True)
+    return params
 
 
 def input_meta(channel) -> dict:
