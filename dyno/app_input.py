@@ -87,6 +87,6 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
         ch = state["channel"]
         point.update(input_point(streams, point, ch))
         rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
-        point.update(input_systematic(point, rel_out, ch))
+        point.update(input_systematic(point, rel_out, ch, uncertainty.get("driveline_loss_max_frac") or 0.0))
 
     controller.point_hooks.append(hook)

@@ -39,10 +39,12 @@ def summarize(ctx, drills_from: int = 0) -> dict:
                 zi = input_zero_check(ctx.poller.streams, zc, channel)
             out["torque_zero_input"] = zi
         if zc.get("correct"):
+            from dyno.analysis.systematic import run_basis
             from dyno.analysis.zero_check import corrected_point_keys
 
+            basis = run_basis(getattr(ctx, "ambient", None), getattr(ctx, "rig_cfg", None))
             for pub, p in zip(out["points"], ctx.controller.points):
-                pub.update(corrected_point_keys(p, zc))
+                pub.update(corrected_point_keys(p, zc, basis))
     out["link"] = link_document(ctx)
     out["supervisor"] = supervisor_document(reader)
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)

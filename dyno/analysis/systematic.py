@@ -104,6 +104,15 @@ def interval_basis(unc: dict | None) -> dict:
             "driveline_max_frac": float(unc.get("driveline_loss_max_frac") or 0.0)}
 
 
+def run_basis(ambient: dict | None, rig_cfg) -> dict:
+    """The ``uncertainty`` record's interval inputs (as the composition root states them in meta.json) from a
+    run's ``ambient`` and its rig file: for code that holds the run's result, not its meta."""
+    amb, drv = getattr(rig_cfg, "ambient", None), getattr(rig_cfg, "driveline", None)
+    known = (ambient or {}).get("j1349_factor") is not None
+    return {"air_day": None if known else {"altitude_m": getattr(amb, "altitude_m", None)},
+            "driveline_loss_max_frac": getattr(drv, "loss_max_frac", 0.0)}
+
+
 def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool = True, drop=(),
                        extra95: float = 0.0) -> list | None:
     """``K_interval95`` of an efficiency variant ``value`` of ``point``: the main efficiency's terms scaled

@@ -215,9 +215,12 @@ def run(args) -> int:
             web.end(result)
     if driven_loss is not None:
         from dyno.analysis.coastdown import driven_loss_keys
+        from dyno.analysis.systematic import run_basis
+        from dyno.rigconfig import load_rig
 
+        basis = run_basis(result.get("ambient"), load_rig(getattr(args, "rig", None)))
         for p in result["points"]:
-            p.update(driven_loss_keys(p, driven_loss))
+            p.update(driven_loss_keys(p, driven_loss, basis))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
