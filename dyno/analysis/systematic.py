@@ -47,8 +47,8 @@ import statistics
 from statistics import NormalDist
 
 #: The interval's quadrature: the normal's and the driveline's equal-probability midpoints.
-_Z = tuple(NormalDist().inv_cdf((i + 0.5) / 40) for i in range(40))
-_N_DRIVELINE = 16
+_Z = tuple(NormalDist().inv_cdf((i + 0.5) / 24) for i in range(24))
+_N_DRIVELINE = 12
 
 
 def calibration_rel_u(history, entry) -> float:
@@ -77,12 +77,13 @@ def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac:
     if not (isinstance(value, (int, float)) and math.isfinite(value)):
         return None
     sym95 = sym95 if isinstance(sym95, (int, float)) and math.isfinite(sym95) else 0.0
-    if value <= 0.0 or (not air_factors and not driveline_max_frac):
+    no_air = air_factors is None or len(air_factors) == 0
+    if value <= 0.0 or (no_air and not driveline_max_frac):
         lo, hi = value - sym95, value + sym95
     else:
         import numpy as np
 
-        a = np.asarray(air_factors if air_factors else (1.0,), dtype=float)
+        a = np.asarray((1.0,) if no_air else air_factors, dtype=float)
         lm = float(driveline_max_frac or 0.0)
         d = 1.0 / (1.0 - lm * (np.arange(_N_DRIVELINE) + 0.5) / _N_DRIVELINE)
         e = 1.0 + np.asarray(_Z) * (0.5 * sym95 / value)
@@ -122,7 +123,7 @@ def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool 
     if not (isinstance(value, (int, float)) and math.isfinite(value)):
         return None
     basis = interval_basis(unc)
-    skip = {"driveline", *drop} | ({"air"} if basis["air_factors"] else set())
+    skip = {"driveline", *drop} | ({"air"} if basis["air_factors"] is not None else set())
     k = value / eta if isinstance(eta, (int, float)) and math.isfinite(eta) and eta else 1.0
     sym95 = math.sqrt(sum((k * v) ** 2 for n, v in terms.items() if n not in skip and isinstance(v, (int, float))
                           and math.isfinite(v)) + (extra95 or 0.0) ** 2)
@@ -165,7 +166,7 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
     sys95 = math.sqrt(cal * cal + emap * emap + air * air + drive * drive)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
-    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors else air * air))
+    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors is not None else air * air))
     return {"efficiency_sys95": sys95, "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
             "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": math.hypot(ci, sys95),
             "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
