@@ -1,6 +1,6 @@
 r"""The systematic part of a point's efficiency uncertainty, stated beside the statistical CI.
 
-``efficiency_ci95`` is the scatter of one window; it shrinks with measuring longer.  Two terms do not,
+``efficiency_ci95`` is the scatter of one window; it shrinks with measuring longer.  Four terms do not,
 and they are shared by every point of a run (so they shift a whole curve, not one point):
 
 * the **torque calibration**'s slope (efficiency ∝ torque ∝ 1/slope): its reproducibility, the relative
@@ -11,8 +11,9 @@ and they are shared by every point of a run (so they shift a whole curve, not on
   measured; a map measured on a dyno of stated accuracy allows less).
 
 * the **air** (efficiency ∝ CF, the SAE J1349 factor the map is taken to the run's day by): what the
-  day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), a bound
-  over a plausible day (:mod:`dyno.analysis.air`).
+  day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), the factor's
+  distribution over a plausible day (:mod:`dyno.analysis.air`; ``efficiency_sys95_air`` is half its 95 %
+  range, the interval below its quantiles).
 
 Each is given as a 95 % half-width (coverage factor 2), a fraction like ``efficiency``:
 ``efficiency_sys95_calibration``, ``efficiency_sys95_engine_map``, ``efficiency_sys95_air`` and, in
