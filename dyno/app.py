@@ -229,7 +229,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     site_m = rig_cfg.ambient.altitude_m  # the interval's asymmetric terms (dyno.analysis.systematic.interval_basis)
     holder["uncertainty"].update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else
-                                 {"altitude_m": site_m}, driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac)
+                                 {"altitude_m": site_m}, driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac,
+                                 driveline_drag_max_nm=rig_cfg.driveline.drag_max_nm)
     link_meter = None
     if opts.sim:  # each transaction charged its wire time at the rig file's clock (dyno.transports.budget)
         from dyno.transports.budget import LinkMeter, MeteredBus
@@ -313,7 +314,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
 
         controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
             point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
-            unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc))))
+            unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc, point))))
     app_input.attach(ctx, input_channel, reader, unc or {})  # after the map's terms: its figure stays beside
     if sim is not None:
         poller.listeners.append(sim.truth)

@@ -67,7 +67,7 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
     if channel is None:
         return
     from dyno.analysis.input_torque import input_point, input_systematic, input_zero
-    from dyno.analysis.systematic import calibration_rel_for
+    from dyno.analysis.systematic import calibration_rel_for, driveline_bound
 
     if getattr(reader, "version", None) == 2:
         reader.want_input = True
@@ -87,6 +87,6 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
         ch = state["channel"]
         point.update(input_point(streams, point, ch))
         rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
-        point.update(input_systematic(point, rel_out, ch, uncertainty.get("driveline_loss_max_frac") or 0.0))
+        point.update(input_systematic(point, rel_out, ch, driveline_bound(point, uncertainty)))
 
     controller.point_hooks.append(hook)

@@ -75,16 +75,16 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
 
             p.update(point_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
                                                              else None), unc["engine_map_rel"],
-                                      air_rel, **interval_basis(_basis(unc, ambient, run.meta))))
+                                      air_rel, **interval_basis(_basis(unc, ambient, run.meta), p)))
         if input_channel is not None:  # as the run did: the measured input power, the map's figure beside
             from dyno.analysis.input_torque import input_point, input_systematic
-            from dyno.analysis.systematic import calibration_rel_for
+            from dyno.analysis.systematic import calibration_rel_for, driveline_bound
 
             p.update(input_point(run.streams, p, input_channel))
             if unc:
                 p.update(input_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
                                                                  else None), input_channel,
-                                          unc.get("driveline_loss_max_frac") or 0.0))
+                                          driveline_bound(p, unc)))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still

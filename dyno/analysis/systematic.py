@@ -25,10 +25,11 @@ statistical ``efficiency_ci95``:
 and ``efficiency_u95_terms`` lists each part's half-width (``statistical``, ``calibration``,
 ``engine_map``, ``air``, ``driveline``).
 
-* the **driveline** between the CVT and the gauge (chain, bearings; ``rig.toml [driveline]
-  loss_max_frac``): a loss only ever lowers the reading, so its term is one-sided: the truth is the reading
-  times ``1/(1 − L)``, ``L`` uniform on ``[0, loss_max_frac]``; its ``driveline`` entry is that upward
-  extent, ``η·(1/(1 − L_max) − 1)``.  A coast-down's ``driven_loss.json`` measures the loss instead
+* the **driveline** between the CVT and the gauge (chain, bearings; ``rig.toml [driveline]``): a loss only
+  ever lowers the reading, so its term is one-sided: the truth is the reading times ``1/(1 − L)``, ``L``
+  uniform on ``[0, L_max]``, ``L_max = loss_max_frac + drag_max_nm/|T_s|`` (the chain's share of the load
+  and the bearings' drag, :func:`driveline_bound`); its ``driveline`` entry is that upward extent,
+  ``η·(1/(1 − L_max) − 1)``.  A coast-down's ``driven_loss.json`` measures the loss instead
   (``efficiency_loss_corrected``, whose interval carries the correction's own residual, not this term).
 
 The **interval** ``efficiency_interval95 = [low, high]`` is what the truth is said to lie in at 95 %:
@@ -94,16 +95,29 @@ def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac:
     return [max(0.0, lo), min(1.0, hi)]
 
 
-def interval_basis(unc: dict | None) -> dict:
+def driveline_bound(point: dict | None, unc: dict | None) -> float:
+    """The driveline's largest loss at ``point``, a fraction of what the gauge reads: the load-proportional
+    part (``driveline_loss_max_frac``: the chain) plus the bearings' and seals' drag torque
+    (``driveline_drag_max_nm``, at the secondary) over the point's torque — a drag is a larger share at light
+    load.  At most 0.5; the fraction alone without a finite torque."""
+    unc = unc or {}
+    frac, drag = float(unc.get("driveline_loss_max_frac") or 0.0), float(unc.get("driveline_drag_max_nm") or 0.0)
+    t = (point or {}).get("torque_secondary_nm")
+    if drag and isinstance(t, (int, float)) and math.isfinite(t) and abs(t) > 0.0:
+        frac += drag / abs(t)
+    return min(0.5, frac)
+
+
+def interval_basis(unc: dict | None, point: dict | None = None) -> dict:
     """The interval's asymmetric inputs from a run's ``uncertainty`` record (meta.json): the uncorrected air's
     factor quantiles (``air_day``: the site's ``altitude_m`` when the air is unknown, absent when known) and
-    the driveline bound (``driveline_loss_max_frac``)."""
+    the driveline's bound at ``point`` (:func:`driveline_bound`)."""
     from dyno.analysis.air import uncorrected_factors
 
     unc = unc or {}
     day = unc.get("air_day")
     return {"air_factors": uncorrected_factors(day.get("altitude_m")) if isinstance(day, dict) else None,
-            "driveline_max_frac": float(unc.get("driveline_loss_max_frac") or 0.0)}
+            "driveline_max_frac": driveline_bound(point, unc)}
 
 
 def run_basis(ambient: dict | None, rig_cfg) -> dict:
@@ -112,7 +126,8 @@ def run_basis(ambient: dict | None, rig_cfg) -> dict:
     amb, drv = getattr(rig_cfg, "ambient", None), getattr(rig_cfg, "driveline", None)
     known = (ambient or {}).get("j1349_factor") is not None
     return {"air_day": None if known else {"altitude_m": getattr(amb, "altitude_m", None)},
-            "driveline_loss_max_frac": getattr(drv, "loss_max_frac", 0.0)}
+            "driveline_loss_max_frac": getattr(drv, "loss_max_frac", 0.0),
+            "driveline_drag_max_nm": getattr(drv, "drag_max_nm", 0.0)}
 
 
 def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool = True, drop=(),
@@ -123,7 +138,7 @@ def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool 
     eta, terms = point.get("efficiency"), point.get("efficiency_u95_terms") or {}
     if not (isinstance(value, (int, float)) and math.isfinite(value)):
         return None
-    basis = interval_basis(unc)
+    basis = interval_basis(unc, point)
     skip = {"driveline", *drop} | ({"air"} if basis["air_factors"] is not None else set())
     k = value / eta if isinstance(eta, (int, float)) and math.isfinite(eta) and eta else 1.0
     sym95 = math.sqrt(sum((k * v) ** 2 for n, v in terms.items() if n not in skip and isinstance(v, (int, float))

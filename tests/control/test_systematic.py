@@ -67,3 +67,15 @@ def test_the_driveline_term_is_one_sided_in_u95_and_the_interval():
     assert s["efficiency_u95_terms"]["driveline"] == pytest.approx(0.8 * (1 / 0.96 - 1))
     lo, hi = s["efficiency_interval95"]
     assert hi - 0.8 > 0.8 - lo > 0  # extends further upward
+
+
+def test_the_driveline_bound_is_the_chains_share_plus_the_bearings_drag_over_the_torque():
+    from dyno.analysis.systematic import driveline_bound, interval_basis
+
+    unc = {"driveline_loss_max_frac": 0.03, "driveline_drag_max_nm": 0.25}
+    assert driveline_bound({"torque_secondary_nm": 25.0}, unc) == pytest.approx(0.04)
+    assert driveline_bound({"torque_secondary_nm": 5.0}, unc) == pytest.approx(0.08)  # light load: the drag
+    assert driveline_bound({"torque_secondary_nm": math.nan}, unc) == pytest.approx(0.03)
+    assert driveline_bound({"torque_secondary_nm": 0.01}, unc) == 0.5
+    assert interval_basis(unc, {"torque_secondary_nm": 5.0})["driveline_max_frac"] == pytest.approx(0.08)
+    assert interval_basis({}, {"torque_secondary_nm": 5.0}) == {"air_factors": None, "driveline_max_frac": 0.0}
