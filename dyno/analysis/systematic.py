@@ -179,12 +179,20 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
                 "efficiency_interval95": None}
     cal, emap, air = 2.0 * eff * calibration_rel, 2.0 * eff * engine_map_rel, 2.0 * eff * (air_rel or 0.0)
     drive = eff * (1.0 / (1.0 - driveline_max_frac) - 1.0) if driveline_max_frac else 0.0
-    sys95 = math.sqrt(cal * cal + emap * emap + air * air + drive * drive)
+    # any other symmetric term the point already states (e.g. a part-throttle curve's friction estimate)
+    extra = {k[len("efficiency_sys95_"):]: v for k, v in point.items() if k in _EXTRA_SYS95
+             and isinstance(v, float) and math.isfinite(v) and v > 0.0}
+    sq_extra = sum(v * v for v in extra.values())
+    sys95 = math.sqrt(cal * cal + emap * emap + air * air + drive * drive + sq_extra)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
-    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors is not None else air * air))
+    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors is not None else air * air) + sq_extra)
     return {"efficiency_sys95": sys95, "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
             "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": math.hypot(ci, sys95),
             "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
-                                     "driveline": drive},
+                                     "driveline": drive, **extra},
             "efficiency_interval95": interval95(eff, sym95, air_factors, driveline_max_frac)}
+
+
+#: symmetric 95 % terms a point may carry from its reduction, combined here when present
+_EXTRA_SYS95 = ("efficiency_sys95_friction",)

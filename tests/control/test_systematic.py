@@ -79,3 +79,11 @@ def test_the_driveline_bound_is_the_chains_share_plus_the_bearings_drag_over_the
     assert driveline_bound({"torque_secondary_nm": 0.01}, unc) == 0.5
     assert interval_basis(unc, {"torque_secondary_nm": 5.0})["driveline_max_frac"] == pytest.approx(0.08)
     assert interval_basis({}, {"torque_secondary_nm": 5.0}) == {"air_factors": None, "driveline_max_frac": 0.0}
+
+
+def test_a_term_the_point_already_states_is_combined():
+    base = point_systematic({"efficiency": 0.5, "efficiency_ci95": 0.01}, 0.015, 0.05)
+    s = point_systematic({"efficiency": 0.5, "efficiency_ci95": 0.01, "efficiency_sys95_friction": 0.03}, 0.015, 0.05)
+    assert s["efficiency_u95_terms"]["friction"] == 0.03
+    assert s["efficiency_u95"] == pytest.approx(math.hypot(base["efficiency_u95"], 0.03))
+    assert s["efficiency_interval95"][1] - 0.5 == pytest.approx(s["efficiency_u95"])
