@@ -69,3 +69,18 @@ def test_the_reader_sees_function_level_imports(tmp_path):
                  "    from dyno.cli.progress import (eta_now,\n        points_text)\n")
     assert imported_modules(f) == {"dyno.a", "dyno.a.b", "dyno.d", "dyno.cli.progress", "dyno.cli.progress.eta_now",
                                    "dyno.cli.progress.points_text"}
+
+
+# the issue's own check, as `grep` reads it: the text too (a module named in a string a child process runs counts)
+GREP_RULES = [("dyno/ui", r"(from|import)\s+dyno\.cli\b"), ("dyno/web", r"(from|import)\s+dyno\.(cli|ui)\b"),
+              ("dyno/report", r"(from|import)\s+dyno\.(cli|ui)\b")]
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("package, pattern", GREP_RULES)
+def test_grep_finds_no_upward_import(package, pattern):
+    import re
+
+    bad = [f"{p.relative_to(DYNO.parent)}:{n}: {line.strip()}" for p in sorted((DYNO.parent / package).rglob("*.py"))
+           for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(pattern, line)]
+    assert not bad, "upward imports:\n" + "\n".join(bad)

@@ -213,11 +213,9 @@ def run(args) -> int:
             bar.finish()
         if web is not None:
             web.end(result)
-    if driven_loss is not None:
-        from dyno.analysis.coastdown import driven_loss_keys
+    from dyno.run_after import add_driven_loss
 
-        for p in result["points"]:
-            p.update(driven_loss_keys(p, driven_loss))
+    add_driven_loss(result, driven_loss)
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
@@ -285,27 +283,22 @@ def _plan(args):
 
 def _write_report(result: dict, *, announce: bool) -> None:
     """report.html into the run directory, last of all: a failure is one stderr line, never another exit code."""
-    run_dir = result.get("run_dir")
-    try:
-        if not run_dir or not Path(run_dir, "meta.json").is_file():
-            raise FileNotFoundError(f"no run directory at {run_dir}")
-        from dyno.report.writer import write_report
+    from dyno.run_after import write_run_report
 
-        path = write_report(run_dir)
-    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  the test is on disk; its report is extra
-        why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
-        try:
-            print(f"dyno run: {run_dir}: report.html not written: {why} (`dyno report RUN` retries)",
-                  file=sys.stderr)
-        except OSError:
-            pass
-        return
-    if announce:
+    path = write_run_report(result.get("run_dir"), _warn)
+    if path is not None and announce:
         try:
             print(f"report: {path}")
             sys.stdout.flush()
         except OSError:  # a closed pipe: the report is on disk all the same
             pass
+
+
+def _warn(line: str) -> None:
+    try:
+        print(f"dyno run: {line}", file=sys.stderr)
+    except OSError:
+        pass
 
 
 def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
@@ -321,10 +314,10 @@ def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
 
 def _index(result: dict) -> None:
     """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
-    from dyno.library.index import index_after_run
+    from dyno.run_after import index_run
 
     if result.get("run_dir"):
-        index_after_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
+        index_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
 
 
 def air_line(amb: dict) -> str:
