@@ -305,12 +305,21 @@ class SimRig:
 
     def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v2",
                  faults: BusFaults | None = None, clock_offset_us: int = 0, clock_ppm: float = 0.0,
-                 full_stroke_s: float = 8.0, run_enable_wired: bool = False) -> None:
+                 full_stroke_s: float = 8.0, run_enable_wired: bool = False, brake_hold_relay: bool | None = None,
+                 pace: float = 1.0) -> None:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating
 
         self.model = RigModel(params, seed=seed)
+        if brake_hold_relay is not None:  # K3: wiring, as rig.toml declares it
+            self.model.brake_hold_relay = brake_hold_relay
+        # Paced at N x real time on a real-time loop (dyno ui --speed N): each real-time poll spans N x more
+        # rig time, so the ring holds the same span of rig time it has at 1x (64 events ~ 0.28 s of rig
+        # events; otherwise a poll gap of a few ms overflows it: an artefact of pacing, not the link), and
+        # the Nano's heartbeat keeps its real-time timeout
+        ring = max(64, math.ceil(64 * pace))
         self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
-                                         input_fitted=self.model.input_fitted)
+                                         input_fitted=self.model.input_fitted, ring_capacity=ring,
+                                         pace=max(1.0, pace))
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
         if run_enable_wired and self.firmware.has_supervisor:
             self.model.nano_enable = False  # off until the host's limits arrive
