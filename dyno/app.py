@@ -15,9 +15,9 @@ from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
 from dyno.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
-from dyno.ambient import ambient_sensor, run_ambient
+from dyno.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.ambient import log_end as log_end_ambient
-from dyno.run_signals import install_run_signal_handlers
+from dyno.run_signals import RunSignals
 from dyno.app_safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
@@ -229,7 +229,8 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      protocol=protocol, faults=faults,
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s,
                      run_enable_wired=rig_cfg.limits.supervisor_timeout_s > 0,  # D7 in the kill chain
-                     brake_hold_relay=rig_cfg.actuator.brake_hold_relay, pace=speed)  # K3: as rig.toml declares it
+                     brake_hold_relay=rig_cfg.actuator.brake_hold_relay, pace=speed,  # K3: as rig.toml declares it
+                     bme280_address=sim_bme280_address(rig_cfg))  # (the air sensor too)
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
             from dyno.app_safety import twin_outputs
@@ -249,7 +250,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
     map_source = engine_map.source
     input_channel = app_input.load_input_channel(rig_cfg)  # rig.toml [input_torque], or None
-    ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw, seed=opts.seed)
+    ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw)
     ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
@@ -389,21 +390,21 @@ def _asdict(obj):
 
 async def run_test_async(opts: RunOptions) -> dict:
     loop = asyncio.get_running_loop()
-    built: dict = {}
     # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
     # then ends the run like one that came a moment later (not a directory holding a `start` alone).
-    restore_signals, signals_armed = (install_run_signal_handlers(lambda: built.get("ctx"), loop)
-                                      if opts.handle_signals else (lambda: None, lambda: None))
+    signals = RunSignals(loop).install() if opts.handle_signals else None
     try:
-        ctx = built["ctx"] = build(opts, loop.time)
+        ctx = build(opts, loop.time)
     except BaseException:
-        restore_signals()
+        if signals is not None:
+            signals.restore()
         raise
     if opts.setup:
         opts.setup(ctx)
     stop_watchdog = start_watchdog(ctx, loop)
     arm_drills(ctx, opts.drills, loop)
-    signals_armed()
+    if signals is not None:
+        signals.armed(ctx)
     poll_task = asyncio.create_task(ctx.poller.run(), name="poller")
     status = "fail"
     try:
@@ -428,7 +429,8 @@ async def run_test_async(opts: RunOptions) -> dict:
         ctx.poller.stop()
         await asyncio.gather(poll_task, return_exceptions=True)
         stop_watchdog()
-        restore_signals()
+        if signals is not None:
+            signals.restore()
         log_end_ambient(ctx)  # the air after the run, beside the reading it was corrected to
         result = summarize(ctx)
         record_safety(ctx, result)
@@ -457,15 +459,7 @@ def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     from dyno.drills import DrillRunner
 
-    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
-    poller = ctx.poller
-
-    def first(events, now_s: float) -> None:
-        if poller.last_valid_frame_s is not None:
-            ctx.drills.on_first_frame(poller.last_valid_frame_s)
-            poller.listeners.remove(first)
-
-    poller.listeners.append(first)
+    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(ctx.poller)
 
 
 def run_test(opts: RunOptions) -> dict:

@@ -106,14 +106,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     if drills:
         from dyno.drills import DrillRunner
 
-        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
-
-        def first(events, now_s: float) -> None:
-            if poller.last_valid_frame_s is not None:
-                ctx.drills.on_first_frame(poller.last_valid_frame_s)
-                poller.listeners.remove(first)
-
-        poller.listeners.append(first)
+        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(poller)
     return ctx
 
 

@@ -63,19 +63,26 @@ class LiveSession(RearmMixin):
         self.run_dir_removed = False  # set by close() when a simulated session never started a test
         self.started = False
         self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
-        self._old_signals: dict = {}
         # A hang-up while the rig is being built (run directory, pins, bus) must not kill the process with
         # the run log half-made: the handlers go in first, a signal that comes before the controller
         # exists waits for it (a run directory with a `start` record alone was left behind otherwise).
-        self._signal_pending: int | None = None
-        self._install_signal_handlers()
+        # SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone), SIGINT sent by ``kill -INT``: safe state, abort
+        # record, exit 128+N (dyno.run_signals; the Ctrl+C *key* reaches a Textual app as a key: the E-STOP).
+        import threading
+
+        from dyno.run_signals import RunSignals
+
+        self._signals = None
+        if threading.current_thread() is threading.main_thread():
+            self._signals = RunSignals(loop, closed="session closed", on_signal=self._on_hangup,
+                                       after_abort=self._signal_to_app, record=False).install()
         try:
             self._build(opts, run_opts, build, loop)
         except BaseException:
             self._restore_signals()
             raise
-        if self._signal_pending is not None:
-            loop.call_soon(self._on_signal_loop, self._signal_pending)
+        if self._signals is not None:
+            self._signals.armed(self.ctx)
 
     def _build(self, opts, run_opts, build, loop) -> None:
         if opts.sim:  # paced from the scaled clock by the root: plan, time scale, actuators' clock, polls, ring
@@ -136,47 +143,17 @@ class LiveSession(RearmMixin):
         self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
 
-    def _install_signal_handlers(self) -> None:
-        """SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone) and SIGINT sent by ``kill -INT``:
-        safe state, abort record, exit 128+N.  (The Ctrl+C *key* reaches a Textual app as a key in
-        raw mode, not as SIGINT: it is the E-STOP.)
-        """
-        import signal
-        import threading
-
-        if threading.current_thread() is not threading.main_thread():
-            return
-
-        def handler(signum, frame) -> None:
-            if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
-                from dyno.ui.common import detach_terminal
-
-                detach_terminal()
-                self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
-            if not hasattr(self, "controller"):  # still building: the session acts once it exists
-                if self._signal_pending is None:
-                    self._signal_pending = signum
-                return
-            if self.ctx.sim is None or self.ctx.pi_outputs:  # the Pi's output code (rig or twin): at once
-                from dyno.control.outputs import enter_safe_state
-
-                enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
-            self.loop.call_soon_threadsafe(self._on_signal_loop, signum)
-
-        for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
-            self._old_signals[sig] = signal.signal(sig, handler)
-
-    def _on_signal_loop(self, signum: int) -> None:
+    def _on_hangup(self, signum: int) -> None:
         import signal
 
-        name = signal.Signals(signum).name
-        self.controller.abort("signal", f"{name} received: safe state, session closed")
-        if self.on_signal is not None:
-            self.on_signal(128 + signum)
-        else:  # the app has not hooked the session yet: it will find the abort (asked again on the next turn)
-            self.loop.call_later(0.05, self._signal_to_app, signum)
+        if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
+            from dyno.ui.common import detach_terminal
+
+            detach_terminal()
+            self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
 
     def _signal_to_app(self, signum: int) -> None:
+        """After a signal's abort: the app quits with 128+N (asked again until it has hooked the session)."""
         if self.closed:
             return
         if self.on_signal is not None:
@@ -185,11 +162,8 @@ class LiveSession(RearmMixin):
             self.loop.call_later(0.05, self._signal_to_app, signum)
 
     def _restore_signals(self) -> None:
-        import signal
-
-        for sig, old in self._old_signals.items():
-            signal.signal(sig, old)
-        self._old_signals = {}
+        if self._signals is not None:
+            self._signals.restore()
 
     @property
     def finished(self) -> bool:
