@@ -355,9 +355,9 @@ def check_data(report: Report, cfg, transport, clock, operator) -> None:
     from dyno.hw import doctor_data
     from dyno.hw.clock import MonotonicClock
 
-    reader = make_reader(cfg.protocol, transport)
     input_expected = getattr(cfg, "input_torque", None) is not None and cfg.protocol == "v2"
-    reader.want_input = input_expected  # the engine-side converter asked for, as a run asks at boot
+    # the engine-side converter asked for, as a run asks at boot
+    reader = make_reader(cfg.protocol, transport, want_input=input_expected)
     for name, ok, detail in doctor_data.check(reader, clock or MonotonicClock(), cfg.poll_hz, operator,
                                               input_expected=input_expected):
         report.add(name, OK if ok else FAIL, detail)

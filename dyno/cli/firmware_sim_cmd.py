@@ -128,9 +128,8 @@ def simulate(args) -> dict:
     # (COBS packets, dyno.transports.serial) wired to the MCU's UART.
     tr = SimavrSerialTransport(args.elf, **kw) if args.transport == "serial" else SimavrTransport(args.elf, **kw)
     try:
-        reader = make_reader(args.protocol, tr, supervisor_command=sup.command if sup else None)
-        if getattr(args, "input_hz", 0.0) > 0 and args.protocol == "v2":
-            reader.want_input = True  # as a rig.toml with [input_torque] does
+        reader = make_reader(args.protocol, tr, supervisor_command=sup.command if sup else None,
+                             want_input=getattr(args, "input_hz", 0.0) > 0)  # as a rig.toml with [input_torque]
         times = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: [], v1.CH_ADC: [], CH_INPUT: []}
         input_codes: list = []
         gaps = {v1.CH_PRIMARY: [], v1.CH_SECONDARY: []}  # per edge: its period spans lost events

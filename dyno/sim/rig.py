@@ -320,20 +320,20 @@ class SimRig:
         # events; otherwise a poll gap of a few ms overflows it: an artefact of pacing, not the link), and
         # the Nano's heartbeat keeps its real-time timeout
         ring = max(64, math.ceil(64 * pace))
+        d7_wired = run_enable_wired and protocol == "v2"  # (the Nano's supervisor: v2 firmware)
+
+        def _d7(on: bool, t_s: float, cause: str) -> None:
+            self.model.nano_enable = on
         self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
                                          input_fitted=self.model.input_fitted, ring_capacity=ring,
-                                         pace=max(1.0, pace))
+                                         pace=max(1.0, pace), on_run_enable=_d7 if d7_wired else None)
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
         if bme280_address is not None:  # the simulated air sensor, only when the rig file fits one
             from dyno.sim.bme280_chip import SimBME280
 
             self.bus.devices[bme280_address] = SimBME280(self.model.world, seed if bme280_seed is None else bme280_seed)
-        if run_enable_wired and self.firmware.has_supervisor:
+        if d7_wired:
             self.model.nano_enable = False  # off until the host's limits arrive
-
-            def _d7(on: bool, t_s: float, cause: str) -> None:
-                self.model.nano_enable = on
-            self.firmware.on_run_enable = _d7
         self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)
         self.truth = TruthRecorder(self.model)
         self.protocol = protocol
