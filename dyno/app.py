@@ -67,6 +67,7 @@ class RunSpec:
     # simulated rig's time is the loop's (a virtual loop), or the real rig
     clock: object = None
     on_belt_table_build: object = None  # callable(tune name): the simulated CVT solves its table (a minute)
+    runners: dict = field(default_factory=dict)  # this run's own plan modes beside the shipped ones (tests, benches)
 
 
 RunOptions = RunSpec  # (the name the tests and benches use)
@@ -319,7 +320,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     controller = TestController(poller, actuators, calibration, engine_map, plan=plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None,
-                                runner_for=plans.runner_for, from_idle=plans.FROM_IDLE,  # (the plan modes)
+                                runner_for=_runner_for(opts.runners), from_idle=plans.FROM_IDLE,  # (the plan modes)
                                 rig=rig_cfg, control=rig_cfg.control, inertia=rig_cfg.inertia,  # [control], [inertia]
                                 tune_path=tune_path,  # the characterisations compare with the tune's prediction
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
@@ -355,6 +356,13 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
 
         reader.session.frame_listeners.append(audit)
     return ctx
+
+
+def _runner_for(extra: dict):
+    """The plan modes' runners: the shipped table (dyno.control.registry), with the spec's own modes."""
+    if not extra:
+        return plans.runner_for
+    return lambda mode: extra[mode] if mode in extra else plans.runner_for(mode)
 
 
 def _thermometer(bus, address: int):
