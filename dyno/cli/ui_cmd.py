@@ -61,23 +61,24 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     if getattr(args, "mock_pins", False) and not args.sim:
         raise ConfigError("command line", "--mock-pins", "the mock pins drive the simulated rig only (--sim)")
-    opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
-                       rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
-                       engine_map_path=args.engine_map, drills=drills, plan=plan,
-                       mock_pins=bool(getattr(args, "mock_pins", False)))
     from dyno.cli.run_cmd import air_options
 
     sim_kw: dict = {}
-    opts.ambient, bad = air_options(args, sim_kw, "dyno ui")
+    ambient, bad = air_options(args, sim_kw, "dyno ui")
     if bad:  # one line, exit 2, before the screen is taken over
         import sys
 
         print(bad, file=sys.stderr)
         return 2
+    sim_params = None
     if sim_kw and args.sim:
         from dyno.sim.physics import RigParams
 
-        opts.sim_params = RigParams(**sim_kw)
+        sim_params = RigParams(**sim_kw)
+    opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
+                       rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
+                       engine_map_path=args.engine_map, drills=drills, plan=plan,
+                       mock_pins=bool(getattr(args, "mock_pins", False)), ambient=ambient, sim_params=sim_params)
     web = None
     if args.web is not None or args.web_stop:  # before the screen is taken over: a bad --web is one line
         from dyno.web.attach import WebView

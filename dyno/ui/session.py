@@ -24,8 +24,10 @@ from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-expor
 FINISHED = (State.DONE, State.ABORTED)
 
 
-@dataclass
+@dataclass(frozen=True)
 class LiveOptions:
+    """What a live session is to run (built by `dyno ui` or a test; frozen: the session hands the root a RunSpec)."""
+
     sim: bool = True
     speed: float = 1.0
     seed: int = 0
