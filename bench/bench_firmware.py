@@ -251,16 +251,10 @@ def polled_run(seconds: float, profile: bool) -> dict:
 
 def adc_stress(seconds: float) -> dict:
     """ADC time error against the harness's conversions with the ISRs as busy as the rig gets."""
-    import argparse as _ap
+    from dyno.firmware_sim import FirmwareSimSpec, simulate
 
-    from dyno.cli import firmware_sim_cmd
-
-    parser = _ap.ArgumentParser()
-    firmware_sim_cmd.add_arguments(parser)
-    args = parser.parse_args(["--elf", str(ELF), "--seconds", str(seconds), "--primary-rpm", "15000",
-                              "--secondary-rpm", "14000", "--bounce", "--glitch-hz", "200",
-                              "--poll-jitter", "0.5", "--seed", "5", "--input-hz", "125"])
-    rep = firmware_sim_cmd.simulate(args)
+    rep = simulate(FirmwareSimSpec(elf=str(ELF), seconds=seconds, primary_rpm=15000.0, secondary_rpm=14000.0,
+                                   bounce=True, glitch_hz=200.0, poll_jitter=0.5, seed=5, input_hz=125.0))
     err = rep["adc_time_error_us"] or {}
     inp = rep.get("input") or {}
     ierr = inp.get("time_error_us") or {}
@@ -276,20 +270,15 @@ SUP_TIMEOUT_S, SUP_LIMIT_RPM, SUP_TEST_RPM, LOOP_PASS_US = 0.2, 4200.0, 4600.0, 
 
 def supervisor_reactions(seconds: float) -> dict:
     """The run-enable's reaction times in simavr (``dyno firmware-sim`` with hardware/rig.toml's limits)."""
-    import argparse as _ap
+    from dyno.firmware_sim import FirmwareSimSpec, simulate
 
-    from dyno.cli import firmware_sim_cmd
-
-    parser = _ap.ArgumentParser()
-    firmware_sim_cmd.add_arguments(parser)
-
-    def sim(*argv):
-        return firmware_sim_cmd.simulate(parser.parse_args(["--elf", str(ELF), *argv]))
+    def sim(**kw):
+        return simulate(FirmwareSimSpec(elf=str(ELF), **kw))
 
     stop = max(0.3, seconds / 2)
-    hb = sim("--seconds", str(stop + 0.4), "--host-stop-at", str(stop))["supervisor"]
+    hb = sim(seconds=stop + 0.4, host_stop_at=stop)["supervisor"]
     hb_s = hb["off_at_s"] - hb["last_poll_s"] if hb["off_at_s"] is not None else None
-    rep = sim("--seconds", "0.3", "--primary-rpm", str(SUP_TEST_RPM))
+    rep = sim(seconds=0.3, primary_rpm=SUP_TEST_RPM)
     ov = rep["supervisor"]
     period_s = 60.0 / SUP_TEST_RPM
     first_us = rep["harness"]["first_edge_us"][0]
@@ -302,9 +291,8 @@ def supervisor_reactions(seconds: float) -> dict:
         edge_s = first_us / 1e6 + k * period_s
         ov_s = ov["off_at_s"] - edge_s
         onset_s = ov["off_at_s"] - max(ov["on_at_s"], first_us / 1e6)
-    pump = firmware_sim_cmd.simulate(parser.parse_args(
-        ["--elf", str(ELF.with_name("dyno_nano_oldboot.elf")), "--seconds", str(min(seconds, 1.0)), "--bounce",
-         "--input-hz", "125"]))["supervisor"]
+    pump = simulate(FirmwareSimSpec(elf=str(ELF.with_name("dyno_nano_oldboot.elf")), seconds=min(seconds, 1.0),
+                                    bounce=True, input_hz=125.0))["supervisor"]
     out = {"timeout_s": SUP_TIMEOUT_S,
            "heartbeat": {"last_poll_s": hb["last_poll_s"], "off_at_s": hb["off_at_s"], "cause": hb["cause"],
                          "reaction_s": hb_s, "bound_s": SUP_TIMEOUT_S + 2 * LOOP_PASS_US / 1e6},

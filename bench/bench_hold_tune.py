@@ -30,7 +30,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import dyno.control.plans.speed_hold as sh  # noqa: E402
 from dyno.app import RunOptions, run_test  # noqa: E402
-from dyno.control import plans as plans_mod  # noqa: E402
 from dyno.control.controller import State, TestPlan  # noqa: E402
 from dyno.control.plans.steps import find_contact  # noqa: E402
 
@@ -101,14 +100,9 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         ctx.phase(State.SETTLE, "bench")
         ctx.phase(State.DONE, "bench done")
 
-    mp_old = plans_mod.RUNNERS.get("bench-hold")
-    plans_mod.RUNNERS["bench-hold"] = runner
-    try:
-        r = run_test(RunOptions(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
-                                out_dir=tmp / f"{variable}-{seed}-{kp}-{identify}", sim_params=params))
-    finally:
-        if mp_old is None:
-            plans_mod.RUNNERS.pop("bench-hold", None)
+    r = run_test(RunOptions(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
+                            runners={"bench-hold": runner},  # the bench's own mode, with the run's spec
+                            out_dir=tmp / f"{variable}-{seed}-{kp}-{identify}", sim_params=params))
     found["aborts"] = [a for a in r["aborts"] if a["cause"] != "no_points"]
     return found
 

@@ -28,6 +28,8 @@ twin (~2,800 runs, hours on 2 cores): run by hand, or a slice of it with the fil
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import argparse
 import json
 import math
@@ -91,7 +93,7 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
                       mock_pins=mode in ("mock", *TWIN_MODES), fault_rate=0.01 if mode == "sim+faults" else 0.0,
                       rig_path=rig)
     if plan == "drive-grid":
-        opts.engine_map_path = DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv")
+        opts = replace(opts, engine_map_path=DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv"))
     r = run_test(opts)
     m = held["ctx"].sim.model
     physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0

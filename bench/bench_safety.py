@@ -72,7 +72,7 @@ def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, p
     opts = RunOptions(sim=True, seed=seed, out_dir=out, drills=_drills_for(name, t), handle_signals=True,
                       plan=plan or TestPlan(), setup=lambda ctx: held.update(ctx=ctx))
     if mock_pins:
-        opts.mock_pins = True
+        opts = replace(opts, mock_pins=True)
     r = run_test(opts)
     a = r["aborts"][0] if r["aborts"] else {}
     m = held["ctx"].sim.model  # the physics' own verdict: pads off the rotor, actuator off, idle, killed

@@ -28,6 +28,8 @@ Exit 0 when every acceptance check holds (docs/safety.md, "Soak"), 1 otherwise.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import argparse
 import json
 import logging
@@ -105,7 +107,7 @@ def options(plan: str, seed: int, drill, fault_rate: float):
     opts = RunOptions(sim=True, seed=seed, speed=None, fault_rate=fault_rate, plan=plan_named(plan),
                       drills=[drill] if drill is not None else [], handle_signals=True)
     if plan == "drive-grid":  # its grid needs the part-throttle curves (as bench_safe_state runs it)
-        opts.engine_map_path = DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv")
+        opts = replace(opts, engine_map_path=DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv"))
     return opts
 
 
@@ -124,7 +126,7 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
 
     held: dict = {}
     opts = options(plan, seed, drill, fault_rate)
-    opts.setup = lambda ctx: held.update(ctx=ctx)
+    opts = replace(opts, setup=lambda ctx: held.update(ctx=ctx))
     rec = {"plan": plan, "seed": seed, "drill": str(drill) if drill else None}
     try:
         r = run_test(opts)

@@ -18,6 +18,8 @@ fills and its handler blocks).  Printed per configuration:
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import argparse
 import json
 import os
@@ -129,7 +131,7 @@ def run_config(n_clients: int, drill: str, *, rate_hz: float, web: bool, out: Pa
         ctx.poller.listeners.append(lambda events, now_s: polls.append((wall(), c.state.value,
                                                                         ctx.poller.poll_period_s)))
 
-    opts.setup = setup
+    opts = replace(opts, setup=setup)
     if web and n_clients:
         clients = subprocess.Popen([sys.executable, "-c", CLIENTS, "127.0.0.1", str(server.port), server.token,
                                     str(n_clients), "600"], stdout=subprocess.PIPE, text=True)

@@ -12,17 +12,21 @@ from dyno.analysis.air import Ambient, check_air
 from dyno.errors import ConfigError
 
 
-def ambient_sensor(rig_cfg, *, sim=None, hw=None, seed: int = 0):
-    """The rig's BME280 driver (None when ``rig.toml`` declares none).  On the simulated rig the chip is
-    plugged into the simulated bus here: it exists only when the rig file says it is fitted."""
+def sim_bme280_address(rig_cfg) -> int | None:
+    """Where the simulated rig plugs its BME280 chip (``SimRig(bme280_address=...)``): only when the rig file
+    says one is fitted (None: none)."""
+    return rig_cfg.ambient.address if rig_cfg.ambient.sensor == "bme280" else None
+
+
+def ambient_sensor(rig_cfg, *, sim=None, hw=None):
+    """The rig's BME280 driver (None when ``rig.toml`` declares none): the rig's, or one on the simulated bus
+    (whose chip the simulated rig was built with, :func:`sim_bme280_address`)."""
     if rig_cfg.ambient.sensor != "bme280":
         return None
     if hw is not None:
         return hw.ambient_sensor
     from dyno.hw.bme280 import BME280
-    from dyno.sim.bme280_chip import SimBME280
 
-    sim.bus.devices[rig_cfg.ambient.address] = SimBME280(sim.model.world, seed)
     return BME280(sim.bus, rig_cfg.ambient.address, sleep=lambda dt_s: None)  # (the chip converts at once)
 
 

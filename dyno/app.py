@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import datetime as _dt
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,10 +15,10 @@ from dyno.acquisition.poller import Poller
 from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
 from dyno.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
-from dyno.ambient import ambient_sensor, run_ambient
+from dyno.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.ambient import log_end as log_end_ambient
-from dyno.run_signals import install_run_signal_handlers
-from dyno.app_safety import _attach_watchdog, start_watchdog  # noqa: F401 (re-exported: the UI session)
+from dyno.run_signals import RunSignals
+from dyno.app_safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -28,8 +29,13 @@ DEFAULT_CALIBRATION = REPO_ROOT / "calibration" / "torque_calibration.csv"
 DEFAULT_ENGINE_MAP = REPO_ROOT / "calibration" / "engine_maps" / "baja-10hp-representative.csv"
 
 
-@dataclass
-class RunOptions:
+@dataclass(frozen=True)
+class RunSpec:
+    """What a run is to be: built by the CLI, the UI session or a test, read once by :func:`build`.
+
+    Frozen: a change is a new spec (``dataclasses.replace``); nothing is added to a run after it is built.
+    """
+
     sim: bool = True
     seed: int = 0
     speed: float | None = None  # None: as fast as possible (sim); N: N x real time
@@ -57,6 +63,14 @@ class RunOptions:
     finish_release: bool = True  # after the test, service the outputs until the brake release stroke ends
     mock_pins: bool = False  # sim: drive the physics through the real-rig output code (dyno.hw.mockpins)
     ambient: object = None  # dyno.analysis.air.Ambient given on the command line (--ambient), else rig.toml/sensor
+    # the live session's scaled clock (dyno.pacing.ScaledClock: simulated time on a real-time loop); None: the
+    # simulated rig's time is the loop's (a virtual loop), or the real rig
+    clock: object = None
+    on_belt_table_build: object = None  # callable(tune name): the simulated CVT solves its table (a minute)
+    runners: dict = field(default_factory=dict)  # this run's own plan modes beside the shipped ones (tests, benches)
+
+
+RunOptions = RunSpec  # (the name the tests and benches use)
 
 
 def default_run_dir(root: Path | None = None) -> Path:
@@ -170,11 +184,17 @@ def build(opts: RunOptions, now_s) -> RunContext:
     the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
-    holder: dict = {"uncertainty": systematic_terms(opts, rig_cfg, calibration)}
+    uncertainty = systematic_terms(opts, rig_cfg, calibration)
+    from dyno.drills_wiring import check_wiring_drill
+
+    for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
+        check_wiring_drill(d, rig_cfg, opts.sim and opts.mock_pins)
+    hw = None
+    if not opts.sim:
+        hw = open_rig(rig_cfg, pin_factory=opts.pin_factory, bus=opts.rig_bus, serial_port=opts.serial_port)
     try:
-        return _build(opts, now_s, rig_cfg, calibration, engine_map, holder)
+        return _build(opts, now_s, rig_cfg, calibration, engine_map, uncertainty, hw)
     except BaseException:
-        hw = holder.get("hw")
         if hw is not None:  # the pins were claimed: leave them safe and released
             hw.__exit__(None, None, None)
         raise
@@ -190,45 +210,53 @@ def _supervisor_command(protocol: str, limits, rig_cfg) -> bytes | None:
     return v2.supervisor_command(limits.overspeed_primary_rpm, limits.overspeed_secondary_rpm, timeout_s)
 
 
-def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) -> RunContext:
+def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: dict, hw) -> RunContext:
     from dyno.runlog.writer import RunWriter
 
     protocol = opts.protocol or rig_cfg.protocol
     limits = opts.limits or limits_from_config(rig_cfg)
-    from dyno.drills_wiring import check_wiring_drill
-
-    for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
-        check_wiring_drill(d, rig_cfg, opts.sim and opts.mock_pins)
-    sim = hw = None
+    sim = twin = estop = None
+    clock = opts.clock if opts.sim else None  # the live session's scaled clock (None: the loop's time is the sim's)
+    speed = clock.speed if clock is not None else 1.0
+    plan = opts.plan
     if opts.sim:
         from dyno.sim.bus import BusFaults
         from dyno.sim.rig import SimRig
 
+        if clock is not None:
+            now_s = clock.now
         faults = opts.faults or (BusFaults.mixed(opts.fault_rate) if opts.fault_rate else None)
         sim = SimRig(now_s, seed=opts.seed, params=app_input.sim_params_for(opts.sim_params, rig_cfg),
                      protocol=protocol, faults=faults,
                      clock_offset_us=opts.clock_offset_us, full_stroke_s=rig_cfg.actuator.full_stroke_s,
-                     run_enable_wired=rig_cfg.limits.supervisor_timeout_s > 0)  # D7 in the kill chain
-        sim.model.brake_hold_relay = rig_cfg.actuator.brake_hold_relay  # K3: wiring, as rig.toml declares it
+                     run_enable_wired=rig_cfg.limits.supervisor_timeout_s > 0,  # D7 in the kill chain
+                     brake_hold_relay=rig_cfg.actuator.brake_hold_relay, pace=speed,  # K3: as rig.toml declares it
+                     bme280_address=sim_bme280_address(rig_cfg))  # (the air sensor too)
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
             from dyno.app_safety import twin_outputs
 
-            actuators, twin, estop = holder["twin"] = twin_outputs(rig_cfg, sim, now_s, opts.seed)
+            actuators, twin, estop = twin_outputs(rig_cfg, sim, now_s, opts.seed)
+        elif clock is not None:  # the controller ticks with the loop's time; the stroke is timed in the sim's
+            from dyno.pacing import SimTimeActuators
+
+            actuators = SimTimeActuators(sim.actuators, clock.now)
+        if clock is not None:  # the plan's durations in host seconds (the controller runs on the loop's clock)
+            from dyno.pacing import scaled_plan
+
+            plan = scaled_plan(opts.plan, speed)
         blocking = False
     else:
-        hw = holder["hw"] = open_rig(rig_cfg, pin_factory=opts.pin_factory, bus=opts.rig_bus,
-                                     serial_port=opts.serial_port)
-        actuators = hw.actuators
+        actuators, estop = hw.actuators, hw.estop
         blocking = opts.rig_bus is None  # real buses block: transfers run in a thread
     map_source = engine_map.source
     input_channel = app_input.load_input_channel(rig_cfg)  # rig.toml [input_torque], or None
-    ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw, seed=opts.seed)
+    ambient_dev = ambient_sensor(rig_cfg, sim=sim, hw=hw)
     ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     site_m = rig_cfg.ambient.altitude_m  # the interval's asymmetric terms (dyno.analysis.systematic.interval_basis)
-    holder["uncertainty"].update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else
+    uncertainty.update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else
                                  {"altitude_m": site_m}, driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac,
                                  driveline_drag_max_nm=rig_cfg.driveline.drag_max_nm)
     link_meter = None
@@ -244,8 +272,11 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     else:
         transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
         thermometer = hw.thermometer.object_c
-    reader = make_reader(protocol, transport, supervisor_command=_supervisor_command(protocol, limits, rig_cfg))
-    poller = Poller(reader, poll_hz=rig_cfg.poll_hz, thermometer=thermometer, blocking_io=blocking)
+    reader = make_reader(protocol, transport, supervisor_command=_supervisor_command(protocol, limits, rig_cfg),
+                         want_input=input_channel is not None)  # (asked for at every boot: docs/protocol.md)
+    # paced: each real-time poll spans `speed` x more rig time, so it may drain that many more frames
+    poller = Poller(reader, poll_hz=rig_cfg.poll_hz, thermometer=thermometer, blocking_io=blocking,
+                    max_burst=max(8, math.ceil(8 * speed)))
     meta = {
         "mode": "sim" if opts.sim else "rig",
         "protocol": protocol,
@@ -256,8 +287,8 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "calibration_source": str(opts.calibration_path),
         "engine_map_source": str(map_source),
         "engine_map_sha256": engine_map.sha256,
-        "plan": plan_meta(opts.plan),
-        "uncertainty": holder["uncertainty"],
+        "plan": plan_meta(plan),
+        "uncertainty": uncertainty,
         "ambient": ambient.to_dict(),  # the one place the air is read from (library, report, replay)
         "limits": _asdict(limits),
         **app_input.input_meta(input_channel),
@@ -289,33 +320,32 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
                        engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text,
                        plan_text=plan_text)
     poller.listeners.append(writer.events)
-    controller = TestController(poller, actuators, calibration, engine_map, plan=opts.plan, limits=limits,
+    controller = TestController(poller, actuators, calibration, engine_map, plan=plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None,
-                                runner_for=plans.runner_for, from_idle=plans.FROM_IDLE)  # (the plan modes)
-    controller.rig = rig_cfg
-    controller.tune_path = tune_path  # the characterisations compare with the tune's prediction
-    controller.control = rig_cfg.control  # load-control gains and inertias (rig.toml [control], [inertia])
-    controller.inertia = rig_cfg.inertia
-    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
-                     ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter)
-    if "twin" in holder:
-        _, ctx.twin, ctx.estop = holder["twin"]
-    elif hw is not None:
-        ctx.estop = hw.estop
-    ctx.pi_outputs = hw is not None or ctx.twin is not None  # the outputs are the Pi's code (signal path)
+                                runner_for=_runner_for(opts.runners), from_idle=plans.FROM_IDLE,  # (the plan modes)
+                                rig=rig_cfg, control=rig_cfg.control, inertia=rig_cfg.inertia,  # [control], [inertia]
+                                tune_path=tune_path,  # the characterisations compare with the tune's prediction
+                                input_channel=input_channel,  # the live screen's T_in; tared at the first point
+                                time_scale=1.0 / speed)  # the plan runners' own durations shrink like the plan's
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
-    _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
-    unc = holder["uncertainty"]
+    watchdog = make_watchdog(controller, poller, hw, estop, rig_cfg.actuator.watchdog_s, now_s)
+    ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
+                     ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter,
+                     twin=twin, estop=estop, watchdog=watchdog,
+                     pi_outputs=hw is not None or twin is not None,  # the outputs are the Pi's code (signal path)
+                     host_to_sim=clock.host_to_sim if clock is not None else None)  # drills' true-time latencies
+    unc = uncertainty
     if unc:
         from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic
 
         controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
             point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
             unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc, point))))
-    app_input.attach(ctx, input_channel, reader, unc or {})  # after the map's terms: its figure stays beside
+    if input_channel is not None:  # after the map's terms: its figure stays beside
+        controller.point_hooks.append(app_input.InputPointHook(controller, input_channel, poller.streams, unc or {}))
     if sim is not None:
         poller.listeners.append(sim.truth)
         controller.point_hooks.append(sim.truth.point_hook)
@@ -329,6 +359,13 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
 
         reader.session.frame_listeners.append(audit)
     return ctx
+
+
+def _runner_for(extra: dict):
+    """The plan modes' runners: the shipped table (dyno.control.registry), with the spec's own modes."""
+    if not extra:
+        return plans.runner_for
+    return lambda mode: extra[mode] if mode in extra else plans.runner_for(mode)
 
 
 def _thermometer(bus, address: int):
@@ -364,21 +401,21 @@ def _asdict(obj):
 
 async def run_test_async(opts: RunOptions) -> dict:
     loop = asyncio.get_running_loop()
-    built: dict = {}
     # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
     # then ends the run like one that came a moment later (not a directory holding a `start` alone).
-    restore_signals, signals_armed = (install_run_signal_handlers(lambda: built.get("ctx"), loop)
-                                      if opts.handle_signals else (lambda: None, lambda: None))
+    signals = RunSignals(loop).install() if opts.handle_signals else None
     try:
-        ctx = built["ctx"] = build(opts, loop.time)
+        ctx = build(opts, loop.time)
     except BaseException:
-        restore_signals()
+        if signals is not None:
+            signals.restore()
         raise
     if opts.setup:
         opts.setup(ctx)
     stop_watchdog = start_watchdog(ctx, loop)
     arm_drills(ctx, opts.drills, loop)
-    signals_armed()
+    if signals is not None:
+        signals.armed(ctx)
     poll_task = asyncio.create_task(ctx.poller.run(), name="poller")
     status = "fail"
     try:
@@ -403,7 +440,8 @@ async def run_test_async(opts: RunOptions) -> dict:
         ctx.poller.stop()
         await asyncio.gather(poll_task, return_exceptions=True)
         stop_watchdog()
-        restore_signals()
+        if signals is not None:
+            signals.restore()
         log_end_ambient(ctx)  # the air after the run, beside the reading it was corrected to
         result = summarize(ctx)
         record_safety(ctx, result)
@@ -432,15 +470,7 @@ def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     from dyno.drills import DrillRunner
 
-    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
-    poller = ctx.poller
-
-    def first(events, now_s: float) -> None:
-        if poller.last_valid_frame_s is not None:
-            ctx.drills.on_first_frame(poller.last_valid_frame_s)
-            poller.listeners.remove(first)
-
-    poller.listeners.append(first)
+    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(ctx.poller)
 
 
 def run_test(opts: RunOptions) -> dict:
@@ -449,7 +479,10 @@ def run_test(opts: RunOptions) -> dict:
 
     try:
         if opts.sim:
-            return run(run_test_async(opts), virtual=True, speed=opts.speed)
+            from dyno.sim.belt_table import announcing_builds
+
+            with announcing_builds(opts.on_belt_table_build):  # (a table solved for this run is said so)
+                return run(run_test_async(opts), virtual=True, speed=opts.speed)
         return run(run_test_async(opts), virtual=False)  # pragma: no cover - needs the rig
     finally:  # a process that runs test after test must not keep each run's freed pages (dyno.heap)
         return_free_heap()

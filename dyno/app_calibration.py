@@ -34,6 +34,7 @@ class CalibrationContext:
     writer: object = None
     twin: object = None  # --mock-pins: the wiring twin (dyno.hw.mockpins) over the fixture's actuator
     rig_cfg: object = None
+    closed: bool = False  # close_calibration ran (the rig released)
 
 
 def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig_path=None,
@@ -46,6 +47,8 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # the same link budget as a run: a poll rate the link cannot carry is refused
+    want_input = getattr(rig_cfg, "input_torque", None) is not None  # asked for as in a run
+    hw = twin = None
     if sim:
         from dyno.ui.sim_fixture import build_fixture_poller
 
@@ -54,36 +57,28 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         def sim_now() -> float:
             return (loop.time() - t0) * speed
 
-        # the simulated rig has the engine-side channel when rig.toml declares it (as in a run)
-        fixture_kw = {"input_fitted": getattr(rig_cfg, "input_torque", None) is not None, **(fixture_kw or {})}
-        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, **fixture_kw)
-        if getattr(rig_cfg, "input_torque", None) is not None:
-            poller.reader.want_input = True  # asked for as on the rig (a fixture without it: announced absent)
-        # each real-time poll spans `speed` x more fixture time: drain and buffer as much more
-        poller.max_burst = max(8, math.ceil(8 * speed))
-        per_poll = 128 if fixture.fixture.input_fitted else 64  # two converters: twice the events
-        fixture.firmware.ring_capacity = max(per_poll, math.ceil(per_poll * speed))
-        ctx = CalibrationContext(poller, sim=fixture)
+        # the simulated rig has the engine-side channel when rig.toml declares it (as in a run); asked for as
+        # on the rig (a fixture without it: announced absent); paced: each real-time poll spans `speed` x more
+        fixture_kw = {"input_fitted": want_input, **(fixture_kw or {})}
+        fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, pace=speed,
+                                               want_input=want_input or None, **fixture_kw)
         if mock_pins:  # the Pi's own output code (HardwareRig) over the wiring twin and the fixture's actuator
-            ctx.hw, ctx.twin = _twin_rig(rig_cfg, fixture, sim_now, speed)
-            ctx.watchdog = ctx.hw.watchdog
+            hw, twin = _twin_rig(rig_cfg, fixture, sim_now, speed)
     else:
+        fixture, sim_now = None, None
         hw = open_rig(rig_cfg)
-        try:
-            reader = make_reader(rig_cfg.protocol, hw.transport)
-            if getattr(rig_cfg, "input_torque", None) is not None and getattr(reader, "version", None) == 2:
-                reader.want_input = True  # ask the firmware for the engine-side converter, as a run does
+        try:  # (the engine-side converter asked for as a run does)
+            reader = make_reader(rig_cfg.protocol, hw.transport, want_input=want_input)
             poller = Poller(reader, poll_hz=rig_cfg.poll_hz, blocking_io=True)
         except BaseException:
             hw.__exit__(None, None, None)
             raise
-        ctx = CalibrationContext(poller, hw=hw, watchdog=hw.watchdog)
-        sim_now = None
-    ctx.rig_cfg = rig_cfg
-    if ctx.hw is not None:  # nothing else runs the rig's outputs here: the watchdog thread, and the polls tick
-        ctx.hw.watchdog.start_thread()  # them (the start-up release stroke ends and de-energises on time)
+    if hw is not None:  # nothing else runs the rig's outputs here: the watchdog thread, and the polls tick
+        hw.watchdog.start_thread()  # them (the start-up release stroke ends and de-energises on time)
     lim = rig_cfg.limits
-    ctx.monitor = SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s), poller)
+    ctx = CalibrationContext(poller, sim=fixture, hw=hw, twin=twin, watchdog=hw.watchdog if hw is not None else None,
+                             rig_cfg=rig_cfg, monitor=SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s),
+                                                                    poller))
 
     def check(events, now_s: float) -> None:
         if ctx.hw is not None:
@@ -106,14 +101,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     if drills:
         from dyno.drills import DrillRunner
 
-        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed)
-
-        def first(events, now_s: float) -> None:
-            if poller.last_valid_frame_s is not None:
-                ctx.drills.on_first_frame(poller.last_valid_frame_s)
-                poller.listeners.remove(first)
-
-        poller.listeners.append(first)
+        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(poller)
     return ctx
 
 
@@ -138,6 +126,6 @@ def _twin_rig(rig_cfg, fixture, sim_now, speed: float):
 def close_calibration(ctx: CalibrationContext) -> None:
     if ctx.drills is not None:
         ctx.drills.cancel()
-    if ctx.hw is not None:
+    if ctx.hw is not None and not ctx.closed:
+        ctx.closed = True
         ctx.hw.__exit__(None, None, None)
-        ctx.hw = None

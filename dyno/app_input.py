@@ -62,31 +62,32 @@ def input_meta(channel) -> dict:
                              "bearing_loss_u_nm": channel.bearing_loss_u_nm, "source": channel.source}}
 
 
-def attach(ctx, channel, reader, uncertainty: dict) -> None:
-    """Ask the firmware for the channel and add the input path to every point (after the map's terms)."""
-    if channel is None:
-        return
-    from dyno.analysis.input_torque import input_point, input_systematic, input_zero
-    from dyno.analysis.systematic import calibration_rel_for, driveline_bound
+class InputPointHook:
+    """The input path added to every point (after the map's terms): a point hook of the controller.
 
-    if getattr(reader, "version", None) == 2:
-        reader.want_input = True
-    controller, streams = ctx.controller, ctx.poller.streams
-    state = {"channel": channel, "tared": False}
-    controller.input_channel = channel  # the live screen's T_in (dyno.ui.live_model); tared below
+    The first point tares the channel from GO's zero window, as the brake-side channel is
+    (:meth:`dyno.control.controller.TestController.tare_input` keeps it for the live screen and the zero
+    check); every point then gets ``input_point`` and its systematic terms."""
 
-    def hook(point: dict, t0_s, t1_s) -> None:
-        if not state["tared"]:
-            state["tared"] = True
+    def __init__(self, controller, channel, streams, uncertainty: dict) -> None:
+        self.controller, self.channel, self.streams = controller, channel, streams
+        self.uncertainty = uncertainty
+        self.tared = False
+
+    def __call__(self, point: dict, t0_s, t1_s) -> None:
+        from dyno.analysis.input_torque import input_point, input_systematic, input_zero
+        from dyno.analysis.systematic import calibration_rel_for, driveline_bound
+
+        controller = self.controller
+        if not self.tared:
+            self.tared = True
             zb = getattr(controller, "zero_before", None) or {}
             if controller.tare is not None and "t_start_us" in zb:  # as the brake-side channel: from GO's zero
-                zero = input_zero(streams, zb["t_start_us"], zb["t_end_us"], channel)
-                state["channel"] = controller.input_channel = channel.with_zero(zero)
-                if state["channel"].tare is not None:
-                    controller.plan_context.log("tare_input", **state["channel"].tare)
-        ch = state["channel"]
-        point.update(input_point(streams, point, ch))
-        rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
-        point.update(input_systematic(point, rel_out, ch, driveline_bound(point, uncertainty)))
-
-    controller.point_hooks.append(hook)
+                zero = input_zero(self.streams, zb["t_start_us"], zb["t_end_us"], self.channel)
+                self.channel = self.channel.with_zero(zero)
+                controller.tare_input(self.channel)
+                if self.channel.tare is not None:
+                    controller.plan_context.log("tare_input", **self.channel.tare)
+        point.update(input_point(self.streams, point, self.channel))
+        rel_out = calibration_rel_for(self.uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
+        point.update(input_systematic(point, rel_out, self.channel, driveline_bound(point, self.uncertainty)))

@@ -56,40 +56,48 @@ def close_twin(ctx) -> None:
         close()
 
 
-def _attach_watchdog(ctx, timeout_s: float, now_s) -> None:
+class _TripRecord:
+    """What the watchdog's trip callback saw (its thread), reported once by the controller's heartbeat."""
+
+    def __init__(self) -> None:
+        self.silent_s: float | None = None
+        self.t_s: float | None = None
+        self.reported = False
+
+
+def make_watchdog(controller, poller, hw, estop, timeout_s: float, now_s):
     """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
 
     On a :class:`~dyno.clock.VirtualTimeLoop` it is a background ticker (the loop's
     stand-in for an OS thread: it runs while a callback blocks the loop); on a real
-    loop it is a daemon thread.  The controller's safety heartbeat feeds it.
+    loop it is a daemon thread.  The controller's safety heartbeat feeds it, and reports its trip.
+    ``hw``: the real rig (its own watchdog, built over the real outputs), else None.
     """
     from dyno.hw.safety import Watchdog
 
-    controller = ctx.controller
-    trip: dict = {}
+    trip = _TripRecord()
 
     def on_trip(silent_s: float) -> None:
-        trip["silent_s"] = silent_s
-        trip["t_s"] = wd.clock.now()
+        trip.silent_s = silent_s
+        trip.t_s = wd.clock.now()
 
     class _Clock:  # until start_watchdog() gives it the loop's clock
         now = staticmethod(now_s)
 
-    wd = getattr(ctx.hw, "watchdog", None)
+    wd = getattr(hw, "watchdog", None)
     if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
         wd.on_trip = on_trip
     else:
         wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
-        if ctx.estop is not None:  # the twin's E-stop input: the rig's level check, every look
-            wd.level_checks.append(ctx.estop.poll)
-    ctx.watchdog = wd
+        if estop is not None:  # the twin's E-stop input: the rig's level check, every look
+            wd.level_checks.append(estop.poll)
 
     def beat() -> None:
-        if wd.tripped and not trip.get("reported"):
-            trip["reported"] = True
-            if "silent_s" in trip:
-                controller.abort("watchdog", f"control loop silent for {trip['silent_s']:.3f} s (watchdog "
-                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip["t_s"])
+        if wd.tripped and not trip.reported:
+            trip.reported = True
+            if trip.silent_s is not None:
+                controller.abort("watchdog", f"control loop silent for {trip.silent_s:.3f} s (watchdog "
+                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip.t_s)
             else:  # a look that raised: safed, logged, still watching
                 errs = getattr(wd, "errors", None) or ["tripped"]
                 controller.abort("watchdog", f"{errs[0]}: the watchdog put the rig in its safe state")
@@ -97,7 +105,18 @@ def _attach_watchdog(ctx, timeout_s: float, now_s) -> None:
 
     controller.heartbeat_hooks.append(beat)
     # Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on).
-    ctx.poller.listeners.append(lambda events, now_s: wd.kick())
+    poller.listeners.append(_WatchdogKick(wd))
+    return wd
+
+
+class _WatchdogKick:
+    """The poller's listener that kicks the watchdog (a re-arm finds it by type, and replaces it)."""
+
+    def __init__(self, wd) -> None:
+        self.wd = wd
+
+    def __call__(self, events, now_s: float) -> None:
+        self.wd.kick()
 
 
 def start_watchdog(ctx, loop) -> object:

@@ -14,8 +14,7 @@ device-reset           the Nano resets (watchdog; current bootloader restarts in
 hall-dead:CH           the Hall sensor(s) give no more edges (CH: primary|secondary|both)
 thermometer-stuck      the rotor thermometer repeats its last word forever
 thermometer-lost       the rotor thermometer stops answering (NACK)
-adc-error[:input]      the AD7171 (``:input``: the engine-side input torque one) sets its error bit on every
-                       conversion
+adc-error[:input]      the AD7171 (``:input``: the engine-side input one) sets its error bit on every conversion
 adc-stuck[:input]      the AD7171 (``:input``: the input torque one) repeats one code forever
 bus-lost               the I2C cable falls out: every device NACKs
 overtemp               a dragging pad heats the rotor at 20 C/s while the engine runs
@@ -28,7 +27,6 @@ controller-crash       the control task raises
 disk-full              the run directory refuses writes (ENOSPC)
 sigint|sigterm|sighup  the process receives the signal
 =====================  ==================================================================
-
 and the wiring drills through the twin (``--mock-pins``): :mod:`dyno.drills_wiring`.
 """
 
@@ -36,16 +34,15 @@ from __future__ import annotations
 
 import errno
 import math
-from bisect import bisect_left
 import os
 import signal
+from bisect import bisect_left
 from dataclasses import dataclass
 
 from dyno.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, check_wiring_drill
 from dyno.errors import ConfigError
 
-OVERTEMP_RATE_C_PER_S = 20.0
-PI_FREEZE_DEFAULT_S = 5.0
+OVERTEMP_RATE_C_PER_S, PI_FREEZE_DEFAULT_S = 20.0, 5.0
 
 #: name -> (argument required?, allowed arguments or None, needs an engine?)
 DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
@@ -146,10 +143,8 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
 class DrillRunner(WiringDrills):
     """Arms drills on a running rig and records when each fault physically began.
 
-    ``ctx`` is the composition root's RunContext (``sim``, ``controller``,
-    ``writer``, ``poller``); ``loop`` the running asyncio loop.  Drills are
-    scheduled from the first accepted frame (the poller calls :meth:`on_first_frame`).
-    """
+    ``ctx``: the composition root's RunContext (``sim``, ``controller``, ``writer``, ``poller``); ``loop``: the
+    running asyncio loop.  Drills are scheduled from the first accepted frame (:meth:`arm_from_first_frame`)."""
 
     def __init__(self, drills, ctx, loop, *, sim_now=None, speed: float = 1.0) -> None:
         self.drills = list(drills)
@@ -194,6 +189,15 @@ class DrillRunner(WiringDrills):
             if self._in_phase(d.phase):
                 self._phased.remove(d)
                 self._handles.append(self.loop.call_later(d.at_s / self.speed, self._fire, d))
+
+    def arm_from_first_frame(self, poller) -> DrillRunner:
+        """Schedule the drills from ``poller``'s first accepted frame (a run and a calibration alike)."""
+        def first(events, now_s: float) -> None:
+            if poller.last_valid_frame_s is not None:
+                self.on_first_frame(poller.last_valid_frame_s)
+                poller.listeners.remove(first)
+        poller.listeners.append(first)
+        return self
 
     def on_first_frame(self, now_s: float) -> None:
         if self.t_first_frame_s is not None:

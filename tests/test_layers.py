@@ -69,3 +69,71 @@ def test_the_reader_sees_function_level_imports(tmp_path):
                  "    from dyno.cli.progress import (eta_now,\n        points_text)\n")
     assert imported_modules(f) == {"dyno.a", "dyno.a.b", "dyno.d", "dyno.cli.progress", "dyno.cli.progress.eta_now",
                                    "dyno.cli.progress.points_text"}
+
+
+# the issue's own check, as `grep` reads it: the text too (a module named in a string a child process runs counts)
+GREP_RULES = [("dyno/ui", r"(from|import)\s+dyno\.cli\b"), ("dyno/web", r"(from|import)\s+dyno\.(cli|ui)\b"),
+              ("dyno/report", r"(from|import)\s+dyno\.(cli|ui)\b")]
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("package, pattern", GREP_RULES)
+def test_grep_finds_no_upward_import(package, pattern):
+    import re
+
+    bad = [f"{p.relative_to(DYNO.parent)}:{n}: {line.strip()}" for p in sorted((DYNO.parent / package).rglob("*.py"))
+           for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(pattern, line)]
+    assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+# --- no wiring after construction (issue 41) -------------------------------------------------------------------
+# The composition root (dyno.app.build, dyno.app_calibration.build_calibration) gives each part what it needs in
+# its constructor. The check: no module under dyno/ assigns an attribute of a built controller, rig, poller or
+# reader (``controller.x = ...``, ``ctx.controller.x = ...``, ``sim.x = ...``) outside that object's own class
+# (``self.x``), nor one of the run context's wiring fields. (Runtime state is changed through methods: e.g.
+# TestController.tare_input, set_zero_check; drills change the simulated *world*, ``sim.model``/``sim.bus``.)
+BUILT_NAMES = {"controller", "ctrl", "poller", "reader", "sim", "hw", "fixture", "firmware", "fw"}
+CTX_WIRING = {"twin", "estop", "pi_outputs", "host_to_sim", "sim", "hw", "poller", "rig_cfg", "link_meter",
+              "ambient_sensor", "thermometer", "monitor"}
+
+
+def wiring_assignments(source: str) -> list[str]:
+    """``a.b.attr = ...`` targets where the object assigned to is a built part (see BUILT_NAMES, CTX_WIRING)."""
+    import ast
+
+    def chain(node):
+        parts = []
+        while isinstance(node, ast.Attribute):
+            parts.append(node.attr)
+            node = node.value
+        if isinstance(node, ast.Name):
+            parts.append(node.id)
+        return parts[::-1]
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+        for target in targets:
+            for t in (target.elts if isinstance(target, (ast.Tuple, ast.List)) else [target]):
+                c = chain(t) if isinstance(t, ast.Attribute) else []
+                if len(c) < 2 or c == ["self", c[-1]]:
+                    continue
+                owner, attr = c[-2], c[-1]
+                if owner in BUILT_NAMES or (owner == "ctx" and attr in CTX_WIRING):
+                    found.append(f"{node.lineno}: {'.'.join(c)}")
+    return found
+
+
+@pytest.mark.quick
+def test_no_attribute_is_injected_into_a_built_part():
+    bad = [f"{p.relative_to(DYNO.parent)}:{hit}" for p in sorted(DYNO.rglob("*.py"))
+           for hit in wiring_assignments(p.read_text())]
+    assert not bad, "attributes set on a built part outside its constructor:\n" + "\n".join(bad)
+
+
+def test_the_wiring_check_sees_injection():
+    src = ("def f(ctx, controller, sim):\n    controller.rig = 1\n    ctx.controller.time_scale = 2\n"
+           "    ctx.twin = None\n    sim.model.t = 0\n    ctx.drills = []\n    self.x = 1\n")
+    assert [h.split(": ")[1] for h in wiring_assignments(src)] == [
+        "controller.rig", "ctx.controller.time_scale", "ctx.twin"]

@@ -64,7 +64,8 @@ class V1Reader:
 
     read_len = v1.FRAME_MAX
 
-    def __init__(self, transport: Transport, version: int = 2) -> None:
+    def __init__(self, transport: Transport, version: int = 2, *, want_input: bool = False,
+                 supervisor_command: bytes | None = None) -> None:
         self.transport = transport
         self.version = version
         self.protocol = f"v{version}"
@@ -78,13 +79,13 @@ class V1Reader:
         self._last_frame_s: float | None = None
         # The engine-side input torque channel (v2 extension): asked for only when the rig file declares
         # it; enabled in every boot whose capabilities announce it (RAM: a reset disables it again).
-        self.want_input = False
+        self.want_input = want_input
         self.input_present: bool | None = None  # None: not asked yet in this boot
         self._caps_pending = False
         self._caps_data_answers = 0
         # The Nano's run-enable (issue 37): SET_SUPERVISOR with the rig file's limits, sent in every boot whose
         # capabilities announce it until the device confirms it armed (None: never arm it).
-        self.supervisor_command: bytes | None = None
+        self.supervisor_command: bytes | None = supervisor_command
         self.supervisor_present: bool | None = None  # None: not asked yet
         self.supervisor_armed = False          # this boot confirmed it
         self.supervisor_ever_armed = False
@@ -432,13 +433,13 @@ def run_enable_text(reader) -> str:
     return "off" if reader.run_enable is False else "not armed"
 
 
-def make_reader(protocol: str, transport: Transport, *, supervisor_command: bytes | None = None):
+def make_reader(protocol: str, transport: Transport, *, supervisor_command: bytes | None = None,
+                want_input: bool = False):
     """The reader for ``protocol``; v2 arms the Nano's run-enable with ``supervisor_command`` in every boot
-    (``dyno.protocol.v2.supervisor_command``; None: never armed)."""
+    (``dyno.protocol.v2.supervisor_command``; None: never armed) and, with ``want_input``, enables the
+    engine-side input torque converter in every boot that announces it (v1 and v0 have none)."""
     if protocol == "v2":
-        reader = V1Reader(transport, 2)
-        reader.supervisor_command = supervisor_command
-        return reader
+        return V1Reader(transport, 2, want_input=want_input, supervisor_command=supervisor_command)
     if protocol == "v1":
         return V1Reader(transport, 1)
     if protocol == "v0":

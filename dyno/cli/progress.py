@@ -32,7 +32,7 @@ def status_line(state: str, n_points: int, total: int | None, rpm_engine: float,
 
 
 class TtyProgress:
-    """Attach with ``RunOptions.setup = progress.attach``; call :meth:`finish` before printing results."""
+    """Attach with ``RunSpec(setup=progress.attach)``; call :meth:`finish` before printing results."""
 
     def __init__(self, stream=None, *, wall_clock=time.monotonic, period_s: float = 0.25) -> None:
         self.stream = stream if stream is not None else sys.stderr

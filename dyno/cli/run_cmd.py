@@ -146,26 +146,23 @@ def exit_code(result: dict) -> int:
     return EXIT_DONE if result["state"] == "done" else EXIT_ABORTED
 
 
-def run(args) -> int:
-    from dyno.app import RunOptions, run_test
+def run_spec(args):
+    """(spec, driven loss or None, error line or None): ``dyno run``'s arguments as a :class:`dyno.app.RunSpec`."""
+    from dyno.app import RunSpec
     from dyno.drills import parse_drill
 
-    if not args.sim:
-        print("dyno run: only --sim is available headless here; on the rig use `dyno ui`", file=sys.stderr)
-        return 2
     drills = [parse_drill(d) for d in args.drill]
-    opts = RunOptions(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
-                      protocol=args.protocol, rig_path=getattr(args, "rig", None),
-                      plan=_plan(args), drills=drills, handle_signals=True,
-                      mock_pins=args.mock_pins)
+    kw = dict(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
+              protocol=args.protocol, rig_path=getattr(args, "rig", None), plan=_plan(args), drills=drills,
+              handle_signals=True, mock_pins=args.mock_pins, on_belt_table_build=_announce_belt_table)
     driven_loss = _driven_loss(args)  # a bad file: one line, exit 2, before anything is written
     if args.calibration:
-        opts.calibration_path = args.calibration
+        kw["calibration_path"] = args.calibration
     if args.engine_map:
-        opts.engine_map_path = args.engine_map
+        kw["engine_map_path"] = args.engine_map
     sim_kw = {}
     if args.tune:
-        opts.tune_path = args.tune
+        kw["tune_path"] = args.tune
         sim_kw["cvt_tune_path"] = str(args.tune)
     if args.sim_driven_loss is not None:
         try:
@@ -173,54 +170,61 @@ def run(args) -> int:
             if len(coeffs) != 3 or not all(c >= 0 for c in coeffs):
                 raise ValueError
         except ValueError:
-            print(f"dyno run: --sim-driven-loss: expected three numbers >= 0 as A,B,C, got "
-                  f"{args.sim_driven_loss!r}", file=sys.stderr)
-            return 2
+            return None, None, (f"dyno run: --sim-driven-loss: expected three numbers >= 0 as A,B,C, got "
+                                f"{args.sim_driven_loss!r}")
         sim_kw["driven_loss_nm"] = coeffs
     if args.sim_zero_drift is not None:
         sim_kw["adc_zero_drift_nm_per_min"] = float(args.sim_zero_drift)
-    opts.ambient, bad = air_options(args, sim_kw)
+    kw["ambient"], bad = air_options(args, sim_kw)
     if bad:
-        print(bad, file=sys.stderr)
-        return 2
+        return None, None, bad
     if sim_kw:
         from dyno.sim.physics import RigParams
 
-        opts.sim_params = RigParams(**sim_kw)
+        kw["sim_params"] = RigParams(**sim_kw)
+    return RunSpec(**kw), driven_loss, None
+
+
+def _announce_belt_table(name) -> None:
+    print(f"dyno run: the simulated CVT solves its belt-model table for tune {name or '(none)'} (once per tune and "
+          "model version, cached; about 1-2 min)", file=sys.stderr, flush=True)
+
+
+def run(args) -> int:
+    """parse (argparse) -> spec (:func:`run_spec`) -> call (:func:`dyno.app.run_test`) -> print."""
+    if not args.sim:
+        print("dyno run: only --sim is available headless here; on the rig use `dyno ui`", file=sys.stderr)
+        return 2
+    spec, driven_loss, bad = run_spec(args)
+    if bad:
+        print(bad, file=sys.stderr)
+        return 2
+    from dataclasses import replace
+
+    from dyno.app import run_test
     from dyno.cli import progress as tty
 
     bar = None
     if tty.wanted(args.json):  # a person at a terminal: one live status line on stderr
         bar = tty.TtyProgress()
-        opts.setup = bar.attach
-    web = _web(args, opts)
+        spec = replace(spec, setup=bar.attach)
+    web, spec = _web(args, spec)
     if web is False:
         return 2
     import time
 
     wall0_s = time.monotonic()
     result = None
-    if opts.sim:
-        from dyno.sim import belt_table
-
-        belt_table.on_build = lambda name: print(
-            f"dyno run: the simulated CVT solves its belt-model table for tune {name or '(none)'} (once per tune and "
-            "model version, cached; about 1-2 min)", file=sys.stderr, flush=True)
     try:
-        result = run_test(opts)
+        result = run_test(spec)
     finally:
         if bar is not None:
             bar.finish()
         if web is not None:
             web.end(result)
-    if driven_loss is not None:
-        from dyno.analysis.coastdown import driven_loss_keys
-        from dyno.analysis.systematic import run_basis
-        from dyno.rigconfig import load_rig
+    from dyno.run_after import add_driven_loss
 
-        basis = run_basis(result.get("ambient"), load_rig(getattr(args, "rig", None)))
-        for p in result["points"]:
-            p.update(driven_loss_keys(p, driven_loss, basis))
+    add_driven_loss(result, driven_loss, getattr(args, "rig", None))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
@@ -239,20 +243,21 @@ def run(args) -> int:
     return exit_code(result)
 
 
-def _web(args, opts):
-    """--web: the server started (its URL on stderr) and hooked to the run when it is built; None without
-    --web, False after one line saying why not.  The page is for people: the run goes at real time
+def _web(args, spec):
+    """(web, spec) --web: the server started (its URL on stderr) and hooked to the run when it is built; None
+    without --web, False after one line saying why not.  The page is for people: the run goes at real time
     (--speed 1) unless --speed says otherwise."""
     if args.web is None and not args.web_stop:
-        return None
+        return None, spec
+    from dataclasses import replace
+
     from dyno.web.attach import WebView
 
     web = WebView.start("dyno run", args)
     if web is None:
-        return False
-    if opts.speed is None:
-        opts.speed = 1.0
-    before = opts.setup
+        return False, spec
+    speed = 1.0 if spec.speed is None else spec.speed
+    before = spec.setup
 
     def setup(ctx) -> None:
         import asyncio
@@ -262,10 +267,9 @@ def _web(args, opts):
         if before is not None:
             before(ctx)
         loop = asyncio.get_running_loop()
-        web.attach(RunSource(ctx, loop, opts.speed), loop)
+        web.attach(RunSource(ctx, loop, speed), loop)
 
-    opts.setup = setup
-    return web
+    return web, replace(spec, speed=speed, setup=setup)
 
 
 def _driven_loss(args):
@@ -288,27 +292,22 @@ def _plan(args):
 
 def _write_report(result: dict, *, announce: bool) -> None:
     """report.html into the run directory, last of all: a failure is one stderr line, never another exit code."""
-    run_dir = result.get("run_dir")
-    try:
-        if not run_dir or not Path(run_dir, "meta.json").is_file():
-            raise FileNotFoundError(f"no run directory at {run_dir}")
-        from dyno.report.writer import write_report
+    from dyno.run_after import write_run_report
 
-        path = write_report(run_dir)
-    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  the test is on disk; its report is extra
-        why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
-        try:
-            print(f"dyno run: {run_dir}: report.html not written: {why} (`dyno report RUN` retries)",
-                  file=sys.stderr)
-        except OSError:
-            pass
-        return
-    if announce:
+    path = write_run_report(result.get("run_dir"), _warn)
+    if path is not None and announce:
         try:
             print(f"report: {path}")
             sys.stdout.flush()
         except OSError:  # a closed pipe: the report is on disk all the same
             pass
+
+
+def _warn(line: str) -> None:
+    try:
+        print(f"dyno run: {line}", file=sys.stderr)
+    except OSError:
+        pass
 
 
 def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
@@ -324,10 +323,10 @@ def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
 
 def _index(result: dict) -> None:
     """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
-    from dyno.library.index import index_after_run
+    from dyno.run_after import index_run
 
     if result.get("run_dir"):
-        index_after_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
+        index_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))
 
 
 def air_line(amb: dict) -> str:

@@ -61,23 +61,24 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     if getattr(args, "mock_pins", False) and not args.sim:
         raise ConfigError("command line", "--mock-pins", "the mock pins drive the simulated rig only (--sim)")
-    opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
-                       rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
-                       engine_map_path=args.engine_map, drills=drills, plan=plan,
-                       mock_pins=bool(getattr(args, "mock_pins", False)))
     from dyno.cli.run_cmd import air_options
 
     sim_kw: dict = {}
-    opts.ambient, bad = air_options(args, sim_kw, "dyno ui")
+    ambient, bad = air_options(args, sim_kw, "dyno ui")
     if bad:  # one line, exit 2, before the screen is taken over
         import sys
 
         print(bad, file=sys.stderr)
         return 2
+    sim_params = None
     if sim_kw and args.sim:
         from dyno.sim.physics import RigParams
 
-        opts.sim_params = RigParams(**sim_kw)
+        sim_params = RigParams(**sim_kw)
+    opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
+                       rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
+                       engine_map_path=args.engine_map, drills=drills, plan=plan,
+                       mock_pins=bool(getattr(args, "mock_pins", False)), ambient=ambient, sim_params=sim_params)
     web = None
     if args.web is not None or args.web_stop:  # before the screen is taken over: a bad --web is one line
         from dyno.web.attach import WebView
@@ -127,25 +128,29 @@ def _with_web(app_class, web):
 
 
 def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False, report: bool = True) -> None:
-    """Index an ended run and write its report.html (failures are one stderr line, never the exit code)."""
-    if run_dir is None or not (Path(run_dir) / "meta.json").is_file():
-        return  # the session never started a run there
-    _index(run_dir)
-    if report and not (only_if_missing and (Path(run_dir) / "report.html").is_file()):
-        from dyno.cli.run_cmd import _write_report
-
-        _write_report({"run_dir": str(run_dir)}, announce=announce)  # "report: <path>" (or one line why not)
-    if announce:
-        try:
-            print(f"run: {run_dir}")
-        except OSError:
-            pass
-
-
-def _index(out) -> None:
-    """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
+    """Index an ended run and write its report.html (:func:`dyno.run_after.finish_run`), saying so: failures
+    are one stderr line, never the exit code."""
     import sys
 
-    from dyno.library.index import index_after_run
+    from dyno.run_after import finish_run as finish
 
-    index_after_run(out, lambda line: print(f"dyno ui: {line}", file=sys.stderr))
+    def warn(prog):
+        def say(line: str) -> None:
+            try:
+                print(f"{prog}: {line}", file=sys.stderr)
+            except OSError:
+                pass
+        return say
+
+    # (a report failure says "dyno run:", as it always has)
+    there, path = finish(run_dir, warn_index=warn("dyno ui"), warn_report=warn("dyno run"),
+                         only_if_missing=only_if_missing, report=report)
+    if not there or not announce:
+        return
+    try:
+        if path is not None:
+            print(f"report: {path}")
+            sys.stdout.flush()
+        print(f"run: {run_dir}")
+    except OSError:
+        pass

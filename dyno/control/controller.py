@@ -40,7 +40,11 @@ __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
-                 on_wait_engine=None, runner_for=None, from_idle=None) -> None:
+                 on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None,
+                 control=None, inertia=None, input_channel=None, time_scale: float = 1.0,
+                 point_hooks=(), result_hooks=()) -> None:
+        # Everything the composition root (dyno.app.build) wires is given here, never set afterwards
+        # (tests/test_layers.py checks that no module assigns to a built controller's attributes).
         self.poller = poller
         self.act = actuators
         self.calibration = calibration  # tared at the zero read before GO (self.tare: the record)
@@ -59,7 +63,15 @@ class TestController(Measuring):
         self.reason = ""
         self.points: list[dict] = []
         self.aborts: list[dict] = []
-        self.point_hooks: list = []  # callables(point, host_t0_s, host_t1_s) -> None
+        # rig.toml's description, [control] gains and [inertia] (the plans read them: dyno.control.api.PlanConfig),
+        # the tune a characterisation compares with, the engine-side torque channel (or None; tared at GO)
+        self.rig, self.control, self.inertia = rig, control, inertia
+        self.tune_path = tune_path
+        self.input_channel = input_channel
+        #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
+        #: runners' own durations (hold periods, approach times) shrink like the plan's
+        self.time_scale = float(time_scale)
+        self.point_hooks: list = list(point_hooks)  # callables(point, host_t0_s, host_t1_s) -> None
         self.listeners: list = []  # callables(controller) on every state change
         self.paused = False
         self._go = asyncio.Event()
@@ -77,7 +89,7 @@ class TestController(Measuring):
         self.skips: list[str] = []  # why a setpoint or step gave no point (each also a "skip" document)
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.plans.characterise / coastdown)
-        self.result_hooks: list = []  # callables(results) -> None (the sim adds its truths)
+        self.result_hooks: list = list(result_hooks)  # callables(results) -> None (the sim adds its truths)
         self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
         self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
         self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
@@ -293,9 +305,15 @@ class TestController(Measuring):
 
     _injected: BaseException | None = None  # the last crash injected (drill controller-crash)
 
-    #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
-    #: runners' own durations (hold periods, approach times) must shrink like the plan's
-    time_scale: float = 1.0
+    def tare_input(self, channel) -> None:
+        """The engine-side channel with its zero from GO's window (dyno.app_input's first point)."""
+        self.input_channel = channel
+
+    def set_zero_check(self, check: dict, input_check: dict | None = None) -> None:
+        """The zero at rest after the test (dyno.control.zero_check.after_test), and the input channel's."""
+        self.zero_check = check
+        if input_check is not None:
+            self.zero_check_input = input_check
 
     def rig_now(self) -> float:
         """The controller's time in rig seconds (see :attr:`time_scale`)."""

@@ -6,26 +6,29 @@ Split from :mod:`dyno.control.plans` so that the dependency runs one way: the pl
 Nor does it import a runner's module or the controller: a runner is named as a
 ``"module:function"`` string and imported when used (:func:`runner_for`), so this module is a
 leaf over :mod:`dyno.control.api`.  ``dyno.control.plans`` re-exports every name here (the same
-objects: a mode added to ``plans.RUNNERS`` is added here).
+objects).
 """
 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
+from types import MappingProxyType
 
 from dyno.control.api import TestPlan
 from dyno.errors import ConfigError
 
 #: mode -> "module:coroutine" (or the coroutine function itself); it takes the plan context
-#: (:class:`dyno.control.api.PlanContext`) after the warm-up (those in FROM_IDLE right after GO)
-RUNNERS: dict[str, object] = {
+#: (:class:`dyno.control.api.PlanContext`) after the warm-up (those in FROM_IDLE right after GO).
+#: Read-only: a run's own extra modes (a test's, a bench's) come with its spec (``dyno.app.RunSpec.runners``).
+RUNNERS: Mapping[str, object] = MappingProxyType({
     "step": "dyno.control.plans.thesis_step:run_thesis_step",
     "speed-hold": "dyno.control.plans.speed_hold:run_speed_hold",
     "steps": "dyno.control.plans.steps:run_steps",
     "engagement": "dyno.control.plans.characterise:run_engagement",
     "coast-down": "dyno.control.plans.coastdown:run_coast_down",
     "drive-grid": "dyno.control.plans.drive_grid:run_drive_grid",
-}
+})
 
 #: modes whose runner starts from idle (GO, then no full-throttle warm-up): the characterisations
 FROM_IDLE = {"engagement", "coast-down"}

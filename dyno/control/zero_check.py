@@ -64,12 +64,13 @@ async def after_test(ctrl, *, wait_rest_s: float = 30.0) -> dict:
                                                     "why": "not read"}
     check = drift_check(before, after, _config(ctrl).drift_max_nm)
     check["correct"] = _config(ctrl).correct
-    ctrl.zero_check = check
+    ctrl.set_zero_check(check)
     ctrl.plan_context.log("torque_zero", **check)
     channel = getattr(ctrl, "input_channel", None)
     if channel is not None:  # the engine-side input channel (issue 27): its zero over the same two windows
         from dyno.analysis.input_torque import input_zero_check
 
-        ctrl.zero_check_input = input_zero_check(ctrl.poller.streams, check, channel)
-        ctrl.plan_context.log("torque_zero_input", **ctrl.zero_check_input)
+        input_check = input_zero_check(ctrl.poller.streams, check, channel)
+        ctrl.set_zero_check(check, input_check)
+        ctrl.plan_context.log("torque_zero_input", **input_check)
     return check

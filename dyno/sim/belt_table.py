@@ -24,6 +24,9 @@ called every 4 ms physics cell), clamped to the table's range.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import json
 import logging
 import math
@@ -348,8 +351,19 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
 _TABLES: dict = {}
 #: called with the tune's name (or None) before a table the cache does not hold is solved (a minute or two):
-#: a command line says so on stderr instead of looking hung (dyno run sets it; a full-screen UI does not)
-on_build = None
+#: a command line says so on stderr instead of looking hung (a run's spec gives it, dyno.app.run_test sets it
+#: for that run's context with :func:`announcing_builds`; a full-screen UI gives none)
+_ON_BUILD: contextvars.ContextVar = contextvars.ContextVar("belt_table_on_build", default=None)
+
+
+@contextlib.contextmanager
+def announcing_builds(on_build):
+    """Within the block (and the tasks it starts), ``on_build(tune name)`` is called before a table is solved."""
+    token = _ON_BUILD.set(on_build)
+    try:
+        yield
+    finally:
+        _ON_BUILD.reset(token)
 
 
 class _CacheMiss(Exception):
@@ -377,6 +391,7 @@ def belt_table(cache_dir=None, tune=None) -> BeltTable:
         try:
             _TABLES[key] = build_belt_table(cache_dir=cache, tune=tune, solve=_cached_only)
         except _CacheMiss:
+            on_build = _ON_BUILD.get()
             if on_build is not None:
                 on_build(getattr(tune, "name", None))
             _TABLES[key] = _build_locked(cache, tune)

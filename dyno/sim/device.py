@@ -48,11 +48,12 @@ class EmulatedFirmware:
 
     def __init__(self, protocol: str = "v2", ring_capacity: int = 64, clock_offset_us: int = 0,
                  clock_ppm: float = 0.0, input_fitted: bool = False, knows_caps: bool = True,
-                 supervisor: bool = True) -> None:
+                 supervisor: bool = True, pace: float = 1.0, on_run_enable=None) -> None:
         self.protocol = protocol
         self.has_supervisor = bool(supervisor) and protocol == "v2" and knows_caps
-        self.on_run_enable = None  # f(on, t_s, cause): the wiring behind D7
-        self.supervisor = NanoSupervisor(self._push_supervisor, self._run_enable_changed)
+        self.on_run_enable = on_run_enable  # f(on, t_s, cause): the wiring behind D7
+        # pace: a simulation at N x real time keeps the heartbeat's real-time timeout (dyno.sim.supervisor)
+        self.supervisor = NanoSupervisor(self._push_supervisor, self._run_enable_changed, pace=pace)
         self.knows_caps = knows_caps  # False: firmware from before the input channel (CAPS is an unknown op)
         self.input_fitted = bool(input_fitted) and protocol == "v2"
         self.ring_capacity = ring_capacity

@@ -86,12 +86,10 @@ def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0, twin: bool | None =
     from dyno.app_input import sim_params_for
 
     clock = FakeClock(start_s=0.0)
-    sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed, params=sim_params_for(None, cfg))
-    sim.model.brake_hold_relay = cfg.actuator.brake_hold_relay
-    if cfg.ambient.sensor == "bme280":  # the simulated chip, only when the rig file fits one
-        from dyno.sim.bme280_chip import SimBME280
-
-        sim.bus.devices[cfg.ambient.address] = SimBME280(sim.model.world)
+    sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed, params=sim_params_for(None, cfg),
+                 brake_hold_relay=cfg.actuator.brake_hold_relay,  # K3, and the air sensor: as the rig file says
+                 bme280_address=cfg.ambient.address if cfg.ambient.sensor == "bme280" else None,
+                 bme280_seed=0)  # (the doctor's chip error: seed 0's)
     out = DoctorSim(sim, clock, operator=SimOperator(sim))
     if mock_pins if twin is None else twin:
         from dyno.hw.mockpins import SimPinFactory

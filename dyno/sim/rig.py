@@ -301,23 +301,39 @@ class SimRig:
     clock_offset_us : device counter at boot (near 2**32 to cross the wrap early)
     run_enable_wired : the Nano's run-enable (D7) is in the kill chain (hardware/README.md; the shipped rig:
         ``[limits] supervisor_timeout_s`` > 0): the engine runs only while the host's polls keep it on
+    brake_hold_relay : K3 fitted (rig.toml ``actuator.brake_hold_relay``); None: the physics' default
+    pace : N when the simulation runs at N x real time on a real-time loop (the live UI); 1 otherwise
+    bme280_address : the simulated BME280 on the bus (rig.toml ``[ambient] sensor = "bme280"``); None: none fitted
     """
 
     def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v2",
                  faults: BusFaults | None = None, clock_offset_us: int = 0, clock_ppm: float = 0.0,
-                 full_stroke_s: float = 8.0, run_enable_wired: bool = False) -> None:
+                 full_stroke_s: float = 8.0, run_enable_wired: bool = False, brake_hold_relay: bool | None = None,
+                 pace: float = 1.0, bme280_address: int | None = None, bme280_seed: int | None = None) -> None:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating
 
         self.model = RigModel(params, seed=seed)
-        self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
-                                         input_fitted=self.model.input_fitted)
-        self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
-        if run_enable_wired and self.firmware.has_supervisor:
-            self.model.nano_enable = False  # off until the host's limits arrive
+        if brake_hold_relay is not None:  # K3: wiring, as rig.toml declares it
+            self.model.brake_hold_relay = brake_hold_relay
+        # Paced at N x real time on a real-time loop (dyno ui --speed N): each real-time poll spans N x more
+        # rig time, so the ring holds the same span of rig time it has at 1x (64 events ~ 0.28 s of rig
+        # events; otherwise a poll gap of a few ms overflows it: an artefact of pacing, not the link), and
+        # the Nano's heartbeat keeps its real-time timeout
+        ring = max(64, math.ceil(64 * pace))
+        d7_wired = run_enable_wired and protocol == "v2"  # (the Nano's supervisor: v2 firmware)
 
-            def _d7(on: bool, t_s: float, cause: str) -> None:
-                self.model.nano_enable = on
-            self.firmware.on_run_enable = _d7
+        def _d7(on: bool, t_s: float, cause: str) -> None:
+            self.model.nano_enable = on
+        self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
+                                         input_fitted=self.model.input_fitted, ring_capacity=ring,
+                                         pace=max(1.0, pace), on_run_enable=_d7 if d7_wired else None)
+        self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
+        if bme280_address is not None:  # the simulated air sensor, only when the rig file fits one
+            from dyno.sim.bme280_chip import SimBME280
+
+            self.bus.devices[bme280_address] = SimBME280(self.model.world, seed if bme280_seed is None else bme280_seed)
+        if d7_wired:
+            self.model.nano_enable = False  # off until the host's limits arrive
         self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)
         self.truth = TruthRecorder(self.model)
         self.protocol = protocol

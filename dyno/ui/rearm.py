@@ -112,12 +112,11 @@ class RearmMixin:
         self.ctx.ambient = dict(meta.get("ambient") or {})
         ctrl = TestController(self.poller, old.act, old.calibration, engine_map, plan=old.plan,
                               limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
-                              runner_for=old.runner_for, from_idle=old.from_idle)
-        ctrl.point_hooks = list(old.point_hooks)  # (the simulated rig's truth: keyed by time, not by run)
-        ctrl.result_hooks = list(getattr(old, "result_hooks", []))  # (the characterisations' sim truths)
-        for name in REBUILT_ATTRS:  # what the composition root sets on a controller after building it
-            if hasattr(old, name):
-                setattr(ctrl, name, getattr(old, name))
+                              runner_for=old.runner_for, from_idle=old.from_idle,
+                              # what the composition root gave the first controller (dyno.app.build): the same
+                              **{name: getattr(old, name) for name in REBUILT_ATTRS},
+                              point_hooks=old.point_hooks,  # (the simulated rig's truth: keyed by time, not by run)
+                              result_hooks=old.result_hooks)  # (the characterisations' sim truths)
         ctrl.listeners.append(self._on_controller)
         writer.on_error = lambda exc: ctrl.abort(
             "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or new_dir}): "
@@ -155,22 +154,21 @@ class RearmMixin:
 
     def _rehook_watchdog(self) -> None:
         """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
-        from dyno.app import _attach_watchdog, start_watchdog
+        from dyno.app_safety import _WatchdogKick, make_watchdog, start_watchdog
 
-        self.poller.listeners[:] = [fn for fn in self.poller.listeners
-                                    if not getattr(fn, "__qualname__", "").startswith("_attach_watchdog.")]
-        timeout_s = self.ctx.rig_cfg.actuator.watchdog_s
-        if self.ctx.hw is None:  # the session's own watchdog: a new one beside the new controller
-            if self._stop_watchdog is not None:
-                self._stop_watchdog()
-            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
-            self._stop_watchdog = start_watchdog(self.ctx, self.loop)
-        else:  # pragma: no cover - the rig's watchdog (its thread runs on) reports to the new controller
-            _attach_watchdog(self.ctx, timeout_s, self.loop.time)
+        self.poller.listeners[:] = [fn for fn in self.poller.listeners if not isinstance(fn, _WatchdogKick)]
+        ctx = self.ctx
+        timeout_s = ctx.rig_cfg.actuator.watchdog_s
+        if ctx.hw is None and self._stop_watchdog is not None:  # the session's own: a new one beside the new controller
+            self._stop_watchdog()
+        # (the rig's own watchdog thread runs on: it reports to the new controller)
+        ctx.watchdog = make_watchdog(self.controller, self.poller, ctx.hw, ctx.estop, timeout_s, self.loop.time)
+        if ctx.hw is None:
+            self._stop_watchdog = start_watchdog(ctx, self.loop)
 
 
-# Attributes dyno.app.build may set on a controller after constructing it (rig.toml's control gains and
-# inertias on newer trees): a re-armed controller gets the same.
+# What dyno.app.build gives a controller's constructor beside the plan and its parts (rig.toml's description,
+# control gains and inertias, the tune, the input channel as tared): a re-armed controller is given the same.
 # (time_scale: the paced session's host seconds per rig second -- lost, a re-armed x4 session's speed hold timed
 # its derivative and settle in host seconds and held no setpoint; input_channel: the live screen's T_in)
 REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "time_scale", "input_channel")

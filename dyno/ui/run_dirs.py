@@ -23,8 +23,7 @@ def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
 async def _finish_in_background(run_dir: Path) -> None:
     """report.html and the run library's entry for an ended run, in a low-priority child process
     (matplotlib would hold the loop, and the GIL, for seconds)."""
-    code = ("import os, sys; os.nice(10); from dyno.cli.ui_cmd import finish_run; "
-            "finish_run(sys.argv[1], announce=False)")
+    code = "import os, sys; os.nice(10); from dyno.run_after import _background_main; _background_main(sys.argv)"
     try:
         proc = await asyncio.create_subprocess_exec(sys.executable, "-c", code, str(run_dir),
                                                     stdin=asyncio.subprocess.DEVNULL,

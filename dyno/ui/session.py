@@ -1,10 +1,9 @@
 """A live test session for the UI: the backbone (poller, controller, run log) on the app's own loop.
 
 Textual runs its own asyncio loop, so the simulated rig cannot use
-:class:`dyno.clock.VirtualTimeLoop`.  Instead the simulated bus sees a scaled
-clock, ``t_sim = (loop.time() - t0) * speed``, starting at 0 (the loop's
-monotonic clock is hours since boot; the physics would otherwise simulate
-them all on the first poll).  The poller keeps its real-time rate.  At
+:class:`dyno.clock.VirtualTimeLoop`.  Instead the session hands the composition root a scaled clock
+(:class:`dyno.pacing.ScaledClock`, ``t_sim = (loop.time() - t0) * speed``) with the run's spec, and
+:func:`dyno.app.build` paces the run from it.  The poller keeps its real-time rate.  At
 ``speed > 1`` the plan's durations are divided by ``speed`` so the rig sees
 the usual warm-up, step, settle and measurement times in simulated time,
 and settling uses the fixed time (the detection's window is compared with
@@ -19,14 +18,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
-from dyno.ui.pacing import SimTimeActuators, scaled_plan  # noqa: F401 (scaled_plan: re-exported)
+from dyno.pacing import ScaledClock, SimTimeActuators, scaled_plan  # noqa: F401 (re-exported)
 from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
 
 FINISHED = (State.DONE, State.ABORTED)
 
 
-@dataclass
+@dataclass(frozen=True)
 class LiveOptions:
+    """What a live session is to run (built by `dyno ui` or a test; frozen: the session hands the root a RunSpec)."""
+
     sim: bool = True
     speed: float = 1.0
     seed: int = 0
@@ -46,56 +47,48 @@ class LiveSession(RearmMixin):
     """Owns the run: start the tasks, forward the operator's commands, shut down safely."""
 
     def __init__(self, opts: LiveOptions) -> None:
-        from dyno.app import RunOptions, build
+        from dyno.app import RunSpec, build
 
         self.opts = opts
         loop = asyncio.get_running_loop()
         self.loop = loop
         self.speed = float(opts.speed) if opts.sim else 1.0
-        self.t0 = loop.time()
-        self.sim_now = lambda: (loop.time() - self.t0) * self.speed
-        run_opts = RunOptions(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
-                              rig_path=opts.rig_path, plan=scaled_plan(opts.plan, self.speed),
-                              mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient, drills=list(opts.drills),
-                              sim_params=opts.sim_params if opts.sim else None)
-        if opts.calibration_path:
-            run_opts.calibration_path = opts.calibration_path
-        if opts.engine_map_path:
-            run_opts.engine_map_path = opts.engine_map_path
+        self.clock = ScaledClock(loop.time, self.speed)  # the simulated rig's time (at speed 1 on the rig: unused)
+        self.sim_now = self.clock.now
+        paths = {k: v for k, v in (("calibration_path", opts.calibration_path),
+                                   ("engine_map_path", opts.engine_map_path)) if v}
+        run_opts = RunSpec(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
+                           rig_path=opts.rig_path, plan=opts.plan, clock=self.clock if opts.sim else None,
+                           mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient, drills=list(opts.drills),
+                           sim_params=opts.sim_params if opts.sim else None, **paths)
         self.guard = None
         self.run_dir_removed = False  # set by close() when a simulated session never started a test
         self.started = False
         self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
-        self._old_signals: dict = {}
         # A hang-up while the rig is being built (run directory, pins, bus) must not kill the process with
         # the run log half-made: the handlers go in first, a signal that comes before the controller
         # exists waits for it (a run directory with a `start` record alone was left behind otherwise).
-        self._signal_pending: int | None = None
-        self._install_signal_handlers()
+        # SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone), SIGINT sent by ``kill -INT``: safe state, abort
+        # record, exit 128+N (dyno.run_signals; the Ctrl+C *key* reaches a Textual app as a key: the E-STOP).
+        import threading
+
+        from dyno.run_signals import RunSignals
+
+        self._signals = None
+        if threading.current_thread() is threading.main_thread():
+            self._signals = RunSignals(loop, closed="session closed", on_signal=self._on_hangup,
+                                       after_abort=self._signal_to_app, record=False).install()
         try:
             self._build(opts, run_opts, build, loop)
         except BaseException:
             self._restore_signals()
             raise
-        if self._signal_pending is not None:
-            loop.call_soon(self._on_signal_loop, self._signal_pending)
+        if self._signals is not None:
+            self._signals.armed(self.ctx)
 
     def _build(self, opts, run_opts, build, loop) -> None:
-        if opts.sim:
+        if opts.sim:  # paced from the scaled clock by the root: plan, time scale, actuators' clock, polls, ring
             self.ctx = build(run_opts, self.sim_now)
-            # the plan runners' own durations (hold periods, approach times) shrink like the plan's
-            self.ctx.controller.time_scale = 1.0 / self.speed
-            if not opts.mock_pins:  # (GpioActuators already keep time on the simulated clock)
-                self.ctx.controller.act = SimTimeActuators(self.ctx.sim.actuators, self.sim_now)
-            self.ctx.host_to_sim = lambda t: (t - self.t0) * self.speed  # drills' true-time latencies
-            # Each real-time poll spans `speed` x more rig time: let it drain that many more frames.
-            self.ctx.poller.max_burst = max(8, math.ceil(8 * self.speed))
-            # ... and give the emulated firmware's ring the same span of rig time it has at 1x
-            # (64 events ~ 0.28 s of rig events); otherwise a real-time poll gap of a few ms is
-            # `speed` x longer for the device and the ring overflows: an artefact of pacing, not the link.
-            fw = self.ctx.sim.firmware
-            fw.ring_capacity = max(fw.ring_capacity, math.ceil(fw.ring_capacity * self.speed))
-            fw.supervisor.pace = max(1.0, self.speed)  # the Nano's heartbeat: the same real time (dyno.sim.supervisor)
         else:  # pragma: no cover - needs the rig
             from dyno.hw.safety import SafetyGuard
 
@@ -121,6 +114,11 @@ class LiveSession(RearmMixin):
         self._drills_fired_before = 0  # drills fired in earlier runs of the session (re-arm)
 
     @property
+    def t0(self) -> float:
+        """The loop time the simulated rig's time starts from (the scaled clock's origin)."""
+        return self.clock.t0
+
+    @property
     def sim(self):
         return self.ctx.sim
 
@@ -136,7 +134,7 @@ class LiveSession(RearmMixin):
         if self.ctx.sim is not None and self.ctx.sim.model.t_s == 0.0:
             # Rig time starts now, not when assembly began: building took a few hundred ms
             # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
-            self.t0 = self.loop.time()
+            self.clock.restart()
         from dyno.app import arm_drills, start_watchdog
 
         # The safety path does not depend on the UI: the watchdog is a thread, the checks run
@@ -147,47 +145,17 @@ class LiveSession(RearmMixin):
         self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
 
-    def _install_signal_handlers(self) -> None:
-        """SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone) and SIGINT sent by ``kill -INT``:
-        safe state, abort record, exit 128+N.  (The Ctrl+C *key* reaches a Textual app as a key in
-        raw mode, not as SIGINT: it is the E-STOP.)
-        """
-        import signal
-        import threading
-
-        if threading.current_thread() is not threading.main_thread():
-            return
-
-        def handler(signum, frame) -> None:
-            if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
-                from dyno.ui.common import detach_terminal
-
-                detach_terminal()
-                self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
-            if not hasattr(self, "controller"):  # still building: the session acts once it exists
-                if self._signal_pending is None:
-                    self._signal_pending = signum
-                return
-            if self.ctx.sim is None or self.ctx.pi_outputs:  # the Pi's output code (rig or twin): at once
-                from dyno.control.outputs import enter_safe_state
-
-                enter_safe_state(self.controller.act, latch=True)  # at once, latched, whatever the loop does
-            self.loop.call_soon_threadsafe(self._on_signal_loop, signum)
-
-        for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
-            self._old_signals[sig] = signal.signal(sig, handler)
-
-    def _on_signal_loop(self, signum: int) -> None:
+    def _on_hangup(self, signum: int) -> None:
         import signal
 
-        name = signal.Signals(signum).name
-        self.controller.abort("signal", f"{name} received: safe state, session closed")
-        if self.on_signal is not None:
-            self.on_signal(128 + signum)
-        else:  # the app has not hooked the session yet: it will find the abort (asked again on the next turn)
-            self.loop.call_later(0.05, self._signal_to_app, signum)
+        if signum == signal.SIGHUP:  # the terminal went: or Textual's shut-down may wait on it for ever
+            from dyno.ui.common import detach_terminal
+
+            detach_terminal()
+            self.hung_up = True  # close at once: pads off the rotor, not the whole stroke (docs/safety.md)
 
     def _signal_to_app(self, signum: int) -> None:
+        """After a signal's abort: the app quits with 128+N (asked again until it has hooked the session)."""
         if self.closed:
             return
         if self.on_signal is not None:
@@ -196,11 +164,8 @@ class LiveSession(RearmMixin):
             self.loop.call_later(0.05, self._signal_to_app, signum)
 
     def _restore_signals(self) -> None:
-        import signal
-
-        for sig, old in self._old_signals.items():
-            signal.signal(sig, old)
-        self._old_signals = {}
+        if self._signals is not None:
+            self._signals.restore()
 
     @property
     def finished(self) -> bool:

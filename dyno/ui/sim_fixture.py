@@ -220,13 +220,17 @@ class CalibrationFixture:
 class FixtureRig:
     """Fixture + emulated firmware + simulated bus, ready for a reader and a poller."""
 
-    def __init__(self, now_s, *, seed: int = 0, params=None, **fixture_kw) -> None:
+    def __init__(self, now_s, *, seed: int = 0, params=None, pace: float | None = None, **fixture_kw) -> None:
         from dyno.sim.bus import SimSMBus
         from dyno.sim.device import EmulatedFirmware
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
         self.model = self.fixture  # what the drills act on (dyno.drills), as SimRig.model
-        self.firmware = EmulatedFirmware("v2", input_fitted=self.fixture.input_fitted)
+        # paced at N x real time (dyno calibrate --speed N): the ring holds the same span of fixture time
+        # (two converters: twice the events); None: the firmware's own 64
+        per_poll = 128 if self.fixture.input_fitted else 64
+        ring = 64 if pace is None else max(per_poll, math.ceil(per_poll * pace))
+        self.firmware = EmulatedFirmware("v2", input_fitted=self.fixture.input_fitted, ring_capacity=ring)
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
 
     def hang(self, mass_kg: float, radius_m: float, channel: str = "output") -> float:
@@ -234,16 +238,18 @@ class FixtureRig:
         return self.fixture.hang(mass_kg, radius_m, channel)
 
 
-def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, address: int = 0x03, **fixture_kw):
+def build_fixture_poller(now_s, *, seed: int = 0, poll_hz: float = 150.0, address: int = 0x03, pace: float | None = None,
+                         want_input: bool | None = None, **fixture_kw):
     """(FixtureRig, Poller) over the simulated bus: what ``dyno calibrate --sim`` acquires from.
 
-    ``input_fitted=True`` (a fixture option): the input channel too, asked for at boot as a run does."""
+    ``input_fitted=True`` (a fixture option): the input channel too, asked for at boot as a run does
+    (``want_input``: asked for or not whatever is fitted; None: when fitted).  ``pace``: N at N x real time
+    (each real-time poll drains and buffers N x more)."""
     from dyno.acquisition.poller import Poller
     from dyno.acquisition.reader import make_reader
     from dyno.transports.base import I2CTransport
 
-    rig = FixtureRig(now_s, seed=seed, **fixture_kw)
-    reader = make_reader("v2", I2CTransport(rig.bus, address))
-    if rig.fixture.input_fitted:
-        reader.want_input = True
-    return rig, Poller(reader, poll_hz=poll_hz)
+    rig = FixtureRig(now_s, seed=seed, pace=pace, **fixture_kw)
+    reader = make_reader("v2", I2CTransport(rig.bus, address),
+                         want_input=rig.fixture.input_fitted if want_input is None else want_input)
+    return rig, Poller(reader, poll_hz=poll_hz, max_burst=max(8, math.ceil(8 * (pace or 1.0))))

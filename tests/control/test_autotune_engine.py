@@ -11,7 +11,6 @@ from dataclasses import replace
 import pytest
 
 from dyno.app import RunOptions, run_test
-from dyno.control import plans as plans_mod
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import identify_gain
 from dyno.control.plans.steps import probe_load_sign
@@ -66,13 +65,9 @@ def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
         ctx.phase(State.SETTLE, "test")
         ctx.phase(State.DONE, "test done")
 
-    mp = pytest.MonkeyPatch()
-    mp.setitem(plans_mod.RUNNERS, "test-engine-tune", runner)
-    try:
-        r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
-                                out_dir=tmp_path / "run", sim_params=params))
-    finally:
-        mp.undo()
+    # the test's own mode comes with the run's spec
+    r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
+                            runners={"test-engine-tune": runner}, out_dir=tmp_path / "run", sim_params=params))
     assert not [a for a in r["aborts"] if a["cause"] != "no_points"], r["aborts"]
     return found
 

@@ -13,7 +13,6 @@ import pytest
 
 from dyno.app import RunOptions, run_test
 from dyno.sim.rig_params import RigParams
-from dyno.control import plans as plans_mod
 from dyno.control.plans import speed_hold as sh
 from dyno.control.controller import State, TestPlan as Plan
 from dyno.control.plans.steps import find_contact
@@ -69,16 +68,12 @@ def _hold_run(out_dir, seed: int, end_stop: bool) -> dict:
         ctx.phase(State.SETTLE, "test")
         ctx.phase(State.DONE, "test done")
 
-    mp = pytest.MonkeyPatch()
-    mp.setitem(plans_mod.RUNNERS, "test-hold", runner)
-    try:
-        # the thesis rig as specified (RigParams(ideal=True): its engine exactly its map, the reference
-        # day): these are the hold's figures on that plant; a seed's own engine (dyno.sim.world, up to
-        # ~20 % down on a hot day at altitude) changes the plant's gain, which is not what this checks
-        r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-hold"), mock_pins=True,
-                                out_dir=out_dir / "run", sim_params=RigParams(ideal=True)))
-    finally:
-        mp.undo()
+    # the thesis rig as specified (RigParams(ideal=True): its engine exactly its map, the reference
+    # day): these are the hold's figures on that plant; a seed's own engine (dyno.sim.world, up to
+    # ~20 % down on a hot day at altitude) changes the plant's gain, which is not what this checks.
+    # The test's own mode comes with the run's spec.
+    r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-hold"), mock_pins=True,
+                            runners={"test-hold": runner}, out_dir=out_dir / "run", sim_params=RigParams(ideal=True)))
     assert r["state"] in ("done", "aborted") and not [a for a in r["aborts"] if a["cause"] != "no_points"]
     return found
 

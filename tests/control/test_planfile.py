@@ -91,7 +91,13 @@ def test_unknown_name_and_missing_file():
 
 def test_a_mode_registered_in_code_is_selectable_and_usable_from_a_file(monkeypatch):
     """Another module adds a mode (e.g. "engagement"): a code plan by name, and plan files may use it."""
-    monkeypatch.setitem(plans_mod.RUNNERS, "engagement", "dyno.control.plans.steps:run_steps")
+    from types import MappingProxyType
+
+    from dyno.control import registry
+
+    # (the table is read-only: another module's mode is a different table, as a build of the package would ship)
+    monkeypatch.setattr(registry, "RUNNERS",
+                        MappingProxyType({**registry.RUNNERS, "engagement": "dyno.control.plans.steps:run_steps"}))
     monkeypatch.setitem(plans_mod.PLANS, "engagement", Plan(mode="engagement", warmup_s=1.0))
     p = plan_named("engagement")
     assert p.mode == "engagement" and p.name == "engagement" and p.warmup_s == 1.0

@@ -4,6 +4,8 @@ not from what the program says — and the latch refuses every command that woul
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from dyno.app import DEFAULT_ENGINE_MAP, RunOptions, run_test
@@ -40,7 +42,7 @@ def _run(plan: str, drill: str, tmp_path, *, mock_pins: bool = False, setup=None
     opts = RunOptions(sim=True, seed=5, out_dir=tmp_path / f"{plan}-{mock_pins}", plan=plan_named(plan),
                       drills=[parse_drill(drill)], setup=keep, mock_pins=mock_pins)
     if plan == "drive-grid":
-        opts.engine_map_path = PART_THROTTLE_MAP
+        opts = replace(opts, engine_map_path=PART_THROTTLE_MAP)
     return run_test(opts), held["ctx"]
 
 

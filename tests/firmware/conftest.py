@@ -46,13 +46,13 @@ def firmware_build(toolchain):
 
 @pytest.fixture
 def sim_args():
-    """Arguments for dyno.cli.firmware_sim_cmd.simulate, as the CLI would parse them."""
+    """The spec for dyno.firmware_sim.simulate, as the CLI builds it from these arguments."""
     from dyno.cli import firmware_sim_cmd
 
-    def make(*argv: str) -> argparse.Namespace:
+    def make(*argv: str):
         parser = argparse.ArgumentParser()
         firmware_sim_cmd.add_arguments(parser)
-        return parser.parse_args(list(argv))
+        return firmware_sim_cmd.spec_from_args(parser.parse_args(list(argv)))
 
     return make
 

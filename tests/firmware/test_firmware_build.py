@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.cli.firmware_sim_cmd import simulate
+from dyno.firmware_sim import simulate
 
 pytestmark = [pytest.mark.quick, pytest.mark.firmware]
 

@@ -22,7 +22,7 @@ import sys
 
 import pytest
 
-from dyno.cli.firmware_sim_cmd import simulate
+from dyno.firmware_sim import simulate
 
 pytestmark = pytest.mark.firmware
 

@@ -58,7 +58,7 @@ def test_a_port_that_never_answers_is_one_line_naming_it():
 
 
 def test_after_a_reset_the_doctor_waits_for_the_new_boot_not_a_fixed_time():
-    from dyno.cli.doctor_cmd import _boots, _new_boot
+    from dyno.hw.doctor import _boots, _new_boot
 
     sim, clock = _sim()
     cfg = load_rig()

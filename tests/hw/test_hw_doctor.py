@@ -66,7 +66,7 @@ def test_hw_doctor_sim_toggle_report(capsys, tmp_path):
 
 def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):
     import dyno.hw.outputs as outputs
-    from dyno.cli.doctor_cmd import diagnose
+    from dyno.hw.doctor import diagnose
     from dyno.rigconfig import load_rig
 
     monkeypatch.setattr(outputs, "GpioActuators", None)  # any use would raise
@@ -104,8 +104,8 @@ def test_hw_doctor_reads_the_bme280_the_rig_file_fits(tmp_path):
 def test_hw_doctor_checks_the_nanos_run_enable():
     """The firmware's capabilities say whether it has the run-enable (issue 37); without it, a rig whose kill
     chain has the Nano's transistor cannot run the engine: a warning naming the fix."""
-    from dyno.cli.doctor_cmd import Report
-    from dyno.cli.doctor_nano import check_run_enable
+    from dyno.hw.doctor import Report
+    from dyno.hw.doctor_nano import check_run_enable
     from dyno.rigconfig import load_rig
     from dyno.sim.device import EmulatedFirmware
     from dyno.transports.base import Transport

@@ -264,7 +264,7 @@ def test_clear_latch_refuses_while_the_release_runs(rig_wired):
 def test_a_switch_fault_outlives_the_process_until_doctor_passes(rig_wired, tmp_path, monkeypatch):
     """Found stuck in one session, the switch is not trusted by the next (a new driver would have forgotten):
     releases run their full stroke and the re-arm is refused until ``dyno doctor --toggle``'s switch check passes."""
-    from dyno.cli.doctor_cmd import Report, check_end_switch
+    from dyno.hw.doctor import Report, check_end_switch
     from dyno.hw import rig_faults
     from dyno.hw.rig import HardwareRig
 

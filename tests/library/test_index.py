@@ -209,7 +209,10 @@ def test_import_legacy_is_indexed(tmp_path):
 def test_ui_hook_indexes_what_is_new(library, tmp_path, monkeypatch):
     import shutil
 
-    from dyno.cli.ui_cmd import _index
+    from dyno.run_after import index_run
+
+    def _index(run_dir):
+        index_run(run_dir, lambda line: None)
 
     root = tmp_path / "runs"
     shutil.copytree(library["root"] / "quick", root / "20260101-000000")

@@ -195,7 +195,8 @@ def test_a_table_to_solve_is_announced_once_a_cached_one_not(tmp_path, monkeypat
     from dyno.sim import belt_table as bt
 
     said = []
-    monkeypatch.setattr(bt, "on_build", said.append)
+    announcing = bt.announcing_builds(said.append)
+    announcing.__enter__()
     real_build = bt.build_belt_table
     monkeypatch.setattr(bt, "build_belt_table",
                         lambda cache_dir=None, tune=None, solve=None: real_build(
@@ -207,4 +208,5 @@ def test_a_table_to_solve_is_announced_once_a_cached_one_not(tmp_path, monkeypat
         bt.belt_table(cache_dir=tmp_path)  # all cached now (another process): read, nothing said
         assert said == [None]
     finally:
+        announcing.__exit__(None, None, None)
         bt._TABLES.pop((str(tmp_path), None), None)

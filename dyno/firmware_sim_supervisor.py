@@ -1,4 +1,4 @@
-"""``dyno firmware-sim``'s run-enable supervisor (issue 37): the host's side of it and the report.
+"""The firmware-in-the-loop harness's run-enable supervisor (:mod:`dyno.firmware_sim`) (issue 37): the host's side of it and the report.
 
 The host sends the rig file's ``[limits]`` (``overspeed_primary_rpm``, ``overspeed_secondary_rpm``,
 ``supervisor_timeout_s``) in one SET_SUPERVISOR at every boot, after the boot's first frame, as the host
@@ -22,42 +22,29 @@ decoded, a reset from the boot change the host saw:
 
 from __future__ import annotations
 
-from dyno.cli import number_in
 from dyno.protocol import v1, v2
 
-
-
-def add_arguments(parser) -> None:
-    from dyno.rigconfig import add_rig_argument
-
-    add_rig_argument(parser)  # --rig PATH: its [limits] arm the run-enable at every boot
-    parser.add_argument("--host-stop-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
-                        help="the host stops polling at S simulated seconds (the simulation goes on to --seconds; "
-                             "the host reads what the device kept after the drain)")
-    parser.add_argument("--no-limits", action="store_true",
-                        help="never send the rig file's limits (SET_SUPERVISOR): the run-enable stays off")
-    parser.add_argument("--enable-model", choices=("auto", "static", "pump"), default="auto",
-                        help="how the harness reads D7: a static level (watchdog build), a charge pump's pulse "
-                             "train (old-bootloader build), or auto-detected (default)")
 
 
 class SupervisorHost:
     """What the host does about the run-enable, and what it decoded of it."""
 
-    def __init__(self, args) -> None:
+    def __init__(self, spec) -> None:
+        """``spec``: a :class:`dyno.firmware_sim.FirmwareSimSpec` (``protocol``, ``no_limits``, ``rig``,
+        ``host_stop_at``)."""
         self.command = None
         self.limits = None
-        if args.protocol == "v2" and not args.no_limits:
+        if spec.protocol == "v2" and not spec.no_limits:
             from dyno.rigconfig import load_rig
 
-            lim = load_rig(args.rig).limits
+            lim = load_rig(spec.rig).limits
             self.limits = {"overspeed_primary_rpm": lim.overspeed_primary_rpm,
                            "overspeed_secondary_rpm": lim.overspeed_secondary_rpm,
                            "timeout_s": lim.supervisor_timeout_s}
             if lim.supervisor_timeout_s > 0:  # 0 in the rig file: the run-enable is not armed
                 self.command = v2.supervisor_command(lim.overspeed_primary_rpm, lim.overspeed_secondary_rpm,
                                                      lim.supervisor_timeout_s)
-        self.stop_at = args.host_stop_at
+        self.stop_at = spec.host_stop_at
         self.sends: list = []          # (t_s, boot_id)
         self.events: list = []         # (t_s decoded, boot_id, Event)
         self.boot_seen: list = []      # (t_s, boot_id): the host's first frame of each boot

@@ -1,6 +1,6 @@
 """``dyno doctor``'s check of the Nano's run-enable (issue 37).
 
-``OK``, ``WARN``, ``SKIP``: the report's statuses (dyno.cli.doctor_cmd).
+``OK``, ``WARN``, ``SKIP``: the report's statuses (dyno.hw.doctor).
 """
 
 from __future__ import annotations
