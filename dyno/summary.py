@@ -127,7 +127,8 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
               "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
-              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
+              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "driveline_loss_true_nm",
+              "faults",
               # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
               "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
