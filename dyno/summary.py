@@ -134,6 +134,7 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
               # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
               "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
+              "efficiency_sys95_friction",
               "efficiency_sys95_air", "efficiency_u95", "efficiency_u95_terms", "torque_zero_tare_nm",
               # which power the efficiency divides by ("input_torque" | "engine_map"); the input channel's
               # torque, its own terms, and the map's figure beside it (dyno.analysis.input_torque)

@@ -20,6 +20,7 @@ import numpy as np
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
 from dyno.analysis.efficiency import batch_mean, point_efficiency
 from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange
+from dyno.analysis.part_throttle_air import friction_u95_nm
 from dyno.analysis.spectral_sem import satterthwaite_dof, spectral_sem
 from dyno.protocol import v1
 
@@ -140,6 +141,9 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
         else:
             point.update(power_out_w=eff["power_out_w"], power_in_w=eff["power_in_w"],
                          efficiency=eff["efficiency"], efficiency_sem=eff["efficiency_sem"])
+            fr95 = friction_u95_nm(curve, rp)  # a part-throttle curve at the day's air: its friction estimate's term
+            if fr95 > 0:
+                point["efficiency_sys95_friction"] = float(eff["efficiency"] * fr95 / curve.torque_nm(rp))
             # 95 % interval half-width: the standard error is from batch means (correlated samples),
             # so Student's t with (batches - 1) degrees of freedom, not 1.96.
             # (the torque's own degrees of freedom and the speeds' batches', combined: Welch-Satterthwaite)
