@@ -276,7 +276,8 @@ class EngineMap:
         day, fr95 = part_throttle_at_ambient(n, curve._standard_torque_nm, full_std, cf)
         src = f"{curve.source} at {temp_c:g} C, {dry_pressure_kpa:g} kPa dry (SAE J1349 CF {cf:.4f}, friction unscaled)"
         out = EngineMap(n, day, source=src, sha256=curve.sha256, _j1349_factor=cf,
-                        _ambient=(float(temp_c), float(dry_pressure_kpa)), _standard_torque_nm=curve._standard_torque_nm)
+                        _ambient=(float(temp_c), float(dry_pressure_kpa)),
+                        _standard_torque_nm=curve._standard_torque_nm)
         out.throttle_frac = curve.throttle_frac
         out.friction_u95_knots_nm = fr95  # (dyno.analysis.part_throttle_air.friction_u95_nm)
         return out

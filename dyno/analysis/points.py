@@ -6,9 +6,10 @@ them with another calibration or engine map when asked).
 
 Speeds are mean speeds by edge count over the window (insensitive to firing
 ripple); their scatter is the standard deviation of per-period rpm, their
-standard error comes from batch means; the torque's from the low end of its spectrum
-(:mod:`dyno.analysis.spectral_sem`: white converter noise, many more degrees of freedom).  ADC conversions with the AD7171 error
-bit, or at a rail (0 / 65535), are excluded and counted, never averaged in.
+standard error comes from batch means; the torque's from the low end of its
+spectrum (:mod:`dyno.analysis.spectral_sem`: white converter noise, many more
+degrees of freedom).  ADC conversions with the AD7171 error bit, or at a rail
+(0 / 65535), are excluded and counted, never averaged in.
 """
 
 from __future__ import annotations
@@ -144,9 +145,8 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
             fr95 = friction_u95_nm(curve, rp)  # a part-throttle curve at the day's air: its friction estimate's term
             if fr95 > 0:
                 point["efficiency_sys95_friction"] = float(eff["efficiency"] * fr95 / curve.torque_nm(rp))
-            # 95 % interval half-width: the standard error is from batch means (correlated samples),
-            # so Student's t with (batches - 1) degrees of freedom, not 1.96.
-            # (the torque's own degrees of freedom and the speeds' batches', combined: Welch-Satterthwaite)
+            # 95 % interval half-width: the standard errors are estimates (the torque's from its spectrum, the
+            # speeds' from batch means), so Student's t on their combined degrees of freedom, not 1.96
             dof = efficiency_dof(point, eff["efficiency"], eff["efficiency_sem"], _n_batches(t0_us, t1_us) - 1)
             point["efficiency_dof"] = dof
             point["efficiency_ci95"] = float(_t975(dof) * eff["efficiency_sem"])

@@ -157,7 +157,7 @@ class SpeedHoldPlan:
     in_band_s: float = 0.8  # ... for this long, then measure
     # ... and steady: the speed's rate over the last ``settle_rate_window_s`` (two adjacent means) below this
     # fraction of the setpoint per second (0: the dwell alone).  A window started while the speed still moves
-    # averages a transient (the gauge misses the secondary pulley's inertia torque): biased, and drift-skipped.
+    # averages a transient: the CVT shifts under the frozen brake and the window is drift-skipped, time lost.
     settle_rate_rel_per_s: float = 0.0
     settle_rate_window_s: float = 0.3
     max_approach_s: float = 8.0  # then: near the setpoint, measure (flagged); far from it, skip it
