@@ -255,7 +255,8 @@ def main() -> int:
                       f"{statistics.mean(r['reversals_per_s'] for r in rows):.2f} |", flush=True)
             if plan == "speed-hold" and rows:
                 hold_rows = rows
-        print_breakdown(hold_rows)
+        if hold_rows:
+            print_breakdown(hold_rows)
     return judge(hold_rows, quick=args.quick)
 
 
@@ -272,7 +273,10 @@ def print_breakdown(rows: list[dict]) -> None:
 
 
 def judge(rows: list[dict], quick: bool) -> int:
-    """The issue's criteria on the speed-hold rows (quick: points and CI only)."""
+    """The issue's criteria on the speed-hold rows (quick: points and CI only; none run: nothing to judge)."""
+    if not rows:
+        print("criteria: no speed-hold run to judge")
+        return 0
     fails = []
     for seed, r in enumerate(rows, 1):
         if r["points"] < MIN_POINTS:
