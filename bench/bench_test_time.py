@@ -15,13 +15,21 @@ Everything runs through the real-rig output code on mock pins (``--mock-pins``):
 
     python bench/bench_test_time.py [--seeds 10] [--thesis-seeds 2] [--step-seeds 10] [--skip-steps] [--quick]
 
-``--quick`` (CI's smoke run): one seed of each part (steps, speed-hold, thesis-step).
+Part 3 (speed-hold) prints where its test time goes, per seed, from each run's log: warm-up (full throttle, no
+brake), contact search, the warm-up wait at load, settling (setpoint step until in band and steady), measuring,
+setpoints lost to skips; per point; and the floor for the precision asked: the same start, each point's window
+at the precision its own noise allows with a known error ((1.96 c / target)^2, c = the point's standard error
+times the root of its length) and the settle's dwell.  Criteria (issue 39), judged on the speed-hold seeds with
+perfect knowledge: >= 18 points, every CI95 <= 0.01, the truth inside the CI at >= 85 % pooled, test time
+<= 100 s; exit 1 when one fails.  ``--quick`` (CI's smoke run): one seed of each part (steps, speed-hold,
+thesis-step), judging points and CI only (one seed's coverage and time are luck; the full run judges them).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import math
 import statistics
 import sys
@@ -150,6 +158,46 @@ def step_table(seeds: list[int], tmp: Path) -> None:
           f"(reversals/s {statistics.mean(r['reversals_per_s'] for r in all_rates):.2f})", flush=True)
 
 
+TARGET_CI95 = 0.01
+MIN_POINTS = 18
+MAX_TEST_S = 100.0
+MIN_COVERAGE = 0.85
+
+
+def time_breakdown(run_dir, target_ci95: float = TARGET_CI95, in_band_s: float = 0.3) -> dict:
+    """Where a speed-hold run's test time went (s), from its ``documents.jsonl``; and the floor (see the docstring)."""
+    docs = [json.loads(line) for line in Path(run_dir, "documents.jsonl").read_text().splitlines() if line.strip()]
+    out = {"warmup": 0.0, "contact": 0.0, "warmup_wait": 0.0, "settle": 0.0, "measure": 0.0, "skipped": 0.0}
+    go = contact0 = seg = None
+    floor_measure = 0.0
+    n = 0
+    for d in docs:
+        t = d.get("host_t_s")
+        if d["type"] == "state" and d["state"] == "warmup" and go is None:
+            go = t
+        elif d["type"] == "state" and d["state"] == "step" and "contact" in d.get("reason", ""):
+            out["warmup"], contact0 = t - go, t
+        elif d["type"] == "contact":
+            out["contact"], seg = t - contact0, t
+        elif d["type"] == "warmup_wait":
+            out["warmup_wait"] = d["wait_s"]
+        elif d["type"] == "state" and d["state"] == "measure" and seg is not None:
+            out["settle"] += t - seg
+        elif d["type"] == "point":
+            out["measure"] += d["duration_s"]
+            c = d["efficiency_sem"] * math.sqrt(d["duration_s"])
+            floor_measure += (1.96 * c / target_ci95) ** 2
+            seg, n = t, n + 1
+        elif d["type"] == "skip" and seg is not None:
+            out["skipped"] += t - seg
+            seg = t
+    out["settle"] -= out["warmup_wait"]  # (the first point's settle overlaps the wait; counted once, as the wait)
+    out["points"] = n
+    out["total"] = sum(out[k] for k in ("warmup", "contact", "warmup_wait", "settle", "measure", "skipped"))
+    out["floor"] = out["warmup"] + out["contact"] + out["warmup_wait"] + floor_measure + n * in_band_s
+    return out
+
+
 def summary(r: dict) -> dict:
     pts = r["points"]
     return {"state": r["state"], "points": len(pts), "test_time_s": r["test_time_s"],
@@ -176,6 +224,7 @@ def main() -> int:
         tmp = Path(tmp)
         if not args.skip_steps and args.step_seeds > 0:
             step_table(list(range(args.step_seed_start, args.step_seed_start + args.step_seeds)), tmp)
+        hold_rows: list[dict] = []
         print("\n| plan | seed | points | test time s | s/point | max CI95 | truth in CI | median err | pulses/s | reversals/s |")
         print("|---|---|---|---|---|---|---|---|---|---|")
         for plan, n in (("speed-hold", args.seeds), ("thesis-step", args.thesis_seeds)):
@@ -187,6 +236,8 @@ def main() -> int:
                     s = summary(run_test(RunOptions(sim=True, seed=seed, plan=plan_named(plan), mock_pins=True,
                                                     out_dir=tmp / f"{plan}-{seed}", sim_params=RigParams(ideal=True))))
                 s["pulses_per_s"], s["reversals_per_s"] = count.per_s() if count.periods else (math.nan, math.nan)
+                if plan == "speed-hold":
+                    s["time"] = time_breakdown(tmp / f"{plan}-{seed}")
                 rows.append(s)
                 print(f"| {plan} | {seed} | {s['points']} | {s['test_time_s']:.0f} | {s['per_point_s']:.1f} | "
                       f"{s['max_ci95']:.5f} | {s['covered']:.0%} | {s['median_err']:.4f} | "
@@ -202,7 +253,47 @@ def main() -> int:
                       f"{statistics.median(e for r in rows for e in r['errs']):.4f} | "
                       f"{statistics.mean(r['pulses_per_s'] for r in rows):.2f} | "
                       f"{statistics.mean(r['reversals_per_s'] for r in rows):.2f} |", flush=True)
-    return 0
+            if plan == "speed-hold" and rows:
+                hold_rows = rows
+        if hold_rows:
+            print_breakdown(hold_rows)
+    return judge(hold_rows, quick=args.quick)
+
+
+def print_breakdown(rows: list[dict]) -> None:
+    keys = ("warmup", "contact", "warmup_wait", "settle", "measure", "skipped", "total", "floor")
+    print("\nspeed-hold: where the test time goes (s; settle and measure also per point)\n")
+    print("| seed | points | " + " | ".join(keys) + " | settle/point | measure/point |")
+    print("|---" * (len(keys) + 4) + "|")
+    for seed, r in enumerate(rows, 1):
+        b = r["time"]
+        n = max(1, b["points"])
+        print(f"| {seed} | {b['points']} | " + " | ".join(f"{b[k]:.1f}" for k in keys)
+              + f" | {b['settle'] / n:.2f} | {b['measure'] / n:.2f} |")
+
+
+def judge(rows: list[dict], quick: bool) -> int:
+    """The issue's criteria on the speed-hold rows (quick: points and CI only; none run: nothing to judge)."""
+    if not rows:
+        print("criteria: no speed-hold run to judge")
+        return 0
+    fails = []
+    for seed, r in enumerate(rows, 1):
+        if r["points"] < MIN_POINTS:
+            fails.append(f"seed {seed}: {r['points']} points < {MIN_POINTS}")
+        if not r["max_ci95"] <= TARGET_CI95:
+            fails.append(f"seed {seed}: a CI95 of {r['max_ci95']:.4f} > {TARGET_CI95}")
+        if not quick and not r["test_time_s"] <= MAX_TEST_S:
+            fails.append(f"seed {seed}: test time {r['test_time_s']:.0f} s > {MAX_TEST_S:.0f} s")
+    allpts = sum(r["points"] for r in rows)
+    cov = sum(r["covered"] * r["points"] for r in rows) / max(1, allpts)
+    if not quick and cov < MIN_COVERAGE:
+        fails.append(f"truth inside the CI at {cov:.0%} < {MIN_COVERAGE:.0%} pooled")
+    for f in fails:
+        print(f"FAIL: {f}")
+    print("criteria: " + ("met" if not fails else f"{len(fails)} failed")
+          + (" (quick: points and CI only)" if quick else ""))
+    return 1 if fails else 0
 
 
 if __name__ == "__main__":

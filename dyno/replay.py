@@ -19,7 +19,7 @@ PASS_THROUGH = ("settled_by", "settle_s", "host_t_start_s", "host_t_end_s", "ste
                 "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "power_in_true_w",
                 "power_out_true_w", "ratio_geometric_true", "belt_slip_true", "legacy_point", "discarded",
                 "legacy_faults", "thesis_torque_nm", "legacy_channels", "setpoint_rpm", "setpoint", "hold_variable",
-                "ramp_rate_rpm_s", "torque_input_true_nm")
+                "ramp_rate_rpm_s", "torque_input_true_nm", "driveline_loss_true_nm")
 # Fields a fault found at import/acquisition time withholds (the raw data cannot support them).
 WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 

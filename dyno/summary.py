@@ -129,12 +129,14 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
               "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
-              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "faults",
+              "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "driveline_loss_true_nm",
+              "faults",
               # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
               "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
               # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
               "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
+              "efficiency_sys95_friction",
               "efficiency_sys95_air", "efficiency_sys95_driveline", "efficiency_u95", "efficiency_u95_terms",
               "efficiency_interval95", "torque_zero_tare_nm",
               # which power the efficiency divides by ("input_torque" | "engine_map"); the input channel's

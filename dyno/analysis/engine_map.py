@@ -253,6 +253,8 @@ class EngineMap:
 
         Always computed from the standard-condition map, so calling it on a
         map that is already at some ambient does not compound corrections.
+        Part-throttle curves: the fuelled torque scales, the friction does not
+        (:mod:`dyno.analysis.part_throttle_air`, with its stated friction term).
         """
         cf = j1349_correction_factor(temp_c, dry_pressure_kpa)
         std = self._standard_torque_nm
@@ -262,7 +264,24 @@ class EngineMap:
                         _standard_torque_nm=std)
         out.throttle_frac = self.throttle_frac
         out.file_source = getattr(self, "file_source", None) or self.source  # the file, for code that reloads it
-        out.part_throttle = {t: c.at_ambient(temp_c, dry_pressure_kpa) for t, c in self.part_throttle.items()}
+        out.part_throttle = {t: self._part_at_ambient(c, temp_c, dry_pressure_kpa, cf)
+                             for t, c in self.part_throttle.items()}
+        return out
+
+    def _part_at_ambient(self, curve: "EngineMap", temp_c: float, dry_pressure_kpa: float, cf: float) -> "EngineMap":
+        """A part-throttle ``curve`` of this (full-throttle) map at the day's air: friction not scaled."""
+        from dyno.analysis.part_throttle_air import part_throttle_at_ambient
+
+        n = curve.rpm
+        full_std = PchipInterpolator(self.rpm, self._standard_torque_nm)(np.clip(n, self.rpm_min, self.rpm_max))
+        day, fr95 = part_throttle_at_ambient(n, curve._standard_torque_nm, full_std, cf)
+        src = f"{curve.source} at {temp_c:g} C, {dry_pressure_kpa:g} kPa dry (SAE J1349 CF {cf:.4f}, friction unscaled)"
+        out = EngineMap(n, day, source=src, sha256=curve.sha256, _j1349_factor=cf,
+                        _ambient=(float(temp_c), float(dry_pressure_kpa)),
+                        _standard_torque_nm=curve._standard_torque_nm)
+        out.throttle_frac = curve.throttle_frac
+        out.file_source = getattr(curve, "file_source", None) or curve.source
+        out.friction_u95_knots_nm = fr95  # (dyno.analysis.part_throttle_air.friction_u95_nm)
         return out
 
     def metadata(self) -> dict:

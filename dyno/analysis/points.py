@@ -6,8 +6,10 @@ them with another calibration or engine map when asked).
 
 Speeds are mean speeds by edge count over the window (insensitive to firing
 ripple); their scatter is the standard deviation of per-period rpm, their
-standard error comes from batch means.  ADC conversions with the AD7171 error
-bit, or at a rail (0 / 65535), are excluded and counted, never averaged in.
+standard error comes from batch means; the torque's from the low end of its
+spectrum (:mod:`dyno.analysis.spectral_sem`: white converter noise, many more
+degrees of freedom).  ADC conversions with the AD7171 error bit, or at a rail
+(0 / 65535), are excluded and counted, never averaged in.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import numpy as np
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
 from dyno.analysis.efficiency import batch_mean, point_efficiency
 from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange
+from dyno.analysis.part_throttle_air import friction_u95_nm
+from dyno.analysis.spectral_sem import satterthwaite_dof, spectral_sem
 from dyno.protocol import v1
 
 ADC_RAILS = (0, 0xFFFF)
@@ -99,8 +103,13 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
         point["adc_std"] = float(good.std())
         nb = _n_batches(t0_us, t1_us)
         adc_sem = batch_mean(good, nb)[1] if good.size >= 2 * nb else float(good.std() / math.sqrt(good.size))
+        adc_dof = nb - 1
+        # the spectrum's low end: many more degrees of freedom than the batches (dyno.analysis.spectral_sem)
+        spec_sem, spec_dof = spectral_sem(good, (t1_us - t0_us) / 1e6)
+        if spec_dof:
+            adc_sem, adc_dof = spec_sem, spec_dof
     else:
-        adc_sem = math.nan
+        adc_sem, adc_dof = math.nan, 0
         faults.append({"channel": "adc", "reason": f"{good.size} valid conversions in the window"})
     if point["n_adc_error"]:
         faults.append({"channel": "adc", "reason": f"{point['n_adc_error']} conversions with the AD7171 error bit excluded",
@@ -112,6 +121,7 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     point["torque_secondary_nm"] = float(torque)
     point["torque_secondary_std_nm"] = float(point["adc_std"] / calibration.slope_counts_per_nm)
     point["torque_secondary_sem_nm"] = float(adc_sem / calibration.slope_counts_per_nm)
+    point["torque_secondary_sem_dof"] = int(adc_dof)
     rp, rs = point["rpm_primary"], point["rpm_secondary"]
     point["ratio"] = rp / rs if rs and rs > 0 and not math.isnan(rp) else math.nan
     point.update(power_out_w=math.nan, power_in_w=math.nan, efficiency=math.nan, efficiency_sem=math.nan,
@@ -132,9 +142,14 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
         else:
             point.update(power_out_w=eff["power_out_w"], power_in_w=eff["power_in_w"],
                          efficiency=eff["efficiency"], efficiency_sem=eff["efficiency_sem"])
-            # 95 % interval half-width: the standard error is from batch means (correlated samples),
-            # so Student's t with (batches - 1) degrees of freedom, not 1.96.
-            point["efficiency_ci95"] = float(_t975(_n_batches(t0_us, t1_us) - 1) * eff["efficiency_sem"])
+            fr95 = friction_u95_nm(curve, rp)  # a part-throttle curve at the day's air: its friction estimate's term
+            if fr95 > 0:
+                point["efficiency_sys95_friction"] = float(eff["efficiency"] * fr95 / curve.torque_nm(rp))
+            # 95 % interval half-width: the standard errors are estimates (the torque's from its spectrum, the
+            # speeds' from batch means), so Student's t on their combined degrees of freedom, not 1.96
+            dof = efficiency_dof(point, eff["efficiency"], eff["efficiency_sem"], _n_batches(t0_us, t1_us) - 1)
+            point["efficiency_dof"] = dof
+            point["efficiency_ci95"] = float(_t975(dof) * eff["efficiency_sem"])
     eff = point["efficiency"]
     if math.isfinite(eff) and not 0.0 <= eff <= 1.0:
         # No drive train makes power: a calibration or an engine map that does not fit this run.
@@ -146,6 +161,16 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     # dyno.analysis.input_torque, which sets "input_torque")
     point["efficiency_source"] = "engine_map"
     return point
+
+
+def efficiency_dof(point: dict, eff: float, eff_sem: float, batch_dof: int) -> int:
+    """Degrees of freedom of the efficiency's standard error: its torque term (``eff / T * sem_T``, with the
+    torque's own dof) and the rest (the speeds', from ``batch_dof`` batches), by Welch-Satterthwaite."""
+    t, t_sem, t_dof = point["torque_secondary_nm"], point["torque_secondary_sem_nm"], point["torque_secondary_sem_dof"]
+    v_t = (eff / t * t_sem) ** 2 if t and math.isfinite(t_sem) and t_dof else 0.0
+    v_all = eff_sem ** 2
+    dof = satterthwaite_dof([(min(v_t, v_all), t_dof), (max(0.0, v_all - v_t), batch_dof)])
+    return int(dof) if math.isfinite(dof) and dof >= 1 else max(1, batch_dof)
 
 
 def _t975(dof: int) -> float:

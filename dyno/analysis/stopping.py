@@ -48,4 +48,6 @@ def stop_uncertainty(point: dict, *, ci95: bool, quantile: float = STOP_QUANTILE
     from dyno.analysis.points import _n_batches
 
     u = point["efficiency_ci95"] if ci95 else point["efficiency_sem"]
-    return float(u) * sem_bound_factor(_n_batches(point["t_start_us"], point["t_end_us"]), quantile)
+    dof = point.get("efficiency_dof")  # (the estimate's own degrees of freedom: dyno.analysis.spectral_sem)
+    n = int(dof) + 1 if dof else _n_batches(point["t_start_us"], point["t_end_us"])
+    return float(u) * sem_bound_factor(n, quantile)

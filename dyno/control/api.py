@@ -72,6 +72,7 @@ class TestPlan:
     target_efficiency_sem: float = 0.0012  # extend the average until the standard error is this small ...
     target_efficiency_ci95: float | None = None  # ... or, if set, until the 95 % half-width is this small ...
     max_measure_s: float = 24.0  # ... or this long (rotor heat limits how long a point can last)
+    measure_check_s: float = 1.0  # the stopping rule looks this often (its bound covers frequent looks)
     stop_quantile: float = STOP_QUANTILE  # the targets are met by the error's upper bound at this level
     min_point_torque_nm: float = 4.0  # below this the brake has not really loaded the CVT: no point
     settle_mode: str = "detect"  # "detect" (from the data) or "fixed" (thesis: 4 s)

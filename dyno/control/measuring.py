@@ -49,7 +49,7 @@ class Measuring:
                     break
                 if not unsure or remaining_s < 0.05:
                     break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
-                await self._sleep(min(1.0, remaining_s))
+                await self._sleep(min(p.measure_check_s, remaining_s))
             # Let the poller look once more: a loss or reset at the window's end is reported late.
             await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
             disturbed = self.poller.disturbances_between(host_t0, self._now())

@@ -20,6 +20,12 @@ fuelled torque just balances its friction, a little above ``n_idle``.  For
 ``u = 1`` the set speed lies above the map's last rpm, so ``f = 1`` wherever
 the map is defined.  Killed (no ignition): ``T_e = -T_fr``.
 
+The day's air (:mod:`dyno.sim.world`) scales the full-throttle map (``T_map`` is the day's: the standard
+curve over J1349's factor); at part throttle the fuelled share ``f`` of the day's gross torque
+``T_map + T_fr`` burns, and the friction ``T_fr`` is the engine's own, not scaled by the air -- as on a real
+engine, whose charge the air changes and whose bearings and rings it does not (the host's part-throttle
+correction keeps the friction too, with its own estimate: :mod:`dyno.analysis.part_throttle_air`).
+
 Firing ripple: one power stroke per two revolutions.  The gas torque's
 half-order harmonic has amplitude ``a_f (T_e + T_fr)`` (gross torque, so it
 scales with the charge burnt); on the crank inertia ``J`` it makes the

@@ -70,13 +70,14 @@ import numpy as np
 
 from dyno.sim.brake import Brake
 from dyno.sim.cvt import CVT
-from dyno.sim.driven import Engagement, after_drag, clamp_radius_m, parasitic_nm
+from dyno.sim.driveline import Driveline
+from dyno.sim.driven import Engagement, after_drag, clamp_radius_m
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.input_torque import InputTorqueSignals
 # The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
 # keep importing them from dyno.sim.physics.
-from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for
-from dyno.sim.rig_params import _load_tune, _resolve_map_path
+from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for, _load_tune
+from dyno.sim.rig_params import _resolve_map_path
 from dyno.sim.kill_chain import KillChain
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
@@ -148,9 +149,8 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
                                          half_angle_deg=self.cvt.tune.drive.sheave_half_angle_deg
                                          if self.cvt.tune is not None else p.cvt_sheave_half_angle_deg,
                                          max_torque_nm=p.cvt_clutch_capacity_nm)
-        self._driven_loss = tuple(float(v) for v in p.driven_loss_nm)
-        if len(self._driven_loss) != 3 or any(not math.isfinite(v) or v < 0 for v in self._driven_loss):
-            raise ValueError(f"driven_loss_nm: three finite coefficients >= 0, got {p.driven_loss_nm!r}")
+        self.driveline = Driveline(p)  # between the CVT and the gauge: driven_loss_nm, driveline_loss_*
+        self._driven_loss, self.driveline_loss_nm = self.driveline.parasitic, self.driveline.loss_nm
         self._zero_drift_counts_per_s = p.adc_zero_drift_nm_per_min * p.adc_gain_counts_per_nm / 60.0
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
@@ -351,8 +351,8 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
             self.pads_off_at_s = None
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
-        if self._driven_loss[0] or self._driven_loss[1] or self._driven_loss[2]:
-            fric += parasitic_nm(self._driven_loss, self._w_s)              # bearings, mesh, windage
+        if self.driveline.on:  # bearings, mesh, windage; the chain's load share (on the last cell's belt torque)
+            fric += self.driveline.between_nm(self._w_s, self._t_s)
         t_load_cap = t_brake_cap * g + fric                                 # referred to the secondary
 
         w_e0 = self._w_e

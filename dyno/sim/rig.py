@@ -221,13 +221,13 @@ def physical_outputs(model) -> dict:
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
-    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip", "te")
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip", "te", "dl")
 
     def __init__(self, model) -> None:
         self.model = model
         self.t = array("d")
         (self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c, self.ratio_geo,
-         self.slip, self.te) = (array("d") for _ in self.FIELDS)
+         self.slip, self.te, self.dl) = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -241,6 +241,7 @@ class TruthRecorder:
         self.ratio_geo.append(tr.ratio_geometric)
         self.slip.append(tr.belt_slip)
         self.te.append(getattr(tr, "torque_engine_nm", math.nan))  # (a stand-in truth may not have it)
+        self.dl.append(getattr(tr, "driveline_loss_nm", 0.0))
 
     def trim_before(self, t_s: float) -> int:
         """Forget the samples older than ``t_s`` (a UI session re-arms on one rig: each run's truth is
@@ -280,6 +281,10 @@ class TruthRecorder:
         extra = {}
         if getattr(self.model, "input_fitted", False):  # the engine's true torque the cradle carries
             extra["torque_input_true_nm"] = mean(self.te)
+        # efficiency_true: the belt's (the CVT's) alone, what the host's interval should cover; the driveline
+        # after it (RigParams driveline_loss_*) is recorded beside it: the gauge sees torque_secondary_true_nm
+        # less driveline_loss_true_nm
+        extra["driveline_loss_true_nm"] = mean(self.dl)
         return extra | {"efficiency_true": p_out / p_in if p_in > 0 else math.nan,
                 "rpm_primary_true": mean(self.rp), "rpm_secondary_true": mean(self.rs),
                 "torque_secondary_true_nm": mean(self.tq), "power_in_true_w": p_in, "power_out_true_w": p_out,

@@ -140,7 +140,22 @@ class RigParams:
     # Driven-side parasitic loss a + b w + c w^2 (N m, w in rad/s of the secondary), upstream of
     # the torque gauge (dyno.sim.driven); off by default, see there.
     driven_loss_nm: tuple = (0.0, 0.0, 0.0)
-    # ---- driveline
+    # ---- driveline between the CVT and the torque gauge (dyno.sim.physics, "Driveline loss"): the secondary
+    # shaft's two ball bearings and seal, and the chain (or gear pair) to the brake shaft.  At the secondary:
+    #   T_dl = drag + drag_per_krpm * n_s / 1000 + load_frac * T_s
+    # Basis: a lubricated roller chain transmits 98-99 % of its load (ANSI B29 / chain makers' design
+    # guides: 1-2 % mesh loss, proportional to the load): 1 %; deep-groove bearings and a lip seal on a ~25 mm
+    # shaft drag 0.05-0.1 N·m each lightly loaded (bearing makers' friction models: a speed-dependent viscous
+    # part and a load-independent seal part), the chain's slack-side churn adds a little: 0.12 N·m + 0.01 N·m
+    # per 1000 rpm.  So 3-4 % at light load and high speed, ~1.5 % at full load.  Fixed (one rig's
+    # driveline, not drawn per seed).  None = that default (DEFAULT_DRIVELINE_LOSS), or none with ``ideal``
+    # (perfect knowledge: the host assumes no driveline); a number is used as given, ideal or not.
+    # The belt's efficiency (Truth.efficiency, efficiency_true) is the CVT's alone; the gauge sees the
+    # belt's output less this (Truth.driveline_loss_nm, driveline_loss_true_nm).
+    driveline_loss_drag_nm: float | None = None
+    driveline_loss_drag_nm_per_krpm: float | None = None
+    driveline_loss_load_frac: float | None = None
+    # ---- driveline inertias
     secondary_inertia_kg_m2: float = 0.013       # secondary pulley + shaft + 32 t gear
     brake_shaft_inertia_kg_m2: float = 0.044     # 61 t gear + brake shaft + rotor
     gear_ratio_brake_per_secondary: float = 32.0 / 61.0
@@ -217,6 +232,17 @@ class RigParams:
     hall_primary_phase_rad: float = 0.7          # magnet position relative to the firing cycle
     # ---- numerics
     max_substep_s: float = 0.004                 # fixed physics cell; also the input latency bound
+
+
+#: (drag N·m, drag N·m per 1000 rpm, load fraction): the default rig's driveline (see RigParams)
+DEFAULT_DRIVELINE_LOSS = (0.12, 0.01, 0.01)
+
+
+def driveline_loss_of(p: RigParams) -> tuple[float, float, float]:
+    """The rig's driveline loss coefficients (drag N·m, N·m per 1000 rpm, load fraction): each given one as
+    given, the others the default's, or zero with ``ideal``."""
+    given = (p.driveline_loss_drag_nm, p.driveline_loss_drag_nm_per_krpm, p.driveline_loss_load_frac)
+    return tuple(float(g) if g is not None else (0.0 if p.ideal else d) for g, d in zip(given, DEFAULT_DRIVELINE_LOSS))
 
 
 def _belt_table_for(p: RigParams, tune=None):

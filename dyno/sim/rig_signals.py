@@ -92,6 +92,9 @@ class Truth:
     clutch_locked: bool = False
     clutch_capacity_nm: float = 0.0  # torque the primary can pass now (engagement)
     belt_slip: float = 0.0         # 1 - belt speed efficiency: omega_s = (1 - slip) omega_p / ratio_geometric
+    # efficiency above is the belt's (the CVT's) alone; between it and the gauge the driveline takes this
+    # (at the secondary, N·m; RigParams driveline_loss_*)
+    driveline_loss_nm: float = 0.0
 
 
 class RigSignals:
@@ -224,6 +227,7 @@ class RigSignals:
             clutch_locked=self._locked,
             clutch_capacity_nm=self._cap,
             belt_slip=self._slip,
+            driveline_loss_nm=self.driveline_loss_nm(w_s, self._t_s) if w_s > 0.0 else 0.0,
         )
 
 

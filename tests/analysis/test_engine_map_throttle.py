@@ -47,8 +47,14 @@ def test_throttle_column_gives_one_curve_per_throttle(tmp_path):
     with pytest.raises(OutOfMapRange):  # a curve refuses to extrapolate, like the full one
         half.torque_nm(2700)
     assert m.metadata()["throttles"] == [0.5, 1.0]
-    amb = m.at_ambient(35.0, 90.0)  # J1349 applies to every curve
-    assert amb.at_throttle(0.5).torque_nm(2500) == pytest.approx(10.0 / amb.j1349_factor)
+    amb = m.at_ambient(35.0, 90.0)  # J1349 applies to every curve: the full one divided by the factor, a
+    # part-throttle one's fuelled torque scaled alike, its friction not (dyno.analysis.part_throttle_air)
+    from dyno.analysis.part_throttle_air import part_throttle_at_ambient
+
+    expect, _ = part_throttle_at_ambient([2500], [10.0], [m.torque_nm(2500)], amb.j1349_factor)
+    assert amb.at_throttle(0.5).torque_nm(2500) == pytest.approx(expect[0])
+    assert amb.torque_nm(2500) == pytest.approx(m.torque_nm(2500) / amb.j1349_factor)
+    assert amb.at_throttle(0.5).torque_nm(2500) < 10.0 / amb.j1349_factor  # a hot, thin day: the friction stays
 
 
 @pytest.mark.parametrize("body, field", [

@@ -237,10 +237,10 @@ def _dyno(*args, **kw):
 def test_signal_drill_as_a_real_process(tmp_path, sig):
     """The process signals itself mid-test: safe state, abort + stop record, JSON printed, exit 128+N.
 
-    At 120 s from the first frame: two points are done by then (the torque zero read at rest before GO
-    takes 4 s; at 110 s the second point was still being measured)."""
+    At 60 s from the first frame: mid-test, points done by then (the torque zero read at rest before GO
+    takes 4 s; the default plan's points take ~5-6 s each and its last ends ~120 s after the first frame)."""
     out = tmp_path / "run"
-    p = _dyno("run", "--sim", "--headless", "--json", "--out", out, "--drill", f"{sig}@120")
+    p = _dyno("run", "--sim", "--headless", "--json", "--out", out, "--drill", f"{sig}@60")
     signum = int(getattr(signal, sig.upper()))
     assert p.returncode == 128 + signum, p.stderr
     assert "Traceback" not in p.stderr
@@ -280,7 +280,7 @@ def test_external_sigterm_leaves_an_abort_record(tmp_path):
 
 def test_disk_full_drill_as_a_real_process(tmp_path):
     out = tmp_path / "run"
-    p = _dyno("run", "--sim", "--headless", "--json", "--out", out, "--drill", "disk-full@120")  # (two points done: see above)
+    p = _dyno("run", "--sim", "--headless", "--json", "--out", out, "--drill", "disk-full@60")  # (mid-test: see above)
     assert p.returncode == 3
     assert "Traceback" not in p.stderr
     err_lines = [ln for ln in p.stderr.splitlines() if ln.strip()]

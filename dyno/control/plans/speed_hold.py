@@ -155,6 +155,11 @@ class SpeedHoldPlan:
     high_margin: float = 0.04  # the first setpoint: this fraction below the no-load speed
     tolerance_rel: float = 0.0075  # "at the setpoint": within 0.75 % ...
     in_band_s: float = 0.8  # ... for this long, then measure
+    # ... and steady: the speed's rate over the last ``settle_rate_window_s`` (two adjacent means) below this
+    # fraction of the setpoint per second (0: the dwell alone).  A window started while the speed still moves
+    # averages a transient: the CVT shifts under the frozen brake and the window is drift-skipped, time lost.
+    settle_rate_rel_per_s: float = 0.0
+    settle_rate_window_s: float = 0.3
     max_approach_s: float = 8.0  # then: near the setpoint, measure (flagged); far from it, skip it
     unholdable_rel: float = 0.02  # "far": the shift region, where a friction brake cannot hold a speed
     drift_rel: float = 0.02  # a window whose mean speed ends farther than this from the setpoint is no point
@@ -308,7 +313,7 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
         rpm = secondary_rpm(ctx, window_s)
         if abs(rpm - sp) <= sh.tolerance_rel * sp:
             in_band_since = in_band_since if in_band_since is not None else ctx.now()
-            if ctx.now() - in_band_since >= sh.in_band_s:
+            if ctx.now() - in_band_since >= sh.in_band_s and steady(ctx, sp, sh):
                 break
         else:
             in_band_since = None
@@ -336,6 +341,25 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
         return skip(f"torque {point['torque_secondary_nm']:.2f} N m below {p.min_point_torque_nm} N m at {sp:.0f} rpm")
     ctx.record(point, host_t0, host_t1)
     return point, None
+
+
+def speed_rate_rel_per_s(ctx, sp: float, window_s: float) -> float:
+    """The secondary's rate of change as a fraction of ``sp`` per second: the difference of the mean speeds
+    over the last two adjacent ``window_s`` (edge counts: immune to the firing ripple) over ``window_s``."""
+    now = ctx.device_now_us()
+    if now is None or not sp > 0:
+        return math.nan
+    w_us = int(window_s * 1e6)
+    recent, _ = rpm_by_count(ctx.streams.edge_window(v1.CH_SECONDARY, now - w_us, now))
+    before, _ = rpm_by_count(ctx.streams.edge_window(v1.CH_SECONDARY, now - 2 * w_us, now - w_us))
+    return (recent - before) / sp / window_s
+
+
+def steady(ctx, sp: float, sh: SpeedHoldPlan) -> bool:
+    """The settle's rate criterion (see :class:`SpeedHoldPlan`): True when off or met."""
+    if not sh.settle_rate_rel_per_s > 0:
+        return True
+    return abs(speed_rate_rel_per_s(ctx, sp, sh.settle_rate_window_s)) <= sh.settle_rate_rel_per_s
 
 
 def speed_hold_plan_of(plan) -> SpeedHoldPlan:

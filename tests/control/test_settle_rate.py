@@ -1,0 +1,31 @@
+"""The speed hold's settle criterion on the measured speed's rate (dyno.control.plans.speed_hold.steady)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dyno.control.plans.speed_hold import SpeedHoldPlan, speed_rate_rel_per_s, steady
+
+pytestmark = pytest.mark.quick
+
+
+def _ctx(rpm0: float, rate_rpm_per_s: float, now_s: float = 3.0):
+    """A secondary Hall edge per revolution for a speed rpm0 + rate * t, read at ``now_s``."""
+    t, edges = 0.0, []
+    while t < now_s:
+        edges.append(int(t * 1e6))
+        t += 60.0 / (rpm0 + rate_rpm_per_s * t)
+    e = np.array(edges, dtype=np.int64)
+    streams = SimpleNamespace(edge_window=lambda ch, t0, t1: e[(e >= t0) & (e <= t1)])
+    return SimpleNamespace(device_now_us=lambda: int(now_s * 1e6), streams=streams)
+
+
+def test_the_rate_is_the_speeds_own_and_steady_means_under_the_plans_bound():
+    sh = SpeedHoldPlan(settle_rate_rel_per_s=0.01, settle_rate_window_s=0.3)
+    moving = _ctx(3000.0, 90.0)  # 3 %/s of 3,000 rpm
+    assert speed_rate_rel_per_s(moving, 3000.0, 0.3) == pytest.approx(0.03, rel=0.15)
+    assert not steady(moving, 3000.0, sh)
+    held = _ctx(3000.0, 6.0)  # 0.2 %/s: the brake's slow fade
+    assert abs(speed_rate_rel_per_s(held, 3000.0, 0.3)) < 0.01 and steady(held, 3000.0, sh)
+    assert steady(moving, 3000.0, SpeedHoldPlan())  # off (0): the dwell alone decides

@@ -1,0 +1,67 @@
+"""The default simulated rig's driveline between the CVT and the gauge (RigParams driveline_loss_*), judged by
+the sim's truth: the gauge reads the belt's output less it; a coast-down measures its drag; the coast-down's
+loss added back brings the efficiency to the belt's own less the load share no coast-down can see."""
+
+from dataclasses import replace
+
+import pytest
+
+from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
+from dyno.app import RunOptions, run_test
+from dyno.control.controller import TestPlan
+from dyno.control.plans import plan_named
+from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.rig_params import DEFAULT_DRIVELINE_LOSS, driveline_loss_of
+
+DRAG_NM, PER_KRPM_NM, LOAD_FRAC = DEFAULT_DRIVELINE_LOSS
+
+
+@pytest.mark.quick
+def test_the_default_rig_has_a_driveline_and_the_ideal_one_none():
+    assert driveline_loss_of(RigParams()) == DEFAULT_DRIVELINE_LOSS
+    assert driveline_loss_of(RigParams(ideal=True)) == (0.0, 0.0, 0.0)
+    assert driveline_loss_of(RigParams(ideal=True, driveline_loss_load_frac=0.02)) == (0.0, 0.0, 0.02)
+    m = RigModel(RigParams(belt_efficiency_source="loss_model"), seed=2)
+    m.start_engine()
+    m.throttle_frac = 1.0
+    m.step(3.0)
+    m.actuator_dir = 1
+    m.step(4.0)
+    m.actuator_dir = 0
+    m.step(3.0)  # steady, loaded
+    t = m.truth()
+    expect = DRAG_NM + PER_KRPM_NM * t.rpm_secondary / 1000 + LOAD_FRAC * t.torque_secondary_nm
+    assert t.driveline_loss_nm == pytest.approx(expect, rel=0.02)
+    # the gauge (on the brake shaft) sees the belt's output less the driveline; the truth's efficiency is the belt's
+    assert t.torque_brake_shaft_nm * m._g == pytest.approx(t.torque_secondary_nm - t.driveline_loss_nm, abs=0.05)
+    assert t.efficiency == pytest.approx(t.power_out_w / t.power_in_w)
+
+
+def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_path):
+    # perfect knowledge otherwise (engine, sensor, day): the driveline alone, at the default rig's numbers
+    params = RigParams(ideal=True, driveline_loss_drag_nm=DRAG_NM, driveline_loss_drag_nm_per_krpm=PER_KRPM_NM,
+                       driveline_loss_load_frac=LOAD_FRAC)
+    cd = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
+                             sim_params=params))
+    assert cd["state"] == "done"
+    fit = cd["loss_fit"]
+    # the fitted drag is the driveline's (plus the released brake's residual drag, in the truth too)
+    for rpm, f, t, s, y in zip(fit["rpm_grid"], fit["torque_nm"], cd["loss_torque_true_nm"], fit["torque_ci95_nm"],
+                               fit["torque_sys95_nm"]):
+        assert t >= DRAG_NM + PER_KRPM_NM * rpm / 1000  # the truth holds the driveline's drag
+        assert abs(f - t) <= s + y + 0.02
+    loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
+    run = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", sim_params=params,
+                              plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
+    inside = 0
+    for p in run["points"]:
+        assert p["driveline_loss_true_nm"] > DRAG_NM
+        k = driven_loss_keys(p, loss)
+        raw = p["efficiency"] - p["efficiency_true"]
+        assert raw < -0.01  # the driveline makes the reading low
+        # what the coast-down cannot see: the load share (the belt's output times LOAD_FRAC)
+        unseen = -LOAD_FRAC * p["efficiency_true"]
+        fixed = k["efficiency_loss_corrected"] - p["efficiency_true"]
+        assert abs(fixed - unseen) < abs(raw) / 2 and abs(fixed - unseen) <= 0.01  # lands within 1 pp
+        inside += abs(fixed - unseen) <= k["efficiency_loss_corrected_ci95"]
+    assert inside >= 0.8 * len(run["points"])
