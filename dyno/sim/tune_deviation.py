@@ -41,7 +41,8 @@ PARTS: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = (
     ("primary_spring", "primary_spring", ("preload_n", "rate_n_per_m"), ("preload_n", "rate_n_per_m")),
     # (not its torsion preload: that is the position the spring is clocked to, a setting, not the spring)
     ("secondary_spring", "secondary_spring",
-     ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad"), ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad")),
+     ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad"),
+     ("preload_n", "rate_n_per_m", "torsion_rate_nm_per_rad")),
     ("helix", "helix", ("angle_from_axis_deg", "radius_m"), ("angle_from_axis_deg", "radius_m")),
 )
 #: each deviated field's share w of REL (module docstring); the flyweights' radius is an offset of REL x w metres
