@@ -252,8 +252,8 @@ def main() -> None:
     print(f"--sim-tune-deviation {REL}, targets within ±{TOL_RPM:.0f} rpm; catalogue steps: flyweights 4 g per "
           "weight (~20 rpm), primary springs ~25-40 N at full shift (~25-40 rpm of engagement), secondary "
           "springs 25 N x 3 torsion positions (~10-25 rpm of shift-out)")
-    print("| # | start | targets eng / shift-out (the hidden tune) | advisor trips | advised parts | measured eng / shift-out | "
-          "within ± u / ± U95 | rule-of-thumb trips | verdict | wall s |")
+    print("| # | start | targets eng / shift-out (the hidden tune) | advisor trips | advised parts | "
+          "measured eng / shift-out | within ± u / ± U95 | rule-of-thumb trips | verdict | wall s |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     tot = {"ok2": 0, "ok": 0, "c1": 0, "c2": 0, "n": 0, "rot": [], "adv": []}
     try:

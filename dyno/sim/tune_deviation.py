@@ -103,7 +103,7 @@ def deviate_tune(tune, rel: float, world_seed: int):
                 continue
             label = float(label)
             if kind == "flyweights" and washers:
-                (d_w,) = _draws(world_seed, f"washers:{washers:.6g}", [2.0 * WASHER_REL])
+                (d_w,) = _draws(world_seed, f"washers:{washers:.6g}", [WASHER_REL])
                 true = (label - washers) * (1.0 + dv) + washers * (1.0 + float(d_w))
                 entry["washer_mass_each_kg"] = washers
                 entry[f] = {"label": label, "true": true, "deviation_rel": true / label - 1.0,
