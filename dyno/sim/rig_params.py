@@ -105,8 +105,8 @@ class RigParams:
     # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
     cvt_engagement_model: str = "clamp"
     # The CVT's friction (dyno.sim.cvt_friction): None = drawn per world within its real range (the clutch's
-    # belt flank mu 0.30-0.45, the ramps' 2-6 % and the helix's 5-15 % of their axial force, 5-20 N of sheave
-    # bushings); a number = that value (0 = no such friction).
+    # belt flank mu 0.30-0.45, the ramps' 0.5-1.5 % and the helix's 1-3 % of their axial force, 2-8 N of
+    # sheave bushings); a number = that value (0 = no such friction).
     cvt_clutch_friction_coefficient: float | None = None
     cvt_ramp_friction_frac: float | None = None
     cvt_helix_friction_frac: float | None = None
@@ -131,10 +131,10 @@ class RigParams:
     # friction coefficient instead (--sim-belt-thrust F).
     cvt_belt_friction_coefficient: float | None = None
     # Added to the tune's flyweight radius table: the real weights' centre of mass, which no drawing gives.
-    # -7 mm: fitted to the 2019 logs' run2 alone with the CVT's friction in the model (engine speed against
-    # speed ratio, default thesis-step, seed 4; mean error -1 rpm, RMS 59; the frictionless model's fit was
-    # -3 mm) and shown on run3 and run4 (bench/bench_fidelity.py, docs/simulator-fidelity.md).
-    cvt_flyweight_radius_offset_m: float = -0.007
+    # -3 mm: fitted to the 2019 logs' run2 alone (engine speed against speed ratio, default thesis-step, seed
+    # 4; 0.5 mm grid, least RMS) and shown on run3 and run4 (bench/bench_fidelity.py, docs/simulator-fidelity.md).
+    # With the CVT's friction (dyno.sim.cvt_friction) run2/3/4 are 57/64/65 rpm RMS (frictionless 46/48/45).
+    cvt_flyweight_radius_offset_m: float = -0.003
     # Which belt tier gives the true thrust ratio: "full" (the full model's cells; with a friction given,
     # the capstan tier), "capstan" (Gerbert's V-belt limit, dyno.model.capstan) or "closed_form" (the
     # model dyno.tuning.fit fits: circular, for comparison only).
