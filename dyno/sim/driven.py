@@ -111,6 +111,17 @@ def _load_at_secondary_nm(model, omega_s_rad_s: float) -> float:
             + parasitic_nm(model._driven_loss, omega_s_rad_s))
 
 
+#: what each ``*_true`` figure of the engagement plan means (recorded with them)
+TRUTH_FIGURES = {
+    "engagement_rpm_true": "breakaway at the low stop, engine speed rising: the closing clamp (ramp friction and "
+                           "bushing off), the world's flank friction",
+    "lockup_rpm_true": "the closing clamp carries the locked belt's torque (quasi-static, engine speed rising)",
+    "shift_out_rpm_true": "the up-shift's start at the low stop: F_p - F_s = F_f (the frictionless balance is "
+                          "lower, a back-shift's start lower still)",
+    "full_shift_ratio_true": "high-stop geometric ratio over (1 - creep) at the load",
+}
+
+
 def characterisation_truth(model) -> dict:
     """The sim's quasi-static truths for the engagement plan, from its own model (not from a
     measurement), for the load the brake puts on the secondary now:
@@ -134,6 +145,7 @@ def characterisation_truth(model) -> dict:
     out: dict = {}
     if cvt.friction is not None:
         out["cvt_friction_true"] = cvt.friction.to_dict()
+    out["truth_figures"] = TRUTH_FIGURES
     i_lo, i_hi = cvt.ratio_low, cvt.ratio_high
     rpm_to_rad = math.pi / 30.0
     if eng is not None:
