@@ -297,13 +297,14 @@ def main() -> None:
                   f"{res['cover1']}/{res['n_cov']} / {res['cover2']}/{res['n_cov']} | "
                   f"{rot['trips'] if rot['ok'] or rot['trips'] == '-' else str(rot['trips']) + ' (missed)'} | "
                   f"{verdict(res, tgt)} | {time.monotonic() - t0:.0f} |", flush=True)
-        print(f"\nadvisor: both targets within ±{TOL_RPM:.0f} rpm in ≤ 2 advised trips in {tot['ok2']}/{n} "
-              f"(in ≤ 3: {tot['ok']}/{n})")
+        ran = len(tot["adv"])
+        print(f"\nadvisor: both targets within ±{TOL_RPM:.0f} rpm in ≤ 2 advised trips in {tot['ok2']}/{ran} "
+              f"(in ≤ 3: {tot['ok']}/{ran})")
         fin = [t for t in tot["adv"] if math.isfinite(t)]
         rfin = [t for t in tot["rot"] if isinstance(t, (int, float)) and math.isfinite(t)]
         print(f"trips to the dyno after the first run: advisor mean {sum(fin) / max(len(fin), 1):.2f} "
               f"({len(fin)} reached); rule of thumb mean {sum(rfin) / max(len(rfin), 1):.2f} "
-              f"({len(rfin)}/{n} reached in ≤ 10)")
+              f"({len(rfin)}/{ran} reached in ≤ 10)")
         if tot["n"]:
             print(f"coverage of the advisor's predictions ({tot['n']} measured figures): within ± u "
                   f"{tot['c1'] / tot['n']:.2f}, within ± U95 {tot['c2'] / tot['n']:.2f}")
