@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """The tune advisor against the simulated rig with parts that are not their labels.
 
-Each scenario is a rig (world seed) with ``--sim-tune-deviation 0.1`` (every part's true flyweight mass,
-spring preload and rate, helix angle within ±10 % of its label, the same part keeping its deviation
-across trips), a starting tune and targets for the engagement plan's light-load engagement and
-shift-out. The loop a team runs:
+Each scenario is a rig (world seed) with ``--sim-tune-deviation 0.1`` (every part's true values off its
+labels within its own tolerance, dyno.sim.tune_deviation, the same part keeping its deviation across
+trips), a starting tune and targets for the engagement plan's light-load engagement and shift-out: what a
+hidden catalogue tune of <= 2 changes measures on that rig (:data:`SCENARIOS`). The loop a team runs:
 
     engagement run -> dyno tune advise (runs so far) -> fit the #1 tune's parts -> engagement run -> ...
 
@@ -23,6 +23,17 @@ not on the belt's efficiency share.
     python bench/bench_advisor.py [--scenarios 10] [--quick]
 
 ``--quick`` (CI's smoke run): one scenario, the advisor's loop only, at most 2 advised trips.
+
+The simulated rig has physics the advisor's relations leave out (docs/tuning.md "What the simulator
+shares with the host"): its own clutch flank friction per world, the ramps' and helix's friction (the
+up-shift figures sit above the frictionless balance), the full belt model's thrust ratio, and parts
+deviating on fields the advisor does not calibrate.
+
+Pass criteria (exit 1 when one fails, after the table): both targets within ±50 rpm in ≤ 2 advised trips
+in ≥ 9/10 scenarios (``--quick``: its one scenario), and the measured figures within the advisor's
+predicted ± U95 in ≥ 90 % of them (``--quick``: ≥ 75 % of its ≤ 4).  Each scenario's verdict says why a
+miss missed.  ``--break-input RPM`` (a test of the criteria) adds RPM to every figure the advisor is
+given: its input is wrong, so the bench must fail.
 """
 
 from __future__ import annotations
@@ -50,24 +61,32 @@ ROOT = Path(__file__).resolve().parent.parent
 TOL_RPM = 50.0
 VERBOSE = False
 REL = 0.1
-#: (starting tune, catalogue parts fitted to it first, engagement target, shift-out target). Engagement
-#: targets stay <= ~2,170 rpm: the plan's loaded ramps engage ~40 rpm higher, and a clutch still slipping
-#: at 2,300 rpm trips the rig's "the secondary must turn" check (docs/control.md); a 2,200 rpm target
-#: aborted both advised trips that way (measured, then moved to 2,160).
+BREAK_RPM = 0.0  # --break-input: a lie added to every figure the advisor reads
+#: (starting tune, catalogue parts fitted to it first, the hidden tune's catalogue changes (<= 2)). The
+#: targets are what the hidden tune measures on the scenario's rig (one engagement run before the loop, its
+#: figures rounded to 10 rpm): reachable by a catalogue tune of <= 2 changes on that rig by construction,
+#: whatever the rig's friction and parts are (the advisor never sees the hidden tune or the sim's truth).
 SCENARIOS = (
-    ("cvtech-stock", (), 2100, 2750),
-    ("cvtech-stock", (), 2050, 2550),
-    ("heavy-flyweights", (), 2150, 2700),
-    ("cvtech-stock", ("ss-250n@1",), 2160, 2650),
-    ("heavy-flyweights", (), 2000, 2600),
-    ("cvtech-stock", ("fw-3x240g",), 2150, 2850),
-    ("cvtech-stock", ("ps-900n-17.5k",), 2120, 2620),
-    ("heavy-flyweights", ("ss-175n@0.6",), 2080, 2800),
-    ("cvtech-stock", ("hx-36deg",), 2180, 2720),
-    ("cvtech-stock", ("fw-3x236g", "ss-225n@1"), 2060, 2680),
-    ("heavy-flyweights", ("ps-975n-18.6k",), 2170, 2780),
-    ("cvtech-stock", ("ss-150n@1.4",), 2130, 2580),
+    ("cvtech-stock", (), ("fw-3x240g",)),
+    ("cvtech-stock", (), ("ps-900n-17.5k", "ss-190n@1")),
+    ("heavy-flyweights", (), ("fw-3x252g", "ss-215n@1.4")),
+    ("cvtech-stock", ("ss-165n@1",), ("ps-850n-16.5k",)),
+    ("heavy-flyweights", (), ("ps-880n-17k", "hx-21deg")),
+    ("cvtech-stock", ("fw-3x236g",), ("fw-3x260g", "ss-215n@1.4")),
+    ("cvtech-stock", ("ps-975n-18.6k",), ("fw-3x220g", "ps-950n-18.2k")),
+    ("heavy-flyweights", ("ss-115n@0.6",), ("fw-3x272g", "ss-165n@1")),
+    ("cvtech-stock", ("hx-21deg",), ("ps-1000n-18.8k", "hx-25deg")),
+    ("cvtech-stock", ("fw-3x232g", "ss-215n@1"), ("fw-3x224g", "ss-165n@1.4")),
+    ("heavy-flyweights", ("ps-975n-18.6k",), ("ss-190n@0.6",)),
+    ("cvtech-stock", ("ss-140n@1.4",), ("fw-3x244g", "ps-925n-17.8k")),
 )
+
+
+def _part(cat, pid: str):
+    for p in cat:
+        if p.id == pid:
+            return p
+    raise SystemExit(f"bench_advisor: catalogue part {pid!r} not in calibration/parts (a scenario names it)")
 
 
 def engagement_run(tune, seed: int, world_seed: int, out: Path) -> dict:
@@ -84,15 +103,53 @@ def _hit(r: dict, tgt: dict) -> bool:
                for f, v in tgt.items())
 
 
+def _load(run_dir: Path):
+    rd = load_run_data(run_dir)
+    if BREAK_RPM:
+        import dataclasses
+
+        rd.figures = [dataclasses.replace(f, rpm=f.rpm + BREAK_RPM) for f in rd.figures]
+    return rd
+
+
+def verdict(res: dict, tgt: dict) -> str:
+    """Why a scenario missed (or 'hit'): from the last advised trip's prediction and measurement."""
+    if res["ok"]:
+        return "hit" if res["trips"] <= 2 else f"hit in {res['trips']} trips"
+    if res.get("why"):
+        return res["why"]
+    last = res.get("last")
+    if not last:
+        return "missed: no advised trip"
+    pred, p_hit, f = last
+    why = []
+    for fig, v in tgt.items():
+        m = f.get(f"{fig}_rpm", math.nan)
+        if not math.isfinite(m):
+            why.append(f"{fig} not measured ({f.get('state')}: {f.get('reason')})")
+            continue
+        if abs(m - v) <= TOL_RPM:
+            continue
+        pr = pred[fig]
+        if abs(m - pr["rpm"]) > pr["u95_rpm"]:
+            why.append(f"{fig} {m - v:+.0f} rpm off target, {m - pr['rpm']:+.0f} from the prediction "
+                       f"(outside its U95 {pr['u95_rpm']:.0f}: the model missed)")
+        else:
+            why.append(f"{fig} {m - v:+.0f} rpm off target, within the prediction's U95 {pr['u95_rpm']:.0f} "
+                       f"(the best tune's P(hit) {p_hit:.2f}: the calibration was not tight enough)")
+    return "missed: " + "; ".join(why)
+
+
 def advisor_loop(start, tgt: dict, world_seed: int, tmp: Path, cat, max_trips: int) -> dict:
     runs = []
     r = engagement_run(start, 1, world_seed, tmp / "adv-0")
     cover1 = cover2 = n_cov = 0
     try:
-        runs.append(load_run_data(tmp / "adv-0"))
+        runs.append(_load(tmp / "adv-0"))
     except ConfigError:  # the starting tune cannot be characterised on this rig (e.g. engages too high)
         print(f"    (starting run: {r['state']}: {r.get('reason')})", flush=True)
-        return {"trips": 0, "ok": False, "cover1": 0, "cover2": 0, "n_cov": 0, "final": r, "changes": []}
+        return {"trips": 0, "ok": False, "cover1": 0, "cover2": 0, "n_cov": 0, "final": r, "changes": [],
+                "why": f"missed: the starting run found no figures ({r['state']}: {r.get('reason')})"}
     trips = 0
     if _hit(r, tgt):  # the start already meets them: nothing to advise
         return {"trips": 0, "ok": True, "cover1": 0, "cover2": 0, "n_cov": 0, "final": r, "changes": []}
@@ -107,7 +164,7 @@ def advisor_loop(start, tgt: dict, world_seed: int, tmp: Path, cat, max_trips: i
                   + " ".join(f"{f} {pred[f]['rpm']:.0f}±{pred[f]['u_rpm']:.0f} -> {r.get(f + '_rpm', math.nan):.0f}"
                              for f in tgt), flush=True)
         try:
-            runs.append(load_run_data(tmp / f"adv-{trips}"))
+            runs.append(_load(tmp / f"adv-{trips}"))
         except ConfigError:  # the run found no engagement/shift-out (e.g. aborted): a trip that taught nothing
             print(f"    (scenario trip {trips}: {r['state']}: {r.get('reason')})", flush=True)
         for f in tgt:
@@ -116,11 +173,12 @@ def advisor_loop(start, tgt: dict, world_seed: int, tmp: Path, cat, max_trips: i
                 n_cov += 1
                 cover1 += abs(m - pred[f]["rpm"]) <= pred[f]["u_rpm"]
                 cover2 += abs(m - pred[f]["rpm"]) <= pred[f]["u95_rpm"]
+        last = (pred, a["ranked"][0]["p_within_tolerance"], r)
         if _hit(r, tgt):
             return {"trips": trips, "ok": True, "cover1": cover1, "cover2": cover2, "n_cov": n_cov,
                     "final": r, "changes": [p.id for p in best.changes]}
     return {"trips": trips, "ok": False, "cover1": cover1, "cover2": cover2, "n_cov": n_cov, "final": r,
-            "changes": []}
+            "changes": [p.id for p in best.changes], "last": last}
 
 
 def _step(cat, tune, kind: str, key, direction: int, steps: int):
@@ -177,9 +235,11 @@ def main() -> None:
     ap.add_argument("--verbose", action="store_true", help="each advised trip: parts, predicted ± u, measured")
     ap.add_argument("--no-baseline", action="store_true", help="the advisor's loop only")
     ap.add_argument("--quick", action="store_true", help="CI smoke run: one scenario, the advisor only")
+    ap.add_argument("--break-input", type=float, default=0.0, metavar="RPM",
+                    help="add RPM to every figure the advisor reads (a wrong input: the criteria must fail)")
     a = ap.parse_args()
-    global VERBOSE
-    VERBOSE = a.verbose
+    global VERBOSE, BREAK_RPM
+    VERBOSE, BREAK_RPM = a.verbose, a.break_input
     n = 1 if a.quick else min(a.scenarios, len(SCENARIOS))
     tmp = Path(tempfile.mkdtemp(prefix="bench_adv_"))
     # the shipped catalogue without the team's example part: it states +-2 % (weighed), but the sim draws
@@ -192,22 +252,33 @@ def main() -> None:
     print(f"--sim-tune-deviation {REL}, targets within ±{TOL_RPM:.0f} rpm; catalogue steps: flyweights 4 g per "
           "weight (~20 rpm), primary springs ~25-40 N at full shift (~25-40 rpm of engagement), secondary "
           "springs 25 N x 3 torsion positions (~10-25 rpm of shift-out)")
-    print("| # | start | targets eng / shift-out | advisor trips | advised parts | measured eng / shift-out | "
-          "within ± u / ± U95 | rule-of-thumb trips | wall s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| # | start | targets eng / shift-out (the hidden tune) | advisor trips | advised parts | "
+          "measured eng / shift-out | within ± u / ± U95 | rule-of-thumb trips | verdict | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     tot = {"ok2": 0, "ok": 0, "c1": 0, "c2": 0, "n": 0, "rot": [], "adv": []}
     try:
-        for k, (start_name, fitted, eng, so) in enumerate(SCENARIOS[:n]):
+        for k, (start_name, fitted, hidden) in enumerate(SCENARIOS[:n]):
             if k + 1 < a.first or (a.only and k + 1 != a.only):
                 continue
             t0 = time.monotonic()
             start = load_tune(ROOT / "calibration" / "tunes" / f"{start_name}.toml")
             for pid in fitted:
-                start = apply_part(start, next(p for p in cat if p.id == pid))
-            tgt = {"engagement": float(eng), "shift_out": float(so)}
+                start = apply_part(start, _part(cat, pid))
+            target_tune = start
+            for pid in hidden:
+                target_tune = apply_part(target_tune, _part(cat, pid))
             world = 201 + k
             d = tmp / f"s{k}"
             d.mkdir()
+            ref = engagement_run(target_tune, 99, world, d / "target")
+            eng, so = (round(ref.get(f"{f}_rpm", math.nan) / 10.0) * 10.0 if math.isfinite(
+                ref.get(f"{f}_rpm", math.nan)) else math.nan for f in ("engagement", "shift_out"))
+            if not (math.isfinite(eng) and math.isfinite(so)):
+                print(f"| {k + 1} | {start_name} | (hidden {'+'.join(hidden)} not characterised: {ref['state']}: "
+                      f"{ref.get('reason')}) | - | - | - | - | - | counted as a miss | - |", flush=True)
+                tot["adv"].append(math.inf)
+                continue
+            tgt = {"engagement": float(eng), "shift_out": float(so)}
             res = advisor_loop(start, tgt, world, d, cat, 2 if a.quick else 3)
             tot["ok2"] += res["ok"] and res["trips"] <= 2
             tot["ok"] += res["ok"]
@@ -219,24 +290,39 @@ def main() -> None:
                    else rule_of_thumb(start, tgt, world, d, cat))
             tot["rot"].append(rot["trips"] if rot["ok"] else math.inf)
             f = res["final"]
-            print(f"| {k + 1} | {start_name}{'+' + '+'.join(fitted) if fitted else ''} | {eng} / {so} | "
+            print(f"| {k + 1} | {start_name}{'+' + '+'.join(fitted) if fitted else ''} | {eng:.0f} / {so:.0f} "
+                  f"({'+'.join(hidden)}) | "
                   f"{res['trips'] if res['ok'] else str(res['trips']) + ' (missed)'} | {' '.join(res['changes'])} | "
                   f"{f.get('engagement_rpm', math.nan):.0f} / {f.get('shift_out_rpm', math.nan):.0f} | "
                   f"{res['cover1']}/{res['n_cov']} / {res['cover2']}/{res['n_cov']} | "
                   f"{rot['trips'] if rot['ok'] or rot['trips'] == '-' else str(rot['trips']) + ' (missed)'} | "
-                  f"{time.monotonic() - t0:.0f} |", flush=True)
-        print(f"\nadvisor: both targets within ±{TOL_RPM:.0f} rpm in ≤ 2 advised trips in {tot['ok2']}/{n} "
-              f"(in ≤ 3: {tot['ok']}/{n})")
+                  f"{verdict(res, tgt)} | {time.monotonic() - t0:.0f} |", flush=True)
+        ran = len(tot["adv"])
+        print(f"\nadvisor: both targets within ±{TOL_RPM:.0f} rpm in ≤ 2 advised trips in {tot['ok2']}/{ran} "
+              f"(in ≤ 3: {tot['ok']}/{ran})")
         fin = [t for t in tot["adv"] if math.isfinite(t)]
         rfin = [t for t in tot["rot"] if isinstance(t, (int, float)) and math.isfinite(t)]
         print(f"trips to the dyno after the first run: advisor mean {sum(fin) / max(len(fin), 1):.2f} "
               f"({len(fin)} reached); rule of thumb mean {sum(rfin) / max(len(rfin), 1):.2f} "
-              f"({len(rfin)}/{n} reached in ≤ 10)")
+              f"({len(rfin)}/{ran} reached in ≤ 10)")
         if tot["n"]:
             print(f"coverage of the advisor's predictions ({tot['n']} measured figures): within ± u "
                   f"{tot['c1'] / tot['n']:.2f}, within ± U95 {tot['c2'] / tot['n']:.2f}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    ran = len(tot["adv"])
+    need_hits = ran if a.quick else math.ceil(0.9 * ran)
+    need_cov = 0.75 if a.quick else 0.90
+    cov = tot["c2"] / tot["n"] if tot["n"] else 0.0
+    fails = []
+    if tot["ok2"] < need_hits:
+        fails.append(f"within ±{TOL_RPM:.0f} rpm in ≤ 2 trips in {tot['ok2']}/{ran} < {need_hits}/{ran}")
+    if cov < need_cov:
+        fails.append(f"U95 coverage {cov:.2f} < {need_cov:.2f}")
+    print(f"criteria: ≥ {need_hits}/{ran} scenarios within ±{TOL_RPM:.0f} rpm in ≤ 2 trips, U95 coverage ≥ "
+          f"{need_cov:.2f}: " + ("PASS" if not fails else "FAIL (" + "; ".join(fails) + ")"))
+    if fails:
+        sys.exit(1)
 
 
 if __name__ == "__main__":

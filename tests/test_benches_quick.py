@@ -56,3 +56,13 @@ def test_bench_quick_runs_to_the_end(name):
     lines = out.splitlines()
     if len(lines) == 1 and "skipped" in lines[0]:  # e.g. bench_firmware.py without the AVR toolchain
         pytest.skip(lines[0])
+
+
+def test_bench_advisor_fails_on_a_wrong_input():
+    """bench_advisor states its criteria and exits 1 when they fail: with every figure the advisor reads 300 rpm
+    off (--break-input), its advice misses and its U95 does not cover; the normal --quick passes
+    (test_bench_quick_runs_to_the_end)."""
+    p = _bench("bench_advisor.py", "--quick", "--break-input", "300")
+    assert p.returncode == 1, f"exit {p.returncode}" + _tail(p)
+    assert "Traceback" not in p.stderr, _tail(p)
+    assert "criteria:" in p.stdout and "FAIL" in p.stdout and "missed" in p.stdout, _tail(p)

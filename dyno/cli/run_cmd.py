@@ -77,9 +77,10 @@ def add_air_arguments(p) -> None:
                    help="with --sim: draw the engine, sensor and day from this seed instead of --seed (the same "
                         "rig measured again: compare runs that share it)")
     p.add_argument("--sim-tune-deviation", type=float, default=None, metavar="REL",
-                   help="with --sim: each CVT part's true value (spring rate and preload, flyweight mass, helix "
-                        "angle) differs from its label by up to REL (uniform), drawn per part and world seed: the "
-                        "same part keeps its deviation on the same rig across runs (default 0)")
+                   help="with --sim: each CVT part's true value (spring preloads and rates, flyweight mass and "
+                        "centre of mass, helix angle and radius) differs from its label by up to REL, normal with "
+                        "each field's own spread, drawn per part and world seed: the same part keeps its "
+                        "deviation on the same rig across runs (default 0)")
     p.add_argument("--sim-belt-thrust", type=float, default=None, metavar="F",
                    help="with --sim: the simulated belt requires the secondary thrust of the capstan tier at "
                         "belt-sheave friction F (0.4 is the thesis's); default: the full belt model's thrust "

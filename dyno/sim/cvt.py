@@ -15,7 +15,13 @@ move at a speed proportional to the imbalance (belt radial creep and sheave
 friction act like a damper), ``dx/dt = (F_p - F_s) / (K_ref tau_shift)``
 with ``K_ref`` the springs' force change over the full travel, so near a
 stable balance this is a first-order lag of time constant ``tau_shift``
-towards the quasi-static ratio; ``x`` stops at the ratio end stops.
+towards the quasi-static ratio; ``x`` stops at the ratio end stops.  With the
+world's friction attached (``CVT.friction``, :mod:`dyno.sim.cvt_friction`: the
+primary's ramps and rollers, the secondary's helix, the sheave bushings) only
+the imbalance beyond the friction ``F_f`` moves the sheaves,
+``dx/dt = D(F_p - F_s; F_f) / (K_ref tau_shift)`` with the dead band
+``D(u; F_f) = sign(u) max(|u| - F_f, 0)``: the up-shift needs ``F_p - F_s > F_f``,
+the back-shift ``F_p - F_s < -F_f`` (a hysteresis).
 
 Two sources for ``C, S_p, S_s, B`` and the ratio ``i(x)``, both tabulated
 over ``x`` once at start-up (the inner loop only interpolates):
@@ -27,17 +33,19 @@ over ``x`` once at start-up (the inner loop only interpolates):
 * otherwise a self-contained closed form: ``C`` constant (a flyweight
   coefficient), linear springs, constant helix gain ``H``, and the ratio
   from ``r_p + r_s = const`` between the two ratio end stops.
-Belt thrust ratio (optional, ``belt_friction_coefficient`` set)
--------------------------------------------------------------
-By default the belt passes the primary clamp to the secondary unchanged
-(``F_p = F_s`` at balance).  With a belt friction coefficient ``f`` (and a
-tune) the primary clamp sets the belt tensions and the belt then *requires* a
-secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
+Belt thrust ratio
+-----------------
+With a tune the simulated rig's default (``RigParams.cvt_belt_thrust_model =
+"full"``) is the full belt model's thrust ratio from the belt table's cells
+(:mod:`dyno.sim.belt_thrust`).  Without a tune (or without a table) the belt
+passes the primary clamp to the secondary unchanged (``F_p = F_s`` at balance).
+With a belt friction coefficient ``f`` (and a tune) the primary clamp sets the
+belt tensions and the belt then *requires* a secondary thrust ``F_s,belt``, so the imbalance is ``F_s,belt - F_s``.
 ``F_s,belt = kappa F_p`` with the thrust ratio ``kappa(x, T_p, F_p; f)``
 re-evaluated every ``belt_update_cells`` calls of :meth:`CVT.shift` (kappa
 varies slowly next to the 0.4 s shift lag, and at a steady point it is
 evaluated at that point, so the steady ratio is exact).  The true kappa comes
-from ``belt_thrust_model``: ``"capstan"`` (default: Gerbert's V-belt,
+from ``belt_thrust_model``: ``"capstan"`` (Gerbert's V-belt,
 :func:`dyno.model.capstan.capstan_point`, which is *not* the closed form that
 :mod:`dyno.tuning.fit` fits, so the fit is not validated against itself) or
 ``"closed_form"`` (Sorge & Cammalleri eqs. 17-18, the fitted model itself:
@@ -207,6 +215,8 @@ class CVT:
         self.i_opt = ratio_best_eff
         self.c_bend = bending_drag_nm
         self.tune = tune
+        # the world's friction (dyno.sim.cvt_friction.CvtFriction), attached by the rig; None = frictionless
+        self.friction = None
         x = np.linspace(0.0, 1.0, n_table + 1)
         if tune is not None:
             ratio, c_rpm2, s_p, s_s, b_s = _tables_from_tune(tune, x, flyweight_radius_offset_m)
@@ -354,12 +364,18 @@ class CVT:
             if self._belt_count % self._belt_every == 0:
                 self.update_belt(x, rpm_primary, torque_primary_nm)
             self._belt_count += 1
-        dx = self.force_imbalance_n(rpm_primary, torque_secondary_nm, x) * dt_s / (self.k_ref_n * self.tau_shift_s)
+        imb = self.force_imbalance_n(rpm_primary, torque_secondary_nm, x)
+        if self.friction is not None:
+            from dyno.sim.cvt_friction import dead_band, friction_n
+
+            imb = dead_band(imb, friction_n(self, rpm_primary, torque_secondary_nm, x))
+        dx = imb * dt_s / (self.k_ref_n * self.tau_shift_s)
         x = x + dx
         return self.x_min if x < self.x_min else (self.x_max if x > self.x_max else x)
 
     def equilibrium_travel(self, rpm_primary: float, torque_secondary_nm: float) -> float:
-        """Quasi-static travel where ``F_p = F_s`` (end stop if none), for tests and plots."""
+        """Quasi-static travel where ``F_p = F_s`` (end stop if none), for tests and plots: the frictionless
+        balance, the middle of the friction's hysteresis band."""
         xs = np.linspace(self.x_min, self.x_max, 401)
         r = np.array([self.force_imbalance_n(rpm_primary, torque_secondary_nm, v) for v in xs])
         if r[0] <= 0.0:

@@ -21,6 +21,11 @@ capacity only grows, and :math:`T_{max}` caps it there).  So the engagement spee
 tune (flyweight mass, spring preload) and of the load, as on the real CVT, not a
 fixed number: :math:`n_{eng} = \sqrt{S_p/C}` at the low stop for zero load.
 
+The flank friction :math:`\mu_c` is the world's own (:mod:`dyno.sim.cvt_friction`: drawn per world on
+0.30-0.45, rubber on aluminium), not the thesis's 0.4 that the host's advisor assumes, and the clamp is
+the one the sheave closes with while the engine speeds up: the ramps' and rollers' friction and the
+sheave bushing take their share (:func:`dyno.sim.cvt_friction.closing_clamp_n`).
+
 Driven-side parasitic loss
 --------------------------
 Bearings, seals, chain/gear mesh and windage between the CVT's output and the
@@ -55,8 +60,10 @@ class Engagement:
         self.x_min = cvt.x_min
 
     def clamp_n(self, rpm_primary: float, x: float) -> float:
-        """Net primary clamp (N), 0 while the spring holds the sheave open."""
-        f = self.cvt.primary_force_n(rpm_primary, x)
+        """Net primary clamp (N) as the sheave closes (friction off), 0 while the spring holds it open."""
+        from dyno.sim.cvt_friction import closing_clamp_n
+
+        f = closing_clamp_n(self.cvt, rpm_primary, x)
         return f if f > 0.0 else 0.0
 
     def capacity_nm(self, rpm_primary: float, x: float) -> float:
@@ -104,6 +111,17 @@ def _load_at_secondary_nm(model, omega_s_rad_s: float) -> float:
             + parasitic_nm(model._driven_loss, omega_s_rad_s) + model.driveline_loss_nm(omega_s_rad_s))
 
 
+#: what each ``*_true`` figure of the engagement plan means (recorded with them)
+TRUTH_FIGURES = {
+    "engagement_rpm_true": "breakaway at the low stop, engine speed rising: the closing clamp (ramp friction and "
+                           "bushing off), the world's flank friction",
+    "lockup_rpm_true": "the closing clamp carries the locked belt's torque (quasi-static, engine speed rising)",
+    "shift_out_rpm_true": "the up-shift's start at the low stop: F_p - F_s = F_f (the frictionless balance is "
+                          "lower, a back-shift's start lower still)",
+    "full_shift_ratio_true": "high-stop geometric ratio over (1 - creep) at the load",
+}
+
+
 def characterisation_truth(model) -> dict:
     """The sim's quasi-static truths for the engagement plan, from its own model (not from a
     measurement), for the load the brake puts on the secondary now:
@@ -113,12 +131,21 @@ def characterisation_truth(model) -> dict:
     * ``lockup_rpm_true``: the capacity equals the torque the locked belt needs to carry
       that load (load / (i eta) + the bending drag) -- a quasi-static bound: on a ramp the
       lock comes later, once the slipping secondary has caught up (its inertia);
-    * ``shift_out_rpm_true``: the shift balance at the low stop, ``F_p = F_s`` with the
-      secondary torque equal to the load at the speed it turns then;
+    * ``shift_out_rpm_true``: the up-shift's start at the low stop, ``F_p - F_s = F_f`` (the shift
+      friction, :mod:`dyno.sim.cvt_friction`) with the secondary torque equal to the load at the speed
+      it turns then (the frictionless balance would be lower, a back-shift's lower still);
+    * ``cvt_friction_true``: the world's friction (clutch flank mu, ramp and helix fractions, bushings).
+
+    Engagement and lock-up are the engine-speed-rising figures too (the closing clamp, friction off).
     * ``full_shift_ratio_true``: high-stop geometric ratio over (1 - creep) at that load.
     """
+    from dyno.sim.cvt_friction import friction_n
+
     cvt, eng = model.cvt, model.engagement
     out: dict = {}
+    if cvt.friction is not None:
+        out["cvt_friction_true"] = cvt.friction.to_dict()
+    out["truth_figures"] = TRUTH_FIGURES
     i_lo, i_hi = cvt.ratio_low, cvt.ratio_high
     rpm_to_rad = math.pi / 30.0
     if eng is not None:
@@ -137,7 +164,8 @@ def characterisation_truth(model) -> dict:
         t_l = _load_at_secondary_nm(model, rpm / i_lo * rpm_to_rad)
         # the belt's thrust ratio at the low stop and this load (not the running state's: the truth is
         # computed after the ramp, at the high stop)
-        return cvt.quasi_static_imbalance_n(rpm, t_l, cvt.x_min, t_l / i_lo + cvt.drag_nm(i_lo))
+        imb = cvt.quasi_static_imbalance_n(rpm, t_l, cvt.x_min, t_l / i_lo + cvt.drag_nm(i_lo))
+        return imb - friction_n(cvt, rpm, t_l, cvt.x_min)  # the up-shift starts beyond the friction
 
     lo, hi = 500.0, 6000.0
     if imbalance(lo) < 0.0 < imbalance(hi):

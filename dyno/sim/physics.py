@@ -31,11 +31,9 @@ that conserves ``i J_e omega_e + J_s omega_s``.
 The ratio ``i`` follows the flyweight/helix force balance of the CVT tune
 ``RigParams.cvt_tune_path`` through :mod:`dyno.tuning.actuators` (closed-form
 fallback with ``cvt_tune_path=None``), between the end stops
-``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  The belt's
-thrust ratio in the balance (``cvt_belt_friction_coefficient``: the capstan tier,
-not the closed form the host's shift model uses; ``--sim-belt-thrust``) and the
-hidden parameters of the shift-model fit (``cvt_flyweight_radius_offset_m``,
-``cvt_secondary_friction_torque_nm``) are off by default (:mod:`dyno.sim.rig_params`).
+``cvt_ratio_low``/``cvt_ratio_high``; see :mod:`dyno.sim.cvt`.  The belt's thrust ratio is the full belt
+model's (:mod:`dyno.sim.belt_thrust`), the clutch's, ramps' and helix's friction the world's own
+(:mod:`dyno.sim.cvt_friction`); the other hidden parameters are in :mod:`dyno.sim.rig_params`.
 
 Belt efficiency (``belt_efficiency_source``): "belt_model" (default) splits the
 CVT loss into the full belt model's share, from a ratio x torque table solved
@@ -82,6 +80,7 @@ from dyno.sim.kill_chain import KillChain
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
 from dyno.sim.tune_deviation import parts_on_the_rig
+from dyno.sim.cvt_friction import attach_friction
 from dyno.sim.world import realise
 
 __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
@@ -140,11 +139,12 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
                        **_belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
+        friction = attach_friction(self.cvt, p, seed)  # this world's CVT friction (dyno.sim.cvt_friction)
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
         self.engagement = None
         if p.cvt_engagement_model == "clamp":
-            self.engagement = Engagement(self.cvt, friction_coefficient=p.cvt_clutch_friction_coefficient,
+            self.engagement = Engagement(self.cvt, friction_coefficient=friction.clutch_friction_coefficient,
                                          radius_m=clamp_radius_m(p, self.cvt),
                                          half_angle_deg=self.cvt.tune.drive.sheave_half_angle_deg
                                          if self.cvt.tune is not None else p.cvt_sheave_half_angle_deg,

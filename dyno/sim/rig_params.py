@@ -99,14 +99,21 @@ class RigParams:
     # CVT tune for the flyweight/helix forces (dyno.tuning.actuators); "" or
     # None = the closed-form balance above (cvt_flyweight_coeff..helix_gain).
     cvt_tune_path: str | None = DEFAULT_TUNE
-    # Each CVT part's true value differs from its label by up to this fraction (uniform), drawn per part
-    # and world seed (dyno.sim.tune_deviation, --sim-tune-deviation); 0 = every part exactly its label.
+    # Each CVT part's true value differs from its label by up to this fraction (normal, each field with its
+    # own share of it from its manufacturing norm, dyno.sim.tune_deviation), drawn per part and world seed
+    # (--sim-tune-deviation); 0 = every part exactly its label.
     tune_deviation_rel: float = 0.0
     # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
     # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
     # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
     cvt_engagement_model: str = "clamp"
-    cvt_clutch_friction_coefficient: float = 0.4  # belt flank friction while slipping (thesis f = 0.4)
+    # The CVT's friction (dyno.sim.cvt_friction): None = drawn per world within its real range (the clutch's
+    # belt flank mu 0.30-0.45, the ramps' 0.5-1.5 % and the helix's 1-3 % of their axial force, 2-8 N of
+    # sheave bushings); a number = that value (0 = no such friction).
+    cvt_clutch_friction_coefficient: float | None = None
+    cvt_ramp_friction_frac: float | None = None
+    cvt_helix_friction_frac: float | None = None
+    cvt_sheave_friction_n: float | None = None
     cvt_engage_start_rpm: float = 1900.0
     cvt_engage_full_rpm: float = 2100.0
     cvt_clutch_capacity_nm: float = 60.0
@@ -129,6 +136,7 @@ class RigParams:
     # Added to the tune's flyweight radius table: the real weights' centre of mass, which no drawing gives.
     # -3 mm: fitted to the 2019 logs' run2 alone (engine speed against speed ratio, default thesis-step, seed
     # 4; 0.5 mm grid, least RMS) and shown on run3 and run4 (bench/bench_fidelity.py, docs/simulator-fidelity.md).
+    # With the CVT's friction (dyno.sim.cvt_friction) run2/3/4 are 57/64/65 rpm RMS (frictionless 46/48/45).
     cvt_flyweight_radius_offset_m: float = -0.003
     # Which belt tier gives the true thrust ratio: "full" (the full model's cells; with a friction given,
     # the capstan tier), "capstan" (Gerbert's V-belt limit, dyno.model.capstan) or "closed_form" (the

@@ -17,6 +17,14 @@ a tune with the host's actuator relations (:mod:`dyno.tuning.actuators`) at the 
   higher at no load), so the advisor carries an effective ``kappa = (1 + a) (theta_s / theta_p)
   exp(-c T_p / (r_p F_p))`` whose ``a`` and ``c`` are calibrated with the parts (prior a 0 +- 0.3,
   c 1 +- 1), shared by every tune (the belt and the pulleys stay);
+* the **friction** the frictionless relations leave out, shared by every tune too (the rig's sheaves,
+  ramps and belt stay): an effective flank friction ``mu = FLANK_FRICTION (1 + m)`` (rubber on aluminium:
+  prior m 0 +- 0.125, i.e. mu 0.4 +- 0.05) and an effective ramp friction ``h``: the up-shift figures
+  (engine speed rising: the sheave closes or starts to shift against the ramps' and rollers' friction)
+  see the flyweights' force ``(1 - h) C n^2`` (prior h 0.03 +- 0.03, >= 0).  With ``a, c`` these four are
+  the "rig" parameters (:func:`thrust_params`), calibrated from the runs' engagement and shift-out
+  figures: one run pins ``mu (1 - h) m_fw`` and ``(1 - h) m_fw`` only through the prior, runs with
+  other flyweights or springs separate them;
 * ``full_load``: the engine speed of the force balance at the low stop at full throttle
   (:meth:`dyno.tuning.shift_curve.Solver.balance_rpm`, closed-form belt thrusts, the run's engine map).
 
@@ -193,9 +201,13 @@ def _radii(d, low_ratio: float) -> tuple[float, float]:
     return r, float(act.secondary_radius_m(tune, r))
 
 
-#: the effective thrust ratio's parameters (module docstring): nominal values and prior sds
-THRUST_NOMINAL = (0.0, 1.0)
-THRUST_PRIOR_SD = (0.3, 1.0)
+#: the rig's effective parameters (module docstring): the thrust ratio's level a and decay c, the flank
+#: friction's relative deviation m and the ramps' friction h; nominal values and prior sds
+THRUST_NOMINAL = (0.0, 1.0, 0.0, 0.03)
+THRUST_PRIOR_SD = (0.3, 1.0, 0.125, 0.03)
+THRUST_FIELDS = ("kappa_level", "kappa_decay", "flank_friction_rel", "ramp_friction")
+#: their bounds as deviations from nominal (c >= 0, h >= 0)
+THRUST_BOUNDS = ((-0.9, math.inf), (-1.0, math.inf), (-0.4, 0.4), (-0.03, 0.17))
 
 
 def wrap_ratio(tune, low_ratio: float) -> float:
@@ -228,12 +240,15 @@ def predict_figure(tune, figure: str, load_nm: float, low_ratio: float, engine=N
     shift model's effective (f, dr, T_fr) of :mod:`dyno.tuning.fit` for the full-load figure; ``thrust``:
     the effective thrust ratio's (a, c) for the shift-out (None: nominal)."""
     r_p, r_s = low_stop_radii_m(tune, low_ratio)
+    a, c, m, h = THRUST_NOMINAL if thrust is None else tuple(thrust) + THRUST_NOMINAL[len(thrust):]
+    if figure in ("engagement", "shift_out") and h and tune.flyweights is not None:
+        # the up-shift's ramp friction: (1 - h) of the flyweights' force, as a (1 - h) lighter set
+        tune = tune.with_changes(**{"flyweights.mass_each_kg": tune.flyweights.mass_each_kg * (1.0 - h)})
     if figure == "engagement":
         sin_a = math.sin(math.radians(tune.drive.sheave_half_angle_deg))
-        f_need = max(load_nm, 0.0) * sin_a / (2.0 * FLANK_FRICTION * r_p * low_ratio)
+        f_need = max(load_nm, 0.0) * sin_a / (2.0 * FLANK_FRICTION * (1.0 + m) * r_p * low_ratio)
         return float(act.primary_speed_for_force_rpm(tune, f_need, r_p))
     if figure == "shift_out":
-        a, c = THRUST_NOMINAL if thrust is None else thrust
         f_s = float(act.secondary_axial_force_n(tune, max(load_nm, 0.0), r_s))
         f_p = primary_force_for_secondary_n(f_s, max(load_nm, 0.0) / low_ratio, r_p,
                                             (1.0 + a) * wrap_ratio(tune, low_ratio), c)
@@ -271,7 +286,8 @@ def belt_params() -> list[Param]:
 
 
 def thrust_params() -> list[Param]:
-    return [Param("belt", "thrust", name, sd) for name, sd in zip(("kappa_level", "kappa_decay"), THRUST_PRIOR_SD)]
+    """The rig's effective parameters shared by every tune: the thrust ratio's and the friction's."""
+    return [Param("belt", "thrust", name, sd) for name, sd in zip(THRUST_FIELDS, THRUST_PRIOR_SD)]
 
 
 def thrust_of(d_thrust) -> tuple[float, float]:
@@ -344,7 +360,7 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
         per_run.append(ps)
     if any(r.steady for r in runs):
         params.extend(belt_params())
-    with_thrust = any(f.figure == "shift_out" for r in runs for f in r.figures)
+    with_thrust = any(f.figure in ("engagement", "shift_out") for r in runs for f in r.figures)
     if with_thrust:
         params.extend(thrust_params())
     idx = {(p.part, p.field): i for i, p in enumerate(params)}
@@ -398,7 +414,7 @@ def calibrate(runs: list[RunData], tolerance_of) -> Calibration:
     lower = -bound.copy()
     for i, p in enumerate(params):
         if p.kind == "thrust":
-            lower[i] = -THRUST_NOMINAL[1] if p.field == "kappa_decay" else -0.9
+            lower[i], bound[i] = THRUST_BOUNDS[THRUST_FIELDS.index(p.field)]
     x0 = np.zeros(len(params))
     sol = least_squares(resid, x0, bounds=(lower, bound), diff_step=1e-4, xtol=1e-10, ftol=1e-10)
     if n_steady:
@@ -435,14 +451,14 @@ def predict_with_u(cal: Calibration, tune, figure: str, load_nm: float, low_rati
     n_part = len(ps)
     if figure == "full_load" and ("belt", belt_params()[0].field) in idx:
         ps = ps + belt_params()  # the calibrated shift model's effective parameters
-    if figure == "shift_out":
-        ps = ps + thrust_params()  # calibrated if a run measured a shift-out, else at their prior
+    if figure in ("engagement", "shift_out"):
+        ps = ps + thrust_params()  # calibrated if a run measured these figures, else at their prior
     d = np.array([cal.d[idx[(p.part, p.field)]] if (p.part, p.field) in idx else 0.0 for p in ps])
 
     def f(x):
         extra = x[n_part:]
         theta = theta_of(extra) if figure == "full_load" and len(ps) > n_part else None
-        thrust = thrust_of(extra) if figure == "shift_out" else None
+        thrust = thrust_of(extra) if figure in ("engagement", "shift_out") else None
         return predict_figure(effective_tune(tune, ps[:n_part], x[:n_part]), figure, load_nm, low_ratio, engine,
                               theta, thrust)
 
@@ -480,5 +496,5 @@ def calibrated_theta(cal: Calibration):
 
 
 def calibrated_thrust(cal: Calibration):
-    """The calibrated thrust ratio's (a, c) when a run measured a shift-out, else None (nominal)."""
+    """The calibrated rig parameters (a, c, m, h) when a run measured the light figures, else None (nominal)."""
     return _calibrated(cal, thrust_params(), thrust_of)
