@@ -48,7 +48,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.app import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 from dyno.errors import ConfigError  # noqa: E402
 from dyno.sim.physics import RigParams  # noqa: E402

@@ -6,7 +6,7 @@ Each world seed is one simulated rig (its engine, torque sensor, drawn day: :mod
 runs of the short speed-hold plan: the stock tune and the heavy flyweights (a real change of efficiency and of
 engine speed, ~220 rpm, so the map's error does not cancel exactly).  Even worlds measure both on the same day,
 odd worlds the heavy tune on another drawn day.  The rig has a BME280 ("air known"); each run is also
-re-processed with no air ("uncorrected", :func:`dyno.replay.replay` with ``Ambient()``).  Pairs:
+re-processed with no air ("uncorrected", :func:`dyno.runlog.replay.replay` with ``Ambient()``).  Pairs:
 
 * ``known``: both runs corrected to their air — calibration, map and air all residual;
 * ``uncorrected``: neither — the air does not cancel (stated: each run's plausible-day term);
@@ -42,7 +42,7 @@ def _as_compared(out: Path, name: str, uncorrected: bool) -> dict:
     """A run as ``compare`` takes it; ``uncorrected``: re-processed with no air, its meta saying so."""
     from dyno.analysis.air import Ambient, uncorrected_air_rel_u
     from dyno.library.summary import read_run_files, run_row
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
 
     files = read_run_files(out)
     meta, points = files["meta"], [d for d in files["documents"] if d.get("type") == "point"]
@@ -55,7 +55,7 @@ def _as_compared(out: Path, name: str, uncorrected: bool) -> dict:
 
 def one_world(world: int, tmp: str, rig_path: str, plan_path: str) -> dict:
     """Two runs on one rig (stock, heavy flyweights) and the three pairs' coverage records."""
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
     from dyno.library.compare import compare
     from dyno.sim.physics import RigParams

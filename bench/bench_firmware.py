@@ -251,7 +251,7 @@ def polled_run(seconds: float, profile: bool) -> dict:
 
 def adc_stress(seconds: float) -> dict:
     """ADC time error against the harness's conversions with the ISRs as busy as the rig gets."""
-    from dyno.firmware_sim import FirmwareSimSpec, simulate
+    from dyno.session.firmware_sim import FirmwareSimSpec, simulate
 
     rep = simulate(FirmwareSimSpec(elf=str(ELF), seconds=seconds, primary_rpm=15000.0, secondary_rpm=14000.0,
                                    bounce=True, glitch_hz=200.0, poll_jitter=0.5, seed=5, input_hz=125.0))
@@ -270,7 +270,7 @@ SUP_TIMEOUT_S, SUP_LIMIT_RPM, SUP_TEST_RPM, LOOP_PASS_US = 0.2, 4200.0, 4600.0, 
 
 def supervisor_reactions(seconds: float) -> dict:
     """The run-enable's reaction times in simavr (``dyno firmware-sim`` with hardware/rig.toml's limits)."""
-    from dyno.firmware_sim import FirmwareSimSpec, simulate
+    from dyno.session.firmware_sim import FirmwareSimSpec, simulate
 
     def sim(**kw):
         return simulate(FirmwareSimSpec(elf=str(ELF), **kw))

@@ -29,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import dyno.control.plans.speed_hold as sh  # noqa: E402
-from dyno.app import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.control.controller import State, TestPlan  # noqa: E402
 from dyno.control.plans.steps import find_contact  # noqa: E402
 

@@ -108,7 +108,7 @@ def false_accepts(frames: list[bytes], ber: float, seed: int, version: int = 1) 
 
 
 def bench_sim(seconds_cap: float = 600.0, plan=None) -> dict:
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
 
     kw = {} if plan is None else {"plan": plan}
     with tempfile.TemporaryDirectory() as d:

@@ -74,7 +74,7 @@ def setup_files(tmp: Path, repro: float | None) -> dict:
 
 
 def one_seed(seed: int, tmp: str, files: dict) -> dict:
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
     from dyno.sim.rig_params import RigParams
 

@@ -2,7 +2,7 @@
 """Every drill on every shipped plan, at onsets in each phase: the safe state as the physics sees it.
 
 For each (plan, drill, phase, mode) it runs ``dyno run --sim`` in-process (the same composition root the
-command uses, signal handlers included) with the drill at ``@PHASE[+S]`` (``dyno.drills.PHASES``: armed =
+command uses, signal handlers included) with the drill at ``@PHASE[+S]`` (``dyno.session.drills.PHASES``: armed =
 idle, loaded = the pads first bite (contact search / stepping / holding), measure, after = after the test)
 and prints one row: the cause, whether the drill's hazard arose, the safe-state latency in true time from
 the physical onset against its bound, the brake position when the safe state came, the release time
@@ -14,7 +14,7 @@ Modes: ``sim`` (the simulated driver), ``mock`` (``--mock-pins``: the real-rig o
 MockFactory), ``sim+faults`` (``--fault-rate 0.01``), these three on the shipped rig file (K3 fitted), and the
 wiring twin: ``twin`` (``--mock-pins`` with a rig file declaring the end switch and the E-stop monitor input, K3
 not fitted: the driver's own release is judged) and ``twin+k3`` (the same with K3 fitted).  The wiring drills
-(:mod:`dyno.drills_wiring`) run on the twin modes only; on every ``mock``/``twin`` row the driver's verdict must
+(:mod:`dyno.session.drills_wiring`) run on the twin modes only; on every ``mock``/``twin`` row the driver's verdict must
 agree with the physics (``driver_agrees``).
 
     python bench/bench_safe_state.py [--quick] [--plans a,b] [--drills x,y] [--phases p,q]
@@ -80,10 +80,10 @@ def wired_rig_file(out_dir: Path, k3: bool) -> Path:
 
 
 def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> dict:
-    from dyno.app import DEFAULT_ENGINE_MAP, RunOptions, run_test
+    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
     from dyno.cli.run_cmd import exit_code
     from dyno.control.plans import plan_named
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
     from dyno.runlog.reader import load_run
 
     held: dict = {}

@@ -1,16 +1,16 @@
 #!/usr/bin/env python3
 """Soak: back-to-back runs of every shipped plan on the simulated rig, for simulated hours, in ONE process.
 
-Each run is ``dyno run --sim`` in-process (``dyno.app.run_test``, the composition root the command uses,
+Each run is ``dyno run --sim`` in-process (``dyno.session.root.run_test``, the composition root the command uses,
 signal handlers included) as fast as the machine goes (``speed=None``), with 1 % mixed transfer faults,
 the plans in turn, a new seed each run.  Every ``--drill-every-min`` simulated minutes the next run gets
-one random drill (``dyno.drills``) at a random phase or time; the run after it starts only once the safe
+one random drill (``dyno.session.drills``) at a random phase or time; the run after it starts only once the safe
 state's release stroke has ended (``run_test`` awaits ``finish_release``), as an operator re-arms.
 The signal drills (sigint/sigterm/sighup) are included and run in this process: the run's own handlers
 (``handle_signals=True``, as ``dyno run`` installs them) turn them into a ``signal`` abort, and the
 process must go on — which is part of what is soaked.
 
-After every run: the points replayed from its directory (``dyno.replay.replay``) against its own, the run
+After every run: the points replayed from its directory (``dyno.runlog.replay.replay``) against its own, the run
 indexed in the run library (``index_after_run``, as ``dyno run`` does) and, after every abort, the brake
 pads off the rotor as the physics has them (``outputs.pads_off_rotor``, ``rig_safe`` and the model itself).
 Per simulated hour (``--report-min``) one line: runs, points, aborts by cause, unhandled exceptions,
@@ -49,11 +49,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PLANS = ("speed-hold", "thesis-step", "sweep", "torque-hold", "engine-hold", "engagement", "coast-down",
          "drive-grid")
-#: the drills a soak draws from (every one in dyno.drills; loop-stall on both sides of watchdog_s)
+#: the drills a soak draws from (every one in dyno.session.drills; loop-stall on both sides of watchdog_s)
 DRILLS = ("device-reset", "hall-dead:primary", "hall-dead:secondary", "hall-dead:both", "thermometer-stuck",
           "thermometer-lost", "adc-error", "adc-stuck", "bus-lost", "overtemp", "overspeed", "loop-stall:300",
           "loop-stall:800", "controller-crash", "disk-full", "sigint", "sigterm", "sighup")
-#: onsets: phases of the test (dyno.drills.PHASES) and plain times from the first frame
+#: onsets: phases of the test (dyno.session.drills.PHASES) and plain times from the first frame
 ONSETS = ("armed", "warmup+1", "loaded+2", "measure+1", "after+0.5", "20", "45")
 QUICK_PLANS = "engine-hold,torque-hold,coast-down"  # the shortest ones with points (~1-2 simulated min each)
 RSS_GROWTH_MAX = 0.10  # the issue's bound on RSS growth after the first hour
@@ -101,7 +101,7 @@ class Errors:
 
 
 def options(plan: str, seed: int, drill, fault_rate: float):
-    from dyno.app import DEFAULT_ENGINE_MAP, RunOptions
+    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions
     from dyno.control.plans import plan_named
 
     opts = RunOptions(sim=True, seed=seed, speed=None, fault_rate=fault_rate, plan=plan_named(plan),
@@ -120,9 +120,9 @@ def physics_safe(ctx) -> bool:
 
 def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warns: list) -> dict:
     """One run and its checks; a small record (nothing of the run is kept: the soak must not hold memory)."""
-    from dyno.app import run_test
+    from dyno.session.root import run_test
     from dyno.library.index import index_after_run
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
 
     held: dict = {}
     opts = options(plan, seed, drill, fault_rate)
@@ -265,7 +265,7 @@ def soak(args) -> dict:
     errors.install()
     rng = random.Random(args.seed)
     end_s, every_s, drill_every_s = args.hours * 3600.0, args.report_min * 60.0, args.drill_every_min * 60.0
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
 
     sim_s, next_report_s, next_drill_s = 0.0, every_s, drill_every_s
     iv, total, rows, run_dirs, bad_runs = Interval(), Interval(), [], [], []

@@ -126,7 +126,7 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
 def check_runs(root: Path) -> dict:
     """Every run directory the session left: safe at the end with the pads off, and its points replay."""
     from dyno.library.index import find_run_dirs
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
     from dyno.runlog.reader import load_run
 
     dirs = find_run_dirs(root)

@@ -39,7 +39,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import dyno.control.plans.speed_hold as sh  # noqa: E402
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.controller import State  # noqa: E402
 from dyno.control.outputs import APPLY, STOP  # noqa: E402

@@ -218,7 +218,7 @@ IDLE_UI_MAX_PCT = 4.0  # issue 42: dyno ui --sim idle while ARMED, % of one core
 
 def headless_floor(quick: bool) -> dict:
     """``dyno run --sim --headless``'s work per rig-second with nothing to wait for (its virtual clock unpaced)."""
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.cli.run_cmd import plan_named
 
     plan = plan_named("speed-hold")
@@ -304,7 +304,7 @@ def _run(a, seconds: float, cpu_s: float, speed: float, pace: str, status: dict)
         ov = asyncio.run(_with_ui(seconds, tmp / "ov", overlay=True, speed=speed))
         print(fmt_timing("with UI + model overlay", ov) + f"  overlay: {ov.get('overlay_tier') or 'pending'}")
 
-        from dyno.app import RunOptions, run_test
+        from dyno.session.root import RunOptions, run_test
         from dyno.control.controller import TestPlan
 
         run_dir = tmp / "replay_run"

@@ -5,7 +5,7 @@ smooth deviation (5 % sd), its torque sensor's gain from the latest calibration 
 reproducibility, and its day is drawn (5…35 °C, 0…1,500 m).  The host is told only what an operator
 would know: the shipped map, the calibration history, and the air if a BME280 is fitted.  A short
 speed-hold plan (4 setpoints) runs on each seed with the sensor fitted ("air known"); the same run is
-re-processed with no air ("uncorrected", :func:`dyno.replay.replay` with ``Ambient()``).
+re-processed with no air ("uncorrected", :func:`dyno.runlog.replay.replay` with ``Ambient()``).
 
 Printed per case: points, coverage of ``efficiency_u95`` (95 % nominal), the normalised errors
 ``error / (u95/1.96)`` (mean, standard deviation), the mean half-width; and, with the air known, each
@@ -65,9 +65,9 @@ def _rig_with_sensor(tmp: Path) -> Path:
 def one_seed(seed: int, tmp: str) -> dict:
     """One simulated rig: its points with the air known and uncorrected, and its truth."""
     from dyno.analysis.air import Ambient
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
 
     tmp_dir = Path(tmp)
     plan_path = tmp_dir / "short.toml"

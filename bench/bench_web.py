@@ -37,9 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from dyno.app import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.cli.run_cmd import plan_named  # noqa: E402
-from dyno.drills import parse_drill  # noqa: E402
+from dyno.session.drills import parse_drill  # noqa: E402
 
 TEST_STATES = {"warmup", "step", "settle", "measure"}
 

@@ -1,11 +1,11 @@
-"""dyno.heap: freed C-heap pages held by glibc go back to the OS (the soak's RSS growth, docs/safety.md)."""
+"""dyno.session.heap: freed C-heap pages held by glibc go back to the OS (the soak's RSS growth, docs/safety.md)."""
 
 import sys
 from pathlib import Path
 
 import pytest
 
-from dyno.heap import return_free_heap
+from dyno.session.heap import return_free_heap
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

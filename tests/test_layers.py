@@ -87,7 +87,7 @@ def test_grep_finds_no_upward_import(package, pattern):
 
 
 # --- no wiring after construction (issue 41) -------------------------------------------------------------------
-# The composition root (dyno.app.build, dyno.app_calibration.build_calibration) gives each part what it needs in
+# The composition root (dyno.session.root.build, dyno.session.calibration.build_calibration) gives each part what it needs in
 # its constructor. The check: no module under dyno/ assigns an attribute of a built controller, rig, poller or
 # reader (``controller.x = ...``, ``ctx.controller.x = ...``, ``sim.x = ...``) outside that object's own class
 # (``self.x``), nor one of the run context's wiring fields. (Runtime state is changed through methods: e.g.
@@ -137,3 +137,15 @@ def test_the_wiring_check_sees_injection():
            "    ctx.twin = None\n    sim.model.t = 0\n    ctx.drills = []\n    self.x = 1\n")
     assert [h.split(": ")[1] for h in wiring_assignments(src)] == [
         "controller.rig", "ctx.controller.time_scale", "ctx.twin"]
+
+
+#: the modules every layer reaches (errors, clocks, file writes, data paths) stay at the top; the rest are packages
+SHARED_MODULES = {"__init__", "__main__", "clock", "errors", "fileio", "datapaths"}
+
+
+@pytest.mark.quick
+def test_the_tree_shows_the_architecture():
+    loose = {p.stem for p in DYNO.glob("*.py")}
+    assert loose <= SHARED_MODULES, f"loose modules beside the packages: {sorted(loose - SHARED_MODULES)}"
+    packages = {p.name for p in DYNO.iterdir() if (p / "__init__.py").is_file()}
+    assert {"session", "rig", "sim", "control", "acquisition", "protocol", "transports"} <= packages

@@ -125,7 +125,7 @@ def live_values(poller, controller, now_s: float, rate: RateMeter) -> LiveValues
     ratio = rp / rs if rs > 1.0 else math.nan
     torque = recent_torque_nm(poller.streams, poller.device_now_us(), controller.calibration)
     p_out = torque * rs * RAD_S_PER_RPM if not math.isnan(torque) else math.nan
-    channel = getattr(controller, "input_channel", None)  # rig.toml [input_torque] (dyno.app_input)
+    channel = getattr(controller, "input_channel", None)  # rig.toml [input_torque] (dyno.session.input_channel)
     t_in, source = math.nan, "map"
     if channel is not None:  # the engine's power measured: the map not needed
         t_in, source = recent_input_torque_nm(poller.streams, poller.device_now_us(), channel), "input"

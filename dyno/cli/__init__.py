@@ -164,7 +164,7 @@ def _dispatch(argv: list[str]) -> int:
         if "--rig" not in parser._option_string_actions:
             # every command takes --rig PATH (the rig description), even where it only
             # records it, so scripts can pass it uniformly
-            from dyno.rigconfig import add_rig_argument
+            from dyno.rig.config import add_rig_argument
 
             add_rig_argument(parser)
         try:

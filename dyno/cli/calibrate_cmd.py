@@ -42,7 +42,7 @@ def add_arguments(p) -> None:
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
                         "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")
-    from dyno.rigconfig import add_rig_argument
+    from dyno.rig.config import add_rig_argument
 
     add_rig_argument(p)
 
@@ -67,11 +67,11 @@ def run(args) -> int:
 
     if args.samples < 2 or args.settle_samples < 0 or not args.speed > 0:
         raise SystemExit("dyno calibrate: --samples >= 2, --settle-samples >= 0, --speed > 0")
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d, engine=False) for d in args.drill]
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
     from dyno.transports.budget import check_budget
@@ -97,11 +97,11 @@ def run(args) -> int:
         raise ConfigError("command line", "--mock-pins", "the wiring twin drives the simulated rig only (--sim)")
     in_force = None
     if inp:
-        from dyno.app_input import calibration_path
+        from dyno.session.input_channel import calibration_path
 
         in_force = calibration_path(rig_cfg.input_torque)  # the channel's history the runs read
     else:
-        from dyno.app import DEFAULT_CALIBRATION
+        from dyno.session.root import DEFAULT_CALIBRATION
 
         in_force = DEFAULT_CALIBRATION
     history = args.history

@@ -10,7 +10,7 @@ import sys
 
 from dyno.hw.doctor import (FAIL, OK, SKIP, WARN, Check, Report, _boots, _new_boot,  # noqa: F401 (re-exported)
                             check_end_switch, diagnose, doctor_spec, run_diagnosis)
-from dyno.rigconfig import add_rig_argument, load_rig
+from dyno.rig.config import add_rig_argument, load_rig
 
 
 def add_arguments(parser) -> None:

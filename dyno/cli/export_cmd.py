@@ -22,7 +22,7 @@ def add_arguments(p) -> None:
 
 def run(args) -> int:
     if args.format == "csv":
-        from dyno.replay import export
+        from dyno.runlog.replay import export
 
         for path in export(args.run, args.out, calibration_path=args.calibration, engine_map_path=args.engine_map):
             print(path)
@@ -38,7 +38,7 @@ def run(args) -> int:
     from dyno.errors import ConfigError
     from dyno.fileio import write_atomic
     from dyno.library import exports
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
     from dyno.runlog.reader import load_run
 
     result = replay(args.run, calibration_path=args.calibration, engine_map_path=args.engine_map)

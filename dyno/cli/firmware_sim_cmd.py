@@ -1,5 +1,5 @@
 """``dyno firmware-sim``: run the real firmware ELF in simavr against the real host code (parse -> spec ->
-:func:`dyno.firmware_sim.simulate` -> print).  What it does and its exit status: :mod:`dyno.firmware_sim`."""
+:func:`dyno.session.firmware_sim.simulate` -> print).  What it does and its exit status: :mod:`dyno.session.firmware_sim`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from dyno.cli import number_in
-from dyno.firmware_sim import RESET_CAUSES, FirmwareSimSpec, check_spec, simulate
+from dyno.session.firmware_sim import RESET_CAUSES, FirmwareSimSpec, check_spec, simulate
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS
 
 
@@ -69,7 +69,7 @@ def add_arguments(parser) -> None:
 
 
 def _supervisor_arguments(parser) -> None:
-    from dyno.rigconfig import add_rig_argument
+    from dyno.rig.config import add_rig_argument
 
     add_rig_argument(parser)  # --rig PATH: its [limits] arm the run-enable at every boot
     parser.add_argument("--host-stop-at", type=number_in(0.0, 3600.0), default=None, metavar="S",

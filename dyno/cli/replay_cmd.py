@@ -21,8 +21,8 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from dyno.app import public_point
-    from dyno.replay import replay
+    from dyno.session.root import public_point
+    from dyno.runlog.replay import replay
 
     if getattr(args, "measured_map", None) is not None:
         return _measured_map(args, [replay(r, args.calibration, args.engine_map) for r in args.run])

@@ -51,7 +51,7 @@ def add_arguments(p) -> None:
                         "device-reset, hall-dead:primary|secondary|both, thermometer-stuck, thermometer-lost, "
                         "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, pi-freeze[:S], "
                         "controller-crash, disk-full, sigint, sigterm, sighup (docs/safety.md)")
-    from dyno.rigconfig import add_rig_argument
+    from dyno.rig.config import add_rig_argument
     from dyno.web.attach import add_web_arguments
 
     add_web_arguments(p)  # --web [ADDR:PORT], --web-stop (docs/web.md)
@@ -148,9 +148,9 @@ def exit_code(result: dict) -> int:
 
 
 def run_spec(args):
-    """(spec, driven loss or None, error line or None): ``dyno run``'s arguments as a :class:`dyno.app.RunSpec`."""
-    from dyno.app import RunSpec
-    from dyno.drills import parse_drill
+    """(spec, driven loss or None, error line or None): ``dyno run``'s arguments as a :class:`dyno.session.root.RunSpec`."""
+    from dyno.session.root import RunSpec
+    from dyno.session.drills import parse_drill
 
     drills = [parse_drill(d) for d in args.drill]
     kw = dict(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
@@ -192,7 +192,7 @@ def _announce_belt_table(name) -> None:
 
 
 def run(args) -> int:
-    """parse (argparse) -> spec (:func:`run_spec`) -> call (:func:`dyno.app.run_test`) -> print."""
+    """parse (argparse) -> spec (:func:`run_spec`) -> call (:func:`dyno.session.root.run_test`) -> print."""
     if not args.sim:
         print("dyno run: only --sim is available headless here; on the rig use `dyno ui`", file=sys.stderr)
         return 2
@@ -202,7 +202,7 @@ def run(args) -> int:
         return 2
     from dataclasses import replace
 
-    from dyno.app import run_test
+    from dyno.session.root import run_test
     from dyno.cli import progress as tty
 
     bar = None
@@ -223,7 +223,7 @@ def run(args) -> int:
             bar.finish()
         if web is not None:
             web.end(result)
-    from dyno.run_after import add_driven_loss
+    from dyno.session.after import add_driven_loss
 
     add_driven_loss(result, driven_loss, getattr(args, "rig", None))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
@@ -279,7 +279,7 @@ def _driven_loss(args):
 
     path = args.driven_loss
     if path is None:
-        from dyno.rigconfig import load_rig
+        from dyno.rig.config import load_rig
 
         path = load_rig(getattr(args, "rig", None)).driven.loss_file
     return None if path is None else load_driven_loss(path)
@@ -293,7 +293,7 @@ def _plan(args):
 
 def _write_report(result: dict, *, announce: bool) -> None:
     """report.html into the run directory, last of all: a failure is one stderr line, never another exit code."""
-    from dyno.run_after import write_run_report
+    from dyno.session.after import write_run_report
 
     path = write_run_report(result.get("run_dir"), _warn)
     if path is not None and announce:
@@ -324,7 +324,7 @@ def _speed_note(asked: float | None, result: dict, wall_s: float) -> None:
 
 def _index(result: dict) -> None:
     """Add the run to the run library (docs/library.md); a failure is one stderr line, never the exit code."""
-    from dyno.run_after import index_run
+    from dyno.session.after import index_run
 
     if result.get("run_dir"):
         index_run(result["run_dir"], lambda line: print(f"dyno run: {line}", file=sys.stderr))

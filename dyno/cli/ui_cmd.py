@@ -23,7 +23,7 @@ def add_arguments(p) -> None:
     p.add_argument("--mock-pins", action="store_true",
                    help="--sim: drive the simulated physics through the real-rig output code (gpiozero MockFactory)")
     from dyno.cli.run_cmd import add_air_arguments
-    from dyno.rigconfig import add_rig_argument
+    from dyno.rig.config import add_rig_argument
 
     from dyno.web.attach import add_web_arguments
 
@@ -38,7 +38,7 @@ def run(args) -> int:
 
     if not args.speed > 0:
         raise SystemExit("dyno ui: --speed must be > 0")
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d) for d in args.drill]
@@ -46,7 +46,7 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "pi-freeze stops the whole host, its watchdog thread "
                           "included: only in simulated time (dyno run --sim), not in a live session")
     from dyno.control.plans import plan_named
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
     rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
@@ -128,11 +128,11 @@ def _with_web(app_class, web):
 
 
 def finish_run(run_dir, *, announce: bool, only_if_missing: bool = False, report: bool = True) -> None:
-    """Index an ended run and write its report.html (:func:`dyno.run_after.finish_run`), saying so: failures
+    """Index an ended run and write its report.html (:func:`dyno.session.after.finish_run`), saying so: failures
     are one stderr line, never the exit code."""
     import sys
 
-    from dyno.run_after import finish_run as finish
+    from dyno.session.after import finish_run as finish
 
     def warn(prog):
         def say(line: str) -> None:

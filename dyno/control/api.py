@@ -55,6 +55,7 @@ for _s in State:
 
 @dataclass(frozen=True)
 class TestPlan:
+    __test__ = False  # a plan, not a pytest class (tests import it by name)
     engine_running_rpm: float = 1300.0  # primary above this = engine started
     engine_detect_s: float = 0.5
     # Ignition enabled and no primary rpm for this long: the engine was not started, or its

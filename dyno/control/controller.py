@@ -43,7 +43,7 @@ class TestController(Measuring):
                  on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None,
                  control=None, inertia=None, input_channel=None, time_scale: float = 1.0,
                  point_hooks=(), result_hooks=()) -> None:
-        # Everything the composition root (dyno.app.build) wires is given here, never set afterwards
+        # Everything the composition root (dyno.session.root.build) wires is given here, never set afterwards
         # (tests/test_layers.py checks that no module assigns to a built controller's attributes).
         self.poller = poller
         self.act = actuators
@@ -306,7 +306,7 @@ class TestController(Measuring):
     _injected: BaseException | None = None  # the last crash injected (drill controller-crash)
 
     def tare_input(self, channel) -> None:
-        """The engine-side channel with its zero from GO's window (dyno.app_input's first point)."""
+        """The engine-side channel with its zero from GO's window (dyno.session.input_channel's first point)."""
         self.input_channel = channel
 
     def set_zero_check(self, check: dict, input_check: dict | None = None) -> None:

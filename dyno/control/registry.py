@@ -20,7 +20,7 @@ from dyno.errors import ConfigError
 
 #: mode -> "module:coroutine" (or the coroutine function itself); it takes the plan context
 #: (:class:`dyno.control.api.PlanContext`) after the warm-up (those in FROM_IDLE right after GO).
-#: Read-only: a run's own extra modes (a test's, a bench's) come with its spec (``dyno.app.RunSpec.runners``).
+#: Read-only: a run's own extra modes (a test's, a bench's) come with its spec (``dyno.session.root.RunSpec.runners``).
 RUNNERS: Mapping[str, object] = MappingProxyType({
     "step": "dyno.control.plans.thesis_step:run_thesis_step",
     "speed-hold": "dyno.control.plans.speed_hold:run_speed_hold",

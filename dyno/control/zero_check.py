@@ -16,7 +16,7 @@ from dyno.protocol import v1
 
 
 def _config(ctrl):
-    from dyno.rigconfig import TorqueZeroConfig
+    from dyno.rig.config import TorqueZeroConfig
 
     return getattr(getattr(ctrl, "rig", None), "torque_zero", None) or TorqueZeroConfig()
 

@@ -184,7 +184,7 @@ def check_ambient(report: Report, cfg, bus) -> None:
     if bus is None:
         report.add("ambient", FAIL, "BME280: no I2C bus")
         return
-    from dyno.ambient import read_sensor
+    from dyno.session.ambient import read_sensor
     from dyno.errors import ConfigError
     from dyno.hw.bme280 import BME280
 
@@ -426,7 +426,7 @@ class DoctorSpec:
     """What :func:`diagnose` examines and how: the rig file's description and the parts to use (None: the
     real ones, opened by the diagnosis; the simulated rig's by :func:`doctor_spec`)."""
 
-    cfg: object  # dyno.rigconfig.RigConfig
+    cfg: object  # dyno.rig.config.RigConfig
     toggle: bool = False  # exercise the outputs (reset pulse, a brake step out and back)
     transport_kind: str | None = None  # "i2c" | "serial" (None: the rig file's)
     bus: object = None

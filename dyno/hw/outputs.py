@@ -33,7 +33,7 @@ from dyno.hw.clock import MonotonicClock
 from dyno.hw.endswitch import EndSwitch, tolerance
 from dyno.hw.blocking import BlockingMixin
 from dyno.hw.readback import ReadbackMixin
-from dyno.rigconfig import RigConfig
+from dyno.rig.config import RigConfig
 
 #: Keep driving into an end stop for this fraction of a stroke beyond the
 #: estimate, so estimate drift never leaves the brake short of its stop.

@@ -83,7 +83,7 @@ class HardwareRig:
             else:
                 self.transport = self._i2c
             self.thermometer = MLX90614(_CurrentBus(self._i2c), cfg.i2c.thermometer_address)
-            if cfg.ambient.sensor == "bme280":  # the air, read by the run before and after (dyno.ambient)
+            if cfg.ambient.sensor == "bme280":  # the air, read by the run before and after (dyno.session.ambient)
                 from dyno.hw.bme280 import BME280
 
                 self.ambient_sensor = BME280(_CurrentBus(self._i2c), cfg.ambient.address)

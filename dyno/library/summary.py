@@ -136,7 +136,7 @@ def run_row(files: dict, path_key: str, signature: str = "") -> dict:
     if tune and not tune_name and meta.get("tune_source"):
         tune_name = Path(str(meta["tune_source"])).stem
     cal = files["calibration"] if isinstance(files["calibration"], dict) else {}
-    atm = meta.get("ambient") if isinstance(meta.get("ambient"), dict) else {}  # the run's air (dyno.ambient)
+    atm = meta.get("ambient") if isinstance(meta.get("ambient"), dict) else {}  # the run's air (dyno.session.ambient)
     state, status, reason = run_state(docs)
     aborts = [d for d in docs if d.get("type") == "abort"]
     points = [d for d in docs if d.get("type") == "point"]

@@ -247,7 +247,7 @@ def _calibration(data: ReportData) -> str:
 
 
 def air_text(amb) -> str:
-    """The run's air and what was done with it, in words (meta.json ``ambient``, dyno.ambient)."""
+    """The run's air and what was done with it, in words (meta.json ``ambient``, dyno.session.ambient)."""
     if not isinstance(amb, dict) or not amb:
         return ("not recorded (a run from before the air was logged): the map is used as recorded, at the "
                 "SAE J1349 reference day")

@@ -351,7 +351,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
 
 _TABLES: dict = {}
 #: called with the tune's name (or None) before a table the cache does not hold is solved (a minute or two):
-#: a command line says so on stderr instead of looking hung (a run's spec gives it, dyno.app.run_test sets it
+#: a command line says so on stderr instead of looking hung (a run's spec gives it, dyno.session.root.run_test sets it
 #: for that run's context with :func:`announcing_builds`; a full-screen UI gives none)
 _ON_BUILD: contextvars.ContextVar = contextvars.ContextVar("belt_table_on_build", default=None)
 

@@ -48,7 +48,7 @@ class SimOperator:
 
 def parse_doctor_drill(text: str, cfg):
     """``NAME[:ARG]`` (no ``@T``) -> Drill; ConfigError naming ``--drill`` for anything else."""
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
     from dyno.errors import ConfigError
 
     names = (*SENSOR_DRILLS, *TWIN_DRILLS)
@@ -83,7 +83,7 @@ def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0, twin: bool | None =
 
         raise ConfigError("command line", "--drill", "the end-switch drills act through the wiring twin: add "
                           "--mock-pins")
-    from dyno.app_input import sim_params_for
+    from dyno.session.input_channel import sim_params_for
 
     clock = FakeClock(start_s=0.0)
     sim = SimRig(clock.now, protocol=cfg.protocol, seed=seed, params=sim_params_for(None, cfg),

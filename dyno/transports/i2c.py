@@ -115,7 +115,7 @@ def smbus_factory(bus_number: int):
 
 
 def open_i2c(config, *, bus=None, reset=None, clock=None, address=None) -> RecoveringI2CTransport:
-    """The firmware transport for a :class:`dyno.rigconfig.RigConfig`.
+    """The firmware transport for a :class:`dyno.rig.config.RigConfig`.
 
     ``bus`` defaults to ``smbus2.SMBus(config.i2c.bus)`` (reopened on recovery);
     pass the simulated bus to run the same code off the rig.  ``reset`` is

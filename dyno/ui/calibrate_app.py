@@ -63,7 +63,7 @@ class CalibrateOptions:
     radius_m: float = DEFAULT_RADIUS_M
     masses: str = DEFAULT_MASSES
     fixture_kw: dict | None = None  # sim only: CalibrationFixture options (tests)
-    drills: list = None  # dyno.drills.Drill (sim only), from the first frame
+    drills: list = None  # dyno.session.drills.Drill (sim only), from the first frame
     channel: str = "output"  # "output" (brake side) | "input" (engine cradle, issue 27)
     repeats: int = 1  # passes of the load sequence; from 2 on the slope's reproducibility is shown
     in_force_path: Path | None = None  # the channel's calibration in force when history_path is new
@@ -87,7 +87,7 @@ class CalibrateApp(DynoApp):
         self.feeder: WizardFeeder | None = None
         self.poller = None
         self.rig = None  # FixtureRig (sim) or HardwareRig
-        self.cal_ctx = None  # dyno.app_calibration.CalibrationContext
+        self.cal_ctx = None  # dyno.session.calibration.CalibrationContext
         self._old_signals: dict = {}
         self.calibration_in_force = None
         self._poll_task = None
@@ -117,7 +117,7 @@ class CalibrateApp(DynoApp):
 
     async def on_mount(self) -> None:
         from dyno.analysis.calibration import latest, load_history
-        from dyno.app import DEFAULT_CALIBRATION
+        from dyno.session.root import DEFAULT_CALIBRATION
         from dyno.errors import DynoError
 
         history = []
@@ -142,7 +142,7 @@ class CalibrateApp(DynoApp):
         self.refresh_view()
 
     def _start_acquisition(self) -> None:
-        from dyno.app_calibration import build_calibration
+        from dyno.session.calibration import build_calibration
 
         loop = asyncio.get_running_loop()
         self.cal_ctx = build_calibration(sim=self.opts.sim, loop=loop, seed=self.opts.seed, speed=self.opts.speed,
@@ -405,7 +405,7 @@ class CalibrateApp(DynoApp):
             await asyncio.gather(self._poll_task, return_exceptions=True)
             self._poll_task = None
         if self.cal_ctx is not None:
-            from dyno.app_calibration import close_calibration
+            from dyno.session.calibration import close_calibration
 
             close_calibration(self.cal_ctx)  # the rig: release stroke finished, pins released
             self.rig = None

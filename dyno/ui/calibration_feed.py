@@ -53,11 +53,11 @@ async def run_sim_calibration(wizard: CalibrationWizard, *, seed: int = 0, settl
     """Drive a whole calibration on the simulated fixture (the simulated operator hangs each mass).
 
     For tests and the benchmark: run it on a :class:`dyno.clock.VirtualTimeLoop`.
-    Returns the :class:`~dyno.ui.sim_fixture.FixtureRig`.
+    Returns the :class:`~dyno.sim.ui_fixture.FixtureRig`.
     """
     import asyncio
 
-    from dyno.ui.sim_fixture import build_fixture_poller
+    from dyno.sim.ui_fixture import build_fixture_poller
 
     loop = asyncio.get_running_loop()
     t0 = loop.time()

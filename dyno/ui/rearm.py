@@ -84,7 +84,7 @@ class RearmMixin:
             meta["rearmed_after"] = str(old_dir)
             engine_map = old.engine_map
             if self.ctx.ambient_sensor is not None:  # each run its own air, read when it is armed
-                from dyno.ambient import read_sensor
+                from dyno.session.ambient import read_sensor
 
                 amb = read_sensor(self.ctx.ambient_sensor, "BME280")
                 engine_map = engine_map.at_ambient(amb.temp_c, amb.dry_pressure_kpa)
@@ -113,7 +113,7 @@ class RearmMixin:
         ctrl = TestController(self.poller, old.act, old.calibration, engine_map, plan=old.plan,
                               limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
                               runner_for=old.runner_for, from_idle=old.from_idle,
-                              # what the composition root gave the first controller (dyno.app.build): the same
+                              # what the composition root gave the first controller (dyno.session.root.build): the same
                               **{name: getattr(old, name) for name in REBUILT_ATTRS},
                               point_hooks=old.point_hooks,  # (the simulated rig's truth: keyed by time, not by run)
                               result_hooks=old.result_hooks)  # (the characterisations' sim truths)
@@ -148,13 +148,13 @@ class RearmMixin:
         truth = getattr(self.ctx.sim, "truth", None)
         if truth is not None and len(truth.t):
             truth.trim_before(truth.t[-1] - HISTORY_KEEP_S)
-        from dyno.heap import return_free_heap
+        from dyno.session.heap import return_free_heap
 
         return_free_heap()
 
     def _rehook_watchdog(self) -> None:
         """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
-        from dyno.app_safety import _WatchdogKick, make_watchdog, start_watchdog
+        from dyno.session.safety import _WatchdogKick, make_watchdog, start_watchdog
 
         self.poller.listeners[:] = [fn for fn in self.poller.listeners if not isinstance(fn, _WatchdogKick)]
         ctx = self.ctx
@@ -167,7 +167,7 @@ class RearmMixin:
             self._stop_watchdog = start_watchdog(ctx, self.loop)
 
 
-# What dyno.app.build gives a controller's constructor beside the plan and its parts (rig.toml's description,
+# What dyno.session.root.build gives a controller's constructor beside the plan and its parts (rig.toml's description,
 # control gains and inertias, the tune, the input channel as tared): a re-armed controller is given the same.
 # (time_scale: the paced session's host seconds per rig second -- lost, a re-armed x4 session's speed hold timed
 # its derivative and settle in host seconds and held no setpoint; input_channel: the live screen's T_in)

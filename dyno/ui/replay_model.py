@@ -1,9 +1,9 @@
 """The replay viewer's logic (pure apart from reading runs and writing exports; no Textual).
 
-Re-processing goes through :func:`dyno.replay.replay`, the same
+Re-processing goes through :func:`dyno.runlog.replay.replay`, the same
 ``reduce_point`` the live controller used, so with the run's own calibration
 and map the points are the logged ones.  Exports: CSV through
-:func:`dyno.replay.export` (points + raw streams), PNG with matplotlib on the
+:func:`dyno.runlog.replay.export` (points + raw streams), PNG with matplotlib on the
 Agg backend (no display over SSH), imported only when a PNG is asked for.
 """
 
@@ -21,7 +21,7 @@ from dyno.protocol import v1
 @dataclass
 class ReplayRun:
     run_dir: Path
-    result: dict  # dyno.replay.replay(...)
+    result: dict  # dyno.runlog.replay.replay(...)
     run: object  # dyno.runlog.reader.Run (raw streams)
     calibration_path: Path | None = None
     engine_map_path: Path | None = None
@@ -53,7 +53,7 @@ class ReplaySet:
 
 
 def load_replay(run_dir, calibration_path=None, engine_map_path=None) -> ReplayRun:
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
     from dyno.runlog.reader import load_run
 
     run_dir = Path(run_dir)
@@ -104,7 +104,7 @@ def point_streams(run, point: dict, margin_s: float = 1.0) -> dict:
 
 def export_csv(rr: ReplayRun, out_dir=None) -> list[Path]:
     """points.csv (re-processed) and the raw streams, into ``out_dir`` (default ``<run>/export``)."""
-    from dyno.replay import export
+    from dyno.runlog.replay import export
 
     return export(rr.run_dir, out_dir, calibration_path=rr.calibration_path, engine_map_path=rr.engine_map_path)
 

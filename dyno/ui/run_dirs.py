@@ -10,7 +10,7 @@ from pathlib import Path
 def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
     """The next run's directory: ``<--out>-2``, ``-3``, ... beside the one given, else a new runs/<timestamp>."""
     if out_dir is None:
-        from dyno.app import default_run_dir
+        from dyno.session.root import default_run_dir
 
         return default_run_dir(old.parent)
     base = Path(out_dir)
@@ -23,7 +23,7 @@ def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
 async def _finish_in_background(run_dir: Path) -> None:
     """report.html and the run library's entry for an ended run, in a low-priority child process
     (matplotlib would hold the loop, and the GIL, for seconds)."""
-    code = "import os, sys; os.nice(10); from dyno.run_after import _background_main; _background_main(sys.argv)"
+    code = "import os, sys; os.nice(10); from dyno.session.after import _background_main; _background_main(sys.argv)"
     try:
         proc = await asyncio.create_subprocess_exec(sys.executable, "-c", code, str(run_dir),
                                                     stdin=asyncio.subprocess.DEVNULL,

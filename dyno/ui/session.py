@@ -2,8 +2,8 @@
 
 Textual runs its own asyncio loop, so the simulated rig cannot use
 :class:`dyno.clock.VirtualTimeLoop`.  Instead the session hands the composition root a scaled clock
-(:class:`dyno.pacing.ScaledClock`, ``t_sim = (loop.time() - t0) * speed``) with the run's spec, and
-:func:`dyno.app.build` paces the run from it.  The poller keeps its real-time rate.  At
+(:class:`dyno.session.pacing.ScaledClock`, ``t_sim = (loop.time() - t0) * speed``) with the run's spec, and
+:func:`dyno.session.root.build` paces the run from it.  The poller keeps its real-time rate.  At
 ``speed > 1`` the plan's durations are divided by ``speed`` so the rig sees
 the usual warm-up, step, settle and measurement times in simulated time,
 and settling uses the fixed time (the detection's window is compared with
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
-from dyno.pacing import ScaledClock, SimTimeActuators, scaled_plan  # noqa: F401 (re-exported)
+from dyno.session.pacing import ScaledClock, SimTimeActuators, scaled_plan  # noqa: F401 (re-exported)
 from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
 
 FINISHED = (State.DONE, State.ABORTED)
@@ -37,7 +37,7 @@ class LiveOptions:
     engine_map_path: Path | None = None
     plan: TestPlan = field(default_factory=TestPlan)
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
-    drills: list = field(default_factory=list)  # dyno.drills.Drill (sim only), from the first frame
+    drills: list = field(default_factory=list)  # dyno.session.drills.Drill (sim only), from the first frame
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
     ambient: object = None  # dyno.analysis.air.Ambient from --ambient (else rig.toml's sensor or day)
     sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
@@ -47,7 +47,7 @@ class LiveSession(RearmMixin):
     """Owns the run: start the tasks, forward the operator's commands, shut down safely."""
 
     def __init__(self, opts: LiveOptions) -> None:
-        from dyno.app import RunSpec, build
+        from dyno.session.root import RunSpec, build
 
         self.opts = opts
         loop = asyncio.get_running_loop()
@@ -69,10 +69,10 @@ class LiveSession(RearmMixin):
         # the run log half-made: the handlers go in first, a signal that comes before the controller
         # exists waits for it (a run directory with a `start` record alone was left behind otherwise).
         # SIGTERM (systemd, kill), SIGHUP (terminal or SSH gone), SIGINT sent by ``kill -INT``: safe state, abort
-        # record, exit 128+N (dyno.run_signals; the Ctrl+C *key* reaches a Textual app as a key: the E-STOP).
+        # record, exit 128+N (dyno.session.signals; the Ctrl+C *key* reaches a Textual app as a key: the E-STOP).
         import threading
 
-        from dyno.run_signals import RunSignals
+        from dyno.session.signals import RunSignals
 
         self._signals = None
         if threading.current_thread() is threading.main_thread():
@@ -135,7 +135,7 @@ class LiveSession(RearmMixin):
             # Rig time starts now, not when assembly began: building took a few hundred ms
             # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
             self.clock.restart()
-        from dyno.app import arm_drills, start_watchdog
+        from dyno.session.root import arm_drills, start_watchdog
 
         # The safety path does not depend on the UI: the watchdog is a thread, the checks run
         # in the poller and the controller's own heartbeat, drills act on the rig itself.
@@ -302,8 +302,8 @@ class LiveSession(RearmMixin):
     def _close_log(self) -> None:
         """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
         document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
-        from dyno.ambient import log_end
-        from dyno.summary import safety_document, summarize, supervisor_document
+        from dyno.session.ambient import log_end
+        from dyno.session.summary import safety_document, summarize, supervisor_document
 
         log_end(self.ctx)  # the air after the run (a BME280 read again), as dyno run logs it
         if self.ctx.writer.error is None:
@@ -326,7 +326,7 @@ class LiveSession(RearmMixin):
         self.controller.latch_safe_state()
         if not self.finished:
             self.controller.abort("quit", why)
-        from dyno.safe_outputs import finish_release, release_done
+        from dyno.session.safe_outputs import finish_release, release_done
 
         if self.ctx.sim is not None and self.started and (self.controller.go_s is not None
                                                           or not release_done(self.ctx)):
@@ -352,7 +352,7 @@ class LiveSession(RearmMixin):
         if self.guard is not None:  # pragma: no cover - rig only
             self.guard.__exit__(None, None, None)
         if self.ctx.twin is not None:  # --mock-pins: release the mock pins (the record is closed)
-            from dyno.app_safety import close_twin
+            from dyno.session.safety import close_twin
 
             close_twin(self.ctx)
         if getattr(self, "hung_up", False):  # safe state reached, record closed: should the app's shut-down

@@ -11,7 +11,7 @@ import time
 
 from dyno.analysis.live import RateMeter, live_values
 
-#: the points table's columns (a subset of dyno.summary.POINT_KEYS)
+#: the points table's columns (a subset of dyno.session.summary.POINT_KEYS)
 POINT_COLUMNS = ("index", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w",
                  "power_in_w", "efficiency", "efficiency_ci95", "efficiency_u95", "efficiency_interval95", "valid")
 

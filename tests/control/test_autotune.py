@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.planfile import plan_from_text
 from dyno.sim.physics import RigParams
 

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import identify_gain
 from dyno.control.plans.steps import probe_load_sign

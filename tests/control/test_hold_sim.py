@@ -11,7 +11,7 @@ import statistics
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams
 from dyno.control.plans import speed_hold as sh
 from dyno.control.controller import State, TestPlan as Plan

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dyno.errors import ConfigError
-from dyno.rigconfig import DEFAULT_RIG_PATH, rig_from_dict
+from dyno.rig.config import DEFAULT_RIG_PATH, rig_from_dict
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

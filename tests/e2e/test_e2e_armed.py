@@ -7,9 +7,9 @@ controller waits in ARMED, measure the latency in true simulated time from the p
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import SafetyLimits
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 
 from .conftest import QUICK_PLAN
 

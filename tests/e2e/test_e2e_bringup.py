@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.cli import main
 from dyno.control.plans import plan_named
 
@@ -101,7 +101,7 @@ def test_doctor_over_serial_survives_the_auto_reset(capsys):
 def test_an_eio_on_the_broadcom_controller_is_a_stretch_timeout_not_a_nack():
     import dataclasses
 
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
     from dyno.transports.i2c import open_i2c
 
     class Bus:

@@ -119,7 +119,7 @@ def test_a_runs_zero_checks_see_the_input_channels_own_drift(tmp_path):
     the amount the physics drifted between the two windows, and ``torque_zero`` is not."""
     import dataclasses
 
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.sim.rig_params import RigParams
     from tests.e2e.conftest import QUICK_PLAN
 

@@ -106,7 +106,7 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
     from dataclasses import replace
 
     from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.controller import TestPlan
     from dyno.control.plans import plan_named
     from dyno.sim.physics import RigParams
@@ -138,7 +138,7 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
 
 def test_a_clutch_engaging_below_idle_is_refused_safely(tmp_path):
     """Flyweights so heavy the secondary already turns at idle: nothing to characterise, said in one line."""
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
     from dyno.sim.physics import RigParams
 

@@ -10,8 +10,8 @@ import random
 
 import pytest
 
-from dyno.app import RunOptions, run_test
-from dyno.drills import parse_drill
+from dyno.session.root import RunOptions, run_test
+from dyno.session.drills import parse_drill
 
 from .conftest import QUICK_PLAN, rig_without_run_enable
 

@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan
 from dyno.control.plans import plan_named
 from dyno.sim.physics import RigModel, RigParams

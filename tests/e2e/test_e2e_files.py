@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.replay import replay
+from dyno.runlog.replay import replay
 from dyno.runlog.reader import load_run
 
 REPO = Path(__file__).resolve().parents[2]

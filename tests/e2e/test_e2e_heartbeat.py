@@ -5,7 +5,7 @@ import asyncio
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import SafetyLimits
 
 from .conftest import QUICK_PLAN

@@ -73,7 +73,7 @@ def test_with_the_sensor_the_j1349_factor_is_applied_and_logged(tmp_path):
         assert p["power_in_w"] * amb["j1349_factor"] == pytest.approx(emap.power_w(p["rpm_primary"]), rel=2e-3)
         assert p["efficiency_u95_terms"]["air"] < 0.01
     # replay reproduces the run's numbers from its own record of the air
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
 
     again = replay(run_dir)["points"]
     assert [q["efficiency"] for q in again if q.get("efficiency") == q.get("efficiency")] == pytest.approx(

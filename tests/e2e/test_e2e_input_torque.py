@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
-from dyno.drills import parse_drill
+from dyno.session.root import RunOptions, run_test
+from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
-from dyno.replay import export, replay
+from dyno.runlog.replay import export, replay
 from dyno.sim.rig_params import RigParams
 
 from .conftest import IDEAL, QUICK_PLAN

@@ -17,7 +17,7 @@ RIG = (REPO / "hardware" / "rig.toml").read_text()
 
 
 def _run_test(tmp_path, seed: int, rig: str | None = None) -> dict:
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.cli.run_cmd import plan_named
 
     return run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / f"t{seed}", rig_path=rig,

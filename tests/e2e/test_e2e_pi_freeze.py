@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.cli.run_cmd import exit_code
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
-from dyno.replay import replay
+from dyno.runlog.replay import replay
 from dyno.runlog.reader import load_run
 
 from .conftest import QUICK_PLAN

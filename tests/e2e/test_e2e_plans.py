@@ -152,7 +152,7 @@ def test_the_ui_runs_a_closed_loop_plan_paced(tmp_path):
 def test_step_limits_end_a_step_or_abort_safely(tmp_path):
     """Limits per step: passed with on_limit = "next" the plan goes on (a `limit` document); with "abort"
     the rig goes to the safe state and the run ends aborted (cause plan_limit)."""
-    from dyno.app import RunOptions, run_test
+    from dyno.session.root import RunOptions, run_test
     from dyno.control.planfile import plan_from_text
 
     head = ('schema = "dyno.plan/1"\nname = "limits"\nmode = "steps"\n[[step]]\nkind = "contact"\n'

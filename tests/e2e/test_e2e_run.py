@@ -8,7 +8,7 @@ import numpy as np
 
 import pytest
 
-from dyno.replay import replay
+from dyno.runlog.replay import replay
 
 TOLERANCE_PP = 0.5  # issue 2: every point within 0.5 percentage points of the truth
 
@@ -94,7 +94,7 @@ def test_efficiency_over_one_is_flagged_not_accepted(full_run, tmp_path):
     """Reprocessed with a calibration whose slope is 40 % too low, torque and efficiency come out 1.7x:
     every point over 100 % is marked invalid with the reason, never passed off as a result."""
     from dyno.analysis.calibration import latest, load_history
-    from dyno.replay import replay
+    from dyno.runlog.replay import replay
 
     meta_cal = json.loads((Path(full_run["run_dir"]) / "calibration.json").read_text())
     bad = tmp_path / "cal.csv"

@@ -8,10 +8,10 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.app import DEFAULT_ENGINE_MAP, RunOptions, run_test
+from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.control.plans import plan_named
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.errors import SafetyAbort
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2

@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import SafetyLimits
 from dyno.runlog.reader import load_run
 

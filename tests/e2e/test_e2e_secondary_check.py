@@ -4,9 +4,9 @@ through engagement at full throttle, and a dead secondary sensor still caught wi
 
 from dataclasses import replace
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan as StepPlan
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.control.safety import SafetyLimits
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2

@@ -3,7 +3,7 @@
 import asyncio
 from dataclasses import replace
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.sim.bus import BusFaults
 
 from .conftest import IDEAL, QUICK_PLAN, rig_without_run_enable, tare_allowance

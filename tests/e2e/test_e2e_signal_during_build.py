@@ -10,15 +10,15 @@ import json
 import os
 import signal
 
-import dyno.app
-from dyno.app import RunOptions, run_test
+import dyno.session.root
+from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_signal_during_build_ends_the_run_safe_with_its_records(tmp_path, monkeypatch):
-    real_build = dyno.app.build
+    real_build = dyno.session.root.build
     seen = {}
 
     def build_then_signalled(*args, **kwargs):
@@ -27,7 +27,7 @@ def test_signal_during_build_ends_the_run_safe_with_its_records(tmp_path, monkey
         os.kill(os.getpid(), signal.SIGTERM)  # (the default action would end this test process)
         return ctx
 
-    monkeypatch.setattr(dyno.app, "build", build_then_signalled)
+    monkeypatch.setattr(dyno.session.root, "build", build_then_signalled)
     before = signal.getsignal(signal.SIGTERM)
     out = tmp_path / "run"
     r = run_test(RunOptions(sim=True, seed=21, speed=None, out_dir=out, plan=plan_named("coast-down"),

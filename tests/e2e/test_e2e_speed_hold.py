@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, public_point, run_test
+from dyno.session.root import RunOptions, public_point, run_test
 from dyno.control.plans import plan_named
-from dyno.drills import parse_drill
-from dyno.replay import replay
+from dyno.session.drills import parse_drill
+from dyno.runlog.replay import replay
 
 from .conftest import IDEAL  # perfect knowledge: this test checks the statistics alone
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.rig_params import RigParams
 from tests.e2e.test_e2e_honest_numbers import SHORT_PLAN

@@ -4,7 +4,7 @@
 plausibility check, aborted on a false over-speed from a corrupted time slot.)
 """
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.sim.bus import BusFaults
 
 from .conftest import IDEAL  # perfect knowledge: this test checks the statistics alone

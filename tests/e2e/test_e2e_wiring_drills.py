@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.cli.run_cmd import exit_code
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
@@ -173,7 +173,7 @@ def test_a_fault_that_finds_the_outputs_already_safe_has_its_safe_state_at_the_o
     """A watchdog trip during a coast-down (engine cut, brake released and de-energised): the driver's safe
     state writes nothing, so no output changes after the onset; the outputs were safe at it (latency 0, not
     unknown: bench_safe_state found `latency None` on those rows)."""
-    from dyno.drills import first_safe_s
+    from dyno.session.drills import first_safe_s
 
     history = [(1.0, "throttle", 0.0), (2.0, "kill", True), (3.0, "brake", -1), (4.0, "brake", 0)]
     assert first_safe_s(history, 10.0) == 10.0

@@ -8,7 +8,7 @@ import pytest
 from dyno.acquisition.poller import Poller
 from dyno.acquisition.reader import make_reader
 from dyno.acquisition.rpm import rpm_per_period
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.clock import run
 from dyno.protocol import v1
 from dyno.runlog.reader import load_run

@@ -170,8 +170,8 @@ def test_report_of_a_legacy_import(tmp_path):
 
 
 def test_report_of_an_aborted_run(tmp_path):
-    from dyno.app import RunOptions, run_test
-    from dyno.drills import parse_drill
+    from dyno.session.root import RunOptions, run_test
+    from dyno.session.drills import parse_drill
     from dyno.report.writer import write_report
 
     out = tmp_path / "aborted"

@@ -8,7 +8,7 @@ import pytest
 import datetime as dt
 import threading
 
-from dyno import app
+from dyno.session import root as app
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

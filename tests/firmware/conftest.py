@@ -46,7 +46,7 @@ def firmware_build(toolchain):
 
 @pytest.fixture
 def sim_args():
-    """The spec for dyno.firmware_sim.simulate, as the CLI builds it from these arguments."""
+    """The spec for dyno.session.firmware_sim.simulate, as the CLI builds it from these arguments."""
     from dyno.cli import firmware_sim_cmd
 
     def make(*argv: str):

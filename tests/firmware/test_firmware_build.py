@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.firmware_sim import simulate
+from dyno.session.firmware_sim import simulate
 
 pytestmark = [pytest.mark.quick, pytest.mark.firmware]
 

@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from dyno.acquisition.reader import make_reader
-from dyno.firmware_sim import simulate
+from dyno.session.firmware_sim import simulate
 from dyno.protocol import v1, v2
 from dyno.transports.simavr import SimavrTransport
 

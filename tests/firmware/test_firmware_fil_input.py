@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from dyno.acquisition.reader import make_reader
-from dyno.firmware_sim import simulate
+from dyno.session.firmware_sim import simulate
 from dyno.protocol import v2
 from dyno.transports.simavr import SimavrTransport
 

@@ -22,7 +22,7 @@ import sys
 
 import pytest
 
-from dyno.firmware_sim import simulate
+from dyno.session.firmware_sim import simulate
 
 pytestmark = pytest.mark.firmware
 

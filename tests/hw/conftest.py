@@ -9,7 +9,7 @@ from gpiozero import Device
 
 from dyno.hw.clock import FakeClock
 from dyno.hw.testing import RecordingFactory
-from dyno.rigconfig import load_rig
+from dyno.rig.config import load_rig
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ import pytest
 
 from dyno.acquisition.reader import make_reader
 from dyno.hw.clock import FakeClock
-from dyno.rigconfig import load_rig
+from dyno.rig.config import load_rig
 from dyno.sim.device import BOOTLOADER_S
 from dyno.sim.rig import SimRig
 from dyno.sim.serial_port import SimSerialPort

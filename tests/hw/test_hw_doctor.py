@@ -7,7 +7,7 @@ import errno
 import pytest
 
 from dyno.cli import main
-from dyno.rigconfig import DEFAULT_RIG_PATH
+from dyno.rig.config import DEFAULT_RIG_PATH
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
@@ -67,7 +67,7 @@ def test_hw_doctor_sim_toggle_report(capsys, tmp_path):
 def test_hw_doctor_without_toggle_claims_no_pin(monkeypatch):
     import dyno.hw.outputs as outputs
     from dyno.hw.doctor import diagnose
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     monkeypatch.setattr(outputs, "GpioActuators", None)  # any use would raise
 
@@ -106,7 +106,7 @@ def test_hw_doctor_checks_the_nanos_run_enable():
     chain has the Nano's transistor cannot run the engine: a warning naming the fix."""
     from dyno.hw.doctor import Report
     from dyno.hw.doctor_nano import check_run_enable
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
     from dyno.sim.device import EmulatedFirmware
     from dyno.transports.base import Transport
 

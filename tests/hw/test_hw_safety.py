@@ -125,7 +125,7 @@ CHILD = textwrap.dedent("""
     from dyno.hw.outputs import GpioActuators
     from dyno.hw.safety import SafetyGuard
     from dyno.hw.testing import RecordingFactory
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
     from dyno.control.outputs import APPLY
     clock = FakeClock()
     f = RecordingFactory(clock)

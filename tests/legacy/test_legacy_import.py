@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.app import public_point
+from dyno.session.root import public_point
 from dyno.cli import main
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
-from dyno.replay import replay
+from dyno.runlog.replay import replay
 from dyno.runlog.legacy import import_legacy
 from dyno.runlog.reader import load_run
 

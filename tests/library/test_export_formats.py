@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan as Plan
 from dyno.library.exports import POINT_UNITS
-from dyno.replay import replay
+from dyno.runlog.replay import replay
 from dyno.runlog.reader import load_run
 
 REPO = Path(__file__).resolve().parents[2]

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan as Plan
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.library import index as lib
 
 REPO = Path(__file__).resolve().parents[2]
@@ -209,7 +209,7 @@ def test_import_legacy_is_indexed(tmp_path):
 def test_ui_hook_indexes_what_is_new(library, tmp_path, monkeypatch):
     import shutil
 
-    from dyno.run_after import index_run
+    from dyno.session.after import index_run
 
     def _index(run_dir):
         index_run(run_dir, lambda line: None)

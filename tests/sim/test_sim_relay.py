@@ -7,7 +7,7 @@ import pytest
 from dyno.clock import FakeClock
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.hw.mockpins import mock_pin_actuators
-from dyno.rigconfig import load_rig
+from dyno.rig.config import load_rig
 from dyno.sim.physics import RigModel, RigParams
 from dyno.sim.rig import SimActuators
 

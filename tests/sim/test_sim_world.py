@@ -10,7 +10,7 @@ import pytest
 
 from dyno.analysis.calibration import load_history
 from dyno.analysis.systematic import calibration_rel_u
-from dyno.app import DEFAULT_CALIBRATION
+from dyno.session.root import DEFAULT_CALIBRATION
 from dyno.sim.engine import EngineMap
 from dyno.sim.rig_params import RigParams
 from dyno.sim.world import realise

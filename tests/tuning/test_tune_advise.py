@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.physics import RigParams
 

@@ -20,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from dyno.app import RunOptions, run_test
+from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.physics import RigParams
 from dyno.tuning.parts import apply_part, load_catalogue

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
 from tests.screens import screen_text
 

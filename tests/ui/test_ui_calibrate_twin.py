@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import time
 
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
 
 SIZE = (80, 24)

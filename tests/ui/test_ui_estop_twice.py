@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from dyno.control.controller import State
-from dyno.drills import parse_drill
+from dyno.session.drills import parse_drill
 from dyno.ui.session import LiveOptions, LiveSession
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "e2e"))

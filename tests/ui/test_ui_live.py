@@ -273,7 +273,7 @@ def test_ui_live_model_pieces():
     assert plan.settle.fixed_settle_s == pytest.approx(0.4)
     assert scaled_plan(Plan(), 1.0) == Plan()
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.app import DEFAULT_ENGINE_MAP
+    from dyno.session.root import DEFAULT_ENGINE_MAP
 
     assert 2800 < ideal_engine_rpm(load_engine_map(DEFAULT_ENGINE_MAP)) < 4000
 
@@ -301,7 +301,7 @@ def test_ui_live_rearm_after_estop_starts_a_new_run(tmp_path):
     keeps its abort record and gets its report.html; the new run arms without moving anything; GO works."""
     from dyno.protocol import v1
 
-    from dyno.rigconfig import DEFAULT_RIG_PATH
+    from dyno.rig.config import DEFAULT_RIG_PATH
 
     rig = tmp_path / "rig-bme280.toml"  # (a BME280 fitted: each run reads its own air)
     rig.write_text(DEFAULT_RIG_PATH.read_text())  # (the shipped rig file fits one)

@@ -8,13 +8,13 @@ import asyncio
 import os
 import signal
 
-import dyno.app
+import dyno.session.root
 from dyno.control.controller import State
 from dyno.ui.session import LiveOptions, LiveSession
 
 
 def test_signal_during_build_aborts_once_built_and_leaves_nothing(tmp_path, monkeypatch):
-    real_build = dyno.app.build
+    real_build = dyno.session.root.build
     built = {}
 
     def build_then_signalled(*args, **kwargs):
@@ -24,7 +24,7 @@ def test_signal_during_build_aborts_once_built_and_leaves_nothing(tmp_path, monk
         os.kill(os.getpid(), signal.SIGTERM)  # (SIGHUP would also detach this process's terminal)
         return ctx
 
-    monkeypatch.setattr(dyno.app, "build", build_then_signalled)
+    monkeypatch.setattr(dyno.session.root, "build", build_then_signalled)
     before = signal.getsignal(signal.SIGTERM)
 
     async def scenario():
@@ -54,7 +54,7 @@ def test_quit_right_after_a_watchdog_trip_before_go_records_the_rig_safe(tmp_pat
     is written (it said `rig_safe: false`, "actuator releasing", though the pads were never on the rotor)."""
     import json
 
-    from dyno.drills import parse_drill
+    from dyno.session.drills import parse_drill
 
     async def scenario():
         s = LiveSession(LiveOptions(sim=True, speed=4.0, seed=12, out_dir=tmp_path / "run",

@@ -37,7 +37,7 @@ class CoastDownPlan:
     max_coast_s: float = 90.0
     min_secondary_rpm: float = 60.0  # below this the periods are too long to difference
     # The driven side's inertia (referred to the secondary) and the part beyond the gauge are the rig's:
-    # rig.toml [inertia] (dyno.rigconfig.InertiaConfig), the controller's ``inertia``.
+    # rig.toml [inertia] (dyno.rig.config.InertiaConfig), the controller's ``inertia``.
 
 
 def _zero(ctx, t0_us: int, t1_us: int) -> tuple[float, float]:
@@ -53,7 +53,7 @@ def _zero(ctx, t0_us: int, t1_us: int) -> tuple[float, float]:
 
 async def run_coast_down(ctx, cp: CoastDownPlan | None = None) -> None:
     cp = cp or ctx.config.coast_down_plan or CoastDownPlan()
-    from dyno.rigconfig import InertiaConfig
+    from dyno.rig.config import InertiaConfig
 
     jc = ctx.config.inertia or InertiaConfig()
     inertia, inertia_unc, beyond = jc.driven_kg_m2, jc.driven_rel_unc, jc.beyond_gauge_kg_m2

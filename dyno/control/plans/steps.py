@@ -313,7 +313,7 @@ async def _ramp_step(ctx, st: dict) -> None:
     b = float(st["to"])
     rate = float(st["rate_rpm_s"]) * (1.0 if b >= a else -1.0)
     point_s = float(st.get("point_s", 1.0))
-    from dyno.rigconfig import InertiaConfig
+    from dyno.rig.config import InertiaConfig
 
     inertia = ctx.config.inertia or InertiaConfig()  # rig.toml [inertia]: the one source
     j_e, j_s = inertia.engine_kg_m2, inertia.secondary_kg_m2

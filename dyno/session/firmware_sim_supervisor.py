@@ -1,4 +1,4 @@
-"""The firmware-in-the-loop harness's run-enable supervisor (:mod:`dyno.firmware_sim`) (issue 37): the host's side of it and the report.
+"""The firmware-in-the-loop harness's run-enable supervisor (:mod:`dyno.session.firmware_sim`) (issue 37): the host's side of it and the report.
 
 The host sends the rig file's ``[limits]`` (``overspeed_primary_rpm``, ``overspeed_secondary_rpm``,
 ``supervisor_timeout_s``) in one SET_SUPERVISOR at every boot, after the boot's first frame, as the host
@@ -30,12 +30,12 @@ class SupervisorHost:
     """What the host does about the run-enable, and what it decoded of it."""
 
     def __init__(self, spec) -> None:
-        """``spec``: a :class:`dyno.firmware_sim.FirmwareSimSpec` (``protocol``, ``no_limits``, ``rig``,
+        """``spec``: a :class:`dyno.session.firmware_sim.FirmwareSimSpec` (``protocol``, ``no_limits``, ``rig``,
         ``host_stop_at``)."""
         self.command = None
         self.limits = None
         if spec.protocol == "v2" and not spec.no_limits:
-            from dyno.rigconfig import load_rig
+            from dyno.rig.config import load_rig
 
             lim = load_rig(spec.rig).limits
             self.limits = {"overspeed_primary_rpm": lim.overspeed_primary_rpm,

@@ -2,7 +2,7 @@
 
 The physics runs at ``speed`` x real time on a scaled clock, ``t_sim = (loop.time() - t0) * speed``,
 starting at 0 (the loop's monotonic clock is hours since boot; the physics would otherwise simulate them
-all on the first poll).  The composition root (:func:`dyno.app.build`) takes the clock and paces the
+all on the first poll).  The composition root (:func:`dyno.session.root.build`) takes the clock and paces the
 rest from it: the plan's durations shrink by the same factor (the controller runs on the loop's clock),
 the simulated driver's release timer reads the physics' time, the polls drain ``speed`` x more frames.
 """

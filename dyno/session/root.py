@@ -12,19 +12,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.acquisition.poller import Poller
-from dyno.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
-from dyno.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
+from dyno.session.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
+from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
-from dyno.ambient import ambient_sensor, run_ambient, sim_bme280_address
-from dyno.ambient import log_end as log_end_ambient
-from dyno.run_signals import RunSignals
-from dyno.app_safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
-from dyno import app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
+from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
+from dyno.session.ambient import log_end as log_end_ambient
+from dyno.session.signals import RunSignals
+from dyno.session.safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
+from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parent.parent.parent
 DEFAULT_CALIBRATION = REPO_ROOT / "calibration" / "torque_calibration.csv"
 DEFAULT_ENGINE_MAP = REPO_ROOT / "calibration" / "engine_maps" / "baja-10hp-representative.csv"
 
@@ -58,12 +58,12 @@ class RunSpec:
     rig_bus: object = None
     serial_port: object = None
     tune_path: Path | None = None  # the CVT tune on the rig (stored with the run); sim: its CVT's tune
-    drills: list = field(default_factory=list)  # dyno.drills.Drill, armed from the first frame (sim only)
+    drills: list = field(default_factory=list)  # dyno.session.drills.Drill, armed from the first frame (sim only)
     handle_signals: bool = False  # SIGINT/SIGTERM/SIGHUP -> safe state + abort record (the CLI sets it)
     finish_release: bool = True  # after the test, service the outputs until the brake release stroke ends
     mock_pins: bool = False  # sim: drive the physics through the real-rig output code (dyno.hw.mockpins)
     ambient: object = None  # dyno.analysis.air.Ambient given on the command line (--ambient), else rig.toml/sensor
-    # the live session's scaled clock (dyno.pacing.ScaledClock: simulated time on a real-time loop); None: the
+    # the live session's scaled clock (dyno.session.pacing.ScaledClock: simulated time on a real-time loop); None: the
     # simulated rig's time is the loop's (a virtual loop), or the real rig
     clock: object = None
     on_belt_table_build: object = None  # callable(tune name): the simulated CVT solves its table (a minute)
@@ -97,7 +97,7 @@ def load_inputs(opts: RunOptions):
     """Rig config, calibration entry and engine map; every error names file and field."""
     from dyno.analysis.calibration import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     rig_cfg = load_rig(opts.rig_path)
     from dyno.transports.budget import check_budget
@@ -136,7 +136,7 @@ class RunContext:
     thermometer: object = None
     audit: dict = field(default_factory=lambda: {"corrupted_accepted": 0})
     watchdog: object = None
-    drills: object = None  # dyno.drills.DrillRunner
+    drills: object = None  # dyno.session.drills.DrillRunner
     rig_cfg: object = None
     signal_received: int | None = None
     hw: object = None  # dyno.hw.rig.HardwareRig on the real rig (closed by close_rig)
@@ -172,7 +172,7 @@ def close_rig(ctx) -> None:
     if hw is not None:
         hw.__exit__(None, None, None)
     if getattr(ctx, "twin", None) is not None:  # --mock-pins: the run is recorded; release the mock pins
-        from dyno.app_safety import close_twin
+        from dyno.session.safety import close_twin
 
         close_twin(ctx)
 
@@ -185,7 +185,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
     uncertainty = systematic_terms(opts, rig_cfg, calibration)
-    from dyno.drills_wiring import check_wiring_drill
+    from dyno.session.drills_wiring import check_wiring_drill
 
     for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
         check_wiring_drill(d, rig_cfg, opts.sim and opts.mock_pins)
@@ -234,15 +234,15 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      bme280_address=sim_bme280_address(rig_cfg))  # (the air sensor too)
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
-            from dyno.app_safety import twin_outputs
+            from dyno.session.safety import twin_outputs
 
             actuators, twin, estop = twin_outputs(rig_cfg, sim, now_s, opts.seed)
         elif clock is not None:  # the controller ticks with the loop's time; the stroke is timed in the sim's
-            from dyno.pacing import SimTimeActuators
+            from dyno.session.pacing import SimTimeActuators
 
             actuators = SimTimeActuators(sim.actuators, clock.now)
         if clock is not None:  # the plan's durations in host seconds (the controller runs on the loop's clock)
-            from dyno.pacing import scaled_plan
+            from dyno.session.pacing import scaled_plan
 
             plan = scaled_plan(opts.plan, speed)
         blocking = False
@@ -454,28 +454,28 @@ async def run_test_async(opts: RunOptions) -> dict:
 
 def record_safety(ctx: RunContext, summary: dict) -> None:
     """The run directory keeps what the run reports of its safety (a ``safety`` document)."""
-    from dyno.summary import safety_document
+    from dyno.session.summary import safety_document
 
     if ctx.writer.error is None:
         ctx.writer.doc("safety", **safety_document(summary))
 
 
 def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
-    """Schedule ``drills`` (dyno.drills.Drill) from the run's first accepted frame."""
+    """Schedule ``drills`` (dyno.session.drills.Drill) from the run's first accepted frame."""
     if not drills:
         return
     if ctx.sim is None:
         from dyno.errors import ConfigError
 
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
-    from dyno.drills import DrillRunner
+    from dyno.session.drills import DrillRunner
 
     ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(ctx.poller)
 
 
 def run_test(opts: RunOptions) -> dict:
     from dyno.clock import run
-    from dyno.heap import return_free_heap
+    from dyno.session.heap import return_free_heap
 
     try:
         if opts.sim:
@@ -484,5 +484,5 @@ def run_test(opts: RunOptions) -> dict:
             with announcing_builds(opts.on_belt_table_build):  # (a table solved for this run is said so)
                 return run(run_test_async(opts), virtual=True, speed=opts.speed)
         return run(run_test_async(opts), virtual=False)  # pragma: no cover - needs the rig
-    finally:  # a process that runs test after test must not keep each run's freed pages (dyno.heap)
+    finally:  # a process that runs test after test must not keep each run's freed pages (dyno.session.heap)
         return_free_heap()

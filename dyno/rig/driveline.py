@@ -1,6 +1,6 @@
 """rig.toml ``[driveline]``: the bound on the loss between the CVT's secondary and the torque gauge.
 
-Split from :mod:`dyno.rigconfig` (which validates the rest of the file with the same reader).
+Split from :mod:`dyno.rig.config` (which validates the rest of the file with the same reader).
 
 The gauge reads the torque after the secondary's bearings, the 32/61 t roller chain and the brake
 shaft's bearings (hardware/README.md), so the CVT's own output is the reading *plus* their loss: a

@@ -1,6 +1,6 @@
 """rig.toml ``[ambient]``: the rig's air — an ambient sensor on its I²C bus, or a day given by hand.
 
-Split from :mod:`dyno.rigconfig` (which validates the rest of the file with the same reader).
+Split from :mod:`dyno.rig.config` (which validates the rest of the file with the same reader).
 
 ``sensor = "bme280"`` (the shipped file; ``address`` 0x76 or 0x77) has the run read the air at its start and end;
 ``sensor = "none"`` (a rig without one; also a file with no ``[ambient]``) leaves it to ``temp_c``/``pressure_kpa``/``rh_pct`` here or

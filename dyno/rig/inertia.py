@@ -1,7 +1,7 @@
 """rig.toml ``[inertia]``: the rig's rotating inertias, one source for the I·alpha correction of sweeps and
 ramps and the coast-down's driven side; older files' ``[driven]`` inertia keys are mapped onto it.
 
-Split from :mod:`dyno.rigconfig` (which validates the rest of the file with the same reader).
+Split from :mod:`dyno.rig.config` (which validates the rest of the file with the same reader).
 """
 
 from __future__ import annotations

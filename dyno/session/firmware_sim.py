@@ -11,7 +11,7 @@ generated can be counted against what the host decoded.
 
 v2: the host arms the Nano's run-enable supervisor at every boot with the rig file's limits and the
 report says when the output (D7) went on and off and why (``supervisor``; issue 37,
-:mod:`dyno.firmware_sim_supervisor`); ``--host-stop-at S`` stops the host's polls at S s.
+:mod:`dyno.session.firmware_sim_supervisor`); ``--host-stop-at S`` stops the host's polls at S s.
 
 The command's exit status: 0 when the run completed (v2/v1: and nothing was lost; with ``--host-stop-at``, whose stop
 overflows the device's queue on purpose: and every event is either delivered or counted lost by the
@@ -35,7 +35,7 @@ from dyno.protocol import v1
 from dyno.protocol.v2 import CH_INPUT, CH_SUPERVISOR
 from dyno.protocol.v2 import cause_name
 from dyno.transports.simavr import ALL_FAULT_KINDS, FAULT_KINDS, SimavrSerialTransport, SimavrTransport
-from dyno import firmware_sim_supervisor as supervisor
+from dyno.session import firmware_sim_supervisor as supervisor
 
 
 #: MCUSR bits the harness sets for a reset at ``reset_at`` (S, CAUSE)

@@ -1,5 +1,5 @@
 """The calibration wizard's rig (``dyno calibrate``): a poller on the simulated fixture or the real rig, with
-the same link and sensor safety as a test.  Composition, split from :mod:`dyno.app` (whose ``open_rig`` it
+the same link and sensor safety as a test.  Composition, split from :mod:`dyno.session.root` (whose ``open_rig`` it
 uses); nothing below the faces imports it.
 """
 
@@ -10,14 +10,14 @@ from dataclasses import dataclass
 
 from dyno.acquisition.poller import Poller
 from dyno.acquisition.reader import make_reader
-from dyno.app import open_rig
+from dyno.session.root import open_rig
 
 
 @dataclass
 class CalibrationContext:
     """What ``dyno calibrate`` acquires from, with the same safety as a test.
 
-    ``sim`` is the simulated fixture (:class:`dyno.ui.sim_fixture.FixtureRig`) or None;
+    ``sim`` is the simulated fixture (:class:`dyno.sim.ui_fixture.FixtureRig`) or None;
     ``hw`` the real rig (:class:`dyno.hw.rig.HardwareRig`) or None.  Nothing moves in a
     calibration (the secondary is locked by hand), so the safety here is the link and the
     torque sensor: a trip ends the calibration (``on_trip``) and keeps the outputs safe.
@@ -41,7 +41,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
                       fixture_kw: dict | None = None, drills=(), on_trip=None,
                       mock_pins: bool = False) -> CalibrationContext:
     from dyno.control.safety import SafetyLimits, SafetyMonitor
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     rig_cfg = load_rig(rig_path)
     from dyno.transports.budget import check_budget
@@ -50,7 +50,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     want_input = getattr(rig_cfg, "input_torque", None) is not None  # asked for as in a run
     hw = twin = None
     if sim:
-        from dyno.ui.sim_fixture import build_fixture_poller
+        from dyno.sim.ui_fixture import build_fixture_poller
 
         t0 = loop.time()
 
@@ -99,7 +99,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
 
     poller.listeners.append(check)
     if drills:
-        from dyno.drills import DrillRunner
+        from dyno.session.drills import DrillRunner
 
         ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(poller)
     return ctx
@@ -110,7 +110,7 @@ def _twin_rig(rig_cfg, fixture, sim_now, speed: float):
     its clock is the fixture's (paced: a blocking wait sleeps the real time it stands for)."""
     import time
 
-    from dyno.app_safety import _LoopTimeClock
+    from dyno.session.safety import _LoopTimeClock
     from dyno.hw.mockpins import SimPinFactory
     from dyno.hw.rig import HardwareRig
     from dyno.sim.fixture_actuator import FixtureActuatorWiring

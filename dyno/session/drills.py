@@ -27,7 +27,7 @@ controller-crash       the control task raises
 disk-full              the run directory refuses writes (ENOSPC)
 sigint|sigterm|sighup  the process receives the signal
 =====================  ==================================================================
-and the wiring drills through the twin (``--mock-pins``): :mod:`dyno.drills_wiring`.
+and the wiring drills through the twin (``--mock-pins``): :mod:`dyno.session.drills_wiring`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import signal
 from bisect import bisect_left
 from dataclasses import dataclass
 
-from dyno.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, check_wiring_drill
+from dyno.session.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, check_wiring_drill
 from dyno.errors import ConfigError
 
 OVERTEMP_RATE_C_PER_S, PI_FREEZE_DEFAULT_S = 20.0, 5.0
@@ -400,7 +400,7 @@ def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     a["detection_s"] = to_sim(a["trigger_s"]) - onset if a.get("trigger_s") is not None else math.nan
     a["latency_basis"] = "true time from the physical onset (simulated rig)"
     if rec["name"] == "pi-freeze":
-        from dyno.drills_freeze import freeze_abort_latency
+        from dyno.session.drills_freeze import freeze_abort_latency
 
         freeze_abort_latency(ctx, a, rec)
 
@@ -491,7 +491,7 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
         elif name in WIRING_DRILLS:
             arose, note = drills._wiring_verdict(rec, name)
         elif name == "pi-freeze":
-            from dyno.drills_freeze import freeze_verdict
+            from dyno.session.drills_freeze import freeze_verdict
 
             freeze_verdict(ctx, rec)
             continue

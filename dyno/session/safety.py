@@ -1,4 +1,4 @@
-"""The run's safety parts, wired by the composition root (:mod:`dyno.app`): the watchdog beside the loop,
+"""The run's safety parts, wired by the composition root (:mod:`dyno.session.root`): the watchdog beside the loop,
 the E-stop input's record, and under ``--mock-pins`` the Pi's own output code over the wiring twin.
 """
 
@@ -10,7 +10,7 @@ class _LoopTimeClock:
 
     Only the blocking helpers (``step``, ``finish_release``, ``reset_arduino``) sleep;
     on a virtual loop nothing may block, and the host never calls them there.  ``on_now`` (a drill's
-    hook, :mod:`dyno.drills_wiring`) runs inside each reading: a signal delivered there arrives in the
+    hook, :mod:`dyno.session.drills_wiring`) runs inside each reading: a signal delivered there arrives in the
     middle of whatever output command asked the time.
     """
 

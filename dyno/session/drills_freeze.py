@@ -9,7 +9,7 @@ rotor against the release bound from the actuator's true position at the cut.
 
 from __future__ import annotations
 
-from dyno.safe_outputs import RELEASE_BOUND_MARGIN_S
+from dyno.session.safe_outputs import RELEASE_BOUND_MARGIN_S
 
 #: the Nano's check comes within one loop pass of the timeout and the kill relay drops within ~20 ms; the
 #: physics acts from its next 4 ms cell: 0.1 s is the issue's allowance beyond the timeout

@@ -27,18 +27,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from dyno.config_reader import REQUIRED, FieldReader
+from dyno.rig.reader import REQUIRED, FieldReader
 from dyno.errors import ConfigError
-from dyno.rig_ambient import AmbientConfig, ambient_table
-from dyno.rig_driveline import DrivelineConfig, driveline_table
-from dyno.rig_input import InputTorqueConfig, input_torque_table
-from dyno.rig_inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
+from dyno.rig.ambient import AmbientConfig, ambient_table
+from dyno.rig.driveline import DrivelineConfig, driveline_table
+from dyno.rig.input_torque import InputTorqueConfig, input_torque_table
+from dyno.rig.inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
 
 SCHEMA = "dyno.rig/1"
 
 #: The repo's rig description, found relative to the package so it works from
 #: any working directory (and from an editable install on the Pi).
-DEFAULT_RIG_PATH = Path(__file__).resolve().parent.parent / "hardware" / "rig.toml"
+DEFAULT_RIG_PATH = Path(__file__).resolve().parent.parent.parent / "hardware" / "rig.toml"
 #: Environment override, so the systemd unit can point at /etc/dyno/rig.toml.
 RIG_ENV = "DYNO_RIG"
 
@@ -224,7 +224,7 @@ class RigConfig:
     uncertainty: UncertaintyConfig = UncertaintyConfig()
     ambient: AmbientConfig = AmbientConfig()
     driveline: DrivelineConfig = DrivelineConfig()  # [driveline]: the loss between the CVT and the gauge
-    input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig_input)
+    input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig.input_torque)
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
     @property

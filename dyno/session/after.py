@@ -22,7 +22,7 @@ def add_driven_loss(result: dict, driven_loss: dict | None, rig_path=None) -> No
         return
     from dyno.analysis.coastdown import driven_loss_keys
     from dyno.analysis.systematic import run_basis
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     basis = run_basis(result.get("ambient"), load_rig(rig_path))
     for p in result["points"]:

@@ -29,7 +29,7 @@ import sys
 
 from dyno.errors import ConfigError
 
-#: name -> (argument required?, allowed arguments or None, needs an engine?) as ``dyno.drills.DRILLS``
+#: name -> (argument required?, allowed arguments or None, needs an engine?) as ``dyno.session.drills.DRILLS``
 WIRING_DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "endswitch-stuck-closed": (False, None, False),
     "endswitch-stuck-open": (False, None, False),
@@ -70,7 +70,7 @@ class _UnwritableLog:
 
 
 class WiringDrills:
-    """The wiring drills' actions: a mixin of :class:`dyno.drills.DrillRunner` (its ctx, loop, speed, handles)."""
+    """The wiring drills' actions: a mixin of :class:`dyno.session.drills.DrillRunner` (its ctx, loop, speed, handles)."""
 
     def _endswitch(self, mode: str) -> None:
         self.ctx.twin.end_switch_fault(mode)
@@ -124,7 +124,7 @@ class WiringDrills:
     def _sigint_in_command(self, d, rec: dict) -> None:
         from dyno.control.outputs import APPLY
 
-        clock = self.ctx.controller.act.clock  # the driver's clock (dyno.app_safety._LoopTimeClock)
+        clock = self.ctx.controller.act.clock  # the driver's clock (dyno.session.safety._LoopTimeClock)
         rec["delivered_s"] = None
 
         def on_now() -> None:
@@ -138,7 +138,7 @@ class WiringDrills:
         clock.on_now = on_now
 
     def _wiring_verdict(self, rec: dict, name: str) -> tuple[bool, str]:
-        """(hazard arose, why not) for the wiring drills (``dyno.drills.hazard_verdicts``)."""
+        """(hazard arose, why not) for the wiring drills (``dyno.session.drills.hazard_verdicts``)."""
         if name == "sigint-in-command" and rec.get("delivered_s") is None:
             return False, "no brake-apply command came after the onset: the signal was never delivered"
         return True, ""

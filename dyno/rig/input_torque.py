@@ -1,6 +1,6 @@
 """rig.toml ``[input_torque]``: the optional engine-side torque channel (issue 27; hardware/README.md).
 
-Split from :mod:`dyno.rigconfig` (which validates the rest of the file with the same reader).  No table:
+Split from :mod:`dyno.rig.config` (which validates the rest of the file with the same reader).  No table:
 no channel, and nothing about a run changes.  With it, the host asks the firmware for the channel at every
 boot (docs/protocol.md, "Input torque channel"), every point's efficiency is ``P_out / (T_in ω_p)``
 (docs/analysis.md), and the simulated rig has the channel too (``hardware/rig-input-torque.toml``).

@@ -1,15 +1,15 @@
 """What ``dyno run --json`` reports of a finished run (and the run directory's ``safety`` document).
 
-Pure bookkeeping over the composition root's :class:`~dyno.app.RunContext`: the points, the link's
+Pure bookkeeping over the composition root's :class:`~dyno.session.root.RunContext`: the points, the link's
 figures, the aborts with their true-time latencies and the outputs as the world has them
-(:mod:`dyno.safe_outputs`).
+(:mod:`dyno.session.safe_outputs`).
 """
 
 from __future__ import annotations
 
 import math
 
-from dyno.safe_outputs import add_release_to_abort, rig_outputs
+from dyno.session.safe_outputs import add_release_to_abort, rig_outputs
 
 
 def summarize(ctx, drills_from: int = 0) -> dict:
@@ -47,7 +47,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
                 pub.update(corrected_point_keys(p, zc, basis))
     out["link"] = link_document(ctx)
     out["supervisor"] = supervisor_document(reader)
-    out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)
+    out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.session.ambient)
     if getattr(ctx.controller, "tare", None):
         out["torque_tare"] = ctx.controller.tare  # the zero the points were measured from
     out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
@@ -58,7 +58,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
-    out["rig_safe"] = bool(outputs.get("safe"))  # the physical state (dyno.safe_outputs), not a wish
+    out["rig_safe"] = bool(outputs.get("safe"))  # the physical state (dyno.session.safe_outputs), not a wish
     # wiring faults the Pi's output code found (an end switch contradicting the travel): [] when none
     out["rig_faults"] = list(outputs.get("driver_faults") or outputs.get("faults") or [])
     if not out["rig_safe"]:
@@ -78,7 +78,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
         out["faults_injected"] = dict(ctx.sim.bus.injected)
         out["sim_time_s"] = ctx.sim.model.t_s
         out["sim_world"] = ctx.sim.model.world.to_dict()  # the simulated truth: its engine, sensor, day
-        from dyno.drills import hazard_verdicts, true_latencies
+        from dyno.session.drills import hazard_verdicts, true_latencies
 
         if ctx.drills is not None:
             hazard_verdicts(ctx, drills_from)

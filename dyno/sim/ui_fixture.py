@@ -225,7 +225,7 @@ class FixtureRig:
         from dyno.sim.device import EmulatedFirmware
 
         self.fixture = CalibrationFixture(params, seed, **fixture_kw)
-        self.model = self.fixture  # what the drills act on (dyno.drills), as SimRig.model
+        self.model = self.fixture  # what the drills act on (dyno.session.drills), as SimRig.model
         # paced at N x real time (dyno calibrate --speed N): the ring holds the same span of fixture time
         # (two converters: twice the events); None: the firmware's own 64
         per_poll = 128 if self.fixture.input_fitted else 64

@@ -1,6 +1,6 @@
 """Give the C heap's free pages back to the operating system between runs.
 
-A process that runs test after test (the UI session's re-arms, a script calling ``dyno.app.run_test``)
+A process that runs test after test (the UI session's re-arms, a script calling ``dyno.session.root.run_test``)
 frees each run's arrays, but glibc keeps freed pages in its per-thread arenas (each run starts its own
 poller I/O and executor threads, which may land in a different arena): the resident size climbs for a
 few hours until every arena has reached its high-water mark, though nothing is leaked — the 8-hour soak's

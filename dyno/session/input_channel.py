@@ -1,4 +1,4 @@
-"""The engine-side input torque channel in a run (issue 27): composition, split from :mod:`dyno.app`.
+"""The engine-side input torque channel in a run (issue 27): composition, split from :mod:`dyno.session.root`.
 
 rig.toml ``[input_torque]`` declares the channel.  Then the simulated rig has it (its cradle load cell and
 second converter, :mod:`dyno.sim.input_torque`), the reader asks the firmware for it at every boot
@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parent.parent.parent
 
 
 def calibration_path(cfg) -> Path:

@@ -1,0 +1,1 @@
+"""The run session: one composition root, the run's safety wiring, drills, its summary."""
