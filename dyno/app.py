@@ -94,14 +94,19 @@ def load_inputs(opts: RunOptions):
     return rig_cfg, calibration, engine_map
 
 
-def systematic_terms(opts: RunOptions, rig_cfg, calibration) -> dict:
-    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them)."""
+def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) -> dict:
+    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them),
+    with what each assumes (``u95_terms``, dyno.analysis.u95_terms): the map's term is the map file's stated
+    uncertainty, else rig.toml's ``engine_map_rel``."""
+    from dyno.analysis import u95_terms
     from dyno.analysis.calibration import load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(opts.calibration_path)
-    return {"torque_calibration_rel": calibration_rel_u(history, calibration),
-            "engine_map_rel": rig_cfg.uncertainty.engine_map_rel, "calibration_entries": len(history)}
+    cal = calibration_rel_u(history, calibration)
+    emap, basis = u95_terms.map_basis(engine_map, rig_cfg.uncertainty.engine_map_rel)
+    return {"torque_calibration_rel": cal, "engine_map_rel": emap, "calibration_entries": len(history),
+            "u95_terms": u95_terms.base_terms(cal, len(history), emap, basis)}
 
 
 def limits_from_config(rig_cfg) -> SafetyLimits:
@@ -170,7 +175,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
-    holder: dict = {"uncertainty": systematic_terms(opts, rig_cfg, calibration)}
+    holder: dict = {"uncertainty": systematic_terms(opts, rig_cfg, calibration, engine_map)}
     try:
         return _build(opts, now_s, rig_cfg, calibration, engine_map, holder)
     except BaseException:
@@ -228,6 +233,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     holder["uncertainty"]["air_rel"] = ambient.air_rel_u()
+    app_input.state_terms(holder["uncertainty"], ambient, input_channel)  # what each u95 term assumes
     link_meter = None
     if opts.sim:  # each transaction charged its wire time at the rig file's clock (dyno.transports.budget)
         from dyno.transports.budget import LinkMeter, MeteredBus
@@ -306,6 +312,7 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
         "safe state; what was recorded before stays readable")
     _attach_watchdog(ctx, rig_cfg.actuator.watchdog_s, now_s)
     unc = holder["uncertainty"]
+    ctx.u95_terms = unc.get("u95_terms")  # the run's JSON says what each term assumes (dyno.summary)
     if unc:
         from dyno.analysis.systematic import calibration_rel_for, point_systematic
 

@@ -55,6 +55,17 @@ def input_meta(channel) -> dict:
                              "bearing_loss_u_nm": channel.bearing_loss_u_nm, "source": channel.source}}
 
 
+def state_terms(uncertainty: dict, ambient, channel) -> None:
+    """Complete ``uncertainty["u95_terms"]`` (dyno.analysis.u95_terms) once the day's air and the input
+    channel are known: the air term, and with the channel its own terms."""
+    from dyno.analysis import u95_terms
+
+    terms = uncertainty.setdefault("u95_terms", [])
+    terms.append(u95_terms.air_term(uncertainty.get("air_rel", 0.0), getattr(ambient, "source", None)))
+    if channel is not None:
+        terms.extend(u95_terms.input_terms(channel))
+
+
 def attach(ctx, channel, reader, uncertainty: dict) -> None:
     """Ask the firmware for the channel and add the input path to every point (after the map's terms)."""
     if channel is None:
