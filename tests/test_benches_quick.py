@@ -56,3 +56,38 @@ def test_bench_quick_runs_to_the_end(name):
     lines = out.splitlines()
     if len(lines) == 1 and "skipped" in lines[0]:  # e.g. bench_firmware.py without the AVR toolchain
         pytest.skip(lines[0])
+
+
+# ---- benches that judge: each exits non-zero when its stated criteria fail (a deliberately broken input)
+
+def _map_stating(tmp_path: Path, u_rel: float) -> Path:
+    """The shipped map, stating a (much too small) uncertainty of its torque."""
+    text = (REPO / "calibration" / "engine_maps" / "baja-10hp-representative.csv").read_text()
+    lines = [f"# stated_u_rel = {u_rel} | deliberately too small (tests/test_benches_quick.py)" if
+             line.startswith("# stated_u_rel") else line for line in text.splitlines()]
+    path = tmp_path / "overconfident-map.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.slow
+def test_bench_uncertainty_fails_when_the_host_states_too_little(tmp_path):
+    """The well-specified world with the host told its map is good to 0.2 %: the engine's 5 % deviation is then
+    outside nearly every u95, coverage falls under the criterion and the bench exits 1 (quick passes: above)."""
+    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "stated", "--engine-map", str(_map_stating(tmp_path, 0.002)))
+    assert p.returncode == 1, f"exited {p.returncode}" + _tail(p)
+    assert "FAIL: world stated" in p.stdout and "Traceback" not in p.stderr, _tail(p)
+
+
+@pytest.mark.slow
+def test_bench_input_torque_fails_on_a_wrong_input_calibration():
+    """The host handed an input-channel history 10 % off the channel: its measured engine torque and input-path
+    efficiency miss the truth beyond their u95, and the bench exits 1 (quick passes: above)."""
+    p = _bench("bench_input_torque.py", "--quick", "--miscalibrate-input", "0.1")
+    assert p.returncode == 1, f"exited {p.returncode}" + _tail(p)
+    assert "FAIL: input path efficiency" in p.stdout and "FAIL: engine torque" in p.stdout, _tail(p)
+
+
+def test_bench_uncertainty_bad_world_is_bad_input():
+    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "nowhere", timeout=120)
+    assert p.returncode == 2 and "--worlds" in p.stderr and "Traceback" not in p.stderr, _tail(p)
