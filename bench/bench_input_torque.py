@@ -1,8 +1,9 @@
 """Map-free efficiency (issue 27): both paths' ``efficiency_u95`` judged over many simulated rigs.
 
 Each seed is a different rig (:mod:`dyno.sim.world`, as in ``bench_uncertainty.py``): its engine differs
-from the shipped map (a smooth deviation, the simulator's own 4.4 % sd), its day is drawn, and each torque channel's gain differs
-from its calibration by the history's reproducibility.  The rig is ``hardware/rig-input-torque.toml``
+from the shipped map (a smooth deviation, the simulator's own 4.4 % sd), its day is drawn, and each torque
+channel's gain differs from its calibration (the brake-side gauge's as the simulator models it: re-seating
+scatter and thermal drift; the input channel's by the history's reproducibility).  The rig is ``hardware/rig-input-torque.toml``
 with a BME280 (the air known): the engine cradle's load cell is fitted, so every point carries the input
 path's efficiency ``P_out / (T_in w_p)`` with its ``efficiency_u95`` and, beside it, the engine map's
 (``efficiency_engine_map``, ``efficiency_engine_map_u95``).  Both are judged against the simulated truth

@@ -71,9 +71,10 @@ low_rpm = 2200.0
 """
 
 
-def _rig_with_sensor(tmp: Path) -> Path:
+def _rig_with_sensor(tmp: Path, name: str = "rig-bme280.toml") -> Path:
+    """The shipped rig file with the BME280 fitted (one file per run: parallel workers never share one)."""
     text = (REPO / "hardware" / "rig.toml").read_text().replace('sensor = "none"', 'sensor = "bme280"', 1)
-    path = tmp / "rig-bme280.toml"
+    path = tmp / name
     path.write_text(text)
     return path
 
@@ -123,13 +124,14 @@ def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = N
     out = tmp_dir / f"{world}-seed{seed}"
     kw = world_params(world)
     extra = {"engine_map_path": Path(engine_map)} if engine_map else {}
-    opts = RunOptions(sim=True, seed=seed, out_dir=out, rig_path=_rig_with_sensor(tmp_dir),
+    opts = RunOptions(sim=True, seed=seed, out_dir=out, rig_path=_rig_with_sensor(tmp_dir, f"rig-{world}-{seed}.toml"),
                       plan=plan_named(str(plan_path)), sim_params=RigParams(**kw), **extra)
     result = run_test(opts)
     world_rec = result["sim_world"]
     world_rec["driveline_loss_frac"] = kw.get("world_driveline_loss_frac", 0.0)
     cf_host = result["ambient"]["j1349_factor"]
-    uncorrected = replay(out, ambient=Ambient())["points"] if world in WITH_UNCORRECTED else [{}] * len(result["points"])
+    uncorrected = ([{}] * len(result["points"]) if world not in WITH_UNCORRECTED
+                   else replay(out, ambient=Ambient())["points"])
     rows = []
     for p, q in zip(result["points"], uncorrected):
         if p.get("efficiency") is None or p.get("efficiency_true") is None or not p.get("valid", True):
@@ -138,7 +140,8 @@ def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = N
                      "known": (p["efficiency"], p["efficiency_u95"], p["efficiency_u95_terms"]),
                      "uncorrected": (q.get("efficiency"), q.get("efficiency_u95"), q.get("efficiency_u95_terms"))})
     return {"seed": seed, "world_name": world, "rows": rows, "world": world_rec, "cf_host": cf_host,
-            "state": result["state"], "stated": result["points"][0]["efficiency_u95_terms"] if result["points"] else None}
+            "state": result["state"],
+            "stated": result["points"][0]["efficiency_u95_terms"] if result["points"] else None}
 
 
 def _true_parts(run: dict, rpm: float) -> dict:
