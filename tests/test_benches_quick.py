@@ -74,7 +74,8 @@ def _map_stating(tmp_path: Path, u_rel: float) -> Path:
 def test_bench_uncertainty_fails_when_the_host_states_too_little(tmp_path):
     """The well-specified world with the host told its map is good to 0.2 %: the engine's 5 % deviation is then
     outside nearly every u95, coverage falls under the criterion and the bench exits 1 (quick passes: above)."""
-    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "stated", "--engine-map", str(_map_stating(tmp_path, 0.002)))
+    too_sure = _map_stating(tmp_path, 0.002)
+    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "stated", "--engine-map", str(too_sure))
     assert p.returncode == 1, f"exited {p.returncode}" + _tail(p)
     assert "FAIL: world stated" in p.stdout and "Traceback" not in p.stderr, _tail(p)
 

@@ -48,7 +48,8 @@ def air_term(air_rel: float, source: str | None) -> dict:
         basis = (f"the day's air as {'the BME280 read it' if source == 'sensor' else 'given'}: ±1 °C, ±1 hPa, "
                  "±3 %RH (rectangular) through the SAE J1349 factor")
     else:
-        basis = "no air known: a rectangular bound over a plausible day (−10…45 °C, 80…105 kPa) on the J1349 factor"
+        basis = ("no air known: a rectangular bound over a plausible day (−10…45 °C, 80…105 kPa) on the "
+                 "J1349 factor")
     return term("air", air_rel, basis)
 
 
