@@ -270,9 +270,10 @@ def main(argv=None) -> int:
           f"{sum(r['state'] == 'done' for r in runs)} of {len(runs)} runs done, {wall_s:.0f} s wall; host map "
           f"{args.engine_map or 'shipped'}")
     _print_cases(cases)
-    terms = bias_by_term(by_world.get("stated") or by_world.get("own") or runs)
-    print("air known: each term's true contribution (relative, one per run) vs the host's stated standard u "
-          f"(world {'stated' if 'stated' in by_world else 'own' if 'own' in by_world else worlds[0]})")
+    first = "stated" if "stated" in by_world else "own" if "own" in by_world else worlds[0]
+    terms = bias_by_term(by_world[first])  # (one world's runs: the worlds' errors differ)
+    print(f"air known: each term's true contribution (relative, one per run) vs the host's stated standard u "
+          f"(world {first})")
     print(f"{'term':<13}{'true RMS %':>11}{'true mean %':>12}{'stated u %':>11}")
     for t in terms:
         print(f"{t['term']:<13}{100 * t['true_rms']:>11.2f}{100 * t['true_mean']:>12.2f}{100 * t['stated_u']:>11.2f}")
