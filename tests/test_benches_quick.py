@@ -1,7 +1,8 @@
 """Every bench in bench/ runs to the end: its ``--quick`` mode (CI's smoke run) as a real process.
 
-Speed and memory targets live in the bench scripts, which print figures; this only checks that each one
-still runs: exit code 0, no traceback, something printed.  The list is built from bench/ itself, so a new
+Speed and memory targets live in the bench scripts, which print figures; this checks that each one still
+runs: exit code 0, no traceback, something printed.  Benches that judge exit non-zero when their criteria
+fail: the end of this file hands bench_uncertainty and bench_input_torque a deliberately broken input.  The list is built from bench/ itself, so a new
 bench is smoke-run (and must have ``--quick``) without being added here.  bench_safety.py and
 bench_safe_state.py are smoke-run, with checks of what they print, in tests/e2e/test_bench_safety_smoke.py.
 A bench that needs tools this machine lacks (bench_firmware.py: the AVR toolchain and simavr) says so in one
