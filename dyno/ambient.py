@@ -26,16 +26,17 @@ def ambient_sensor(rig_cfg, *, sim=None, hw=None, seed: int = 0):
     return BME280(sim.bus, rig_cfg.ambient.address, sleep=lambda dt_s: None)  # (the chip converts at once)
 
 
-def read_sensor(sensor, what: str) -> Ambient:
-    """One reading as an :class:`Ambient`; a sensor that fails or reads nonsense: ConfigError naming it."""
+def read_sensor(sensor, what: str, rig_path: str = "rig.toml") -> Ambient:
+    """One reading as an :class:`Ambient`; a sensor that fails or reads nonsense: ConfigError naming
+    ``[ambient] sensor`` (the run is refused in one line, exit 2)."""
     from dyno.hw.bme280 import AmbientSensorError
 
     try:
         t, p, rh = sensor.read()
         check_air(t, p, rh, what)
     except (AmbientSensorError, ValueError) as exc:
-        raise ConfigError("rig.toml", "ambient.sensor", f"a BME280 that answers with a plausible day ({exc}); "
-                          "check its wiring and address, or set sensor = \"none\" and give --ambient") from None
+        raise ConfigError(rig_path, "[ambient] sensor", f"\"bme280\" is declared but does not answer with a plausible "
+                          f"day ({exc}); check its wiring and address, or set sensor = \"none\"") from None
     return Ambient(round(t, 3), round(p, 4), round(rh, 2), "sensor")
 
 
@@ -45,7 +46,7 @@ def run_ambient(rig_cfg, given: Ambient | None, sensor) -> Ambient:
     if given is not None:
         return given
     if sensor is not None:
-        return read_sensor(sensor, "BME280")
+        return read_sensor(sensor, "BME280", getattr(rig_cfg, "path", "rig.toml"))
     return rig_cfg.ambient.given() or Ambient()
 
 

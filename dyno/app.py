@@ -232,7 +232,10 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     ambient = run_ambient(rig_cfg, opts.ambient, ambient_dev)  # (a declared sensor that fails: ConfigError)
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
-    holder["uncertainty"]["air_rel"] = ambient.air_rel_u()
+    site_m = rig_cfg.ambient.altitude_m  # the interval's asymmetric terms (dyno.analysis.systematic.interval_basis)
+    holder["uncertainty"].update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else
+                                 {"altitude_m": site_m}, driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac,
+                                 driveline_drag_max_nm=rig_cfg.driveline.drag_max_nm)
     app_input.state_terms(holder["uncertainty"], ambient, input_channel)  # what each u95 term assumes
     link_meter = None
     if opts.sim:  # each transaction charged its wire time at the rig file's clock (dyno.transports.budget)
@@ -314,11 +317,11 @@ def _build(opts: RunOptions, now_s, rig_cfg, calibration, engine_map, holder) ->
     unc = holder["uncertainty"]
     ctx.u95_terms = unc.get("u95_terms")  # the run's JSON says what each term assumes (dyno.summary)
     if unc:
-        from dyno.analysis.systematic import calibration_rel_for, point_systematic
+        from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic
 
         controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
             point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
-            unc["engine_map_rel"], unc["air_rel"])))
+            unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc, point))))
     app_input.attach(ctx, input_channel, reader, unc or {})  # after the map's terms: its figure stays beside
     if sim is not None:
         poller.listeners.append(sim.truth)

@@ -38,12 +38,19 @@ def load_input_channel(rig_cfg):
 
 
 def sim_params_for(params, rig_cfg):
-    """The simulated rig's parameters with the channel fitted when rig.toml declares it."""
-    if getattr(rig_cfg, "input_torque", None) is None:
+    """The simulated rig's parameters with the channel fitted when rig.toml declares it, and at its site
+    (``[ambient] altitude_m``: where the rig stands is a fact of its world, not knowledge of the host's)."""
+    site_m = getattr(getattr(rig_cfg, "ambient", None), "altitude_m", None)
+    if getattr(rig_cfg, "input_torque", None) is None and site_m is None:
         return params
     from dyno.sim.physics import RigParams
 
-    return dataclasses.replace(params if params is not None else RigParams(), input_torque_fitted=True)
+    params = params if params is not None else RigParams()
+    if site_m is not None and params.site_altitude_m is None:
+        params = dataclasses.replace(params, site_altitude_m=float(site_m))
+    if getattr(rig_cfg, "input_torque", None) is not None:
+        params = dataclasses.replace(params, input_torque_fitted=True)
+    return params
 
 
 def input_meta(channel) -> dict:
@@ -62,6 +69,9 @@ def state_terms(uncertainty: dict, ambient, channel) -> None:
 
     terms = uncertainty.setdefault("u95_terms", [])
     terms.append(u95_terms.air_term(uncertainty.get("air_rel", 0.0), getattr(ambient, "source", None)))
+    if "driveline_loss_max_frac" in uncertainty:
+        terms.append(u95_terms.driveline_term(uncertainty["driveline_loss_max_frac"],
+                                              uncertainty.get("driveline_drag_max_nm", 0.0)))
     if channel is not None:
         terms.extend(u95_terms.input_terms(channel))
 
@@ -71,7 +81,7 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
     if channel is None:
         return
     from dyno.analysis.input_torque import input_point, input_systematic, input_zero
-    from dyno.analysis.systematic import calibration_rel_for
+    from dyno.analysis.systematic import calibration_rel_for, driveline_bound
 
     if getattr(reader, "version", None) == 2:
         reader.want_input = True
@@ -91,6 +101,6 @@ def attach(ctx, channel, reader, uncertainty: dict) -> None:
         ch = state["channel"]
         point.update(input_point(streams, point, ch))
         rel_out = calibration_rel_for(uncertainty.get("torque_calibration_rel", 0.0), point, controller.tare)
-        point.update(input_systematic(point, rel_out, ch))
+        point.update(input_systematic(point, rel_out, ch, driveline_bound(point, uncertainty)))
 
     controller.point_hooks.append(hook)

@@ -48,7 +48,8 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
     from dyno.analysis.air import Ambient
 
     ambient = ambient if ambient is not None else Ambient.from_dict(run.meta.get("ambient"))
-    air_rel = ambient.air_rel_u() if "ambient" in run.meta or ambient.corrected else 0.0
+    site_m = ((run.meta.get("uncertainty") or {}).get("air_day") or {}).get("altitude_m")
+    air_rel = ambient.air_rel_u(site_m) if "ambient" in run.meta or ambient.corrected else 0.0
     if ambient.corrected:  # the run's day (SAE J1349), as the run itself took it
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     from dyno.analysis.input_torque import channel_from_meta
@@ -70,19 +71,20 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
                 p[k] = doc[k]
         unc = run.meta.get("uncertainty")
         if unc and "efficiency_sys95" in doc:  # the run's stated systematic terms, on the re-processed point
-            from dyno.analysis.systematic import calibration_rel_for, point_systematic
+            from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic
 
             p.update(point_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
                                                              else None), unc["engine_map_rel"],
-                                      air_rel))
+                                      air_rel, **interval_basis(_basis(unc, ambient, run.meta), p)))
         if input_channel is not None:  # as the run did: the measured input power, the map's figure beside
             from dyno.analysis.input_torque import input_point, input_systematic
-            from dyno.analysis.systematic import calibration_rel_for
+            from dyno.analysis.systematic import calibration_rel_for, driveline_bound
 
             p.update(input_point(run.streams, p, input_channel))
             if unc:
                 p.update(input_systematic(p, calibration_rel_for(unc["torque_calibration_rel"], p, tares[-1] if tares
-                                                                 else None), input_channel))
+                                                                 else None), input_channel,
+                                          driveline_bound(p, unc)))
         fatal = [f for f in doc.get("legacy_faults", ()) if f.get("severity") == "error"]
         if fatal and not math.isnan(p["efficiency"]):
             # A fault recorded with the run (e.g. a glitch the importer found) still
@@ -95,7 +97,7 @@ def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -
             p["withheld_by_import"] = True
         points.append(p)
     plan_path = run.path / "plan.toml"
-    extra = {}
+    extra = {"uncertainty_basis": _basis(run.meta.get("uncertainty") or {}, ambient, run.meta)}
     if run.docs("grid_cell"):  # a drive grid: its table from the re-processed points (dyno.analysis.drive_grid)
         from dyno.analysis.drive_grid import grid_table
 
@@ -147,3 +149,11 @@ def export(run_dir, out_dir=None, **kw) -> list[Path]:
         write_atomic(out / "input_adc.csv", rows)
         written.append(out / "input_adc.csv")
     return written
+
+
+def _basis(unc: dict, ambient, meta: dict) -> dict:
+    """The interval's inputs for the replayed air (an ``--ambient`` given now corrects an uncorrected run;
+    a run from before the air was stated has no air term)."""
+    day = unc.get("air_day") or {}
+    known = ambient.corrected or "ambient" not in meta
+    return {**unc, "air_day": None if known else {"altitude_m": day.get("altitude_m")}}

@@ -30,6 +30,7 @@ from typing import Any, Mapping
 from dyno.config_reader import REQUIRED, FieldReader
 from dyno.errors import ConfigError
 from dyno.rig_ambient import AmbientConfig, ambient_table
+from dyno.rig_driveline import DrivelineConfig, driveline_table
 from dyno.rig_input import InputTorqueConfig, input_torque_table
 from dyno.rig_inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
 
@@ -159,9 +160,7 @@ class ResetConfig:
 
 
 @dataclass(frozen=True)
-class DrivenConfig:
-    """The driven side's measured loss (its inertia is ``[inertia]``'s: :attr:`InertiaConfig.driven_kg_m2`)."""
-
+class DrivenConfig:  # the driven side's measured loss (its inertia: [inertia]'s driven_kg_m2)
     loss_file: str | None = None  # driven_loss.json of a coast-down: added back to efficiency when asked
 
 
@@ -224,6 +223,7 @@ class RigConfig:
     control: ControlConfig = ControlConfig()
     uncertainty: UncertaintyConfig = UncertaintyConfig()
     ambient: AmbientConfig = AmbientConfig()
+    driveline: DrivelineConfig = DrivelineConfig()  # [driveline]: the loss between the CVT and the gauge
     input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig_input)
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
 
@@ -273,7 +273,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
 _TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
-             "uncertainty", "driven", "torque_zero", "ambient", "input_torque"}
+             "uncertainty", "driven", "torque_zero", "ambient", "input_torque", "driveline"}
 
 
 def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigConfig:
@@ -404,9 +404,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         boot_s=r.number(t, "boot_s", "reset.", lo=0.0, hi=30.0, required=False, default=1.0),
         active_high=r.boolean(t, "active_high", "reset.", default=True),
     )
-
-    # driven side and torque zero (optional tables)
-    t = data.get("driven", {})
+    t = data.get("driven", {})  # driven side and torque zero (optional tables)
     if not isinstance(t, Mapping):
         raise r.err("driven", f"expected a table [driven], got {type(t).__name__}")
     r.no_extra(t, {"loss_file", *DRIVEN_INERTIA_KEYS}, "driven.")
@@ -457,7 +455,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         pins=pins, i2c=i2c, serial=serial, gear=gear, limits=limits,
         actuator=actuator, throttle=throttle, reset=reset, inertia=inertia, control=control,
         uncertainty=uncertainty, driven=driven, torque_zero=torque_zero, deprecations=deprecations,
-        ambient=ambient_table(r, data), input_torque=input_torque_table(r, data),
+        ambient=ambient_table(r, data), input_torque=input_torque_table(r, data), driveline=driveline_table(r, data),
     )
 
 

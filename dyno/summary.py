@@ -39,10 +39,12 @@ def summarize(ctx, drills_from: int = 0) -> dict:
                 zi = input_zero_check(ctx.poller.streams, zc, channel)
             out["torque_zero_input"] = zi
         if zc.get("correct"):
+            from dyno.analysis.systematic import run_basis
             from dyno.analysis.zero_check import corrected_point_keys
 
+            basis = run_basis(getattr(ctx, "ambient", None), getattr(ctx, "rig_cfg", None))
             for pub, p in zip(out["points"], ctx.controller.points):
-                pub.update(corrected_point_keys(p, zc))
+                pub.update(corrected_point_keys(p, zc, basis))
     out["link"] = link_document(ctx)
     out["supervisor"] = supervisor_document(reader)
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.ambient)
@@ -135,12 +137,14 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
               # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
               "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
-              "efficiency_sys95_air", "efficiency_u95", "efficiency_u95_terms", "torque_zero_tare_nm",
+              "efficiency_sys95_air", "efficiency_sys95_driveline", "efficiency_u95", "efficiency_u95_terms",
+              "efficiency_interval95", "torque_zero_tare_nm",
               # which power the efficiency divides by ("input_torque" | "engine_map"); the input channel's
               # torque, its own terms, and the map's figure beside it (dyno.analysis.input_torque)
               "efficiency_source", "torque_input_nm", "torque_input_std_nm", "torque_input_u95_nm", "n_input",
               "efficiency_sys95_calibration_input", "efficiency_sys95_cradle", "efficiency_engine_map",
-              "efficiency_engine_map_u95", "power_in_engine_map_w", "torque_input_true_nm")
+              "efficiency_engine_map_u95", "efficiency_engine_map_interval95", "power_in_engine_map_w",
+              "torque_input_true_nm")
 
 
 def public_point(p: dict) -> dict:

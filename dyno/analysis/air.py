@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -101,22 +102,64 @@ def j1349_factor_of(temp_c: float, pressure_kpa: float, rh_pct: float) -> float:
     return j1349_correction_factor(temp_c, dry_air_pressure_kpa(pressure_kpa, temp_c, rh_pct))
 
 
-def uncorrected_air_rel_u() -> float:
-    """Relative standard uncertainty of an efficiency whose map was NOT taken to the run's air.
+#: Station pressure at a known site moves with the weather by about this much either side of its ISA figure
+#: (a year's 1st..99th percentile at one station is ~±3 kPa; the sim's day draws ±1 kPa sd).
+SITE_WEATHER_KPA = 4.0
 
-    Such an efficiency divides by the standard-day power ``P_std = CF·P_day``, so it is off by the factor
-    ``CF`` of the unknown day (efficiency_true / efficiency_reported = CF, the map otherwise exact).  Over the
-    plausible day (``PLAUSIBLE_*``) CF spans [CF_lo, CF_hi]; the error is bounded by
-    ``a = max(|CF_lo − 1|, |CF_hi − 1|)`` and taken as rectangular on ±a (GUM 4.3.7): ``u = a/√3``.
-    The bound is wide on purpose: it is what not knowing the air costs.
+
+def isa_pressure_kpa(altitude_m: float) -> float:
+    """ISA station pressure at ``altitude_m``: :math:`p = 101.325\\,(1 - 2.25577\\cdot10^{-5} h)^{5.25588}` kPa."""
+    return 101.325 * (1.0 - 2.25577e-5 * float(altitude_m)) ** 5.25588
+
+
+def plausible_pressure_kpa(altitude_m: float | None = None) -> tuple[float, float]:
+    """The station pressure a day may have: ``PLAUSIBLE_PRESSURE_KPA``, or the site's (``rig.toml [ambient]
+    altitude_m``) ISA figure ± ``SITE_WEATHER_KPA``."""
+    if altitude_m is None:
+        return PLAUSIBLE_PRESSURE_KPA
+    p = isa_pressure_kpa(altitude_m)
+    return (p - SITE_WEATHER_KPA, p + SITE_WEATHER_KPA)
+
+
+@functools.lru_cache(maxsize=8)
+def uncorrected_factors(altitude_m: float | None = None, n: int = 256) -> tuple[float, ...]:
+    """The distribution of J1349's factor over the plausible day: ``n`` equal-probability quantiles.
+
+    The day is uniform over its stated box (temperature ``PLAUSIBLE_TEMP_C``, station pressure
+    :func:`plausible_pressure_kpa`, vapour pressure ``0 … min(4 kPa, e_s(T))``): nothing says one day of
+    it is likelier than another, so each is weighted alike (the maximum-entropy choice on a box).  The
+    factor is evaluated on a 24 × 24 × 12 midpoint grid of that box and reduced to its quantiles at
+    probabilities ``(i + ½)/n``.  Over the default box it spans 0.87…1.40 with 2.5/50/97.5 % quantiles
+    0.906/1.081/1.310: the truth is never more than ~10 % below an uncorrected figure, often 30 % above.
     """
-    corners = []
-    for t in PLAUSIBLE_TEMP_C:
-        for p in PLAUSIBLE_PRESSURE_KPA:
-            for e in PLAUSIBLE_VAPOUR_KPA:
-                corners.append(j1349_correction_factor(t, p - min(e, saturation_vapour_pressure_kpa(t))))
-    a = max(abs(min(corners) - 1.0), abs(max(corners) - 1.0))
-    return a / math.sqrt(3.0)
+    import numpy as np
+
+    lo_p, hi_p = plausible_pressure_kpa(altitude_m)
+    t = PLAUSIBLE_TEMP_C[0] + (PLAUSIBLE_TEMP_C[1] - PLAUSIBLE_TEMP_C[0]) * (np.arange(24) + 0.5) / 24
+    p = lo_p + (hi_p - lo_p) * (np.arange(24) + 0.5) / 24
+    e = (np.arange(12) + 0.5) / 12
+    es = 0.61121 * np.exp((18.678 - t / 234.5) * (t / (257.14 + t)))  # saturation_vapour_pressure_kpa
+    vap = e[None, :] * np.minimum(PLAUSIBLE_VAPOUR_KPA[1], es)[:, None]  # (T, e)
+    dry = p[None, :, None] - vap[:, None, :]  # (T, P, e)
+    cf = 1.176 * (J1349_REFERENCE_DRY_PRESSURE_KPA / dry) * np.sqrt((t[:, None, None] + 273.0) / 298.0) - 0.176
+    return tuple(float(x) for x in np.quantile(cf.ravel(), (np.arange(n) + 0.5) / n))
+
+
+def uncorrected_air_rel_u(altitude_m: float | None = None) -> float:
+    """Relative standard uncertainty (k = 2 convention: half the 95 % range over 2) of an efficiency whose
+    map was NOT taken to the run's air.
+
+    Such an efficiency divides by the standard-day power ``P_std = CF·P_day`` instead of the day's
+    ``P_day``, so :math:`\\eta_{true} = P_{out}/P_{day} = CF\\cdot\\eta_{reported}`: the truth is the
+    reported figure *times* the unknown day's factor.  Over the plausible day (:func:`uncorrected_factors`)
+    CF has 2.5/97.5 % quantiles ``q_lo, q_hi``; the symmetric summary is ``u = (q_hi − q_lo)/4`` (so
+    ``2u`` is the range's 95 % half-width).  The interval itself is asymmetric, ``η·[q_lo, q_hi]`` combined
+    with the other terms (:func:`dyno.analysis.systematic.interval95`).
+    """
+    q = uncorrected_factors(altitude_m)
+    n = len(q)
+    lo, hi = q[int(0.025 * n)], q[min(n - 1, int(0.975 * n))]
+    return (hi - lo) / 4.0
 
 
 def known_air_rel_u(temp_c: float, pressure_kpa: float, rh_pct: float | None) -> float:
@@ -166,10 +209,11 @@ class Ambient:
     def j1349_factor(self) -> float | None:
         return j1349_correction_factor(self.temp_c, self.dry_pressure_kpa) if self.corrected else None
 
-    def air_rel_u(self) -> float:
-        """Relative standard uncertainty the air leaves in efficiency (see the two functions above)."""
+    def air_rel_u(self, altitude_m: float | None = None) -> float:
+        """Relative standard uncertainty the air leaves in efficiency (see the two functions above);
+        ``altitude_m``: the site's (``rig.toml [ambient]``), narrowing an uncorrected run's pressure range."""
         if not self.corrected:
-            return uncorrected_air_rel_u()
+            return uncorrected_air_rel_u(altitude_m)
         return known_air_rel_u(self.temp_c, self.pressure_kpa, self.rh_pct)
 
     def to_dict(self) -> dict:

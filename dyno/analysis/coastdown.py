@@ -110,9 +110,17 @@ def loss_band(fit: dict, rpm: float) -> tuple[float, float]:
     return float(t), math.hypot(stat, 2.0 * fit.get("inertia_rel_unc", 0.0) * abs(t))
 
 
-def driven_loss_keys(point: dict, loss: dict) -> dict:
-    """A point's efficiency with the driven-side loss the gauge does not see added back (extra keys)."""
+def driven_loss_keys(point: dict, loss: dict, unc: dict | None = None) -> dict:
+    """A point's efficiency with the driven-side loss the gauge does not see added back (extra keys).
+
+    Its interval (``efficiency_loss_corrected_interval95``) carries every term of the point's efficiency
+    (calibration, engine map, air: ``unc`` is the run's uncertainty record,
+    :func:`~dyno.analysis.systematic.interval_basis`) with the correction's own 95 % half-width in place of
+    the statistics and the driveline's one-sided bound: the loss is measured now, its residual is the band.
+    A value outside 0…1 is a fault naming it that marks the point as the main efficiency's does.
+    """
     from dyno.analysis.efficiency import add_back_loss
+    from dyno.analysis.systematic import range_fault, variant_interval95
 
     rs, eta, ci, p_in = (point.get(k) for k in ("rpm_secondary", "efficiency", "efficiency_ci95", "power_in_w"))
     if any(v is None or not math.isfinite(v) for v in (rs, eta, p_in)) or p_in <= 0:
@@ -122,9 +130,15 @@ def driven_loss_keys(point: dict, loss: dict) -> dict:
     unseen_ci = math.hypot(total_ci, loss.get("seen_ci95_nm", 0.0))
     e, e_ci = add_back_loss(eta, ci if ci is not None and math.isfinite(ci) else 0.0, p_in, rs, unseen, unseen_ci)
     fit = loss["loss_fit"]
-    return {"driven_loss_nm": unseen, "driven_loss_ci95_nm": unseen_ci, "efficiency_loss_corrected": e,
-            "efficiency_loss_corrected_ci95": e_ci,
-            "driven_loss_extrapolated": not fit["rpm_min"] <= rs <= fit["rpm_max"]}
+    out = {"driven_loss_nm": unseen, "driven_loss_ci95_nm": unseen_ci, "efficiency_loss_corrected": e,
+           "efficiency_loss_corrected_ci95": e_ci,
+           "efficiency_loss_corrected_interval95": variant_interval95(e, point, unc, driveline=False,
+                                                                      drop=("statistical",), extra95=e_ci),
+           "driven_loss_extrapolated": not fit["rpm_min"] <= rs <= fit["rpm_max"]}
+    fault = range_fault("efficiency_loss_corrected", e)
+    if fault is not None:
+        out["faults"], out["valid"] = [*(point.get("faults") or ()), fault], False
+    return out
 
 
 def load_driven_loss(path) -> dict:

@@ -270,6 +270,7 @@ class EngineMap:
                         _standard_torque_nm=std)
         out.throttle_frac = self.throttle_frac
         out.stated_u_rel, out.stated_u_basis = self.stated_u_rel, self.stated_u_basis
+        out.file_source = getattr(self, "file_source", None) or self.source  # the file, for code that reloads it
         out.part_throttle = {t: c.at_ambient(temp_c, dry_pressure_kpa) for t, c in self.part_throttle.items()}
         return out
 

@@ -105,12 +105,19 @@ def input_point(streams, point: dict, channel: InputChannel) -> dict:
            "efficiency_engine_map": point.get("efficiency", math.nan),
            "efficiency_engine_map_ci95": point.get("efficiency_ci95", math.nan),
            "efficiency_engine_map_u95": point.get("efficiency_u95", math.nan),
+           "efficiency_engine_map_interval95": point.get("efficiency_interval95"),
            "power_in_engine_map_w": point.get("power_in_w", math.nan),
            "power_in_w": math.nan, "efficiency": math.nan, "efficiency_sem": math.nan,
            "efficiency_ci95": math.nan, "efficiency_reason": None}
     faults = list(point.get("faults", ()))
-    # the map's own complaints do not concern this efficiency (its figure is only beside it)
+    # the map's own complaints do not concern this efficiency (its figure is only beside it), but a figure
+    # beside it outside 0..1 is still a fault, named by its key, that marks the point (a map that cannot be)
     faults = [f for f in faults if not (f.get("channel") == "efficiency" or "engine map" in f.get("reason", ""))]
+    from dyno.analysis.systematic import range_fault
+
+    map_fault = range_fault("efficiency_engine_map", out["efficiency_engine_map"])
+    if map_fault is not None:
+        faults.append(map_fault)
     if out["n_input_error"]:
         faults.append({"channel": "input", "severity": "warning",
                        "reason": f"{out['n_input_error']} input conversions with the AD7171 error bit excluded"})
@@ -156,19 +163,24 @@ def _rel(sem, value) -> float:
     return sem / abs(value)
 
 
-def input_systematic(point: dict, calibration_rel_out: float, channel: InputChannel) -> dict:
-    """The input path's systematic terms and ``efficiency_u95`` (see the module docstring).
+def input_systematic(point: dict, calibration_rel_out: float, channel: InputChannel,
+                     driveline_max_frac: float = 0.0) -> dict:
+    """The input path's systematic terms, ``efficiency_u95`` and ``efficiency_interval95`` (see the module
+    docstring; the driveline's one-sided bound as :mod:`dyno.analysis.systematic` states it: the gauge is
+    still after the chain).
 
     ``calibration_rel_out`` is the brake-side channel's term at this point
     (:func:`~dyno.analysis.systematic.calibration_rel_for`).
     """
+    from dyno.analysis.systematic import interval95
+
     eff = point.get("efficiency", math.nan)
     t_in = point.get("torque_input_nm", math.nan)
     if not (isinstance(eff, float) and math.isfinite(eff) and isinstance(t_in, float) and t_in > 0):
         return {"efficiency_sys95": math.nan, "efficiency_sys95_calibration": math.nan,
                 "efficiency_sys95_calibration_input": math.nan, "efficiency_sys95_cradle": math.nan,
-                "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0,
-                "efficiency_u95": math.nan, "efficiency_u95_terms": None}
+                "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0, "efficiency_sys95_driveline": math.nan,
+                "efficiency_u95": math.nan, "efficiency_u95_terms": None, "efficiency_interval95": None}
     u_tare = (channel.tare or {}).get("u_nm", 0.0) or 0.0
     cal_in_rel = math.hypot(channel.calibration_rel, u_tare / t_in)
     cradle_rel = channel.bearing_loss_u_nm / t_in
@@ -179,15 +191,18 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
     cal = 2.0 * eff * calibration_rel_out
     cal_in = 2.0 * eff * cal_in_rel
     cradle = 2.0 * eff * cradle_rel
-    sys95 = math.sqrt(cal * cal + cal_in * cal_in + cradle * cradle)
+    drive = eff * (1.0 / (1.0 - driveline_max_frac) - 1.0) if driveline_max_frac else 0.0
+    sys95 = math.sqrt(cal * cal + cal_in * cal_in + cradle * cradle + drive * drive)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
     return {"torque_input_u95_nm": torque_u95, "efficiency_sys95": sys95, "efficiency_sys95_calibration": cal,
             "efficiency_sys95_calibration_input": cal_in, "efficiency_sys95_cradle": cradle,
-            "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0,
+            "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0, "efficiency_sys95_driveline": drive,
             "efficiency_u95": math.hypot(ci, sys95),
             "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "calibration_input": cal_in,
-                                     "cradle": cradle, "engine_map": 0.0, "air": 0.0}}
+                                     "cradle": cradle, "engine_map": 0.0, "air": 0.0, "driveline": drive},
+            "efficiency_interval95": interval95(eff, math.sqrt(ci * ci + cal * cal + cal_in * cal_in + cradle * cradle),
+                                                None, driveline_max_frac)}
 
 
 def load_channel(cfg, path) -> InputChannel:

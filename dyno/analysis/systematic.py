@@ -1,18 +1,19 @@
 r"""The systematic part of a point's efficiency uncertainty, stated beside the statistical CI.
 
-``efficiency_ci95`` is the scatter of one window; it shrinks with measuring longer.  Two terms do not,
+``efficiency_ci95`` is the scatter of one window; it shrinks with measuring longer.  Four terms do not,
 and they are shared by every point of a run (so they shift a whole curve, not one point):
 
 * the **torque calibration**'s slope (efficiency ∝ torque ∝ 1/slope): its reproducibility, the relative
   standard deviation of the slopes in the calibration history (the rig's calibrations scatter more than
   one fit's own slope error says), combined with the entry's own fit error when its sample count is known;
-* the **engine map**'s torque (efficiency ∝ 1/map power): a relative standard uncertainty stated in
-  ``rig.toml [uncertainty] engine_map_rel`` (5 % by default: the shipped map is representative, not
-  measured; a map measured on a dyno of stated accuracy allows less).
+* the **engine map**'s torque (efficiency ∝ 1/map power): the relative standard uncertainty the map file
+  states (``# stated_u_rel``: 5 % in the shipped representative map; a measured map states its
+  measurement's), else ``rig.toml [uncertainty] engine_map_rel`` (:mod:`dyno.analysis.u95_terms`).
 
 * the **air** (efficiency ∝ CF, the SAE J1349 factor the map is taken to the run's day by): what the
-  day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), a bound
-  over a plausible day (:mod:`dyno.analysis.air`).
+  day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), the factor's
+  distribution over a plausible day (:mod:`dyno.analysis.air`; ``efficiency_sys95_air`` is half its 95 %
+  range, the interval below its quantiles).
 
 Each is given as a 95 % half-width (coverage factor 2), a fraction like ``efficiency``:
 ``efficiency_sys95_calibration``, ``efficiency_sys95_engine_map``, ``efficiency_sys95_air`` and, in
@@ -22,7 +23,22 @@ statistical ``efficiency_ci95``:
 .. math:: U_{95} = \sqrt{CI_{95}^2 + \sum_k (2\,\eta\,u_{k,rel})^2}
 
 and ``efficiency_u95_terms`` lists each part's half-width (``statistical``, ``calibration``,
-``engine_map``, ``air``).  The systematic parts are one draw per run: every point of a run shares its
+``engine_map``, ``air``, ``driveline``).
+
+* the **driveline** between the CVT and the gauge (chain, bearings; ``rig.toml [driveline]``): a loss only
+  ever lowers the reading, so its term is one-sided: the truth is the reading times ``1/(1 − L)``, ``L``
+  uniform on ``[0, L_max]``, ``L_max = loss_max_frac + drag_max_nm/|T_s|`` (the chain's share of the load
+  and the bearings' drag, :func:`driveline_bound`); its ``driveline`` entry is that upward extent,
+  ``η·(1/(1 − L_max) − 1)``.  A coast-down's ``driven_loss.json`` measures the loss instead
+  (``efficiency_loss_corrected``, whose interval carries the correction's own residual, not this term).
+
+The **interval** ``efficiency_interval95 = [low, high]`` is what the truth is said to lie in at 95 %:
+the 2.5/97.5 % quantiles of :math:`\eta\,A\,D\,(1+\varepsilon)`, with ``A`` the uncorrected air's factor
+(its distribution over the plausible day, :func:`dyno.analysis.air.uncorrected_factors`; 1 when the day
+is known), ``D`` the driveline's ``1/(1 − L)`` and ``ε`` normal with sd half the symmetric terms'
+quadrature over η (k = 2).  It is asymmetric where a term is, and clipped to [0, 1] (an efficiency
+cannot exceed 1).  Every efficiency variant ``K`` carries ``K_interval95`` the same way
+(:func:`variant_interval95`).  The systematic parts are one draw per run: every point of a run shares its
 engine, sensor and day, so they shift a whole curve together (judged over many runs, never one).
 """
 
@@ -30,6 +46,11 @@ from __future__ import annotations
 
 import math
 import statistics
+from statistics import NormalDist
+
+#: The interval's quadrature: the normal's and the driveline's equal-probability midpoints.
+_Z = tuple(NormalDist().inv_cdf((i + 0.5) / 24) for i in range(24))
+_N_DRIVELINE = 12
 
 
 def calibration_rel_u(history, entry) -> float:
@@ -44,7 +65,93 @@ def calibration_rel_u(history, entry) -> float:
 
 
 SYSTEMATIC_KEYS = ("efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
-                   "efficiency_sys95_air", "efficiency_u95", "efficiency_u95_terms")
+                   "efficiency_sys95_air", "efficiency_sys95_driveline", "efficiency_u95", "efficiency_u95_terms",
+                   "efficiency_interval95")
+
+
+def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac: float = 0.0) -> list | None:
+    """``[low, high]``: the 95 % interval of the truth about a reading ``value`` (see the module docstring).
+
+    ``sym95``: the symmetric terms' 95 % half-width (quadrature, absolute); ``air_factors``: equal-probability
+    quantiles of the uncorrected air's factor (None: the day is known); ``driveline_max_frac``: the
+    one-sided loss bound.  Clipped to [0, 1].  None for a value that is not a finite number.
+    """
+    if not (isinstance(value, (int, float)) and math.isfinite(value)):
+        return None
+    sym95 = sym95 if isinstance(sym95, (int, float)) and math.isfinite(sym95) else 0.0
+    no_air = air_factors is None or len(air_factors) == 0
+    if value <= 0.0 or (no_air and not driveline_max_frac):
+        lo, hi = value - sym95, value + sym95
+    else:
+        import numpy as np
+
+        a = np.asarray((1.0,) if no_air else air_factors, dtype=float)
+        lm = float(driveline_max_frac or 0.0)
+        d = 1.0 / (1.0 - lm * (np.arange(_N_DRIVELINE) + 0.5) / _N_DRIVELINE)
+        e = 1.0 + np.asarray(_Z) * (0.5 * sym95 / value)
+        r = (a[:, None, None] * d[None, :, None] * e[None, None, :]).ravel()
+        q_lo, q_hi = np.quantile(r, (0.025, 0.975))
+        lo, hi = value * float(q_lo), value * float(q_hi)
+    return [max(0.0, lo), min(1.0, hi)]
+
+
+def driveline_bound(point: dict | None, unc: dict | None) -> float:
+    """The driveline's largest loss at ``point``, a fraction of what the gauge reads: the load-proportional
+    part (``driveline_loss_max_frac``: the chain) plus the bearings' and seals' drag torque
+    (``driveline_drag_max_nm``, at the secondary) over the point's torque — a drag is a larger share at light
+    load.  At most 0.5; the fraction alone without a finite torque."""
+    unc = unc or {}
+    frac, drag = float(unc.get("driveline_loss_max_frac") or 0.0), float(unc.get("driveline_drag_max_nm") or 0.0)
+    t = (point or {}).get("torque_secondary_nm")
+    if drag and isinstance(t, (int, float)) and math.isfinite(t) and abs(t) > 0.0:
+        frac += drag / abs(t)
+    return min(0.5, frac)
+
+
+def interval_basis(unc: dict | None, point: dict | None = None) -> dict:
+    """The interval's asymmetric inputs from a run's ``uncertainty`` record (meta.json): the uncorrected air's
+    factor quantiles (``air_day``: the site's ``altitude_m`` when the air is unknown, absent when known) and
+    the driveline's bound at ``point`` (:func:`driveline_bound`)."""
+    from dyno.analysis.air import uncorrected_factors
+
+    unc = unc or {}
+    day = unc.get("air_day")
+    return {"air_factors": uncorrected_factors(day.get("altitude_m")) if isinstance(day, dict) else None,
+            "driveline_max_frac": driveline_bound(point, unc)}
+
+
+def run_basis(ambient: dict | None, rig_cfg) -> dict:
+    """The ``uncertainty`` record's interval inputs (as the composition root states them in meta.json) from a
+    run's ``ambient`` and its rig file: for code that holds the run's result, not its meta."""
+    amb, drv = getattr(rig_cfg, "ambient", None), getattr(rig_cfg, "driveline", None)
+    known = (ambient or {}).get("j1349_factor") is not None
+    return {"air_day": None if known else {"altitude_m": getattr(amb, "altitude_m", None)},
+            "driveline_loss_max_frac": getattr(drv, "loss_max_frac", 0.0),
+            "driveline_drag_max_nm": getattr(drv, "drag_max_nm", 0.0)}
+
+
+def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool = True, drop=(),
+                       extra95: float = 0.0) -> list | None:
+    """``K_interval95`` of an efficiency variant ``value`` of ``point``: the main efficiency's terms scaled
+    to it (each is relative), less those in ``drop`` (and the driveline's unless ``driveline``), with
+    ``extra95`` (a correction's own 95 % half-width) in quadrature."""
+    eta, terms = point.get("efficiency"), point.get("efficiency_u95_terms") or {}
+    if not (isinstance(value, (int, float)) and math.isfinite(value)):
+        return None
+    basis = interval_basis(unc, point)
+    skip = {"driveline", *drop} | ({"air"} if basis["air_factors"] is not None else set())
+    k = value / eta if isinstance(eta, (int, float)) and math.isfinite(eta) and eta else 1.0
+    sym95 = math.sqrt(sum((k * v) ** 2 for n, v in terms.items() if n not in skip and isinstance(v, (int, float))
+                          and math.isfinite(v)) + (extra95 or 0.0) ** 2)
+    return interval95(value, sym95, basis["air_factors"], basis["driveline_max_frac"] if driveline else 0.0)
+
+
+def range_fault(name: str, value) -> dict | None:
+    """The fault of an efficiency ``name`` outside 0…1 (it marks the point as the main efficiency's does)."""
+    if isinstance(value, (int, float)) and math.isfinite(value) and not 0.0 <= value <= 1.0:
+        return {"channel": name, "reason": f"{name} {value:.3f} outside 0..1: a calibration, map or correction "
+                "does not fit this point"}
+    return None
 
 
 def calibration_rel_for(calibration_rel: float, point: dict, tare: dict | None) -> float:
@@ -57,8 +164,10 @@ def calibration_rel_for(calibration_rel: float, point: dict, tare: dict | None) 
     return math.hypot(calibration_rel, u_nm / abs(torque))
 
 
-def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float, air_rel: float = 0.0) -> dict:
-    """The 95 % systematic half-widths of ``point``'s efficiency and its total ``efficiency_u95``.
+def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float, air_rel: float = 0.0,
+                     air_factors=None, driveline_max_frac: float = 0.0) -> dict:
+    """The 95 % systematic half-widths of ``point``'s efficiency, its total ``efficiency_u95`` and its
+    ``efficiency_interval95`` (``air_factors``, ``driveline_max_frac``: :func:`interval_basis`).
 
     NaN (and no terms) without an efficiency.  ``air_rel`` 0 is a run from before the air was stated.
     """
@@ -66,11 +175,24 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
     if not isinstance(eff, float) or not math.isfinite(eff):
         return {"efficiency_sys95": math.nan, "efficiency_sys95_calibration": math.nan,
                 "efficiency_sys95_engine_map": math.nan, "efficiency_sys95_air": math.nan,
-                "efficiency_u95": math.nan, "efficiency_u95_terms": None}
+                "efficiency_sys95_driveline": math.nan, "efficiency_u95": math.nan, "efficiency_u95_terms": None,
+                "efficiency_interval95": None}
     cal, emap, air = 2.0 * eff * calibration_rel, 2.0 * eff * engine_map_rel, 2.0 * eff * (air_rel or 0.0)
-    sys95 = math.sqrt(cal * cal + emap * emap + air * air)
+    drive = eff * (1.0 / (1.0 - driveline_max_frac) - 1.0) if driveline_max_frac else 0.0
+    # any other symmetric term the point already states (e.g. a part-throttle curve's friction estimate)
+    extra = {k[len("efficiency_sys95_"):]: v for k, v in point.items() if k in _EXTRA_SYS95
+             and isinstance(v, float) and math.isfinite(v) and v > 0.0}
+    sq_extra = sum(v * v for v in extra.values())
+    sys95 = math.sqrt(cal * cal + emap * emap + air * air + drive * drive + sq_extra)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
+    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors is not None else air * air) + sq_extra)
     return {"efficiency_sys95": sys95, "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
-            "efficiency_sys95_air": air, "efficiency_u95": math.hypot(ci, sys95),
-            "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air}}
+            "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": math.hypot(ci, sys95),
+            "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
+                                     "driveline": drive, **extra},
+            "efficiency_interval95": interval95(eff, sym95, air_factors, driveline_max_frac)}
+
+
+#: symmetric 95 % terms a point may carry from its reduction, combined here when present
+_EXTRA_SYS95 = ("efficiency_sys95_friction",)

@@ -9,6 +9,7 @@ A run states these once (``meta.json`` ``uncertainty.u95_terms``, the run's JSON
 * ``engine_map``: the map's torque, its relative standard uncertainty as the map file states it
   (``# stated_u_rel = …`` in the CSV, :func:`dyno.analysis.engine_map.load_engine_map`), else ``rig.toml
   [uncertainty] engine_map_rel`` (5 % unless set) for a map that states none;
+* ``driveline``: the one-sided bound of a loss between the CVT and the gauge (``rig.toml [driveline]``);
 * ``air``: the SAE J1349 factor, what the day's air is known to (sensor, given) or a bound over a plausible
   day when none is known (:mod:`dyno.analysis.air`);
 * with the engine-side input torque channel, ``calibration_input`` and ``cradle`` (``engine_map`` and
@@ -48,9 +49,16 @@ def air_term(air_rel: float, source: str | None) -> dict:
         basis = (f"the day's air as {'the BME280 read it' if source == 'sensor' else 'given'}: ±1 °C, ±1 hPa, "
                  "±3 %RH (rectangular) through the SAE J1349 factor")
     else:
-        basis = ("no air known: a rectangular bound over a plausible day (−10…45 °C, 80…105 kPa) on the "
-                 "J1349 factor")
+        basis = ("no air known: the J1349 factor's spread over a plausible day (dyno.analysis.air; narrowed by "
+                 "rig.toml [ambient] altitude_m when set)")
     return term("air", air_rel, basis)
+
+
+def driveline_term(loss_max_frac: float, drag_max_nm: float) -> dict:
+    """The driveline between the CVT and the gauge: one-sided (a loss only lowers the reading), per point."""
+    return term("driveline", None, f"one-sided, rig.toml [driveline]: up to {100 * loss_max_frac:g} % of the load "
+                f"(chain) plus {drag_max_nm:g} N m of bearing drag over each point's torque; a loss only lowers the "
+                "reading")
 
 
 def input_terms(channel) -> list[dict]:

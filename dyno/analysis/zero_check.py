@@ -63,8 +63,12 @@ def zero_at(check: dict, t_s: float) -> float:
     return b["torque_nm"] + (a["torque_nm"] - b["torque_nm"]) * (t_s - tb) / (ta - tb)
 
 
-def corrected_point_keys(point: dict, check: dict) -> dict:
-    """Linearly drift-corrected torque and efficiency for one point (extra keys)."""
+def corrected_point_keys(point: dict, check: dict, unc: dict | None = None) -> dict:
+    """Linearly drift-corrected torque and efficiency for one point (extra keys): the efficiency with every
+    term of the point's (``unc``: :func:`~dyno.analysis.systematic.interval_basis`) in its
+    ``efficiency_zero_corrected_interval95``, and outside 0…1 a fault naming it that marks the point."""
+    from dyno.analysis.systematic import range_fault, variant_interval95
+
     t0, t1 = point.get("host_t_start_s"), point.get("host_t_end_s")
     torque, eff = point.get("torque_secondary_nm"), point.get("efficiency")
     if t0 is None or t1 is None or torque is None or not math.isfinite(check.get("drift_nm", math.nan)):
@@ -73,7 +77,11 @@ def corrected_point_keys(point: dict, check: dict) -> dict:
     tc = torque - z
     out = {"torque_secondary_zero_corrected_nm": tc}
     if eff is not None and math.isfinite(eff) and torque:
-        out["efficiency_zero_corrected"] = eff * tc / torque
+        ez = out["efficiency_zero_corrected"] = eff * tc / torque
+        out["efficiency_zero_corrected_interval95"] = variant_interval95(ez, point, unc)
+        fault = range_fault("efficiency_zero_corrected", ez)
+        if fault is not None:
+            out["faults"], out["valid"] = [*(point.get("faults") or ()), fault], False
     return out
 
 

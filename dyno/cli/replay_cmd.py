@@ -42,15 +42,15 @@ def run(args) -> int:
 
             loss = load_driven_loss(args.driven_loss)
 
-        def pub(p):
+        def pub(p, r):
             out = public_point(p)
             if loss is not None:
                 from dyno.analysis.coastdown import driven_loss_keys
 
-                out.update(driven_loss_keys(out, loss))
+                out.update(driven_loss_keys(out, loss, r.get("uncertainty_basis")))
             return out
 
-        docs = [{"run_dir": r["run_dir"], "points": [pub(p) for p in r["points"]],
+        docs = [{"run_dir": r["run_dir"], "points": [pub(p, r) for p in r["points"]],
                  "stop": r["stop"], "aborts": r["aborts"], "torn": r["torn"],
                  **({"drive_grid": r["drive_grid"]} if "drive_grid" in r else {})} for r in results]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1, default=str))

@@ -216,9 +216,12 @@ def run(args) -> int:
             web.end(result)
     if driven_loss is not None:
         from dyno.analysis.coastdown import driven_loss_keys
+        from dyno.analysis.systematic import run_basis
+        from dyno.rigconfig import load_rig
 
+        basis = run_basis(result.get("ambient"), load_rig(getattr(args, "rig", None)))
         for p in result["points"]:
-            p.update(driven_loss_keys(p, driven_loss))
+            p.update(driven_loss_keys(p, driven_loss, basis))
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
@@ -332,7 +335,8 @@ def air_line(amb: dict) -> str:
     """One line on the run's air: the J1349 factor the map was taken to the day by, or "uncorrected"."""
     if amb.get("j1349_factor") is None:
         return ("air: uncorrected (no BME280, no --ambient, no rig.toml [ambient] day): the map is the standard "
-                "day's, and each point's efficiency_u95 covers a plausible day")
+                "day's, and each point's efficiency_interval95 covers a plausible day (asymmetric: the truth is up to "
+                "~30 % above the figure)")
     rh = amb.get("rh_pct")
     return (f"air: {amb['temp_c']:.1f} C, {amb['pressure_kpa']:.2f} kPa" + (f", {rh:.0f} %RH" if rh is not None else "")
             + f" ({amb.get('source')}): SAE J1349 factor {amb['j1349_factor']:.4f} applied to the engine map")
@@ -399,15 +403,18 @@ def _print_table(result: dict) -> None:
 
 
 def _print_points(points: list) -> None:
-    """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``) and
-    its U95 (statistics and every systematic term, ``efficiency_u95``), both ± half-widths in pp."""
+    """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``), its
+    U95 (statistics and every systematic term, ``efficiency_u95``), both ± half-widths in pp, and the interval
+    the truth lies in at 95 % (``efficiency_interval95``: asymmetric where a term is, at most 100 %)."""
     print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±CI95':>6} "
-          f"{'±U95':>5}")
+          f"{'±U95':>5} {'interval95 %':>12}")
     for p in points:
         def f(k, scale=1.0, fmt="{:.0f}"):
             v = p.get(k)
             return "-" if v is None else fmt.format(v * scale)
+        iv = p.get("efficiency_interval95")
+        interval = "-" if not iv or None in iv else f"{100 * iv[0]:.1f}..{100 * iv[1]:.1f}"
         print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
               f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
               f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_ci95', 100, '{:.1f}'):>6} "
-              f"{f('efficiency_u95', 100, '{:.1f}'):>5}")
+              f"{f('efficiency_u95', 100, '{:.1f}'):>5} {interval:>12}")

@@ -178,21 +178,31 @@ def _points_table(data: ReportData) -> str:
                      _f(p.get("power_out_w"), ".2f", 1e-3), _f(p.get("power_in_w"), ".2f", 1e-3),
                      _f(p.get("efficiency"), ".1f", 100), _f(p.get("efficiency_ci95"), ".1f", 100),
                      _f(p.get("efficiency_sys95"), ".1f", 100), _f(p.get("efficiency_u95"), ".1f", 100),
+                     _interval(p.get("efficiency_interval95")),
                      state + "".join(f'<br><span class="warn">{escape(n)}</span>' for n in notes)])
         if has_input:
             rows[-1][5:5] = [_f(p.get("torque_input_nm"), ".2f")]
             rows[-1][-1:-1] = [_f(p.get("efficiency_engine_map"), ".1f", 100),
-                               _f(p.get("efficiency_engine_map_u95"), ".1f", 100)]
+                               _f(p.get("efficiency_engine_map_u95"), ".1f", 100),
+                               _interval(p.get("efficiency_engine_map_interval95"))]
     if not rows:
         return "<p>No points were recorded.</p>"
     head = ["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
-            "efficiency %", "± pp (95 %, stat.)", "± pp (95 %, syst.)", "± pp (95 %, total)", "state / notes"]
+            "efficiency %", "CI95 ± pp (the point's statistics)", "systematic ± pp (95 %)",
+            "U95 ± pp (total)", "interval95 % (the truth at 95 %)", "state / notes"]
     if has_input:  # P in and the efficiency from the measured input torque; the map's figure beside
         head[5:5] = ["engine torque N·m (measured)"]
-        head[-1:-1] = ["efficiency % (engine map)", "± pp (95 %, map)"]
+        head[-1:-1] = ["efficiency % (engine map)", "U95 ± pp (map)", "interval95 % (map)"]
         return ("<p>Efficiency from the engine-side input torque channel: P out / (T in · ω p); the engine "
-                "map's figure beside it for comparison.</p>" + _table(head, rows, left={14}))
-    return _table(head, rows, left={11})
+                "map's figure beside it for comparison.</p>" + _table(head, rows, left={16}))
+    return _table(head, rows, left={12})
+
+
+def _interval(iv) -> str:
+    """``[low, high]`` (fractions) as ``low…high`` in %; "–" without one."""
+    if not isinstance(iv, (list, tuple)) or len(iv) != 2 or not all(isinstance(v, (int, float)) for v in iv):
+        return "–"
+    return f"{100 * iv[0]:.1f}…{100 * iv[1]:.1f}"
 
 
 def _faults(data: ReportData) -> str:
@@ -243,8 +253,9 @@ def air_text(amb) -> str:
                 "SAE J1349 reference day")
     if amb.get("j1349_factor") is None:
         return ("uncorrected: no air was known (no BME280, no --ambient, no rig.toml [ambient] day), so the map "
-                "stays at the SAE J1349 reference day (25 °C, 99 kPa dry) and each point's efficiency_u95 "
-                "carries an air term wide enough for a plausible day (−10…45 °C, 80…105 kPa)")
+                "stays at the SAE J1349 reference day (25 °C, 99 kPa dry) and each point's efficiency_interval95 "
+                "carries the factor's range over a plausible day (−10…45 °C, 80…105 kPa, or the site's "
+                "[ambient] altitude_m): asymmetric, the truth up to ~30 % above the figure, ~10 % below")
     rh = amb.get("rh_pct")
     rh_s = f", {rh:.0f} %RH" if isinstance(rh, (int, float)) else ", humidity not given"
     src = {"sensor": "read from the rig's BME280", "given": "given (--ambient or rig.toml)"}.get(amb.get("source"),

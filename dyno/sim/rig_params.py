@@ -71,6 +71,9 @@ class RigParams:
     engine_ageing_loss_frac: float = 0.0
     # The day (intake air): (temp_c, station pressure_kpa, rh_pct), or None = drawn per seed.
     ambient_day: tuple | None = None
+    # The site (m): a drawn day's pressure is this altitude's (ISA) with the weather; None = drawn 0…1,500 m.
+    # Where the rig stands is a fact of the world (rig.toml [ambient] altitude_m states it), not the host's knowledge.
+    site_altitude_m: float | None = None
     # Perfect knowledge: the engine exactly its map, the sensor exactly its nominal calibration, the
     # J1349 reference day (tests of statistics alone; --sim-ideal).
     ideal: bool = False

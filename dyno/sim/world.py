@@ -90,10 +90,12 @@ class World:
         return d
 
 
-def draw_day(rng: np.random.Generator) -> tuple[float, float, float]:
-    """A plausible test day: 5…35 °C, station pressure at 0…1,500 m (ISA) ± 1 kPa of weather, 20…80 %RH."""
+def draw_day(rng: np.random.Generator, site_altitude_m: float | None = None) -> tuple[float, float, float]:
+    """A plausible test day: 5…35 °C, station pressure at 0…1,500 m (or the site's altitude; ISA) ± 1 kPa of
+    weather (sd), 20…80 %RH."""
     temp_c = float(rng.uniform(5.0, 35.0))
-    altitude_m = float(rng.uniform(0.0, 1500.0))
+    altitude_m = float(rng.uniform(0.0, 1500.0))  # (drawn even at a known site: the later draws stay put)
+    altitude_m = altitude_m if site_altitude_m is None else float(site_altitude_m)
     pressure_kpa = 101.325 * (1.0 - 2.25577e-5 * altitude_m) ** 5.25588 + float(rng.normal(0.0, 1.0))
     return temp_c, pressure_kpa, float(rng.uniform(20.0, 80.0))
 
@@ -130,7 +132,7 @@ def realise(p, seed: int, map_rpm: np.ndarray, map_torque_nm: np.ndarray):
         return q, map_rpm, map_torque_nm / w.j1349_factor, w
     seed = int(seed if p.world_seed is None else p.world_seed)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x24]))  # (0x24: this world's stream)
-    day = draw_day(rng)  # drawn even when given, so the other draws do not depend on it
+    day = draw_day(rng, p.site_altitude_m)  # drawn even when given, so the other draws do not depend on it
     t, pr, rh = p.ambient_day or day
     dev_rpm, dev_rel = draw_deviation(rng, float(map_rpm[0]), float(map_rpm[-1]), p.engine_map_dev_rel_sd,
                                       p.engine_map_dev_length_rpm)

@@ -13,7 +13,7 @@ from dyno.analysis.live import RateMeter, live_values
 
 #: the points table's columns (a subset of dyno.summary.POINT_KEYS)
 POINT_COLUMNS = ("index", "rpm_primary", "rpm_secondary", "ratio", "torque_secondary_nm", "power_out_w",
-                 "power_in_w", "efficiency", "efficiency_ci95", "efficiency_u95", "valid")
+                 "power_in_w", "efficiency", "efficiency_ci95", "efficiency_u95", "efficiency_interval95", "valid")
 
 
 def _num(x):
@@ -28,7 +28,16 @@ def _num(x):
 
 
 def point_row(p: dict) -> dict:
-    return {k: (p.get(k) if k == "valid" else _num(p.get(k))) for k in POINT_COLUMNS}
+    return {k: (p.get(k) if k == "valid" else _interval(p.get(k)) if k.endswith("_interval95") else _num(p.get(k)))
+            for k in POINT_COLUMNS}
+
+
+def _interval(iv):
+    """``[low, high]`` with finite ends, else None."""
+    if not isinstance(iv, (list, tuple)) or len(iv) != 2:
+        return None
+    lo, hi = _num(iv[0]), _num(iv[1])
+    return None if lo is None or hi is None else [lo, hi]
 
 
 class SnapshotBuilder:
@@ -67,6 +76,7 @@ class SnapshotBuilder:
             "efficiency": last["efficiency"] if last else None,
             "efficiency_ci95": last["efficiency_ci95"] if last else None,
             "efficiency_u95": last["efficiency_u95"] if last else None,
+            "efficiency_interval95": last["efficiency_interval95"] if last else None,  # [low, high]
             "rotor_temp_c": _num(v.rotor_temp_c), "rotor_temp_limit_c": _num(v.rotor_temp_limit_c),
             "throttle_frac": _num(v.throttle_frac), "frames_per_s": _num(v.frames_per_s),
             "crc_errors": v.crc_errors, "events_lost": v.events_lost, "run_enable": v.run_enable,

@@ -31,3 +31,59 @@ def test_point_terms_are_95_percent_half_widths_in_quadrature():
     assert s["efficiency_sys95_engine_map"] == pytest.approx(2 * 0.85 * 0.05)
     assert s["efficiency_sys95"] == pytest.approx(math.hypot(2 * 0.85 * 0.015, 2 * 0.85 * 0.05))
     assert math.isnan(point_systematic({"efficiency": math.nan}, 0.015, 0.05)["efficiency_sys95"])
+
+
+def test_the_interval_is_the_truths_95_percent_range_asymmetric_and_clipped():
+    """Monte Carlo of the world the interval describes: a true efficiency, read low by a driveline loss
+    (uniform 0..L_max: a loss only lowers the reading), off by an unknown day's J1349 factor (uniform day)
+    and by normal terms: the interval holds the truth ~95 % of the time, and is one-sided where a term is."""
+    import numpy as np
+
+    from dyno.analysis.air import uncorrected_factors
+    from dyno.analysis.systematic import interval95
+
+    eta, sym95, lmax = 0.7, 0.04, 0.04
+    # the driveline alone: the interval extends upward only, to the loss bound
+    lo, hi = interval95(eta, 0.0, None, lmax)
+    assert lo == pytest.approx(eta, rel=2e-3) and hi == pytest.approx(eta / (1 - 0.975 * lmax), rel=2e-3)
+    # every term: coverage by simulation (readings made from truths; the interval judged on the truth)
+    rng = np.random.default_rng(7)
+    q = np.asarray(uncorrected_factors())
+    n = 1000
+    cf = rng.choice(q, n)
+    truth = 0.6 + 0.02 * rng.standard_normal(n)
+    reading = truth * (1 - rng.uniform(0, lmax, n)) / cf + rng.normal(0, sym95 / 2, n)
+    inside = [a <= t <= b for t, r in zip(truth, reading) for a, b in [interval95(r, sym95, q, lmax)]]
+    assert 0.93 <= np.mean(inside) <= 0.975
+    lo, hi = interval95(eta, sym95, q, lmax)
+    assert hi - eta > 2 * (eta - lo)  # the day can only be this much worse, far more better
+    assert interval95(0.95, sym95, q, lmax)[1] == 1.0  # never beyond what physics allows
+    assert interval95(0.5, 0.02) == pytest.approx([0.48, 0.52])  # known air, no driveline: symmetric
+
+
+def test_the_driveline_term_is_one_sided_in_u95_and_the_interval():
+    s = point_systematic({"efficiency": 0.8, "efficiency_ci95": 0.007}, 0.015, 0.05, 0.002,
+                         driveline_max_frac=0.04)
+    assert s["efficiency_u95_terms"]["driveline"] == pytest.approx(0.8 * (1 / 0.96 - 1))
+    lo, hi = s["efficiency_interval95"]
+    assert hi - 0.8 > 0.8 - lo > 0  # extends further upward
+
+
+def test_the_driveline_bound_is_the_chains_share_plus_the_bearings_drag_over_the_torque():
+    from dyno.analysis.systematic import driveline_bound, interval_basis
+
+    unc = {"driveline_loss_max_frac": 0.03, "driveline_drag_max_nm": 0.25}
+    assert driveline_bound({"torque_secondary_nm": 25.0}, unc) == pytest.approx(0.04)
+    assert driveline_bound({"torque_secondary_nm": 5.0}, unc) == pytest.approx(0.08)  # light load: the drag
+    assert driveline_bound({"torque_secondary_nm": math.nan}, unc) == pytest.approx(0.03)
+    assert driveline_bound({"torque_secondary_nm": 0.01}, unc) == 0.5
+    assert interval_basis(unc, {"torque_secondary_nm": 5.0})["driveline_max_frac"] == pytest.approx(0.08)
+    assert interval_basis({}, {"torque_secondary_nm": 5.0}) == {"air_factors": None, "driveline_max_frac": 0.0}
+
+
+def test_a_term_the_point_already_states_is_combined():
+    base = point_systematic({"efficiency": 0.5, "efficiency_ci95": 0.01}, 0.015, 0.05)
+    s = point_systematic({"efficiency": 0.5, "efficiency_ci95": 0.01, "efficiency_sys95_friction": 0.03}, 0.015, 0.05)
+    assert s["efficiency_u95_terms"]["friction"] == 0.03
+    assert s["efficiency_u95"] == pytest.approx(math.hypot(base["efficiency_u95"], 0.03))
+    assert s["efficiency_interval95"][1] - 0.5 == pytest.approx(s["efficiency_u95"])

@@ -107,7 +107,7 @@ def test_not_significant_where_the_truths_do_not_differ(compared, quantity):
 def test_html_report_is_self_contained(compared):
     text = compared["html"].read_text()
     assert text.count("<svg") >= 3  # curves + one difference figure per compared run
-    assert "mass_each_kg" in text and "stock-1: uncorrected" in text  # each run's air, from its meta.json
+    assert "mass_each_kg" in text and "stock-1: sensor" in text  # each run's air, from its meta.json
     assert "What cancels in the efficiency difference" in text
     assert " src=" not in text and "<link" not in text  # nothing fetched from elsewhere
 

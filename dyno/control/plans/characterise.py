@@ -240,7 +240,8 @@ async def _back_shift(ctx, ep: EngagementPlan, res: dict) -> dict:
 def predicted_from_tune(ctx, loads_nm=()) -> dict:
     """The tune's predicted engagement and shift-out (dyno.tuning) and the measured minus predicted."""
     tune_path = ctx.config.tune_path
-    src = getattr(ctx.config.engine_map, "source", None)
+    em = ctx.config.engine_map  # (a map taken to the day names its file in file_source)
+    src = getattr(em, "file_source", None) or getattr(em, "source", None)
     if not tune_path or not src:
         return {}
     try:

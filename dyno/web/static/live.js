@@ -33,7 +33,8 @@ function render(f) {
   $("run-enable").dataset.off = String((f.run_enable || "").startsWith("off"));
   $("efficiency").textContent = fmt(f.efficiency === null ? null : f.efficiency * 100, 1, " %");
   $("eff-ci").textContent = f.efficiency_ci95 !== null && f.efficiency_ci95 !== undefined
-    ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp" : "";
+    ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp"
+      + (f.efficiency_interval95 ? " · interval95 " + interval(f.efficiency_interval95) + " %" : "") : "";
   const ban = $("banner");
   if (f.abort_cause) {
     ban.hidden = false;
@@ -53,6 +54,9 @@ function render(f) {
   plots();
 }
 
+// an efficiency_interval95 [low, high] (fractions) as "low…high" in % (asymmetric where a term is)
+function interval(iv) { return fmt(iv[0] * 100, 1) + "…" + fmt(iv[1] * 100, 1); }
+
 function table(points) {
   shownPoints = points.length;
   $("n-points").textContent = String(points.length);
@@ -64,7 +68,8 @@ function table(points) {
     for (const v of [p.index, fmt(p.rpm_primary, 0), fmt(p.rpm_secondary, 0), fmt(p.ratio, 3), fmt(p.torque_secondary_nm, 2),
                      fmt(p.power_out_w, 0), fmt(p.efficiency === null ? null : p.efficiency * 100, 1),
                      fmt(p.efficiency_ci95 === null ? null : p.efficiency_ci95 * 100, 1),
-                     fmt(p.efficiency_u95 === null ? null : p.efficiency_u95 * 100, 1)]) {
+                     fmt(p.efficiency_u95 === null ? null : p.efficiency_u95 * 100, 1),
+                     p.efficiency_interval95 ? interval(p.efficiency_interval95) : "—"]) {
       const td = document.createElement("td"); td.textContent = v; tr.appendChild(td);
     }
     body.appendChild(tr);
