@@ -1,8 +1,9 @@
 """Map-free efficiency (issue 27): both paths' ``efficiency_u95`` judged over many simulated rigs.
 
 Each seed is a different rig (:mod:`dyno.sim.world`, as in ``bench_uncertainty.py``): its engine differs
-from the shipped map (5 % sd smooth deviation), its day is drawn, and each torque channel's gain differs
-from its calibration by the history's reproducibility.  The rig is ``hardware/rig-input-torque.toml``
+from the shipped map (a smooth deviation, the simulator's own 4.4 % sd), its day is drawn, and each torque
+channel's gain differs from its calibration (the brake-side gauge's as the simulator models it: re-seating
+scatter and thermal drift; the input channel's by the history's reproducibility).  The rig is ``hardware/rig-input-torque.toml``
 with a BME280 (the air known): the engine cradle's load cell is fitted, so every point carries the input
 path's efficiency ``P_out / (T_in w_p)`` with its ``efficiency_u95`` and, beside it, the engine map's
 (``efficiency_engine_map``, ``efficiency_engine_map_u95``).  Both are judged against the simulated truth
@@ -13,6 +14,12 @@ Printed: coverage (95 % nominal), normalised errors, the mean U95 half-width for
 reproducibility at which the input path's mean half-width would be 2 pp (from the stated terms); and with
 ``--repro R`` the whole bench at reproducibility R (both channels' histories and the rigs' sensors scatter
 by R instead of 1.6 %), to check that claim on the truth.
+
+Pass criteria (exit 1 when one fails, 0 when all hold): the input path's efficiency coverage by its
+``efficiency_u95`` ≥ 0.90 and the engine's measured torque's coverage by ``torque_input_u95_nm`` ≥ 0.90
+(95 % nominal); with ``--quick`` (3 seeds) ≥ 0.75 each, a smoke check.  ``--miscalibrate-input REL`` hands
+the host an input-channel calibration history whose slopes are all off by REL (a deliberately broken
+input: the criteria must then fail).
 
     python bench/bench_input_torque.py              # 100 seeds (about 20 min on 2 cores)
     python bench/bench_input_torque.py --repro 0.007 --seeds 50
@@ -57,10 +64,42 @@ def _scaled_history(src: Path, dst: Path, repro: float) -> None:
     dst.write_text(buf.getvalue())
 
 
-def setup_files(tmp: Path, repro: float | None) -> dict:
+def _scaled_slopes(src: Path, dst: Path, factor: float) -> None:
+    """``src``'s history with every slope times ``factor`` (a calibration the channel does not have)."""
+    import csv
+    import io
+
+    rows = list(csv.DictReader(io.StringIO(src.read_text())))
+    for r in rows:
+        r["slope_counts_per_nm"] = repr(float(r["slope_counts_per_nm"]) * factor)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    dst.write_text(buf.getvalue())
+
+
+CRITERION_COVERAGE, CRITERION_COVERAGE_QUICK = 0.90, 0.75
+
+
+def verdicts(input_path: dict, torque: dict, quick: bool) -> list[str]:
+    """The pass criteria (module docstring): one line each, 'FAIL' in it when it fails."""
+    need = CRITERION_COVERAGE_QUICK if quick else CRITERION_COVERAGE
+    out = []
+    for what, cov in (("input path efficiency", input_path["coverage"]), ("engine torque", torque["coverage"])):
+        ok = cov >= need  # (NaN: nothing judged, fails)
+        out.append(f"{'pass' if ok else 'FAIL'}: {what}: coverage {cov:.3f} (criterion >= {need:.2f})")
+    return out
+
+
+def setup_files(tmp: Path, repro: float | None, miscalibrate: float | None = None) -> dict:
     """The rig file (input channel + BME280) and, at ``repro``, both channels' histories."""
     rig = (REPO / "hardware" / "rig-input-torque.toml").read_text().replace('sensor = "none"', 'sensor = "bme280"', 1)
     files = {"calibration": str(REPO / "calibration" / "torque_calibration.csv")}
+    if miscalibrate is not None:  # the host told a wrong input calibration (the broken-input check)
+        bad = tmp / "input_torque_calibration_off.csv"
+        _scaled_slopes(REPO / "calibration" / "input_torque_calibration.csv", bad, 1.0 + miscalibrate)
+        rig = rig.replace('calibration = "calibration/input_torque_calibration.csv"', f'calibration = "{bad}"')
     if repro is not None:
         out_hist, in_hist = tmp / "torque_calibration.csv", tmp / "input_torque_calibration.csv"
         _scaled_history(REPO / "calibration" / "torque_calibration.csv", out_hist, repro)
@@ -170,16 +209,21 @@ def main(argv=None) -> int:
     ap.add_argument("--repro", type=float, default=None,
                     help="both channels' calibration reproducibility (relative sd; default: the shipped histories')")
     ap.add_argument("--quick", action="store_true", help="3 seeds: a smoke run")
+    ap.add_argument("--miscalibrate-input", type=float, default=None, metavar="REL",
+                    help="hand the host an input calibration history with every slope off by REL (a broken input)")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = ap.parse_args(argv)
     n = 3 if args.quick else args.seeds
     if args.repro is not None and not 0.0 < args.repro < 0.2:
         print("bench_input_torque: --repro: a relative standard deviation in (0, 0.2)", file=sys.stderr)
         return 2
+    if args.miscalibrate_input is not None and not -0.5 < args.miscalibrate_input < 0.5:
+        print("bench_input_torque: --miscalibrate-input: a relative error in (-0.5, 0.5)", file=sys.stderr)
+        return 2
     seeds = list(range(args.first_seed, args.first_seed + n))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench-input-") as tmp:
-        files = setup_files(Path(tmp), args.repro)
+        files = setup_files(Path(tmp), args.repro, args.miscalibrate_input)
         if args.jobs > 1:
             with ProcessPoolExecutor(args.jobs) as pool:
                 runs = list(pool.map(one_seed, seeds, [tmp] * n, [files] * n))
@@ -190,8 +234,9 @@ def main(argv=None) -> int:
     torque = judge_torque(runs)
     r2 = repro_for_half_width(runs, 0.02)
     repro = "shipped histories (1.6 %)" if args.repro is None else f"{100 * args.repro:.2f} %"
+    off = "" if args.miscalibrate_input is None else f", input calibration off by {args.miscalibrate_input:+.1%}"
     print(f"bench_input_torque: {n} seeds ({seeds[0]}..{seeds[-1]}), rig-input-torque + BME280, short speed-hold "
-          f"plan, calibration reproducibility {repro}, {sum(r['state'] == 'done' for r in runs)} runs done, "
+          f"plan, calibration reproducibility {repro}{off}, {sum(r['state'] == 'done' for r in runs)} runs done, "
           f"{wall_s:.0f} s wall")
     print(f"{'path':<13}{'points':>7}{'runs':>6}{'coverage':>10}{'per run':>9}{'z mean':>8}{'z sd':>7}{'mean U95 pp':>13}")
     for c, name in zip(paths, ("input_torque", "engine_map")):
@@ -201,10 +246,13 @@ def main(argv=None) -> int:
           f"mean U95 {100 * torque['mean_u95_rel']:.2f} % of the torque, z sd {torque['z_sd']:.2f}")
     print(f"input path mean U95 = 2 pp at a calibration reproducibility of {100 * r2:.2f} % (both channels; "
           "from the stated terms)")
+    lines = verdicts(paths[0], torque, args.quick)
+    for line in lines:
+        print(line)
     if args.json:
         args.json.write_text(json.dumps({"paths": paths, "torque": torque, "repro_for_2pp": r2, "seeds": seeds,
-                                         "repro": args.repro, "wall_s": wall_s}, indent=1))
-    return 0
+                                         "repro": args.repro, "verdicts": lines, "wall_s": wall_s}, indent=1))
+    return 1 if any(line.startswith("FAIL") for line in lines) else 0
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """Every bench in bench/ runs to the end: its ``--quick`` mode (CI's smoke run) as a real process.
 
-Speed and memory targets live in the bench scripts, which print figures; this only checks that each one
-still runs: exit code 0, no traceback, something printed.  The list is built from bench/ itself, so a new
+Speed and memory targets live in the bench scripts, which print figures; this checks that each one still
+runs: exit code 0, no traceback, something printed.  Benches that judge exit non-zero when their criteria
+fail: the end of this file hands bench_uncertainty and bench_input_torque a deliberately broken input.  The list is built from bench/ itself, so a new
 bench is smoke-run (and must have ``--quick``) without being added here.  bench_safety.py and
 bench_safe_state.py are smoke-run, with checks of what they print, in tests/e2e/test_bench_safety_smoke.py.
 A bench that needs tools this machine lacks (bench_firmware.py: the AVR toolchain and simavr) says so in one
@@ -66,3 +67,40 @@ def test_bench_advisor_fails_on_a_wrong_input():
     assert p.returncode == 1, f"exit {p.returncode}" + _tail(p)
     assert "Traceback" not in p.stderr, _tail(p)
     assert "criteria:" in p.stdout and "FAIL" in p.stdout and "missed" in p.stdout, _tail(p)
+
+
+# ---- benches that judge: each exits non-zero when its stated criteria fail (a deliberately broken input)
+
+def _wrong_map(tmp_path: Path, factor: float) -> Path:
+    """The shipped map with every torque times ``factor`` (and still stating its 5 %): a map of another engine."""
+    out = []
+    for line in (REPO / "calibration" / "engine_maps" / "baja-10hp-representative.csv").read_text().splitlines():
+        rpm, sep, torque = line.partition(",")
+        out.append(f"{rpm},{float(torque) * factor:.3f}" if sep and rpm[:1].isdigit() else line)
+    path = tmp_path / "wrong-map.csv"
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+@pytest.mark.slow
+def test_bench_uncertainty_fails_on_a_wrong_map(tmp_path):
+    """The well-specified world with the host handed a map 25 % stronger than the engine it was drawn from: every
+    efficiency reads ~20 % low, beyond its u95 (±10 pp); coverage falls under the criterion and the bench exits 1
+    (its quick mode passes: test_bench_quick_runs_to_the_end)."""
+    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "stated", "--engine-map", str(_wrong_map(tmp_path, 1.25)))
+    assert p.returncode == 1, f"exited {p.returncode}" + _tail(p)
+    assert "FAIL: world stated" in p.stdout and "Traceback" not in p.stderr, _tail(p)
+
+
+@pytest.mark.slow
+def test_bench_input_torque_fails_on_a_wrong_input_calibration():
+    """The host handed an input-channel history 10 % off the channel: its measured engine torque and input-path
+    efficiency miss the truth beyond their u95, and the bench exits 1 (quick passes: above)."""
+    p = _bench("bench_input_torque.py", "--quick", "--miscalibrate-input", "0.1")
+    assert p.returncode == 1, f"exited {p.returncode}" + _tail(p)
+    assert "FAIL: input path efficiency" in p.stdout and "FAIL: engine torque" in p.stdout, _tail(p)
+
+
+def test_bench_uncertainty_bad_world_is_bad_input():
+    p = _bench("bench_uncertainty.py", "--quick", "--worlds", "nowhere", timeout=120)
+    assert p.returncode == 2 and "--worlds" in p.stderr and "Traceback" not in p.stderr, _tail(p)

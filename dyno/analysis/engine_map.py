@@ -13,6 +13,12 @@ throttle takes its denominator from the curve at its own throttle, never from
 the full-throttle one, and never from a blend of two throttles (the governor
 makes torque at a given speed steep in throttle).
 
+A map states its own uncertainty: a comment line ``# stated_u_rel = 0.05 | basis`` gives the relative
+standard uncertainty of its torque and why (:attr:`EngineMap.stated_u_rel`, ``stated_u_basis``); a map
+that states none has ``stated_u_rel = None`` and the run takes ``rig.toml [uncertainty] engine_map_rel``
+(:mod:`dyno.analysis.u95_terms`).  The shipped representative map states 5 %; a map measured through the
+input torque channel (:func:`dyno.analysis.measured_map.write_map`) states its measurement's.
+
 Only :func:`load_engine_map` and :func:`load_legacy_engine_map` read files;
 malformed files raise :class:`dyno.errors.ConfigError` naming file, line and
 field.
@@ -163,6 +169,8 @@ class EngineMap:
         self._pchip = PchipInterpolator(n, t, extrapolate=False)
         self._dpchip = self._pchip.derivative()
         self.throttle_frac = 1.0  # the throttle this curve is at
+        self.stated_u_rel: float | None = None  # the file's '# stated_u_rel' (relative standard), None: not stated
+        self.stated_u_basis = ""
         self.part_throttle: dict[float, EngineMap] = {}  # (on the full-throttle map) throttle -> curve
 
     # -- throttle ------------------------------------------------------------
@@ -263,6 +271,7 @@ class EngineMap:
                         _ambient=(float(temp_c), float(dry_pressure_kpa)),
                         _standard_torque_nm=std)
         out.throttle_frac = self.throttle_frac
+        out.stated_u_rel, out.stated_u_basis = self.stated_u_rel, self.stated_u_basis
         out.file_source = getattr(self, "file_source", None) or self.source  # the file, for code that reloads it
         out.part_throttle = {t: self._part_at_ambient(c, temp_c, dry_pressure_kpa, cf)
                              for t, c in self.part_throttle.items()}
@@ -290,7 +299,7 @@ class EngineMap:
                 "rpm_max": self.rpm_max, "j1349_factor": self.j1349_factor,
                 "ambient_temp_c": None if self.ambient is None else self.ambient[0],
                 "ambient_dry_pressure_kpa": None if self.ambient is None else self.ambient[1],
-                "throttles": self.throttles}
+                "throttles": self.throttles, "stated_u_rel": self.stated_u_rel, "stated_u_basis": self.stated_u_basis}
 
 
 # ----------------------------------------------------------------------------
@@ -349,6 +358,35 @@ def _content_lines(text: str) -> list[tuple[int, str]]:
             if line.strip() and not line.lstrip().startswith("#")]
 
 
+STATED_U_FIELD = "stated_u_rel"
+
+
+def _stated_u(path: Path, text: str) -> tuple[float | None, str]:
+    """The map's ``# stated_u_rel = REL | basis`` comment: (REL, basis), or (None, "") when it states none."""
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        body = line.strip().lstrip("#").strip() if line.lstrip().startswith("#") else ""
+        if not body.startswith(STATED_U_FIELD):
+            continue
+        key, eq, rest = body.partition("=")
+        value, _, basis = rest.partition("|")
+        try:
+            u = float(value) if eq and key.strip() == STATED_U_FIELD else math.nan
+        except ValueError:
+            u = math.nan
+        if not 0.0 < u < 1.0:  # (NaN fails too)
+            raise ConfigError(path, f"line {lineno}, field {STATED_U_FIELD}",
+                              f"'# {STATED_U_FIELD} = REL | basis' with 0 < REL < 1 (relative standard "
+                              f"uncertainty of the torque), got {line.strip()!r}")
+        return u, basis.strip()
+    return None, ""
+
+
+def _with_stated_u(m: EngineMap, stated: tuple[float | None, str]) -> EngineMap:
+    for c in (m, *m.part_throttle.values()):
+        c.stated_u_rel, c.stated_u_basis = stated
+    return m
+
+
 def load_engine_map(path) -> EngineMap:
     """Load an engine map CSV with a header naming the units.
 
@@ -358,6 +396,9 @@ def load_engine_map(path) -> EngineMap:
     the knots (:math:`T = P/\\omega`) and torque is interpolated.  The map is
     taken to be at SAE J1349 standard conditions (see
     :meth:`EngineMap.at_ambient`).
+
+    ``# stated_u_rel = REL | basis`` (a comment line anywhere before the data) states the map's relative
+    standard uncertainty of torque and its basis; without it :attr:`EngineMap.stated_u_rel` is None.
 
     Part throttle: a header ``throttle,rpm,torque_nm`` (or ``power_hp`` /
     ``power_kw``) adds a first column, the throttle fraction (0 < throttle <= 1);
@@ -408,8 +449,9 @@ def load_engine_map(path) -> EngineMap:
             torque = _torque_from_power_w(rpm, val * 1000.0)
         return EngineMap(rpm, torque, source=str(path), sha256=sha)
 
+    stated = _stated_u(path, text)
     if not throttle:
-        return curve(lines[1:])
+        return _with_stated_u(curve(lines[1:]), stated)
     groups = _throttle_groups(path, lines[1:], cols[1])
     full = curve(groups.pop(1.0))
     for u, rows in groups.items():
@@ -417,7 +459,7 @@ def load_engine_map(path) -> EngineMap:
         c.throttle_frac = u
         c.source = f"{path} (throttle {u:g})"
         full.part_throttle[u] = c
-    return full
+    return _with_stated_u(full, stated)
 
 
 def _throttle_groups(path: Path, rows: list[tuple[int, str]], value_name: str) -> dict[float, list]:

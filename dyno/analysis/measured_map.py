@@ -5,8 +5,9 @@ its engine makes at each point's speed.  The full-throttle points, grouped by en
 curve with a 95 % half-width per speed: the calibration part of it (slope reproducibility, tare, cradle
 bearings) is shared by every point, so averaging shrinks only the statistical part.  Against the map the
 host was given it reads "at 3,000 rpm your engine makes 4 % less than its map".  :func:`write_map` saves it
-in the engine-map format (``rpm,torque_nm``; the uncertainty in its comments and the relative standard
-uncertainty to put in ``rig.toml [uncertainty] engine_map_rel``), which ``--engine-map`` then reads.
+in the engine-map format (``rpm,torque_nm``; each row's uncertainty in its comments and the map's relative
+standard uncertainty as its ``# stated_u_rel`` line), which ``--engine-map`` then reads: a run on it states
+the measurement's uncertainty for its map term (:mod:`dyno.analysis.u95_terms`).
 """
 
 from __future__ import annotations
@@ -83,8 +84,8 @@ def write_map(curve: list[dict], path, *, source: str = "") -> str:
     lines = ["# MEASURED engine map: full-throttle net torque from the engine-side input torque channel",
              f"# (dyno, issue 27){' from ' + source if source else ''}; between and beyond these speeds the map "
              "interpolates / refuses as any map.",
-             f"# relative standard uncertainty (largest over the rows): {u_rel:.4f} -> rig.toml [uncertainty] "
-             f"engine_map_rel = {math.ceil(u_rel * 1000) / 1000:.3f}",
+             f"# stated_u_rel = {math.ceil(u_rel * 1000) / 1000:.3f} | measured through the input torque channel: "
+             f"the largest row's relative standard uncertainty ({u_rel:.4f}; calibration, tare, cradle, scatter)",
              "# per row: rpm, torque_nm, its 95 % half-width (N m), points: "
              + "; ".join(f"{r['rpm']:.0f} {r['torque_nm']:.3f} ±{r['torque_u95_nm']:.3f} ({r['n_points']})"
                          for r in curve),

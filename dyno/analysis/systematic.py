@@ -6,9 +6,9 @@ and they are shared by every point of a run (so they shift a whole curve, not on
 * the **torque calibration**'s slope (efficiency ∝ torque ∝ 1/slope): its reproducibility, the relative
   standard deviation of the slopes in the calibration history (the rig's calibrations scatter more than
   one fit's own slope error says), combined with the entry's own fit error when its sample count is known;
-* the **engine map**'s torque (efficiency ∝ 1/map power): a relative standard uncertainty stated in
-  ``rig.toml [uncertainty] engine_map_rel`` (5 % by default: the shipped map is representative, not
-  measured; a map measured on a dyno of stated accuracy allows less).
+* the **engine map**'s torque (efficiency ∝ 1/map power): the relative standard uncertainty the map file
+  states (``# stated_u_rel``: 5 % in the shipped representative map; a measured map states its
+  measurement's), else ``rig.toml [uncertainty] engine_map_rel`` (:mod:`dyno.analysis.u95_terms`).
 
 * the **air** (efficiency ∝ CF, the SAE J1349 factor the map is taken to the run's day by): what the
   day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), the factor's

@@ -67,12 +67,13 @@ def add_air_arguments(p) -> None:
                    help="with --sim: the simulated day (default: drawn per seed). The host is not told it")
     p.add_argument("--sim-engine-dev", type=float, default=None, metavar="REL_SD",
                    help="with --sim: relative sd of the simulated engine's smooth deviation from its map "
-                        "(default 0.05; 0: exactly the map's shape)")
+                        "(default 0.044, the simulator's own: dyno/sim/rig_params.py; 0: exactly the map's shape)")
     p.add_argument("--sim-engine-ageing", type=float, default=None, metavar="FRAC",
                    help="with --sim: the simulated engine makes this fraction less than its map (worn)")
     p.add_argument("--sim-cal-drift", type=float, default=None, metavar="REL_SD",
                    help="with --sim: relative sd of the torque sensor's gain drift from its latest calibration "
-                        "(default 0.0157, the calibration history's reproducibility; 0: none)")
+                        "(default 0.015, re-seating and re-calibration scatter; 0: none; the thermal drift with "
+                        "the day's temperature, 0.025 %%/K from 20 C, stays)")
     p.add_argument("--sim-world-seed", type=int, default=None, metavar="N",
                    help="with --sim: draw the engine, sensor and day from this seed instead of --seed (the same "
                         "rig measured again: compare runs that share it)")

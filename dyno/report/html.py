@@ -282,6 +282,17 @@ def _engine_map(data: ReportData) -> str:
             + _img(figures.engine_map_svg(m), "engine map: torque and power vs engine speed", "fig-engine-map"))
 
 
+def _u95_terms(data: ReportData) -> str:
+    """What each term of the points' efficiency_u95 assumes (meta.json uncertainty.u95_terms)."""
+    from dyno.analysis.u95_terms import describe
+
+    terms = (data.meta.get("uncertainty") or {}).get("u95_terms")
+    if not terms:
+        return ""
+    items = "".join(f"<li>{escape(line)}</li>" for line in describe(terms))
+    return f'<h2 id="u95-terms">What efficiency_u95 assumes</h2><ul>{items}</ul>'
+
+
 def _tune(data: ReportData) -> str:
     if not data.tune_text:
         return "<p>No CVT tune stored with this run.</p>"
@@ -351,6 +362,7 @@ def render_report(data: ReportData) -> str:
         "<h2>Aborts, faults and discarded points</h2>", _faults(data),
         "<h2>Calibration</h2>", _calibration(data),
         "<h2>Engine map</h2>", _engine_map(data),
+        _u95_terms(data),
         "<h2>CVT tune</h2>", _tune(data),
         "<h2>Versions</h2>", _versions(data),
         _json_block(series),

@@ -62,6 +62,21 @@ def input_meta(channel) -> dict:
                              "bearing_loss_u_nm": channel.bearing_loss_u_nm, "source": channel.source}}
 
 
+def state_terms(uncertainty: dict, ambient, channel) -> None:
+    """Complete ``uncertainty["u95_terms"]`` (dyno.analysis.u95_terms) once the day's air and the input
+    channel are known: the air term, and with the channel its own terms."""
+    from dyno.analysis import u95_terms
+
+    terms = uncertainty.setdefault("u95_terms", [])
+    terms.append(u95_terms.air_term(uncertainty.get("air_rel", 0.0), getattr(ambient, "source", None)))
+    if "driveline_loss_max_frac" in uncertainty:
+        terms.append(u95_terms.driveline_term(uncertainty["driveline_loss_max_frac"],
+                                              uncertainty.get("driveline_drag_max_nm", 0.0)))
+    if channel is not None:
+        terms.extend(u95_terms.input_terms(channel))
+
+
+
 class InputPointHook:
     """The input path added to every point (after the map's terms): a point hook of the controller.
 

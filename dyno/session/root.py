@@ -108,14 +108,19 @@ def load_inputs(opts: RunOptions):
     return rig_cfg, calibration, engine_map
 
 
-def systematic_terms(opts: RunOptions, rig_cfg, calibration) -> dict:
-    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them)."""
+def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) -> dict:
+    """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them),
+    with what each assumes (``u95_terms``, dyno.analysis.u95_terms): the map's term is the map file's stated
+    uncertainty, else rig.toml's ``engine_map_rel``."""
+    from dyno.analysis import u95_terms
     from dyno.analysis.calibration import load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(opts.calibration_path)
-    return {"torque_calibration_rel": calibration_rel_u(history, calibration),
-            "engine_map_rel": rig_cfg.uncertainty.engine_map_rel, "calibration_entries": len(history)}
+    cal = calibration_rel_u(history, calibration)
+    emap, basis = u95_terms.map_basis(engine_map, rig_cfg.uncertainty.engine_map_rel)
+    return {"torque_calibration_rel": cal, "engine_map_rel": emap, "calibration_entries": len(history),
+            "u95_terms": u95_terms.base_terms(cal, len(history), emap, basis)}
 
 
 def limits_from_config(rig_cfg) -> SafetyLimits:
@@ -150,6 +155,7 @@ class RunContext:
     pi_outputs: bool = False  # the outputs are the Pi's own code (the rig, or the twin): the rig's signal path
     estop_hooked: bool = False  # the E-stop input records its stops through this context (start_watchdog)
     link_meter: object = None  # dyno.transports.budget.LinkMeter: the firmware link's time on the wire
+    u95_terms: list | None = None  # what each term of efficiency_u95 assumes (dyno.analysis.u95_terms)
 
 
 def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
@@ -184,7 +190,7 @@ def build(opts: RunOptions, now_s) -> RunContext:
     the safety they get (monitor, watchdog, drills, signal handlers) all come from here.
     """
     rig_cfg, calibration, engine_map = load_inputs(opts)
-    uncertainty = systematic_terms(opts, rig_cfg, calibration)
+    uncertainty = systematic_terms(opts, rig_cfg, calibration, engine_map)
     from dyno.session.drills_wiring import check_wiring_drill
 
     for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
@@ -256,9 +262,10 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     if ambient.corrected:  # the engine makes the day's power, not the standard day's (SAE J1349)
         engine_map = engine_map.at_ambient(ambient.temp_c, ambient.dry_pressure_kpa)
     site_m = rig_cfg.ambient.altitude_m  # the interval's asymmetric terms (dyno.analysis.systematic.interval_basis)
-    uncertainty.update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else
-                                 {"altitude_m": site_m}, driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac,
-                                 driveline_drag_max_nm=rig_cfg.driveline.drag_max_nm)
+    uncertainty.update(air_rel=ambient.air_rel_u(site_m), air_day=None if ambient.corrected else {"altitude_m": site_m},
+                       driveline_loss_max_frac=rig_cfg.driveline.loss_max_frac,
+                       driveline_drag_max_nm=rig_cfg.driveline.drag_max_nm)
+    app_input.state_terms(uncertainty, ambient, input_channel)  # what each u95 term assumes
     link_meter = None
     if opts.sim:  # each transaction charged its wire time at the rig file's clock (dyno.transports.budget)
         from dyno.transports.budget import LinkMeter, MeteredBus
@@ -336,7 +343,8 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter,
                      twin=twin, estop=estop, watchdog=watchdog,
                      pi_outputs=hw is not None or twin is not None,  # the outputs are the Pi's code (signal path)
-                     host_to_sim=clock.host_to_sim if clock is not None else None)  # drills' true-time latencies
+                     host_to_sim=clock.host_to_sim if clock is not None else None,  # drills' true-time latencies
+                     u95_terms=uncertainty.get("u95_terms"))  # what each term assumes (dyno.session.summary)
     unc = uncertainty
     if unc:
         from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic

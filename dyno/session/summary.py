@@ -48,6 +48,8 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     out["link"] = link_document(ctx)
     out["supervisor"] = supervisor_document(reader)
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.session.ambient)
+    if getattr(ctx, "u95_terms", None):
+        out["u95_terms"] = ctx.u95_terms  # what each term of efficiency_u95 assumes (dyno.analysis.u95_terms)
     if getattr(ctx.controller, "tare", None):
         out["torque_tare"] = ctx.controller.tare  # the zero the points were measured from
     out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level

@@ -350,7 +350,7 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
         elif self._act_mm > a0 >= a_before:
             self.pads_off_at_s = None
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
-        fric = p.cvt_secondary_friction_torque_nm                           # shaft drag, after the helix
+        fric = p.cvt_secondary_friction_torque_nm + p.world_driveline_loss_frac * max(self._t_s, 0.0)  # after the helix
         if self.driveline.on:  # bearings, mesh, windage; the chain's load share (on the last cell's belt torque)
             fric += self.driveline.between_nm(self._w_s, self._t_s)
         t_load_cap = t_brake_cap * g + fric                                 # referred to the secondary

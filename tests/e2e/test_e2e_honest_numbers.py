@@ -65,6 +65,13 @@ def test_with_the_sensor_the_j1349_factor_is_applied_and_logged(tmp_path):
     # the sensor's own error (data sheet accuracy) is all that separates the host's factor from the truth's
     assert amb["j1349_factor"] == pytest.approx(result["sim_world"]["j1349_factor"], rel=0.01)
     assert amb["end"]["source"] == "sensor"  # read again after the run
+    # what each u95 term assumes, in the run's JSON, meta.json and the report
+    terms = {t["term"]: t for t in result["u95_terms"]}
+    assert list(terms) == ["statistical", "calibration", "engine_map", "air", "driveline"]
+    assert terms["engine_map"]["u_rel"] == 0.05 and "stated in the map file" in terms["engine_map"]["basis"]
+    assert "BME280" in terms["air"]["basis"] and terms["air"]["u_rel"] < 0.005
+    assert json.loads((run_dir / "meta.json").read_text())["uncertainty"]["u95_terms"] == result["u95_terms"]
+    assert "What efficiency_u95 assumes" in (run_dir / "report.html").read_text()
     docs = [json.loads(x) for x in (run_dir / "documents.jsonl").read_text().splitlines() if x.strip()]
     assert [d for d in docs if d.get("type") == "ambient"][0]["j1349_factor"] == amb["j1349_factor"]
     emap = load_engine_map(REPO / "calibration" / "engine_maps" / "baja-10hp-representative.csv")

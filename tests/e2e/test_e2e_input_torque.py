@@ -162,7 +162,8 @@ def test_measured_engine_curve_against_the_simulated_engines_true_curve(honest_i
                           capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "than its map" in proc.stdout and out.is_file()
-    emap = load_engine_map(out)  # a map file like any other
+    emap = load_engine_map(out)  # a map file like any other, stating its measurement's uncertainty
+    assert emap.stated_u_rel == pytest.approx(max(r["torque_u95_nm"] / 2 / r["torque_nm"] for r in curve), abs=1e-3)
     cf = r["ambient"]["j1349_factor"] if r["ambient"].get("corrected") else 1.0
     for row in curve:
         assert emap.torque_nm(round(row["rpm"], 1)) == pytest.approx(row["torque_nm"] * cf, rel=1e-3)

@@ -1,0 +1,82 @@
+"""The engine map's stated uncertainty lives with the map file, and a run says what each u95 term assumes."""
+
+from __future__ import annotations
+
+import math
+import types
+from pathlib import Path
+
+import pytest
+
+from dyno.analysis import u95_terms
+from dyno.analysis.engine_map import load_engine_map
+from dyno.analysis.measured_map import write_map
+from dyno.app import DEFAULT_CALIBRATION, RunOptions, systematic_terms
+from dyno.errors import ConfigError
+
+pytestmark = pytest.mark.quick
+
+REPO = Path(__file__).resolve().parents[2]
+SHIPPED = REPO / "calibration" / "engine_maps" / "baja-10hp-representative.csv"
+PLAIN = "rpm,torque_nm\n2000,17\n3000,18\n"
+
+
+def _rig(default_rel=0.05):
+    return types.SimpleNamespace(uncertainty=types.SimpleNamespace(engine_map_rel=default_rel))
+
+
+def _terms(engine_map, default_rel=0.05):
+    from dyno.analysis.calibration import latest, load_history
+
+    cal = latest(load_history(DEFAULT_CALIBRATION))
+    return systematic_terms(RunOptions(), _rig(default_rel), cal, engine_map)
+
+
+def test_shipped_maps_state_five_percent_with_a_basis():
+    for name in ("baja-10hp-representative.csv", "baja-10hp-representative-part-throttle.csv"):
+        m = load_engine_map(REPO / "calibration" / "engine_maps" / name)
+        assert m.stated_u_rel == 0.05 and "representative" in m.stated_u_basis
+        assert all(c.stated_u_rel == 0.05 for c in m.part_throttle.values())
+        assert m.at_ambient(35.0, 90.0).stated_u_rel == 0.05  # the day's map keeps it
+        assert m.metadata()["stated_u_rel"] == 0.05
+
+
+def test_a_map_stating_none_takes_the_rig_files_default_and_says_so(tmp_path):
+    (tmp_path / "m.csv").write_text(PLAIN)
+    m = load_engine_map(tmp_path / "m.csv")
+    assert m.stated_u_rel is None
+    unc = _terms(m, default_rel=0.07)
+    assert unc["engine_map_rel"] == 0.07
+    emap = next(t for t in unc["u95_terms"] if t["term"] == "engine_map")
+    assert emap["u_rel"] == 0.07 and "rig.toml [uncertainty] engine_map_rel" in emap["basis"]
+
+
+def test_the_maps_statement_is_the_runs_map_term():
+    unc = _terms(load_engine_map(SHIPPED), default_rel=0.2)  # the map's own 5 %, not the rig file's 20 %
+    assert unc["engine_map_rel"] == 0.05
+    names = [t["term"] for t in unc["u95_terms"]]
+    assert names == ["statistical", "calibration", "engine_map"]
+    cal = next(t for t in unc["u95_terms"] if t["term"] == "calibration")
+    assert cal["u_rel"] == pytest.approx(unc["torque_calibration_rel"]) and "4 entries" in cal["basis"]
+    assert "stated in the map file" in unc["u95_terms"][2]["basis"]
+    lines = u95_terms.describe(unc["u95_terms"] + [u95_terms.air_term(0.001, "sensor")])
+    assert lines[2].startswith("engine_map: 5.00 %") and "BME280" in lines[3]
+
+
+@pytest.mark.parametrize("line", ["# stated_u_rel = 0 | none", "# stated_u_rel = five", "# stated_u_rel 0.05",
+                                  "# stated_u_rel = 1.5 | more than the torque"])
+def test_a_bad_statement_names_the_file_line_and_field(tmp_path, line):
+    (tmp_path / "m.csv").write_text(f"# a map\n{line}\n{PLAIN}")
+    with pytest.raises(ConfigError) as e:
+        load_engine_map(tmp_path / "m.csv")
+    assert "m.csv" in str(e.value) and "line 2" in str(e.value) and "stated_u_rel" in str(e.value)
+
+
+def test_a_measured_map_carries_its_measurements_uncertainty(tmp_path):
+    curve = [{"rpm": 2500.0, "torque_nm": 16.0, "torque_u95_nm": 0.48, "n_points": 3},
+             {"rpm": 3000.0, "torque_nm": 15.0, "torque_u95_nm": 0.60, "n_points": 2}]
+    write_map(curve, tmp_path / "measured.csv")
+    m = load_engine_map(tmp_path / "measured.csv")
+    assert m.stated_u_rel == pytest.approx(math.ceil(0.60 / 2 / 15.0 * 1000) / 1000)  # the worst row's: 0.020
+    assert "input torque channel" in m.stated_u_basis
+    assert _terms(m)["engine_map_rel"] == pytest.approx(0.02)
