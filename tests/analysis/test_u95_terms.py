@@ -11,7 +11,7 @@ import pytest
 from dyno.analysis import u95_terms
 from dyno.analysis.engine_map import load_engine_map
 from dyno.analysis.measured_map import write_map
-from dyno.app import DEFAULT_CALIBRATION, RunOptions, systematic_terms
+from dyno.session.root import DEFAULT_CALIBRATION, RunOptions, systematic_terms
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick

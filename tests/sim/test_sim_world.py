@@ -47,7 +47,7 @@ def test_the_world_spreads_are_the_simulators_own_not_the_hosts():
     not the history's figure, but the history's figure, a standard deviation of four slopes, is one that four
     calibrations of the simulated gauge could give (chi-square 95 % interval, 3 degrees of freedom)."""
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.rigconfig import load_rig
+    from dyno.rig.config import load_rig
 
     p = RigParams()
     stated_map = load_engine_map(p.engine_map_path).stated_u_rel
