@@ -12,7 +12,7 @@ import pytest
 
 from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import speed_hold as sh
-from dyno.control.plans.autotune import identify_gain
+from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_gain
 from dyno.control.plans.steps import probe_load_sign
 from dyno.control.controller import State, TestPlan as Plan
 from dyno.control.plans.steps import find_contact
@@ -85,19 +85,20 @@ def tunes(tmp_path_factory):
 @pytest.mark.parametrize("seed, stiff", CASES)
 def test_engine_identification_refused_where_the_cvt_shifts(tunes, seed, stiff):
     """On the logs' plant the CVT shifts at a near-flat engine speed: at 3,000 rpm on the secondary the engine
-    sits inside the shift, where the CVT, not the brake, sets its speed.  A brake pulse then moves the secondary
-    ~20x as much as the engine (relative; measured 19-24x on seeds 1-3), the engine's gain is a quarter of what
-    it is at a stop (0.014-0.019 /s against 0.073-0.078 on the former plant, which held the engine in low), and
-    a kp scaled to it (42-60) rings: with it and a 0.5 s lead a 5 % step overshot 9-10 % (sd 4 %).  So the
-    identification refuses, says why, and leaves rig.toml's kp in place -- on either brake (the share is the
-    CVT's, not the brake's)."""
+    sits inside the shift, where the CVT, not the brake, sets its speed.  Without the shift's friction a brake
+    pulse moved the secondary ~20x as much as the engine (relative; 19-24x on seeds 1-3) and a kp scaled to the
+    engine's small gain rang (a 5 % step overshot 9-10 %).  With the sheaves' friction (dyno.sim.cvt_friction:
+    a dead band in the shift balance) the CVT sticks through some pulses and slips on others: the secondary
+    still moves 3-6x as much as the engine, and the pulses' engine gains disagree (e.g. 0.02 /s on the first,
+    0.12 /s on the next three).  Either way the engine's speed is not the brake's to set here, so the
+    identification refuses, says why, and leaves rig.toml's kp in place -- on either brake."""
     f = tunes[(seed, stiff)]
     ident = f["identify"]
     assert ident["variable"] == "engine" and ident["kp_key"] == "kp_engine" and ident["kp_before"] == 3.0
     assert not ident["ok"] and not ident["applied"] and f["kp"] == 3.0, ident
-    assert ident["secondary_over_engine"] > 10.0, ident
-    assert ident["reason"].startswith("the CVT shifts here"), ident
-    assert ident["gain_rel_per_s"] < 0.04, ident  # (a quarter to a half of the engine's gain at a stop)
+    shifting = ident["secondary_over_engine"] > MAX_SHIFT_SHARE
+    assert shifting or ident["spread"] > MAX_SPREAD, ident
+    assert ident["reason"].startswith("the CVT shifts here" if shifting else "pulses disagree"), ident
 
 
 def test_the_engine_hold_stays_near_its_setpoint_inside_the_shift(tunes):
