@@ -47,7 +47,7 @@ LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
 #state { height: auto; max-height: 5; }  /* an abort's cause wraps, never cut */
 #main { height: 1fr; }
-#fields { width: 30; padding: 0 1; }
+#fields { width: 32; padding: 0 1; }
 #plot { width: 1fr; }
 #results { width: 1fr; display: none; padding: 0 1; }  /* a characterisation's figures, in place of the plot */
 #state.aborted { background: $error 40%; }
@@ -197,7 +197,7 @@ class LiveApp(OverlayMixin, DynoApp):
         t = Text()
 
         def row(label: str, value: str, style: str = "") -> None:
-            t.append(f"{label:<10}")
+            t.append(f"{label:<10}" if len(label) < 10 else label + " ")
             t.append(value + "\n", style=style)
 
         row("engine", fmt(v.rpm_primary, ".0f", " rpm"))
@@ -214,13 +214,16 @@ class LiveApp(OverlayMixin, DynoApp):
         row("effic.", efficiency_text(v, loaded))
         colour, marker = temp_colour(v.rotor_temp_c, v.rotor_temp_limit_c)
         row("rotor", fmt(v.rotor_temp_c, ".0f", f"/{v.rotor_temp_limit_c:.0f} °C{marker}"), f"bold {colour}")
-        last = last_point_text(self.session.controller.points)  # (in this row: the panel's height is fixed)
-        row("points", str(v.points) + (f"  {last}" if last else ""))
+        u95, interval = last_point_text(self.session.controller.points)
+        row("points", str(v.points) + (f"  {u95}" if u95 else ""))
+        row("interval95", interval or "—")  # the last point's efficiency_interval95
         nd = len(self.session.controller.discards)
         row("discarded", f"{nd} windows" if nd != 1 else "1 window", "bold yellow" if nd else "")
         row("link", fmt(v.frames_per_s, ".0f", " frames/s"))
-        row(" CRC/NACK", f"{v.crc_errors} / {v.nacks} (rej {v.rejected_total})")
-        row(" lost", f"{v.events_lost} events", "bold red" if v.events_lost else "")
+        # (one row: the panel's height is fixed, 80x24 shows every row)
+        row(" CRC/NACK", f"{v.crc_errors}/{v.nacks} rej {v.rejected_total} ")
+        t.append("lost ")
+        t.append(f"{v.events_lost}\n", style="bold red" if v.events_lost else "")
         row("Nano run", v.run_enable, "bold red" if v.run_enable.startswith("off") else "")
         if self.overlay_requested:
             row("overlay", self.overlay_tier or "computing…")

@@ -62,18 +62,18 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
     return f"#{min(r, 255):02x}{g:02x}00", marker
 
 
-def last_point_text(points: list) -> str:
-    """The last point's total 95 % half-width and interval, for the points row: ``U95 ±x pp · interval95
-    a…b %`` (its ``efficiency_u95``: the window's scatter with the calibration, the engine map, the air and the
-    driveline, dyno.analysis.systematic; ``efficiency_interval95``: where the truth lies at 95 %, asymmetric
-    where a term is; the CI alone is on the measuring line)."""
+def last_point_text(points: list) -> tuple[str, str]:
+    """The last point's total 95 % half-width and its interval, for the points row and the row under it:
+    ``("U95 ±x pp", "a…b %")`` (its ``efficiency_u95``: the window's scatter with the calibration, the engine
+    map, the air and the driveline, dyno.analysis.systematic; ``efficiency_interval95``: where the truth lies at
+    95 %, asymmetric where a term is; the CI alone is on the measuring line); ``("", "")`` before a point."""
     p = next((q for q in reversed(points) if isinstance(q.get("efficiency"), float)
               and math.isfinite(q["efficiency"])), None)
     if p is None:
-        return ""
+        return "", ""
     iv = p.get("efficiency_interval95")
-    tail = f" · interval95 {iv[0] * 100:.1f}…{iv[1] * 100:.1f} %" if iv and None not in iv else ""
-    return f"U95 ±{fmt(p.get('efficiency_u95', math.nan) * 100, '.1f')} pp" + tail
+    interval = f"{iv[0] * 100:.1f}…{iv[1] * 100:.1f} %" if iv and None not in iv else ""
+    return f"U95 ±{fmt(p.get('efficiency_u95', math.nan) * 100, '.1f')} pp", interval
 
 
 def efficiency_text(v: LiveValues, loaded: bool) -> str:

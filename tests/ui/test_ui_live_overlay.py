@@ -3,6 +3,8 @@ prediction on screen, solved in the background by dyno.model.overlay_service (it
 
 from __future__ import annotations
 
+import re
+
 import asyncio
 
 from dyno.control.controller import State
@@ -43,6 +45,8 @@ def test_ui_live_overlay_shows_the_full_model_for_each_point(tmp_path):
             text = screen_text(app)
             assert any(f"full {n}/" in text for n in (3, 4, 5)), text
             assert "model (full)" in text, text  # the plot's legend
+            # every row of the panel on the 80x24 screen, each number labelled: the last point's U95 and interval
+            assert "U95 ±" in text and re.search(r"interval95 \d+\.\d…\d+\.\d %", text), text
             keys = app._overlay_keys[:3]
             res = [svc.get(k) for k in keys]
             near = [svc.entries[k].extra.get("neighbour_distance") for k in keys]
