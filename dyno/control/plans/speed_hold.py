@@ -61,6 +61,9 @@ class SpeedHoldGains:
     ff_s: float = 0.0  # feed-forward: full-speed travel (s) per unit relative setpoint change
     lead_s: float = 0.5  # the position term's lead (the plant's lag); 0: the actuator's speed alone
     derivative_window_s: float = 0.1  # the error's rate over this span (two periods)
+    # Near the setpoint the minimum pulse is shorter (the CVT's stuck sheaves, below); 0: ``min_pulse_s`` everywhere
+    fine_pulse_s: float = 0.01
+    fine_band_rel: float = 0.01  # |error one lead ahead| below this: ``fine_pulse_s``
 
     @classmethod
     def from_config(cls, control, variable: str = "secondary") -> "SpeedHoldGains":
@@ -138,7 +141,10 @@ class SpeedHold:
         if abs(e_band) < self.g.deadband_rel:  # (with a lead: the error one lag ahead, where it is heading)
             return STOP, 0.0
         self.owed_s += u * self.g.period_s
-        if abs(self.owed_s) < self.g.min_pulse_s:
+        min_pulse_s = self.g.min_pulse_s
+        if 0 < self.g.fine_pulse_s < min_pulse_s and abs(e_band) < self.g.fine_band_rel:
+            min_pulse_s = self.g.fine_pulse_s  # the stuck CVT's gain: one ordinary minimum pulse is ~1 %
+        if abs(self.owed_s) < min_pulse_s:
             return STOP, 0.0
         on_s = min(abs(self.owed_s), self.g.period_s)
         direction = APPLY if self.owed_s > 0 else RELEASE
