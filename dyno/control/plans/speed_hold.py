@@ -50,7 +50,16 @@ class SpeedHoldGains:
     50 ms one only ~0.3 %: the relay eats the first ~30 ms): the former pure ``kp`` = 3 (tuned
     on the former plant) took 3.4-8 s and rang 1-2 %, higher kp oscillated; ``kp`` 12 with a 0.5 s lead settles 5 % steps within ±0.5 % in ≤ 1.5 s
     (seeds 1-10).  The dead band is judged on the error one lead ahead (where it is heading),
-    so a correction already under way is not doubled while the plant's lag hides it."""
+    so a correction already under way is not doubled while the plant's lag hides it.
+
+    Near the setpoint the minimum pulse is ``fine_pulse_s`` (10 ms; ``min_pulse_s`` beyond ``fine_band_rel``).
+    The CVT's shift has Coulomb friction (:mod:`dyno.sim.cvt_friction`, bounded by the 2019 logs): once the
+    error is small the sheaves stick inside the dead band, the ratio is fixed, and the secondary answers the
+    brake with the engine's own slope alone: one 20 ms pulse (0.10-0.14 mm of actuator) then moved it 0.8-1 %,
+    wider than the +-0.5 % band, so the hold limit-cycled one pulse each way (sd 0.31-0.35 % on 5 % steps,
+    settling 3-8 s; docs/measurements/2026-11-29-hold-friction.md).  A 10 ms pulse (~0.06 mm) halves the step:
+    sd <= 0.15 %.  A reversal shorter than the relay's settle still moves nothing (the driver's sequence), as
+    before; far from the setpoint the longer minimum keeps the pulse count down."""
 
     kp: float = 12.0  # actuator speed fraction per unit relative speed error
     ki_per_s: float = 0.0
