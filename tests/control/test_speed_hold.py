@@ -72,26 +72,32 @@ def test_owed_travel_survives_the_dead_band_on_the_same_side():
     assert APPLY not in out and out.index(RELEASE) >= 29
 
 
-def test_near_the_setpoint_the_minimum_pulse_is_the_fine_one():
-    """Within ``fine_band_rel`` of the setpoint (judged one lead ahead) the owed travel becomes a pulse once it is
-    worth ``fine_pulse_s``; farther out it waits for ``min_pulse_s``.  (With the CVT's sheaves stuck in the shift
-    friction's dead band one 20 ms pulse moves the secondary ~1 %: wider than the +-0.5 % it must hold.)"""
+def test_after_a_reversal_near_the_setpoint_the_minimum_pulse_is_the_fine_one():
+    """Near the setpoint (within ``fine_band_rel``, one lead ahead) a pulse against the last one means the last
+    correction crossed the whole dead band: from then on the owed travel becomes a pulse once it is worth
+    ``fine_pulse_s``; before any reversal, or farther out, it waits for ``min_pulse_s``.  (With the CVT's sheaves
+    stuck in the shift friction's dead band one 20 ms pulse moves the secondary ~1 %: wider than the +-0.5 %
+    the hold must keep, and the hold limit-cycled one pulse each way.)"""
     g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004, lead_s=0.0,
                        fine_pulse_s=0.01, fine_band_rel=0.01)
 
-    def first_pulse(e):
-        h = SpeedHold(g)
+    def first_pulse(h, e):
         for i in range(100):
             d, on_s = h.pulse(h.command(e, g.period_s), e)
             if d != STOP:
                 return i, d, on_s
 
-    i, d, on_s = first_pulse(0.008)  # 1.2 ms a period: 9 periods owe 10.8 ms
-    assert (i, d) == (8, APPLY) and g.fine_pulse_s <= on_s < g.min_pulse_s
-    i, d, on_s = first_pulse(-0.008)
-    assert (i, d) == (8, RELEASE) and on_s < g.min_pulse_s
-    i, d, on_s = first_pulse(0.012)  # outside the fine band: 1.8 ms a period, 12 periods to 20 ms
-    assert (i, d) == (11, APPLY) and on_s >= g.min_pulse_s
+    h = SpeedHold(g)
+    i, d, on_s = first_pulse(h, 0.008)  # 1.2 ms a period, no reversal yet: 17 periods owe 20.4 ms
+    assert (i, d) == (16, APPLY) and on_s >= g.min_pulse_s and not h.fine
+    i, d, on_s = first_pulse(h, -0.008)  # the reversal: 9 periods owe 10.8 ms
+    assert (i, d) == (8, RELEASE) and g.fine_pulse_s <= on_s < g.min_pulse_s and h.fine
+    i, d, on_s = first_pulse(h, 0.008)  # fine from here on, either way
+    assert (i, d) == (8, APPLY) and on_s < g.min_pulse_s
+    i, d, on_s = first_pulse(h, 0.012)  # outside the fine band: 1.8 ms a period, 12 periods to 20 ms
+    assert (i, d) == (11, APPLY) and on_s >= g.min_pulse_s and not h.fine
+    h.reset()
+    assert not h.fine and h.last_dir == 0
 
 
 def test_the_lead_sets_the_brake_position_by_the_error_and_waits_for_a_correction_under_way():
