@@ -158,7 +158,7 @@ class SpeedHold:
         if 0 < self.g.fine_pulse_s < min_pulse_s and abs(e_band) < self.g.fine_band_rel:
             # a reversal near the setpoint: the last correction crossed the whole dead band (one minimum pulse
             # is more than the band: the CVT's sheaves stuck in its shift friction), so go finer from here
-            self.fine = self.fine or (self.last_dir != 0 and math.copysign(1.0, self.owed_s) != self.last_dir)
+            self.fine = self.fine or (self.last_dir * self.owed_s < 0)
             if self.fine:
                 min_pulse_s = self.g.fine_pulse_s
         else:
