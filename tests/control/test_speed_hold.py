@@ -48,7 +48,8 @@ def test_owed_travel_survives_the_dead_band_on_the_same_side():
     """At the band's edge kp·e·T is a fraction of a ms a period: if the band dropped the travel already
     owed, the first pulse after the error leaves it would come seconds late (the long step responses
     of docs/control.md "The holds").  Kept, it comes at once; dropped when the error changes side."""
-    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004, lead_s=0.0)
+    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004, lead_s=0.0,
+                       fine_pulse_s=0.0)  # one minimum pulse everywhere (the fine one: the next test)
     h = SpeedHold(g)
     e = 0.02  # 2 % too fast: 3 ms of travel a period
     for _ in range(5):  # 15 ms owed, below the minimum pulse
@@ -71,12 +72,40 @@ def test_owed_travel_survives_the_dead_band_on_the_same_side():
     assert APPLY not in out and out.index(RELEASE) >= 29
 
 
+def test_after_a_reversal_near_the_setpoint_the_minimum_pulse_is_the_fine_one():
+    """Near the setpoint (within ``fine_band_rel``, one lead ahead) a pulse against the last one means the last
+    correction crossed the whole dead band: from then on the owed travel becomes a pulse once it is worth
+    ``fine_pulse_s``; before any reversal, or farther out, it waits for ``min_pulse_s``.  (With the CVT's sheaves
+    stuck in the shift friction's dead band one 20 ms pulse moves the secondary ~1 %: wider than the +-0.5 %
+    the hold must keep, and the hold limit-cycled one pulse each way.)"""
+    g = SpeedHoldGains(kp=3.0, ki_per_s=0.0, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004, lead_s=0.0,
+                       fine_pulse_s=0.01, fine_band_rel=0.01)
+
+    def first_pulse(h, e):
+        for i in range(100):
+            d, on_s = h.pulse(h.command(e, g.period_s), e)
+            if d != STOP:
+                return i, d, on_s
+
+    h = SpeedHold(g)
+    i, d, on_s = first_pulse(h, 0.008)  # 1.2 ms a period, no reversal yet: 17 periods owe 20.4 ms
+    assert (i, d) == (16, APPLY) and on_s >= g.min_pulse_s and not h.fine
+    i, d, on_s = first_pulse(h, -0.008)  # the reversal: 9 periods owe 10.8 ms
+    assert (i, d) == (8, RELEASE) and g.fine_pulse_s <= on_s < g.min_pulse_s and h.fine
+    i, d, on_s = first_pulse(h, 0.008)  # fine from here on, either way
+    assert (i, d) == (8, APPLY) and on_s < g.min_pulse_s
+    i, d, on_s = first_pulse(h, 0.012)  # outside the fine band: 1.8 ms a period, 12 periods to 20 ms
+    assert (i, d) == (11, APPLY) and on_s >= g.min_pulse_s and not h.fine
+    h.reset()
+    assert not h.fine and h.last_dir == 0
+
+
 def test_the_lead_sets_the_brake_position_by_the_error_and_waits_for_a_correction_under_way():
     """u = kp·(e + lead·de/dt): integrated by the actuator, the lead part moves the brake by kp·lead·Δe (a
     position in proportion to the error); and the dead band is judged on e + lead·de/dt, so an error outside the
     band that is already closing fast enough (a correction the plant's lag still hides) asks for no pulse."""
     g = SpeedHoldGains(kp=12.0, lead_s=0.5, period_s=0.05, min_pulse_s=0.02, deadband_rel=0.004,
-                       derivative_window_s=0.1)
+                       derivative_window_s=0.1, fine_pulse_s=0.0)
     h = SpeedHold(g)
     for _ in range(3):
         h.command(0.0, g.period_s)

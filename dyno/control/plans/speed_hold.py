@@ -50,7 +50,18 @@ class SpeedHoldGains:
     50 ms one only ~0.3 %: the relay eats the first ~30 ms): the former pure ``kp`` = 3 (tuned
     on the former plant) took 3.4-8 s and rang 1-2 %, higher kp oscillated; ``kp`` 12 with a 0.5 s lead settles 5 % steps within ±0.5 % in ≤ 1.5 s
     (seeds 1-10).  The dead band is judged on the error one lead ahead (where it is heading),
-    so a correction already under way is not doubled while the plant's lag hides it."""
+    so a correction already under way is not doubled while the plant's lag hides it.
+
+    Near the setpoint, once a pulse has gone against the one before it (the last correction crossed the whole
+    dead band), the minimum pulse is ``fine_pulse_s`` (10 ms) until the error leaves ``fine_band_rel``.
+    The CVT's shift has Coulomb friction (:mod:`dyno.sim.cvt_friction`, bounded by the 2019 logs): once the
+    error is small the sheaves stick inside the dead band, the ratio is fixed, and the secondary answers the
+    brake with the engine's own slope alone: one 20 ms pulse (0.10-0.14 mm of actuator) then moved it 0.8-1 %,
+    wider than the +-0.5 % band, so the hold limit-cycled one pulse each way (sd 0.31-0.35 % on 5 % steps,
+    settling 3-8 s; docs/measurements/2026-11-29-hold-friction.md).  A 10 ms pulse (~0.06 mm) halves the step:
+    sd <= 0.22 % over seeds 1-10 and the friction's whole range.  A reversal shorter than the relay's settle still
+    moves nothing (the driver's sequence), as before.  Only after a reversal: a plant that the coarse pulse does
+    not overshoot keeps it (fewer pulses; a plant stepped coarser than 10 ms cannot resolve the fine one)."""
 
     kp: float = 12.0  # actuator speed fraction per unit relative speed error
     ki_per_s: float = 0.0
@@ -61,6 +72,9 @@ class SpeedHoldGains:
     ff_s: float = 0.0  # feed-forward: full-speed travel (s) per unit relative setpoint change
     lead_s: float = 0.5  # the position term's lead (the plant's lag); 0: the actuator's speed alone
     derivative_window_s: float = 0.1  # the error's rate over this span (two periods)
+    # Near the setpoint after a reversal the minimum pulse is shorter (the CVT's stuck sheaves, above); 0: off
+    fine_pulse_s: float = 0.01
+    fine_band_rel: float = 0.01  # "near": |error one lead ahead| below this
 
     @classmethod
     def from_config(cls, control, variable: str = "secondary") -> "SpeedHoldGains":
@@ -84,6 +98,8 @@ class SpeedHold:
         self.owed_s = 0.0  # actuator travel asked for but not yet given (s at full speed)
         self.e_hist: list[float] = []  # the last errors, one a period (the rate over derivative_window_s)
         self.e_lead = math.nan  # e + lead·de/dt: where the error is heading
+        self.last_dir = 0  # the last pulse's direction (+1 apply, -1 release, 0 none yet)
+        self.fine = False  # near the setpoint after a reversal there: the minimum pulse is ``fine_pulse_s``
 
     def update(self, rpm: float, setpoint_rpm: float, dt_s: float) -> float:
         """Actuator command in [-1, 1] (+: apply more brake) for the measured ``rpm``."""
@@ -138,11 +154,21 @@ class SpeedHold:
         if abs(e_band) < self.g.deadband_rel:  # (with a lead: the error one lag ahead, where it is heading)
             return STOP, 0.0
         self.owed_s += u * self.g.period_s
-        if abs(self.owed_s) < self.g.min_pulse_s:
+        min_pulse_s = self.g.min_pulse_s
+        if 0 < self.g.fine_pulse_s < min_pulse_s and abs(e_band) < self.g.fine_band_rel:
+            # a reversal near the setpoint: the last correction crossed the whole dead band (one minimum pulse
+            # is more than the band: the CVT's sheaves stuck in its shift friction), so go finer from here
+            self.fine = self.fine or (self.last_dir * self.owed_s < 0)
+            if self.fine:
+                min_pulse_s = self.g.fine_pulse_s
+        else:
+            self.fine = False
+        if abs(self.owed_s) < min_pulse_s:
             return STOP, 0.0
         on_s = min(abs(self.owed_s), self.g.period_s)
         direction = APPLY if self.owed_s > 0 else RELEASE
         self.owed_s -= math.copysign(on_s, self.owed_s)
+        self.last_dir = 1 if direction == APPLY else -1
         return direction, on_s
 
 
