@@ -37,10 +37,16 @@ def test_the_default_rig_has_a_driveline_and_the_ideal_one_none():
     assert t.efficiency == pytest.approx(t.power_out_w / t.power_in_w)
 
 
+#: a heavier driveline than the default (a worn chain, tight bearings: twice the default's drag), so the
+#: correction is judged on a loss well above the coast-down's own resolution (~0.5 pp at these loads: the
+#: released pads' residual drag it also sees); the default's drag is half this (bench_fidelity, the 2019 logs)
+HEAVY_DRAG_NM, HEAVY_PER_KRPM_NM = 2 * DRAG_NM, 2 * PER_KRPM_NM
+
+
 def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_path):
-    # perfect knowledge otherwise (engine, sensor, day): the driveline alone, at the default rig's numbers
-    params = RigParams(ideal=True, driveline_loss_drag_nm=DRAG_NM, driveline_loss_drag_nm_per_krpm=PER_KRPM_NM,
-                       driveline_loss_load_frac=LOAD_FRAC)
+    # perfect knowledge otherwise (engine, sensor, day): the driveline alone
+    params = RigParams(ideal=True, driveline_loss_drag_nm=HEAVY_DRAG_NM,
+                       driveline_loss_drag_nm_per_krpm=HEAVY_PER_KRPM_NM, driveline_loss_load_frac=LOAD_FRAC)
     cd = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
                              sim_params=params))
     assert cd["state"] == "done"
@@ -48,14 +54,14 @@ def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_
     # the fitted drag is the driveline's (plus the released brake's residual drag, in the truth too)
     for rpm, f, t, s, y in zip(fit["rpm_grid"], fit["torque_nm"], cd["loss_torque_true_nm"], fit["torque_ci95_nm"],
                                fit["torque_sys95_nm"]):
-        assert t >= DRAG_NM + PER_KRPM_NM * rpm / 1000  # the truth holds the driveline's drag
+        assert t >= HEAVY_DRAG_NM + HEAVY_PER_KRPM_NM * rpm / 1000  # the truth holds the driveline's drag
         assert abs(f - t) <= s + y + 0.02
     loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
     run = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", sim_params=params,
                               plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
     inside = 0
     for p in run["points"]:
-        assert p["driveline_loss_true_nm"] > DRAG_NM
+        assert p["driveline_loss_true_nm"] > HEAVY_DRAG_NM
         k = driven_loss_keys(p, loss)
         raw = p["efficiency"] - p["efficiency_true"]
         assert raw < -0.01  # the driveline makes the reading low
