@@ -93,8 +93,8 @@ def host_stated() -> dict:
     from dyno.analysis.calibration import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.analysis.systematic import calibration_rel_u
-    from dyno.app import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
-    from dyno.rigconfig import load_rig
+    from dyno.session.root import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
+    from dyno.rig.config import load_rig
 
     emap = load_engine_map(DEFAULT_ENGINE_MAP).stated_u_rel
     if emap is None:

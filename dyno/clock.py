@@ -260,6 +260,26 @@ class LoopClock:
         time.sleep(dt_s)
 
 
+class LoopRigClock:
+    """Rig time on the running loop's own clock: the rig, and a simulation on a (virtual) loop.
+
+    The controller's clock for everything the plan times (``now()`` in rig seconds, ``await sleep(rig_s)``);
+    a paced live session gives it :class:`dyno.session.pacing.ScaledClock` instead (the same pair at
+    ``speed`` x the loop's rate).  The safety deadlines never use it: they stay on the loop's clock.
+    """
+
+    speed = 1.0
+
+    def now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    async def sleep(self, rig_s: float) -> None:
+        await asyncio.sleep(rig_s)
+
+
+LOOP_RIG_CLOCK = LoopRigClock()
+
+
 def run(main, *, virtual: bool, start_s: float = 0.0, speed: float | None = None):
     """Run coroutine ``main`` on a virtual-time loop (optionally paced) or a real one."""
     factory = (lambda: VirtualTimeLoop(start_s, speed)) if virtual else None

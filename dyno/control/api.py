@@ -139,19 +139,16 @@ class PlanContext(Protocol):
     throttle_frac: float  #: the throttle as last commanded, 0..1
 
     def now(self) -> float:
-        """Rig seconds (a paced session's host time divided by its speed-up)."""
+        """Rig seconds: the run's clock (a paced session's scaled clock, else the loop's)."""
 
     def host_now(self) -> float:
-        """Host (loop) seconds: the time base of the measuring windows and the log."""
+        """Host (loop) seconds: the time base of the log and of the points' windows (their disturbances)."""
 
     def test_time_s(self) -> float:
         """Rig seconds since GO."""
 
     async def sleep(self, dt_s: float) -> None:
         """Wait ``dt_s`` rig seconds (the outputs are serviced on the way)."""
-
-    async def plan_sleep(self, dt_s: float) -> None:
-        """Wait a duration taken from the plan (already scaled for a paced session)."""
 
     async def checkpoint(self) -> None:
         """Return when the operator has not paused the test."""

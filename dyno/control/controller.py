@@ -23,6 +23,7 @@ import math
 # one.  Nor does this module import dyno.control.plans: the plan modes' runners are handed in
 # (``runner_for``/``from_idle``, as the app's composition root does); the default is the mode table in
 # dyno.control.registry, a leaf over the api that imports a runner's module only when its mode runs.
+from dyno.clock import LOOP_RIG_CLOCK
 from dyno.control import registry as _registry
 from dyno.control.api import ENGINE_STATES as _ENGINE_STATES
 from dyno.control.api import LOADED_STATES as _LOADED_STATES
@@ -41,7 +42,7 @@ class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
                  on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None,
-                 control=None, inertia=None, input_channel=None, time_scale: float = 1.0,
+                 control=None, inertia=None, input_channel=None, clock=None,
                  point_hooks=(), result_hooks=()) -> None:
         # Everything the composition root (dyno.session.root.build) wires is given here, never set afterwards
         # (tests/test_layers.py checks that no module assigns to a built controller's attributes).
@@ -68,9 +69,11 @@ class TestController(Measuring):
         self.rig, self.control, self.inertia = rig, control, inertia
         self.tune_path = tune_path
         self.input_channel = input_channel
-        #: host seconds per rig second: 1, except in a paced UI session (speed N: 1/N), where the plan
-        #: runners' own durations (hold periods, approach times) shrink like the plan's
-        self.time_scale = float(time_scale)
+        #: the run's clock: rig time (``now()``, ``await sleep(rig_s)``) for everything the plan times (its
+        #: durations, the runners' hold periods and approach times, settling, measuring windows); the loop's
+        #: own clock unless a paced live session hands its scaled clock (dyno.session.pacing.ScaledClock).
+        #: The safety deadlines (heartbeat, link timeout, watchdog) and the log's host times stay on the loop.
+        self.clock = clock if clock is not None else LOOP_RIG_CLOCK
         self.point_hooks: list = list(point_hooks)  # callables(point, host_t0_s, host_t1_s) -> None
         self.listeners: list = []  # callables(controller) on every state change
         self.paused = False
@@ -90,7 +93,8 @@ class TestController(Measuring):
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it
         self.results: dict = {}  # a characterisation plan's figures (dyno.control.plans.characterise / coastdown)
         self.result_hooks: list = list(result_hooks)  # callables(results) -> None (the sim adds its truths)
-        self.go_s: float | None = None  # controller time of GO (test_time_s counts from it)
+        self.go_s: float | None = None  # host (loop) time of GO
+        self.go_rig_s: float | None = None  # rig time of GO (test_time_s counts from it)
         self.load_since_s: float | None = None  # rig time the brake first loaded the CVT (warm-up criterion)
         self.warmup: dict | None = None  # the warm-up criterion as met (a `warmup` document too)
         self.fault_injection: BaseException | None = None  # drill controller-crash: raised in the plan task
@@ -315,15 +319,26 @@ class TestController(Measuring):
         if input_check is not None:
             self.zero_check_input = input_check
 
+    @property
+    def time_scale(self) -> float:
+        """Host seconds per rig second: 1, except in a paced live session (speed N: 1/N)."""
+        return 1.0 / self.clock.speed
+
     def rig_now(self) -> float:
-        """The controller's time in rig seconds (see :attr:`time_scale`)."""
-        return self._now() / self.time_scale
+        """The controller's time in rig seconds (:attr:`clock`)."""
+        return self.clock.now()
 
     async def rig_sleep(self, dt_s: float) -> None:
-        await self._sleep(dt_s * self.time_scale)
+        """Wait ``dt_s`` rig seconds (a duration of the plan's), the outputs serviced after."""
+        await self.clock.sleep(dt_s)
+        self._after_sleep()
 
     async def _sleep(self, dt_s: float) -> None:
+        """Wait ``dt_s`` host (loop) seconds: the poller's and the link's own periods."""
         await asyncio.sleep(dt_s)
+        self._after_sleep()
+
+    def _after_sleep(self) -> None:
         if self.fault_injection is not None:
             exc, self.fault_injection = self.fault_injection, None
             raise exc
@@ -351,16 +366,16 @@ class TestController(Measuring):
         if self.on_wait_engine:
             self.on_wait_engine()
         since = None
-        t_enabled = self._now()
+        t_enabled = self.rig_now()  # the plan's durations are rig seconds (self.clock)
         while True:
-            await self._sleep(0.05)
-            if self._now() - t_enabled > p.engine_start_timeout_s:
+            await self.rig_sleep(0.05)
+            if self.rig_now() - t_enabled > p.engine_start_timeout_s:
                 self.abort("stall", f"no engine speed {p.engine_start_timeout_s:.0f} s after enabling the ignition: "
                                     "engine not started, or the primary Hall sensor is dead")
                 return
             if self.poller.rpm(v1.CH_PRIMARY) > p.engine_running_rpm:
-                since = since if since is not None else self._now()
-                if self._now() - since >= p.engine_detect_s:
+                since = since if since is not None else self.rig_now()
+                if self.rig_now() - since >= p.engine_detect_s:
                     break
             else:
                 since = None
@@ -372,13 +387,13 @@ class TestController(Measuring):
         if self.auto_go:
             self._go.set()
         await self._go.wait()
-        self.go_s = self._now()
+        self.go_s, self.go_rig_s = self._now(), self.rig_now()
         if p.mode in self.from_idle:  # characterisations start from idle: no full-throttle warm-up
             await self.runner_for(p.mode)(self.plan_context)
             return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.set_throttle(1.0)
-        await self._sleep(p.warmup_s)
+        await self.rig_sleep(p.warmup_s)
         await self.runner_for(p.mode)(self.plan_context)
 
     # --- safety ----------------------------------------------------------------------------------

@@ -67,13 +67,10 @@ class EngineContext:
 
     def test_time_s(self) -> float:
         e = self._engine
-        return (e._now() - e.go_s) / e.time_scale
+        return e.rig_now() - e.go_rig_s
 
     async def sleep(self, dt_s: float) -> None:
         await self._engine.rig_sleep(dt_s)
-
-    async def plan_sleep(self, dt_s: float) -> None:
-        await self._engine._sleep(dt_s)
 
     async def checkpoint(self) -> None:
         await self._engine._resume.wait()

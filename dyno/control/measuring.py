@@ -32,10 +32,11 @@ class Measuring:
         await self._warm_up_at_load()
         for attempt in range(MAX_REMEASURE + 1):
             self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
-            host_t0, dev_t0 = self._now(), self.poller.device_now_us()
-            await self._sleep(p.measure_s)
+            # the window's length is the plan's, in rig seconds (self.clock); its ends are kept in host time
+            host_t0, rig_t0, dev_t0 = self._now(), self.rig_now(), self.poller.device_now_us()
+            await self.rig_sleep(p.measure_s)
             while True:
-                host_t1, dev_t1 = self._now(), self.poller.device_now_us()
+                host_t1, rig_t1, dev_t1 = self._now(), self.rig_now(), self.poller.device_now_us()
                 point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
                                      index=len(self.points), throttle_frac=self.throttle_frac)
                 # Against the error's upper bound, not the estimate: few batches must not stop a window
@@ -43,13 +44,13 @@ class Measuring:
                 ci = p.target_efficiency_ci95 is not None
                 bound = stop_uncertainty(point, ci95=ci, quantile=p.stop_quantile)
                 unsure = bound > (p.target_efficiency_ci95 if ci else p.target_efficiency_sem)
-                remaining_s = p.max_measure_s - (host_t1 - host_t0)
+                remaining_s = p.max_measure_s - (rig_t1 - rig_t0)
                 if unsure and give_up is not None and give_up():
                     point["gave_up"] = True
                     break
                 if not unsure or remaining_s < 0.05:
                     break  # (a NaN sem cannot improve by waiting; a sliver of time cannot either)
-                await self._sleep(min(p.measure_check_s, remaining_s))
+                await self.rig_sleep(min(p.measure_check_s, remaining_s))
             # Let the poller look once more: a loss or reset at the window's end is reported late.
             await self._sleep(2.0 * getattr(self.poller, "poll_period_s", 0.0))
             disturbed = self.poller.disturbances_between(host_t0, self._now())
@@ -114,6 +115,6 @@ class Measuring:
         lim = self.limits
         for ch in (v1.CH_PRIMARY, v1.CH_SECONDARY):
             if self._channel_quiet_s(ch) > 0.1:
-                await self._sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)
+                await self.rig_sleep(max(lim.primary_quiet_s, lim.secondary_quiet_s) + 0.05)  # (judged in device time)
                 return False
         return True

@@ -3,15 +3,15 @@
 The physics runs at ``speed`` x real time on a scaled clock, ``t_sim = (loop.time() - t0) * speed``,
 starting at 0 (the loop's monotonic clock is hours since boot; the physics would otherwise simulate them
 all on the first poll).  The composition root (:func:`dyno.session.root.build`) takes the clock and paces the
-rest from it: the plan's durations shrink by the same factor (the controller runs on the loop's clock),
-the simulated driver's release timer reads the physics' time, the polls drain ``speed`` x more frames.
+rest from it: the controller times the plan on it (``now()`` in rig seconds, ``sleep(rig_s)`` waiting
+``rig_s / speed`` on the loop), so the plan keeps its own durations; the simulated driver's release timer
+reads the physics' time; the polls drain ``speed`` x more frames.  The safety deadlines (heartbeat, link
+timeout, watchdog) stay on the loop's clock: they protect the real world, which runs in wall time.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from dyno.control.api import TestPlan
+import asyncio
 
 
 class ScaledClock:
@@ -25,6 +25,10 @@ class ScaledClock:
     def now(self) -> float:
         return (self._loop_time() - self.t0) * self.speed
 
+    async def sleep(self, rig_s: float) -> None:
+        """Wait ``rig_s`` simulated seconds: ``rig_s / speed`` on the loop."""
+        await asyncio.sleep(rig_s / self.speed)
+
     def host_to_sim(self, t_host_s: float) -> float:
         """A loop time as simulated time (drills' true-time latencies)."""
         return (t_host_s - self.t0) * self.speed
@@ -32,20 +36,6 @@ class ScaledClock:
     def restart(self) -> None:
         """Simulated time starts now (a session's rig starts when its first poll does, not when it was built)."""
         self.t0 = self._loop_time()
-
-
-def scaled_plan(plan: TestPlan, speed: float) -> TestPlan:
-    """The plan with every duration divided by ``speed`` (host seconds for ``speed`` x simulated ones)."""
-    if speed == 1.0:
-        return plan
-    k = 1.0 / speed
-    settle = replace(plan.settle, min_settle_s=plan.settle.min_settle_s * k,
-                     max_settle_s=plan.settle.max_settle_s * k, fixed_settle_s=plan.settle.fixed_settle_s * k)
-    return replace(plan, engine_detect_s=plan.engine_detect_s * k, engine_start_timeout_s=plan.engine_start_timeout_s * k,
-                   warmup_s=plan.warmup_s * k,
-                   step_s=plan.step_s * k, step_min_s=plan.step_min_s * k, step_max_s=plan.step_max_s * k,
-                   measure_s=plan.measure_s * k, max_measure_s=plan.max_measure_s * k, settle_mode="fixed",
-                   settle=settle)
 
 
 class SimTimeActuators:

@@ -224,7 +224,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     sim = twin = estop = None
     clock = opts.clock if opts.sim else None  # the live session's scaled clock (None: the loop's time is the sim's)
     speed = clock.speed if clock is not None else 1.0
-    plan = opts.plan
+    plan = opts.plan  # in rig seconds, never rewritten: a paced controller times it on the scaled clock
     if opts.sim:
         from dyno.sim.bus import BusFaults
         from dyno.sim.rig import SimRig
@@ -247,10 +247,6 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
             from dyno.session.pacing import SimTimeActuators
 
             actuators = SimTimeActuators(sim.actuators, clock.now)
-        if clock is not None:  # the plan's durations in host seconds (the controller runs on the loop's clock)
-            from dyno.session.pacing import scaled_plan
-
-            plan = scaled_plan(opts.plan, speed)
         blocking = False
     else:
         actuators, estop = hw.actuators, hw.estop
@@ -334,7 +330,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 rig=rig_cfg, control=rig_cfg.control, inertia=rig_cfg.inertia,  # [control], [inertia]
                                 tune_path=tune_path,  # the characterisations compare with the tune's prediction
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
-                                time_scale=1.0 / speed)  # the plan runners' own durations shrink like the plan's
+                                clock=clock)  # rig time for the plan (None: the loop's; safety stays on the loop)
     writer.on_error = lambda exc: controller.abort(
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")

@@ -55,8 +55,9 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     out.update(ctx.controller.results)  # a characterisation's figures (engagement_rpm, ...), top level
     go_s = ctx.controller.go_s
     ends = [p["host_t_end_s"] for p in ctx.controller.points if p.get("host_t_end_s") is not None]
-    # from GO to the end of the last measurement, on the controller's clock (simulated on the sim)
-    out["test_time_s"] = (max(ends) - go_s) if go_s is not None and ends else ctx.controller.results.get("test_time_s")
+    # from GO to the end of the last measurement in rig seconds (host seconds over the paced session's scale)
+    scale = getattr(ctx.controller, "time_scale", 1.0)
+    out["test_time_s"] = (max(ends) - go_s) / scale if go_s is not None and ends else ctx.controller.results.get("test_time_s")
     out["warmup"] = ctx.controller.warmup  # the warm-up criterion as met before the first point (or None)
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs

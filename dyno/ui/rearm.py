@@ -169,9 +169,9 @@ class RearmMixin:
 
 # What dyno.session.root.build gives a controller's constructor beside the plan and its parts (rig.toml's description,
 # control gains and inertias, the tune, the input channel as tared): a re-armed controller is given the same.
-# (time_scale: the paced session's host seconds per rig second -- lost, a re-armed x4 session's speed hold timed
-# its derivative and settle in host seconds and held no setpoint; input_channel: the live screen's T_in)
-REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "time_scale", "input_channel")
+# (clock: the paced session's scaled clock -- lost, a re-armed x4 session would time its plan in host seconds;
+# input_channel: the live screen's T_in)
+REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "clock", "input_channel")
 INPUT_COPIES = ("plan.toml",)
 
 #: seconds of events and truth a re-arm keeps (more than any window or drill check looks back over)

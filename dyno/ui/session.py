@@ -3,11 +3,9 @@
 Textual runs its own asyncio loop, so the simulated rig cannot use
 :class:`dyno.clock.VirtualTimeLoop`.  Instead the session hands the composition root a scaled clock
 (:class:`dyno.session.pacing.ScaledClock`, ``t_sim = (loop.time() - t0) * speed``) with the run's spec, and
-:func:`dyno.session.root.build` paces the run from it.  The poller keeps its real-time rate.  At
-``speed > 1`` the plan's durations are divided by ``speed`` so the rig sees
-the usual warm-up, step, settle and measurement times in simulated time,
-and settling uses the fixed time (the detection's window is compared with
-host time and measured in device time, which no longer agree).
+:func:`dyno.session.root.build` paces the run from it.  The poller keeps its real-time rate.  The
+controller times the plan on that clock, so the plan keeps its own durations (rig seconds: the warm-up,
+steps, settling, measuring windows, the screen's "measuring N s"); the safety deadlines stay on the loop's.
 """
 
 from __future__ import annotations
@@ -18,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
-from dyno.session.pacing import ScaledClock, SimTimeActuators, scaled_plan  # noqa: F401 (re-exported)
+from dyno.session.pacing import ScaledClock, SimTimeActuators  # noqa: F401 (re-exported)
 from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
 
 FINISHED = (State.DONE, State.ABORTED)
@@ -87,7 +85,7 @@ class LiveSession(RearmMixin):
             self._signals.armed(self.ctx)
 
     def _build(self, opts, run_opts, build, loop) -> None:
-        if opts.sim:  # paced from the scaled clock by the root: plan, time scale, actuators' clock, polls, ring
+        if opts.sim:  # paced from the scaled clock by the root: the controller's clock, actuators' clock, polls, ring
             self.ctx = build(run_opts, self.sim_now)
         else:  # pragma: no cover - needs the rig
             from dyno.hw.safety import SafetyGuard

@@ -13,12 +13,11 @@ import time
 import pytest
 
 from dyno.control.controller import State
-from dyno.control.controller import TestPlan as Plan
 from dyno.ui.live_app import LiveApp
 from dyno.model.overlay_inputs import overlay_inputs
 from dyno.analysis.live import RateMeter, ideal_engine_rpm
 from dyno.ui.live_model import fmt, temp_colour
-from dyno.ui.session import LiveOptions, scaled_plan
+from dyno.ui.session import LiveOptions
 from tests.rig_files import rig_without_run_enable
 from tests.screens import screen_text, wait_for
 
@@ -268,10 +267,6 @@ def test_ui_live_model_pieces():
     assert x == 2000.0 and op.primary_speed_rpm == 3000.0 and op.primary_torque_nm == pytest.approx(tq)
     # the geometric ratio is the speed ratio less the belt's slip (Table 6.1 belt, 100 N slack)
     assert 1.5 * (1 - 0.01) < op.ratio < 1.5 and op.slack_tension_n == 100.0
-    plan = scaled_plan(Plan(), 10.0)
-    assert plan.warmup_s == pytest.approx(0.3) and plan.settle_mode == "fixed"
-    assert plan.settle.fixed_settle_s == pytest.approx(0.4)
-    assert scaled_plan(Plan(), 1.0) == Plan()
     from dyno.analysis.engine_map import load_engine_map
     from dyno.session.root import DEFAULT_ENGINE_MAP
 

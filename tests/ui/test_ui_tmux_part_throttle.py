@@ -3,6 +3,7 @@ curve at the commanded throttle, and says n/a (why) when the map has none there.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -43,10 +44,10 @@ def _env(home: Path) -> dict:
 
 
 def _fields(screen: str) -> dict:
-    """The live screen's fields column (30 wide) as {label: value text}."""
+    """The live screen's fields column (32 wide) as {label: value text}."""
     out = {}
     for line in screen.splitlines():
-        m = FIELD.match(line[:30].rstrip())
+        m = FIELD.match(line[:32].rstrip())
         if m:
             out[m.group(1)] = m.group(2).strip()
     return out
@@ -88,9 +89,14 @@ def _loaded_readouts(tmp_path: Path, engine_map: Path) -> list[dict]:
 def test_ui_tmux_part_throttle_efficiency_uses_the_curve_at_the_throttle(tmp_path):
     from dyno.analysis.engine_map import load_engine_map
 
-    full = load_engine_map(PART_MAP)
-    part = full.at_throttle(0.6)
     seen = _loaded_readouts(tmp_path, PART_MAP)
+    # the shipped rig measures its air (its BME280): the screen's engine power is the map's at the run's day
+    from dyno.analysis.air import Ambient
+
+    air = Ambient.from_dict(json.loads((tmp_path / "run" / "meta.json").read_text())["ambient"])
+    assert air.source == "sensor" and air.corrected, air
+    full = load_engine_map(PART_MAP).at_ambient(air.temp_c, air.dry_pressure_kpa)
+    part = full.at_throttle(0.6)
     apart = 0  # readouts where the two curves differ by > 10 %: where the old full-throttle denominator was wrong
     for f in seen:
         rpm = float(f["engine"].split()[0])

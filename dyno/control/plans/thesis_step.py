@@ -4,7 +4,8 @@ Full throttle (the engine's warm-up is behind us), then repeat: apply the brake 
 wait for steady state (detected from the data, or the thesis's fixed 4 s), measure a point — until
 the secondary falls below ``min_secondary_rpm`` or ``max_points`` are taken.  The step length adapts
 so the run gives about ``target_points`` points over ``expected_secondary_span_rpm``.  Every duration
-here comes from the plan, so it waits with :meth:`~dyno.control.api.PlanContext.plan_sleep`.
+here comes from the plan and is waited in rig seconds (:meth:`~dyno.control.api.PlanContext.sleep`), the
+time base of the device's streams the settling window is cut from.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ async def run_thesis_step(ctx) -> None:
         await ctx.checkpoint()
         ctx.phase(State.STEP, f"brake step {step_s * 1e3:.0f} ms")
         ctx.brake(APPLY)
-        await ctx.plan_sleep(step_s)
+        await ctx.sleep(step_s)
         ctx.brake(STOP)
         ctx.mark_loaded()
         ctx.phase(State.SETTLE, "waiting for steady state")
@@ -80,30 +81,30 @@ async def secondary_below(ctx, rpm_min: float) -> bool:
     if rs == 0.0 and _channel_quiet_s(ctx, v1.CH_SECONDARY) < 2.0:
         # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
         # within secondary_quiet_s; never read it as "the test has reached its end".
-        await ctx.plan_sleep(ctx.config.limits.secondary_quiet_s + 0.1)
+        await ctx.sleep(ctx.config.limits.secondary_quiet_s + 0.1)
         rs = ctx.rpm(v1.CH_SECONDARY)
     return rs < rpm_min
 
 
 async def settle(ctx) -> tuple[str, float]:
     """SETTLE: the thesis's fixed wait, or until the speeds and torque are steady (:func:`is_settled`),
-    the time cap, or the secondary below the plan's end.  Returns (how, host seconds)."""
+    the time cap, or the secondary below the plan's end.  Returns (how, rig seconds)."""
     p, c = ctx.plan, ctx.plan.settle
-    t0 = ctx.host_now()
+    t0 = ctx.now()
     if p.settle_mode == "fixed":
-        await ctx.plan_sleep(c.fixed_settle_s)
+        await ctx.sleep(c.fixed_settle_s)
         return "fixed", c.fixed_settle_s
-    await ctx.plan_sleep(c.min_settle_s)
+    await ctx.sleep(c.min_settle_s)
     cal = ctx.config.calibration
     while True:
         now_dev = ctx.device_now_us()
-        if now_dev is not None and ctx.host_now() - t0 >= c.window_s:
+        if now_dev is not None and ctx.now() - t0 >= c.window_s:
             ok, _ = is_settled(ctx.streams, now_dev, cal.slope_counts_per_nm, cal.intercept_counts, c)
             if ok:
-                return "detected", ctx.host_now() - t0
-        if ctx.host_now() - t0 >= c.max_settle_s:
-            return "timeout", ctx.host_now() - t0
-        if (ctx.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and ctx.host_now() - t0 > c.min_settle_s + 1
+                return "detected", ctx.now() - t0
+        if ctx.now() - t0 >= c.max_settle_s:
+            return "timeout", ctx.now() - t0
+        if (ctx.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and ctx.now() - t0 > c.min_settle_s + 1
                 and await secondary_below(ctx, p.min_secondary_rpm)):
-            return "below_min", ctx.host_now() - t0
-        await ctx.plan_sleep(0.1)
+            return "below_min", ctx.now() - t0
+        await ctx.sleep(0.1)

@@ -1,0 +1,91 @@
+"""The paced live session (``dyno ui --sim --speed N``) times its plan on the scaled clock: the plan keeps
+its own durations (rig seconds: controller, meta.json, the screen's "measuring N s"), while the physics runs at
+N x the loop's (wall) time."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+
+import pytest
+
+from dyno.clock import LOOP_RIG_CLOCK, run
+from dyno.control.controller import State, TestPlan
+from dyno.session.pacing import ScaledClock
+from dyno.ui.session import LiveOptions, LiveSession
+
+SPEED = 8.0
+
+
+@pytest.mark.quick
+def test_the_scaled_clock_sleeps_rig_seconds_over_speed_on_the_loop():
+    async def main():
+        loop = asyncio.get_running_loop()
+        clock = ScaledClock(loop.time, 4.0)
+        t_loop, t_rig = loop.time(), clock.now()
+        await clock.sleep(2.0)
+        scaled = (loop.time() - t_loop, clock.now() - t_rig)
+        t_loop = loop.time()
+        await LOOP_RIG_CLOCK.sleep(2.0)
+        return scaled, (loop.time() - t_loop, LOOP_RIG_CLOCK.now() - loop.time())
+
+    (loop_s, rig_s), (plain_loop_s, offset_s) = run(main(), virtual=True)
+    assert loop_s == pytest.approx(0.5) and rig_s == pytest.approx(2.0)
+    assert plain_loop_s == pytest.approx(2.0) and offset_s == 0.0  # unpaced: rig time is the loop's
+
+
+async def _until(cond, timeout_s: float) -> bool:
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        await asyncio.sleep(0.02)
+    return cond()
+
+
+def test_a_paced_session_keeps_the_plans_durations_while_the_physics_runs_speed_times_wall_time(tmp_path):
+    plan = TestPlan()
+    seen: list[tuple[State, float, float, str]] = []  # (state, sim truth time, loop time, reason) at each change
+
+    async def scenario():
+        s = LiveSession(LiveOptions(sim=True, speed=SPEED, seed=3, out_dir=tmp_path / "run", plan=plan))
+        s.controller.listeners.append(
+            lambda c: seen.append((c.state, s.sim.model.t_s, s.loop.time(), c.reason)))
+        s.start()
+        try:
+            assert await _until(lambda: s.controller.state is State.ARMED, 30), s.controller.reason
+            s.go()
+            assert await _until(lambda: s.controller.points or s.controller.state in (State.DONE, State.ABORTED),
+                                90), s.controller.reason
+            assert s.controller.points, s.controller.reason
+            label_s = s.state_elapsed_s()
+            return s.controller.plan, s.controller.points[0], s.controller.time_scale, label_s, s.ctx.writer.run_dir
+        finally:
+            await s.close("test")
+
+    ctrl_plan, point, time_scale, _, run_dir = asyncio.run(scenario())
+    # the plan is the plan's own, not divided by the speed: the controller's, and the run's record of it
+    assert ctrl_plan == plan and ctrl_plan.warmup_s == 3.0 and ctrl_plan.measure_s == 3.0
+    meta = json.loads((run_dir / "meta.json").read_text())
+    assert meta["plan"]["warmup_s"] == 3.0 and meta["plan"]["max_measure_s"] == plan.max_measure_s
+    assert meta["plan"]["settle_mode"] == plan.settle_mode  # (no forced fixed settling)
+    assert time_scale == pytest.approx(1 / SPEED)
+    measure = [r for st, _, _, r in seen if st is State.MEASURE]
+    assert measure and measure[0].startswith(f"measuring {plan.measure_s:.0f}-{plan.max_measure_s:.0f} s")
+    # the warm-up lasts the plan's 3 s in the simulated world's time, 3/SPEED s on the loop
+    (_, sim_w, loop_w, _), = [x for x in seen if x[0] is State.WARMUP]
+    _, sim_s, loop_s, _ = next(x for x in seen if x[0] is State.STEP)
+    assert plan.warmup_s - 0.1 < sim_s - sim_w < plan.warmup_s + 1.0, (sim_s - sim_w)
+    assert sim_s - sim_w == pytest.approx(SPEED * (loop_s - loop_w), rel=0.15, abs=0.5)
+    # settling is detected from the data as unpaced (no forced fixed wait), timed in rig seconds: the point's
+    # settle_s is the simulated world's time from SETTLE to MEASURE
+    assert point["settled_by"] in ("detected", "timeout") and point["settle_s"] >= plan.settle.min_settle_s
+    i_measure = next(i for i, x in enumerate(seen) if x[0] is State.MEASURE)
+    _, sim_settle, _, _ = next(x for x in reversed(seen[:i_measure]) if x[0] is State.SETTLE)
+    # (the truth's time is the last poll's: each end may lag by a loop hiccup x SPEED on a loaded machine)
+    assert point["settle_s"] - 0.8 < seen[i_measure][1] - sim_settle < point["settle_s"] + 0.8, point["settle_s"]
+    # the first point's window: at least the plan's measure_s of device (rig) time, over SPEED on the loop
+    assert point["duration_s"] >= plan.measure_s - 0.05, point["duration_s"]
+    host_window_s = point["host_t_end_s"] - point["host_t_start_s"]
+    assert host_window_s == pytest.approx(point["duration_s"] / SPEED, rel=0.15, abs=0.1)
