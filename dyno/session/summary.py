@@ -131,6 +131,7 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               "torque_secondary_nm", "power_out_w", "power_in_w",
               # efficiency_reason: why efficiency is null (no engine-map curve at the point's throttle, ...)
               "efficiency", "efficiency_sem", "efficiency_ci95", "efficiency_reason", "rpm_primary_std", "rpm_secondary_std", "torque_secondary_std_nm",
+              "torque_secondary_sem_nm", "torque_secondary_sem_dof",
               "n_primary_edges", "n_secondary_edges", "n_adc", "duration_s", "settled_by", "valid",
               "efficiency_true", "rpm_primary_true", "rpm_secondary_true", "torque_secondary_true_nm", "driveline_loss_true_nm",
               "faults",

@@ -357,6 +357,7 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
             give_up=lambda: not abs(secondary_rpm(ctx, 0.5) - sp) <= sh.drift_rel * sp)
     finally:
         target["frozen"] = False
+    point = _inertia_corrected(ctx, point)
     point.update(settled_by=settled_by, settle_s=settle_s, setpoint_rpm=sp)
     if point.get("gave_up") or not abs(point["rpm_secondary"] - sp) <= sh.drift_rel * sp:
         # The frozen brake let the CVT shift under the window (its hysteresis): the average
@@ -367,6 +368,17 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
         return skip(f"torque {point['torque_secondary_nm']:.2f} N m below {p.min_point_torque_nm} N m at {sp:.0f} rpm")
     ctx.record(point, host_t0, host_t1)
     return point, None
+
+
+def _inertia_corrected(ctx, point: dict) -> dict:
+    """The window's I·alpha correction (dyno.analysis.inertia): with the brake frozen the CVT may still
+    shift under the window (its sheaves' stick-slip), the engine and the secondary accelerating; what the
+    crank's inertia takes the map's torque does not pass to the CVT, and the gauge misses the secondary's."""
+    from dyno.analysis.inertia import correct_inertia
+    from dyno.rig.config import InertiaConfig
+
+    inertia = ctx.config.inertia or InertiaConfig()  # rig.toml [inertia]: the one source
+    return correct_inertia(point, ctx.streams, ctx.config.engine_map, inertia.engine_kg_m2, inertia.secondary_kg_m2)
 
 
 def speed_rate_rel_per_s(ctx, sp: float, window_s: float) -> float:
