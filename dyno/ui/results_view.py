@@ -85,7 +85,8 @@ def coast_down_lines(r: dict) -> list[str]:
     f = r["loss_fit"]
     co = f.get("coefficients") or {}
     out = ["COAST-DOWN: driven-side loss at the secondary",
-           f"T = a + b·ω + c·ω² (ω in rad/s) over {_f(f.get('rpm_min'), '.0f')}–{_f(f.get('rpm_max'), '.0f')} rpm",
+           "T = a + b·ω + c·ω² (ω in rad/s)",  # (two lines: the pane beside the 32-column fields is 46 wide)
+           f"  over {_f(f.get('rpm_min'), '.0f')}–{_f(f.get('rpm_max'), '.0f')} rpm",
            f"  a = {_f(co.get('a_nm'), '.4f')} N·m",
            f"  b = {_f(co.get('b_nm_per_rad_s'), '.3e')} N·m per rad/s",
            f"  c = {_f(co.get('c_nm_per_rad_s2'), '.3e')} N·m per (rad/s)²"]

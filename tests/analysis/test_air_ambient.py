@@ -85,7 +85,7 @@ def test_every_face_says_what_was_done_with_the_air():
     assert "1.1558" in air_line(given) and "1.1558" in air_text(given)
     assert "not recorded" in air_text({})  # a run from before the air was logged
     pt = {"efficiency": 0.85, "efficiency_ci95": 0.006, "efficiency_u95": 0.09}
-    assert last_point_text([pt]) == "U95 ±9.0 pp"
+    assert last_point_text([pt]) == ("U95 ±9.0 pp", "")
     pt["efficiency_interval95"] = [0.77, 0.951]
-    assert last_point_text([pt]) == "U95 ±9.0 pp · interval95 77.0…95.1 %"
-    assert last_point_text([]) == ""
+    assert last_point_text([pt]) == ("U95 ±9.0 pp", "77.0…95.1 %")  # (the live screen's interval95 row)
+    assert last_point_text([]) == ("", "")
