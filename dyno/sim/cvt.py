@@ -366,7 +366,8 @@ class CVT:
             self._belt_count += 1
         imb = self.force_imbalance_n(rpm_primary, torque_secondary_nm, x)
         if self.friction is not None:
-            from dyno.sim.cvt_friction import dead_band, friction_n
+            from dyno.sim.cvt_friction import friction_n
+            from dyno.sim.driven import after_drag as dead_band  # the same Coulomb band: 0 inside +-friction
 
             imb = dead_band(imb, friction_n(self, rpm_primary, torque_secondary_nm, x))
         dx = imb * dt_s / (self.k_ref_n * self.tau_shift_s)

@@ -111,15 +111,6 @@ def friction_n(cvt, rpm_primary: float, torque_secondary_nm: float, x: float) ->
         + fr.sheave_friction_n
 
 
-def dead_band(imbalance_n: float, friction: float) -> float:
-    """The part of the imbalance that moves the sheaves: 0 inside ``+-friction``."""
-    if imbalance_n > friction:
-        return imbalance_n - friction
-    if imbalance_n < -friction:
-        return imbalance_n + friction
-    return 0.0
-
-
 def closing_clamp_n(cvt, rpm_primary: float, x: float) -> float:
     """The primary's clamp as the sheave closes on the belt (engine speeding up): ramp loss and bushing off."""
     f = cvt.primary_force_n(rpm_primary, x)
