@@ -176,8 +176,9 @@ class PlanContext(Protocol):
     def log(self, doc_type: str, **fields) -> None:
         """One document of the run's log."""
 
-    async def measure(self, give_up=None, plan: TestPlan | None = None) -> tuple:
-        """MEASURE a steady window into a point (remeasured if disturbed); ``plan``: the window's own targets.
+    async def measure(self, give_up=None, plan: TestPlan | None = None, since_s: float = 0.0) -> tuple:
+        """MEASURE a steady window into a point (remeasured if disturbed); ``plan``: the window's own targets;
+        ``since_s``: the window began that many seconds ago (the plan saw the rig steady and untouched since).
         Returns (point, host_t0, host_t1)."""
 
     def record(self, point: dict, host_t0: float, host_t1: float) -> None:

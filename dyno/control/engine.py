@@ -92,13 +92,13 @@ class EngineContext:
     def log(self, doc_type: str, **fields) -> None:
         self._engine._log(doc_type, **fields)
 
-    async def measure(self, give_up=None, plan: TestPlan | None = None) -> tuple:
+    async def measure(self, give_up=None, plan: TestPlan | None = None, since_s: float = 0.0) -> tuple:
         e = self._engine
         if plan is None:
-            return await e._measure(give_up=give_up)
+            return await e._measure(give_up=give_up, since_s=since_s)
         saved, e.plan = e.plan, plan  # the window's own targets, for this window only
         try:
-            return await e._measure(give_up=give_up)
+            return await e._measure(give_up=give_up, since_s=since_s)
         finally:
             e.plan = saved
 

@@ -267,6 +267,7 @@ async def _hold_loop(ctx, hold: SpeedHold, target: dict, variable: str = "second
             await ctx.sleep(on_s)
         finally:
             ctx.brake(STOP)
+            target["last_pulse_end_s"] = ctx.now()
         await ctx.sleep(max(0.0, g.period_s - on_s))
 
 
@@ -347,6 +348,12 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
             settled_by = "timeout"
             break
     settle_s = ctx.now() - t0
+    # The window may begin where the settle's rate criterion began looking (its later half-window, the
+    # speed already steady there) if the brake has not moved since: those data are in the streams.
+    since_s = 0.0
+    if settled_by == "held" and sh.settle_rate_rel_per_s > 0:
+        quiet_s = ctx.now() - target.get("last_pulse_end_s", -math.inf)
+        since_s = max(0.0, min(sh.settle_rate_window_s, quiet_s, settle_s))
     if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
         return skip(f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after {settle_s:.1f} s): {unholdable_why}")
     # Measure with the brake where the hold put it: corrections during the window would
@@ -354,7 +361,7 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
     target["frozen"] = True
     try:
         point, host_t0, host_t1 = await ctx.measure(
-            give_up=lambda: not abs(secondary_rpm(ctx, 0.5) - sp) <= sh.drift_rel * sp)
+            give_up=lambda: not abs(secondary_rpm(ctx, 0.5) - sp) <= sh.drift_rel * sp, since_s=since_s)
     finally:
         target["frozen"] = False
     point = _inertia_corrected(ctx, point)
