@@ -168,7 +168,7 @@ def time_breakdown(run_dir, target_ci95: float = TARGET_CI95, in_band_s: float =
     """Where a speed-hold run's test time went (s), from its ``documents.jsonl``; and the floor (see the docstring)."""
     docs = [json.loads(line) for line in Path(run_dir, "documents.jsonl").read_text().splitlines() if line.strip()]
     out = {"warmup": 0.0, "contact": 0.0, "warmup_wait": 0.0, "settle": 0.0, "measure": 0.0, "skipped": 0.0}
-    go = contact0 = seg = None
+    go = contact0 = seg = measure0 = None
     floor_measure = 0.0
     n = 0
     for d in docs:
@@ -183,8 +183,11 @@ def time_breakdown(run_dir, target_ci95: float = TARGET_CI95, in_band_s: float =
             out["warmup_wait"] = d["wait_s"]
         elif d["type"] == "state" and d["state"] == "measure" and seg is not None:
             out["settle"] += t - seg
+            measure0 = t
         elif d["type"] == "point":
             out["measure"] += d["duration_s"]
+            # a window may begin before its MEASURE state (the settle's steady tail): that span is the window's
+            out["settle"] -= max(0.0, measure0 - d.get("host_t_start_s", measure0))
             c = d["efficiency_sem"] * math.sqrt(d["duration_s"])
             floor_measure += (1.96 * c / target_ci95) ** 2
             seg, n = t, n + 1

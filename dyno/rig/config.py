@@ -168,8 +168,7 @@ class DrivenConfig:  # the driven side's measured loss (its inertia: [inertia]'s
 class TorqueZeroConfig:
     """Torque-channel zero read at rest before GO and after the last point."""
 
-    read_s: float = 8.0  # averaging window at rest (8 s: 95 % half-width ~0.05 N m with the sim's noise); the
-    # tare before GO is common to every point: at 4 s (~0.07 N m) the truth left the points' CI at 16 % of points
+    read_s: float = 4.0  # averaging window at rest (4 s: 95 % half-width ~0.09 N m with the sim's noise)
     drift_max_nm: float = 0.15  # |after - before| beyond this (secondary N m) is flagged in the run and report
     correct: bool = False  # linear drift correction of the points' torque (extra keys; raw points unchanged)
     tare: bool = True  # the zero read before GO is the points' zero (the bridge offset moves between calibrations)

@@ -221,13 +221,13 @@ def physical_outputs(model) -> dict:
 class TruthRecorder:
     """Samples the physics' true state at every poll, to average over point windows."""
 
-    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip", "te", "dl")
+    FIELDS = ("p_in", "p_out", "rp", "rs", "tq", "rotor_c", "ratio_geo", "slip", "te", "dl", "act")
 
     def __init__(self, model) -> None:
         self.model = model
         self.t = array("d")
         (self.p_in, self.p_out, self.rp, self.rs, self.tq, self.rotor_c, self.ratio_geo,
-         self.slip, self.te, self.dl) = (array("d") for _ in self.FIELDS)
+         self.slip, self.te, self.dl, self.act) = (array("d") for _ in self.FIELDS)
 
     def __call__(self, events, now_s: float) -> None:
         tr = self.model.truth()
@@ -242,6 +242,7 @@ class TruthRecorder:
         self.slip.append(tr.belt_slip)
         self.te.append(getattr(tr, "torque_engine_nm", math.nan))  # (a stand-in truth may not have it)
         self.dl.append(getattr(tr, "driveline_loss_nm", 0.0))
+        self.act.append(getattr(tr, "actuator_mm", math.nan))  # the brake actuator's true position
 
     def trim_before(self, t_s: float) -> int:
         """Forget the samples older than ``t_s`` (a UI session re-arms on one rig: each run's truth is

@@ -36,7 +36,7 @@ from dyno.protocol import v1
 
 @dataclass(frozen=True)
 class SpeedHoldGains:
-    """Tuned on the simulated rig (bench/bench_speed_hold.py), whose actuator, relay and CVT
+    """Tuned on the simulated rig (bench/bench_test_time.py's step part), whose actuator, relay and CVT
     keep the real ones' limits.  The law, on the actuator's velocity ``u`` (the actuator
     integrates it into the brake's position)::
 
@@ -263,11 +263,12 @@ async def _hold_loop(ctx, hold: SpeedHold, target: dict, variable: str = "second
             await ctx.sleep(g.period_s)
             continue
         ctx.brake(direction)
+        target["pulsing"] = True
         try:
             await ctx.sleep(on_s)
         finally:
             ctx.brake(STOP)
-            target["last_pulse_end_s"] = ctx.now()
+            target["pulsing"], target["last_pulse_end_s"] = False, ctx.now()
         await ctx.sleep(max(0.0, g.period_s - on_s))
 
 
@@ -348,18 +349,15 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
             settled_by = "timeout"
             break
     settle_s = ctx.now() - t0
-    # The window may begin where the settle's rate criterion began looking (its later half-window, the
-    # speed already steady there) if the brake has not moved since: those data are in the streams.
-    since_s = 0.0
-    if settled_by == "held" and sh.settle_rate_rel_per_s > 0:
-        quiet_s = ctx.now() - target.get("last_pulse_end_s", -math.inf)
-        since_s = max(0.0, min(sh.settle_rate_window_s, quiet_s, settle_s))
     if settled_by == "timeout" and abs(rpm - sp) > sh.unholdable_rel * sp:
         return skip(f"cannot hold {sp:.0f} rpm (secondary at {rpm:.0f} rpm after {settle_s:.1f} s): {unholdable_why}")
     # Measure with the brake where the hold put it: corrections during the window would
     # move the torque and the shift under the average (measured: CI 4-10x wider).
     target["frozen"] = True
     try:
+        while target.get("pulsing"):  # a pulse under way ends first (its travel is not the window's)
+            await ctx.sleep(0.005)
+        since_s = _steady_tail_s(ctx, sh, target, settled_by, settle_s)
         point, host_t0, host_t1 = await ctx.measure(
             give_up=lambda: not abs(secondary_rpm(ctx, 0.5) - sp) <= sh.drift_rel * sp, since_s=since_s)
     finally:
@@ -375,6 +373,16 @@ async def hold_point(ctx, sp: float, sh: SpeedHoldPlan, target: dict, loop_task,
         return skip(f"torque {point['torque_secondary_nm']:.2f} N m below {p.min_point_torque_nm} N m at {sp:.0f} rpm")
     ctx.record(point, host_t0, host_t1)
     return point, None
+
+
+def _steady_tail_s(ctx, sh: SpeedHoldPlan, target: dict, settled_by: str, settle_s: float) -> float:
+    """How far back the window may begin: the settle's rate criterion judged the last ``settle_rate_window_s``
+    steady, and if the brake has not moved over it either, those data (in the streams) are the point's
+    (~0.3 s a point, ~5 s a run).  Not after a timeout (nothing was judged steady)."""
+    if settled_by != "held" or not sh.settle_rate_rel_per_s > 0:
+        return 0.0
+    quiet_s = ctx.now() - target.get("last_pulse_end_s", -math.inf)
+    return max(0.0, min(sh.settle_rate_window_s, quiet_s, settle_s))
 
 
 def _inertia_corrected(ctx, point: dict) -> dict:
