@@ -43,16 +43,12 @@ class Measuring:
                 host_t0 -= since_s * self.time_scale
                 rig_t0 -= since_s
                 dev_t0 -= int(since_s * 1e6)
+            await self.rig_sleep(max(0.0, rig_t0 + p.measure_s - self.rig_now()))
             since_s = 0.0
-            # the minimum window, looking for a give-up as often as the stopping rule looks
-            lost = await self._wait_minimum(rig_t0 + p.measure_s, give_up)
             while True:
                 host_t1, rig_t1, dev_t1 = self._now(), self.rig_now(), self.poller.device_now_us()
                 point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
                                      index=len(self.points), throttle_frac=self.throttle_frac)
-                if lost:
-                    point["gave_up"] = True
-                    break
                 # Against the error's upper bound, not the estimate: few batches must not stop a window
                 # on a luckily small estimate (dyno/analysis/stopping.py).
                 ci = p.target_efficiency_ci95 is not None
@@ -83,15 +79,6 @@ class Measuring:
                 point["valid"] = False
                 point.setdefault("faults", []).append({"reason": f"window disturbed: {why}"})
         return point, host_t0, host_t1
-
-    async def _wait_minimum(self, rig_until_s: float, give_up=None) -> bool:
-        """Wait out a window's minimum length; True when ``give_up`` said so first (a drift seen mid-window
-        cost the rest of the minimum on every skipped point)."""
-        while (left_s := rig_until_s - self.rig_now()) > 1e-9:
-            await self.rig_sleep(min(self.plan.measure_check_s, left_s) if give_up is not None else left_s)
-            if give_up is not None and give_up():
-                return True
-        return False
 
     def _set_results(self, results: dict, *, hooks: bool = True) -> None:
         for hook in self.result_hooks if hooks else ():
