@@ -230,20 +230,10 @@ def test_entry_firmware_sim_missing_elf_is_one_line(work):
 
 
 def test_entry_firmware_sim(work):
-    from dyno.transports.simavr import toolchain_missing
+    from tests.fw_build import sim_elf
 
-    why = toolchain_missing()
-    if why:
-        pytest.skip(f"AVR toolchain/simavr not installed: {why}")
-    import fcntl
-
-    (REPO / "firmware" / "build").mkdir(exist_ok=True)
-    with open(REPO / "firmware" / "build" / ".make.lock", "w") as lock:  # the lock tests/firmware builds under
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        build = subprocess.run(["make", "-s", "-C", str(REPO / "firmware"), "sim"], capture_output=True,
-                               text=True, timeout=600)
-    assert build.returncode == 0, build.stdout + build.stderr
-    proc = _ok(dyno("firmware-sim", "--elf", REPO / "firmware" / "build" / "dyno_nano.elf", "--seconds", 0.5,
+    elf = sim_elf()
+    proc = _ok(dyno("firmware-sim", "--elf", elf, "--seconds", 0.5,
                     "--json", cwd=work, timeout=300))
     doc = json.loads(proc.stdout)
     assert doc["ok"] is True and doc["events_lost"] == 0
