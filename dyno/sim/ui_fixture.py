@@ -185,12 +185,8 @@ class CalibrationFixture:
             ta = self._next_adc_t
             t_sig = self.signal_nm(ta)
             sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(t_sig)
-            code = math.floor(self.true_counts(t_sig) + sigma * float(self._rng.standard_normal()) + 0.5)
-            code = min(65535, max(0, code))
-            status = 0x20 if self.adc_error_prob and self._rng_err.random() < self.adc_error_prob else 0
-            if self.adc_stuck:
-                self._adc_stuck_code = code if self._adc_stuck_code is None else self._adc_stuck_code
-                code = self._adc_stuck_code
+            code, status = self._convert(self.true_counts(t_sig), sigma, self._rng, self.adc_error_prob,
+                                         self._rng_err, "_adc_stuck_code" if self.adc_stuck else None)
             out.append(_Event("adc", ta, code, status))
             self._next_adc_t = ta + self._adc_period_s
         if self.input_fitted:
@@ -206,15 +202,24 @@ class CalibrationFixture:
             ta = self._next_in_t
             sig = self._in_signal_nm(ta)
             sigma = p.input_noise_counts + p.input_noise_counts_per_nm * abs(sig)
-            code = (self.true_input_offset_counts + self.true_input_gain_counts_per_nm * sig
-                    + sigma * float(self._in_rng.standard_normal()))
-            code = min(65535, max(0, math.floor(code + 0.5)))
-            status = 0x20 if self.input_error_prob and self._in_rng_err.random() < self.input_error_prob else 0
-            if self.input_stuck:
-                self._input_stuck_code = code if self._input_stuck_code is None else self._input_stuck_code
-                code = self._input_stuck_code
+            code, status = self._convert(self.true_input_offset_counts + self.true_input_gain_counts_per_nm * sig,
+                                         sigma, self._in_rng, self.input_error_prob, self._in_rng_err,
+                                         "_input_stuck_code" if self.input_stuck else None)
             out.append(_Event("input", ta, code, status))
             self._next_in_t = ta + self._in_period_s
+
+    def _convert(self, counts: float, sigma: float, rng, error_prob: float, rng_err,
+                 stuck_attr: str | None) -> tuple[int, int]:
+        """One conversion of a converter: (16-bit code, status) for the true ``counts`` with its white noise, an
+        error bit at ``error_prob``, and when stuck (``stuck_attr`` names where the first stuck code is kept) that
+        code again."""
+        code = min(65535, max(0, math.floor(counts + sigma * float(rng.standard_normal()) + 0.5)))
+        status = 0x20 if error_prob and rng_err.random() < error_prob else 0
+        if stuck_attr is not None:
+            if getattr(self, stuck_attr) is None:
+                setattr(self, stuck_attr, code)
+            code = getattr(self, stuck_attr)
+        return code, status
 
 
 class FixtureRig:

@@ -4,24 +4,15 @@ pytest-xdist workers build concurrently), skip cleanly without the AVR toolchain
 from __future__ import annotations
 
 import argparse
-import fcntl
-import subprocess
 from pathlib import Path
 
 import pytest
 
 from dyno.transports.simavr import toolchain_missing
+from tests.fw_build import make as _make
 
 FW = Path(__file__).resolve().parents[2] / "firmware"
 BUILD = FW / "build"
-
-
-def _make(*targets: str) -> subprocess.CompletedProcess:
-    BUILD.mkdir(exist_ok=True)
-    with open(BUILD / ".make.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        return subprocess.run(["make", "-s", "-C", str(FW), *targets], capture_output=True,
-                              text=True)
 
 
 @pytest.fixture(scope="session")
