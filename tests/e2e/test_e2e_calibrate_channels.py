@@ -10,14 +10,12 @@ import shutil
 import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import pytest
 
 from tests.bad_input import one_line_failures, snapshot
 
-from tests.screens import pane, tmux, wait_screen
 
 REPO = Path(__file__).resolve().parents[2]
 INPUT_RIG = REPO / "hardware" / "rig-input-torque.toml"
@@ -55,11 +53,11 @@ def test_calibrate_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path):
 
 
 def _env(home: Path) -> dict:
-    return {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home), "PYTHONPATH": str(REPO)}
+    return {"HOME": str(home), "PYTHONPATH": str(REPO)}  # the session's belt table and library: tests/screens.py
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
-def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(tmp_path):
+def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(tmp_path, terminal):
     """The whole procedure on the input channel, 3 repeats, keys in a real 80x24 terminal: the entry
     appended to the channel's history has the gain of the simulated cradle load cell (the physics' draw for
     the seed, computed here from the simulator's parameters, not read off the program), 1.8 % from the
@@ -73,32 +71,30 @@ def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(
     hist = tmp_path / "input_history.csv"
     shutil.copy(SHIPPED_INPUT, hist)
     old = hist.read_bytes()
-    session = f"dyno-calin-{uuid.uuid4().hex[:8]}"
     cmd = (f"{sys.executable} -m dyno calibrate --sim --channel input --rig {INPUT_RIG} --repeats 3 --speed 10 "
            f"--seed {seed} --history {hist} ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env=_env(tmp_path), cwd=tmp_path)
+    session = terminal(cmd, env=_env(tmp_path), cwd=tmp_path)
     try:
-        screen = wait_screen(session, ["SETUP", "cradle arm", "2,4,6,8,10", "input"], 60)
+        screen = session.wait(["SETUP", "cradle arm", "2,4,6,8,10", "input"], 60)
         t_end = time.monotonic() + 240
         while time.monotonic() < t_end:
-            screen = pane(session)
+            screen = session.screen()
             if "REVIEW" in screen or "REJECTED" in screen:
                 break
             if "COLLECTING" not in screen:
-                tmux("send-keys", "-t", session, "c")  # a spare press while collecting only says so
+                session.keys("c")  # a spare press while collecting only says so
             time.sleep(0.3)
-        screen = wait_screen(session, ["REVIEW", "slope", "reproducibility", "(3 repeats)", "history term"], 10)
+        screen = session.wait(["REVIEW", "slope", "reproducibility", "(3 repeats)", "history term"], 10)
         assert "meets the 0.4 %" in screen and "REFUSED" not in screen, screen
         assert all(len(line) <= 80 for line in screen.splitlines())
-        tmux("send-keys", "-t", session, "a")
-        wait_screen(session, "Append this calibration", 10)
-        tmux("send-keys", "-t", session, "y")
-        wait_screen(session, "appended to", 10)
-        tmux("send-keys", "-t", session, "q")
-        wait_screen(session, "EXITED=0", 20)
+        session.keys("a")
+        session.wait("Append this calibration", 10)
+        session.keys("y")
+        session.wait("appended to", 10)
+        session.keys("q")
+        session.wait("EXITED=0", 20)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert hist.read_bytes().startswith(old)
     entries = load_history(hist)
     assert len(entries) == 5

@@ -15,15 +15,12 @@ import shutil
 import signal
 import subprocess
 import sys
-import uuid
 from pathlib import Path
 
 import pytest
 
 from dyno.cli import COMMANDS
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
-from tests.screens import tmux as _tmux
-from tests.screens import wait_screen as _wait_screen
 
 REPO = Path(__file__).resolve().parents[2]
 LEGACY_RUN = "2019-04-18_run2"
@@ -56,25 +53,11 @@ def _ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
 
 
 # --- tmux ----------------------------------------------------------------------------------------
-class Terminal:
-    """A 120x40 tmux session running one dyno command; the shell line after it reports the exit code."""
-
-    def __init__(self, args, cwd: Path) -> None:
-        self.name = f"dyno-e2e-{uuid.uuid4().hex[:8]}"
-        cmd = " ".join([sys.executable, "-m", "dyno", *map(str, args)]) + " ; echo EXITED=$? ; sleep 30"
-        subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", self.name, "-c", str(cwd),
-                        cmd], check=True, timeout=20,
-                       env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
-                            "HOME": str(cwd), "PYTHONPATH": str(REPO)})
-
-    def wait(self, needles, timeout_s: float = 60) -> str:
-        return _wait_screen(self.name, needles, timeout_s)
-
-    def keys(self, *keys: str) -> None:
-        _tmux("send-keys", "-t", self.name, *keys)
-
-    def close(self) -> None:
-        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True, timeout=20)
+def dyno_terminal(terminal, args, cwd: Path):
+    """A 120x40 terminal (tests/screens.py) running one dyno command; the shell line after it reports the exit
+    code."""
+    cmd = " ".join([sys.executable, "-m", "dyno", *map(str, args)]) + " ; echo EXITED=$? ; sleep 30"
+    return terminal(cmd, size=(120, 40), cwd=cwd, env={"HOME": str(cwd), "PYTHONPATH": str(REPO)})
 
 
 # --- one simulated run for the module -------------------------------------------------------------
@@ -129,9 +112,9 @@ def test_entry_replay_json_reproduces_the_run(sim_run, work):
 
 
 @needs_tmux
-def test_entry_replay_viewer_shows_the_points_table(sim_run, work):
+def test_entry_replay_viewer_shows_the_points_table(sim_run, work, terminal):
     run_dir, doc = sim_run
-    term = Terminal(["replay", run_dir], cwd=work)
+    term = dyno_terminal(terminal, ["replay", run_dir], cwd=work)
     try:
         screen = term.wait(["T N·m", "eff %", "efficiency vs secondary rpm"], 60)
         assert f"{len(doc['points'])} points" in screen and "run 1/1" in screen
@@ -145,9 +128,9 @@ def test_entry_replay_viewer_shows_the_points_table(sim_run, work):
 
 
 @needs_tmux
-def test_entry_calibrate_sim_starts_and_quits(work):
+def test_entry_calibrate_sim_starts_and_quits(work, terminal):
     history = work / "cal_history.csv"
-    term = Terminal(["calibrate", "--sim", "--history", history], cwd=work)
+    term = dyno_terminal(terminal, ["calibrate", "--sim", "--history", history], cwd=work)
     try:
         screen = term.wait(["SETUP", "E-STOP", "ADC now"], 60)
         assert "Enter the rope radius and the masses" in screen

@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import shutil
-import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -62,24 +59,15 @@ def test_progress_draws_at_most_once_per_period_and_erases_itself():
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
-def test_progress_on_a_terminal(tmp_path):
-    session = f"dyno-prog-{uuid.uuid4().hex[:8]}"
+def test_progress_on_a_terminal(tmp_path, terminal):
     run_dir = tmp_path / "run"
-    from dyno.model.overlay import default_cache_dir
-
-    # the belt-model table's cache stays the user's (a fresh HOME rebuilds it: 20 s quiet, > 70 s on a loaded
-    # machine, past this test's bound); in the command, as a running tmux server gives a session its own env
-    cmd = (f"env DYNO_MODEL_CACHE={default_cache_dir()} {sys.executable} -m dyno run --sim --headless "
-           f"--out {run_dir} ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "30", "-s", session, cmd], check=True, timeout=20,
-                   env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
-                        "HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
+    cmd = f"{sys.executable} -m dyno run --sim --headless --out {run_dir} ; echo EXITED=$? ; sleep 30"
+    session = terminal(cmd, size=(80, 30), env={"HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
     seen, screen = set(), ""
     try:
         t_end = time.monotonic() + 120
         while time.monotonic() < t_end and "EXITED=" not in screen:
-            screen = subprocess.run(["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True,
-                                    timeout=20).stdout
+            screen = session.screen()
             for line in screen.splitlines():
                 if line.startswith(("WARMUP", "STEP", "SETTLE", "MEASURE")) and "ETA" in line:
                     seen.add(line.split()[0])
@@ -87,7 +75,7 @@ def test_progress_on_a_terminal(tmp_path):
                         seen.add("eta")
             time.sleep(0.1)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert "EXITED=0" in screen, screen
     assert {"MEASURE", "eta"} <= seen, seen
     assert "ETA" not in screen and "report: " in screen  # the line was erased before the results

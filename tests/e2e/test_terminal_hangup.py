@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from tests.fw_build import sim_elf
-from tests.screens import pane, pids_matching, seconds_until_gone, tmux, wait_screen
+from tests.screens import Terminal, pids_matching, seconds_until_gone
 
 REPO = Path(__file__).resolve().parents[2]
 ELF = REPO / "firmware" / "build" / "dyno_nano.elf"
@@ -78,22 +78,22 @@ def logged_run(tmp_path_factory) -> Path:
     return out
 
 
-def _walk(session: str, steps) -> None:
+def _walk(session: Terminal, steps) -> None:
     for step in steps:
         if step[0] == "wait":
-            wait_screen(session, step[1], 150)  # (a busy 2-core machine: the app and the sim start slowly)
+            session.wait(step[1], 150)  # (a busy 2-core machine: the app and the sim start slowly)
         elif step[0] == "keys":
             time.sleep(0.3)  # the screen is drawn before its widget takes keys
-            tmux("send-keys", "-t", session, step[1])
+            session.keys(step[1])
         elif step[0] == "sleep":
             time.sleep(step[1])
         else:  # ("until", key, needle, timeout_s): press until the screen shows it
             _, key, needle, timeout_s = step
             t_end = time.monotonic() + timeout_s
-            while needle not in pane(session) and time.monotonic() < t_end:
-                tmux("send-keys", "-t", session, key)
+            while needle not in session.screen() and time.monotonic() < t_end:
+                session.keys(key)
                 time.sleep(0.5)
-            wait_screen(session, needle, 5)
+            session.wait(needle, 5)
 
 
 def _records(runs: Path) -> dict:
@@ -110,7 +110,8 @@ def _records(runs: Path) -> dict:
 
 @needs
 @pytest.mark.parametrize("case, command, steps", CASES, ids=[c[0] for c in CASES])
-def test_entry_point_ends_safe_state_first_when_its_terminal_goes(case, command, steps, tmp_path, request):
+def test_entry_point_ends_safe_state_first_when_its_terminal_goes(case, command, steps, tmp_path, request,
+                                                                  terminal):
     if command[0] == "firmware-sim":
         sim_elf()  # built here if no firmware test has built it yet (skips only without the toolchain)
     runs = tmp_path / "runs"
@@ -123,13 +124,10 @@ def test_entry_point_ends_safe_state_first_when_its_terminal_goes(case, command,
     else:
         args = [*command, "--seed", seed] + (["--history", str(history)] if command[0] == "calibrate" else [])
     marker = "dyno " + " ".join(args)
-    name = f"dyno-hup-{uuid.uuid4().hex[:8]}"
-    # (HOME stays the user's: the simulated CVT's belt-model table is cached there, ~2 min to rebuild when loaded)
-    subprocess.run(["tmux", "new-session", "-d", "-x", "100", "-y", "30", "-s", name, "-c", str(tmp_path), "bash",
-                    "--norc"], check=True, timeout=20)
+    name = terminal("bash --norc", size=(100, 30), cwd=tmp_path)
     try:
-        # "EXI""TED": the typed line itself must not read as the program's end to wait_screen
-        tmux("send-keys", "-t", name,
+        # "EXI""TED": the typed line itself must not read as the program's end to Terminal.wait
+        name.keys(
              f"DYNO_RUNS_DIR={runs} PYTHONPATH={REPO} {sys.executable} -m dyno {' '.join(args)}; echo \"EXI\"\"TED=$?\"", "Enter")
         t_launch = time.monotonic()
         if steps is None:
@@ -139,12 +137,12 @@ def test_entry_point_ends_safe_state_first_when_its_terminal_goes(case, command,
         else:
             _walk(name, steps)
         pids = pids_matching(marker)
-        assert pids, f"not running before the pane closed:\n{pane(name)}"
+        assert pids, f"not running before the pane closed:\n{name.screen()}"
         for pid in list(pids):  # its children too (firmware-sim's simavr harness)
             pids += [int(x) for x in subprocess.run(["pgrep", "-P", str(pid)], capture_output=True,
                                                     text=True).stdout.split()]
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=20)
+        name.hang_up()  # SIGHUP, as a closed pane or a lost SSH session sends it (the fixture ends what is left)
     gone_s = seconds_until_gone(pids, timeout_s=15)
     if os.environ.get("DYNO_HUP_FIGURES"):  # a file to collect the figures in (docs/safety.md)
         with open(os.environ["DYNO_HUP_FIGURES"], "a") as f:

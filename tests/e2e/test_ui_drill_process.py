@@ -7,45 +7,33 @@ and the physical outputs — the pads off the rotor, the actuator off — read f
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
 import sys
-import uuid
 from pathlib import Path
 
 import pytest
 
-from tests.screens import wait_screen
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
-def test_ui_mock_pins_drill_records_the_physical_safe_state(tmp_path):
+def test_ui_mock_pins_drill_records_the_physical_safe_state(tmp_path, terminal):
     out = tmp_path / "run"
-    name = f"dyno-ui-drill-{uuid.uuid4().hex[:8]}"
-    from dyno.model.overlay import default_cache_dir
-
-    # the belt-model table's cache stays the user's (a fresh HOME would rebuild it inside the test's bound); in the
-    # command, as a running tmux server gives a session its own environment
-    cmd = " ".join(["env", f"DYNO_MODEL_CACHE={os.environ.get('DYNO_MODEL_CACHE', str(default_cache_dir()))}",
-                    sys.executable, "-m", "dyno", "ui", "--sim", "--mock-pins", "--speed", "4",
+    cmd = " ".join([sys.executable, "-m", "dyno", "ui", "--sim", "--mock-pins", "--speed", "4",
                     "--drill", "adc-stuck@loaded+2", "--out", str(out)]) + " ; echo EXITED=$? ; sleep 30"
-    subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "40", "-s", name, "-c", str(tmp_path), cmd],
-                   check=True, timeout=20, env={"TERM": "xterm-256color", "PATH": os.environ.get("PATH", ""),
-                                                "HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
+    name = terminal(cmd, size=(120, 40), cwd=tmp_path, env={"HOME": str(tmp_path), "PYTHONPATH": str(REPO)})
     try:
-        wait_screen(name, "ARMED", 150)  # (a busy 2-core machine: the app and the sim start slowly)
-        subprocess.run(["tmux", "send-keys", "-t", name, "g"], timeout=20)
-        wait_screen(name, "GO", 10)
-        subprocess.run(["tmux", "send-keys", "-t", name, "y"], timeout=20)
-        screen = wait_screen(name, ["ABORTED", "rig SAFE"], 180)
+        name.wait("ARMED", 150)  # (a busy 2-core machine: the app and the sim start slowly)
+        name.keys("g")
+        name.wait("GO", 10)
+        name.keys("y")
+        screen = name.wait(["ABORTED", "rig SAFE"], 180)
         assert "sensor_fault" in screen
-        subprocess.run(["tmux", "send-keys", "-t", name, "q"], timeout=20)
-        wait_screen(name, "EXITED=", 60)
+        name.keys("q")
+        name.wait("EXITED=", 60)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=20)
+        name.close()
     docs = [json.loads(line) for line in (out / "documents.jsonl").read_text().splitlines() if line.strip()]
     safety = [d for d in docs if d.get("type") == "safety"]
     assert safety, "the UI run left no safety record"

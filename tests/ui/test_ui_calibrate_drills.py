@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import shutil
-import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import pytest
@@ -59,30 +57,18 @@ def test_calibration_refuses_engine_drills():
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
-def test_calibrate_drill_in_a_real_terminal(tmp_path):
-    session = f"dyno-cal-{uuid.uuid4().hex[:8]}"
+def test_calibrate_drill_in_a_real_terminal(tmp_path, terminal):
     cmd = (f"{sys.executable} -m dyno calibrate --sim --speed 2 --history {tmp_path / 'h.csv'} "
            f"--drill adc-stuck@1 ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "100", "-y", "30", "-s", session, cmd], check=True,
-                   timeout=20, env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
-                                    "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    session = terminal(cmd, size=(100, 30),
+                       env={"HOME": str(tmp_path), "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
     try:
-        t_end = time.monotonic() + 60
-        screen = ""
-        while time.monotonic() < t_end and "ABORTED" not in screen:
-            screen = subprocess.run(["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True,
-                                    timeout=20).stdout
-            time.sleep(0.3)
+        screen = session.wait("ABORTED", 60)
         assert "ABORTED (sensor_fault)" in screen and "rig SAFE" in screen, screen
-        subprocess.run(["tmux", "send-keys", "-t", session, "q"], timeout=20)
-        t_end = time.monotonic() + 20
-        while time.monotonic() < t_end and "EXITED=" not in screen:
-            screen = subprocess.run(["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True,
-                                    timeout=20).stdout
-            time.sleep(0.3)
-        assert "EXITED=0" in screen, screen
+        session.keys("q")
+        session.wait("EXITED=0", 20)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert not (tmp_path / "h.csv").exists()
 
 

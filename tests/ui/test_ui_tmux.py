@@ -6,79 +6,64 @@ import shutil
 import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import pytest
 
-from tests.screens import tmux as _tmux
-from tests.screens import wait_screen as _wait_screen
+from tests.screens import Terminal
 
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
 
 # (ARMED within 120 s: a UI start-up took over 60 s once with a bench on the other test worker)
 def _env(home: Path) -> dict:
-    """A terminal's environment: a fresh HOME, but the belt-model table the test session built (else each
-    `dyno ui --sim` builds it again in the new HOME's cache: 20 s, over a minute on a loaded machine) and the
-    session's run library."""
-    import os
-
-    from dyno.model.overlay import default_cache_dir
-
-    env = {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home),
-           "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "DYNO_MODEL_CACHE": str(default_cache_dir())}
-    if os.environ.get("DYNO_RUNS_DIR"):
-        env["DYNO_RUNS_DIR"] = os.environ["DYNO_RUNS_DIR"]
-    return env
+    """A terminal's environment: a fresh HOME (the belt-model table and the run library stay the session's:
+    tests/screens.py)."""
+    return {"HOME": str(home), "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
 
 
-def _go(session: str) -> None:
+def _go(session: Terminal) -> None:
     """Wait for ARMED, press g, confirm: the test runs."""
-    _wait_screen(session, "ARMED", 120)
-    _tmux("send-keys", "-t", session, "g")
-    _wait_screen(session, "Start the test?", 10)
-    _tmux("send-keys", "-t", session, "y")
-    _wait_screen(session, "GO: full throttle", 10)
+    session.wait("ARMED", 120)
+    session.keys("g")
+    session.wait("Start the test?", 10)
+    session.keys("y")
+    session.wait("GO: full throttle", 10)
 
 
-def test_ui_tmux_dyno_ui_sim(tmp_path):
-    session = f"dyno-ui-{uuid.uuid4().hex[:8]}"
+def test_ui_tmux_dyno_ui_sim(tmp_path, terminal):
     run_dir = tmp_path / "run"
     cmd = (f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env=_env(tmp_path))
+    session = terminal(cmd, env=_env(tmp_path))
     try:
-        screen = _wait_screen(session, "ARMED", 120)
+        screen = session.wait("ARMED", 120)
         assert "E-STOP" in screen and "g GO" in screen and "engine" in screen
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "Start the test?", 10)
-        _tmux("send-keys", "-t", session, "y")
-        screen = _wait_screen(session, "GO: full throttle", 10)
-        _tmux("send-keys", "-t", session, "C-c")  # E-STOP, not quit
-        screen = _wait_screen(session, "cause: estop", 10)
+        session.keys("g")
+        session.wait("Start the test?", 10)
+        session.keys("y")
+        screen = session.wait("GO: full throttle", 10)
+        session.keys("C-c")  # E-STOP, not quit
+        screen = session.wait("cause: estop", 10)
         assert "ABORTED" in screen and "rig SAFE" in screen
         assert "EXITED" not in screen  # Ctrl+C did not kill the app
-        _tmux("send-keys", "-t", session, "q")
-        screen = _wait_screen(session, "EXITED=0", 20)
+        session.keys("q")
+        screen = session.wait("EXITED=0", 20)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     docs = (run_dir / "documents.jsonl").read_text()
     assert '"cause": "estop"' in docs and '"type": "stop"' in docs
 
 
-def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
+def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path, terminal):
     """The terminal (or the SSH link) goes away mid-test: SIGHUP -> safe state, abort + stop record."""
-    session = f"dyno-hup-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
     cmd = f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"
-    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env=_env(tmp_path))
+    session = terminal(cmd, env=_env(tmp_path))
     try:
         _go(session)
     finally:
         # closing the terminal sends SIGHUP to the program in it
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     docs_path = run_dir / "documents.jsonl"
     t_end = time.monotonic() + 20
     while time.monotonic() < t_end and '"type": "stop"' not in docs_path.read_text():
@@ -88,61 +73,53 @@ def test_ui_tmux_sighup_mid_test_leaves_abort_record(tmp_path):
     assert '"type": "stop"' in docs and '"exit_status": "abort"' in docs
 
 
-def _start(session: str, cmd: str, home: Path, size=("80", "24")) -> None:
-    subprocess.run(["tmux", "new-session", "-d", "-x", size[0], "-y", size[1], "-s", session, cmd], check=True,
-                   timeout=20, env=_env(home))
-
-
-def test_ui_tmux_space_estops_with_the_go_dialog_open(tmp_path):
+def test_ui_tmux_space_estops_with_the_go_dialog_open(tmp_path, terminal):
     """E-STOP on the space bar while a modal has the focus: the modal closes, the rig is safe."""
-    session = f"dyno-esm-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
-    _start(session, f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30",
-           tmp_path)
+    session = terminal(f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo EXITED=$? ; sleep 30",
+           env=_env(tmp_path))
     try:
-        _wait_screen(session, "ARMED", 120)
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "Start the test?", 10)
-        _tmux("send-keys", "-t", session, "Space")
-        screen = _wait_screen(session, "cause: estop", 10)
+        session.wait("ARMED", 120)
+        session.keys("g")
+        session.wait("Start the test?", 10)
+        session.keys("Space")
+        screen = session.wait("cause: estop", 10)
         assert "ABORTED" in screen and "rig SAFE" in screen and "Start the test?" not in screen
-        _tmux("send-keys", "-t", session, "q")
-        _wait_screen(session, "EXITED=", 20)
+        session.keys("q")
+        session.wait("EXITED=", 20)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
 
 
-def test_calibrate_tmux_space_estops_with_a_text_field_focused(tmp_path):
+def test_calibrate_tmux_space_estops_with_a_text_field_focused(tmp_path, terminal):
     """The wizard starts with the radius field focused: space is E-STOP there too, never a typed blank."""
-    session = f"dyno-esc-{uuid.uuid4().hex[:8]}"
     hist = tmp_path / "h.csv"
-    _start(session, f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo EXITED=$? ; sleep 30",
-           tmp_path, size=("100", "30"))
+    session = terminal(f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo EXITED=$? ; sleep 30",
+           env=_env(tmp_path), size=(100, 30))
     try:
-        screen = _wait_screen(session, "SETUP", 60)
+        screen = session.wait("SETUP", 60)
         assert "0.15" in screen  # the focused field's default
-        _tmux("send-keys", "-t", session, "Space")
-        screen = _wait_screen(session, "ABORTED (estop)", 10)
+        session.keys("Space")
+        screen = session.wait("ABORTED (estop)", 10)
         assert "rig SAFE" in screen and "nothing written" in screen
         assert "REJECTED" in screen  # the calibration ended; the key was not typed into the field
-        _tmux("send-keys", "-t", session, "q")
-        screen = _wait_screen(session, "EXITED=", 20)
+        session.keys("q")
+        screen = session.wait("EXITED=", 20)
         assert "EXITED=0" in screen
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert not hist.exists()
 
 
-def test_ui_tmux_kill_int_mid_test_leaves_abort_record(tmp_path):
+def test_ui_tmux_kill_int_mid_test_leaves_abort_record(tmp_path, terminal):
     """SIGINT from outside (kill -INT, not the Ctrl+C key): safe state, abort + stop record, exit 130."""
     import os
     import signal
 
-    session = f"dyno-int-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
     marker = tmp_path / "rc"
-    _start(session, f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo $? > {marker} ; sleep 30",
-           tmp_path)
+    session = terminal(f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} ; echo $? > {marker} ; sleep 30",
+           env=_env(tmp_path))
     try:
         _go(session)
         pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir}"],
@@ -154,22 +131,21 @@ def test_ui_tmux_kill_int_mid_test_leaves_abort_record(tmp_path):
             time.sleep(0.2)
         assert marker.exists() and marker.read_text().strip() == "130"  # 128 + SIGINT
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     docs = docs_path.read_text()
     assert '"cause": "signal"' in docs and "SIGINT" in docs and '"type": "stop"' in docs
 
 
-def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path):
+def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path, terminal):
     import os
     import signal
 
-    session = f"dyno-cst-{uuid.uuid4().hex[:8]}"
     hist = tmp_path / "h.csv"
     marker = tmp_path / "rc"
-    _start(session, f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo $? > {marker} ; sleep 30",
-           tmp_path, size=("100", "30"))
+    session = terminal(f"{sys.executable} -m dyno calibrate --sim --history {hist} ; echo $? > {marker} ; sleep 30",
+           env=_env(tmp_path), size=(100, 30))
     try:
-        _wait_screen(session, "SETUP", 60)
+        session.wait("SETUP", 60)
         # the python process itself, not the shell tmux runs it in
         pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m dyno calibrate --sim --history {hist}"],
                                  capture_output=True, text=True, timeout=20).stdout.split()[0])
@@ -179,41 +155,40 @@ def test_calibrate_tmux_sigterm_aborts_and_writes_nothing(tmp_path):
             time.sleep(0.2)
         assert marker.exists() and marker.read_text().strip() == "143"
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert not hist.exists()
 
 
-def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path):
+def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path, terminal):
     """The real `dyno ui --sim`: GO, E-STOP, `r` (once the engine has stopped), confirm: ARMED again in a new
     run directory; a second test there; at exit both runs have their record, report.html and path printed."""
-    session = f"dyno-rearm-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
-    _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --out {run_dir} ; echo EXITED=$? ; sleep 60",
-           tmp_path)
+    session = terminal(f"{sys.executable} -m dyno ui --sim --speed 8 --out {run_dir} ; echo EXITED=$? ; sleep 60",
+           env=_env(tmp_path))
     try:
         _go(session)
-        _tmux("send-keys", "-t", session, "Space")
-        screen = _wait_screen(session, "cause: estop", 10)
+        session.keys("Space")
+        screen = session.wait("cause: estop", 10)
         assert "r re-arm" in screen.splitlines()[-1] or "r re-arm" in screen
         # `r` is refused while the engine still turns; ask until it is accepted (a condition, not a sleep)
         t_end = time.monotonic() + 60
         while time.monotonic() < t_end:
-            _tmux("send-keys", "-t", session, "r")
-            screen = _tmux("capture-pane", "-p", "-t", session)
+            session.keys("r")
+            screen = session.screen()
             if "Acknowledge" in screen:
                 break
             time.sleep(0.5)
-        screen = _wait_screen(session, "Acknowledge: ABORTED (estop", 5)
-        _tmux("send-keys", "-t", session, "y")
-        screen = _wait_screen(session, "re-armed: new run", 10)
+        screen = session.wait("Acknowledge: ABORTED (estop", 5)
+        session.keys("y")
+        screen = session.wait("re-armed: new run", 10)
         assert "run-2" in screen.splitlines()[0]  # the title names the run being written
         _go(session)  # ARMED again (the simulated operator restarts the engine), then a second GO
-        _tmux("send-keys", "-t", session, "Space")
-        _wait_screen(session, "cause: estop", 10)
-        _tmux("send-keys", "-t", session, "q")
-        screen = _wait_screen(session, "EXITED=0", 120)
+        session.keys("Space")
+        session.wait("cause: estop", 10)
+        session.keys("q")
+        screen = session.wait("EXITED=0", 120)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     run2 = tmp_path / "run-2"
     for d in (run_dir, run2):
         docs = (d / "documents.jsonl").read_text()
@@ -222,22 +197,21 @@ def test_ui_tmux_rearm_after_estop_starts_a_second_run(tmp_path):
     assert f"run: {run_dir}" in screen.replace("\n", "") and f"run: {run2}" in screen.replace("\n", "")
 
 
-def test_ui_tmux_coast_down_shows_its_results(tmp_path):
+def test_ui_tmux_coast_down_shows_its_results(tmp_path, terminal):
     """`dyno ui --sim --plan coast-down` in a real terminal: when the plan ends, its loss fit is on screen
     (the run's characterisation document, units labelled); at exit the report has it too."""
     import json
 
-    session = f"dyno-res-{uuid.uuid4().hex[:8]}"
     run_dir = tmp_path / "run"
-    _start(session, f"{sys.executable} -m dyno ui --sim --speed 8 --plan coast-down --out {run_dir} ; "
-                    "echo EXITED=$? ; sleep 30", tmp_path)
+    session = terminal(f"{sys.executable} -m dyno ui --sim --speed 8 --plan coast-down --out {run_dir} ; "
+                    "echo EXITED=$? ; sleep 30", env=_env(tmp_path))
     try:
-        _wait_screen(session, "ARMED", 120)
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "ENGINE IS CUT", 10)  # the dialog says what this plan moves
-        _tmux("send-keys", "-t", session, "y")
-        _wait_screen(session, "GO: full throttle, then engine cut", 10)
-        screen = _wait_screen(session, "COAST-DOWN: driven-side loss", 90)
+        session.wait("ARMED", 120)
+        session.keys("g")
+        session.wait("ENGINE IS CUT", 10)  # the dialog says what this plan moves
+        session.keys("y")
+        session.wait("GO: full throttle, then engine cut", 10)
+        screen = session.wait("COAST-DOWN: driven-side loss", 90)
         assert "DONE" in screen and "T = a + b·ω + c·ω² (ω in rad/s)" in screen and "4 results" in screen
         # the numbers are the run's stored characterisation (written at DONE), formatted
         docs = [json.loads(line) for line in (run_dir / "documents.jsonl").read_text().splitlines()]
@@ -245,9 +219,9 @@ def test_ui_tmux_coast_down_shows_its_results(tmp_path):
         fit = c["loss_fit"]
         assert f"a = {fit['coefficients']['a_nm']:.4f} N·m" in screen, screen
         assert f"over {fit['rpm_min']:.0f}–{fit['rpm_max']:.0f} rpm" in screen, screen
-        _tmux("send-keys", "-t", session, "q")
-        _wait_screen(session, "EXITED=0", 30)
+        session.keys("q")
+        session.wait("EXITED=0", 30)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     report = (run_dir / "report.html").read_text()
     assert "<h2>Characterisation</h2>" in report and f"{fit['coefficients']['a_nm']:.4f}" in report

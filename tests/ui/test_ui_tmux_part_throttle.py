@@ -6,16 +6,12 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import pytest
 
-from tests.screens import pane as _screen
-from tests.screens import wait_screen as _wait
 
 pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 
@@ -37,10 +33,7 @@ FIELD = re.compile(r"^ (engine|P out|P engine|effic\.)\s+(.*)$")
 
 
 def _env(home: Path) -> dict:
-    from dyno.model.overlay import default_cache_dir
-
-    return {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "HOME": str(home), "PYTHONPATH": str(REPO),
-            "DYNO_MODEL_CACHE": str(default_cache_dir())}  # the session's belt table, not a rebuild
+    return {"HOME": str(home), "PYTHONPATH": str(REPO)}  # the session's belt table and library: tests/screens.py
 
 
 def _fields(screen: str) -> dict:
@@ -53,43 +46,41 @@ def _fields(screen: str) -> dict:
     return out
 
 
-def _loaded_readouts(tmp_path: Path, engine_map: Path) -> list[dict]:
+def _loaded_readouts(terminal, tmp_path: Path, engine_map: Path) -> list[dict]:
     """Run the one-cell grid in `dyno ui`; the fields seen while the brake holds the speed (SETTLE/MEASURE)."""
     plan = tmp_path / "grid.toml"
     plan.write_text(PLAN)
     run_dir = tmp_path / "run"
-    session = f"dyno-pt-{uuid.uuid4().hex[:8]}"
     cmd = (f"{sys.executable} -m dyno ui --sim --speed 2 --seed 2 --plan {plan} --engine-map {engine_map} "
            f"--out {run_dir} ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "80", "-y", "24", "-s", session, cmd], check=True,
-                   timeout=20, env=_env(tmp_path))
+    session = terminal(cmd, env=_env(tmp_path))
     seen = []
     try:
-        _wait(session, "ARMED", 60)
-        subprocess.run(["tmux", "send-keys", "-t", session, "g"], timeout=20)
-        _wait(session, "Start the test?", 10)
-        subprocess.run(["tmux", "send-keys", "-t", session, "y"], timeout=20)
+        session.wait("ARMED", 60)
+        session.keys("g")
+        session.wait("Start the test?", 10)
+        session.keys("y")
         t_end = time.monotonic() + 120
         while time.monotonic() < t_end:
-            screen = _screen(session)
+            screen = session.screen()
             if " DONE" in screen or "ABORTED" in screen:
                 break
             if " MEASURE" in screen or " SETTLE" in screen:
                 seen.append(_fields(screen))
             time.sleep(0.2)
         assert " DONE" in screen, screen
-        subprocess.run(["tmux", "send-keys", "-t", session, "q"], timeout=20)
-        _wait(session, "EXITED=0", 30)
+        session.keys("q")
+        session.wait("EXITED=0", 30)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     assert seen, "no SETTLE/MEASURE screen captured"
     return seen
 
 
-def test_ui_tmux_part_throttle_efficiency_uses_the_curve_at_the_throttle(tmp_path):
+def test_ui_tmux_part_throttle_efficiency_uses_the_curve_at_the_throttle(tmp_path, terminal):
     from dyno.analysis.engine_map import load_engine_map
 
-    seen = _loaded_readouts(tmp_path, PART_MAP)
+    seen = _loaded_readouts(terminal, tmp_path, PART_MAP)
     # the shipped rig measures its air (its BME280): the screen's engine power is the map's at the run's day
     from dyno.analysis.air import Ambient
 
@@ -119,7 +110,7 @@ def test_ui_tmux_part_throttle_efficiency_uses_the_curve_at_the_throttle(tmp_pat
     assert apart >= 2, seen
 
 
-def test_ui_tmux_part_throttle_without_a_curve_says_na(tmp_path):
-    seen = _loaded_readouts(tmp_path, FULL_MAP)
+def test_ui_tmux_part_throttle_without_a_curve_says_na(tmp_path, terminal):
+    seen = _loaded_readouts(terminal, tmp_path, FULL_MAP)
     assert {f["effic."] for f in seen} == {"n/a: no 60 % curve"}, seen
     assert {f["P engine"] for f in seen} == {"—"}, seen

@@ -6,28 +6,22 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
 import sys
 import time
-import uuid
 
-from tests.screens import tmux as _tmux
-from tests.screens import wait_screen as _wait_screen
 from tests.ui.test_ui_tmux import _env
 from tests.web.conftest import http_status, needs_browser, needs_tmux
 
 pytestmark = [needs_browser, needs_tmux]
 
 
-def test_ui_web_page_follows_the_terminal_session(browser, tmp_path):
-    session = f"dyno-uiweb-{uuid.uuid4().hex[:8]}"
+def test_ui_web_page_follows_the_terminal_session(browser, tmp_path, terminal):
     run_dir = tmp_path / "run"
     cmd = (f"{sys.executable} -m dyno ui --sim --speed 4 --out {run_dir} --drill bus-lost@measure+1 "
            f"--web 127.0.0.1:0 ; echo EXITED=$? ; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-x", "120", "-y", "30", "-s", session, cmd], check=True,
-                   timeout=20, env=_env(tmp_path))
+    session = terminal(cmd, size=(120, 30), env=_env(tmp_path))
     try:
-        screen = _wait_screen(session, "ARMED", 120)
+        screen = session.wait("ARMED", 120)
         m = re.search(r"web: (http://127\.0\.0\.1:\d+/\?token=[\w-]+)", screen)
         assert m, screen
         url = m.group(1)
@@ -39,9 +33,9 @@ def test_ui_web_page_follows_the_terminal_session(browser, tmp_path):
         assert page.query_selector("#stop") is None or not page.is_visible("#stop")  # no --web-stop: no button
         for text in ("GO", "arm"):  # nothing on the page starts or re-arms the rig
             assert page.query_selector(f"button:text-is('{text}')") is None
-        _tmux("send-keys", "-t", session, "g")
-        _wait_screen(session, "Start the test?", 10)
-        _tmux("send-keys", "-t", session, "y")
+        session.keys("g")
+        session.wait("Start the test?", 10)
+        session.keys("y")
         page.wait_for_function("!document.getElementById('state').textContent.startsWith('ARMED')", timeout=20_000)
         seen = set()
         for _ in range(12):
@@ -51,12 +45,12 @@ def test_ui_web_page_follows_the_terminal_session(browser, tmp_path):
         page.wait_for_selector("#banner:not([hidden])", timeout=90_000)
         assert page.inner_text("#abort-cause") == "comms_lost"
         page.wait_for_function("document.getElementById('rig-safe').dataset.safe === 'true'", timeout=30_000)
-        _wait_screen(session, ["cause: comms_lost", "rig SAFE"], 20)  # the terminal says the same
-        _tmux("send-keys", "-t", session, "q")  # (the test has ended: no confirmation)
-        _wait_screen(session, "EXITED=0", 30)
+        session.wait(["cause: comms_lost", "rig SAFE"], 20)  # the terminal says the same
+        session.keys("q")  # (the test has ended: no confirmation)
+        session.wait("EXITED=0", 30)
         page.wait_for_function("document.getElementById('link').textContent.includes('ended')", timeout=10_000)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True, timeout=20)
+        session.close()
     # the run's own safety record: the drill's abort, the physics safe at its end
     docs = [json.loads(line) for line in (run_dir / "documents.jsonl").read_text().splitlines() if line.strip()]
     safety = [d for d in docs if d.get("type") == "safety"][-1]
