@@ -50,12 +50,13 @@ def pytest_sessionfinish(session, exitstatus):
 def no_process_outlives_its_test():
     """Whatever a test started (directly or through its fixtures) ends with it: after the test's own teardown, a
     process it left gets a few seconds, then SIGKILL, and the test errors naming it.  (Processes of wider-scoped
-    fixtures, set up before this, are not the test's; a tmux server is detached, and the ``terminal`` fixture
+    fixtures, set up before this, and what they start are not the test's; a tmux server is detached, and the ``terminal`` fixture
     ends it.)"""
     me = os.getpid()
     before = processes.descendants(me)
     yield
-    left = processes.wait_gone(lambda: sorted(processes.descendants(me) - before), timeout_s=10.0, poll_s=0.1)
+    left = processes.wait_gone(lambda: sorted(processes.descendants(me, before) - before), timeout_s=10.0,
+                                  poll_s=0.1)
     if left:
         what = processes.describe(left)
         processes.kill(left)

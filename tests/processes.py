@@ -97,8 +97,9 @@ def kill(pids) -> None:
 _PROCESS_HELPERS = ("multiprocessing.resource_tracker", "multiprocessing.forkserver")
 
 
-def descendants(pid: int) -> set[int]:
-    """Every live process below ``pid`` (children, their children, ...), Python's own helpers left out."""
+def descendants(pid: int, owned_by_others=frozenset()) -> set[int]:
+    """Every live process below ``pid`` (children, their children, ...), Python's own helpers left out, and
+    not looking below the processes in ``owned_by_others`` (what they start is theirs: a browser's renderers)."""
     parent_of = {}
     for entry in os.listdir("/proc"):
         if entry.isdigit():
@@ -110,4 +111,5 @@ def descendants(pid: int) -> set[int]:
     while frontier:
         frontier = {p for p, pp in parent_of.items() if pp in frontier and p not in found}
         found |= frontier
+        frontier -= set(owned_by_others)
     return {p for p in found if not any(h in cmdline(p) for h in _PROCESS_HELPERS)}
