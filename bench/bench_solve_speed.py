@@ -10,8 +10,9 @@ Run:  python bench/bench_solve_speed.py [--quick] [--variants corrected,as_publi
 3. the warm step: a chain of operating points spaced as a speed-hold run's accepted points are (ratio +6 %,
    torque -/+ 3 N*m, primary speed -5 %), each solved from the one before, in-process: <= 0.3 s each.
 
-Exits 1 when a criterion fails.  Wall time on a quiet machine is the figure; ``--quick`` (CI's smoke run,
-beside other tests) judges CPU time instead, on Table 6.1 once, two grid cases and three warm steps.
+Exits 1 when a criterion fails.  Wall time on a quiet machine is the figure.  ``--quick`` (CI's smoke run, beside
+other tests, on whatever machine CI has) runs Table 6.1 once, two grid cases and three warm steps to their end and
+judges what they solve (converged, or refused with a physical reason), not their speed: it prints the times.
 BLAS runs on one thread (its idle spinning would count as CPU).
 """
 
@@ -68,10 +69,10 @@ def cold(runs: int, quick: bool) -> bool:
         cpus.append(cpu)
         print(f"   {wall:5.2f} s wall, {cpu:5.2f} s CPU, solve {out['solve_s']:.2f} s, "
               f"{out['continuation_steps']} steps, {out['mesh_nodes']} nodes, efficiency {out['efficiency']['overall']:.6f}")
-    judged = statistics.median(cpus if quick else walls)
-    ok = judged <= COLD_CHECK_S
-    print(f"   median {judged:.2f} s {'CPU' if quick else 'wall'}: target {COLD_TARGET_S:g} s, checked at "
-          f"{COLD_CHECK_S:g} s -> {'ok' if ok else 'FAIL'}")
+    judged = statistics.median(walls)
+    ok = quick or judged <= COLD_CHECK_S
+    print(f"   median {judged:.2f} s wall: target {COLD_TARGET_S:g} s, checked at {COLD_CHECK_S:g} s -> "
+          f"{'not judged (--quick)' if quick else 'ok' if ok else 'FAIL'}")
     return ok
 
 
@@ -84,16 +85,16 @@ def grid(variants, ratios, torques, quick: bool) -> bool:
                 wall, cpu, rc, out = point_process("--ratio", f"{ratio:g}", "--torque", f"{torque:g}",
                                                    "--variant", variant)
                 state = out.get("state", "failed")
-                judged = cpu if quick else wall
-                worst = max(worst, judged)
+                worst = max(worst, wall)
                 physical = state == "steady" or state == "gross_slip"
-                ok = physical and judged <= GRID_S
+                ok = physical and (quick or wall <= GRID_S)
                 ok_all &= ok
                 what = (f"efficiency {out['efficiency']['overall']:.4f}, {out['continuation_steps']} steps"
                         if state == "steady" else out.get("reason", "")[:90])
                 print(f"   {variant:12s} ratio {ratio:3.1f} {torque:4.0f} N*m  {wall:5.2f} s wall {cpu:5.2f} s CPU  "
                       f"{state:10s} {what} {'' if ok else '  FAIL'}")
-    print(f"   slowest {worst:.2f} s {'CPU' if quick else 'wall'} -> {'ok' if ok_all else 'FAIL'}")
+    print(f"   slowest {worst:.2f} s wall{' (speed not judged: --quick)' if quick else ''} -> "
+          f"{'ok' if ok_all else 'FAIL'}")
     return ok_all
 
 
@@ -111,17 +112,21 @@ def warm(steps: int, quick: bool) -> bool:
         t0, c0 = time.perf_counter(), time.thread_time()
         prev = solve_point(TABLE_6_1, op, guess=prev)
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
-        times.append(cpu if quick else wall)
+        times.append(wall)
+        if not prev.summary.get("converged", True):
+            print("   FAILED: did not converge")
+            return False
         print(f"   ratio {op.ratio:5.3f} {op.primary_torque_nm:4.1f} N*m {op.primary_speed_rpm:6.0f} rpm: {wall:5.3f} s wall "
               f"{cpu:5.3f} s CPU, {len(prev.raw.history)} attempt(s)")
-    ok = max(times) <= WARM_S
-    print(f"   median {statistics.median(times):.3f} s, slowest {max(times):.3f} s -> {'ok' if ok else 'FAIL'}")
+    ok = quick or max(times) <= WARM_S
+    print(f"   median {statistics.median(times):.3f} s, slowest {max(times):.3f} s wall -> "
+          f"{'not judged (--quick)' if quick else 'ok' if ok else 'FAIL'}")
     return ok
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="CI smoke run: CPU time, a few cases")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: a few cases to their end, solutions judged, not speed")
     ap.add_argument("--variants", default="corrected,as_published", help="variants of the cold grid")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v]
