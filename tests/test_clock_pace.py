@@ -29,8 +29,11 @@ def test_the_work_between_waits_does_not_slow_the_pace():
         return time.monotonic() - t0, loop.pace_stats()
 
     wall_s, pace = run(go(), virtual=True, speed=2.0)
-    assert 0.19 <= wall_s < 0.25, wall_s
-    assert pace["speed"] == 2.0 and pace["held"] == pytest.approx(1.0, abs=0.1), pace
+    # the end is the last deadline (0.2 s) plus that wake-up's lateness, bounded by the latest one this run saw
+    # (a loaded machine's scheduling): never the work's 20 x 4 ms on top (0.28 s on a quiet machine)
+    late_s = pace["late_max_ms"] / 1e3
+    assert 0.19 <= wall_s < 0.2 + late_s + 0.02, (wall_s, pace)
+    assert pace["speed"] == 2.0 and pace["held"] >= 0.2 / (0.2 + late_s + 0.02) - 0.02, pace
     assert pace["wakes"] == 20 and pace["written_off_s"] == 0.0
     assert 0.0 <= pace["late_p99_ms"] <= pace["late_max_ms"]
 

@@ -103,7 +103,9 @@ def test_watchdog_thread_catches_a_real_blocked_event_loop_on_the_real_rig_path(
                      if pin == kill and t >= result["blocked_at"] and (v >= 0.5) == high_kills]
         assert killed_at, "the watchdog never killed the engine while the loop was blocked"
         latency = killed_at[0] - result["blocked_at"]
-        assert latency <= wd.timeout_s + wd.period_s + 0.05, latency  # 50 ms: thread scheduling on a busy VM
+        # the watchdog's own bound (a timeout and one look) plus the OS's scheduling of its thread, which a loaded
+        # or slower 2-core machine stretches: 150 ms of it (a Pi with the service alone sees ~1 ms)
+        assert latency <= wd.timeout_s + wd.period_s + 0.15, latency
         assert killed_at[0] < result["resumed_at"], "safed only after the loop came back"
         assert hw.actuators.latched
 

@@ -6,7 +6,6 @@ The full grid (ratio x torque x variant) runs in bench/bench_model.py; here a re
 import json
 import subprocess
 import sys
-import time
 from dataclasses import replace
 
 import pytest
@@ -66,7 +65,6 @@ def test_corrected_balances_hold_at_half_and_double_ei(table_6_1):
 @pytest.mark.parametrize("ratio,torque_nm", [(0.9, 5.0), (2.0, 10.0), (3.5, 18.0)])
 def test_cold_start_at_any_ratio_solves_and_balances(ratio, torque_nm):
     """Ratios >= 1.5 used to fail from the geometric guess: now continued from equal radii."""
-    t0 = time.perf_counter()
     sol = solve_point(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=ratio, primary_torque_nm=torque_nm), time_limit_s=60)
     s = sol.summary
     assert s["state"] == "steady"
@@ -74,7 +72,6 @@ def test_cold_start_at_any_ratio_solves_and_balances(ratio, torque_nm):
     assert s["torque_nm"]["primary"] == pytest.approx(torque_nm, rel=1e-6)
     assert max(s["balance"].values()) < LIMIT, s["balance"]
     assert 0.5 < s["efficiency"]["overall"] < 1.05
-    assert time.perf_counter() - t0 < 60
 
 
 def _dyno(*args, timeout=180):
@@ -133,9 +130,7 @@ def test_stock_clamp_carries_10_but_not_18_nm_at_ratio_2():
     s = solve_point(TABLE_6_1, replace(op, primary_torque_nm=10.0), time_limit_s=60).summary
     assert s["state"] == "steady" and s["axial_force_n"]["primary"] == pytest.approx(clamp, rel=1e-6)
     assert max(s["balance"].values()) < LIMIT
-    t0 = time.perf_counter()
     with pytest.raises(GrossSlip) as info:
         solve_point(TABLE_6_1, op, time_limit_s=60)
-    assert not isinstance(info.value, DidNotConverge)
+    assert not isinstance(info.value, DidNotConverge)  # refused by the bound, not by running out of time
     assert "primary" in str(info.value) and "capstan bound" in str(info.value)
-    assert time.perf_counter() - t0 < 30

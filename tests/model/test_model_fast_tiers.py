@@ -94,11 +94,18 @@ def test_closed_form_axial_force_operating_point_round_trip():
 
 
 def test_closed_form_is_fast():
-    # A generous functional bound (the benchmark prints the real figure).
-    t0 = time.perf_counter()
+    """The closed form is the live tier because it costs a small fraction of the full model's solve: judged as a
+    ratio of the two, measured here on the same machine (bench/bench_model.py prints the seconds)."""
+    from dyno.model.solution import solve_point
+
+    t0 = time.thread_time()
+    solve_point(TABLE_6_1, TABLE_6_1_POINT)
+    full_s = time.thread_time() - t0
+    t0 = time.thread_time()
     for _ in range(200):
         cf.closed_form_point(TABLE_6_1, TABLE_6_1_POINT)
-    assert (time.perf_counter() - t0) / 200 < 0.01
+    closed_s = (time.thread_time() - t0) / 200
+    assert closed_s * 20 < full_s, (closed_s, full_s)
 
 
 def test_capstan_thrust_against_the_full_model(table_6_1):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -41,9 +40,8 @@ def test_tiny_table_is_physical_and_monotone(tiny):
 
 def test_second_build_reads_the_overlay_cache(tiny):
     tab, cache = tiny
-    t0 = time.perf_counter()
     again = build_belt_table(RATIOS, (18.0,), cache_dir=cache)
-    assert again.solved == 0 and time.perf_counter() - t0 < 1.0
+    assert again.solved == 0  # every cell read, none solved
     np.testing.assert_array_equal(again.eta_torque, tab.eta_torque)
     # the entries are the overlay's: predict_overlay answers from them without solving
     from dyno.model.overlay import predict_overlay

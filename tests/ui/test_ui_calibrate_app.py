@@ -150,10 +150,9 @@ def test_an_error_inside_the_running_app_propagates_instead_of_hanging(tmp_path)
             await pilot.pause(0.3)
             raise RuntimeError("an assertion inside the app's context")
 
-    t0 = time.monotonic()
+    # an app that did not shut down would hold the error until wait_for's timeout, which raises TimeoutError instead
     with pytest.raises(RuntimeError, match="inside the app's context"):
-        asyncio.run(asyncio.wait_for(scenario(), 40))
-    assert time.monotonic() - t0 < 20, "the app did not shut down: the test body's error waited for a timeout"
+        asyncio.run(asyncio.wait_for(scenario(), 300))
 
 
 def test_ui_calibrate_input_channel_without_its_converter_says_so(tmp_path):

@@ -8,7 +8,6 @@ import math
 import re
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -58,7 +57,6 @@ def test_ui_live_go_points_estop(tmp_path):
             await pilot.pause(0.1)
             await pilot.press("y")
             assert await wait_for(pilot, lambda: s.controller.state is not State.ARMED, 5)
-            t0 = time.monotonic()
             # MEASURE shows its clock against the cap (rig seconds), not the minimum average
             assert await wait_for(pilot, lambda: "MEASURE  " in screen_text(app), 60), s.controller.reason
             text = screen_text(app)
@@ -78,7 +76,6 @@ def test_ui_live_go_points_estop(tmp_path):
             assert re.search(r"last: point \d+, try 1: device reset", text), text
             assert "discarded 1 window" in text, text
             assert await wait_for(pilot, lambda: len(s.controller.points) >= 1, 60), s.controller.reason
-            wall_to_point_s = time.monotonic() - t0
             assert await wait_for(pilot, lambda: "points    1" in screen_text(app) or "points    2" in screen_text(app),
                                   5), screen_text(app)
             # the efficiency plot shows the point's axis (secondary rpm)
@@ -106,10 +103,8 @@ def test_ui_live_go_points_estop(tmp_path):
             assert s.sim.model.throttle_frac == 0.0 and not s.manual
             await pilot.press("q")  # finished: quits without a question
             await pilot.pause(0.5)
-        return wall_to_point_s
 
-    wall_s = asyncio.run(scenario())
-    assert wall_s < 60
+    asyncio.run(scenario())
     stop = [json.loads(line) for line in (tmp_path / "run" / "documents.jsonl").read_text().splitlines()
             if line.strip()]
     assert any(d.get("type") == "abort" and d.get("cause") == "estop" for d in stop)
