@@ -32,8 +32,11 @@ for one core of a Pi 4 and half a core for one of a Pi 5.
     python bench/bench_pi_budget.py [--quick] [--quotas 0.25,0.5,1] [--cases headless,drill,ui,ui+overlay,web]
                                     [--setpoints N] [--seed 3] [--json]
 
-``--quick`` (CI's smoke run, under a minute): a quarter core, the drill case alone.  Without a writable
-cgroup v1 ``cpu`` hierarchy (not root, cgroup v2 only) it prints one ``skipped:`` line and exits 0.
+``--quick`` (CI's smoke run, under a minute, on whatever machine CI has): a quarter core, the drill case alone,
+judged on what it did -- the run aborted by the drill's cause within its bound in true time, no watchdog trip
+(the headless run's watchdog keeps its virtual clock) -- while the rates held, a wall-clock pace that a quarter
+core of a slower or loaded machine cannot keep, are printed, not judged.  Without a writable cgroup v1 ``cpu``
+hierarchy (not root, cgroup v2 only) it prints one ``skipped:`` line and exits 0.
 """
 
 from __future__ import annotations
@@ -272,8 +275,9 @@ def rate_of(res: dict, nominal_hz: float) -> dict | None:
     return next((r for r in res.get("rates") or [] if abs(r["nominal_hz"] - nominal_hz) < 1e-6), None)
 
 
-def verdicts(case: str, fraction: float, res: dict) -> list[str]:
-    """The targets this case missed (empty: all met, or none applies at this quota)."""
+def verdicts(case: str, fraction: float, res: dict, quick: bool = False) -> list[str]:
+    """The targets this case missed (empty: all met, or none applies at this quota); ``quick``: not the rates
+    held (wall-clock pace: the machine's speed, not the host's behaviour)."""
     if "error" in res:
         return [f"did not run to the end: {res['error'].splitlines()[0]}"]
     bad = []
@@ -281,7 +285,7 @@ def verdicts(case: str, fraction: float, res: dict) -> list[str]:
     if res.get("state") != expect:
         bad.append(f"ended {res.get('state')}, not {expect}")
     if fraction <= 0.25 + 1e-9:
-        for r in res.get("rates") or []:
+        for r in [] if quick else res.get("rates") or []:
             if r["held_hz"] is not None and r["held_hz"] < HELD_MIN * r["nominal_hz"]:
                 bad.append(f"poll rate {r['held_hz']:.2f} Hz < {HELD_MIN:.0%} of {r['nominal_hz']:g} Hz")
         if any(a.get("cause") == "watchdog" for a in res.get("aborts") or []):
@@ -355,7 +359,7 @@ def run_case(case: str, fraction: float, args, plan: Path | None) -> dict:
         host.close()
         if solver is not None:
             solver.close()
-    res["missed"] = verdicts(case, fraction, res)
+    res["missed"] = verdicts(case, fraction, res, args.quick)
     if res["missed"] and not args.quick:
         print(f"  (kept {work} for a look)", file=sys.stderr)
     else:
@@ -408,9 +412,10 @@ def main(argv=None) -> int:
         print(f"MISSED at {fraction:g} core, {case}: {m}")
     if args.json:
         print(json.dumps(results, indent=1, default=str))
-    print(f"targets: {'all met' if not missed else f'{len(missed)} missed'} (a quarter core: rates within "
-          f"{1 - HELD_MIN:.0%} of nominal, no watchdog trip, {DRILL} within its bound; half a core: the overlay "
-          "keeps up)")
+    rates = (f"rates within {1 - HELD_MIN:.0%} of nominal: not judged (--quick)" if args.quick
+             else f"rates within {1 - HELD_MIN:.0%} of nominal")
+    print(f"targets: {'all met' if not missed else f'{len(missed)} missed'} (a quarter core: {rates}, no watchdog "
+          f"trip, {DRILL} within its bound; half a core: the overlay keeps up)")
     return 1 if missed else 0
 
 

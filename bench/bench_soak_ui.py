@@ -16,7 +16,9 @@ its points replay.
 second run to its end (~1.5–2 min of wall time).  Skips in one
 line without tmux.  Exit 0 when the UI ran to the end, every run is safe and replays, and RSS after the
 first quarter grew by at most 10 % (judged from 3 tests on), fds flat, and no test that was not E-stopped ended
-without a point; 1 otherwise.
+without a point; 1 otherwise.  Nothing is judged on wall time: the waits for a screen are give-ups with the headroom
+a 2x slower, loaded machine needs, and a watchdog trip of a loop starved at ``--speed N`` (a slow machine's, not a
+fault of the session's) is met as the operator meets it, by starting ``dyno ui`` again.
 """
 
 from __future__ import annotations
@@ -95,14 +97,14 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
     seen, _ = wait_any(name, [" ARMED ", *ENDED], 150)  # (a busy 2-core machine: the first start is slow)
     if seen == " ARMED ":  # (else it ended before GO, e.g. the engine did not start: re-armed all the same)
         tmux("send-keys", "-t", name, "g")
-        wait_any(name, ["Start the test?"], 20)
+        wait_any(name, ["Start the test?"], 60)
         tmux("send-keys", "-t", name, "y")
         if estop:
             wait_any(name, [" MEASURE ", " SETTLE ", " STEP "], 120)
             tmux("send-keys", "-t", name, "Space")
     ended, screen = wait_any(name, list(ENDED), test_timeout_s)
     cause = next((line.split("cause:", 1)[1].strip()[:90] for line in screen.splitlines() if " cause: " in line), "")
-    t_end = time.monotonic() + 60  # re-arm as the operator does: ask until the release has ended
+    t_end = time.monotonic() + 120  # re-arm as the operator does: ask until the release has ended
     while True:
         tmux("send-keys", "-t", name, "r")
         try:
@@ -115,7 +117,7 @@ def one_test(name: str, estop: bool, test_timeout_s: float) -> str:
                 raise
     title = pane(name).splitlines()[0]  # names the run directory: a new one once the re-arm has been done
     tmux("send-keys", "-t", name, "y")
-    t_end = time.monotonic() + 60
+    t_end = time.monotonic() + 120
     while pane(name).splitlines()[0] == title:  # (else the next test would read this one's stale screen)
         if time.monotonic() > t_end:
             raise AssertionError(f"re-armed, but the screen still shows {title!r}")
@@ -197,7 +199,7 @@ def soak(args) -> dict:
                 continue
             break
         tmux("send-keys", "-t", name, "q")
-        wait_any(name, ["Quit?"], 20)
+        wait_any(name, ["Quit?"], 60)
         tmux("send-keys", "-t", name, "y")
         wait_any(name, ["EXITED="], 120)
         exited = pane(name).split("EXITED=")[1].split()[0]

@@ -34,7 +34,7 @@ repeats).  The rest asserts nothing (the machine is shared and noisy: read singl
 ``--quick`` (CI's smoke run, about 80 s): every part once on a smaller problem -- the CPU figures for the
 session alone and the live screen with the rig's bus I/O (the plain live screen's path is within the latter),
 2 s per phase, and with the web view; the jitter without the UI and with the UI + overlay (the plain UI's path is within the latter),
-2 s each; the entry points -- with the simulated rig at 5x real time so that the waits for ARMED, the warm-up
+2 s each; the entry points -- judging nothing on time (a slow or loaded machine's figures are its own), with the simulated rig at 5x real time so that the waits for ARMED, the warm-up
 and the spin-down are short, and the model cache's entries copied into its fresh cache (else the simulated
 rig's belt table is built anew: about a minute).  Its figures are not the real-time ones.
 """
@@ -70,7 +70,7 @@ async def _bare(seconds: float, out_dir: Path, speed: float = 1.0) -> dict:
 
     s = LiveSession(LiveOptions(sim=True, speed=speed, out_dir=out_dir))
     s.start()
-    t_end = asyncio.get_running_loop().time() + seconds + 15
+    t_end = asyncio.get_running_loop().time() + seconds + 120  # a give-up: start-up on a slow, loaded machine
     while s.controller.state.value != "armed" and asyncio.get_running_loop().time() < t_end:
         await asyncio.sleep(0.05)
     s.poller.timing.intervals_s.clear()  # measure the test, not the engine start
@@ -88,7 +88,7 @@ async def _with_ui(seconds: float, out_dir: Path, overlay: bool, speed: float = 
 
     app = LiveApp(LiveOptions(sim=True, speed=speed, out_dir=out_dir))
     async with app.run_test(size=(80, 24)) as pilot:
-        t_end = time.monotonic() + 20
+        t_end = time.monotonic() + 120  # a give-up: start-up on a slow, loaded machine
         while (app.session is None or app.session.controller.state.value != "armed") and time.monotonic() < t_end:
             await asyncio.sleep(0.05)
         s = app.session
