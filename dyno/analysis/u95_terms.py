@@ -78,3 +78,47 @@ def describe(terms) -> list[str]:
         fig = "per point" if u is None else f"{100 * u:.2f} % (standard, relative)"
         out.append(f"{t.get('term')}: {fig} — {t.get('basis')}")
     return out
+
+
+#: what ``dyno compare`` does with the terms two runs share (dyno.library.compare_terms), for the readers
+COMPARE_NOTE = ("`dyno compare` cancels what two runs share (the same calibration entry, the same engine map at "
+                "one engine speed, the air each run was corrected to): a change between runs is known better than "
+                "either run's U95")
+
+COMPARE_NOTE_SHORT = "`dyno compare` cancels what runs share"
+#: the terms' names in a 30-column screen field
+TERM_SHORT = {"statistical": "scatter", "calibration": "calib.", "engine_map": "map", "calibration_input": "calib.in",
+              "driveline": "driveline", "air": "air", "cradle": "cradle", "friction": "friction"}
+
+
+def largest_term(points) -> tuple[str, float, float] | None:
+    """The term of ``efficiency_u95`` that dominates the points: (name, its 95 % half-width, the U95), each the
+    root mean square over the points that state their terms (``efficiency_u95_terms``); None without any."""
+    import math
+
+    sums: dict[str, float] = {}
+    u95_sq, n = 0.0, 0
+    for p in points or []:
+        terms, u95 = p.get("efficiency_u95_terms"), p.get("efficiency_u95")
+        if not isinstance(terms, dict) or not isinstance(u95, float) or not math.isfinite(u95):
+            continue
+        n += 1
+        u95_sq += u95 * u95
+        for name, v in terms.items():
+            if isinstance(v, (int, float)) and math.isfinite(v):
+                sums[name] = sums.get(name, 0.0) + float(v) * float(v)
+    if not n or not sums:
+        return None
+    name = max(sums, key=sums.get)
+    return name, math.sqrt(sums[name] / n), math.sqrt(u95_sq / n)
+
+
+def largest_term_text(points, *, short: bool = False) -> str:
+    """``largest U95 term: engine_map (±4.1 pp of ±4.6 pp)`` (``short``: ``engine_map ±4.1/4.6 pp``); '' without."""
+    found = largest_term(points)
+    if found is None:
+        return ""
+    name, half, u95 = found
+    if short:
+        return f"{name} ±{100 * half:.1f}/{100 * u95:.1f} pp"
+    return f"largest U95 term: {name} (±{100 * half:.1f} pp of ±{100 * u95:.1f} pp, rms over the points)"

@@ -47,6 +47,14 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, self.last_error + "\n")
 
 
+class ParagraphsFormatter(argparse.HelpFormatter):
+    """argparse's help, with a description's or an epilog's paragraphs (blank-line separated) kept apart."""
+
+    def _fill_text(self, text, width, indent):
+        return "\n\n".join(super(ParagraphsFormatter, self)._fill_text(par, width, indent)
+                             for par in text.split("\n\n"))
+
+
 def number_in(lo: float, hi: float, *, integer: bool = False, lo_open: bool = False):
     """An argparse ``type``: a finite number in [lo, hi] (``(lo, hi]`` with ``lo_open``)."""
     import math
@@ -155,18 +163,33 @@ def _error(line: str, rc: int, as_json: bool) -> int:
     return rc
 
 
+def command_parser(name: str):
+    """(module, parser) of ``dyno NAME``: what runs it and what its ``--help`` says (docs/cli.md is made from these)."""
+    from dyno.cli.epilogs import EPILOGS
+
+    mod = importlib.import_module(COMMANDS[name][0])
+    parser = OneLineParser(prog=f"dyno {name}", description=COMMANDS[name][1], epilog=EPILOGS.get(name),
+                           formatter_class=ParagraphsFormatter)
+    mod.add_arguments(parser)
+    for p in [parser, *sub_parsers(parser)]:
+        if "--rig" not in p._option_string_actions:
+            # every command (and every action of one, `dyno model point`) takes --rig PATH (the rig
+            # description), even where it only records it, so scripts can pass it uniformly
+            from dyno.rig.config import add_rig_argument
+
+            add_rig_argument(p)
+    return mod, parser
+
+
+def sub_parsers(parser) -> list:
+    """The parsers of a command's actions (``dyno model point``, ...), in the order they were added."""
+    return [p for a in parser._actions if isinstance(a, argparse._SubParsersAction) for p in a.choices.values()]
+
+
 def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] in COMMANDS and _available(argv[0]):
         name = argv[0]
-        mod = importlib.import_module(COMMANDS[name][0])
-        parser = OneLineParser(prog=f"dyno {name}", description=COMMANDS[name][1])
-        mod.add_arguments(parser)
-        if "--rig" not in parser._option_string_actions:
-            # every command takes --rig PATH (the rig description), even where it only
-            # records it, so scripts can pass it uniformly
-            from dyno.rig.config import add_rig_argument
-
-            add_rig_argument(parser)
+        mod, parser = command_parser(name)
         try:
             args = parser.parse_args(argv[1:])
         except SystemExit as exc:  # --help, or a bad argument (already reported on one line)

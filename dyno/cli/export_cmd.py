@@ -16,8 +16,9 @@ def add_arguments(p) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="csv: output directory (default RUN/export); parquet/mdf4: the file (default "
                         "RUN/export/<run>.parquet or .mf4)")
-    p.add_argument("--calibration", type=Path, default=None)
-    p.add_argument("--engine-map", type=Path, default=None)
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="torque calibration history CSV (default: the one the run used)")
+    p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV (default: the run's engine_map.csv)")
 
 
 def run(args) -> int:

@@ -25,17 +25,21 @@ def _reset_at(text: str) -> tuple:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--elf", required=True, help="firmware ELF to run (any ATmega328P sketch)")
-    parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2")
+    parser.add_argument("--protocol", choices=("v2", "v1", "v0"), default="v2", help="the protocol the firmware speaks (default v2)")
     parser.add_argument("--transport", choices=("i2c", "serial"), default="i2c",
                         help="the host's link to the MCU: I2C (TWI) or USB serial (UART0, COBS)")
-    parser.add_argument("--primary-rpm", type=number_in(0.0, 30000.0), default=3800.0)
-    parser.add_argument("--secondary-rpm", type=number_in(0.0, 30000.0), default=7600.0)
-    parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145)
+    parser.add_argument("--primary-rpm", type=number_in(0.0, 30000.0), default=3800.0,
+                        help="the primary Hall signal's speed (default 3800 rpm)")
+    parser.add_argument("--secondary-rpm", type=number_in(0.0, 30000.0), default=7600.0,
+                        help="the secondary Hall signal's speed (default 7600 rpm)")
+    parser.add_argument("--adc-code", type=lambda s: int(s, 0), default=35145,
+                        help="the torque ADC's code the simulated converter returns (default 35145)")
     parser.add_argument("--adc-status", type=lambda s: int(s, 0), default=0x05,
                         help="AD7171 status byte clocked after the data (default 0x05)")
     parser.add_argument("--adc-error-every", type=number_in(0, 1_000_000, integer=True), default=0,
                         help="set the AD7171 error bit on every Nth conversion (0: never)")
-    parser.add_argument("--adc-hz", type=number_in(1.0, 1000.0), default=125.0)
+    parser.add_argument("--adc-hz", type=number_in(1.0, 1000.0), default=125.0,
+                        help="the torque ADC's conversion rate (default 125 Hz)")
     parser.add_argument("--input-hz", type=number_in(0.0, 1000.0), default=0.0,
                         help="fit the engine-side input torque AD7171 (D8/D9) at this rate; the host enables "
                              "it (protocol v2 CAPS / SET_CHANNELS) and the report adds its events (0: not fitted)")
@@ -51,13 +55,16 @@ def add_arguments(parser) -> None:
                         help="probability that a transfer is corrupted between harness and host")
     parser.add_argument("--fault-kinds", default=",".join(FAULT_KINDS),
                         help=f"comma list from {','.join(ALL_FAULT_KINDS)} (default: all but abort)")
-    parser.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=1)
-    parser.add_argument("--poll-hz", type=number_in(0.0, 2000.0, lo_open=True), default=150.0)
+    parser.add_argument("--seed", type=number_in(0, 2**32 - 1, integer=True), default=1,
+                        help="seed of the injected faults and jitter (default 1)")
+    parser.add_argument("--poll-hz", type=number_in(0.0, 2000.0, lo_open=True), default=150.0,
+                        help="the host's poll rate (default 150 Hz)")
     parser.add_argument("--poll-jitter", type=number_in(0.0, 1.0), default=0.0,
                         help="poll at random intervals: each uniform within +-J of the period (0..1)")
     parser.add_argument("--max-burst", type=number_in(1, 1000, integer=True), default=8,
                         help="reads per poll while the device says MORE (the Poller's default)")
-    parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100)
+    parser.add_argument("--i2c-khz", type=number_in(10, 1000, integer=True), default=100,
+                        help="the I2C bus clock (default 100 kHz)")
     parser.add_argument("--drain-s", type=number_in(0.0, 60.0), default=0.3,
                         help="keep polling this long after the signals stop")
     parser.add_argument("--reset-at", type=_reset_at, action="append", default=None, metavar="S[:CAUSE]",
@@ -82,6 +89,11 @@ def _supervisor_arguments(parser) -> None:
                              "train (old-bootloader build), or auto-detected (default)")
 
 
+def _fig(x, spec: str) -> str:
+    """A figure to a sensible precision (the JSON keeps every digit); "-" for none."""
+    return "-" if not isinstance(x, (int, float)) else format(x, spec)
+
+
 def spec_from_args(args) -> FirmwareSimSpec:
     """The command line's options as the library's typed spec (the same names)."""
     names = {f.name for f in dataclasses.fields(FirmwareSimSpec)}
@@ -102,10 +114,12 @@ def run(args) -> int:
         print(json.dumps(report, indent=2))
     else:
         ev = report["events"]
-        print(f"{report['protocol']} {report['elf']}: {report['seconds']} s simulated "
-              f"in {report['wall_s']} s wall")
-        print(f"  rpm primary {report['rpm_primary']}, secondary {report['rpm_secondary']}, "
-              f"adc mean {report['adc_mean']}")
+        err = report.get("rpm_error_pct") or {}
+        print(f"{report['protocol']} {report['elf']}: {_fig(report['seconds'], '.3g')} s simulated "
+              f"in {_fig(report['wall_s'], '.1f')} s wall")
+        print(f"  rpm primary {_fig(report['rpm_primary'], '.2f')} ({_fig(err.get('primary'), '+.3f')} %), "
+              f"secondary {_fig(report['rpm_secondary'], '.2f')} ({_fig(err.get('secondary'), '+.3f')} %), "
+              f"adc mean {_fig(report['adc_mean'], '.1f')}")
         for name, ch in ev.items():
             print(f"  {name}: {ch['received']} received of {ch['expected']} generated")
         fr = report["frames"]
@@ -114,6 +128,6 @@ def run(args) -> int:
         sv = report.get("supervisor")
         if sv:
             state = "on" if sv["off_at_s"] is None else f"off at {sv['off_at_s']:.4f} s ({sv['cause']})"
-            print(f"  run-enable (D7, {sv['model']}): {state}; on at {sv['on_at_s']} s; "
-                  f"limits sent at {sv['limits_sent_at_s']}")
+            print(f"  run-enable (D7, {sv['model']}): {state}; on at {_fig(sv['on_at_s'], '.4f')} s; "
+                  f"limits sent at {_fig(sv['limits_sent_at_s'], '.4f')} s")
     return 0 if report["ok"] else 1

@@ -39,12 +39,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     inverse.add_argument("--tier", choices=("closed_form", "full"), default="closed_form",
                          help="slip tier (full: the BVP, seconds per point)")
     inverse.add_argument("--json", action="store_true", help="print JSON instead of text")
-    study.add_argument("name", choices=STUDIES)
+    study.add_argument("name", choices=STUDIES, help="the parameter varied (thesis Section 7)")
     study.add_argument("--values", type=number_in(-1e12, 1e12), nargs="+", help="parameter values (default: the thesis's)")
     for p in (point, sweep, study):
-        p.add_argument("--variant", choices=VARIANTS, default="corrected")
+        p.add_argument("--variant", choices=VARIANTS, default="corrected",
+                       help="corrected (default), or as_published: the equations as the thesis prints them (a warning says its "
+                            "efficiency is mostly an artefact; docs/belt-model.md)")
         p.add_argument("--json", action="store_true", help="print JSON instead of text")
-        p.add_argument("--tier", choices=("full", "closed_form", "capstan"), default="full")
+        p.add_argument("--tier", choices=("full", "closed_form", "capstan"), default="full",
+                       help="model tier (full: the BVP; closed_form: the creep-only bound; capstan: the capstan thrust)")
         p.add_argument("--slip-threshold", type=number_in(0.0, 1.0, lo_open=True), default=1e-4, metavar="M_S", help="adhesion slip speed [m/s]")
         p.add_argument("--tol", type=number_in(0.0, 1.0, lo_open=True), default=1e-3, help="solve_bvp tolerance")
         p.add_argument("--rpm", type=number_in(0.0, 20000.0, lo_open=True), default=3400.0, help="primary speed [rpm]")
@@ -58,7 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     point.add_argument("--profiles", type=Path, default=None, help="write the profiles to this CSV")
     for p in (sweep, study):
         p.add_argument("--points", type=number_in(2, 1000, integer=True), default=20, help="ratios between --ratio-range ends")
-        p.add_argument("--ratio-range", type=number_in(0.1, 10.0), nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"))
+        p.add_argument("--ratio-range", type=number_in(0.1, 10.0), nargs=2, default=(1.74, 0.72), metavar=("LOW", "HIGH"),
+                       help="geometric ratios R_S/R_P at the two ends (default 1.74 0.72)")
         p.add_argument("--out", type=Path, default=Path("model-out"), help="directory for CSV, Parquet and PNG")
         p.add_argument("--jobs", type=number_in(1, 1024, integer=True), default=None,
                        help="local worker processes (default: the machine's cores; 1: this process)")

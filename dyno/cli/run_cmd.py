@@ -21,7 +21,9 @@ def add_arguments(p) -> None:
                    help="with --sim: drive the simulated rig through the real-rig output code (gpiozero "
                         "devices on MockFactory); outputs then reports the pins' final states")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
-    p.add_argument("--protocol", choices=("v2", "v1", "v0"), default=None)
+    p.add_argument("--protocol", choices=("v2", "v1", "v0"), default=None,
+                   help="the firmware link's protocol (default: rig.toml's protocol; v0: the thesis rig's legacy "
+                        "frame, docs/protocol.md)")
     p.add_argument("--calibration", type=Path, default=None, help="torque calibration history CSV")
     p.add_argument("--engine-map", type=Path, default=None, help="engine map CSV")
     p.add_argument("--tune", type=Path, default=None,
@@ -46,11 +48,9 @@ def add_arguments(p) -> None:
                         "secondary-speed grid, with a part-throttle --engine-map; ...) or a plan "
                         "file (a path ending in .toml; docs/control.md)")
     p.add_argument("--json", action="store_true", help="print one JSON document (on every way out)")
-    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
-                   help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
-                        "device-reset, hall-dead:primary|secondary|both, thermometer-stuck, thermometer-lost, "
-                        "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, pi-freeze[:S], "
-                        "controller-crash, disk-full, sigint, sigterm, sighup (docs/safety.md)")
+    from dyno.session.drill_help import drill_help
+
+    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@WHEN", help=drill_help())
     from dyno.rig.config import add_rig_argument
     from dyno.web.attach import add_web_arguments
 
@@ -405,16 +405,26 @@ def _print_table(result: dict) -> None:
 def _print_points(points: list) -> None:
     """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``), its
     U95 (statistics and every systematic term, ``efficiency_u95``), both ± half-widths in pp, and the interval
-    the truth lies in at 95 % (``efficiency_interval95``: asymmetric where a term is, at most 100 %)."""
-    print(f"{'#':>3} {'rpm_p':>7} {'rpm_s':>7} {'T_s N·m':>7} {'P_out W':>8} {'P_in W':>8} {'eff %':>6} {'±CI95':>6} "
-          f"{'±U95':>5} {'interval95 %':>12}")
+    the truth lies in at 95 % (``efficiency_interval95``: asymmetric where a term is, at most 100 %); the speed
+    ratio; where P_in comes from (``map``: the engine map at the point's speed and throttle, ``meas``: the input
+    torque channel).  Its footer names the term that dominates U95 and what ``dyno compare`` cancels."""
+    from dyno.analysis.u95_terms import COMPARE_NOTE, largest_term_text
+
+    print(f"{'#':>3} {'rpm_p':>6} {'rpm_s':>6} {'ratio':>5} {'T_s N·m':>7} {'P_out W':>7} {'P_in W':>6} {'from':<4} "
+          f"{'eff %':>5} {'±CI95':>5} {'±U95':>5} {'interval95 %':>12}")
     for p in points:
         def f(k, scale=1.0, fmt="{:.0f}"):
             v = p.get(k)
             return "-" if v is None else fmt.format(v * scale)
         iv = p.get("efficiency_interval95")
         interval = "-" if not iv or None in iv else f"{100 * iv[0]:.1f}..{100 * iv[1]:.1f}"
-        print(f"{p.get('index', ''):>3} {f('rpm_primary'):>7} {f('rpm_secondary'):>7} "
-              f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>8} {f('power_in_w'):>8} "
-              f"{f('efficiency', 100, '{:.1f}'):>6} {f('efficiency_ci95', 100, '{:.1f}'):>6} "
+        source = "meas" if p.get("efficiency_source") == "input_torque" else "map"
+        print(f"{p.get('index', ''):>3} {f('rpm_primary'):>6} {f('rpm_secondary'):>6} {f('ratio', fmt='{:.2f}'):>5} "
+              f"{f('torque_secondary_nm', fmt='{:.2f}'):>7} {f('power_out_w'):>7} {f('power_in_w'):>6} {source:<4} "
+              f"{f('efficiency', 100, '{:.1f}'):>5} {f('efficiency_ci95', 100, '{:.1f}'):>5} "
               f"{f('efficiency_u95', 100, '{:.1f}'):>5} {interval:>12}")
+    print("from: where P_in comes from (map: the engine map at the point's speed and throttle; meas: the input "
+          "torque channel)")
+    largest = largest_term_text(points)
+    if largest:
+        print(f"{largest}; {COMPARE_NOTE}")

@@ -18,8 +18,11 @@ def add_arguments(p) -> None:
     p.add_argument("--plan", default="speed-hold", metavar="NAME|FILE",
                    help="the test plan: a shipped name (speed-hold, the default; thesis-step; sweep; torque-hold; "
                         "engine-hold; ...) or a plan file (a path ending in .toml; docs/control.md)")
-    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
-                   help="fault drill at T simulated seconds from the first frame (--sim only; docs/safety.md)")
+    from dyno.session.drill_help import drill_help
+    from dyno.session.drills import DRILLS
+
+    p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@WHEN",
+                   help=drill_help(n for n in DRILLS if n != "pi-freeze"))  # (pi-freeze: dyno run only)
     p.add_argument("--mock-pins", action="store_true",
                    help="--sim: drive the simulated physics through the real-rig output code (gpiozero MockFactory)")
     from dyno.cli.run_cmd import add_air_arguments
@@ -98,11 +101,10 @@ def run(args) -> int:
         runs = list(session.run_dirs)  # every run of the session (re-arm starts a new one), oldest first
     else:
         runs = [args.out] if args.out is not None else []
-    for k, run_dir in enumerate(runs):
-        # the last run's report is written now; an earlier one's was written in the background at re-arm
+    for run_dir in runs:
+        # each run's report was written in the background when its test ended; one quit before that is written now
         # (after a hang-up, SIGHUP: the terminal went, end now: no report, `dyno report RUN` writes it later)
-        finish_run(run_dir, announce=True, only_if_missing=k < len(runs) - 1,
-                   report=rc != 128 + 1)
+        finish_run(run_dir, announce=True, only_if_missing=True, report=rc != 128 + 1)
     return rc
 
 

@@ -17,12 +17,17 @@ import asyncio
 class ScaledClock:
     """Simulated seconds on a real-time loop: ``now() = (loop_time() - t0) * speed``."""
 
-    def __init__(self, loop_time, speed: float = 1.0) -> None:
+    def __init__(self, loop_time, speed: float = 1.0, *, held: bool = False) -> None:
         self._loop_time = loop_time
         self.speed = float(speed)
         self.t0 = loop_time()
+        # held: the rig's time stands at 0 until :meth:`restart` (what is read while the session is built,
+        # the air sensor, is read at rig time 0, and the physics does not run through the building)
+        self.held = held
 
     def now(self) -> float:
+        if self.held:
+            return 0.0
         return (self._loop_time() - self.t0) * self.speed
 
     async def sleep(self, rig_s: float) -> None:
@@ -36,6 +41,7 @@ class ScaledClock:
     def restart(self) -> None:
         """Simulated time starts now (a session's rig starts when its first poll does, not when it was built)."""
         self.t0 = self._loop_time()
+        self.held = False
 
 
 class SimTimeActuators:

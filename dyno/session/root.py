@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.acquisition.poller import Poller
-from dyno.session.safe_outputs import finish_release, rig_outputs  # noqa: F401 (rig_outputs: re-exported)
+from dyno.session.after import close_run, end_test
+from dyno.session.safe_outputs import finish_release, rig_outputs  # noqa: F401 (re-exported)
 from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
-from dyno.session.ambient import log_end as log_end_ambient
 from dyno.session.signals import RunSignals
 from dyno.session.safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
@@ -429,15 +429,7 @@ async def run_test_async(opts: RunOptions) -> dict:
             ctx.controller.abort("timeout", f"run exceeded {opts.max_sim_s:.0f} s")
             state = ctx.controller.state
         status = "success" if state.value == "done" else "abort"
-        zero_task = None
-        if state.value == "done" and opts.finish_release:  # the zero at rest after the last point
-            from dyno.control.zero_check import after_test
-
-            zero_task = asyncio.create_task(after_test(ctx.controller), name="torque-zero")
-        if opts.finish_release:
-            await finish_release(ctx)
-        if zero_task is not None:
-            await zero_task
+        await end_test(ctx, finish_release=opts.finish_release)  # (the UI's session ends its tests through it too)
     finally:
         if ctx.drills is not None:
             ctx.drills.cancel()
@@ -446,22 +438,11 @@ async def run_test_async(opts: RunOptions) -> dict:
         stop_watchdog()
         if signals is not None:
             signals.restore()
-        log_end_ambient(ctx)  # the air after the run, beside the reading it was corrected to
-        result = summarize(ctx)
-        record_safety(ctx, result)
-        ctx.writer.close(status, ctx.controller.reason, link=ctx.poller.link_health(),
-                         events_lost=ctx.poller.reader.events_lost,
-                         supervisor=supervisor_document(ctx.poller.reader))
-        close_rig(ctx)
+        try:
+            result = close_run(ctx, status)  # the air after the run, the summary, the safety document, the log closed
+        finally:
+            close_rig(ctx)
     return result
-
-
-def record_safety(ctx: RunContext, summary: dict) -> None:
-    """The run directory keeps what the run reports of its safety (a ``safety`` document)."""
-    from dyno.session.summary import safety_document
-
-    if ctx.writer.error is None:
-        ctx.writer.doc("safety", **safety_document(summary))
 
 
 def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:

@@ -23,7 +23,8 @@ from textual_plotext import PlotextPlot
 from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.analysis.live import RateMeter, ideal_engine_rpm, live_values
-from dyno.ui.live_model import History, fmt, temp_colour
+from dyno.analysis.u95_terms import COMPARE_NOTE_SHORT, TERM_SHORT, largest_term
+from dyno.ui.live_model import History, fmt, go_text, temp_colour
 from dyno.ui.live_model import (TEST_STATES, discard_text, efficiency_text, last_point_text, measure_text,
                                 progress_text)
 from dyno.ui.live_overlay import OverlayMixin
@@ -36,12 +37,6 @@ IDLE_REFRESH_HZ = 1.0  # ... and while nothing runs (waiting, armed, ended): a r
 PLOT_PERIOD_S = 1.0  # a plotext redraw costs ~25-50 ms of loop time: at most once a second unless the view changed
 HELP = "g GO  p pause  m manual  [ ] jog  1-3 plot  o overlay  q quit  │ SPACE/^C E-STOP"
 HELP_ENDED = "r re-arm (new run)  1-3 plot  4 results  o overlay  q quit  │ SPACE/^C E-STOP"  # after DONE/ABORTED
-
-# what GO moves, for the plans that do not start at full throttle (the characterisations): (asked, said)
-GO_TEXT = {"engagement": ("From idle the THROTTLE RAMPS up to 90 % through the shift; the brake then steps "
-                          "the load.", "GO: throttle ramp from idle"),
-           "coast-down": ("Throttle goes to FULL with the brake released, then the ENGINE IS CUT and the rig "
-                          "coasts to rest.", "GO: full throttle, then engine cut and coast-down")}
 
 LIVE_CSS = """
 #title { height: 1; background: $primary; color: $text; text-style: bold; }
@@ -178,6 +173,15 @@ class LiveApp(OverlayMixin, DynoApp):
         prog = progress_text(v.state, n, total, eta) if s.controller.plan.mode not in FROM_IDLE else ""
         if prog:
             t.append(f"  │ {prog}", style="bold")
+        if v.state == "done" and s.controller.points:  # what a tuner reads next: the term to improve, and compare
+            largest = largest_term(s.controller.points)
+            if largest is not None:
+                for name in (largest[0], TERM_SHORT.get(largest[0], largest[0])):  # (the short name if too wide)
+                    line = (f" U95 mostly {name} ±{100 * largest[1]:.1f}/{100 * largest[2]:.1f} pp; "
+                            f"{COMPARE_NOTE_SHORT}")
+                    if len(line) < 80:
+                        break
+                t.append("\n" + line)
         disc = discard_text(s.controller.discards)
         if disc and v.state in TEST_STATES:
             t.append(f"\n {disc}", style="yellow")
@@ -219,11 +223,13 @@ class LiveApp(OverlayMixin, DynoApp):
         row("interval95", interval or "—")  # the last point's efficiency_interval95
         nd = len(self.session.controller.discards)
         row("discarded", f"{nd} windows" if nd != 1 else "1 window", "bold yellow" if nd else "")
+        largest = largest_term(self.session.controller.points)
+        row("U95 most", "—" if largest is None else
+            f"{TERM_SHORT.get(largest[0], largest[0])} ±{100 * largest[1]:.1f} of {100 * largest[2]:.1f} pp")
         row("link", fmt(v.frames_per_s, ".0f", " frames/s"))
-        # (one row: the panel's height is fixed, 80x24 shows every row)
-        row(" CRC/NACK", f"{v.crc_errors}/{v.nacks} rej {v.rejected_total} ")
-        t.append("lost ")
-        t.append(f"{v.events_lost}\n", style="bold red" if v.events_lost else "")
+        # (each row its own label, within the column's 30 characters: 80x24 shows every row unwrapped)
+        row("CRC/NACK", f"{v.crc_errors}/{v.nacks}  rejected {v.rejected_total}")
+        row("lost", f"{v.events_lost} events", "bold red" if v.events_lost else "")
         row("Nano run", v.run_enable, "bold red" if v.run_enable.startswith("off") else "")
         if self.overlay_requested:
             row("overlay", self.overlay_tier or "computing…")
@@ -295,9 +301,7 @@ class LiveApp(OverlayMixin, DynoApp):
             self.say(why)
             return
 
-        plan = self.session.controller.plan
-        what = GO_TEXT.get(plan.mode, ("Throttle goes to FULL and the brake starts stepping.",
-                                       "GO: full throttle, brake stepping"))
+        what = go_text(self.session.controller.plan)  # (what this plan moves: steps, holds, a ramp, a cut)
 
         def answered(yes: bool | None) -> None:
             if yes:

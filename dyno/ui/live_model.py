@@ -88,6 +88,36 @@ def efficiency_text(v: LiveValues, loaded: bool) -> str:
     return fmt(v.efficiency * 100, ".1f", " %")
 
 
+def go_text(plan) -> tuple[str, str]:
+    """What GO will move under ``plan``, in the operator's words: (the dialog's sentence, the message after)."""
+    mode = plan.mode
+    if mode == "engagement":
+        return ("From idle the THROTTLE RAMPS up to 90 % through the shift; the brake then steps the load.",
+                "GO: throttle ramp from idle")
+    if mode == "coast-down":
+        return ("Throttle goes to FULL with the brake released, then the ENGINE IS CUT and the rig coasts to rest.",
+                "GO: full throttle, then engine cut and coast-down")
+    if mode == "speed-hold":
+        n = (plan.params or {}).get("points")
+        many = f"{n} " if isinstance(n, int) else ""
+        return (f"Throttle goes to FULL; the brake finds its contact point, then HOLDS the secondary at {many}speed "
+                "setpoints down the range (closed loop).", "GO: full throttle, brake holding speed setpoints")
+    if mode == "drive-grid":
+        return ("For each throttle of the grid the brake is released, the THROTTLE SET, then the brake HOLDS the "
+                "secondary at each reachable speed (closed loop).", "GO: throttle x speed grid, brake holding")
+    if mode == "steps":
+        def variables(kind: str) -> list[str]:
+            return sorted({str(st.get("variable")) for st in plan.steps or ()
+                           if isinstance(st, dict) and st.get("kind") == kind and st.get("variable")})
+
+        holds, ramps = variables("hold"), variables("ramp")
+        moves = ([f"HOLDS {' and '.join(holds)} setpoints in turn"] if holds else []) + \
+                ([f"RAMPS the {' and '.join(ramps)} speed down its range"] if ramps else [])
+        what = "; then ".join(moves) or "HOLDS the plan's setpoints in turn"
+        return (f"Throttle goes to FULL; the brake {what} (closed loop).", f"GO: full throttle, brake {what.lower()}")
+    return ("Throttle goes to FULL and the brake starts stepping (open-loop steps).", "GO: full throttle, brake stepping")
+
+
 def fmt(x: float, spec: str = ".0f", unit: str = "") -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "—"

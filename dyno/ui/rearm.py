@@ -30,6 +30,8 @@ class RearmMixin:
         c = self.controller
         if not self.finished:
             return f"re-arm only after a test has ended (state: {c.state.value}; E-STOP first)"
+        if self.after_test_running:
+            return "not re-armed yet: the brake is releasing and the torque zero is read at rest (a few seconds)"
         cause = c.aborts[-1]["cause"] if c.aborts else None
         if cause in NO_REARM:
             return f"not re-armed after {cause} ({NO_REARM[cause]}): quit and start dyno again"
@@ -106,7 +108,7 @@ class RearmMixin:
         rearm_nano = getattr(self.poller.reader, "rearm_supervisor", None)
         if rearm_nano is not None:  # the Nano latched its run-enable off after a drop: the limits again
             rearm_nano()
-        self._close_log()
+        reported = not self._close_log()  # (closed at the test's end: its report.html is already under way)
         self.poller.listeners.remove(old_writer.events)
         self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
         self.ctx.ambient = dict(meta.get("ambient") or {})
@@ -132,7 +134,9 @@ class RearmMixin:
         self._tasks = [t for t in self._tasks if t.get_name() != "controller"]
         self._tasks.append(asyncio.create_task(ctrl.run(), name="controller"))
         self.run_dirs.append(new_dir)
-        self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
+        if not reported:
+            self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
+        self._after_task = None
         return new_dir, f"re-armed: new run {new_dir} (report of the last one: {old_dir / 'report.html'})"
 
     def _trim_history(self) -> None:

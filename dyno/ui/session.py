@@ -51,7 +51,7 @@ class LiveSession(RearmMixin):
         loop = asyncio.get_running_loop()
         self.loop = loop
         self.speed = float(opts.speed) if opts.sim else 1.0
-        self.clock = ScaledClock(loop.time, self.speed)  # the simulated rig's time (at speed 1 on the rig: unused)
+        self.clock = ScaledClock(loop.time, self.speed, held=True)  # the simulated rig's time, from start() (rig: unused)
         self.sim_now = self.clock.now
         paths = {k: v for k, v in (("calibration_path", opts.calibration_path),
                                    ("engine_map_path", opts.engine_map_path)) if v}
@@ -110,6 +110,8 @@ class LiveSession(RearmMixin):
         self.run_dirs: list[Path] = [Path(self.ctx.writer.run_dir)]  # this session's runs, oldest first
         self._reports: list[asyncio.Task] = []  # report.html of re-armed-from runs, written in the background
         self._drills_fired_before = 0  # drills fired in earlier runs of the session (re-arm)
+        self._after_task: asyncio.Task | None = None  # the ended test's release, zero, log and report (_end_test)
+        self._closed_writer = None  # the run log closed last (each is closed once: at the test's end, or the quit)
 
     @property
     def t0(self) -> float:
@@ -129,10 +131,6 @@ class LiveSession(RearmMixin):
         if self.closed or self.controller.state in FINISHED:  # (a signal during start-up: nothing starts)
             return
         self.started = True
-        if self.ctx.sim is not None and self.ctx.sim.model.t_s == 0.0:
-            # Rig time starts now, not when assembly began: building took a few hundred ms
-            # (maps, run log) that the first poll would otherwise find queued in a 64-event ring.
-            self.clock.restart()
         from dyno.session.root import arm_drills, start_watchdog
 
         # The safety path does not depend on the UI: the watchdog is a thread, the checks run
@@ -140,8 +138,24 @@ class LiveSession(RearmMixin):
         self._stop_watchdog = start_watchdog(self.ctx, self.loop)
         arm_drills(self.ctx, self.opts.drills if self.opts.sim else [], self.loop, sim_now=self.sim_now,
                    speed=self.speed)
-        self._tasks = [asyncio.create_task(self.poller.run(), name="poller"),
+        restart = self.ctx.sim is not None
+        self._tasks = [asyncio.create_task(self._poll_from_rig_zero(restart), name="poller"),
                        asyncio.create_task(self.controller.run(), name="controller")]
+
+    async def _poll_from_rig_zero(self, restart: bool) -> None:
+        """The poller, its first poll in the same loop step as the simulated rig's time zero.
+
+        The clock is held at 0 while the session is built.  It once ran from the session's construction: the
+        build reads the air sensor over the simulated bus, which stepped the physics to the clock's time, and the
+        restart (then guarded by "the physics has not run yet") never happened; the rig's time ran on through
+        the building and the first screen (~0.65 s of wall time: 5 s of rig time at x8), the idling engine's
+        edges and the ADC overfilled the simulated Nano's 64-event ring, and the first frame's
+        ``events_dropped`` (150-700 before GO) were counted as lost.  A headless run's first poll is at rig
+        time 0 (virtual time): 0 lost.  Now the session's is too.
+        """
+        if restart:
+            self.clock.restart()
+        await self.poller.run()  # (its first tick reads the bus before it first awaits)
 
     def _on_hangup(self, signum: int) -> None:
         import signal
@@ -174,6 +188,28 @@ class LiveSession(RearmMixin):
         self.state_since_s = self.loop.time()
         if controller.state in FINISHED and not any(t.get_name() == "rest-rate" for t in self._tasks):
             self._tasks.append(asyncio.create_task(self._idle_rate_at_rest(controller), name="rest-rate"))
+        if controller.state in FINISHED and self._after_task is None and not self.closed:
+            self._after_task = asyncio.create_task(self._end_test(controller), name="after-test")
+
+    async def _end_test(self, ctrl) -> None:
+        """A test has ended: what ``dyno run`` does after its test, through the same code
+        (:mod:`dyno.session.after`): the release stroke serviced and, after DONE, the torque zero at rest; then the
+        run's log closed with its summary and safety document, and its report.html written (in the background:
+        matplotlib holds the GIL for seconds) while the screen stays up."""
+        from dyno.session.after import end_test
+        from dyno.ui.run_dirs import _finish_in_background
+
+        await end_test(self.ctx, poll_s=0.05)
+        if ctrl is not self.controller or self.closed:
+            return
+        run_dir = Path(self.ctx.writer.run_dir)
+        self._close_log()
+        self._reports.append(asyncio.create_task(_finish_in_background(run_dir), name="report"))
+
+    @property
+    def after_test_running(self) -> bool:
+        """The ended test's release and zero reading are still under way (its log is still open)."""
+        return self._after_task is not None and not self._after_task.done()
 
     async def _idle_rate_at_rest(self, ctrl) -> None:
         """A test has ended: full rate while the rig spins down and the brake releases (recorded as it
@@ -297,23 +333,21 @@ class LiveSession(RearmMixin):
             self._jog_handle = None
             self.controller.brake(STOP)  # (refused after the safe state: the release runs on)
 
-    def _close_log(self) -> None:
-        """End the run's log with what ``dyno run --json`` would report of its safety (a ``safety``
-        document: drill records, true-time latencies from the onset, the physical outputs), then close it."""
-        from dyno.session.ambient import log_end
-        from dyno.session.summary import safety_document, summarize, supervisor_document
+    def _close_log(self) -> bool:
+        """End the run's log as ``dyno run`` does (:func:`dyno.session.after.close_run`: the air after the run,
+        the ``safety`` document with drill records, true-time latencies and the physical outputs, the end
+        record); once per run: False when it was closed already (at the test's end)."""
+        from dyno.session.after import close_run
 
-        log_end(self.ctx)  # the air after the run (a BME280 read again), as dyno run logs it
-        if self.ctx.writer.error is None:
-            try:
-                doc = safety_document(summarize(self.ctx, drills_from=self._drills_fired_before))
-                self.ctx.writer.doc("safety", **doc)
-            except Exception as exc:  # noqa: BLE001 - the log still closes; say why the record is missing
-                self.ctx.writer.doc("safety", error=f"{type(exc).__name__}: {exc}")
-        status = {"done": "success"}.get(self.controller.state.value, "abort")
-        self.ctx.writer.close(status, self.controller.reason, link=self.poller.link_health(),
-                              events_lost=self.poller.reader.events_lost,
-                              supervisor=supervisor_document(self.poller.reader))
+        writer = self.ctx.writer
+        if writer is self._closed_writer:
+            return False
+        self._closed_writer = writer
+        try:
+            close_run(self.ctx, drills_from=self._drills_fired_before)
+        except Exception:  # noqa: BLE001 - the log is closed, its safety document says why the summary is missing
+            pass
+        return True
 
     async def close(self, why: str = "operator quit") -> None:
         """Safe state first, then stop the tasks and close the run log."""
@@ -324,10 +358,13 @@ class LiveSession(RearmMixin):
         self.controller.latch_safe_state()
         if not self.finished:
             self.controller.abort("quit", why)
+        if self.after_test_running:  # a quit while the ended test's zero was read: the release goes on below
+            self._after_task.cancel()
+            await asyncio.gather(self._after_task, return_exceptions=True)
         from dyno.session.safe_outputs import finish_release, release_done
 
-        if self.ctx.sim is not None and self.started and (self.controller.go_s is not None
-                                                          or not release_done(self.ctx)):
+        if (self.ctx.sim is not None and self.started and self.ctx.writer is not self._closed_writer
+                and (self.controller.go_s is not None or not release_done(self.ctx))):
             # the simulated brake releases while the polls still advance its physics, so the run records
             # where it ended (the rig's own release is finished by its SafetyGuard on the way out); also
             # before GO: a safe state entered then (a watchdog trip when re-armed) powers the stroke too,

@@ -10,6 +10,7 @@ import csv
 import contextlib
 import io
 import json
+import re
 import os
 import shutil
 import signal
@@ -220,6 +221,12 @@ def test_entry_firmware_sim(work):
                     "--json", cwd=work, timeout=300))
     doc = json.loads(proc.stdout)
     assert doc["ok"] is True and doc["events_lost"] == 0
+    # the text output rounds its figures (the JSON keeps every digit): no "3799.9993968254926"
+    text = _ok(dyno("firmware-sim", "--elf", elf, "--seconds", 0.5, cwd=work, timeout=300)).stdout
+    line = next(x for x in text.splitlines() if "rpm primary" in x)
+    assert re.search(r"rpm primary \d+\.\d{2} \([+-]\d+\.\d{3} %\), secondary \d+\.\d{2} \([+-]\d+\.\d{3} %\), "
+                     r"adc mean \d+\.\d$", line), line
+    assert not re.search(r"\d\.\d{5,}", text), text
 
 
 def test_entry_doctor_sim(work):

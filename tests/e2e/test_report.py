@@ -66,6 +66,16 @@ def test_run_writes_a_self_contained_report_with_its_points(cli_run):
                     "Aborts, faults and discarded points", "Calibration", "Engine map", "CVT tune", "Versions"):
         assert f"<h2>{section}</h2>" in page, section
     assert "success" in page and "108.188" in page and "cvtech" in page.lower()
+    # the term that dominates U95, from the points' own terms (rms over them), and what `dyno compare` cancels
+    names = {n for p in doc["points"] for n in (p.get("efficiency_u95_terms") or {})}
+    rms = {n: math.sqrt(sum((p["efficiency_u95_terms"].get(n) or 0.0) ** 2 for p in doc["points"]
+                            if p.get("efficiency_u95_terms")) / sum(1 for p in doc["points"]
+                                                                     if p.get("efficiency_u95_terms")))
+           for n in names}
+    largest = max(rms, key=rms.get)
+    m = re.search(r'<p id="u95-largest"><b>largest U95 term: (\w+) \(±([\d.]+) pp', page)
+    assert m and m.group(1) == largest and float(m.group(2)) == pytest.approx(100 * rms[largest], abs=0.051), m
+    assert "`dyno compare` cancels what two runs share" in page
 
     data = _data_block(page)
     eff = data["efficiency"]["points"]
