@@ -7,8 +7,15 @@ writes the faults its driver found when it closes and hands the standing ones to
 re-arm are refused); ``dyno doctor --toggle``, once the switch reads closed at the stop and open a step out,
 clears the file.
 
-The file: ``$DYNO_STATE_DIR/rig_faults.json``, else ``~/.local/state/dyno/rig_faults.json`` (a JSON list of
-the fault records, each ``{"channel", "detail", "t_s", ...}`` as the driver made it, plus ``recorded_unix_s``).
+The file: ``$DYNO_STATE_DIR/rig_faults.json`` — one state directory for the service and the operator:
+``hardware/dyno.service`` sets ``DYNO_STATE_DIR=/var/lib/dyno`` (its ``StateDirectory``, group ``dyno``); unset,
+``/var/lib/dyno`` where that directory exists, else ``~/.local/state/dyno`` (a machine without the service).  A
+JSON list of the fault records, each ``{"channel", "detail", "t_s", ...}`` as the driver made it, plus
+``recorded_unix_s``.
+
+A file that cannot be read or is corrupt does not forget: the faults it kept are unknown, so :func:`load` gives a
+standing fault for every channel the file keeps (:data:`CHANNELS`), naming the file; ``dyno doctor --toggle``'s
+pass clears it and rewrites the file.
 """
 
 from __future__ import annotations
@@ -19,20 +26,44 @@ import time
 from pathlib import Path
 
 
+#: the channels whose faults the file keeps (the driver's wiring faults: dyno.hw.endswitch)
+CHANNELS = ("end_switch",)
+#: the service's state directory (hardware/dyno.service: StateDirectory=dyno)
+SERVICE_STATE_DIR = Path("/var/lib/dyno")
+
+
 def state_path() -> Path:
     base = os.environ.get("DYNO_STATE_DIR")
-    root = Path(base) if base else Path.home() / ".local" / "state" / "dyno"
+    if base:
+        root = Path(base)
+    elif SERVICE_STATE_DIR.is_dir():
+        root = SERVICE_STATE_DIR
+    else:
+        root = Path.home() / ".local" / "state" / "dyno"
     return root / "rig_faults.json"
 
 
 def load(path: Path | None = None) -> list[dict]:
-    """The standing faults ([] when none, or when the file is unreadable: it then says so on the next write)."""
+    """The standing faults ([] when there is no file); an unreadable or corrupt file is itself a standing fault
+    on every channel it keeps (module doc)."""
     p = path or state_path()
     try:
         data = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except FileNotFoundError:
         return []
-    return [f for f in data if isinstance(f, dict) and "channel" in f] if isinstance(data, list) else []
+    except (OSError, ValueError) as exc:  # (UnicodeDecodeError is a ValueError)
+        return _unknown(p, f"{type(exc).__name__}: {exc}")
+    if not isinstance(data, list) or not all(isinstance(f, dict) and isinstance(f.get("channel"), str)
+                                             for f in data):
+        return _unknown(p, "not a list of fault records")
+    return data
+
+
+def _unknown(p: Path, why: str) -> list[dict]:
+    detail = (f"unknown: the standing-fault file {p} cannot be read ({why}), so the faults it kept are not known; "
+              "check the switch and its wire, then `dyno doctor --toggle`")
+    return [{"channel": ch, "detail": detail, "t_s": None, "from_file": str(p), "file_unreadable": True}
+            for ch in CHANNELS]
 
 
 def record(faults: list[dict], path: Path | None = None) -> None:
@@ -46,21 +77,38 @@ def record(faults: list[dict], path: Path | None = None) -> None:
         if f.get("channel") not in have:
             standing.append({**f, "recorded_unix_s": time.time()})
             have.add(f.get("channel"))
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_suffix(".tmp")
-    tmp.write_text(json.dumps(standing, indent=1))
-    os.replace(tmp, p)
+    _write(p, standing)
 
 
 def clear(channel: str, path: Path | None = None) -> bool:
-    """Forget the standing fault of ``channel``; True if there was one."""
+    """Forget the standing fault of ``channel`` (an unreadable file's too: it is rewritten); True if there was
+    one.  OSError if the file cannot be rewritten (the fault then stands)."""
     p = path or state_path()
     standing = load(p)
     keep = [f for f in standing if f.get("channel") != channel]
     if len(keep) == len(standing):
         return False
     if keep:
-        p.write_text(json.dumps(keep, indent=1))
+        _write(p, keep)
+    elif p.is_dir():  # (a directory where the file belongs: the unreadable file it was)
+        p.rmdir()
     else:
         p.unlink(missing_ok=True)
     return True
+
+
+def _write(p: Path, faults: list[dict]) -> None:
+    """Atomically, through a temporary file of this process's own (the service and the operator share the
+    directory: neither may meet the other's half-written file or its leftover)."""
+    import tempfile
+
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".rig_faults.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(json.dumps(faults, indent=1))
+        os.chmod(tmp, 0o664)  # the group (dyno) reads and replaces it
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
