@@ -203,7 +203,10 @@ def run(args) -> int:
         return 2
     from dataclasses import replace
 
+    from dyno.rig.locate import find_rig
     from dyno.session.root import run_test
+
+    rig_file = find_rig(spec.rig_path)  # (said once the run has read it: a bad file is one line, this none)
     from dyno.cli import progress as tty
 
     bar = None
@@ -227,6 +230,8 @@ def run(args) -> int:
     from dyno.session.after import add_driven_loss
 
     add_driven_loss(result, driven_loss, getattr(args, "rig", None))
+    result["rig_file"] = rig_file.to_dict()  # {"path", "found_by"}
+    print(f"dyno run: {rig_file.line()}", file=sys.stderr, flush=True)
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:
