@@ -1,4 +1,5 @@
-"""The files the program reads by default: rig files (``hardware/``) and calibration (``calibration/``).
+"""The files the program reads by default: rig files (``hardware/``), calibration (``calibration/``) and the
+prebuilt firmware (``firmware/build/``, when built: ``make -C firmware release``).
 
 They are the repository's own folders, shipped in the wheel as ``dyno.resources.hardware`` and
 ``dyno.resources.calibration`` (setup.py maps the folders; nothing is copied into the tree, so the two
@@ -12,7 +13,9 @@ from importlib import resources
 from pathlib import Path
 
 _REPO = Path(__file__).resolve().parents[2]
-FOLDERS = ("hardware", "calibration")  # the repository folders shipped as dyno.resources.<name>
+FOLDERS = ("hardware", "calibration")  # the repository folders shipped as dyno.resources.<name>, editable copies
+#: every shipped folder and where it is in the repository (firmware: `make -C firmware release`'s output)
+SOURCES = {"hardware": "hardware", "calibration": "calibration", "firmware": "firmware/build"}
 
 
 def resource(relative: str) -> Path:
@@ -20,13 +23,13 @@ def resource(relative: str) -> Path:
 
     A wheel's files are on disk already (pip unpacks it), so the path stays valid for the process.
     """
-    top = relative.split("/", 1)[0]
-    if top not in FOLDERS:
-        raise ValueError(f"{relative}: not under {' or '.join(FOLDERS)}")
+    top, _, rest = relative.partition("/")
+    if top not in SOURCES:
+        raise ValueError(f"{relative}: not under {', '.join(SOURCES)}")
     packaged = Path(str(resources.files(__name__).joinpath(relative)))
     if packaged.exists():
         return packaged
-    return _REPO / relative
+    return _REPO / SOURCES[top] / rest
 
 
 def packaged_root(folder: str) -> Path:

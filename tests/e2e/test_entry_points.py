@@ -31,7 +31,8 @@ EXERCISED = {"run", "replay", "export", "import-legacy", "model", "firmware-sim"
              "shift-curve", "design", "arcvt"}
 EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py",
                        "runs": "tests/library/test_index.py", "compare": "tests/library/test_compare.py",
-                       "serve": "tests/web/test_web_serve.py", "tune": "tests/tuning/test_tune_advise.py"}
+                       "serve": "tests/web/test_web_serve.py", "tune": "tests/tuning/test_tune_advise.py",
+                       "init": "tests/packaging/test_wheel.py", "flash": "tests/hw/test_hw_flash.py"}
 
 
 def _env(**extra: str) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -59,8 +60,19 @@ def _env(tmp: Path) -> dict:
 
 
 def test_the_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path):
+    with_firmware = shutil.which("avr-gcc") is not None
+    if with_firmware:  # the prebuilt firmware the wheel ships (`dyno flash`), as CI builds it
+        from tests.fw_build import make
+
+        built = make("release", timeout_s=600.0)
+        assert built.returncode == 0, built.stdout + built.stderr
     wheel = _build_wheel(tmp_path / "dist")
     names = zipfile.ZipFile(wheel).namelist()
+    if with_firmware:
+        for shipped in ("dyno/resources/firmware/dyno_nano.hex", "dyno/resources/firmware/dyno_nano_oldboot.hex",
+                        "dyno/resources/firmware/firmware.json"):
+            assert shipped in names, shipped
+        assert not [n for n in names if n.endswith((".o", ".elf", ".a"))]  # the HEX files only, no build tree
     for shipped in ("dyno/resources/hardware/rig.toml", "dyno/resources/calibration/torque_calibration.csv",
                     "dyno/resources/calibration/engine_maps/baja-10hp-representative.csv",
                     "dyno/resources/calibration/tunes/cvtech-stock.toml", "dyno/control/plan_files/speed-hold.toml"):
@@ -74,6 +86,14 @@ def test_the_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path)
     where = subprocess.run([venv / "bin" / "python", "-c", "import dyno; print(dyno.__file__)"], cwd=empty,
                            env=env, capture_output=True, text=True, check=True).stdout.strip()
     assert Path(where).is_relative_to(venv), where  # the wheel's copy, not this tree
+    if with_firmware:
+        stamp = subprocess.run([venv / "bin" / "python", "-c", "from dyno.hw.flash import shipped_image as s; "
+                                "i = s(); print(i.version, i.protocol, i.files['optiboot'])"], cwd=empty, env=env,
+                               capture_output=True, text=True, check=True).stdout.split()
+        config_h = (REPO / "firmware" / "src" / "config.h").read_text()
+        version = ".".join(line.split()[2] for line in config_h.splitlines()
+                           if line.startswith("#define FW_VERSION_") and line.split()[1][-5:] in ("MAJOR", "MINOR", "PATCH"))
+        assert stamp[:2] == [version, "2"] and Path(stamp[2]).is_relative_to(venv), stamp
 
     r = subprocess.run([dyno, "run", "--sim", "--headless", "--json"], cwd=empty, env=env, capture_output=True,
                        text=True, timeout=900)
