@@ -224,6 +224,8 @@ class RigConfig:
     driveline: DrivelineConfig = DrivelineConfig()  # [driveline]: the loss between the CVT and the gauge
     input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig.input_torque)
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
+    derate: bool = True  # polls that do not fit the link: poll_hz lowered to fit (said), else refused
+    derated_from_hz: float | None = None  # the file's poll_hz, when derated to fit (dyno.transports.budget)
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -268,7 +270,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
                 "overspeed_secondary_rpm": (500.0, 20000.0), "comms_timeout_s": (0.02, 5.0),
                 "supervisor_timeout_s": (0.0, 65.0)}
 
-_TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
+_TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "derate", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
              "uncertainty", "driven", "torque_zero", "ambient", "input_torque", "driveline"}
@@ -446,7 +448,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         path=str(path),
         protocol=r.string(data, "protocol", "", choices=("v2", "v1", "v0")),
         transport=r.string(data, "transport", "", choices=("i2c", "serial"), required=False, default="i2c"),
-        poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0),
+        poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0), derate=r.boolean(data, "derate", "", True),
         debounce_primary_us=r.integer(data, "debounce_primary_us", "", lo=0, hi=65535),
         debounce_secondary_us=r.integer(data, "debounce_secondary_us", "", lo=0, hi=65535),
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),

@@ -108,7 +108,7 @@ def load_inputs(opts: RunOptions):
     rig_cfg = load_rig(found.path)
     from dyno.transports.budget import check_budget
 
-    check_budget(rig_cfg)  # a poll rate the link cannot carry: one line naming poll_hz, before anything runs
+    rig_cfg = check_budget(rig_cfg)  # a poll rate the link cannot carry: derated (said), or refused naming poll_hz
     calibration = latest(load_history(opts.calibration_path))
     engine_map = load_engine_map(opts.engine_map_path)
     return rig_cfg, calibration, engine_map
@@ -278,9 +278,10 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         # the thermometer shares the firmware's bus on an I2C rig (on a serial rig it has its own)
         thermometer = _thermometer(firmware_bus if rig_cfg.transport == "i2c" else bus,
                                    rig_cfg.i2c.thermometer_address)
-    else:
-        transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
-        thermometer = hw.thermometer.object_c
+    else:  # I2C with the Nano's RESET line wired in, or USB serial: each transfer timed as it happens
+        from dyno.transports.budget import metered_rig_link
+
+        transport, thermometer, link_meter = metered_rig_link(hw, rig_cfg)
     reader = make_reader(protocol, transport, supervisor_command=_supervisor_command(protocol, limits, rig_cfg),
                          want_input=input_channel is not None)  # (asked for at every boot: docs/protocol.md)
     # paced: each real-time poll spans `speed` x more rig time, so it may drain that many more frames
