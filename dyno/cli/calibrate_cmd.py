@@ -109,9 +109,10 @@ def run(args) -> int:
         if args.sim:  # a simulated calibration must never land in the rig's history
             history = SIM_INPUT_HISTORY if inp else SIM_HISTORY
         else:  # pragma: no cover - rig only
-            from dyno.session.calibration_files import history_to_append
+            from dyno.session.calibration_files import history_to_append, is_shipped
 
-            history = history_to_append(in_force.name)  # the state directory's history (docs/install-pi.md)
+            # the shipped history is never written: the state directory's copy is (docs/install-pi.md)
+            history = history_to_append(in_force.name) if is_shipped(in_force) else in_force
     history = Path(history)
     if history.exists():  # a malformed history: one line naming its file, line and field; nothing written
         from dyno.analysis.calibration import load_history

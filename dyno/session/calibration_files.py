@@ -35,3 +35,9 @@ def history_to_append(name: str = TORQUE_HISTORY) -> Path:
         mine.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(resource(f"calibration/{Path(name).name}"), mine)
     return mine
+
+
+def is_shipped(path: Path) -> bool:
+    """``path`` is one of the shipped calibration files (the package's, never appended to)."""
+    shipped = resource(f"calibration/{Path(path).name}")
+    return shipped.exists() and Path(path).resolve() == shipped.resolve()

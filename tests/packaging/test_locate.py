@@ -95,3 +95,15 @@ def test_calibration_history_lives_in_the_state_directory(monkeypatch, tmp_path)
     assert calibration_in_force() == mine  # from now on the runs read the rig's own
     assert history_to_append() == mine and mine.read_bytes().endswith(b"\n\n")  # never restarted
     assert shipped.read_bytes() == (REPO / "calibration" / "torque_calibration.csv").read_bytes()
+
+
+@pytest.mark.quick
+def test_only_the_shipped_history_is_redirected_to_the_state_directory(tmp_path, monkeypatch):
+    from dyno.session.calibration_files import is_shipped
+
+    monkeypatch.setenv("DYNO_STATE_DIR", str(tmp_path / "state"))
+    assert is_shipped(calibration_in_force()) and is_shipped(calibration_in_force("input_torque_calibration.csv"))
+    assert not is_shipped(history_to_append())  # the state directory's copy
+    mine = tmp_path / "torque_calibration.csv"
+    mine.write_text("x")
+    assert not is_shipped(mine)  # a history of the rig's own (rig.toml, --history) is appended where it is
