@@ -73,7 +73,7 @@ def run(args) -> int:
     drills = [parse_drill(d, engine=False) for d in args.drill]
     from dyno.rig.config import load_rig_for
 
-    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # a bad or shipped-on-hardware rig file: one line before the screen is taken over
+    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # (one line before the screen is taken over)
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)

@@ -49,7 +49,7 @@ def run(args) -> int:
     from dyno.rig.config import load_rig_for
 
     plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
-    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # a bad or shipped-on-hardware rig file: one line before the screen is taken over
+    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # (one line before the screen is taken over)
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)

@@ -230,7 +230,7 @@ def test_entry_doctor_sim(work):
 
 @pytest.mark.skipif(Path("/dev/i2c-3").exists(), reason="the rig's I2C bus is present: this is a rig, not CI")
 def test_entry_doctor_without_hardware_says_what_fails(work):
-    proc = dyno("doctor", cwd=work)
+    proc = dyno("doctor", "--rig", REPO / "hardware" / "rig.toml", cwd=work)  # (a rig file of its own: no refusal)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr + proc.stdout
     assert "FAIL  i2c bus" in proc.stdout and "rig NOT ready" in proc.stdout
 
