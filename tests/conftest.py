@@ -104,17 +104,20 @@ def belt_table_built():
 
 @pytest.fixture(scope="session", autouse=True)
 def runs_library_dir(tmp_path_factory):
-    """Runs and the run library go to a temporary directory, never the checkout's runs/.
+    """Runs and the run library, and the state directory, go to temporary directories, never the user's.
 
     ``dyno run`` indexes every run in ``$DYNO_RUNS_DIR`` (docs/library.md); commands
     started as subprocesses inherit this.
     """
     import os
 
-    old = os.environ.get("DYNO_RUNS_DIR")
+    old = {name: os.environ.get(name) for name in ("DYNO_RUNS_DIR", "DYNO_STATE_DIR")}
     os.environ["DYNO_RUNS_DIR"] = str(tmp_path_factory.mktemp("runs-library"))
+    # what dyno keeps between runs (calibration history, standing faults): never the developer's own
+    os.environ["DYNO_STATE_DIR"] = str(tmp_path_factory.mktemp("state"))
     yield
-    if old is None:
-        os.environ.pop("DYNO_RUNS_DIR", None)
-    else:
-        os.environ["DYNO_RUNS_DIR"] = old
+    for name, value in old.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value

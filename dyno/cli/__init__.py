@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util  # (find_spec: not loaded by "import importlib" outside an editable install)
 import os
 import sys
 
@@ -30,6 +31,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "ui": ("dyno.cli.ui_cmd", "terminal UI for the rig (--sim for the simulated rig)"),
     "calibrate": ("dyno.cli.calibrate_cmd", "torque calibration wizard"),
     "doctor": ("dyno.cli.doctor_cmd", "check the rig's hardware and report what works"),
+    "flash": ("dyno.cli.flash_cmd", "flash the Nano's firmware (the shipped build, or --hex FILE) with avrdude"),
+    "init": ("dyno.cli.init_cmd", "write editable copies of the shipped rig files and calibration into DIR"),
     "shift-curve": ("dyno.cli.shift_curve_cmd", "predicted shift curve for a tune"),
     "tune": ("dyno.cli.tune_cmd", "tune advise: which catalogue parts reach target engagement/shift-out rpm"),
     "design": ("dyno.cli.design_cmd", "CVT design method (Arango & Munoz 2020)"),

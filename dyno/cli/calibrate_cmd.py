@@ -71,9 +71,9 @@ def run(args) -> int:
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d, engine=False) for d in args.drill]
-    from dyno.rig.config import load_rig
+    from dyno.rig.config import load_rig_for
 
-    rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # (one line before the screen is taken over)
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)
@@ -101,15 +101,18 @@ def run(args) -> int:
 
         in_force = calibration_path(rig_cfg.input_torque)  # the channel's history the runs read
     else:
-        from dyno.session.root import DEFAULT_CALIBRATION
+        from dyno.session.calibration_files import calibration_in_force
 
-        in_force = DEFAULT_CALIBRATION
+        in_force = calibration_in_force()
     history = args.history
     if history is None:
         if args.sim:  # a simulated calibration must never land in the rig's history
             history = SIM_INPUT_HISTORY if inp else SIM_HISTORY
         else:  # pragma: no cover - rig only
-            history = in_force
+            from dyno.session.calibration_files import history_to_append, is_shipped
+
+            # the shipped history is never written: the state directory's copy is (docs/install-pi.md)
+            history = history_to_append(in_force.name) if is_shipped(in_force) else in_force
     history = Path(history)
     if history.exists():  # a malformed history: one line naming its file, line and field; nothing written
         from dyno.analysis.calibration import load_history

@@ -7,13 +7,13 @@ import json
 import sys
 from pathlib import Path
 
-REPO_CALIBRATION = Path(__file__).resolve().parents[2] / "calibration"
+from dyno.resources import resource
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--requirements", required=True, metavar="FILE",
                         help="route/vehicle requirements TOML (see calibration/design/)")
-    parser.add_argument("--catalogue", metavar="CSV", default=str(REPO_CALIBRATION / "belt_catalogue.csv"),
+    parser.add_argument("--catalogue", metavar="CSV", default=str(resource("calibration/belt_catalogue.csv")),
                         help="belt section catalogue (default: calibration/belt_catalogue.csv)")
     parser.add_argument("--out", metavar="DIR", help="directory for design.json, summary.txt and profile "
                                                       "CSVs (default: ./<name>-design)")

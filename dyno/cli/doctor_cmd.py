@@ -10,7 +10,8 @@ import sys
 
 from dyno.hw.doctor import (FAIL, OK, SKIP, WARN, Check, Report, _boots, _new_boot,  # noqa: F401 (re-exported)
                             check_end_switch, diagnose, doctor_spec, run_diagnosis)
-from dyno.rig.config import add_rig_argument, load_rig
+from dyno.rig.config import add_rig_argument, load_rig  # noqa: F401 (load_rig: re-exported)
+from dyno.rig.config import load_rig_for
 
 
 def add_arguments(parser) -> None:
@@ -29,7 +30,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    cfg = load_rig(args.rig)
+    cfg = load_rig_for(args.rig, sim=args.sim)  # real hardware: never the shipped rig file (dyno.rig.locate)
     spec = doctor_spec(cfg, sim=args.sim, mock_pins=args.mock_pins, drills=args.drill, toggle=args.toggle,
                        transport_kind=args.transport, interactive=not args.sim and sys.stdin.isatty())
     print(f"dyno doctor: {cfg.path}" + (" (simulated rig)" if args.sim else ""), flush=True)

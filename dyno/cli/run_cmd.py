@@ -214,7 +214,10 @@ def run(args) -> int:
         return 2
     from dataclasses import replace
 
+    from dyno.rig.locate import find_rig
     from dyno.session.root import run_test
+
+    rig_file = find_rig(spec.rig_path)  # (said once the run has read it: a bad file is one line, this none)
     from dyno.cli import progress as tty
 
     bar = None
@@ -238,6 +241,12 @@ def run(args) -> int:
     from dyno.session.after import add_driven_loss
 
     add_driven_loss(result, driven_loss, getattr(args, "rig", None))
+    result["rig_file"] = rig_file.to_dict()  # {"path", "found_by"}
+    print(f"dyno run: {rig_file.line()}", file=sys.stderr, flush=True)
+    link = result.get("link") or {}
+    if "link_busy" in link.get("warnings", ()):  # (dyno.transports.budget: measured above the planning limit)
+        print(f"dyno run: warning: link_busy: the busiest second measured {100 * link['measured_busy_frac']:.0f} % "
+              f"of the link (planned {100 * link['planned_busy_frac']:.0f} %, limit 60 %)", file=sys.stderr)
     _speed_note(args.speed, result, time.monotonic() - wall0_s)
     _index(result)
     try:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from dyno.cli import number_in
 
-REPO = Path(__file__).resolve().parents[2]
+from dyno.resources import resource
 
 
 def add_arguments(parser) -> None:
@@ -31,7 +31,7 @@ def add_arguments(parser) -> None:
 
 
 def default_engine_map() -> Path | None:
-    maps = sorted((REPO / "calibration" / "engine_maps").glob("*.csv"))
+    maps = sorted(resource("calibration/engine_maps").glob("*.csv"))
     if maps:
         return maps[0]
     from dyno.datapaths import legacy_data_dir

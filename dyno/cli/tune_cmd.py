@@ -10,7 +10,7 @@ from pathlib import Path
 
 from dyno.cli import number_in
 
-REPO = Path(__file__).resolve().parents[2]
+from dyno.resources import resource
 FIGURES = ("engagement", "shift_out", "full_load")
 
 
@@ -23,7 +23,7 @@ def add_arguments(p) -> None:
     p.add_argument("--target", action="append", default=[], metavar="FIGURE=RPM",
                    help="engagement=RPM, shift_out=RPM (the engagement plan's light-load figures), "
                         "full_load=RPM (the engine speed held in a full-load upshift); repeatable")
-    p.add_argument("--catalogue", type=Path, default=REPO / "calibration" / "parts", metavar="DIR",
+    p.add_argument("--catalogue", type=Path, default=resource("calibration/parts"), metavar="DIR",
                    help="parts catalogue directory (default calibration/parts)")
     p.add_argument("--max-changes", type=number_in(0, 4, integer=True), default=2, metavar="N",
                    help="change at most N parts (default 2)")

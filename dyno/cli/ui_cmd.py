@@ -49,10 +49,10 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "pi-freeze stops the whole host, its watchdog thread "
                           "included: only in simulated time (dyno run --sim), not in a live session")
     from dyno.control.plans import plan_named
-    from dyno.rig.config import load_rig
+    from dyno.rig.config import load_rig_for
 
     plan = plan_named(args.plan)  # a bad plan: one line naming file and field, before the screen is taken over
-    rig_cfg = load_rig(getattr(args, "rig", None))  # a bad rig file: one line before the screen is taken over
+    rig_cfg = load_rig_for(getattr(args, "rig", None), sim=args.sim)  # (one line before the screen is taken over)
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)

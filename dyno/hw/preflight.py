@@ -39,8 +39,10 @@ def check_rig_present(rig_cfg, *, dev: Path = Path("/dev")) -> None:
                                  "checks the rig, `--sim` runs without one") from None
     bus = dev / f"i2c-{rig_cfg.i2c.bus}"
     if not bus.exists():
-        raise RigUnavailable(where, "i2c.bus", f"{bus} is missing (I2C disabled? sudo raspi-config nonint "
-                             "do_i2c 0, then reboot); `dyno doctor` checks the rig")
+        from dyno.transports.i2c import missing_bus_hint
+
+        raise RigUnavailable(where, "i2c.bus", f"{bus} is missing ({missing_bus_hint(rig_cfg.i2c.bus)}); "
+                             "`dyno doctor` checks the rig")
     if getattr(rig_cfg, "transport", "i2c") == "serial":
         port = Path(rig_cfg.serial.port)
         if not port.exists():

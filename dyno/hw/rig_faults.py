@@ -7,9 +7,9 @@ writes the faults its driver found when it closes and hands the standing ones to
 re-arm are refused); ``dyno doctor --toggle``, once the switch reads closed at the stop and open a step out,
 clears the file.
 
-The file: ``$DYNO_STATE_DIR/rig_faults.json`` — one state directory for the service and the operator:
-``hardware/dyno.service`` sets ``DYNO_STATE_DIR=/var/lib/dyno`` (its ``StateDirectory``, group ``dyno``); unset,
-``/var/lib/dyno`` where that directory exists, else ``~/.local/state/dyno`` (a machine without the service).  A
+The file: ``rig_faults.json`` in the state directory (:func:`dyno.datapaths.state_dir`), one for the service and
+the operator: ``hardware/dyno.service`` sets ``DYNO_STATE_DIR=/var/lib/dyno`` (its ``StateDirectory``, group
+``dyno``); unset, ``/var/lib/dyno`` where that directory exists, else the user's data directory.  A
 JSON list of the fault records, each ``{"channel", "detail", "t_s", ...}`` as the driver made it, plus
 ``recorded_unix_s``.
 
@@ -25,22 +25,13 @@ import os
 import time
 from pathlib import Path
 
+from dyno.datapaths import state_dir
+
 
 #: the channels whose faults the file keeps (the driver's wiring faults: dyno.hw.endswitch)
 CHANNELS = ("end_switch",)
-#: the service's state directory (hardware/dyno.service: StateDirectory=dyno)
-SERVICE_STATE_DIR = Path("/var/lib/dyno")
-
-
 def state_path() -> Path:
-    base = os.environ.get("DYNO_STATE_DIR")
-    if base:
-        root = Path(base)
-    elif SERVICE_STATE_DIR.is_dir():
-        root = SERVICE_STATE_DIR
-    else:
-        root = Path.home() / ".local" / "state" / "dyno"
-    return root / "rig_faults.json"
+    return state_dir() / "rig_faults.json"
 
 
 def load(path: Path | None = None) -> list[dict]:

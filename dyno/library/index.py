@@ -26,7 +26,7 @@ class IndexUnusable(Exception):
 
 
 def runs_dir() -> Path:
-    """The runs directory: ``$DYNO_RUNS_DIR``, else ``runs`` (relative to the working directory)."""
+    """The runs directory: ``$DYNO_RUNS_DIR``, else the state directory's ``runs`` (:func:`runs_root`)."""
     from dyno.runlog.files import runs_root
 
     return runs_root()

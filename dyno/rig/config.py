@@ -19,8 +19,6 @@ off the thesis PCB silkscreen is exactly the mistake this file should catch.
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import tomllib
 from dataclasses import dataclass
@@ -33,14 +31,14 @@ from dyno.rig.ambient import AmbientConfig, ambient_table
 from dyno.rig.driveline import DrivelineConfig, driveline_table
 from dyno.rig.input_torque import InputTorqueConfig, input_torque_table
 from dyno.rig.inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
+from dyno.rig.locate import (RIG_ENV, add_rig_argument, find_rig, packaged_rig,  # noqa: F401 (re-exported)
+                             require_own_rig)
 
 SCHEMA = "dyno.rig/1"
 
-#: The repo's rig description, found relative to the package so it works from
-#: any working directory (and from an editable install on the Pi).
-DEFAULT_RIG_PATH = Path(__file__).resolve().parent.parent.parent / "hardware" / "rig.toml"
-#: Environment override, so the systemd unit can point at /etc/dyno/rig.toml.
-RIG_ENV = "DYNO_RIG"
+#: The shipped rig description (the package's, :mod:`dyno.resources`); which file a command reads is
+#: :func:`dyno.rig.locate.find_rig` (``--rig``, ``$DYNO_RIG``, ./hardware, ~/.config/dyno, /etc/dyno, this).
+DEFAULT_RIG_PATH = packaged_rig()
 
 # 40-pin header: physical pin -> BCM GPIO (power/ground pins are absent).
 _BOARD_TO_BCM = {
@@ -226,6 +224,8 @@ class RigConfig:
     driveline: DrivelineConfig = DrivelineConfig()  # [driveline]: the loss between the CVT and the gauge
     input_torque: InputTorqueConfig | None = None  # [input_torque]: the engine-side channel (dyno.rig.input_torque)
     deprecations: tuple = ()  # one line each: an old key that was mapped (load_rig warns once per process)
+    derate: bool = True  # polls that do not fit the link: poll_hz lowered to fit (said), else refused
+    derated_from_hz: float | None = None  # the file's poll_hz, when derated to fit (dyno.transports.budget)
 
     @property
     def gear_ratio_brake_per_secondary(self) -> float:
@@ -270,7 +270,7 @@ LIMIT_RANGES = {"rotor_temp_max_c": (20.0, 500.0), "overspeed_primary_rpm": (500
                 "overspeed_secondary_rpm": (500.0, 20000.0), "comms_timeout_s": (0.02, 5.0),
                 "supervisor_timeout_s": (0.0, 65.0)}
 
-_TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "debounce_primary_us",
+_TOP_KEYS = {"schema", "protocol", "transport", "poll_hz", "derate", "debounce_primary_us",
              "debounce_secondary_us", "kill_relay", "pins", "i2c", "serial", "gear", "limits",
              "actuator", "throttle", "reset", "inertia", "control",
              "uncertainty", "driven", "torque_zero", "ambient", "input_torque", "driveline"}
@@ -448,7 +448,7 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
         path=str(path),
         protocol=r.string(data, "protocol", "", choices=("v2", "v1", "v0")),
         transport=r.string(data, "transport", "", choices=("i2c", "serial"), required=False, default="i2c"),
-        poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0),
+        poll_hz=r.number(data, "poll_hz", "", lo=1.0, hi=1000.0), derate=r.boolean(data, "derate", "", True),
         debounce_primary_us=r.integer(data, "debounce_primary_us", "", lo=0, hi=65535),
         debounce_secondary_us=r.integer(data, "debounce_secondary_us", "", lo=0, hi=65535),
         kill_relay=r.string(data, "kill_relay", "", choices=("energise_to_run", "energise_to_kill")),
@@ -460,11 +460,8 @@ def rig_from_dict(data: Mapping[str, Any], path: str | Path = "<rig>") -> RigCon
 
 
 def resolve_rig_path(path: str | Path | None = None) -> Path:
-    """``path``, else ``$DYNO_RIG``, else the repo's ``hardware/rig.toml``."""
-    if path is not None:
-        return Path(path)
-    env = os.environ.get(RIG_ENV)
-    return Path(env) if env else DEFAULT_RIG_PATH
+    """The rig file a command reads (:func:`dyno.rig.locate.find_rig`)."""
+    return find_rig(path).path
 
 
 def load_rig(path: str | Path | None = None) -> RigConfig:
@@ -490,9 +487,10 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
 _WARNED: set = set()
 
 
-def add_rig_argument(parser: argparse.ArgumentParser) -> None:
-    """``--rig PATH`` for any command; load it with ``load_rig(args.rig)``."""
-    parser.add_argument(
-        "--rig", metavar="PATH", default=None,
-        help=f"rig description (default: ${RIG_ENV} or {DEFAULT_RIG_PATH.parent.name}/{DEFAULT_RIG_PATH.name})",
-    )
+def load_rig_for(path: str | Path | None = None, *, sim: bool) -> RigConfig:
+    """:func:`load_rig` of the found file; real hardware (``sim`` false) refuses the shipped one (dyno.rig.locate)."""
+    found = find_rig(path)
+    if not sim:
+        require_own_rig(found)
+    return load_rig(found.path)
+

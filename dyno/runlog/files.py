@@ -41,7 +41,11 @@ def dumps(obj) -> str:
 
 
 def runs_root() -> Path:
-    """Where runs go by default and where the run library lives: ``$DYNO_RUNS_DIR``, else ``runs``."""
+    """Where runs go by default and where the run library lives: ``$DYNO_RUNS_DIR``, else the state directory's
+    ``runs`` (:func:`dyno.datapaths.state_dir`)."""
     import os
 
-    return Path(os.environ.get("DYNO_RUNS_DIR") or "runs")
+    from dyno.datapaths import state_dir
+
+    env = os.environ.get("DYNO_RUNS_DIR")
+    return Path(env) if env else state_dir() / "runs"

@@ -267,7 +267,7 @@ def default_out_dir(folder: Path, root: Path | None = None) -> Path:
     if root is None:
         from dyno.runlog.files import runs_root
 
-        root = runs_root()  # $DYNO_RUNS_DIR, else runs/
+        root = runs_root()  # $DYNO_RUNS_DIR, else $DYNO_STATE_DIR/runs
     path = root / f"legacy-{folder.name}"
     n = 1
     while path.exists():

@@ -46,7 +46,7 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     rig_cfg = load_rig(rig_path)
     from dyno.transports.budget import check_budget
 
-    check_budget(rig_cfg)  # the same link budget as a run: a poll rate the link cannot carry is refused
+    rig_cfg = check_budget(rig_cfg)  # the same link budget as a run: derated to fit, or refused
     want_input = getattr(rig_cfg, "input_torque", None) is not None  # asked for as in a run
     hw = twin = None
     if sim:

@@ -12,15 +12,17 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parent.parent.parent
 
 
 def calibration_path(cfg) -> Path:
-    """The channel's calibration history: as given, else relative to the repository (the shipped one)."""
+    """The channel's calibration history: as given (absolute or found from here), else the state directory's
+    copy, else the shipped one (:mod:`dyno.session.calibration_files`)."""
+    from dyno.session.calibration_files import calibration_in_force
+
     p = Path(cfg.calibration)
     if p.is_absolute() or p.exists():
         return p
-    return REPO_ROOT / p
+    return calibration_in_force(p.name)
 
 
 def load_input_channel(rig_cfg):

@@ -23,10 +23,12 @@ from dyno.session import input_channel as app_input  # rig.toml [input_torque]: 
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
+from dyno.resources import resource
+from dyno.rig.locate import find_rig
+from dyno.session.calibration_files import calibration_in_force
 
-REPO_ROOT = Path(__file__).resolve().parent.parent.parent
-DEFAULT_CALIBRATION = REPO_ROOT / "calibration" / "torque_calibration.csv"
-DEFAULT_ENGINE_MAP = REPO_ROOT / "calibration" / "engine_maps" / "baja-10hp-representative.csv"
+DEFAULT_CALIBRATION = resource("calibration/torque_calibration.csv")  # the shipped history
+DEFAULT_ENGINE_MAP = resource("calibration/engine_maps/baja-10hp-representative.csv")
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,7 @@ class RunSpec:
     out_dir: Path | None = None
     protocol: str | None = None
     rig_path: Path | None = None
-    calibration_path: Path = DEFAULT_CALIBRATION
+    calibration_path: Path = field(default_factory=calibration_in_force)  # the state directory's, else shipped
     engine_map_path: Path = DEFAULT_ENGINE_MAP
     plan: TestPlan = field(default_factory=TestPlan)  # (the CLI's default is the speed-hold plan file)
     limits: SafetyLimits | None = None
@@ -80,7 +82,7 @@ def default_run_dir(root: Path | None = None) -> Path:
     if root is None:
         from dyno.runlog.files import runs_root
 
-        root = runs_root()  # $DYNO_RUNS_DIR, else runs/
+        root = runs_root()  # $DYNO_RUNS_DIR, else $DYNO_STATE_DIR/runs
     root.mkdir(parents=True, exist_ok=True)
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     for n in range(1, 100_000):
@@ -98,11 +100,15 @@ def load_inputs(opts: RunOptions):
     from dyno.analysis.calibration import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.rig.config import load_rig
+    from dyno.rig.locate import find_rig, require_own_rig
 
-    rig_cfg = load_rig(opts.rig_path)
+    found = find_rig(opts.rig_path)
+    if not opts.sim:
+        require_own_rig(found)  # the shipped rig file's pins are never guessed onto hardware
+    rig_cfg = load_rig(found.path)
     from dyno.transports.budget import check_budget
 
-    check_budget(rig_cfg)  # a poll rate the link cannot carry: one line naming poll_hz, before anything runs
+    rig_cfg = check_budget(rig_cfg)  # a poll rate the link cannot carry: derated (said), or refused naming poll_hz
     calibration = latest(load_history(opts.calibration_path))
     engine_map = load_engine_map(opts.engine_map_path)
     return rig_cfg, calibration, engine_map
@@ -273,9 +279,10 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         # the thermometer shares the firmware's bus on an I2C rig (on a serial rig it has its own)
         thermometer = _thermometer(firmware_bus if rig_cfg.transport == "i2c" else bus,
                                    rig_cfg.i2c.thermometer_address)
-    else:
-        transport = hw.transport  # I2C with the Nano's RESET line wired in, or USB serial (rig.toml)
-        thermometer = hw.thermometer.object_c
+    else:  # I2C with the Nano's RESET line wired in, or USB serial: each transfer timed as it happens
+        from dyno.transports.budget import metered_rig_link
+
+        transport, thermometer, link_meter = metered_rig_link(hw, rig_cfg)
     reader = make_reader(protocol, transport, supervisor_command=_supervisor_command(protocol, limits, rig_cfg),
                          want_input=input_channel is not None)  # (asked for at every boot: docs/protocol.md)
     # paced: each real-time poll spans `speed` x more rig time, so it may drain that many more frames
@@ -287,6 +294,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         "seed": opts.seed if opts.sim else None,
         "fault_rate": opts.fault_rate,
         "rig_config": rig_cfg.path,
+        "rig_file": find_rig(opts.rig_path).to_dict(),  # which file and how it was found (dyno.rig.locate)
         "rig": _asdict(rig_cfg),
         "calibration_source": str(opts.calibration_path),
         "engine_map_source": str(map_source),

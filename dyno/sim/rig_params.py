@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-_REPO_ROOT = Path(__file__).resolve().parents[2]
+from dyno.resources import FOLDERS, resource
+
 DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
 DEFAULT_TUNE = "calibration/tunes/cvtech-stock.toml"
 
@@ -36,10 +37,13 @@ def _resolve_map_path(path: str) -> Path:
     p = Path(path)
     if p.is_absolute():
         return p
-    # Repository-relative by design (the default), so it works from any cwd;
+    # A shipped file by design (the default: "calibration/..."), so it works from any cwd and from a wheel;
     # fall back to cwd-relative for user-supplied relative paths.
-    repo_p = _REPO_ROOT / p
-    return repo_p if repo_p.exists() or not p.exists() else p
+    if p.parts and p.parts[0] in FOLDERS:
+        shipped = resource(p.as_posix())
+        if shipped.exists() or not p.exists():
+            return shipped
+    return p
 
 
 @dataclass

@@ -16,7 +16,12 @@ more byte for COBS and one for the delimiter.
 
 A rig whose planned polls (:func:`planned_busy`) would keep its link busier than :data:`MAX_BUSY` of a second
 is refused (:func:`check_budget`): the margin is for the bursts when the device says MORE, the re-polls after
-a rejected frame, the retries.  :class:`LinkMeter` measures what a run really used, second by second.
+a rejected frame, the retries.  :class:`LinkMeter` measures what a run really used, second by second: on the
+simulator each transaction charged at the rig file's clock (:class:`MeteredBus`), on the rig each transfer
+timed as it happens (:func:`metered_rig_link`).  A measured busiest second above :data:`MAX_BUSY` is a warning
+of the run (``link.warnings``: ``"link_busy"``).
+
+A bus clock above what a device on it is rated for is refused, naming the device (:data:`I2C_DEVICE_MAX_HZ`).
 """
 
 from __future__ import annotations
@@ -29,6 +34,9 @@ FRAME_BYTES = 32
 #: the MLX90614's read word: command byte written, 3 bytes read (2 data + PEC); the poller's rate of it
 THERMOMETER_MSGS = ((False, 1), (True, 3))
 THERMOMETER_HZ = 10.0
+#: the fastest SCL each device on the rig's bus is rated for (datasheets): (rig.toml key, device, max Hz)
+I2C_DEVICE_MAX_HZ = (("i2c.thermometer_address", "MLX90614 (its SMBus interface)", 100_000),
+                     ("i2c.firmware_address", "ATmega328P TWI slave (the Nano)", 400_000))
 
 
 def i2c_clocks(msgs) -> int:
@@ -61,19 +69,58 @@ def clock_hz(rig) -> int:
     return rig.serial.baud if rig.transport == "serial" else rig.i2c.bus_speed_hz
 
 
-def check_budget(rig) -> None:
-    """ConfigError naming the rig file's ``poll_hz`` when its polls do not fit the link with the margin."""
-    busy = planned_busy(rig)
-    if busy <= MAX_BUSY:
-        return
+def check_device_clocks(rig) -> None:
+    """ConfigError naming ``i2c.bus_speed_hz`` and the device when the bus clock is above what it is rated for
+    (the thermometer is on the Pi's bus on every rig; the Nano only where the firmware link is I²C)."""
     from dyno.errors import ConfigError
 
-    fits = int((MAX_BUSY - (planned_busy(rig, 0.0))) / poll_s(rig))
+    for key, device, max_hz in I2C_DEVICE_MAX_HZ:
+        if key == "i2c.firmware_address" and rig.transport != "i2c":
+            continue
+        if rig.i2c.bus_speed_hz > max_hz:
+            address = getattr(rig.i2c, key.split(".", 1)[1])
+            raise ConfigError(rig.path, "i2c.bus_speed_hz", f"at most {max_hz} Hz: the {device} at {key.split('.')[1]}"
+                              f" = 0x{address:02X} is rated for {max_hz // 1000} kHz, not {rig.i2c.bus_speed_hz} Hz")
+
+
+def max_poll_hz(rig) -> int:
+    """The fastest whole poll rate that keeps the planned share within :data:`MAX_BUSY`."""
+    return int((MAX_BUSY - planned_busy(rig, 0.0)) / poll_s(rig))
+
+
+def check_budget(rig, say=None):
+    """The rig as it will run: unchanged when its polls fit the link with the margin; else, with ``derate = true``
+    (the default), ``poll_hz`` lowered to :func:`max_poll_hz` and said on one stderr line; else a ConfigError
+    naming ``poll_hz``.  A bus clock above a device's rating is a ConfigError naming ``i2c.bus_speed_hz``."""
+    check_device_clocks(rig)
+    busy = planned_busy(rig)
+    if busy <= MAX_BUSY:
+        return rig
+    from dyno.errors import ConfigError
+
+    fits = max_poll_hz(rig)
     clock = (f"{rig.serial.baud} Bd" if rig.transport == "serial" else f"{rig.i2c.bus_speed_hz} Hz SCL")
-    raise ConfigError(rig.path, "poll_hz", f"at most {fits} Hz on {rig.transport} at {clock} (each poll "
-                      f"{poll_s(rig) * 1e3:.1f} ms on the wire; {rig.poll_hz:g} Hz would keep the link "
-                      f"{100 * busy:.0f} % busy, the limit is {100 * MAX_BUSY:.0f} %): lower poll_hz, or a faster "
-                      "link (hardware/README.md, 'The Pi's I²C and clock stretching')")
+    why = (f"on {rig.transport} at {clock} each poll is {poll_s(rig) * 1e3:.1f} ms on the wire; {rig.poll_hz:g} Hz "
+           f"would keep the link {100 * busy:.0f} % busy, the limit is {100 * MAX_BUSY:.0f} %")
+    if rig.derate and fits >= 1:
+        from dataclasses import replace
+
+        line = f"{rig.path}: poll_hz: derated from {rig.poll_hz:g} Hz to {fits} Hz ({why}; derate = true)"
+        if line not in _SAID:
+            _SAID.add(line)
+            (say or _stderr)(line)
+        return replace(rig, poll_hz=float(fits), derated_from_hz=rig.poll_hz)
+    raise ConfigError(rig.path, "poll_hz", f"at most {fits} Hz ({why}): lower poll_hz, set derate = true, or a "
+                      "faster link (hardware/README.md, 'The Pi's I²C and clock stretching')")
+
+
+_SAID: set = set()
+
+
+def _stderr(line: str) -> None:
+    import sys
+
+    print(f"dyno: {line}", file=sys.stderr, flush=True)
 
 
 class LinkMeter:
@@ -126,3 +173,48 @@ class MeteredBus:
 
     def __getattr__(self, name):  # close(), the simulated bus's knobs: the bus's own
         return getattr(self.bus, name)
+
+
+class TimedTransport:
+    """A real firmware transport whose every transfer is charged to a :class:`LinkMeter` for the time it took
+    (the transfer's own duration on ``clock``: wire, clock stretching, retries and all)."""
+
+    def __init__(self, transport, meter: LinkMeter, clock) -> None:
+        self.transport = transport
+        self.meter = meter
+        self.clock = clock
+
+    def transfer(self, request: bytes, read_len: int) -> bytes:
+        t0 = self.clock()
+        try:
+            return self.transport.transfer(request, read_len)
+        finally:
+            self.meter.add(self.clock() - t0)
+
+    def write(self, request: bytes) -> None:
+        t0 = self.clock()
+        try:
+            self.transport.write(request)
+        finally:
+            self.meter.add(self.clock() - t0)
+
+    def __getattr__(self, name):  # stats, reset, close, ...: the transport's own
+        return getattr(self.transport, name)
+
+
+def metered_rig_link(hw, rig, clock=None):
+    """(transport, thermometer read, meter) of a real rig, each transfer timed as it happens; the thermometer's
+    reads are charged too where they share the firmware's I²C bus."""
+    import time
+
+    clock = clock or time.monotonic
+    meter = LinkMeter(clock)
+    read_c = hw.thermometer.object_c
+    if rig.transport == "i2c":
+        def read_c(_read=hw.thermometer.object_c):
+            t0 = clock()
+            try:
+                return _read()
+            finally:
+                meter.add(clock() - t0)
+    return TimedTransport(hw.transport, meter, clock), read_c, meter

@@ -100,6 +100,15 @@ class RecoveringI2CTransport(I2CTransport):
             raise TransportFault("io", f"bus reopen failed: {exc}") from exc
 
 
+def missing_bus_hint(bus_number: int) -> str:
+    """How a missing ``/dev/i2c-<n>`` is made on a Pi: bus 1 is the hardware controller (raspi-config); any
+    other number is a software bus from the ``i2c-gpio`` overlay (the shipped rig's bus 3, docs/install-pi.md)."""
+    if bus_number == 1:
+        return "enable I2C: sudo raspi-config nonint do_i2c 0, then reboot"
+    return (f"bus {bus_number} is i2c-gpio's: dtoverlay=i2c-gpio,bus={bus_number},i2c_gpio_sda=5,i2c_gpio_scl=6 "
+            "in /boot/firmware/config.txt (the pins your wiring uses), then reboot; docs/install-pi.md")
+
+
 def smbus_factory(bus_number: int):
     """A callable opening ``/dev/i2c-<n>`` (imported lazily: laptops have no smbus2 device)."""
 
@@ -109,7 +118,7 @@ def smbus_factory(bus_number: int):
         try:
             return SMBus(bus_number)
         except FileNotFoundError as exc:
-            raise OSError(errno.ENODEV, f"/dev/i2c-{bus_number} not found (enable I2C: raspi-config)") from exc
+            raise OSError(errno.ENODEV, f"/dev/i2c-{bus_number} not found ({missing_bus_hint(bus_number)})") from exc
 
     return open_bus
 

@@ -230,8 +230,11 @@ class SerialTransport(Transport):
             close()
 
 
-#: after opening, nothing is asked before this long: the bootloader would take the bytes for an upload
-BOOT_QUIET_S = 0.5
+#: after opening, nothing is sent before this long: Optiboot listens ~1 s after the reset and would take the bytes
+#: for an upload (STK500 commands: a stray 0x64 is "program a page")
+BOOT_WINDOW_S = 1.2
+#: ... and not before the line has been this quiet: a bootloader that talks during its window is let finish
+BOOT_QUIET_GAP_S = 0.15
 #: then the first answer is asked for this often until ``serial.boot_timeout_s``
 BOOT_POLL_S = 0.1
 
@@ -240,7 +243,8 @@ def open_serial(config, *, port=None, clock=None, wait_boot: bool = True) -> Ser
     """The firmware transport over USB serial for a RigConfig (8N1, ``config.serial``), ready to use.
 
     Opening a Nano's port pulses its DTR line, which resets it: Optiboot listens for an upload for about a
-    second, then the sketch starts.  So this waits :data:`BOOT_QUIET_S`, then asks for a frame every
+    second, then the sketch starts.  So this sends nothing for :data:`BOOT_WINDOW_S` and until the line has been
+    quiet :data:`BOOT_QUIET_GAP_S` (what the bootloader said is dropped), then asks for a frame every
     :data:`BOOT_POLL_S` until one answers or ``serial.boot_timeout_s`` has passed since the open (one line
     naming the port and what to check).  ``wait_boot=False``: the port as opened (a Nano whose auto-reset is
     cut answers at once).  The FTDI chip's 16 ms latency timer (~60 answers a second at most) is set low where
@@ -275,7 +279,7 @@ def wait_for_firmware(transport: SerialTransport, config, clock) -> float:
     ask = proto.encode_command(proto.OP_INFO)
     t0 = clock.now()
     deadline = t0 + config.serial.boot_timeout_s
-    clock.sleep(BOOT_QUIET_S)
+    drain_bootloader(transport, clock, until_s=t0 + BOOT_WINDOW_S, deadline_s=deadline)
     while True:
         try:
             transport.transfer(ask, FRAME_MAX)
@@ -287,3 +291,23 @@ def wait_for_firmware(transport: SerialTransport, config, clock) -> float:
                                  "of opening the port (it resets the Nano; its bootloader listens ~1 s): check the "
                                  "USB cable, the firmware is flashed, and protocol/baud in rig.toml")
         clock.sleep(BOOT_POLL_S)
+
+
+def drain_bootloader(transport: SerialTransport, clock, *, until_s: float, deadline_s: float) -> int:
+    """Send nothing until ``until_s`` and until the line has been quiet :data:`BOOT_QUIET_GAP_S` (at most until
+    ``deadline_s``); whatever the bootloader sent meanwhile is dropped.  Returns the bytes dropped."""
+    port = transport.port
+    dropped = 0
+    last_byte_s = clock.now()
+    while True:
+        now = clock.now()
+        if now >= deadline_s or (now >= until_s and now - last_byte_s >= BOOT_QUIET_GAP_S):
+            break
+        port.timeout = min(BOOT_POLL_S, max(0.0, deadline_s - now))
+        got = port.read(max(1, port.in_waiting))
+        if got:
+            dropped += len(got)
+            last_byte_s = clock.now()
+    transport.deframer = CobsDeframer(transport.deframer.validate)  # no half packet of the banner kept
+    transport._packets.clear()
+    return dropped

@@ -117,7 +117,7 @@ class CalibrateApp(DynoApp):
 
     async def on_mount(self) -> None:
         from dyno.analysis.calibration import latest, load_history
-        from dyno.session.root import DEFAULT_CALIBRATION
+        from dyno.session.calibration_files import calibration_in_force
         from dyno.errors import DynoError
 
         history = []
@@ -126,7 +126,7 @@ class CalibrateApp(DynoApp):
             if hist_path and Path(hist_path).exists():
                 history = load_history(hist_path)
             self.calibration_in_force = latest(history or load_history(self.opts.in_force_path
-                                                                       or DEFAULT_CALIBRATION))
+                                                                       or calibration_in_force()))
         except DynoError:
             self.calibration_in_force = None  # first calibration: nothing to compare the tare with
         self.wizard = CalibrationWizard(n_samples=self.opts.n_samples, settle_samples=self.opts.settle_samples,

@@ -27,8 +27,9 @@ def _rig(tmp_path, name="rig.toml", **subs) -> Path:
 
 
 def test_a_poll_rate_the_bus_cannot_carry_is_refused_in_one_line(tmp_path, capsys):
-    """50 kHz SCL (the old default) and 150 polls a second: 363 clocks a poll is 7.3 ms, 110 % of the bus."""
-    rig = _rig(tmp_path, **{"bus_speed_hz = 100000": "bus_speed_hz = 50000"})
+    """50 kHz SCL (the old default) and 150 polls a second: 363 clocks a poll is 7.3 ms, 110 % of the bus;
+    with ``derate = false`` the rig file is refused."""
+    rig = _rig(tmp_path, **{"bus_speed_hz = 100000": "bus_speed_hz = 50000", "\npoll_hz = ": "\nderate = false\npoll_hz = "})
     code = main(["run", "--sim", "--headless", "--json", "--mock-pins", "--rig", str(rig),
                  "--out", str(tmp_path / "run")])
     cap = capsys.readouterr()
@@ -36,6 +37,21 @@ def test_a_poll_rate_the_bus_cannot_carry_is_refused_in_one_line(tmp_path, capsy
     lines = [ln for ln in cap.err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "poll_hz" in lines[0] and "at most 81 Hz" in lines[0], cap.err
     assert json.loads(cap.out)["exit_code"] == 2
+
+
+def test_a_poll_rate_the_bus_cannot_carry_is_derated_to_fit_and_said(tmp_path, capsys):
+    """The same rig with ``derate`` at its default: the run polls at 81 Hz, says so, and reports the link's
+    planned and measured busiest second, a measured share above 60 % named as a warning."""
+    rig = _rig(tmp_path, **{"bus_speed_hz = 100000": "bus_speed_hz = 50000"})
+    code = main(["run", "--sim", "--headless", "--json", "--rig", str(rig), "--plan", "thesis-step",
+                 "--out", str(tmp_path / "run")])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    assert "poll_hz: derated from 150 Hz to 81 Hz" in cap.err
+    link = json.loads(cap.out)["link"]
+    assert link["poll_hz"] == 81 and link["derated_from_hz"] == 150 and link["clock_hz"] == 50_000
+    assert link["planned_busy_frac"] <= 0.6 and link["measured_busy_frac"] > 0.3
+    assert ("link_busy" in link["warnings"]) == (link["measured_busy_frac"] > 0.6), link
 
 
 def test_the_default_rigs_link_fits_with_its_margin_and_loses_nothing(tmp_path):

@@ -284,7 +284,7 @@ def test_disk_full_drill_as_a_real_process(tmp_path):
     p = _dyno("run", "--sim", "--headless", "--json", "--out", out, "--drill", "disk-full@60")  # (mid-test: see above)
     assert p.returncode == 3
     assert "Traceback" not in p.stderr
-    err_lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    err_lines = [ln for ln in p.stderr.splitlines() if ln.strip() and not ln.startswith("dyno run: rig file ")]
     assert len(err_lines) == 1 and "No space left" in err_lines[0] and str(out) in err_lines[0]
     r = json.loads(p.stdout)
     assert r["aborts"][0]["cause"] == "disk_full" and r["rig_safe"]

@@ -32,7 +32,8 @@ EXERCISED = {"run", "replay", "export", "import-legacy", "model", "firmware-sim"
              "shift-curve", "design", "arcvt"}
 EXERCISED_ELSEWHERE = {"ui": "tests/ui/test_ui_tmux.py", "report": "tests/e2e/test_report.py",
                        "runs": "tests/library/test_index.py", "compare": "tests/library/test_compare.py",
-                       "serve": "tests/web/test_web_serve.py", "tune": "tests/tuning/test_tune_advise.py"}
+                       "serve": "tests/web/test_web_serve.py", "tune": "tests/tuning/test_tune_advise.py",
+                       "init": "tests/packaging/test_wheel.py", "flash": "tests/hw/test_hw_flash.py"}
 
 
 def _env(**extra: str) -> dict:
@@ -236,7 +237,7 @@ def test_entry_doctor_sim(work):
 
 @pytest.mark.skipif(Path("/dev/i2c-3").exists(), reason="the rig's I2C bus is present: this is a rig, not CI")
 def test_entry_doctor_without_hardware_says_what_fails(work):
-    proc = dyno("doctor", cwd=work)
+    proc = dyno("doctor", "--rig", REPO / "hardware" / "rig.toml", cwd=work)  # (a rig file of its own: no refusal)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr + proc.stdout
     assert "FAIL  i2c bus" in proc.stdout and "rig NOT ready" in proc.stdout
 

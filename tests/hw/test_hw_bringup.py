@@ -69,3 +69,51 @@ def test_after_a_reset_the_doctor_waits_for_the_new_boot_not_a_fixed_time():
     clock.advance(1.0)  # [reset] boot_s: the old fixed wait, shorter than the bootloader's
     assert _boots(cfg, transport) is None  # what the old check read: "reset line not wired?"
     assert _new_boot(cfg, transport, before, clock) == before + 1
+
+
+def test_the_open_sends_nothing_into_a_talking_bootloader_and_drops_what_it_said():
+    """Optiboot is not silent (its LED, a clone's banner): the open waits out its window and its chatter, and
+    the first frame read is the new sketch's."""
+    sim, clock = _sim()
+    port = SimSerialPort(sim, clock)
+    t_open = clock.now()
+    transport = open_serial(load_rig(), port=port, clock=clock)
+    assert port.noise_bytes > 20  # the bootloader talked ...
+    assert port.taken_by_bootloader == 0  # ... and not one host byte reached it
+    assert clock.now() - t_open >= BOOTLOADER_S
+    info = make_reader("v2", transport).read_info()
+    assert info is not None and info.boot_id == sim.firmware.boot_id
+
+
+def test_the_old_half_second_wait_sent_into_the_bootloaders_window(monkeypatch):
+    import dyno.transports.serial as serial_mod
+
+    monkeypatch.setattr(serial_mod, "BOOT_WINDOW_S", 0.5)  # what dyno did before: 0.5 s, then ask
+    monkeypatch.setattr(serial_mod, "BOOT_QUIET_GAP_S", 0.0)
+    sim, clock = _sim()
+    port = SimSerialPort(sim, clock)
+    open_serial(load_rig(), port=port, clock=clock)
+    assert port.taken_by_bootloader > 0
+
+
+def test_a_bootloader_that_talks_past_the_usual_window_is_let_finish(monkeypatch):
+    import dyno.sim.device as device
+
+    monkeypatch.setattr(device, "BOOTLOADER_S", 1.8)  # an old or slow bootloader: ~1.8 s before the sketch
+    sim, clock = _sim()
+    port = SimSerialPort(sim, clock, bootloader_talks_s=1.7)
+    t_open = clock.now()
+    transport = open_serial(load_rig(), port=port, clock=clock)
+    assert port.taken_by_bootloader == 0 and clock.now() - t_open >= 1.8
+    assert make_reader("v2", transport).read_info().boot_id == sim.firmware.boot_id
+
+
+def test_a_missing_software_bus_names_the_i2c_gpio_overlay_not_raspi_config():
+    from dyno.transports.i2c import smbus_factory
+
+    with pytest.raises(OSError) as bus3:
+        smbus_factory(97)()  # (no /dev/i2c-97 anywhere): the shipped rig's bus 3 is made the same way
+    assert "dtoverlay=i2c-gpio,bus=97" in str(bus3.value) and "raspi-config" not in str(bus3.value)
+    from dyno.transports.i2c import missing_bus_hint
+
+    assert "raspi-config" in missing_bus_hint(1)  # the hardware controller's bus is the one raspi-config enables

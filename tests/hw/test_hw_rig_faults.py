@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from dyno.errors import SafetyAbort
+from dyno import datapaths
 from dyno.hw import rig_faults
 from dyno.hw.outputs import GpioActuators
 
@@ -90,13 +91,13 @@ def test_the_service_and_the_operator_share_one_state_directory():
     unit = (REPO / "hardware" / "dyno.service").read_text()
     env = re.search(r"^Environment=DYNO_STATE_DIR=(\S+)$", unit, re.M)
     assert env, "hardware/dyno.service must set DYNO_STATE_DIR"
-    assert Path(env.group(1)) == rig_faults.SERVICE_STATE_DIR
+    assert Path(env.group(1)) == datapaths.SERVICE_STATE_DIR
     assert re.search(r"^StateDirectory=dyno$", unit, re.M)  # systemd creates it for User=dyno
     mode = re.search(r"^StateDirectoryMode=(\d+)$", unit, re.M)
     assert mode and int(mode.group(1), 8) & 0o070 == 0o070  # the group (the operator's) reads and writes it
     for doc in ("docs/install-pi.md", "docs/safety.md"):
         text = (REPO / doc).read_text()
-        assert str(rig_faults.SERVICE_STATE_DIR) in text and "DYNO_STATE_DIR" in text, doc
+        assert str(datapaths.SERVICE_STATE_DIR) in text and "DYNO_STATE_DIR" in text, doc
 
 
 def test_unset_the_service_directory_is_used_where_it_exists(monkeypatch, tmp_path):

@@ -132,7 +132,7 @@ def test_index_failure_is_one_line_and_keeps_the_exit_code(tmp_path):
     r = _dyno("run", "--sim", "--headless", "--drill", "overspeed@3", "--out", tmp_path / "run",
               runs_dir=not_a_dir)
     assert r.returncode == 3
-    lines = [x for x in r.stderr.splitlines() if x.strip()]
+    lines = [x for x in r.stderr.splitlines() if x.strip() and not x.startswith("dyno run: rig file ")]
     assert len(lines) == 1 and "not indexed" in lines[0] and "Traceback" not in r.stderr
     assert (tmp_path / "run" / "meta.json").is_file()
 
