@@ -102,8 +102,9 @@ def test_the_service_and_the_operator_share_one_state_directory():
 
 def test_unset_the_service_directory_is_used_where_it_exists(monkeypatch, tmp_path):
     monkeypatch.delenv("DYNO_STATE_DIR", raising=False)
-    monkeypatch.setattr(rig_faults, "SERVICE_STATE_DIR", tmp_path / "var-lib-dyno")
+    monkeypatch.setattr(datapaths, "SERVICE_STATE_DIR", tmp_path / "var-lib-dyno")
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
-    assert rig_faults.state_path() == tmp_path / "home" / ".local" / "state" / "dyno" / "rig_faults.json"
+    monkeypatch.delenv("XDG_DATA_HOME", raising=False)
+    assert rig_faults.state_path() == tmp_path / "home" / ".local" / "share" / "dyno" / "rig_faults.json"
     (tmp_path / "var-lib-dyno").mkdir()
     assert rig_faults.state_path() == tmp_path / "var-lib-dyno" / "rig_faults.json"
