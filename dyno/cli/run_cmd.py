@@ -49,7 +49,7 @@ def add_arguments(p) -> None:
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (repeatable; --sim only): "
                         "device-reset, hall-dead:primary|secondary|both, thermometer-stuck, thermometer-lost, "
-                        "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, pi-freeze[:S], "
+                        "adc-error, adc-stuck, bus-lost, overtemp, overspeed, loop-stall:MS, pi-freeze[:S], loop-freeze[:S], "
                         "controller-crash, disk-full, sigint, sigterm, sighup (docs/safety.md)")
     from dyno.rig.config import add_rig_argument
     from dyno.web.attach import add_web_arguments
