@@ -175,6 +175,9 @@ def test_watchdog_thread_cuts_the_engine_while_the_frozen_loop_holds_the_drivers
             result["blocked_at"] = time.monotonic()
             time.sleep(1.2)
             result["resumed_at"] = time.monotonic()
+        deadline = time.monotonic() + 10.0  # the watchdog thread, which waited for the lock, now latches
+        while not act.latched and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
 
     hw = HardwareRig(rig, pin_factory=factory, clock=clock, bus=Bus(), install_signals=False)
     with hw:
