@@ -21,8 +21,8 @@ agree with the physics (``driver_agrees``).
                                      [--modes sim,mock,sim+faults,twin,twin+k3] [--workers N] [--markdown] [--json]
 
 ``--quick`` (CI's smoke run): every plan once, one mid-test drill each, on ``sim``; plus one ``mock`` row and
-two ``twin`` rows.  The full matrix is 8 plans x 24 drills x 4 phases x 5 modes, less the wiring drills off the
-twin (~2,800 runs, hours on 2 cores): run by hand, or a slice of it with the filters
+two ``twin`` rows.  The full matrix is 8 plans x 25 drills x 4 phases x 5 modes, less the wiring drills off the
+twin (~3,400 runs, hours on 2 cores): run by hand, or a slice of it with the filters
 (``--modes twin,twin+k3 --drills wiring``: the wiring drills alone); docs/safety.md has the figures.
 """
 
@@ -47,9 +47,10 @@ PLANS = ("speed-hold", "thesis-step", "torque-hold", "engine-hold", "sweep", "en
 DRILLS = {
     "device-reset": None, "hall-dead:primary": 0.5, "hall-dead:secondary": 0.5, "hall-dead:both": 0.5,
     "thermometer-stuck": 5.0, "thermometer-lost": 5.0, "adc-error": 0.1, "adc-stuck": 2.0, "bus-lost": 0.35,
-    "overtemp": 0.3, "overspeed": 0.1, "loop-stall:300": None, "loop-stall:800": 0.6, "controller-crash": 0.1,
+    "overtemp": 0.3, "overspeed": 0.1, "loop-stall:200": None, "loop-stall:800": 0.6, "controller-crash": 0.1,
     "disk-full": 0.1, "sigint": 0.1, "sigterm": 0.1, "sighup": 0.1,
     "pi-freeze": 0.3,  # freeze -> the kill chain opening (the Nano's heartbeat 0.2 s + 0.1 s)
+    "loop-freeze": 0.3,  # the loop alone frozen: the same bound (the I/O thread stops the heartbeat within 0.05 s)
     # the wiring drills (twin modes only): a stuck or chattering end switch does not trip the run (the driver
     # finds it, names it, falls back to the full stroke time: judged on the physics at the end)
     "endswitch-stuck-closed": None, "endswitch-stuck-open": None, "endswitch-bounce": None,

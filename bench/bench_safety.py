@@ -49,16 +49,18 @@ DRILLS = {
     "bus-lost": ((8.0, 90.0, 200.0), 0.35, "link silence (comms_timeout_s 0.25 s)"),
     "overtemp": ((8.0, 90.0, 200.0), 0.3, "over-temperature"),
     "overspeed": ((4.0, 6.0), 0.1, ""),
-    "loop-stall:300": ((90.0,), None, "survived (shorter than watchdog_s)"),
+    "loop-stall:200": ((90.0,), None, "survived (within the liveness limit, ~0.236 s: docs/safety.md)"),
+    "loop-stall:300": ((8.0, 90.0), 0.35, "past the liveness limit: the Nano cuts; the Pi safes when it resumes"),
     "loop-stall:800": ((8.0, 90.0, 200.0), 0.6, "watchdog_s (0.5 s)"),
     "pi-freeze": ((8.0, 90.0), 0.3, "the Nano's heartbeat (supervisor_timeout_s 0.2 s) opens the kill chain"),
+    "loop-freeze": ((8.0, 90.0), 0.3, "the I/O thread withholds the heartbeat: the Nano (or the watchdog) cuts"),
     "controller-crash": ((8.0, 90.0, 200.0), 0.1, ""),
     "disk-full": ((8.0, 90.0, 200.0), 0.1, ""),
     "sigint": ((8.0, 90.0), 0.1, ""),
     "sigterm": ((8.0, 90.0), 0.1, ""),
     "sighup": ((8.0, 90.0), 0.1, ""),
 }
-SURVIVABLE = {"loop-stall:300"}  # (a device reset cuts the engine through the Nano's run-enable: issue 37)
+SURVIVABLE = {"loop-stall:200"}  # (a device reset cuts the engine through the Nano's run-enable: issue 37)
 
 
 def _drills_for(name: str, t: float):

@@ -49,10 +49,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PLANS = ("speed-hold", "thesis-step", "sweep", "torque-hold", "engine-hold", "engagement", "coast-down",
          "drive-grid")
-#: the drills a soak draws from (every one in dyno.session.drills; loop-stall on both sides of watchdog_s)
+#: the drills a soak draws from (every one in dyno.session.drills; loop-stall on both sides of the loop's liveness
+#: limit, ~0.236 s, and of watchdog_s)
 DRILLS = ("device-reset", "hall-dead:primary", "hall-dead:secondary", "hall-dead:both", "thermometer-stuck",
-          "thermometer-lost", "adc-error", "adc-stuck", "bus-lost", "overtemp", "overspeed", "loop-stall:300",
-          "loop-stall:800", "controller-crash", "disk-full", "sigint", "sigterm", "sighup")
+          "thermometer-lost", "adc-error", "adc-stuck", "bus-lost", "overtemp", "overspeed", "loop-stall:200",
+          "loop-stall:300", "loop-stall:800", "loop-freeze", "controller-crash", "disk-full", "sigint", "sigterm",
+          "sighup")
 #: onsets: phases of the test (dyno.session.drills.PHASES) and plain times from the first frame
 ONSETS = ("armed", "warmup+1", "loaded+2", "measure+1", "after+0.5", "20", "45")
 QUICK_PLANS = "engine-hold,torque-hold,coast-down"  # the shortest ones with points (~1-2 simulated min each)
@@ -144,6 +146,7 @@ def one_run(plan: str, seed: int, drill, fault_rate: float, errors: Errors, warn
                points=len(r["points"]), events_lost=int(r.get("events_lost") or 0),
                cause=r["aborts"][0]["cause"] if r["aborts"] else None,
                drill_fired=bool(r.get("drills")), rig_safe=bool(r["rig_safe"]),
+               heartbeat_cuts=sum(d.get("cause") == "heartbeat" for d in (r.get("supervisor") or {}).get("drops", [])),
                pads_off=bool(r["outputs"].get("pads_off_rotor")), physics_safe=physics_safe(ctx))
     del ctx
     held.clear()  # (the soak keeps no run context alive)
@@ -173,7 +176,12 @@ def library_counts(root: Path, run_dirs: list[str]) -> tuple[int, int, int]:
 
 
 def stalls_host(drill: str | None) -> bool:
-    return bool(drill) and drill.startswith("loop-stall")
+    return bool(drill) and drill.startswith(("loop-stall", "loop-freeze"))
+
+
+def silences_the_nano(drill: str | None) -> bool:
+    """A drill after which the Nano's heartbeat may rightly stop (the loop stalled, the link lost)."""
+    return stalls_host(drill) or bool(drill) and drill.startswith("bus-lost")
 
 
 class Interval:
@@ -183,6 +191,7 @@ class Interval:
         self.runs = self.points = self.exceptions = self.events_lost = self.points_lost = 0
         self.unreplayable = self.unindexed = self.brake_violations = self.drills = self.drills_fired = 0
         self.events_lost_in_stalls = 0
+        self.false_cuts = 0  # the Nano's heartbeat cut in a run where nothing stalled the loop or cut the link
         self.aborts: Counter = Counter()
 
     def add(self, rec: dict) -> None:
@@ -191,6 +200,8 @@ class Interval:
             self.exceptions += 1
             return
         self.points += rec["points"]
+        if rec.get("heartbeat_cuts") and not silences_the_nano(rec["drill"]):
+            self.false_cuts += rec["heartbeat_cuts"]
         if stalls_host(rec["drill"]):  # a stalled host cannot drain the Nano's ring: lost by design, counted
             self.events_lost_in_stalls += rec["events_lost"]
         else:
@@ -219,7 +230,7 @@ def report_row(hour: float, iv: Interval, total: Interval, wall_s: float, root: 
             "run_dirs": on_disk, "library_entries": entries, "unindexed": total.unindexed + missing,
             "unreplayable": total.unreplayable, "points_lost": total.points_lost,
             "events_lost": total.events_lost, "events_lost_in_stalls": total.events_lost_in_stalls,
-            "brake_violations": total.brake_violations,
+            "brake_violations": total.brake_violations, "false_cuts": total.false_cuts,
             "runs_total": total.runs, "points_total": total.points}
 
 
@@ -230,7 +241,7 @@ def print_row(row: dict, out) -> None:
           f"RSS {row['rss_mb']:.1f} MB fds {row['fds']} | run dirs {row['run_dirs']} library {row['library_entries']} "
           f"unindexed {row['unindexed']} unreplayable {row['unreplayable']} points lost {row['points_lost']} "
           f"events lost {row['events_lost']} (in loop stalls {row['events_lost_in_stalls']}) "
-          f"brake violations {row['brake_violations']}", file=out, flush=True)
+          f"brake violations {row['brake_violations']} false cuts {row['false_cuts']}", file=out, flush=True)
 
 
 def verdict(rows: list[dict], total: Interval, errors: Errors, run_dirs: list[str]) -> dict:
@@ -249,6 +260,7 @@ def verdict(rows: list[dict], total: Interval, errors: Errors, run_dirs: list[st
         "every_run_indexed": last["unindexed"] == 0 and last["library_entries"] >= len(run_dirs),
         "every_run_replayable": total.unreplayable == 0,
         "pads_off_after_every_abort": total.brake_violations == 0,
+        "no_false_heartbeat_cuts": total.false_cuts == 0,
         "fds_flat": max(fds_after_first) - min(fds_after_first) <= 1,  # (one transient: the index file)
         "rss_growth_after_first_hour_ok": None if growth is None else growth <= RSS_GROWTH_MAX,
     }

@@ -19,6 +19,14 @@ read via ``asyncio.to_thread`` per tick 2.1 %, one paced I/O thread 1.0 %):
   ``call_soon_threadsafe``; streams, listeners and the safety check still
   run on the loop, in tick order.  A hung transfer blocks only that thread:
   the loop's heartbeat sees the link silent (``comms_lost``).
+
+Liveness (issue 49): every poll is the Nano's heartbeat, so a poll must prove that the control loop is alive,
+not only its I/O thread.  The loop stamps :attr:`Poller.loop_alive_s` (its own clock) each time it has handled
+a tick, after the listeners (the safety check) ran; the I/O thread polls only while that stamp is at most
+:data:`LOOP_TOLERANCE_S` old.  A blocked loop, a call deadlocked on it or a plan hogging it stops the polls
+and so the heartbeat within that tolerance, although the thread itself runs on; the Nano then opens the kill
+chain ``supervisor_timeout_s`` later.  The thread asks the loop for a fresh stamp (one pending callback) and
+polls again the moment the loop has answered.
 """
 
 from __future__ import annotations
@@ -34,6 +42,12 @@ from dyno.acquisition.rpm import current_rpm
 from dyno.acquisition.streams import Streams
 from dyno.protocol import v1
 from dyno.protocol.v2 import cause_name
+
+#: How old the control loop's last stamp may be while the I/O thread still polls (the Nano's heartbeat): a loop
+#: late by more than this plus the Nano's timeout (0.05 + 0.2 s with hardware/rig.toml) gets the engine cut.
+#: Small, so that a freeze is cut within supervisor_timeout_s + 0.1 s of its start (docs/safety.md).
+LOOP_TOLERANCE_S = 0.05
+MAX_HOLDS_KEPT = 1000  # holds recorded one by one (all are counted in held_ticks)
 
 
 @dataclass
@@ -132,6 +146,13 @@ class Poller:
         self._device_us: int | None = None
         self._stop = asyncio.Event()
         self._last_temp_s = -math.inf
+        # the control loop's last sign of life (its clock): the I/O thread's polls wait for a fresh one
+        self.loop_tolerance_s = LOOP_TOLERANCE_S
+        self.loop_alive_s: float | None = None
+        self.held_ticks = 0  # ticks the I/O thread did not poll because the loop's stamp was stale
+        self.holds: list[dict] = []  # {"from_s", "to_s"} (I/O thread's clock): the heartbeat withheld
+        self._nudge_pending = False
+        self._io_read_s = math.inf  # when the I/O thread (or its stand-in) last read a tick
 
     # --- the task ------------------------------------------------------------------
     async def run(self) -> None:
@@ -140,6 +161,7 @@ class Poller:
         self._loop = loop
         self._error: BaseException | None = None
         self.started_s = self._next_t = loop.time()
+        self.loop_alive_s = self.started_s
         self._last_tick_s = None
         if self.blocking_io:
             io_stop = threading.Event()
@@ -162,7 +184,9 @@ class Poller:
             while not self._stop.is_set():
                 now = loop.time()
                 self._note_interval(now, scheduled_s)
+                self._end_hold(now)
                 self._finish_poll(now, *self._read_burst(now), self._read_temperature(now))
+                self.loop_alive_s = loop.time()
                 for _ in range(self._periods_per_tick):
                     next_t += full_period_s
                 scheduled_s = self.poll_period_s
@@ -181,6 +205,11 @@ class Poller:
         scheduled_s = self.poll_period_s  # the period that scheduled this tick (its interval's nominal)
         while not io_stop.is_set():
             now = loop.time()
+            if not self.loop_fresh(now):  # the loop is not handling ticks: no heartbeat for the Nano
+                self._hold(loop, now, threadsafe=True)
+                io_stop.wait(self.poll_period_s)
+                continue
+            self._reading(now)
             try:
                 result = (now, *self._read_burst(now), self._read_temperature(now))
             except Exception as exc:
@@ -221,6 +250,39 @@ class Poller:
             if not self._stop.is_set():
                 self._error = exc
                 self._stop.set()
+        self.loop_alive_s = self._loop.time()
+
+    # --- the loop's liveness (module doc) -------------------------------------------------
+    def loop_fresh(self, now_s: float) -> bool:
+        """May the I/O thread poll at ``now_s``: has the loop stamped within :attr:`loop_tolerance_s`?"""
+        alive = self.loop_alive_s
+        # (or it has handled the last tick the thread read: a poll rate lowered below 1 / tolerance polls on)
+        return alive is None or now_s - alive <= self.loop_tolerance_s or alive >= self._io_read_s
+
+    def _hold(self, loop, now_s: float, *, threadsafe: bool) -> None:
+        """A tick not polled (any thread): counted, its hold recorded, the loop asked once to stamp."""
+        self.held_ticks += 1
+        if (not self.holds or self.holds[-1]["to_s"] is not None) and len(self.holds) < MAX_HOLDS_KEPT:
+            self.holds.append({"from_s": now_s, "to_s": None})
+        if not self._nudge_pending:
+            self._nudge_pending = True
+            try:
+                (loop.call_soon_threadsafe if threadsafe else loop.call_soon)(self._nudged)
+            except RuntimeError:  # the loop is closed
+                pass
+
+    def _reading(self, now_s: float) -> None:
+        """The I/O thread (or its stand-in) reads a tick at ``now_s``: any hold ends."""
+        self._end_hold(now_s)
+        self._io_read_s = now_s
+
+    def _end_hold(self, now_s: float) -> None:
+        if self.holds and self.holds[-1]["to_s"] is None:
+            self.holds[-1]["to_s"] = now_s
+
+    def _nudged(self) -> None:
+        self._nudge_pending = False
+        self.loop_alive_s = self._loop.time()
 
     def _note_interval(self, now: float, scheduled_s: float | None = None) -> None:
         if self._last_tick_s is not None:
@@ -398,6 +460,10 @@ def _stall_ticker(poller: "Poller", loop):
     def tick() -> None:
         if loop.blocked and not poller._stop.is_set():
             now = loop.time()
+            if not poller.loop_fresh(now):  # as the I/O thread: no heartbeat while the loop is stale
+                poller._hold(loop, now, threadsafe=False)
+                return
+            poller._reading(now)
             result = (now, *poller._read_burst(now), poller._read_temperature(now))
             loop.call_soon(poller._deliver, result, poller.poll_period_s)
     return loop.add_ticker(tick, poller.poll_period_s)

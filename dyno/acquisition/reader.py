@@ -83,8 +83,9 @@ class V1Reader:
         self.input_present: bool | None = None  # None: not asked yet in this boot
         self._caps_pending = False
         self._caps_data_answers = 0
-        # The Nano's run-enable (issue 37): SET_SUPERVISOR with the rig file's limits, sent in every boot whose
-        # capabilities announce it until the device confirms it armed (None: never arm it).
+        # The Nano's run-enable (issue 37): SET_SUPERVISOR with the rig file's limits, sent to the first boot whose
+        # capabilities announce it until the device confirms it armed (None: never arm it); once armed, a later
+        # boot is armed only by the operator's re-arm (rearm_supervisor).
         self.supervisor_command: bytes | None = supervisor_command
         self.supervisor_present: bool | None = None  # None: not asked yet
         self.supervisor_armed = False          # this boot confirmed it
@@ -132,7 +133,10 @@ class V1Reader:
         self.supervisor_ever_armed |= self.supervisor_armed
         # pending until the device's own capabilities frame confirms the enable (a write can be lost)
         need_input = self.want_input and frame.has_input and not frame.enabled & v2.CHANNEL_INPUT
-        need_sup = self.supervisor_command is not None and frame.has_supervisor and not self.supervisor_armed
+        # the first boot that announces it is armed by itself; after a reset of a boot that was armed, a new boot
+        # stays cut until the operator re-arms (rearm_supervisor: issue 49, a Nano reset stays a cut)
+        need_sup = (self.supervisor_command is not None and frame.has_supervisor and not self.supervisor_armed
+                    and not self.supervisor_ever_armed)
         self._caps_pending = need_input or need_sup
         try:
             if need_input:

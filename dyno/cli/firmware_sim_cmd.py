@@ -82,6 +82,9 @@ def _supervisor_arguments(parser) -> None:
     parser.add_argument("--host-stop-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
                         help="the host stops polling at S simulated seconds (the simulation goes on to --seconds; "
                              "the host reads what the device kept after the drain)")
+    parser.add_argument("--rearm-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
+                        help="the operator re-arms the run-enable at S simulated seconds (after a Nano reset the "
+                             "new boot stays cut until then)")
     parser.add_argument("--no-limits", action="store_true",
                         help="never send the rig file's limits (SET_SUPERVISOR): the run-enable stays off")
     parser.add_argument("--enable-model", choices=("auto", "static", "pump"), default="auto",

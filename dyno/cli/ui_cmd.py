@@ -45,9 +45,10 @@ def run(args) -> int:
     from dyno.errors import ConfigError
 
     drills = [parse_drill(d) for d in args.drill]
-    if any(d.name == "pi-freeze" for d in drills):  # (before the screen is taken over: one line, exit 2)
-        raise ConfigError("command line", "--drill", "pi-freeze stops the whole host, its watchdog thread "
-                          "included: only in simulated time (dyno run --sim), not in a live session")
+    frozen = next((d.name for d in drills if d.name in ("pi-freeze", "loop-freeze")), None)
+    if frozen:  # (before the screen is taken over: one line, exit 2)
+        raise ConfigError("command line", "--drill", f"{frozen} freezes the host on the simulated clock (its "
+                          "watchdog thread with it): only in simulated time (dyno run --sim), not in a live session")
     from dyno.control.plans import plan_named
     from dyno.rig.config import load_rig_for
 

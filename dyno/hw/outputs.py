@@ -190,6 +190,17 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
                 return
             self._safe_state_now(latch)
 
+    def cut_engine_now(self) -> None:
+        """Throttle idle and the kill relay open, written without the driver's lock (issue 49): the watchdog
+        thread's first act, which a control loop frozen inside one of this driver's commands (holding the
+        lock) must not delay.  Two pin writes, each whole on its own; :meth:`safe_state` follows under the lock."""
+        if self.closed:
+            return
+        th = self.config.throttle
+        self._throttle.value = th.idle_pulse_us / th.frame_us
+        self._kill.value = True
+        self._killed = True
+
     def _safe_state_now(self, latch: bool) -> None:
         if self.closed:
             return

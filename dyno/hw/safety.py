@@ -191,6 +191,9 @@ class Watchdog:
         now = self.clock.now()
         if not self.tripped and now - self.last_alive_s() > self.timeout_s:
             self.tripped = True
+            cut = getattr(self.actuators, "cut_engine_now", None)
+            if cut is not None:  # the engine first, without the driver's lock (the frozen loop may hold it)
+                cut()
             enter_safe_state(self.actuators)
             if self.on_trip is not None:
                 self.on_trip(now - self.last_alive_s())

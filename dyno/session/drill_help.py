@@ -4,7 +4,7 @@ added there is listed in ``dyno run --help``, ``dyno ui --help`` and docs/cli.md
 from __future__ import annotations
 
 #: a numeric argument's name in the help and the errors (a drill not named here takes its listed arguments)
-ARG_FORMS = {"estop-held": "SECONDS", "loop-stall": "MS", "pi-freeze": "S"}
+ARG_FORMS = {"estop-held": "SECONDS", "loop-stall": "MS", "pi-freeze": "S", "loop-freeze": "S"}
 
 
 def drill_form(name: str) -> str:

@@ -19,7 +19,8 @@ adc-stuck[:input]      the AD7171 (``:input``: the input torque one) repeats one
 bus-lost               the I2C cable falls out: every device NACKs
 overtemp               a dragging pad heats the rotor at 20 C/s while the engine runs
 overspeed              the governor fails: throttle stuck wide open
-loop-stall:MS          the host's event loop blocks MS milliseconds
+loop-stall:MS          the host's event loop blocks MS milliseconds (past the liveness tolerance: engine cut)
+loop-freeze[:S]        the control loop blocks S s (default 3) inside a driver call; I/O thread, watchdog run on
 pi-freeze[:S]          the Pi stops entirely for S s (default 5): no polls, no watchdog thread, every output
                        pin frozen at its level (not released); the physics and the Nano run on; then the host
                        resumes (the Nano's run-enable cuts the engine: issue 37)
@@ -43,6 +44,7 @@ from dyno.session.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDril
 from dyno.errors import ConfigError
 
 OVERTEMP_RATE_C_PER_S, PI_FREEZE_DEFAULT_S = 20.0, 5.0
+FREEZE_DRILLS = ("pi-freeze", "loop-freeze")  # (simulated time only; an optional S argument)
 
 #: name -> (argument required?, allowed arguments or None, needs an engine?)
 DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
@@ -57,6 +59,7 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "overspeed": (False, None, True),
     "loop-stall": (True, None, False),
     "pi-freeze": (False, None, False),
+    "loop-freeze": (False, None, False),
     "controller-crash": (False, None, False),
     "disk-full": (False, None, False),
     "sigint": (False, None, False),
@@ -122,13 +125,14 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     if needs_arg and arg is None:
         what = "|".join(allowed) if allowed else {"estop-held": "SECONDS", "loop-stall": "MS"}.get(name, "ARG")
         raise ConfigError("command line", "--drill", f"{text!r}: {name} needs an argument ({name}:{what}@T)")
-    if not needs_arg and arg is not None and allowed is None and name != "pi-freeze":
+    if not needs_arg and arg is not None and allowed is None and name not in FREEZE_DRILLS:
         raise ConfigError("command line", "--drill", f"{text!r}: {name} takes no argument")
     if allowed is not None and arg is not None and arg not in allowed:
         raise ConfigError("command line", "--drill", f"{text!r}: argument must be one of {', '.join(allowed)}")
     numeric = {"estop-held": (3600, "estop-held:S needs 0 < S <= 3600 seconds"),
                "loop-stall": (60_000, "loop-stall:MS needs 0 < MS <= 60000"),
-               "pi-freeze": (600, "pi-freeze:S needs 0 < S <= 600 seconds")}
+               "pi-freeze": (600, "pi-freeze:S needs 0 < S <= 600 seconds"),
+               "loop-freeze": (600, "loop-freeze:S needs 0 < S <= 600 seconds")}
     if name in numeric and arg is not None:
         hi, why = numeric[name]
         try:
@@ -165,9 +169,10 @@ class DrillRunner(WiringDrills):
                                   "(rig.toml [input_torque], e.g. --rig hardware/rig-input-torque.toml)")
         from dyno.clock import VirtualTimeLoop
 
-        if any(d.name == "pi-freeze" for d in self.drills) and not isinstance(loop, VirtualTimeLoop):
-            raise ConfigError("command line", "--drill", "pi-freeze stops the whole host, its watchdog thread "
-                              "included: only in simulated time (dyno run --sim), not in a live session")
+        frozen = next((d.name for d in self.drills if d.name in FREEZE_DRILLS), None)
+        if frozen and not isinstance(loop, VirtualTimeLoop):
+            raise ConfigError("command line", "--drill", f"{frozen} freezes the host on the simulated clock: only "
+                              "in simulated time (dyno run --sim), not in a live session")
         poller = getattr(ctx, "poller", None)
         if any(d.phase for d in self.drills) and poller is not None:
             poller.listeners.append(self._on_poll)
@@ -280,18 +285,12 @@ class DrillRunner(WiringDrills):
         block_loop(self.loop, float(d.arg) / 1000.0)
 
     def _pi_freeze(self, d: Drill, rec: dict) -> None:
-        from dyno.clock import freeze_host
+        from dyno.session.drills_freeze import pi_freeze
+        pi_freeze(self, d, rec, PI_FREEZE_DEFAULT_S)
 
-        rec["freeze_s"] = float(d.arg) if d.arg else PI_FREEZE_DEFAULT_S
-        sim = self.ctx.sim
-        truth = getattr(sim, "truth", None)
-
-        def world() -> None:  # the physics and the Nano run on; the truth is sampled as if polled
-            sim.bus.sync()
-            if truth is not None:
-                truth([], sim.model.t_s)
-        freeze_host(self.loop, rec["freeze_s"] / self.speed, world)
-        rec["resumed_s"] = self.sim_now()
+    def _loop_freeze(self, d: Drill, rec: dict) -> None:
+        from dyno.session.drills_freeze import loop_freeze
+        loop_freeze(self, d, rec)
 
     def _controller_crash(self, d: Drill, rec: dict) -> None:
         self.ctx.controller.inject_crash(RuntimeError("drill controller-crash: the control task raised"))
@@ -399,7 +398,7 @@ def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     to_sim = getattr(ctx, "host_to_sim", None) or (lambda t: t)
     a["detection_s"] = to_sim(a["trigger_s"]) - onset if a.get("trigger_s") is not None else math.nan
     a["latency_basis"] = "true time from the physical onset (simulated rig)"
-    if rec["name"] == "pi-freeze":
+    if rec["name"] in FREEZE_DRILLS:
         from dyno.session.drills_freeze import freeze_abort_latency
 
         freeze_abort_latency(ctx, a, rec)
@@ -479,9 +478,9 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
             note = (f"the rotor's true temperature moved {hi - lo:.2f} C while the thermometer repeated itself: "
                     "the stuck word was still the truth")
         elif name == "loop-stall":
-            wd_s = getattr(getattr(ctx, "watchdog", None), "timeout_s", None)
-            arose = wd_s is None or float(arg) / 1000.0 > wd_s
-            note = f"a {arg} ms stall is shorter than the watchdog's {wd_s:g} s: the loop was not silent past it"
+            from dyno.session.drills_freeze import stall_verdict
+
+            arose, note = stall_verdict(ctx, float(arg) / 1000.0)
         elif name == "controller-crash":
             arose = rec.get("state_at_onset") not in ("done", "aborted")
             note = f"the control task had already ended ({rec.get('state_at_onset')}): nothing left to crash"
@@ -490,7 +489,7 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
             note = "no write was attempted after the disk filled"
         elif name in WIRING_DRILLS:
             arose, note = drills._wiring_verdict(rec, name)
-        elif name == "pi-freeze":
+        elif name in FREEZE_DRILLS:
             from dyno.session.drills_freeze import freeze_verdict
 
             freeze_verdict(ctx, rec)

@@ -72,6 +72,7 @@ class FirmwareSimSpec:
     harness: str | None = None  # harness binary (None: firmware/build/harness)
     rig: object = None  # the rig file whose [limits] arm the run-enable at every boot (None: the default)
     host_stop_at: float | None = None  # the host stops polling at S simulated seconds
+    rearm_at: float | None = None  # the operator re-arms the run-enable at S simulated seconds (issue 49)
     no_limits: bool = False  # never send the limits (SET_SUPERVISOR): the run-enable stays off
     enable_model: str = "auto"  # how the harness reads D7: auto | static | pump
 
@@ -142,6 +143,8 @@ def simulate(args: FirmwareSimSpec) -> dict:
             tr.advance_to(t)
             if sup and not sup.polling(t, t_end):
                 continue  # --host-stop-at: the simulation goes on, the host does not poll
+            if sup:  # --rearm-at: the operator's re-arm (the only way a new boot is armed again)
+                sup.maybe_rearm(reader, t)
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)

@@ -31,7 +31,7 @@ class SupervisorHost:
 
     def __init__(self, spec) -> None:
         """``spec``: a :class:`dyno.session.firmware_sim.FirmwareSimSpec` (``protocol``, ``no_limits``, ``rig``,
-        ``host_stop_at``)."""
+        ``host_stop_at``, ``rearm_at``)."""
         self.command = None
         self.limits = None
         if spec.protocol == "v2" and not spec.no_limits:
@@ -45,6 +45,8 @@ class SupervisorHost:
                 self.command = v2.supervisor_command(lim.overspeed_primary_rpm, lim.overspeed_secondary_rpm,
                                                      lim.supervisor_timeout_s)
         self.stop_at = spec.host_stop_at
+        self.rearm_at = getattr(spec, "rearm_at", None)
+        self.rearmed_at_s = None  # when the operator's re-arm was asked for
         self.sends: list = []          # (t_s, boot_id)
         self.events: list = []         # (t_s decoded, boot_id, Event)
         self.boot_seen: list = []      # (t_s, boot_id): the host's first frame of each boot
@@ -54,6 +56,12 @@ class SupervisorHost:
     def polling(self, t: float, t_end: float) -> bool:
         """Does the host poll at t? (not between --host-stop-at and the end of the drain)"""
         return self.stop_at is None or t < self.stop_at or t > t_end
+
+    def maybe_rearm(self, reader, t: float) -> None:
+        """``--rearm-at S``: the operator re-arms (the reader re-sends the limits until a frame shows RUN)."""
+        if self.rearm_at is not None and self.rearmed_at_s is None and t >= self.rearm_at:
+            self.rearmed_at_s = t
+            reader.rearm_supervisor()
 
     def after_poll(self, reader, t: float, new: list) -> None:
         """After each poll: note the boot, the limits the reader sent (it arms every boot as ``dyno run``'s
@@ -129,6 +137,7 @@ def report(host: SupervisorHost, hs: dict, first_frame_s) -> dict:
         "limits": host.limits, "limits_sent": host.command is not None,
         "limits_sent_at_s": [t for t, _ in host.sends],
         "host_stop_at_s": host.stop_at, "last_poll_s": host.last_poll_s,
+        "rearm_at_s": host.rearm_at, "rearmed_at_s": host.rearmed_at_s,
         "history": history,
         "events": [{"decoded_at_s": round(t, 6), "boot_id": b, "t_us": ev.t_us,
                     "cause": v2.SUP_CAUSE_NAMES.get(ev.status, f"status_{ev.status}"), "code": ev.code}

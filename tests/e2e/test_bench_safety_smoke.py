@@ -39,3 +39,18 @@ def test_bench_safety_quick_one_drill_as_a_process():
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     rows = json.loads(p.stdout)
     assert rows and all(r["ok"] and r["physics_safe"] for r in rows), rows
+
+
+def test_bench_safety_the_loop_liveness_drills_as_a_process():
+    """Issue 49's drills in the timed bench: loop-freeze through the real-rig output code, loop-stall:300 past the
+    liveness limit (cut by the Nano), both within their bounds; loop-stall:200 survived."""
+    for only, mock in (("loop-freeze", ["--mock-pins"]), ("loop-stall:", [])):
+        p = _bench(REPO / "bench" / "bench_safety.py", "--timed", "--quick", "--only", only, "--json", *mock)
+        assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+        rows = {r["drill"]: r for r in json.loads(p.stdout)}
+        assert all(r["ok"] and r["physics_safe"] for r in rows.values()), rows
+        if only == "loop-freeze":
+            assert rows["loop-freeze"]["state"] == "aborted" and rows["loop-freeze"]["latency_s"] <= 0.3
+        else:
+            assert rows["loop-stall:200"]["state"] == "done"
+            assert rows["loop-stall:300"]["cause"] == "nano_heartbeat"

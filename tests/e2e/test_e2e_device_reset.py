@@ -67,3 +67,22 @@ def test_stale_ack_from_the_old_boot_retires_nothing(tmp_path, seed):
     assert r["frames"]["device_resets"] == 1
     assert _retired_but_not_accepted(captured) == 0
     assert captured["ctx"].sim.bus.firmware.ack_from_old_boot >= 1
+
+
+def test_a_nano_reset_stays_a_cut_on_the_firmware_twin(tmp_path):
+    """Issue 49: the Python firmware twin resets while armed; the host does not send the limits to the new boot
+    (only the operator's re-arm would), so the twin's run-enable stays off to the end, as the real ELF's does
+    (tests/firmware/test_firmware_supervisor.py)."""
+    from dyno.session.drills import parse_drill
+    from dyno.session.root import RunOptions, run_test
+
+    held = {}
+    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", drills=[parse_drill("device-reset@armed+1")],
+                            setup=lambda ctx: held.update(ctx=ctx)))
+    ctx = held["ctx"]
+    reader = ctx.poller.reader
+    assert r["state"] == "aborted" and r["aborts"][0]["cause"] == "nano_reset"
+    assert r["frames"]["device_resets"] >= 1 and reader.supervisor_ever_armed
+    assert len(set(reader.supervisor_sent)) == 1  # the limits went to the first boot only
+    assert reader.run_enable is False and not ctx.sim.model.nano_enable  # the twin's D7: still off at the end
+    assert r["outputs"]["nano_run_enable"] is False and not ctx.sim.model.ignition_on

@@ -197,8 +197,10 @@ def _mid_window_s(tmp_path, k=3):
 
 
 def test_short_loop_stall_is_survived_and_counted(tmp_path):
+    """200 ms: within the loop's liveness limit (the Nano's 0.2 s + the I/O thread's 0.05 s tolerance, less two
+    poll periods: docs/safety.md), so nothing is cut."""
     t = _mid_window_s(tmp_path)
-    r, ctx = _run(tmp_path, [f"loop-stall:300@{t}"])
+    r, ctx = _run(tmp_path, [f"loop-stall:200@{t}"])
     assert r["state"] == "done", r["reason"]
     # the poller's I/O path reads on while the loop is held (the rig's I/O thread; the simulated one polls from
     # a background ticker): the Nano's heartbeat (0.2 s) is served, its ring never overflows
@@ -208,6 +210,22 @@ def test_short_loop_stall_is_survived_and_counted(tmp_path):
     assert any("late" in d["reason"] or "no poll" in d["reason"] for d in r["discarded"]), r["discarded"]
     assert not ctx.watchdog.tripped
     _assert_points_honest(r)
+
+
+def test_a_loop_stall_past_the_liveness_limit_cuts_the_engine(tmp_path):
+    """300 ms > the liveness limit (issue 49): the I/O thread's stand-in polls on only while the loop's stamp is
+    fresh, so the Nano's heartbeat stops and its run-enable opens the kill chain while the loop is still stalled;
+    the host latches when it resumes."""
+    t = _mid_window_s(tmp_path)
+    r, ctx = _run(tmp_path, [f"loop-stall:300@{t}"])
+    rec = next(d for d in r["drills"] if d["name"] == "loop-stall")
+    assert r["state"] == "aborted" and exit_code(r) == 3 and rec["hazard_arose"]
+    t_cut, by = ctx.sim.model.engine_cut(rec["onset_s"])
+    assert by == "nano" and t_cut < rec["onset_s"] + 0.3  # (the physics: cut during the stall)
+    assert r["supervisor"]["drops"][0]["cause"] == "heartbeat"
+    assert r["aborts"][0]["cause"] in ("nano_heartbeat", "watchdog") and r["rig_safe"]
+    assert not ctx.watchdog.tripped  # (0.3 s < its 0.5 s: the Nano alone cut)
+    _assert_kept_and_replays(r)
 
 
 def test_dead_sensors_never_end_done(tmp_path):

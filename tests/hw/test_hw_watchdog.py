@@ -143,3 +143,56 @@ def test_watchdog_thread_sleeps_to_the_deadline_while_the_loop_beats_and_trips_a
     assert beating_looks <= 12, beating_looks
     assert looks["tripped_at"] is not None and act.engine_killed
     assert 0.2 <= looks["tripped_at"] - last_kick <= 0.2 + 0.05, looks["tripped_at"] - last_kick
+
+
+def test_watchdog_thread_cuts_the_engine_while_the_frozen_loop_holds_the_drivers_lock(rig):
+    """Issue 49: the loop freezes *inside* one of the driver's commands (holding its lock, as a deadlocked
+    driver call would).  The watchdog thread's cut needs no lock: the kill pin and the throttle's idle pulse are
+    written within watchdog_s + one period of the freeze, while the lock is still held; the rest of the safe
+    state (the latch, the release) follows once the command returns."""
+    from dyno.hw.rig import HardwareRig
+
+    class Bus:
+        def i2c_rdwr(self, *msgs):
+            raise OSError(5, "no Nano here")
+
+        def close(self):
+            pass
+
+    clock = MonotonicClock()
+    factory = RecordingFactory(clock)
+    result: dict = {}
+
+    async def main(hw):
+        act = hw.actuators
+        assert act.finish_release()
+        act.engine_kill(False)
+        act.throttle(0.5)
+        hw.watchdog.start_thread()
+        for _ in range(10):
+            act.tick()
+            await asyncio.sleep(0.02)
+        assert not act.engine_killed
+        with act._held():  # frozen inside a driver command: the lock is held all along
+            result["blocked_at"] = time.monotonic()
+            time.sleep(1.2)
+            result["resumed_at"] = time.monotonic()
+        deadline = time.monotonic() + 10.0  # the watchdog thread, which waited for the lock, now latches
+        while not act.latched and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+
+    hw = HardwareRig(rig, pin_factory=factory, clock=clock, bus=Bus(), install_signals=False)
+    with hw:
+        asyncio.run(main(hw))
+        wd = hw.watchdog
+        kill, servo = gpio(rig.pins.engine_kill), gpio(rig.pins.throttle_servo)
+        high_kills = rig.kill_relay == "energise_to_kill"
+        killed_at = [t for t, pin, v in factory.log
+                     if pin == kill and t >= result["blocked_at"] and (v >= 0.5) == high_kills]
+        idle = rig.throttle.idle_pulse_us / rig.throttle.frame_us
+        idle_at = [t for t, pin, v in factory.log if pin == servo and t >= result["blocked_at"]
+                   and abs(v - idle) < 1e-9]
+        assert killed_at and idle_at, "the watchdog waited for the lock the frozen loop held"
+        assert killed_at[0] < result["resumed_at"] and idle_at[0] < result["resumed_at"]
+        assert killed_at[0] - result["blocked_at"] <= wd.timeout_s + wd.period_s + 0.05
+        assert wd.tripped and hw.actuators.latched  # (the driver's own safe state, once the lock was free)
