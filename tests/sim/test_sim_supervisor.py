@@ -136,7 +136,8 @@ class _EmuTransport(Transport):
         return self.fw.read(read_len, self.clock[0]) if read_len else b""
 
 
-def test_the_host_arms_it_at_every_boot_and_sees_drops_and_their_causes():
+def test_the_host_arms_the_first_boot_only_and_sees_drops_and_their_causes():
+    """A new boot while armed stays a cut (issue 49): only the operator's re-arm turns the run-enable on again."""
     fw = EmulatedFirmware()
     clock = [0.0]
     reader = make_reader("v2", _EmuTransport(fw, clock), supervisor_command=LIMITS)
@@ -149,7 +150,12 @@ def test_the_host_arms_it_at_every_boot_and_sees_drops_and_their_causes():
         clock[0] = 0.2 + 0.005 * (k + 1)
         reader.poll(clock[0])
     assert reader.run_enable_drops[0]["cause"] == "reset (watchdog)"
-    assert fw.run_enable and reader.run_enable, "re-armed in the new boot"
+    assert not fw.run_enable and not reader.run_enable, "a new boot re-armed itself"
+    reader.rearm_supervisor()  # the operator's re-arm after the reset
+    for k in range(10):
+        clock[0] = 0.3 + 0.005 * k
+        reader.poll(clock[0])
+    assert fw.run_enable and reader.run_enable
     # the host stops; the Nano drops; the host comes back and learns why
     clock[0] = 1.0
     fw.service(1.0)
