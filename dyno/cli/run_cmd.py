@@ -231,13 +231,17 @@ def run(args) -> int:
 
     add_driven_loss(result, driven_loss, getattr(args, "rig", None))
     result["rig_file"] = rig_file.to_dict()  # {"path", "found_by"}
-    print(f"dyno run: {rig_file.line()}", file=sys.stderr, flush=True)
+    _index(result)  # first: what follows writes to a terminal that may have gone (SIGHUP)
     link = result.get("link") or {}
-    if "link_busy" in link.get("warnings", ()):  # (dyno.transports.budget: measured above the planning limit)
-        print(f"dyno run: warning: link_busy: the busiest second measured {100 * link['measured_busy_frac']:.0f} % "
-              f"of the link (planned {100 * link['planned_busy_frac']:.0f} %, limit 60 %)", file=sys.stderr)
-    _speed_note(args.speed, result, time.monotonic() - wall0_s)
-    _index(result)
+    try:
+        print(f"dyno run: {rig_file.line()}", file=sys.stderr, flush=True)
+        if "link_busy" in link.get("warnings", ()):  # (dyno.transports.budget: measured above the planning limit)
+            print(f"dyno run: warning: link_busy: the busiest second measured "
+                  f"{100 * link['measured_busy_frac']:.0f} % of the link (planned "
+                  f"{100 * link['planned_busy_frac']:.0f} %, limit 60 %)", file=sys.stderr)
+        _speed_note(args.speed, result, time.monotonic() - wall0_s)
+    except OSError:  # a vanished terminal: the run is on disk and indexed
+        pass
     try:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))

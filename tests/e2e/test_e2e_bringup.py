@@ -29,7 +29,7 @@ def _rig(tmp_path, name="rig.toml", **subs) -> Path:
 def test_a_poll_rate_the_bus_cannot_carry_is_refused_in_one_line(tmp_path, capsys):
     """50 kHz SCL (the old default) and 150 polls a second: 363 clocks a poll is 7.3 ms, 110 % of the bus;
     with ``derate = false`` the rig file is refused."""
-    rig = _rig(tmp_path, **{"bus_speed_hz = 100000": "bus_speed_hz = 50000", "\npoll_hz = ": "\nderate = false\npoll_hz = "})
+    rig = _rig(tmp_path, **{"bus_speed_hz = 100000": "bus_speed_hz = 50000", "\nderate = true ": "\nderate = false "})
     code = main(["run", "--sim", "--headless", "--json", "--mock-pins", "--rig", str(rig),
                  "--out", str(tmp_path / "run")])
     cap = capsys.readouterr()
