@@ -57,3 +57,19 @@ def cli_run(tmp_path_factory):
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
     return run_dir, json.loads(proc.stdout)
 
+
+
+def drill_as_the_user_runs_it(out: Path, *drill_args: str) -> dict:
+    """``dyno run --sim --headless --json --out OUT ARGS...`` as a real process: it must exit 3 (aborted to the safe
+    state), and ``dyno replay --json`` of its run directory exit 0 with every point it reported (nothing recorded
+    was lost).  Its JSON document."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    p = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--out", str(out),
+                        *drill_args], capture_output=True, text=True, env=env, timeout=600)
+    assert p.returncode == 3, p.stderr[-2000:]
+    r = json.loads(p.stdout)
+    q = subprocess.run([sys.executable, "-m", "dyno", "replay", "--json", str(out)], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert q.returncode == 0, q.stderr[-2000:]
+    assert len(json.loads(q.stdout)["points"]) == len(r["points"])
+    return r

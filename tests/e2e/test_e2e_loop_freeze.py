@@ -7,9 +7,6 @@ through the real-rig output code (``--mock-pins``, the loop frozen inside one of
 its lock) the watchdog thread's kill relay opens while the loop is still frozen.
 """
 
-import json
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -22,7 +19,7 @@ from dyno.runlog.replay import replay
 from dyno.session.drills import parse_drill
 from dyno.session.root import RunOptions, run_test
 
-from .conftest import QUICK_PLAN
+from .conftest import QUICK_PLAN, drill_as_the_user_runs_it
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 0.2  # hardware/rig.toml [limits] supervisor_timeout_s
@@ -111,19 +108,9 @@ def test_loop_freeze_argument_is_checked():
 
 def test_loop_freeze_as_the_user_runs_it(tmp_path):
     """The command itself: exit 3, the JSON's verdict, ``dyno replay`` of the run directory exits 0."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    out = tmp_path / "cli"
-    p = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--out", str(out),
-                        "--mock-pins", "--drill", "loop-freeze@loaded+2"], capture_output=True, text=True, env=env,
-                       timeout=600)
-    assert p.returncode == 3, p.stderr[-2000:]
-    r = json.loads(p.stdout)
+    r = drill_as_the_user_runs_it(tmp_path / "cli", "--mock-pins", "--drill", "loop-freeze@loaded+2")
     rec = next(d for d in r["drills"] if d["name"] == "loop-freeze")
     assert r["outputs"]["engine_cut_by"] in ("nano", "pi") and rec["latency_s"] <= TIMEOUT_S + 0.1
-    q = subprocess.run([sys.executable, "-m", "dyno", "replay", "--json", str(out)], capture_output=True,
-                       text=True, env=env, timeout=300)
-    assert q.returncode == 0, q.stderr[-2000:]
-    assert len(json.loads(q.stdout)["points"]) == len(r["points"])
 
 
 def _bench_safe_state():
