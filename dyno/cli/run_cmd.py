@@ -20,6 +20,10 @@ def add_arguments(p) -> None:
     p.add_argument("--mock-pins", action="store_true",
                    help="with --sim: drive the simulated rig through the real-rig output code (gpiozero "
                         "devices on MockFactory); outputs then reports the pins' final states")
+    p.add_argument("--firmware-elf", type=Path, default=None, metavar="PATH",
+                   help="with --sim: the Nano's real firmware ELF runs in simavr as the rig's Nano (firmware in the "
+                        "loop: the physics drives its pins, the host polls it over the rig file's I2C link, its "
+                        "run-enable feeds the kill chain); needs `make -C firmware sim`")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/<timestamp>)")
     p.add_argument("--protocol", choices=("v2", "v1", "v0"), default=None,
                    help="the firmware link's protocol (default: rig.toml's protocol; v0: the thesis rig's legacy "
@@ -156,7 +160,8 @@ def run_spec(args):
     drills = [parse_drill(d) for d in args.drill]
     kw = dict(sim=True, seed=args.seed, speed=args.speed, fault_rate=args.fault_rate, out_dir=args.out,
               protocol=args.protocol, rig_path=getattr(args, "rig", None), plan=_plan(args), drills=drills,
-              handle_signals=True, mock_pins=args.mock_pins, on_belt_table_build=_announce_belt_table)
+              handle_signals=True, mock_pins=args.mock_pins, firmware_elf=args.firmware_elf,
+              on_belt_table_build=_announce_belt_table)
     driven_loss = _driven_loss(args)  # a bad file: one line, exit 2, before anything is written
     if args.calibration:
         kw["calibration_path"] = args.calibration

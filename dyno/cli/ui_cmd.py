@@ -25,6 +25,9 @@ def add_arguments(p) -> None:
                    help=drill_help(n for n in DRILLS if n != "pi-freeze"))  # (pi-freeze: dyno run only)
     p.add_argument("--mock-pins", action="store_true",
                    help="--sim: drive the simulated physics through the real-rig output code (gpiozero MockFactory)")
+    p.add_argument("--firmware-elf", type=Path, default=None, metavar="PATH",
+                   help="--sim: the Nano's real firmware ELF in simavr as the rig's Nano, in lockstep with the physics "
+                        "(--speed paces both)")
     from dyno.cli.run_cmd import add_air_arguments
     from dyno.rig.config import add_rig_argument
 
@@ -65,6 +68,11 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     if getattr(args, "mock_pins", False) and not args.sim:
         raise ConfigError("command line", "--mock-pins", "the mock pins drive the simulated rig only (--sim)")
+    elf = getattr(args, "firmware_elf", None)
+    if elf is not None and not args.sim:
+        raise ConfigError("command line", "--firmware-elf", "the firmware ELF runs in the simulated rig only (--sim)")
+    if elf is not None and not elf.is_file():
+        raise ConfigError(str(elf), "--firmware-elf", "no such file (build it: make -C firmware sim)")
     from dyno.cli.run_cmd import air_options
 
     sim_kw: dict = {}
@@ -82,7 +90,8 @@ def run(args) -> int:
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,
                        rig_path=getattr(args, "rig", None), calibration_path=args.calibration,
                        engine_map_path=args.engine_map, drills=drills, plan=plan,
-                       mock_pins=bool(getattr(args, "mock_pins", False)), ambient=ambient, sim_params=sim_params)
+                       mock_pins=bool(getattr(args, "mock_pins", False)), ambient=ambient, sim_params=sim_params,
+                       firmware_elf=elf)
     web = None
     if args.web is not None or args.web_stop:  # before the screen is taken over: a bad --web is one line
         from dyno.web.attach import WebView

@@ -81,6 +81,9 @@ def summarize(ctx, drills_from: int = 0) -> dict:
         out["faults_injected"] = dict(ctx.sim.bus.injected)
         out["sim_time_s"] = ctx.sim.model.t_s
         out["sim_world"] = ctx.sim.model.world.to_dict()  # the simulated truth: its engine, sensor, day
+        fw_report = getattr(ctx.sim.firmware, "report", None)
+        if fw_report is not None:  # --firmware-elf: which ELF was the Nano, and what its pins were given
+            out["firmware"] = fw_report()
         from dyno.session.drills import hazard_verdicts, true_latencies
 
         if ctx.drills is not None:

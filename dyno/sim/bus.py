@@ -70,6 +70,7 @@ class SimSMBus:
         self.thermometer_lost = False
         self.thermometer_stuck = False
         self._thermo_stuck_word: bytes | None = None
+        self.after_step = None  # callable() after each physics step (the simulated operator at the cord)
         self.devices: dict = {}  # address -> device with .transaction(msgs) (the BME280 when rig.toml fits one)
 
     def schedule_reset(self, t_s: float) -> None:
@@ -117,6 +118,8 @@ class SimSMBus:
                 capture(ev.channel, ev.t_s, ev.code, ev.status)
         finally:
             self._stepping = False
+        if self.after_step is not None:
+            self.after_step()
 
     # --- smbus2 API ---------------------------------------------------------------------
     def i2c_rdwr(self, *msgs) -> None:
@@ -174,6 +177,9 @@ class SimSMBus:
                 ctypes.memmove(msg.buf, data, msg.len)
             else:
                 self.firmware.write(self._flip(bytes(msg)), now)
+        end = getattr(self.firmware, "end_transaction", None)
+        if end is not None:  # (the ELF's slave: a command written alone goes out as its own transfer)
+            end(now)
         if f.timeout_rate and rng.random() < f.timeout_rate:
             self.injected["timeout"] += 1
             raise OSError(errno.ETIMEDOUT, "timeout (injected)")

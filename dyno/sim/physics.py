@@ -318,6 +318,19 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
         del buf[:k]
         return out
 
+    def events_ahead(self, until_s: float) -> list[SensorEvent]:
+        """The sensor events in ``(t, until_s]`` without advancing ``t``: their cells are computed now, so inputs
+        set before ``until_s`` act from the cell after (a firmware in the loop needs the edges that fall during
+        a bus transfer before the transfer runs)."""
+        h = self._h
+        while self._cell_end_s < until_s:
+            self._cell_index += 1
+            self._substep(self._cell_end_s, h, self._buffer)
+            self._cell_end_s = self._cell_index * h
+        stuck = self.stuck_hall
+        return sorted((ev for ev in self._buffer if self.t_s < ev.t_s <= until_s
+                       and not (stuck and ev.channel in stuck)), key=attrgetter("t_s"))
+
     def _substep(self, t0: float, h: float, events: list[SensorEvent]) -> None:
         p = self.params
         cvt = self.cvt

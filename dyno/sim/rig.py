@@ -24,6 +24,9 @@ from dyno.sim.device import EmulatedFirmware
 RELEASE_MARGIN_FRACTION = 0.10
 #: and this long on top, for the direction relay's transfer after a reversal (RigParams.relay_transfer_s)
 RELEASE_MARGIN_S = 0.05
+#: the operator keeps pulling the starter this long while the kill chain is still open (the real firmware's
+#: run-enable comes on within a poll or two of the limits)
+OPERATOR_PULLS_S = 2.0
 
 
 class SimWiring:
@@ -315,7 +318,8 @@ class SimRig:
     def __init__(self, now_s, *, seed: int = 0, params=None, protocol: str = "v2",
                  faults: BusFaults | None = None, clock_offset_us: int = 0, clock_ppm: float = 0.0,
                  full_stroke_s: float = 8.0, run_enable_wired: bool = False, brake_hold_relay: bool | None = None,
-                 pace: float = 1.0, bme280_address: int | None = None, bme280_seed: int | None = None) -> None:
+                 pace: float = 1.0, bme280_address: int | None = None, bme280_seed: int | None = None,
+                 firmware_elf: dict | None = None) -> None:
         from dyno.sim.physics import RigModel  # the physics is the slow import; only when simulating
 
         self.model = RigModel(params, seed=seed)
@@ -330,10 +334,20 @@ class SimRig:
 
         def _d7(on: bool, t_s: float, cause: str) -> None:
             self.model.nano_enable = on
-        self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
-                                         input_fitted=self.model.input_fitted, ring_capacity=ring,
-                                         pace=max(1.0, pace), on_run_enable=_d7 if d7_wired else None)
+        if firmware_elf is not None:  # the Nano's own ELF in simavr (firmware in the loop)
+            from dyno.sim.elf_firmware import ElfFirmware
+
+            self.firmware = ElfFirmware(firmware_elf["elf"], i2c_khz=firmware_elf["i2c_khz"],
+                                        address=firmware_elf["address"], input_fitted=self.model.input_fitted,
+                                        on_run_enable=_d7 if d7_wired else None,
+                                        events_ahead=self.model.events_ahead)
+        else:
+            self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
+                                             input_fitted=self.model.input_fitted, ring_capacity=ring,
+                                             pace=max(1.0, pace), on_run_enable=_d7 if d7_wired else None)
         self.bus = SimSMBus(self.model, self.firmware, now_s, faults, seed=seed)
+        self._pull_until_s: float | None = None
+        self.bus.after_step = self._operator
         if bme280_address is not None:  # the simulated air sensor, only when the rig file fits one
             from dyno.sim.bme280_chip import SimBME280
 
@@ -344,9 +358,27 @@ class SimRig:
         self.truth = TruthRecorder(self.model)
         self.protocol = protocol
 
+    def close(self) -> None:
+        """End what the simulated rig started (the simavr harness of ``--firmware-elf``)."""
+        close = getattr(self.firmware, "close", None)
+        if close is not None:
+            close()
+
     def start_engine(self) -> None:
-        """The operator pulls the starter cord."""
+        """The operator pulls the starter cord; with the kill chain still open (the Nano's run-enable not yet on),
+        pulls again at every step for :data:`OPERATOR_PULLS_S`, as a person at the cord does."""
         self.model.start_engine()
+        if not self.model.engine_running:
+            self._pull_until_s = self.model.t_s + OPERATOR_PULLS_S
+
+    def _operator(self) -> None:
+        """After each physics step: the operator still at the cord."""
+        if self._pull_until_s is None:
+            return
+        if self.model.engine_running or self.model.t_s > self._pull_until_s:
+            self._pull_until_s = None
+        else:
+            self.model.start_engine()
 
     def audit(self, raw: bytes) -> bool:
         """True if ``raw`` is byte-for-byte a frame the device really served."""

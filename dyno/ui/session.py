@@ -37,6 +37,7 @@ class LiveOptions:
     jog_s: float = 0.2  # one brake jog: actuator on-time, in rig (simulated) seconds
     drills: list = field(default_factory=list)  # dyno.session.drills.Drill (sim only), from the first frame
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
+    firmware_elf: object = None  # sim: the Nano's real ELF in simavr as the rig's Nano (paced with the physics)
     ambient: object = None  # dyno.analysis.air.Ambient from --ambient (else rig.toml's sensor or day)
     sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
 
@@ -58,6 +59,7 @@ class LiveSession(RearmMixin):
         run_opts = RunSpec(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
                            rig_path=opts.rig_path, plan=opts.plan, clock=self.clock if opts.sim else None,
                            mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient, drills=list(opts.drills),
+                           firmware_elf=opts.firmware_elf if opts.sim else None,
                            sim_params=opts.sim_params if opts.sim else None, **paths)
         self.guard = None
         self.run_dir_removed = False  # set by close() when a simulated session never started a test

@@ -48,7 +48,7 @@
 #include "sim_irq.h"
 #include "harness.h"
 
-static FILE *proto_out;
+FILE *proto_out;
 static double cfg_start_us = 50000.0;
 
 /* ---- the host's USB serial (UART0, 115200 8N1 through the Nano's USB bridge) ----- */
@@ -75,6 +75,7 @@ static void print_stats(void)
             "\"crashed\": %s, ",
             (unsigned long long)avr->cycle, (double)avr->cycle / F_CPU_HZ, wall_s,
             wall_s > 0 ? (double)wall_cycles / F_CPU_HZ / wall_s : 0.0, crashed ? "true" : "false");
+    plant_print(o);
     fprintf(o, "\"hall\": [");
     for (int c = 0; c < 2; c++)
         fprintf(o, "%s{\"rpm\": %.6f, \"edges\": %llu, \"bounce_edges\": %llu, "
@@ -121,7 +122,7 @@ static void usage(void)
             "       [--adc-status S] [--adc-error-every N] [--adc-hz F] [--bounce]\n"
             "       [--i2c-khz K] [--addr A] [--start-us T] [--pulse-us T] [--duty F]\n"
             "       [--glitch-hz N] [--glitch-us W] [--profile] [--input-hz F] [--input-code C]\n"
-            "       [--profile-from-us T] [--enable-model auto|static|pump]\n");
+            "       [--profile-from-us T] [--enable-model auto|static|pump] [--plant]\n");
     exit(2);
 }
 
@@ -152,6 +153,7 @@ int main(int argc, char **argv)
         else if (strcmp(a, "--bounce") == 0) cfg_bounce = 1;
         else if (strcmp(a, "--legacy-pullups") == 0) cfg_legacy_pullups = 1;
         else if (strcmp(a, "--profile") == 0) cfg_profile = 1;
+        else if (strcmp(a, "--plant") == 0) cfg_plant = 1;
         else if (a[0] == '-') usage();
         else elf = a;
 #undef OPT
@@ -182,7 +184,7 @@ int main(int argc, char **argv)
                             uart_out_notify, NULL);
     start_generators((uint64_t)(cfg_start_us * CYCLES_PER_US));
 
-    char line[512];
+    static char line[65536];
     uint8_t wr[256], rd[256];
     while (fgets(line, sizeof line, stdin)) {
         char cmd[16] = "", a1[300] = "", a2[32] = "", a3[32] = "";
@@ -190,7 +192,12 @@ int main(int argc, char **argv)
         if (strcmp(cmd, "run") == 0) {
             uint64_t target = (uint64_t)(atof(a1) * CYCLES_PER_US);
             run_until(target);
-            fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
+            if (cfg_plant) {  /* the run-enable's changes ride on the reply (one round trip per lockstep) */
+                fprintf(proto_out, "ok %.3f ", (double)avr->cycle / CYCLES_PER_US);
+                plant_run_enable(proto_out);
+            } else {
+                fprintf(proto_out, "ok %.3f\n", (double)avr->cycle / CYCLES_PER_US);
+            }
         } else if (strcmp(cmd, "xfer") == 0 || strcmp(cmd, "abort") == 0) {
             /* abort: like xfer, but the master stops clocking after n/2 bytes of the read */
             int nw = 0, nr = atoi(a2);
@@ -219,6 +226,8 @@ int main(int argc, char **argv)
                     fprintf(proto_out, "-");
                 for (int i = 0; i < nr; i++)
                     fprintf(proto_out, "%02x", rd[i]);
+                if (cfg_plant)  /* the MCU's clock after the transfer: the plant keeps its events ahead of it */
+                    fprintf(proto_out, " %.3f", (double)avr->cycle / CYCLES_PER_US);
                 fprintf(proto_out, "\n");
             }
         } else if (strcmp(cmd, "uwrite") == 0) {
@@ -251,6 +260,8 @@ int main(int argc, char **argv)
             fprintf(proto_out, "\n");
             uart_rx_n = 0;
             uart_packet_end = 0;
+        } else if (strcmp(cmd, "ev") == 0) {
+            plant_events(line + 3);
         } else if (strcmp(cmd, "gen") == 0) {
             gen_enabled = strcmp(a1, "off") != 0;
             if (gen_enabled)
@@ -275,6 +286,7 @@ int main(int argc, char **argv)
             adc_ready = 0;
             drive_pin(pin_dout, 5, 1);
             input_reset();
+            plant_reset();
             if (gen_enabled)
                 start_generators(avr->cycle + CYCLES_PER_US);
             fprintf(proto_out, "ok\n");

@@ -70,6 +70,20 @@ extern uint64_t adc_generated, adc_read, adc_missed, adc_overrun, adc_errors_set
 extern double adc_period_cycles, adc_t0_cycles;
 
 void drive_pin(avr_irq_t *pin, int bit, int level);
+void hall_drive(hall_t *h);
+void adc_present(unsigned code, unsigned status);
+void input_present(unsigned code, unsigned status);
+
+/* plant.c: --plant, the sensors driven by a plant model's events (closed-loop firmware in the loop) */
+extern int cfg_plant;
+void plant_events(const char *list);
+void plant_run_enable(FILE *o);
+void plant_run_enable_change(double t_us, int level, int pump);
+void plant_print(FILE *o);
+void plant_reset(void);
+int run_enable_is_pump(void);
+int run_enable_on(void);
+extern FILE *proto_out;
 double pulse_us(const hall_t *h);
 void hall_start(hall_t *h, uint64_t at_cycle);
 void adc_start(uint64_t at_cycle);

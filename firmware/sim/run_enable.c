@@ -39,6 +39,7 @@ static int pump_on;
 
 static void add(transitions_t *t, double t_us, int level)
 {
+    plant_run_enable_change(t_us, level, t == &pump_tr);
     if (t->n < MAX_TRANSITIONS) {
         t->t_us[t->n] = t_us;
         t->level[t->n] = level;
@@ -87,6 +88,14 @@ void run_enable_edge(void)
 uint8_t run_enable_last;
 
 static int is_pump(void) { return cfg_enable_model == 2 || (cfg_enable_model == 0 && pump_seen); }
+
+int run_enable_is_pump(void) { return is_pump(); }
+
+int run_enable_on(void)
+{
+    pump_decay((double)avr->cycle / CYCLES_PER_US);
+    return is_pump() ? pump_on : pin_level;
+}
 
 static void print_tr(FILE *o, const transitions_t *t)
 {

@@ -57,7 +57,7 @@ double pulse_us(const hall_t *h)
     return us > cfg_pulse_us ? cfg_pulse_us : us;  /* ... at most --pulse-us */
 }
 
-static void hall_drive(hall_t *h)
+void hall_drive(hall_t *h)
 {
     int level = h->sensor_level && h->glitch_level;
     if (level != h->out_level) {
@@ -184,6 +184,26 @@ avr_cycle_count_t adc_rdy_high(avr_t *a, avr_cycle_count_t when, void *param)
     return 0;
 }
 
+/* One conversion's result ready: RDY low with this code (the generator's, or the plant's in --plant mode). */
+void adc_present(unsigned code, unsigned status)
+{
+    if (adc_bit > 0 && adc_bit < 24) {
+        adc_overrun++;  /* a read in progress: the real part keeps the old result */
+        return;
+    }
+    if (adc_ready)
+        adc_missed++;  /* previous result never read: overwritten */
+    adc_generated++;
+    if (cfg_adc_err_every && adc_generated % cfg_adc_err_every == 0) {
+        status |= 0x20;
+        adc_errors_set++;
+    }
+    adc_word = ((uint32_t)(code & 0xFFFF) << 8) | (status & 0xFF);
+    adc_bit = 0;
+    adc_ready = 1;
+    drive_pin(pin_dout, 5, 0);  /* RDY */
+}
+
 avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)when; (void)param;
@@ -191,22 +211,7 @@ avr_cycle_count_t adc_timer(avr_t *a, avr_cycle_count_t when, void *param)
         adc_running = 0;
         return 0;
     }
-    if (adc_bit > 0 && adc_bit < 24) {
-        adc_overrun++;  /* a read in progress: the real part keeps the old result */
-    } else {
-        if (adc_ready)
-            adc_missed++;  /* previous result never read: overwritten */
-        unsigned status = cfg_adc_status & 0xFF;
-        adc_generated++;
-        if (cfg_adc_err_every && adc_generated % cfg_adc_err_every == 0) {
-            status |= 0x20;
-            adc_errors_set++;
-        }
-        adc_word = ((uint32_t)(cfg_adc_code & 0xFFFF) << 8) | status;
-        adc_bit = 0;
-        adc_ready = 1;
-        drive_pin(pin_dout, 5, 0);  /* RDY */
-    }
+    adc_present(cfg_adc_code, cfg_adc_status);
     adc_k++;
     return (avr_cycle_count_t)(adc_t0_cycles + (double)adc_k * adc_period_cycles + 0.5);
 }

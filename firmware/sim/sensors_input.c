@@ -40,6 +40,24 @@ static avr_cycle_count_t in_rdy_high(avr_t *a, avr_cycle_count_t when, void *par
     return 0;
 }
 
+/* One conversion's result ready (the generator's, or the plant's in --plant mode). */
+void input_present(unsigned code, unsigned status)
+{
+    if (cfg_input_hz <= 0)
+        return;  /* not fitted */
+    if (in_bit > 0 && in_bit < 24) {
+        in_overrun++;
+        return;
+    }
+    if (in_ready)
+        in_missed++;
+    in_generated++;
+    in_word = ((uint32_t)(code & 0xFFFFu) << 8) | (status & 0xFFu);
+    in_bit = 0;
+    in_ready = 1;
+    drive_b0(0);  /* RDY */
+}
+
 static avr_cycle_count_t in_timer(avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)when; (void)param;
@@ -47,18 +65,7 @@ static avr_cycle_count_t in_timer(avr_t *a, avr_cycle_count_t when, void *param)
         in_running = 0;
         return 0;
     }
-    if (in_bit > 0 && in_bit < 24) {
-        in_overrun++;
-    } else {
-        if (in_ready)
-            in_missed++;
-        unsigned code = (cfg_input_code + (unsigned)(in_generated % 4096u)) & 0xFFFFu;
-        in_generated++;
-        in_word = ((uint32_t)code << 8) | (cfg_input_status & 0xFFu);
-        in_bit = 0;
-        in_ready = 1;
-        drive_b0(0);  /* RDY */
-    }
+    input_present((cfg_input_code + (unsigned)(in_generated % 4096u)) & 0xFFFFu, cfg_input_status);
     in_k++;
     return (avr_cycle_count_t)(in_t0_cycles + (double)in_k * in_period_cycles + 0.5);
 }
@@ -91,12 +98,12 @@ void input_init(void)
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 1), in_sclk_notify, NULL);
     /* The converter shares the Nano's supply: it converts from power-up (1 ms to settle), not from
      * when the Hall signals start, so the firmware's boot probe finds it. */
-    input_start(CYCLES_PER_US * 1000u);
+    input_start(CYCLES_PER_US * 1000u);  /* (--plant: the plant's conversions instead) */
 }
 
 void input_start(uint64_t at_cycle)
 {
-    if (cfg_input_hz <= 0 || in_running)
+    if (cfg_input_hz <= 0 || in_running || cfg_plant)
         return;
     in_period_cycles = (double)F_CPU_HZ / cfg_input_hz;
     in_t0_cycles = (double)at_cycle;

@@ -1,0 +1,120 @@
+"""Firmware in the loop (issue 55): the Nano's real ELF in simavr between the simulated rig's physics and the host
+(``dyno run --sim --firmware-elf``).  Judged on the physics: every sensor event the physics made reaches the host
+through the ELF, the ELF's run-enable is what cuts the simulated engine, and a run through the ELF measures what
+the same seed measures through the Python emulation of the firmware."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from tests.fw_build import sim_elf
+
+SEED = 3
+
+
+def _fil_run(tmp_path, **kw):
+    """An in-process run; its context, and the Nano's INFO frame read as the run's rig closes (its counters)."""
+    from dyno.session.root import RunSpec, run_test
+
+    seen = {}
+
+    def setup(ctx):
+        seen["ctx"] = ctx
+        close = ctx.sim.close
+
+        def read_info_then_close():
+            seen["info"] = ctx.poller.reader.read_info()
+            close()
+        ctx.sim.close = read_info_then_close
+
+    result = run_test(RunSpec(sim=True, seed=SEED, out_dir=tmp_path / "run", setup=setup, **kw))
+    return result, seen["ctx"], seen["info"]
+
+
+@pytest.mark.quick
+def test_fil_short_run_hands_every_physics_event_to_the_host_and_the_elf_holds_the_kill_chain(tmp_path):
+    elf = sim_elf()
+    result, ctx, info = _fil_run(tmp_path, firmware_elf=elf, max_sim_s=6.0)
+    fw = ctx.sim.firmware
+    assert result["firmware"]["elf"] == str(elf) and not result["firmware"]["harness"]["crashed"]
+    assert result["firmware"]["late_events"] == 0 and result["firmware"]["harness"]["dropped_events"] == 0
+    assert result["link"]["frames_lost"] == 0 and result["events_lost"] == 0, result["link"]
+    # lossless against the physics: every Hall edge and conversion the physics made reached the host, or was
+    # rejected by the firmware's own lock-out (the physics' ignition bounce: counted by the ELF, read in its INFO),
+    # up to the last poll (the tail after it is still in the Nano's ring when the run stops)
+    counts = ctx.poller.streams.counts()
+    made = fw.events_by_channel
+    assert made["primary"] > 100 and made["secondary"] > 100, made  # the engine ran and the CVT engaged
+    rejected = {ch: lock + glitch for ch, lock, glitch in zip(("primary", "secondary"), info.lockout_rejected,
+                                                                info.glitch_rejected)}
+    for key, channel, tail in (("primary_edges", "primary", 2), ("secondary_edges", "secondary", 2),
+                               ("adc_samples", "adc", 6)):
+        seen = counts[key] + rejected.get(channel, 0)
+        assert made[channel] - tail <= seen <= made[channel], (key, counts, made, rejected)
+    # the ELF's run-enable closed the chain (the engine could only start once it did) and the run's end cut it
+    on_log = [(t, on) for t, on, _ in fw.run_enable_log]
+    assert on_log and on_log[0][1] is True, on_log
+    assert ctx.sim.model.engine_cut(0.0) is not None  # the timeout's safe state: the chain opened
+
+
+@pytest.fixture(scope="module")
+def fil_thesis_step(tmp_path_factory):
+    """The issue's command as a real process: ``dyno run --sim --firmware-elf ELF --headless --json --plan
+    thesis-step --seed S``."""
+    elf = sim_elf()
+    out = tmp_path_factory.mktemp("fil") / "run"
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--firmware-elf", str(elf), "--headless",
+                           "--json", "--plan", "thesis-step", "--seed", str(SEED), "--out", str(out)],
+                          capture_output=True, text=True, timeout=1800)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout), elf
+
+
+def test_fil_thesis_step_reaches_done_through_the_real_firmware(fil_thesis_step):
+    result, elf = fil_thesis_step
+    assert result["state"] == "done" and len(result["points"]) >= 10, (result["state"], result["reason"])
+    assert result["link"]["frames_lost"] == 0 and result["events_lost"] == 0
+    assert result["firmware"]["elf"] == str(elf) and not result["firmware"]["harness"]["crashed"]
+    assert result["firmware"]["late_events"] == 0
+    assert result["rig_safe"] and result["outputs"]["pads_off_rotor"]
+
+
+def test_fil_and_the_emulated_firmware_measure_the_same_rig(fil_thesis_step, tmp_path):
+    """The same seed through the ELF and through dyno/sim/device.py: the points' count within 1, and at >= 90 %
+    of the points the efficiencies within sqrt(CI95_a^2 + CI95_b^2), each FIL point paired with the emulated run's
+    point at the nearest secondary speed (the same operating point; one world, so the systematic terms are common
+    and only the random part may differ)."""
+    from dyno.control.planfile import load_plan_file, shipped_plans
+
+    fil, _ = fil_thesis_step
+    emu, _, _ = _fil_run(tmp_path, plan=load_plan_file(shipped_plans()["thesis-step"]))
+    a, b = fil["points"], emu["points"]
+    assert abs(len(a) - len(b)) <= 1, (len(a), len(b))
+    pairs = [(pa, min(b, key=lambda pb: abs(pb["rpm_secondary"] - pa["rpm_secondary"]))) for pa in a]
+    agree = [abs(pa["efficiency"] - pb["efficiency"]) <= math.hypot(pa["efficiency_ci95"], pb["efficiency_ci95"])
+             for pa, pb in pairs]
+    assert sum(agree) >= 0.9 * len(agree), [(pa["efficiency"], pb["efficiency"]) for pa, pb in pairs]
+
+
+def test_fil_pi_freeze_is_cut_by_the_real_firmwares_run_enable(tmp_path):
+    """``--drill pi-freeze@loaded+2`` through the ELF: the frozen host stops polling, the ELF's own supervisor drops
+    D7 and the physics' kill chain opens on it (engine_cut_by "nano", from the physics), within the drill's bound;
+    K3 takes the pads off the rotor; exit 3."""
+    elf = sim_elf()
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--firmware-elf", str(elf), "--headless",
+                           "--json", "--plan", "thesis-step", "--seed", str(SEED), "--drill", "pi-freeze@loaded+2",
+                           "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 3, proc.stderr[-2000:]
+    result = json.loads(proc.stdout)
+    (drill,) = result["drills"]
+    assert drill["engine_cut_by"] == "nano" and result["outputs"]["engine_cut_by"] == "nano", drill
+    assert drill["latency_within_bound"] and drill["latency_s"] <= drill["latency_bound_s"], drill
+    assert drill["latency_s"] >= drill["supervisor_timeout_s"] - 0.01, drill  # (the ELF's timeout, not earlier)
+    assert result["outputs"]["pads_off_rotor"] and drill["pads_off_within_bound"], result["outputs"]
+    assert result["firmware"]["run_enable_changes"] >= 2 and result["firmware"]["late_events"] == 0
+    assert result["link"]["frames_lost"] == 0
