@@ -10,7 +10,8 @@ the physical onset against its bound, the brake position when the safe state cam
 ``rig_safe`` as reported beside the physics' own verdict (pads off, actuator off, throttle idle, ignition
 killed), the points kept and replayed, and whether ``dyno runs --json`` lists the run with its state.
 
-Modes: ``sim`` (the simulated driver), ``mock`` (``--mock-pins``: the real-rig output code on gpiozero's
+Modes: ``fil`` (the Nano's real ELF in simavr, ``--firmware-elf``: the drills that concern the Nano or its link;
+build it first: ``make -C firmware sim``), ``sim`` (the simulated driver), ``mock`` (``--mock-pins``: the real-rig output code on gpiozero's
 MockFactory), ``sim+faults`` (``--fault-rate 0.01``), these three on the shipped rig file (K3 fitted), and the
 wiring twin: ``twin`` (``--mock-pins`` with a rig file declaring the end switch and the E-stop monitor input, K3
 not fitted: the driver's own release is judged) and ``twin+k3`` (the same with K3 fitted).  The wiring drills
@@ -21,7 +22,8 @@ agree with the physics (``driver_agrees``).
                                      [--modes sim,mock,sim+faults,twin,twin+k3] [--workers N] [--markdown] [--json]
 
 ``--quick`` (CI's smoke run): every plan once, one mid-test drill each, on ``sim``; plus one ``mock`` row and
-two ``twin`` rows.  The full matrix is 8 plans x 25 drills x 4 phases x 5 modes, less the wiring drills off the
+two ``twin`` rows (and one ``fil`` row where the ELF is built).  The full matrix is 8 plans x 25 drills x 4 phases
+x 5 modes + the ``fil`` column, less the wiring drills off the
 twin (~3,400 runs, hours on 2 cores): run by hand, or a slice of it with the filters
 (``--modes twin,twin+k3 --drills wiring``: the wiring drills alone); docs/safety.md has the figures.
 """
@@ -59,7 +61,12 @@ DRILLS = {
 WIRING = ("endswitch-stuck-closed", "endswitch-stuck-open", "endswitch-bounce", "estop-held:3", "watchdog-error",
           "sigint-in-command")
 PHASES = ("armed", "loaded+2", "measure+1", "after+0.5")
-MODES = ("sim", "mock", "sim+faults", "twin", "twin+k3")
+MODES = ("sim", "mock", "sim+faults", "twin", "twin+k3", "fil")
+#: ``fil``: the Nano's real ELF in simavr as the rig's Nano (``--firmware-elf``), on the drills that concern the
+#: Nano or its link (issue 55)
+FIL_DRILLS = ("pi-freeze", "loop-freeze", "loop-stall:200", "loop-stall:800", "device-reset", "overspeed",
+              "bus-lost", "hall-dead:primary", "hall-dead:secondary", "hall-dead:both", "adc-stuck")
+FIL_ELF = Path(__file__).resolve().parent.parent / "firmware" / "build" / "dyno_nano.elf"
 TWIN_MODES = ("twin", "twin+k3")
 QUICK = {"speed-hold": "bus-lost@loaded+2", "thesis-step": "adc-stuck@loaded+2",
          "torque-hold": "controller-crash@loaded+2", "engine-hold": "loop-stall:800@loaded+2",
@@ -92,7 +99,7 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
     opts = RunOptions(sim=True, seed=seed, out_dir=Path(out), drills=[parse_drill(drill_text)],
                       handle_signals=True, plan=plan_named(plan), setup=lambda ctx: held.update(ctx=ctx),
                       mock_pins=mode in ("mock", *TWIN_MODES), fault_rate=0.01 if mode == "sim+faults" else 0.0,
-                      rig_path=rig)
+                      rig_path=rig, firmware_elf=FIL_ELF if mode == "fil" else None)
     if plan == "drive-grid":
         opts = replace(opts, engine_map_path=DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv"))
     r = run_test(opts)
@@ -147,13 +154,14 @@ def matrix(args) -> list[tuple[str, str, str]]:
     if args.quick:
         return [(p, d, "sim") for p, d in QUICK.items()] + [("speed-hold", "bus-lost@loaded+2", "mock"),
                                                              ("speed-hold", "endswitch-stuck-closed@loaded+2", "twin"),
-                                                             ("thesis-step", "estop-held:3@loaded+2", "twin+k3")]
+                                                             ("thesis-step", "estop-held:3@loaded+2", "twin+k3")] + (
+            [("thesis-step", "pi-freeze@loaded+2", "fil")] if FIL_ELF.is_file() else [])
     plans = args.plans.split(",") if args.plans else PLANS
     drills = WIRING if args.drills == "wiring" else (args.drills.split(",") if args.drills else list(DRILLS))
     phases = args.phases.split(",") if args.phases else PHASES
     modes = args.modes.split(",") if args.modes else MODES
     return [(p, f"{d}@{ph}", m) for m in modes for p in plans for d in drills for ph in phases
-            if m in TWIN_MODES or d not in WIRING]
+            if (m in TWIN_MODES or d not in WIRING) and (m != "fil" or d in FIL_DRILLS)]
 
 
 def _listed(runs_root: Path, rows: list[dict]) -> None:

@@ -21,6 +21,7 @@ import errno
 import os
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 from dyno.errors import DynoError
@@ -101,6 +102,8 @@ class ElfFirmware:
         self._last_edge_us: dict[str, float] = {}
         self._period_us: dict[str, float] = {}
         self.transactions = 0
+        self.wait_s = 0.0  # wall time spent waiting on the harness (simavr's cycles and the pipe)
+        self.round_trips = 0
         self._us = lambda t_s: (t_s + POWERED_BEFORE_S) * 1e6  # physics time -> the MCU's clock
         if self._cmds(f"run {self._us(0.0):.3f}")[0].split()[:1] != ["ok"]:
             raise FirmwareElfError(f"simavr harness did not start: {self._stderr_tail()}")
@@ -110,10 +113,13 @@ class ElfFirmware:
         proc = self._proc
         if proc.poll() is not None:
             raise FirmwareElfError(f"simavr harness exited ({proc.returncode}): {self._stderr_tail()}")
+        t0 = time.perf_counter()
         try:
             proc.stdin.write("".join(line + "\n" for line in lines))
             proc.stdin.flush()
             replies = [proc.stdout.readline() for _ in lines]
+            self.wait_s += time.perf_counter() - t0
+            self.round_trips += 1
         except (BrokenPipeError, OSError) as exc:
             raise FirmwareElfError(f"simavr harness pipe broke: {exc}: {self._stderr_tail()}") from exc
         if not all(replies):
@@ -178,6 +184,10 @@ class ElfFirmware:
             return doc
         doc["harness"] = {"edges": [h["edges"] for h in st["hall"]], "crashed": st["crashed"], **st.get("plant", {}),
                           "sim_per_wall": st.get("sim_per_wall")}
+        # where the time went: simavr's own cycles (the harness's wall inside its run loop), and the rest of the
+        # waits on it (the pipe and the hand-over between the processes)
+        doc["time"] = {"wait_on_harness_s": round(self.wait_s, 3), "simavr_s": st.get("wall_s"),
+                       "round_trips": self.round_trips}
         return doc
 
     def stats(self) -> dict:

@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""Firmware in the loop (issue 55): a whole test through the Nano's real ELF in simavr, against the same test
+through the Python emulation of the firmware (dyno/sim/device.py), the same seed.
+
+Per seed it runs ``dyno run --sim --headless --json --plan PLAN --seed S`` twice, each in its own process (wall and
+CPU time of the process and its children: the simavr harness included), with and without ``--firmware-elf``, and
+prints: the points of each, the agreement (the share of FIL points whose efficiency lies within
+sqrt(CI95_a^2 + CI95_b^2) of the emulated run's point at the nearest secondary speed), frames and events lost, the
+events that reached the ELF's pins late, the wall and CPU ratios, and where the FIL run's time went (simavr's
+cycles, the rest of the waits on the harness: the pipe and the hand-over, and the Python side: plant and host).
+
+Targets (exit 1 when one is missed): both runs reach done with point counts within 1; agreement >= 90 %; 0 frames
+and events lost; 0 late events; the FIL run's wall time <= 4x the emulated run's.
+
+    python bench/bench_fil.py [--quick] [--plan thesis-step|all] [--seeds 3,4] [--json]
+
+``--quick`` (CI's smoke run): one run of each kind ended by ``--drill pi-freeze@loaded+2`` (~25 simulated s),
+judged on the lockstep's correctness (0 lost, 0 late, the ELF's run-enable closed the chain and cut the engine:
+``engine_cut_by`` "nano"); the time ratio printed, not judged (a loaded CI machine shares its cores).  Without the AVR toolchain and simavr it prints one ``skipped:`` line and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+ELF = REPO / "firmware" / "build" / "dyno_nano.elf"
+MAX_WALL_RATIO = 4.0
+
+
+def _run(args: list[str], out: Path) -> tuple[dict, float, float]:
+    """(the run's JSON, wall s, CPU s of the process and its children)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "dyno", "run", "--sim", "--headless", "--json", "--out", str(out),
+                           *args], capture_output=True, text=True, cwd=REPO)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if not proc.stdout.strip():
+        raise SystemExit(f"bench_fil: dyno run {' '.join(args)} printed nothing: {proc.stderr[-800:]}")
+    return json.loads(proc.stdout), wall, cpu
+
+
+def agreement(fil_points: list, emu_points: list) -> float:
+    if not fil_points or not emu_points:
+        return math.nan
+    ok = 0
+    for pa in fil_points:
+        pb = min(emu_points, key=lambda p: abs(p["rpm_secondary"] - pa["rpm_secondary"]))
+        ok += abs(pa["efficiency"] - pb["efficiency"]) <= math.hypot(pa["efficiency_ci95"], pb["efficiency_ci95"])
+    return ok / len(fil_points)
+
+
+def one_seed(seed: int, plan: str, quick: bool, tmp: Path) -> dict:
+    extra = ["--plan", plan, "--seed", str(seed)]
+    if plan == "drive-grid":  # (its part-throttle cells need a map that has them, as in bench_safe_state)
+        extra += ["--engine-map", str(REPO / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv")]
+    cap = ["--drill", "pi-freeze@loaded+2"] if quick else []  # (quick: the test ends ~25 simulated s in)
+    emu, emu_wall, emu_cpu = _run(extra + cap, tmp / f"emu-{seed}")
+    fil, fil_wall, fil_cpu = _run(extra + cap + ["--firmware-elf", str(ELF)], tmp / f"fil-{seed}")
+    fw = fil.get("firmware", {})
+    t = fw.get("time", {})
+    return {"seed": seed, "plan": plan, "state": (emu["state"], fil["state"]),
+            "points": (len(emu["points"]), len(fil["points"])), "agreement": agreement(fil["points"], emu["points"]),
+            "frames_lost": fil["link"]["frames_lost"], "events_lost": fil["events_lost"],
+            "late_events": fw.get("late_events"), "run_enable_changes": fw.get("run_enable_changes"),
+            "engine_cut_by": fil["outputs"].get("engine_cut_by"),
+            "wall_s": (round(emu_wall, 1), round(fil_wall, 1)), "cpu_s": (round(emu_cpu, 1), round(fil_cpu, 1)),
+            "wall_ratio": fil_wall / emu_wall, "cpu_ratio": fil_cpu / max(emu_cpu, 1e-9),
+            "sim_s": fil.get("sim_time_s"), "simavr_s": t.get("simavr_s"),
+            "wait_on_harness_s": t.get("wait_on_harness_s"), "round_trips": t.get("round_trips")}
+
+
+def judge(row: dict, quick: bool) -> list[str]:
+    bad = []
+    if row["frames_lost"] or row["events_lost"]:
+        bad.append(f"lost frames {row['frames_lost']} events {row['events_lost']}")
+    if row["late_events"] != 0:
+        bad.append(f"{row['late_events']} events reached the pins late")
+    if not row["run_enable_changes"]:
+        bad.append("the ELF's run-enable never closed the chain")
+    if quick:
+        if row["engine_cut_by"] != "nano":
+            bad.append(f"engine cut by {row['engine_cut_by']}, not the ELF's run-enable")
+        return bad
+    if row["state"] != ("done", "done"):
+        bad.append(f"states {row['state']}")
+    if abs(row["points"][0] - row["points"][1]) > 1:
+        bad.append(f"points {row['points']}")
+    if not row["agreement"] >= 0.9:
+        bad.append(f"agreement {row['agreement']:.2f} < 0.90")
+    if row["wall_ratio"] > MAX_WALL_RATIO:
+        bad.append(f"wall ratio {row['wall_ratio']:.1f} > {MAX_WALL_RATIO}")
+    return bad
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--plan", default="thesis-step", help="a shipped plan, or \"all\": every shipped plan")
+    ap.add_argument("--seeds", default="3,4")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    sys.path.insert(0, str(REPO))
+    from dyno.transports.simavr import toolchain_missing
+
+    why = toolchain_missing()
+    if why:
+        print(f"skipped: the AVR toolchain or simavr is missing ({why})")
+        return 0
+    build = subprocess.run(["make", "-s", "-C", str(REPO / "firmware"), "sim"], capture_output=True, text=True)
+    if build.returncode:
+        print(f"bench_fil: make -C firmware sim failed: {build.stderr[-500:]}", file=sys.stderr)
+        return 1
+    seeds = [3] if args.quick else [int(s) for s in args.seeds.split(",")]
+    if args.plan == "all":
+        from bench_safe_state import PLANS  # (every shipped plan: the plan files and the registry's)
+
+        plans = list(PLANS)
+    else:
+        plans = [args.plan]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for plan, seed in [(p, s) for p in plans for s in seeds]:
+            row = one_seed(seed, plan, args.quick, Path(tmp))
+            row["bad"] = judge(row, args.quick)
+            rows.append(row)
+            if not args.json:
+                py_s = row["wall_s"][1] - (row["wait_on_harness_s"] or 0.0)
+                print(f"seed {seed} {row['plan']}: states {row['state']} points emu/fil {row['points']} agreement "
+                      f"{row['agreement']:.2f} lost {row['frames_lost']}/{row['events_lost']} late "
+                      f"{row['late_events']} | wall emu {row['wall_s'][0]} s fil {row['wall_s'][1]} s "
+                      f"(x{row['wall_ratio']:.1f}), CPU x{row['cpu_ratio']:.1f} | FIL time: simavr "
+                      f"{row['simavr_s']} s, other waits on the harness "
+                      f"{(row['wait_on_harness_s'] or 0) - (row['simavr_s'] or 0):.1f} s, Python (plant + host) "
+                      f"{py_s:.1f} s, {row['round_trips']} round trips for {row['sim_s']:.0f} simulated s"
+                      f" {'ok' if not row['bad'] else 'BAD: ' + '; '.join(row['bad'])}", flush=True)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    print(f"{len(rows)} seeds, {sum(1 for r in rows if r['bad'])} out of bound (cores: {os.cpu_count()})",
+          file=sys.stderr)
+    return 1 if any(r["bad"] for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
