@@ -55,14 +55,23 @@ def check_data(report: Report, cfg, transport, clock, operator, *, simulated: bo
     from dyno.acquisition.reader import make_reader
     from dyno.hw import doctor_data
     from dyno.hw.clock import MonotonicClock
-    from dyno.transports.budget import ChargedTransport, LinkMeter, TimedTransport
+    from dyno.transports.budget import ChargedTransport, LinkMeter
 
     clock = clock or MonotonicClock()
     meter = LinkMeter(clock.now)
-    link = ChargedTransport(transport, meter, cfg) if simulated else TimedTransport(transport, meter, clock.now)
+    if simulated:
+        link = ChargedTransport(transport, meter, cfg)
+    else:  # each attempt timed inside the transport, as a run's (dyno.transports.budget.metered_rig_link)
+        link = transport
+        transport.meter_with(meter, clock.now)
     input_expected = getattr(cfg, "input_torque", None) is not None and cfg.protocol == "v2"
     # the engine-side converter asked for, as a run asks at boot
     reader = make_reader(cfg.protocol, link, want_input=input_expected)
-    for name, ok, detail in doctor_data.check(reader, clock, cfg.poll_hz, operator, input_expected=input_expected):
-        report.add(name, OK if ok else FAIL, detail)
+    try:
+        for name, ok, detail in doctor_data.check(reader, clock, cfg.poll_hz, operator,
+                                                  input_expected=input_expected):
+            report.add(name, OK if ok else FAIL, detail)
+    finally:
+        if not simulated:
+            transport.meter_with(None, None)
     check_link_measured(report, cfg, meter)

@@ -201,33 +201,6 @@ class MeteredBus:
         return getattr(self.bus, name)
 
 
-class TimedTransport:
-    """A real firmware transport whose every transfer is charged to a :class:`LinkMeter` for the time it took
-    (the transfer's own duration on ``clock``: wire, clock stretching, retries and all)."""
-
-    def __init__(self, transport, meter: LinkMeter, clock) -> None:
-        self.transport = transport
-        self.meter = meter
-        self.clock = clock
-
-    def transfer(self, request: bytes, read_len: int) -> bytes:
-        t0 = self.clock()
-        try:
-            return self.transport.transfer(request, read_len)
-        finally:
-            self.meter.add(self.clock() - t0)
-
-    def write(self, request: bytes) -> None:
-        t0 = self.clock()
-        try:
-            self.transport.write(request)
-        finally:
-            self.meter.add(self.clock() - t0)
-
-    def __getattr__(self, name):  # stats, reset, close, ...: the transport's own
-        return getattr(self.transport, name)
-
-
 class ChargedTransport:
     """A transport whose every transfer is charged to a :class:`LinkMeter` at ``rig``'s clock from the bytes it
     moved (a simulated link, whose transfers take no time of the clock: ``dyno doctor --sim``); on serial the
@@ -259,12 +232,14 @@ class ChargedTransport:
 
 
 def metered_rig_link(hw, rig, clock=None):
-    """(transport, thermometer read, meter) of a real rig, each transfer timed as it happens; the thermometer's
-    reads are charged too where they share the firmware's I²C bus."""
+    """(transport, thermometer read, meter) of a real rig: each attempt of the firmware transport timed as it
+    happens (:meth:`dyno.transports.base.Transport.meter_with`); the thermometer's reads are charged too where
+    they share the firmware's I²C bus."""
     import time
 
     clock = clock or time.monotonic
     meter = LinkMeter(clock)
+    hw.transport.meter_with(meter, clock)
     read_c = hw.thermometer.object_c
     if rig.transport == "i2c":
         def read_c(_read=hw.thermometer.object_c):
@@ -273,4 +248,4 @@ def metered_rig_link(hw, rig, clock=None):
                 return _read()
             finally:
                 meter.add(clock() - t0)
-    return TimedTransport(hw.transport, meter, clock), read_c, meter
+    return hw.transport, read_c, meter

@@ -5,6 +5,7 @@ durations."""
 from __future__ import annotations
 
 import dataclasses
+import errno
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from dyno.errors import ConfigError
 from dyno.hw.clock import FakeClock
 from dyno.rig.config import load_rig
 from dyno.protocol import v2
-from dyno.transports.budget import (MAX_BUSY, ChargedTransport, LinkMeter, TimedTransport, check_budget, fits,
+from dyno.transports.budget import (MAX_BUSY, ChargedTransport, LinkMeter, check_budget, fits,
                                     max_poll_hz, metered_rig_link, min_poll_hz, planned_busy, planned_by_kind)
 from dyno.transports.wire_load import busiest_second
 
@@ -100,37 +101,82 @@ def test_a_clock_above_a_devices_rating_is_refused_naming_it():
         check_budget(dataclasses.replace(serial, i2c=dataclasses.replace(serial.i2c, bus_speed_hz=400_000)))
 
 
-class _SlowTransport:
-    """A transport whose transfers take ``busy_s`` of the (fake) clock, as a stretched bus would."""
+class _StretchedBus:
+    """An SMBus-like bus each of whose transactions takes ``busy_s`` of the fake clock (a stretched wire); with
+    ``nack_next`` set, the next attempt NACKs after taking its time."""
 
     def __init__(self, clock, busy_s):
-        self.clock, self.busy_s, self.resets = clock, busy_s, 0
+        self.clock, self.busy_s, self.attempts, self.nack_next = clock, busy_s, 0, False
 
-    def transfer(self, request, read_len):
+    def i2c_rdwr(self, *msgs):
+        self.attempts += 1
         self.clock.advance(self.busy_s)
-        return bytes(read_len)
+        if self.nack_next:
+            self.nack_next = False
+            raise OSError(errno.EREMOTEIO, "NACK")
 
-    def write(self, request):
-        self.transfer(request, 0)
 
+def test_the_real_i2c_link_is_measured_from_each_attempts_own_duration():
+    """Each attempt timed around its bus transaction inside the transport: a retried poll costs both attempts'
+    wire time, and its back-off (idle wire) none."""
+    from dyno.transports.i2c import RecoveringI2CTransport
 
-def test_the_real_link_is_measured_from_each_transfers_own_duration():
     clock = FakeClock(start_s=0.0)
-    meter = LinkMeter(clock.now)
-    link = TimedTransport(_SlowTransport(clock, 0.004), meter, clock.now)
-    for _ in range(3):  # three seconds of 150 polls, each 4 ms on the wire and 2.67 ms idle after
-        for _ in range(150):
-            link.transfer(b"x", 32)
+    bus = _StretchedBus(clock, 0.004)
+    transport = RecoveringI2CTransport(bus, 0x03, retries=3, retry_backoff_s=0.002, clock=clock)
+    transport.meter_with(LinkMeter(clock.now), clock.now)
+    for _ in range(3):  # three seconds of 135 polls, each 4 ms on the wire (one in nine retried once)
+        t0 = clock.now()
+        for k in range(135):
+            bus.nack_next = k % 9 == 0
+            transport.transfer(b"x", 32)
             clock.advance(1 / 150 - 0.004)
-    assert meter.worst_frac() == pytest.approx(0.6, abs=0.01)  # what the transfers took, not what was planned
-    assert link.resets == 0  # (the transport's own attributes pass through)
+        clock.advance(1.0 - (clock.now() - t0) + 1e-9)  # the rest of the second idle
+    meter = transport.meter
+    assert bus.attempts == 3 * 150 and sum(transport.retried.values()) == 45
+    assert meter.transactions == bus.attempts and meter.total_s == pytest.approx(bus.attempts * 0.004)
+    assert meter.worst_frac() == pytest.approx(150 * 0.004, abs=0.005)  # 0.6: not the back-off's 0.09 s more
+
+
+def test_the_real_serial_link_is_measured_from_the_request_to_its_frame():
+    from dyno.transports.serial import SerialTransport, cobs_encode
+
+    clock = FakeClock(start_s=0.0)
+    frame = bytes([2, 17]) + bytes(15)
+
+    class _Port:
+        timeout = 0.0
+        pending = b""
+
+        def write(self, data):
+            clock.advance(10 * len(data) / 115_200)
+            self.pending = cobs_encode(frame) + b"\x00"
+
+        @property
+        def in_waiting(self):
+            return len(self.pending)
+
+        def read(self, n=1):
+            if self.pending and n == 1:
+                clock.advance(10 * len(self.pending) / 115_200)  # the frame's bytes arriving
+            out, self.pending = self.pending[:n], self.pending[n:]
+            return out
+
+    transport = SerialTransport(_Port(), clock=clock, validate=None)
+    meter = LinkMeter(clock.now)
+    transport.meter_with(meter, clock.now)
+    clock.advance(0.5)  # idle before: not the link's
+    assert transport.transfer(bytes(6), 32)[:17] == frame
+    assert meter.total_s == pytest.approx(10 * ((6 + 2) + (17 + 2)) / 115_200)
 
 
 def test_the_rigs_thermometer_reads_are_charged_where_they_share_the_bus():
+    from dyno.transports.i2c import RecoveringI2CTransport
+
     clock = FakeClock(start_s=0.0)
 
     class _Hw:
-        transport = _SlowTransport(clock, 0.003)
+        transport = RecoveringI2CTransport(_StretchedBus(clock, 0.003), 0x03, clock=clock)
 
         class thermometer:
             @staticmethod
