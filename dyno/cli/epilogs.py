@@ -15,9 +15,12 @@ EXIT_CODES = ("Exit codes: 0 done, 1 a failure the command names, 2 bad input (o
 EPILOGS: dict[str, str] = {
     "run": f"""\
 `dyno run --sim --headless --json [--seed S] [--fault-rate P] [--speed N] [--out DIR]`: a full test, one JSON \
-document, with `link` (the firmware link's transport, clock, poll rate and its worst second's busy share), \
-`poll_rates` (the rate held and the intervals' jitter at each rate polled), `pace` with --speed N (the pace held in \
-wall time). A rig file whose polls would take over 60 % of its link is refused naming `poll_hz`. Without --json a \
+document, with `link` (the firmware link's transport, clock, poll rate and its busiest second's share, planned and \
+measured: `link_busy` in its warnings above 60 % measured), `poll_rates` (the rate held and the intervals' jitter at \
+each rate polled), `pace` with --speed N (the pace held in wall time). A rig file whose busiest second (its polls, \
+MORE bursts, retries, boot commands, thermometer) would take over 60 % of its link polls at the fastest rate that \
+fits, saying so on one line naming `poll_hz` (`derate = false`, or no rate fits: refused naming `poll_hz`). \
+Without --json a \
 terminal shows a status line (state, point n/~N, ETA) and ends with the points table (each efficiency with its \
 ±CI95, ±U95 and interval95 %, the speed ratio, where P_in comes from; the term that dominates U95), the air and the \
 path of the run's report.html.
@@ -92,10 +95,11 @@ binutils-avr simavr libsimavr-dev libelf-dev), then `dyno firmware-sim --elf fir
 --seconds 2`. --input-hz 125: the second AD7171 of the engine-side torque channel on D8/D9. The text output rounds \
 its figures; --json keeps every digit (docs/firmware.md).""",
     "doctor": """\
-On the rig: the link budget, the I²C bus, the firmware and its run-enable (the Nano's D7: present, armed by dyno at \
+On the rig: the link budget (the busiest second planned; above 60 %: the rate a run derates to, or FAIL where none \
+fits), the I²C bus, the firmware and its run-enable (the Nano's D7: present, armed by dyno at \
 every boot), a few seconds of data frames channel by channel (Hall edges: it asks you to turn a shaft that shows \
 none; the converter's rate and codes; the link's NACK/CRC/stretch counters: one FAIL line naming the channel and \
-its wire), the thermometer, the E-stop input. --toggle moves the outputs (watchdog running) and checks the end \
+its wire; the busiest second of those polls measured, a WARN above 60 %), the thermometer, the E-stop input. --toggle moves the outputs (watchdog running) and checks the end \
 switch against a measured stroke (a pass clears a standing end-switch fault, which otherwise refuses GO and re-arm \
 across restarts; with K3 fitted, as shipped, the step is skipped and said so: hardware/README.md). --sim: the same \
 on the simulated rig (--mock-pins through the wiring twin; --drill a fault from the start: hall-dead:primary, \

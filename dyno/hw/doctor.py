@@ -14,39 +14,11 @@ rig description is invalid (from the CLI's ConfigError handling).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 
-OK, WARN, FAIL, SKIP = "ok", "warn", "FAIL", "skip"
-
-
-@dataclass
-class Check:
-    name: str
-    status: str
-    detail: str
-    essential: bool = True
-
-
-@dataclass
-class Report:
-    checks: list[Check] = field(default_factory=list)
-
-    def add(self, name, status, detail, essential=True) -> Check:
-        c = Check(name, status, detail, essential)
-        self.checks.append(c)
-        return c
-
-    @property
-    def ok(self) -> bool:
-        return not any(c.status == FAIL and c.essential for c in self.checks)
-
-    def render(self) -> str:
-        width = max((len(c.name) for c in self.checks), default=0)
-        lines = [f"  {c.status:>4}  {c.name:<{width}}  {c.detail}" for c in self.checks]
-        verdict = "rig OK" if self.ok else "rig NOT ready: fix the FAIL lines above"
-        return "\n".join(lines + ["", verdict])
+from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Check, Report  # noqa: F401 (the report's types)
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:
@@ -138,22 +110,6 @@ def check_estop_input(report: Report, cfg, pin_factory=None) -> None:
     report.add("e-stop input", OK if closed else FAIL,
                f"GPIO{bcm}: chain closed" if closed else
                f"GPIO{bcm}: chain OPEN (a button pressed, or the chain's wire or connector: check the E-stop chain)")
-
-
-def check_link_budget(report: Report, cfg) -> None:
-    """The poll rate against the link's clock (dyno.transports.budget): a run refuses what does not fit."""
-    from dyno.transports.budget import MAX_BUSY, clock_hz, planned_busy, poll_s
-
-    busy = planned_busy(cfg)
-    fix = ""
-    if busy > MAX_BUSY:
-        fits = int((MAX_BUSY - planned_busy(cfg, 0.0)) / poll_s(cfg))
-        fix = (f": at most {fits} Hz here; lower poll_hz, or a faster link (hardware/README.md, 'The Pi's I²C and "
-               "clock stretching')")
-    report.add("link budget", OK if busy <= MAX_BUSY else FAIL,
-               f"{cfg.poll_hz:g} polls/s x {poll_s(cfg) * 1e3:.2f} ms on {cfg.transport} at {clock_hz(cfg)} "
-               f"{'Bd' if cfg.transport == 'serial' else 'Hz'} = {100 * busy:.0f} % of the link (limit "
-               f"{100 * MAX_BUSY:.0f} %){fix}")
 
 
 def check_thermometer(report: Report, cfg, bus) -> None:
@@ -333,24 +289,10 @@ def _boots(cfg, transport):
     return info.boot_id if cfg.protocol == "v2" else info.boot_count
 
 
-def check_data(report: Report, cfg, transport, clock, operator) -> None:
-    """A few seconds of data frames: edges on each Hall channel, the converter's conversions, the link's
-    counters (:mod:`dyno.hw.doctor_data`); one line a channel, naming the wire to check."""
-    from dyno.acquisition.reader import make_reader
-    from dyno.hw import doctor_data
-    from dyno.hw.clock import MonotonicClock
-
-    input_expected = getattr(cfg, "input_torque", None) is not None and cfg.protocol == "v2"
-    # the engine-side converter asked for, as a run asks at boot
-    reader = make_reader(cfg.protocol, transport, want_input=input_expected)
-    for name, ok, detail in doctor_data.check(reader, clock or MonotonicClock(), cfg.poll_hz, operator,
-                                              input_expected=input_expected):
-        report.add(name, OK if ok else FAIL, detail)
-
-
 def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=False,
              clock=None, pin_factory=None, operator=None) -> Report:
     """All checks; ``bus``/``serial_port`` inject fakes or the simulated bus."""
+    from dyno.hw.doctor_link import check_data, check_link_budget
     from dyno.transports.i2c import open_i2c, smbus_factory
     from dyno.transports.serial import open_serial
 
@@ -358,7 +300,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     injected = bus is not None  # a simulated or fake bus: no real pins behind this doctor
     report.add("rig file", OK, f"{cfg.path} (protocol {cfg.protocol}, poll {cfg.poll_hz:g} Hz)", essential=False)
     kind = transport_kind or cfg.transport
-    check_link_budget(report, cfg if kind == cfg.transport else replace(cfg, transport=kind))
+    run_cfg = check_link_budget(report, cfg if kind == cfg.transport else replace(cfg, transport=kind))
 
     # I2C bus: needed for the thermometer even when the firmware is on USB serial.
     if bus is None:
@@ -400,7 +342,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     else:
         report.add("firmware", FAIL, "no link to the firmware")
     if info is not None and cfg.protocol in ("v1", "v2"):
-        check_data(report, cfg, transport, clock, operator)
+        check_data(report, run_cfg, transport, clock, operator, simulated=injected or serial_port is not None)
 
     if bus is not None:
         check_thermometer(report, cfg, bus)

@@ -1,8 +1,8 @@
 """``dyno doctor``'s data check: a few seconds of data frames, judged channel by channel.
 
 A rig whose INFO frame answers can still have both Hall sensors and the torque converter unplugged.  This
-polls the firmware as a run does (its poll rate, its reader) for :data:`SECONDS` and says, one line a
-channel, what the frames show and which wire to check when they show nothing:
+polls the firmware as a run does (its poll rate, its reader, its MORE bursts) for :data:`SECONDS` and says,
+one line a channel, what the frames show and which wire to check when they show nothing:
 
 * each Hall channel has edges — the primary while the engine idles (or is turned over by hand), the
   secondary while its shaft turns (at idle the CVT is not engaged: turn the brake rotor by hand);
@@ -23,6 +23,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 SECONDS = 3.0
+#: reads a tick while the device says MORE (dyno.acquisition.poller.Poller's default)
+MAX_BURST = 8
 #: the AD7171's output data rate and the share of it a check accepts
 ADC_RATE_HZ = 125.0
 ADC_RATE_TOL = 0.15
@@ -68,6 +70,14 @@ def sample(reader, clock, poll_hz: float, seconds: float = SECONDS) -> DataSampl
             events = reader.poll(clock.now())
         except Exception:  # noqa: BLE001 - a failed poll is counted by the reader's stats; keep sampling
             events = []
+        for _ in range(MAX_BURST - 1):  # as the run's poller: read again at once while the device says MORE
+            if not getattr(reader, "more", False):
+                break
+            s.polls += 1
+            try:
+                events = events + reader.poll(clock.now())
+            except Exception:  # noqa: BLE001 - (as above)
+                break
         for ev in events:
             if ev.channel == v1.CH_PRIMARY:
                 s.edges["primary"] += 1

@@ -100,20 +100,23 @@ def summarize(ctx, drills_from: int = 0) -> dict:
 
 def link_document(ctx) -> dict:
     """The firmware link as the run used it: its transport and clock, the poll rate, the busiest second's share
-    planned and measured (every transfer timed on the rig, charged at the link's clock on the simulator; above
+    planned (every transfer the rig file's busiest second holds, ``planned_by_kind``: dyno.transports.wire_load)
+    and measured (every transfer timed on the rig, charged at the link's clock on the simulator; above
     60 % measured: ``warnings`` names ``link_busy``) and the frames lost — polls that
     got no accepted frame (failed transfers, rejected frames: each re-polled, but late); ``poll_rates``: per
     rate the poller ran at (the waiting states' and the test's), the rate it held and its interval jitter."""
-    from dyno.transports.budget import MAX_BUSY, clock_hz, planned_busy
+    from dyno.transports.budget import MAX_BUSY, clock_hz, planned_by_kind
 
     rig = getattr(ctx, "rig_cfg", None)
     st = ctx.poller.reader.stats
     meter = getattr(ctx, "link_meter", None)
-    planned = round(planned_busy(rig, ctx.poller.full_poll_hz), 4) if rig else None
+    by_kind = planned_by_kind(rig, ctx.poller.full_poll_hz) if rig else None
+    planned = round(sum(by_kind.values()), 4) if rig else None
     measured = round(meter.worst_frac(), 4) if meter is not None else None
     out = {"transport": getattr(rig, "transport", None), "clock_hz": clock_hz(rig) if rig else None,
            "poll_hz": ctx.poller.full_poll_hz, "derated_from_hz": getattr(rig, "derated_from_hz", None),
            "planned_busy_frac": planned, "measured_busy_frac": measured,  # the busiest second's share
+           "planned_by_kind": by_kind,  # poll, more (MORE bursts), retry, boot, supervisor, thermometer
            "bus_busy_frac": measured if measured is not None else planned,
            "busy_basis": "measured" if meter is not None else "planned",
            "warnings": ["link_busy"] if measured is not None and measured > MAX_BUSY else [],

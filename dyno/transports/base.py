@@ -37,10 +37,16 @@ class Transport(ABC):
     name = "transport"
 
     errno_cause = _ERRNO_CAUSE  # OSError errno -> failure cause
+    meter = None  # a dyno.transports.budget.LinkMeter charged each attempt's own time on the wire (None: not metered)
 
     def __init__(self) -> None:
         self.transfers = 0
         self.failures: Counter = Counter()
+
+    def meter_with(self, meter, now) -> None:
+        """Charge ``meter`` each attempt's own duration on ``now`` (seconds): timed around the bus transaction
+        (I²C) or from the request's write to its frame (serial), so a retry's back-off is not link time."""
+        self.meter, self._meter_now = meter, now
 
     def transfer(self, request: bytes, read_len: int) -> bytes:
         self.transfers += 1
@@ -114,7 +120,15 @@ class I2CTransport(Transport):
             else:
                 ctypes.memset(rd.buf, 0, read_len)  # as a fresh buffer: a short read leaves zeros, not old bytes
             msgs.append(rd)
-        self.bus.i2c_rdwr(*msgs)
+        meter = self.meter
+        if meter is None:
+            self.bus.i2c_rdwr(*msgs)
+        else:
+            t0 = self._meter_now()
+            try:
+                self.bus.i2c_rdwr(*msgs)
+            finally:
+                meter.add(self._meter_now() - t0)
         return ctypes.string_at(rd.buf, read_len) if rd is not None else b""
 
     def close(self) -> None:

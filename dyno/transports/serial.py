@@ -198,6 +198,16 @@ class SerialTransport(Transport):
                 self._pump(0.0)
             self.late += len(self._packets)
             self._packets.clear()
+        if self.meter is None:
+            return self._exchange(request, read_len)
+        t0 = self._meter_now()
+        try:
+            return self._exchange(request, read_len)
+        finally:
+            self.meter.add(self._meter_now() - t0)
+
+    def _exchange(self, request: bytes, read_len: int) -> bytes:
+        """The request's packet out, its frame back (the link's time: what the meter charges)."""
         if request:
             self.port.write(cobs_encode(request) + DELIMITER)
             flush = getattr(self.port, "flush", None)
