@@ -60,6 +60,11 @@ def run(args) -> int:
     from dyno.transports.budget import check_budget
 
     check_budget(rig_cfg)  # (so is a poll rate its link cannot carry)
+    elf = getattr(args, "firmware_elf", None)
+    if elf is not None and not args.sim:
+        raise ConfigError("command line", "--firmware-elf", "the firmware ELF runs in the simulated rig only (--sim)")
+    if elf is not None and not elf.is_file():
+        raise ConfigError(str(elf), "--firmware-elf", "no such file (build it: make -C firmware sim)")
     if not args.sim:  # no GPIO / I2C here: one line and exit 2, not a traceback from inside the app
         from dyno.hw.preflight import check_rig_present
 
@@ -68,11 +73,6 @@ def run(args) -> int:
         raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     if getattr(args, "mock_pins", False) and not args.sim:
         raise ConfigError("command line", "--mock-pins", "the mock pins drive the simulated rig only (--sim)")
-    elf = getattr(args, "firmware_elf", None)
-    if elf is not None and not args.sim:
-        raise ConfigError("command line", "--firmware-elf", "the firmware ELF runs in the simulated rig only (--sim)")
-    if elf is not None and not elf.is_file():
-        raise ConfigError(str(elf), "--firmware-elf", "no such file (build it: make -C firmware sim)")
     from dyno.cli.run_cmd import air_options
 
     sim_kw: dict = {}

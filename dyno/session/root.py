@@ -180,23 +180,6 @@ def open_rig(rig_cfg, *, pin_factory=None, bus=None, serial_port=None):
     return hw.__enter__()
 
 
-def _firmware_elf(opts: RunSpec, rig_cfg, protocol: str):
-    """``--firmware-elf``: the ELF and the link it is reached by (the rig file's I2C clock), or None."""
-    if opts.firmware_elf is None:
-        return None
-    from dyno.errors import ConfigError
-
-    if rig_cfg.transport != "i2c":
-        raise ConfigError(str(rig_cfg.path), "transport", "--firmware-elf runs the firmware's I2C link; "
-                          f"this rig file's link is {rig_cfg.transport}")
-    if protocol != "v2":
-        raise ConfigError("command line", "--protocol", "--firmware-elf runs the v2 firmware")
-    if not Path(opts.firmware_elf).is_file():
-        raise ConfigError(str(opts.firmware_elf), "--firmware-elf", "no such file (build it: make -C firmware)")
-    return {"elf": Path(opts.firmware_elf), "i2c_khz": max(1, round(rig_cfg.i2c.bus_speed_hz / 1000)),
-            "address": rig_cfg.i2c.firmware_address}
-
-
 def close_rig(ctx) -> None:
     sim = getattr(ctx, "sim", None)
     if sim is not None:
@@ -254,6 +237,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     plan = opts.plan  # in rig seconds, never rewritten: a paced controller times it on the scaled clock
     if opts.sim:
         from dyno.sim.bus import BusFaults
+        from dyno.sim.elf_firmware import elf_spec as _elf_spec
         from dyno.sim.rig import SimRig
 
         if clock is not None:
@@ -265,7 +249,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      run_enable_wired=rig_cfg.limits.supervisor_timeout_s > 0,  # D7 in the kill chain
                      brake_hold_relay=rig_cfg.actuator.brake_hold_relay, pace=speed,  # K3: as rig.toml declares it
                      bme280_address=sim_bme280_address(rig_cfg),  # (the air sensor too)
-                     firmware_elf=_firmware_elf(opts, rig_cfg, protocol))  # (None: the Python emulation)
+                     firmware_elf=_elf_spec(opts.firmware_elf, rig_cfg, protocol))  # (None: the Python emulation)
         bus, actuators = sim.bus, sim.actuators
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
             from dyno.session.safety import twin_outputs

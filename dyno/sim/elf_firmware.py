@@ -56,6 +56,24 @@ def find_harness(path: str | os.PathLike | None = None) -> Path:
     return p
 
 
+def elf_spec(elf, rig_cfg, protocol: str) -> dict | None:
+    """``--firmware-elf``: the ELF and the link it is reached by (the rig file's I2C address and clock), or None
+    without one; a rig file or protocol the harness cannot serve is refused in one line."""
+    if elf is None:
+        return None
+    from dyno.errors import ConfigError
+
+    if rig_cfg.transport != "i2c":
+        raise ConfigError(str(rig_cfg.path), "transport", "--firmware-elf runs the firmware's I2C link; "
+                          f"this rig file's link is {rig_cfg.transport}")
+    if protocol != "v2":
+        raise ConfigError("command line", "--protocol", "--firmware-elf runs the v2 firmware")
+    if not Path(elf).is_file():
+        raise ConfigError(str(elf), "--firmware-elf", "no such file (build it: make -C firmware sim)")
+    return {"elf": Path(elf), "i2c_khz": max(1, round(rig_cfg.i2c.bus_speed_hz / 1000)),
+            "address": rig_cfg.i2c.firmware_address}
+
+
 class ElfFirmware:
     """The firmware ELF as the simulated rig's Nano (the interface of :class:`dyno.sim.device.EmulatedFirmware`
     that the bus and the drills use: ``capture``, ``write``/``read``, ``reset``, ``service``, ``running``).

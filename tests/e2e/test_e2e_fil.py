@@ -118,3 +118,30 @@ def test_fil_pi_freeze_is_cut_by_the_real_firmwares_run_enable(tmp_path):
     assert result["outputs"]["pads_off_rotor"] and drill["pads_off_within_bound"], result["outputs"]
     assert result["firmware"]["run_enable_changes"] >= 2 and result["firmware"]["late_events"] == 0
     assert result["link"]["frames_lost"] == 0
+
+
+@pytest.mark.quick
+def test_fil_bad_input_is_one_line_and_exit_2(tmp_path):
+    """A missing ELF, a serial rig file (the harness's master is I2C), the ELF on the real rig: one line naming the
+    file or field, exit 2, nothing written."""
+    from tests.bad_input import one_line_failures, snapshot
+
+    repo = sim_elf().parents[2]
+    serial_rig = repo / "hardware" / "rig-input-torque.toml"
+    assert 'transport = "serial"' in serial_rig.read_text()
+
+    def run(*argv):
+        return subprocess.run([sys.executable, "-m", "dyno", *argv], capture_output=True, text=True, timeout=120,
+                              cwd=tmp_path)
+
+    own_rig = tmp_path / "rig.toml"  # (a rig of one's own: the shipped file is never taken for real hardware)
+    own_rig.write_text((repo / "hardware" / "rig.toml").read_text())
+    before = snapshot(tmp_path)
+    cases = [("no such ELF", ["run", "--sim", "--headless", "--firmware-elf", str(tmp_path / "none.elf")],
+              ["none.elf", "--firmware-elf"]),
+             ("a serial rig file", ["run", "--sim", "--headless", "--rig", str(serial_rig), "--firmware-elf",
+                                    str(sim_elf())], ["rig-input-torque.toml", "transport"]),
+             ("the UI off the sim", ["ui", "--rig", str(own_rig), "--firmware-elf", str(sim_elf())],
+              "--firmware-elf")]
+    assert not one_line_failures(cases, run)
+    assert snapshot(tmp_path) == before
