@@ -245,6 +245,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      brake_hold_relay=rig_cfg.actuator.brake_hold_relay, pace=speed,  # K3: as rig.toml declares it
                      bme280_address=sim_bme280_address(rig_cfg))  # (the air sensor too)
         bus, actuators = sim.bus, sim.actuators
+        sim.model.engine_enabled = False  # the Pi's outputs from power-up: the engine killed (the chain open)
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
             from dyno.session.safety import twin_outputs
 
