@@ -394,7 +394,10 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             logging.getLogger("dyno.outputs").error(
                 "dyno: the outputs driver did not run for more than the Nano's heartbeat: the brake's position "
                 "is unknown; ignition off and a full-stroke release (the chain stays open until it has run)")
-            self._safe_state_now(False)
+            if self._depth > 1:  # inside another command (one frozen holding the lock): on its way out, as safe_state
+                self._pending_safe = bool(self._pending_safe)
+            else:
+                self._safe_state_now(False)
 
     def _power_off(self, now: float) -> None:
         if self._enable.value:
