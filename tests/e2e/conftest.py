@@ -31,6 +31,16 @@ def tare_allowance(result: dict, point: dict) -> float:
     return 2.6 * point["efficiency"] * tare.get("u_nm", 0.0) / t if t > 0 else 0.0
 
 
+def tare_error(result: dict, point: dict) -> float:
+    """What the tare's own error moved the point's efficiency by (a fraction).  In the ideal world the sensor is
+    exactly its calibration and the secondary is at rest when the zero is read (idle is below engagement), so
+    the zero read (``torque_tare.zero_nm``) is the tare's error: every point's torque reads low by it.  The zero
+    is one measurement that every point shares, its noise set by when the run reads it."""
+    tare = result.get("torque_tare") or {}
+    t = point.get("torque_secondary_nm") or 0.0
+    return -point["efficiency"] * tare.get("zero_nm", 0.0) / t if t else 0.0
+
+
 # A shorter plan for tests that only need a few points (aborts, kills).
 QUICK_PLAN = replace(TestPlan(), max_measure_s=3.0, warmup_s=2.0)
 

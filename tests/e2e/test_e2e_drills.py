@@ -325,7 +325,7 @@ def test_mock_pins_drill_as_a_real_process(tmp_path):
     o = out["outputs"]
     assert o["brake_position_mm"] <= 1.0 and o["pads_off_rotor"] is True  # inside the 1.0 mm free travel
     assert o["brake_estimate"] == 0.0 and o["driver_released"] is True
-    assert o["driver_release_basis"] == "full_stroke_time"
+    assert o["driver_release_basis"] == "end_of_travel"  # the shipped rig declares the end switch
     assert 0.0 <= o["release_s"] <= o["release_bound_s"]
 
 
