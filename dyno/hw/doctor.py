@@ -205,7 +205,7 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         report.add("brake release", OK, f"released ({cfg.actuator.full_stroke_s:.1f} s stroke)", essential=False)
         before = _boots(cfg, transport)
         act.reset_arduino()
-        after = _new_boot(cfg, transport, before, act.clock)
+        after = _new_boot(cfg, transport, before, act.clock, act)
         if cfg.protocol in ("v1", "v2") and before is not None:
             moved = after is not None and after != before
             what = "boot id" if cfg.protocol == "v2" else "boot count"
@@ -238,7 +238,7 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
 BOOT_DEADLINE_S = 3.0
 
 
-def _new_boot(cfg, transport, before, clock):
+def _new_boot(cfg, transport, before, clock, act=None):
     """The boot identity after a reset: asked until it differs from ``before`` or :data:`BOOT_DEADLINE_S` has
     passed (a fixed wait shorter than the bootloader read the old boot, or none: "reset line not wired?")."""
     end = clock.now() + BOOT_DEADLINE_S
@@ -247,6 +247,8 @@ def _new_boot(cfg, transport, before, clock):
         if (now_boot is not None and now_boot != before) or clock.now() >= end:
             return now_boot
         clock.sleep(0.1)
+        if act is not None:
+            act.tick(clock.now())  # (doctor is the loop here: its tick is the watchdog's sign of life)
 
 
 def _boots(cfg, transport):

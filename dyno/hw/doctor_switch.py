@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+from dyno.errors import SafetyAbort
 from dyno.hw.doctor_report import FAIL, OK, SKIP
 
 #: end-switch reads per position (0.1 s of them): a loose contact that closes on a few % of reads shows
@@ -29,6 +30,7 @@ def _switch_sample(act) -> str | None:
     for _ in range(SWITCH_READS):
         reads.add(act.end_switch_closed())
         act.clock.sleep(0.1 / SWITCH_READS)
+        act.tick(act.clock.now())  # (doctor is the loop here: its tick is the watchdog's sign of life)
     return "chatters" if len(reads) > 1 else ("closed" if True in reads else "open")
 
 
@@ -96,14 +98,18 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
                "or connector off?")
         report.add("end switch", FAIL, f"{wire} {why} (check the switch and its wire; nothing was moved)")
         return
+    found = _found(act)
+    if found:  # the driver judged the switch on the start-up release already: no step needed to name it
+        report.add("end switch", FAIL, f"{wire} {found} (check the switch and its wire; nothing was moved)")
+        return
     reader = _reader(cfg, transport)
     _poll_edges(reader, clock)  # (the first poll drains what the device buffered while nobody polled)
-    edges = _edges(reader, clock, QUIET_S, cfg.poll_hz)
+    edges = _serviced(act, reader, clock, QUIET_S, cfg.poll_hz)
     if edges:
         report.add("end switch", FAIL, f"{wire}: not stepped: {edges} Hall edges in {QUIET_S:.0f} s with the "
                    "ignition killed (the engine or a shaft still turns): stop the engine, then run this again")
         return
-    if not _arm_run_enable(reader, cfg, clock):
+    if not _arm_run_enable(act, reader, cfg, clock):
         report.add("end switch", FAIL, f"{wire}: not stepped: the Nano's run-enable did not close the chain "
                    f"within {ARM_WAIT_S:.0f} s (firmware v2 with its supervisor, [limits] supervisor_timeout_s)")
         return
@@ -113,6 +119,10 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
         turned = _serviced(act, reader, clock, 2 * cfg.actuator.relay_settle_s + cfg.actuator.step_s + 0.05,
                            cfg.poll_hz)
         out = _switch_sample(act)
+    except SafetyAbort as e:  # the driver refused the step (it latched on a fault it found): name the switch
+        report.add("end switch", FAIL, f"{wire}: the step was refused: {_found(act) or e} (check the switch and "
+                   "its wire)")
+        return
     finally:
         act.engine_kill(True)  # open again at once: K3 releases by wiring, the driver's release follows
     act.safe_state()
@@ -127,6 +137,12 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
     report.add("brake step", OK, f"{cfg.actuator.step_s:.2f} s out with the kill chain closed for the step alone, "
                "engine stopped, watchdog running; back by K3 and the release", essential=False)
     check_end_switch(report, cfg, act, at_stop, out, back, hw.persist_faults)
+
+
+def _found(act) -> str | None:
+    """The end-switch fault the driver found this session (None: none)."""
+    found = [f for f in act.faults if f.get("channel") == "end_switch" and not f.get("inherited")]
+    return found[0]["detail"] if found else None
 
 
 def _reader(cfg, transport):
@@ -151,15 +167,7 @@ def _poll_edges(reader, clock) -> int:
     return sum(1 for ev in events if ev.channel in (v1.CH_PRIMARY, v1.CH_SECONDARY))
 
 
-def _edges(reader, clock, seconds: float, poll_hz: float) -> int:
-    n, t_end = 0, clock.now() + seconds
-    while clock.now() < t_end:
-        n += _poll_edges(reader, clock)
-        clock.sleep(1.0 / poll_hz)
-    return n
-
-
-def _arm_run_enable(reader, cfg, clock) -> bool:
+def _arm_run_enable(act, reader, cfg, clock) -> bool:
     """The Nano's run-enable on (armed by the reader's polls); True where the rig has none in its chain."""
     if getattr(reader, "supervisor_command", None) is None:
         return True
@@ -169,6 +177,7 @@ def _arm_run_enable(reader, cfg, clock) -> bool:
         if reader.supervisor_armed:
             return True
         clock.sleep(1.0 / cfg.poll_hz)
+        act.tick(clock.now())
     return reader.supervisor_present is False  # (a firmware without the supervisor: the chain has no Q2)
 
 

@@ -102,8 +102,6 @@ def test_efficiency_over_one_is_flagged_not_accepted(full_run, tmp_path):
     from dyno.analysis.calibration import latest, load_history
     from dyno.runlog.replay import replay
 
-from .conftest import tare_error
-
     meta_cal = json.loads((Path(full_run["run_dir"]) / "calibration.json").read_text())
     bad = tmp_path / "cal.csv"
     bad.write_text("date,slope_counts_per_nm,intercept_counts,r2,n_samples,lever_arm_m,"
