@@ -224,18 +224,27 @@ def _step_ci(rp: np.ndarray, i: int) -> float:
     return 0.5 * abs(float(rp[hi]) - float(rp[lo]))
 
 
-def flatness(loads_nm, shift_out_rpm) -> dict:
+def flatness(loads_nm, shift_out_rpm, shift_out_ci95_rpm=None) -> dict:
     """Shift-out rpm against the secondary load: the straight line's slope (rpm per N m) and its 95 %
-    half-width, and the spread (max - min) -- a flat shift-out holds one engine speed whatever the load."""
+    half-width, and the spread (max - min) -- a flat shift-out holds one engine speed whatever the load.
+
+    The half-width is the larger of the fit's (its residuals, n - 2 dof) and the rows' own (each shift-out's
+    ``shift_out_ci95_rpm`` carried through the slope's weights): three rows leave one degree of freedom, and
+    rows that happen to line up say nothing of how well each was measured."""
     x = np.asarray(loads_nm, dtype=float)
     y = np.asarray(shift_out_rpm, dtype=float)
+    u = np.full(x.shape, np.nan) if shift_out_ci95_rpm is None else np.asarray(shift_out_ci95_rpm, dtype=float)
     ok = np.isfinite(x) & np.isfinite(y)
-    x, y = x[ok], y[ok]
+    x, y, u = x[ok], y[ok], u[ok]
     out = {"n": int(x.size), "spread_rpm": float(y.max() - y.min()) if y.size else math.nan,
            "slope_rpm_per_nm": math.nan, "slope_ci95_rpm_per_nm": math.nan}
     if x.size >= 2 and np.ptp(x) > 0:
         fit = stats.linregress(x, y)
         out["slope_rpm_per_nm"] = float(fit.slope)
-        if x.size >= 3:
-            out["slope_ci95_rpm_per_nm"] = _t975(x.size - 2) * float(fit.stderr)
+        ci = _t975(x.size - 2) * float(fit.stderr) if x.size >= 3 else math.nan
+        if np.all(np.isfinite(u)):
+            dx = x - x.mean()
+            rows = float(np.sqrt(np.sum((dx / np.sum(dx * dx) * u) ** 2)))  # each row's ci95 through its weight
+            ci = rows if not math.isfinite(ci) else max(ci, rows)
+        out["slope_ci95_rpm_per_nm"] = ci
     return out

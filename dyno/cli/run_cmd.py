@@ -90,6 +90,9 @@ def add_air_arguments(p) -> None:
                    help="with --sim: the simulated belt requires the secondary thrust of the capstan tier at "
                         "belt-sheave friction F (0.4 is the thesis's); default: the full belt model's thrust "
                         "ratio, from its table at the operating point (docs/belt-model.md)")
+    p.add_argument("--sim-brake-start", type=float, default=None, metavar="MM",
+                   help="with --sim: the simulated brake starts applied at MM of the actuator's travel (0..40; "
+                        "default 0, released); the host is not told (docs/safety.md, start-up)")
     p.add_argument("--sim-ideal", action="store_true",
                    help="with --sim: perfect knowledge (the engine exactly its map, the sensor exactly its "
                         "calibration, the J1349 reference day): for checks of statistics alone")
@@ -118,6 +121,14 @@ def air_options(args, sim_kw: dict, prog: str = "dyno run"):
             sim_kw[key] = float(v)
     if args.sim_ideal:
         sim_kw["ideal"] = True
+    brake_mm = getattr(args, "sim_brake_start", None)
+    if brake_mm is not None:
+        from dyno.sim.rig_params import RigParams
+
+        travel_mm = RigParams.actuator_travel_mm
+        if not (0.0 <= brake_mm <= travel_mm):  # (NaN fails too)
+            return None, f"{prog}: --sim-brake-start: expected millimetres of travel 0..{travel_mm:g}, got {brake_mm:g}"
+        sim_kw["brake_start_mm"] = float(brake_mm)
     dev = getattr(args, "sim_tune_deviation", None)
     if dev is not None:
         if not (0.0 <= dev <= 0.5):  # (NaN fails too)

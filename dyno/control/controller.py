@@ -30,7 +30,7 @@ from dyno.control.api import LOADED_STATES as _LOADED_STATES
 from dyno.control.api import TRANSITIONS, State, TestPlan
 from dyno.control.engine import EngineContext
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
-from dyno.control.outputs import APPLY, DeadlineService, enter_safe_state
+from dyno.control.outputs import APPLY, DeadlineService, enter_safe_state, ignition_hold_ended
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.errors import SafetyAbort
 from dyno.protocol import v1
@@ -361,6 +361,8 @@ class TestController(Measuring):
         p = self.plan
         enter_safe_state(self.act, latch=False)  # the start of a run (the brake position is not known)
         self.throttle_frac = 0.0
+        if not await ignition_hold_ended(self):  # (dyno.control.outputs: the start-up release's full stroke)
+            return
         self._enter(State.WAIT_ENGINE, f"start the engine (primary > {p.engine_running_rpm:.0f} rpm)")
         self.act.engine_kill(False)
         if self.on_wait_engine:

@@ -44,6 +44,10 @@ class Actuators(Protocol):
     def tick(self, now_s: float) -> None:
         """Give time-based behaviour (end of a release stroke) a chance to act."""
 
+    # Optional: ``ignition_held`` (bool), the kill chain must stay open: the brake's position is unknown
+    # (start-up, a gap in the driver's knowledge) until a release has run its full stroke; meanwhile
+    # ``engine_kill(False)`` is refused (:func:`ignition_hold_ended`).
+
 
 def enter_safe_state(actuators, latch: bool = True) -> None:
     """``actuators.safe_state(latch=...)``; for an implementation without latching, its plain safe state."""
@@ -90,3 +94,29 @@ class DeadlineService:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+
+
+async def ignition_hold_ended(engine) -> bool:
+    """Wait (the engine's rig seconds, outputs serviced) while ``engine.act`` holds the kill chain open: at a
+    run's start the brake's position is not known until its release has run the full stroke, and with K3 on
+    the chain, closing it would end the wired release (docs/safety.md, "Start-up").  Logs the hold; False
+    (the engine aborted, the ignition never enabled) if it outlasts two strokes."""
+    act = engine.act
+
+    def held() -> bool:
+        return bool(getattr(act, "ignition_held", False))
+
+    if not held():
+        return True
+    t0 = engine.rig_now()
+    limit_s = 2.0 * float(getattr(act, "brake_full_stroke_s", 8.0)) + 1.0
+    engine._log("ignition_hold", reason="the brake's position is unknown: its release runs the full stroke "
+                                        "before the ignition is enabled")
+    while held():
+        if engine.rig_now() - t0 > limit_s:
+            engine.abort("release_not_confirmed", f"the brake's start-up release did not end within {limit_s:.0f} s: "
+                                                  "the ignition stays off")
+            return False
+        await engine.rig_sleep(0.05)
+    engine._log("ignition_hold_end", held_s=engine.rig_now() - t0)
+    return True

@@ -30,7 +30,7 @@ class BlockingMixin:
                     if self._moving == STOP and self._target == STOP:
                         return
                     wait = self._next_event_s(now)
-                self.clock.sleep(max(0.0, wait - now) if wait is not None else self._settle_s)
+                self.clock.sleep(min(max(0.0, wait - now) if wait is not None else self._settle_s, self._slice_s()))
         finally:
             with self._held():
                 if self._generation == gen and not self.closed:
@@ -54,7 +54,13 @@ class BlockingMixin:
                     return False
                 wait = self._next_event_s(now)
             step = (wait - now) if wait is not None else self._settle_s
-            self.clock.sleep(min(max(step, 1e-3), max(t_end - now, 1e-3)))
+            self.clock.sleep(min(max(step, 1e-3), max(t_end - now, 1e-3), self._slice_s()))
+
+    def _slice_s(self) -> float:
+        """The longest sleep here: half the Nano's heartbeat, so a helper's own wait is never taken for a gap in
+        the driver's knowledge (:meth:`dyno.hw.outputs.GpioActuators._integrate`)."""
+        gap = self.config.limits.supervisor_timeout_s
+        return 0.5 * gap if gap > 0 else float("inf")
 
     def reset_arduino(self) -> None:
         """Pulse the Nano's RESET, then wait for its bootloader to hand over (blocking).

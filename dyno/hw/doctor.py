@@ -19,6 +19,8 @@ from pathlib import Path
 
 
 from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Check, Report  # noqa: F401 (the report's types)
+from dyno.hw.doctor_switch import (SWITCH_READS, _switch_sample, check_end_switch,  # noqa: F401
+                                   check_end_switch_k3, check_safety_inputs)
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:
@@ -187,7 +189,7 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         report.add("brake release", OK, f"released ({cfg.actuator.full_stroke_s:.1f} s stroke)", essential=False)
         before = _boots(cfg, transport)
         act.reset_arduino()
-        after = _new_boot(cfg, transport, before, act.clock)
+        after = _new_boot(cfg, transport, before, act.clock, act)
         if cfg.protocol in ("v1", "v2") and before is not None:
             moved = after is not None and after != before
             what = "boot id" if cfg.protocol == "v2" else "boot count"
@@ -196,11 +198,8 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         else:
             report.add("arduino reset", WARN, "pulsed; cannot confirm without an INFO frame", essential=False)
         if cfg.actuator.brake_hold_relay:
-            # K3's NO contacts carry the driver's path: with the ignition killed (doctor never enables it) and
-            # the Nano not armed, the actuator cannot move; a step would prove nothing (hardware/README.md)
-            report.add("brake step", SKIP, "K3 fitted (actuator.brake_hold_relay): the actuator moves only with the "
-                       "kill chain closed, not in doctor; a run's release checks it (the end switch confirming)",
-                       essential=False)
+            # K3's NO contacts carry the driver's path: the step needs the kill chain closed (dyno.hw.doctor_switch)
+            check_end_switch_k3(report, cfg, hw, transport, act.clock)
             return
         at_stop = _switch_sample(act)
         act.step(APPLY, cfg.actuator.step_s)
@@ -219,54 +218,11 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         hw.__exit__(None, None, None)  # release stroke finished, outputs de-energised, pins released
 
 
-#: end-switch reads per position (0.1 s of them): a loose contact that closes on a few % of reads shows
-SWITCH_READS = 200
-
-
-def _switch_sample(act) -> str | None:
-    """"closed", "open" or "chatters" over :data:`SWITCH_READS` reads (None: no switch declared)."""
-    if act.end_switch_closed() is None:
-        return None
-    reads = set()
-    for _ in range(SWITCH_READS):
-        reads.add(act.end_switch_closed())
-        act.clock.sleep(0.1 / SWITCH_READS)
-    return "chatters" if len(reads) > 1 else ("closed" if True in reads else "open")
-
-
-def check_end_switch(report: Report, cfg, act, at_stop: str, out: str, back: str, persisted: bool) -> None:
-    """The end-of-travel switch against a measured stroke: closed at the retracted stop, open one brake step
-    out, closed again back at the stop — each over :data:`SWITCH_READS` reads — and no fault found by the
-    driver on the way.  A pass clears a standing end-switch fault (:mod:`dyno.hw.rig_faults`): the rig may be
-    armed again."""
-    wire = f"GPIO{cfg.pins.brake_released_input} (pins.brake_released_input)"
-    why = []
-    if "chatters" in (at_stop, out, back):
-        why.append("chatters (reads both ways at one position): a loose contact or a worn switch?")
-    elif at_stop != "closed" or back != "closed":
-        why.append("reads open at the retracted stop: stuck open, wire cut or connector off?")
-    elif out != "open":
-        why.append(f"reads closed {cfg.actuator.step_s:.2f} s out from the stop: stuck closed or shorted to ground?")
-    found = [f for f in act.faults if f.get("channel") == "end_switch" and not f.get("inherited")]
-    if found and not why:
-        why.append(found[0]["detail"])
-    if why:
-        report.add("end switch", FAIL, f"{wire} {'; '.join(why)} (check the switch and its wire)")
-        return
-    cleared = False
-    if persisted:
-        from dyno.hw import rig_faults
-
-        cleared = rig_faults.clear("end_switch")
-    report.add("end switch", OK, f"{wire}: closed at the stop, open {cfg.actuator.step_s:.2f} s out, closed back"
-               + ("; the standing end-switch fault is cleared" if cleared else ""))
-
-
 #: after a reset, how long the new boot may take to answer (Optiboot ~1 s after an external reset + start-up)
 BOOT_DEADLINE_S = 3.0
 
 
-def _new_boot(cfg, transport, before, clock):
+def _new_boot(cfg, transport, before, clock, act=None):
     """The boot identity after a reset: asked until it differs from ``before`` or :data:`BOOT_DEADLINE_S` has
     passed (a fixed wait shorter than the bootloader read the old boot, or none: "reset line not wired?")."""
     end = clock.now() + BOOT_DEADLINE_S
@@ -275,6 +231,8 @@ def _new_boot(cfg, transport, before, clock):
         if (now_boot is not None and now_boot != before) or clock.now() >= end:
             return now_boot
         clock.sleep(0.1)
+        if act is not None:
+            act.tick(clock.now())  # (doctor is the loop here: its tick is the watchdog's sign of life)
 
 
 def _boots(cfg, transport):
@@ -299,6 +257,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
     report = Report()
     injected = bus is not None  # a simulated or fake bus: no real pins behind this doctor
     report.add("rig file", OK, f"{cfg.path} (protocol {cfg.protocol}, poll {cfg.poll_hz:g} Hz)", essential=False)
+    check_safety_inputs(report, cfg)
     kind = transport_kind or cfg.transport
     run_cfg = check_link_budget(report, cfg if kind == cfg.transport else replace(cfg, transport=kind))
 

@@ -78,11 +78,11 @@ class EndSwitch:
 
     def judge(self, t_s: float, tracked: float | None, travel: float, stroke_s: float, doing: str) -> bool:
         """Read the switch once; True for a plausible closed reading.  A closed reading the travel rules out
-        sets the fault (and returns False).  ``tracked`` None: the position is unknown (start-up), any
-        closing is plausible."""
+        sets the fault (and returns False).  ``tracked``: the estimate from the last known stop (the driver
+        does not judge while the position is unknown)."""
         if self.fault is not None or not self.closed():
             return False
-        if tracked is None or tracked <= tolerance(travel):
+        if tracked <= tolerance(travel):
             return True
         self.set_fault(t_s, f"closed {doing} at an estimated {tracked * stroke_s:.2f} s of travel "
                             f"({100 * tracked:.1f} % of the stroke) from the retracted end, beyond the "

@@ -38,9 +38,13 @@ LOOSE_CLOSED_P = 0.05
 
 
 class _BridgePin(RecordingPin):
+    _carried = False  # the level reached the wiring once (a pin claimed at its idle level changes nothing, but
+    #                   the copper behind it follows that level from then on: e.g. a kill pin claimed low)
+
     def _change_state(self, value):
         changed = super()._change_state(value)
-        if changed and self.factory.bridge is not None:
+        if (changed or not self._carried) and self.factory.bridge is not None:
+            self._carried = True
             self.factory.bridge(self.info.name, float(value))
         return changed
 

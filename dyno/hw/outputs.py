@@ -106,7 +106,13 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
         # as _position is after a fault): what the end switch's readings are judged against.  None: unknown.
         self._tracked: float | None = None
         self._travel = 0.0  # travel integrated since that stop, both ways (the estimate's error grows with it)
-        self._wired_release_maybe = False  # K3 may have moved the brake behind the estimate (see _integrate)
+        # The position is not known (start-up; a gap in this driver's knowledge: K3 may have moved the brake,
+        # see _integrate): the next release runs its full stroke by time, a closed switch never ends it, and
+        # until it has run the ignition stays off (the kill chain open, K3 releasing) and no apply is taken.
+        self._blind = True
+        self._lost_while_running = False  # a gap came while the chain was closed: open it (see _integrate)
+        self._wired_release_maybe = False  # a gap with the chain open: K3 may have released behind the estimate
+        self.knowledge_lost: list[float] = []  # the times a gap made the position unknown
         self._moved_since_release = True  # a command moved the brake since the last confirmed release
         self._step_s: float | None = None  # pending timed step: duration once powered
         self._stop_at_s: float | None = None
@@ -146,6 +152,8 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
     def throttle(self, fraction: float) -> None:
         f = min(1.0, max(0.0, float(fraction)))
         with self._held():
+            if not self.closed:
+                self._catch_up(self.clock.now())
             if f > 0 and self._latched:
                 self.refused.append((self.clock.now(), "throttle", f))
                 raise SafetyAbort("throttle refused: safe state latched")
@@ -154,9 +162,12 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
 
     def engine_kill(self, killed: bool) -> None:
         with self._held():
-            if not killed and self._latched:
+            if not killed and not self.closed:
+                self._advance(self.clock.now())  # (a release that has just run its stroke ends the hold)
+            if not killed and (self._latched or self._blind):
                 self.refused.append((self.clock.now(), "engine_run", True))
-                raise SafetyAbort("engine run refused: safe state latched")
+                raise SafetyAbort("engine run refused: " + ("safe state latched" if self._latched else
+                                                           self._blind_why()))
             self._kill.value = bool(killed)
             self._killed = bool(killed)
 
@@ -202,7 +213,7 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
         self._integrate(now)
         self._latched = self._latched or latch
         running = self._safe_release and self.release_basis is None
-        done = (self.release_basis is not None and not self._moved_since_release
+        done = (self.release_basis is not None and not self._moved_since_release and not self._blind
                 and self._target == STOP and self._moving == STOP)
         if running or done:
             return
@@ -273,51 +284,10 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
                 raise SafetyAbort(f"re-arm refused: {why}")
             self._latched = False
 
-    def rearm_refusal(self) -> str | None:
-        """Why the latch may not be cleared now (None: it may): the release running, or a wiring fault."""
-        if self._safe_release and self.release_basis is None:
-            return "the brake's release stroke is still running"
-        return self.fault_refusal()
-
-    def fault_refusal(self) -> str | None:
-        """A standing wiring fault (the end switch's): no GO, no re-arm, until ``dyno doctor --toggle`` passes."""
-        es = self._end_switch
-        if es is not None and es.fault:
-            return (f"the end-of-travel switch {es.fault.partition(':')[0]}: fix it, then `dyno doctor --toggle` "
-                    "must pass before the rig is armed again")
-        return None
-
-    def end_switch_closed(self) -> bool | None:
-        """The end switch's raw reading (None: none declared) — for ``dyno doctor``, whatever its verdict."""
-        return None if self._end_switch is None else self._end_switch.closed()
-
-    @property
-    def latched(self) -> bool:
-        return self._latched
-
-    @property
-    def released(self) -> bool:
-        """Brake at its release stop with the actuator de-energised."""
-        return self._moving == STOP and self._target == STOP and self._position <= 0.0 \
-            and (self.closed or not self._enable.value)
-
-    @property
-    def release_confirmed(self) -> bool:
-        """The last safe state's release is known complete (``release_basis``) and the actuator is off."""
-        return self.released and self.release_basis is not None
-
-    @property
-    def brake_position(self) -> float:
-        """Estimated travel, 0 released .. 1 full apply."""
-        return min(1.0, max(0.0, self._position))
-
-    @property
-    def throttle_fraction(self) -> float:
-        return self._throttle_fraction
-
-    @property
-    def engine_killed(self) -> bool:
-        return self._killed  # kept in Python: readable after close()
+    def _blind_why(self) -> str:
+        left_s = max(0.0, self._position + END_STOP_OVERRUN_FRACTION) * self.brake_full_stroke_s
+        return (f"the brake's position is unknown until its release has run the full stroke (~{left_s:.1f} s "
+                "more; a closed end switch does not shorten it)")
 
     def close(self) -> None:
         """Drive every output to its safe value, then release the pins.
@@ -355,6 +325,8 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
     def _command(self, direction: int, duration_s: float | None) -> int:
         if direction not in (APPLY, RELEASE, STOP):
             raise ValueError(f"brake direction must be APPLY, RELEASE or STOP, got {direction!r}")
+        if not self.closed:
+            self._catch_up(self.clock.now())  # (a gap found now opens the chain before this command acts)
         if self._latched:
             # Nothing but the release runs while latched: STOP would freeze the brake on the rotor.
             self.refused.append((self.clock.now(), "brake", direction))
@@ -363,6 +335,10 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             return -1
         if self.closed:
             raise SafetyAbort("actuators closed")
+        if direction == APPLY and self._blind:
+            # (with K3 an apply needs the chain closed, and it stays open until the blind release has run)
+            self.refused.append((self.clock.now(), "brake", direction))
+            raise SafetyAbort("brake apply refused: " + self._blind_why())
         now = self.clock.now()
         self._integrate(now)
         self._generation += 1
@@ -370,6 +346,8 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             self._moved_since_release = True
             if self._end_switch is not None and direction == RELEASE:
                 self._end_switch.closed_seen = False
+            if direction == RELEASE and self._blind:
+                self._position = max(self._position, 1.0)  # position unknown: a full stroke
         if self._safe_release and self.release_basis is None:
             self.release_interrupted = f"brake command {direction:+d} stopped the release (not latched)"
         self._safe_release = False
@@ -389,13 +367,37 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
         if self.config.actuator.brake_hold_relay and 0 < gap < dt:
             # This driver did not run for longer than the Nano's heartbeat (a frozen Pi): the kill chain may
             # have opened meanwhile and K3 driven the brake toward its stop by wiring, behind the estimate.
+            # With the chain open (this driver's kill) K3 can only have released: the estimate stays an upper
+            # bound, but the switch is not judged against it until the next stop.  With it closed the position
+            # is unknown: this driver opens the chain now and releases by the full stroke (_catch_up).
             self._wired_release_maybe = True
+            if not self._killed:
+                self._blind = True
+                self._tracked = None
+                self.knowledge_lost.append(now)
+                self._lost_while_running = True
         if self._moving != STOP and dt > 0:
             d = self._moving * dt / self.brake_full_stroke_s
             self._position += d
             if self._tracked is not None:
                 self._tracked = min(self._tracked + d, 1.0 + END_STOP_OVERRUN_FRACTION)
                 self._travel += abs(d)
+
+    def _catch_up(self, now: float) -> None:
+        """Integrate to ``now``; a gap found while the chain was closed opens it and starts a full-stroke
+        release (not latched: the trip is the controller's, which sees the Nano's cut)."""
+        self._integrate(now)
+        if self._lost_while_running:
+            self._lost_while_running = False
+            import logging
+
+            logging.getLogger("dyno.outputs").error(
+                "dyno: the outputs driver did not run for more than the Nano's heartbeat: the brake's position "
+                "is unknown; ignition off and a full-stroke release (the chain stays open until it has run)")
+            if self._depth > 1:  # inside another command (one frozen holding the lock): on its way out, as safe_state
+                self._pending_safe = bool(self._pending_safe)
+            else:
+                self._safe_state_now(False)
 
     def _power_off(self, now: float) -> None:
         if self._enable.value:
@@ -410,22 +412,21 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
 
     def _advance(self, now: float) -> None:
         """Move one safe step toward the target; never relay-with-enable-on."""
-        self._integrate(now)
+        self._catch_up(now)
         if self._stop_at_s is not None and now >= self._stop_at_s - 1e-12:
             self._target, self._stop_at_s = STOP, None
         es = self._end_switch
         switch = False  # the switch (plausibly closed) and the estimate agree: at the retracted stop
-        if es is not None and es.trusted and self._wired_release_maybe:
-            # (K3 may have moved it: a closed switch is plausible anywhere, but it neither zeroes the estimate
-            # nor ends the release early: the release runs the estimate's length, the closing confirming it)
+        if es is not None and es.trusted and (self._blind or self._wired_release_maybe):
+            # (the position unknown: a closed switch is plausible anywhere, but it neither zeroes the estimate
+            # nor ends the release early: the release runs the full stroke, the closing confirming it; the
+            # switch's plausibility is judged at the next apply, from the zero that stroke gives)
             if self._target == RELEASE and es.closed():
                 es.closed_seen = True
         elif es is not None and es.trusted:
             if es.judge(now, self._tracked, self._travel, self.brake_full_stroke_s, self._doing()) \
                     and self._target == RELEASE:
                 es.closed_seen = True
-                if self._tracked is None:  # position unknown (start-up): the switch gives the first zero
-                    self._tracked = self._travel = 0.0
             switch = (self._target == RELEASE and es.closed_seen and self._tracked is not None
                       and self._tracked <= -tolerance(self._travel))
         if self._target != STOP and (switch or self._end_stop_reached(self._target)):
@@ -435,6 +436,8 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
             self._position = 1.0 if self._target == APPLY else 0.0  # re-zero on the stop
             self._tracked, self._travel = self._position, self._position
             self._wired_release_maybe = False
+            if self._target == RELEASE:
+                self._blind = False  # (a blind release started from the full-apply assumption: a full stroke)
             if self._target == RELEASE and self._safe_release:
                 self.release_basis = "end_of_travel" if confirmed else "full_stroke_time"
                 self._moved_since_release = False

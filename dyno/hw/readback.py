@@ -1,12 +1,70 @@
-"""What :class:`dyno.hw.outputs.GpioActuators` reports of its outputs: read back from the pins, not wished.
+"""What :class:`dyno.hw.outputs.GpioActuators` reports of its outputs: read back from the pins, not wished,
+and its state (the latch, the release, the ignition hold, a standing fault).
 
 A mixin of the driver: these read its devices and release state (with its lock held).
 """
 
 from __future__ import annotations
 
+from dyno.control.outputs import STOP
+
 
 class ReadbackMixin:
+    def rearm_refusal(self) -> str | None:
+        """Why the latch may not be cleared now (None: it may): the release running, or a wiring fault."""
+        if self._safe_release and self.release_basis is None:
+            return "the brake's release stroke is still running"
+        return self.fault_refusal()
+
+    def fault_refusal(self) -> str | None:
+        """A standing wiring fault (the end switch's): no GO, no re-arm, until ``dyno doctor --toggle`` passes."""
+        es = self._end_switch
+        if es is not None and es.fault:
+            return (f"the end-of-travel switch {es.fault.partition(':')[0]}: fix it, then `dyno doctor --toggle` "
+                    "must pass before the rig is armed again")
+        return None
+
+    @property
+    def ignition_held(self) -> bool:
+        """The kill chain must stay open: the brake's position is unknown (start-up, a gap) and its release
+        has not yet run the full stroke (the controller waits on this before it enables the ignition)."""
+        with self._held():
+            if not self.closed:
+                self._advance(self.clock.now())
+            return self._blind
+
+    def end_switch_closed(self) -> bool | None:
+        """The end switch's raw reading (None: none declared) — for ``dyno doctor``, whatever its verdict."""
+        return None if self._end_switch is None else self._end_switch.closed()
+
+    @property
+    def latched(self) -> bool:
+        return self._latched
+
+    @property
+    def released(self) -> bool:
+        """Brake at its release stop with the actuator de-energised."""
+        return self._moving == STOP and self._target == STOP and self._position <= 0.0 \
+            and (self.closed or not self._enable.value)
+
+    @property
+    def release_confirmed(self) -> bool:
+        """The last safe state's release is known complete (``release_basis``) and the actuator is off."""
+        return self.released and self.release_basis is not None
+
+    @property
+    def brake_position(self) -> float:
+        """Estimated travel, 0 released .. 1 full apply."""
+        return min(1.0, max(0.0, self._position))
+
+    @property
+    def throttle_fraction(self) -> float:
+        return self._throttle_fraction
+
+    @property
+    def engine_killed(self) -> bool:
+        return self._killed  # kept in Python: readable after close()
+
     def pin_states(self) -> dict[str, float]:
         """Electrical state of every output pin (1 = driven high), for doctor and tests."""
         devs = {"brake_enable": self._enable, "brake_direction": self._direction, "engine_kill": self._kill,

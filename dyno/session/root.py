@@ -251,6 +251,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                      bme280_address=sim_bme280_address(rig_cfg),  # (the air sensor too)
                      firmware_elf=_elf_spec(opts.firmware_elf, rig_cfg, protocol))  # (None: the Python emulation)
         bus, actuators = sim.bus, sim.actuators
+        sim.model.engine_enabled = False  # the Pi's outputs from power-up: the engine killed (the chain open)
         if opts.mock_pins:  # the Pi's own output code and E-stop input over a twin of the wiring
             from dyno.session.safety import twin_outputs
 

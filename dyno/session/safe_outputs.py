@@ -7,7 +7,9 @@ de-energised:
   actuator power and the actuator's true position against the brake's free travel.  The release is
   timed in true (simulated) time: ``safe_commanded_s`` (the last moment the outputs became safe, whoever
   commanded it), ``released_at_s`` (the pads left the rotor), ``release_s`` between them, and its bound
-  ``release_bound_s`` = (position then − free travel) ÷ actuator speed + 0.2 s.
+  ``release_bound_s`` = (position then − free travel) ÷ actuator speed + 0.2 s.  The start-up likewise:
+  ``startup_released_at_s`` (the pads first left the rotor; 0 if they never touched it) and
+  ``ignition_enabled_at_s`` (the kill chain first closed; None if it never did).
 * **real rig** (no position sensor): the driver's confirmation (:class:`dyno.hw.outputs.GpioActuators`):
   the end-of-travel input closed where ``rig.toml`` declares one, else the release stroke ran its full time
   uninterrupted (``release_basis``); a release interrupted or not confirmed makes the rig not safe, and
@@ -67,6 +69,9 @@ def sim_outputs(ctx) -> dict:
         outs["release_bound_s"] = max(0.0, mm_at - b.a0_mm) / b.v_act_mm_s + RELEASE_BOUND_MARGIN_S
         outs["release_within_bound"] = outs["release_s"] is not None and outs["release_s"] <= outs["release_bound_s"]
     outs["release_basis"] = "physics"
+    # the start-up, in true time: when the pads first left the rotor (0: never on it) and the chain first closed
+    outs["startup_released_at_s"] = model.startup_released_at_s
+    outs["ignition_enabled_at_s"] = model.ignition_enabled_at_s
     outs["brake_hold_relay"] = bool(model.brake_hold_relay)
     outs.update(engine_cut(model))
     if not outs["safe"]:

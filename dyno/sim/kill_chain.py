@@ -42,10 +42,17 @@ class KillChain:
             self._ignition_was_on = on
         return on
 
+    @property
+    def ignition_enabled_at_s(self) -> float | None:
+        """When the chain first closed (true time); None if it never did."""
+        return next((t_s for t_s, on, _ in self.__dict__.get("ignition_log", []) if on), None)
+
     def engine_cut(self, after_s: float = 0.0) -> tuple[float, str] | None:
         """(true time, by whom) of the first opening of the chain at or after ``after_s``, while the engine
-        ran or had been enabled; None if the chain stayed closed."""
+        ran or had been enabled; None if the chain stayed closed (or was never closed)."""
+        was_on = False
         for t_s, on, by in self.__dict__.get("ignition_log", []):
-            if not on and t_s >= after_s:
+            if not on and was_on and t_s >= after_s:
                 return t_s, by
+            was_on = was_on or on
         return None

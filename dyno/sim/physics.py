@@ -77,6 +77,7 @@ from dyno.sim.input_torque import InputTorqueSignals
 from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for, _load_tune
 from dyno.sim.rig_params import _resolve_map_path
 from dyno.sim.kill_chain import KillChain
+from dyno.sim.pads import PadsRecord
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
 from dyno.sim.sensors import LowPassFilter
 from dyno.sim.tune_deviation import parts_on_the_rig
@@ -87,7 +88,7 @@ __all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel",
            "Truth"]
 
 
-class RigModel(KillChain, RigSignals, InputTorqueSignals):
+class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
     """The simulated rig.  See the module docstring for the physics.
 
     Inputs (attributes set by the device/actuator emulation):
@@ -183,7 +184,6 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
         self._relay_goal = -1
         self._relay_made_s = -math.inf      # when the contacts made on the goal's side
         self.brake_hold_relay = False       # K3 fitted (rig.toml actuator.brake_hold_relay): see _substep
-        self.pads_off_at_s: float | None = 0.0  # when the actuator last came back inside the free travel
         # fault knobs
         self.stuck_hall: set[str] = set()
         self.adc_error_prob = p.adc_error_prob
@@ -215,7 +215,7 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
         self._slip = p.cvt_slip_base_frac
         self._locked = False
         self._cap = 0.0
-        self._act_mm = 0.0
+        self._act_mm = self._start_pads(p.brake_start_mm)  # (dyno.sim.pads: the pads' record)
         self._rotor_c = p.ambient_temp_c
         self._thermo_c = p.ambient_temp_c
         tau = p.thermometer_time_constant_s
@@ -224,7 +224,7 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
         self._t_p = 0.0
         self._t_s = 0.0
         self._t_gauge = 0.0
-        self._t_brake_cap = self.brake.torque_capacity_nm(0.0, self._rotor_c)
+        self._t_brake_cap = self.brake.torque_capacity_nm(self._act_mm, self._rotor_c)
         self._filt_x = self.lockin.steady_state(0.0)
         self._filt_y = 0.0
         self._next_edge_e = 1       # index k of the next primary edge (measured angle 2 pi k)
@@ -357,11 +357,7 @@ class RigModel(KillChain, RigSignals, InputTorqueSignals):
             run_s = t0 + h - self._relay_made_s  # powered time with the contacts made, in this cell
             if run_s > 0.0:
                 self._act_mm = brk.move_actuator_mm(self._act_mm, self._relay_goal, h if run_s > h else run_s)
-        a0 = brk.a0_mm
-        if a_before > a0 >= self._act_mm:  # the pads left the rotor in this cell (constant speed)
-            self.pads_off_at_s = t0 + h * (a_before - a0) / (a_before - self._act_mm)
-        elif self._act_mm > a0 >= a_before:
-            self.pads_off_at_s = None
+        self._note_pads(t0, h, a_before, self._act_mm)
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm + p.world_driveline_loss_frac * max(self._t_s, 0.0)  # after the helix
         if self.driveline.on:  # bearings, mesh, windage; the chain's load share (on the last cell's belt torque)

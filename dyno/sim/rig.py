@@ -115,6 +115,9 @@ class SimActuators:
         self._release_until_s: float | None = None
         self._latched = False
         self.refused: list[tuple[float, str, object]] = []  # (sim t, command, value) refused while latched
+        # The brake's position is not known until a release has run its full stroke: until then the ignition
+        # stays off (the kill chain open, K3 releasing) and no apply is taken (docs/safety.md, "start-up").
+        self._blind = True
 
     @property
     def history(self) -> list:
@@ -126,12 +129,15 @@ class SimActuators:
         self.refused.append((self.model.t_s, what, value))
         self.wiring.record("refused", f"{what}={value}")
         if hard:  # a command that would move the rig out of its safe state: the caller must know
-            raise SafetyAbort(f"{what} refused: safe state latched")
+            why = ("safe state latched" if self._latched else
+                   "the brake's position is unknown until its release has run the full stroke")
+            raise SafetyAbort(f"{what} refused: {why}")
 
     def brake(self, direction: int) -> None:
-        """Power the actuator in ``direction`` (STOP: enable off); refused while latched."""
+        """Power the actuator in ``direction`` (STOP: enable off); refused while latched, and an apply while
+        the position is unknown (:attr:`ignition_held`)."""
         direction = int(direction)
-        if self._latched:
+        if self._latched or (self._blind and direction > 0):
             self._refuse("brake", direction, hard=direction > 0)
             return
         self._release_until_s = None
@@ -146,9 +152,16 @@ class SimActuators:
         self.wiring.throttle(fraction)
 
     def engine_kill(self, killed: bool) -> None:
-        if self._latched and not killed:
+        if (self._latched or self.ignition_held) and not killed:
             self._refuse("engine_run", True, hard=True)
         self.wiring.engine_kill(killed)
+
+    @property
+    def ignition_held(self) -> bool:
+        """The kill chain must stay open: the brake's position is unknown until a release stroke has run its
+        full time (start-up)."""
+        self.service()
+        return self._blind
 
     def safe_state(self, latch: bool = False) -> None:
         """Throttle idle, ignition killed, release stroke started; ``latch``: refuse all else until re-armed.
@@ -180,6 +193,7 @@ class SimActuators:
         # offset from it, e.g. a UI on the real loop driving a paced simulation).
         if self._release_until_s is not None and self.model.t_s >= self._release_until_s:
             self._release_until_s = None
+            self._blind = False  # a full stroke ran: at the retracted stop, wherever it started
             self.wiring.brake(STOP)
 
     def service(self) -> None:

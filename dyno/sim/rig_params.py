@@ -187,6 +187,8 @@ class RigParams:
     # unpowered meanwhile. The driver's rig.toml relay_settle_s (30 ms) must cover it.
     relay_transfer_s: float = 0.015
     brake_free_travel_mm: float = 1.0
+    # where the actuator starts (--sim-brake-start): a rig switched on with the brake applied; the host is not told
+    brake_start_mm: float = 0.0
     brake_spring_rate_n_per_mm: float = 6.5      # ~22 steps of 0.2 s from light load to n_s < 1500 rpm
     master_cylinder_bore_mm: float = 19.05
     caliper_piston_bore_mm: float = 48.0

@@ -64,3 +64,22 @@ def test_coast_down_fit_recovers_a_known_loss():
     assert fit["torque_sys95_nm"][0] == pytest.approx(0.06 * fit["torque_nm"][0])
     with pytest.raises(ValueError, match="at least 6"):
         cd.fit_loss([1.0, 2.0], [-1.0, -1.0], j)
+
+
+def test_flatness_interval_carries_each_rows_own_interval():
+    """Three rows that happen to line up leave the fit a tiny interval; the rows' own shift-out intervals,
+    carried through the slope's weights, keep the stated one honest (a Monte Carlo of the rows' errors)."""
+    loads, ci95 = np.array([0.66, 3.34, 7.72]), np.array([5.0, 14.0, 32.0])
+    truth = 2720.0 + 44.0 * loads
+    lined_up = se.flatness(loads, truth + 0.01 * loads, ci95)
+    assert lined_up["slope_ci95_rpm_per_nm"] > 10 * se.flatness(loads, truth + 0.01 * loads)["slope_ci95_rpm_per_nm"]
+    rng = np.random.default_rng(7)
+    inside = 0
+    for _ in range(400):
+        y = truth + rng.normal(0.0, ci95 / 1.96)
+        f = se.flatness(loads, y, ci95)
+        inside += abs(f["slope_rpm_per_nm"] - 44.0) <= f["slope_ci95_rpm_per_nm"]
+    assert inside >= 0.93 * 400  # (95 % at least: the larger of the two intervals)
+    # two rows: no residuals, the rows' interval alone; without row intervals, none
+    assert math.isfinite(se.flatness(loads[:2], truth[:2], ci95[:2])["slope_ci95_rpm_per_nm"])
+    assert math.isnan(se.flatness(loads[:2], truth[:2])["slope_ci95_rpm_per_nm"])

@@ -18,12 +18,27 @@ from tests.rig_files import rig_without_run_enable  # noqa: F401 (the e2e tests 
 # tests/e2e/test_e2e_honest_numbers.py and bench/bench_uncertainty.py.
 IDEAL = RigParams(ideal=True)
 
+# A run's start-up: the simulated driver holds the ignition off until its first release has run the full stroke
+# (+ 10 % + 50 ms: dyno.sim.rig), the brake's position being unknown (docs/safety.md, "Start-up and gaps"). A
+# drill timed from the first frame to land in a state of the test comes this much later than it would without.
+STARTUP_HOLD_S = 8.0 * 1.1 + 0.05
+
 def tare_allowance(result: dict, point: dict) -> float:
     """What the tare (the zero read at rest before GO, ±u_nm) can move a point's efficiency by (~99 %):
     even with perfect knowledge the zero is *measured*, so a test of the statistics alone allows it."""
     tare = result.get("torque_tare") or {}
     t = abs(point.get("torque_secondary_nm") or 0.0)
     return 2.6 * point["efficiency"] * tare.get("u_nm", 0.0) / t if t > 0 else 0.0
+
+
+def tare_error(result: dict, point: dict) -> float:
+    """What the tare's own error moved the point's efficiency by (a fraction).  In the ideal world the sensor is
+    exactly its calibration and the secondary is at rest when the zero is read (idle is below engagement), so
+    the zero read (``torque_tare.zero_nm``) is the tare's error: every point's torque reads low by it.  The zero
+    is one measurement that every point shares, its noise set by when the run reads it."""
+    tare = result.get("torque_tare") or {}
+    t = point.get("torque_secondary_nm") or 0.0
+    return -point["efficiency"] * tare.get("zero_nm", 0.0) / t if t else 0.0
 
 
 # A shorter plan for tests that only need a few points (aborts, kills).

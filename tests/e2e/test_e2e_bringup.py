@@ -85,10 +85,8 @@ def test_a_serial_rig_is_charged_at_its_baud(tmp_path):
 def test_doctor_finds_each_wiring_fault_on_the_twin(tmp_path, capsys, drill, channel):
     """`dyno doctor --sim --mock-pins --rig R --drill NAME`: the fault there from the start; a non-zero exit and a
     line naming the channel (and its wire); without a drill, exit 0."""
-    # (K3 bypassed: doctor's end-switch check needs the brake step, which K3's open NO contacts would stop;
-    # with K3 fitted doctor skips it and says so: tests/hw/test_hw_doctor.py)
-    rig = _rig(tmp_path, **{"# brake_released_input = 27 ": "brake_released_input = 27 ",
-                            "brake_hold_relay = true": "brake_hold_relay = false"})
+    # the shipped rig as it is: K3 fitted, the end switch declared (doctor steps the brake with the chain closed)
+    rig = _rig(tmp_path)
     code = main(["doctor", "--sim", "--mock-pins", "--rig", str(rig)] + (["--drill", drill] if drill else []))
     out = capsys.readouterr().out
     if drill is None:
@@ -165,7 +163,7 @@ def test_doctor_on_the_twin_as_a_real_process(tmp_path):
     import subprocess
     import sys
 
-    rig = _rig(tmp_path, **{"# brake_released_input = 27 ": "brake_released_input = 27 "})
+    rig = _rig(tmp_path)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     base = [sys.executable, "-m", "dyno", "doctor", "--sim", "--mock-pins", "--rig", str(rig)]
     bad = subprocess.run(base + ["--drill", "hall-dead:primary"], capture_output=True, text=True, timeout=120,

@@ -13,6 +13,8 @@ from dyno.control.plans import plan_named
 from dyno.sim.physics import RigModel, RigParams
 from dyno.sim.rig_params import DEFAULT_DRIVELINE_LOSS, driveline_loss_of
 
+from .conftest import tare_error
+
 DRAG_NM, PER_KRPM_NM, LOAD_FRAC = DEFAULT_DRIVELINE_LOSS
 
 
@@ -59,7 +61,9 @@ def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_
     loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
     run = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", sim_params=params,
                               plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
-    inside = 0
+    # the tare (one zero that every point shares) judged on its own bound, its error taken out of each point
+    assert abs(run["torque_tare"]["zero_nm"]) <= 2.6 * run["torque_tare"]["u_nm"], run["torque_tare"]
+    inside, left = 0, []
     for p in run["points"]:
         assert p["driveline_loss_true_nm"] > HEAVY_DRAG_NM
         k = driven_loss_keys(p, loss)
@@ -67,7 +71,11 @@ def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_
         assert raw < -0.01  # the driveline makes the reading low
         # what the coast-down cannot see: the load share (the belt's output times LOAD_FRAC)
         unseen = -LOAD_FRAC * p["efficiency_true"]
-        fixed = k["efficiency_loss_corrected"] - p["efficiency_true"]
-        assert abs(fixed - unseen) < abs(raw) / 2 and abs(fixed - unseen) <= 0.01  # lands within 1 pp
+        fixed = k["efficiency_loss_corrected"] - p["efficiency_true"] - tare_error(run, p)
+        assert abs(fixed - unseen) < abs(raw) / 2  # the correction takes at least half the error away
+        left.append(fixed - unseen)
         inside += abs(fixed - unseen) <= k["efficiency_loss_corrected_ci95"]
+    # the correction is a systematic one: across the points it lands within 1 pp; each point's own noise (its
+    # efficiency alone ~±1.3 pp at the lightest load) is judged by its stated interval
+    assert abs(sum(left) / len(left)) <= 0.01, left
     assert inside >= 0.8 * len(run["points"])

@@ -20,7 +20,7 @@ from dyno.errors import ConfigError
 from dyno.runlog.replay import export, replay
 from dyno.sim.rig_params import RigParams
 
-from .conftest import IDEAL, QUICK_PLAN
+from .conftest import IDEAL, QUICK_PLAN, STARTUP_HOLD_S
 
 REPO = Path(__file__).resolve().parents[2]
 INPUT_RIG = REPO / "hardware" / "rig-input-torque.toml"
@@ -118,7 +118,7 @@ def test_without_the_channel_nothing_of_it_appears(tmp_path):
 def test_input_converter_drills_trip_sensor_fault_safe_on_the_truth(tmp_path, drill, bound_s):
     captured = {}
     r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=INPUT_RIG,
-                            sim_params=IDEAL, drills=[parse_drill(f"{drill}@32")], handle_signals=True,
+                            sim_params=IDEAL, drills=[parse_drill(f"{drill}@{32 + STARTUP_HOLD_S}")], handle_signals=True,
                             setup=lambda ctx: captured.setdefault("ctx", ctx)))
     ctx = captured["ctx"]
     assert r["state"] == "aborted"

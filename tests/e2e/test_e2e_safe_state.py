@@ -83,7 +83,8 @@ def test_mock_pins_mid_test_drill_leaves_the_pads_off_the_rotor(plan, tmp_path):
     assert r["state"] == "aborted"
     _assert_physically_safe(r, ctx)
     out = r["outputs"]
-    assert out["driver_released"] is True and out["driver_release_basis"] == "full_stroke_time"
+    # the shipped rig declares the end switch (hardware/rig.toml): the twin's switch closed at the stop
+    assert out["driver_released"] is True and out["driver_release_basis"] == "end_of_travel"
     assert out["brake_estimate"] == 0.0
 
 

@@ -27,12 +27,13 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def wired_rig(tmp_path: Path, *, k3: bool = False, end_switch: bool = True, estop: bool = True) -> Path:
-    """hardware/rig.toml with the optional inputs declared (as hardware/README.md wires them)."""
+    """hardware/rig.toml (which declares both safety inputs, as hardware/README.md wires them), with K3 set as
+    asked and an input left out where a test needs a rig without it."""
     text = (REPO / "hardware" / "rig.toml").read_text()
-    if estop:
-        text = text.replace("# estop_input = 22 ", "estop_input = 22 ")
-    if end_switch:
-        text = text.replace("# brake_released_input = 27 ", "brake_released_input = 27 ")
+    for wanted, key in ((estop, "estop_input"), (end_switch, "brake_released_input")):
+        assert re.search(rf"^{key} = ", text, flags=re.M), f"hardware/rig.toml: no [pins] {key}"
+        if not wanted:
+            text = re.sub(rf"^{key} = ", f"# {key} = ", text, flags=re.M)
     text, n = re.subn(r"^brake_hold_relay = (true|false)", f"brake_hold_relay = {'true' if k3 else 'false'}",
                       text, flags=re.M)
     assert n == 1, "hardware/rig.toml: no [actuator] brake_hold_relay line to set"
@@ -101,8 +102,11 @@ def test_k3_fitted_releases_by_wiring_and_the_driver_still_agrees(tmp_path):
 
 
 def test_a_wiring_drill_the_run_cannot_have_is_refused_before_anything_is_written(tmp_path):
-    with pytest.raises(ConfigError, match="--mock-pins .* and an E-stop monitor input"):  # everything missing, one line
+    with pytest.raises(ConfigError, match="needs --mock-pins"):  # the shipped rig declares the E-stop input
         run_test(RunOptions(sim=True, out_dir=tmp_path / "a", drills=[parse_drill("estop-held:5@10")]))
+    with pytest.raises(ConfigError, match="--mock-pins .* and an E-stop monitor input"):  # everything missing, one line
+        run_test(RunOptions(sim=True, out_dir=tmp_path / "a", rig_path=wired_rig(tmp_path, estop=False),
+                            drills=[parse_drill("estop-held:5@10")]))
     with pytest.raises(ConfigError, match="estop_input"):
         _run(tmp_path, "estop-twice@10", rig=wired_rig(tmp_path, estop=False))
     with pytest.raises(ConfigError, match="brake_released_input"):
@@ -164,7 +168,8 @@ def test_doctor_checks_the_end_switch_through_the_twin(tmp_path, capsys, drill, 
 def test_doctor_drills_are_refused_off_the_twin(tmp_path, capsys):
     from dyno.cli import main
 
-    assert main(["doctor", "--sim", "--mock-pins", "--drill", "endswitch-stuck-open"]) == 2  # no switch declared
+    no_switch = str(wired_rig(tmp_path, end_switch=False))
+    assert main(["doctor", "--sim", "--mock-pins", "--rig", no_switch, "--drill", "endswitch-stuck-open"]) == 2
     assert "brake_released_input" in capsys.readouterr().err
     assert main(["doctor", "--mock-pins"]) == 2
 

@@ -20,8 +20,11 @@ def clock():
 @pytest.fixture
 def rig():
     cfg = load_rig()
-    # Shorter stroke keeps FakeClock loops short; relay settle stays realistic.
-    return dataclasses.replace(cfg, actuator=dataclasses.replace(cfg.actuator, full_stroke_s=2.0))
+    # Shorter stroke keeps FakeClock loops short; relay settle stays realistic.  A bare MockFactory wires no
+    # E-stop contact or end switch behind the shipped rig's inputs: the tests that need them declare them on a
+    # twin or a chain pin of their own (rig_wired, rig_estop).
+    pins = dataclasses.replace(cfg.pins, estop_input=None, brake_released_input=None)
+    return dataclasses.replace(cfg, pins=pins, actuator=dataclasses.replace(cfg.actuator, full_stroke_s=2.0))
 
 
 @pytest.fixture

@@ -48,14 +48,13 @@ def test_hw_doctor_missing_rig_file(tmp_path, capsys):
 
 
 def test_hw_doctor_sim_toggle_report(capsys, tmp_path):
-    # K3 fitted (the shipped rig): the driver's path runs through K3's NO contacts, open with the ignition
-    # killed: no step (it would prove nothing), said so
+    # K3 fitted (the shipped rig): the driver's path runs through K3's NO contacts, so the step is taken with
+    # the kill chain closed for it alone, the engine stopped; the end switch checked both ways
     rc = main(["doctor", "--sim", "--toggle"])
     out = capsys.readouterr().out
     assert rc == 0, out
-    for name in ("firmware", "thermometer", "arduino reset"):
+    for name in ("firmware", "thermometer", "arduino reset", "brake step", "end switch"):
         assert any(line.split()[:1] == ["ok"] and name in line for line in out.splitlines()), (name, out)
-    assert any(line.split()[:1] == ["skip"] and "brake step" in line and "K3" in line for line in out.splitlines())
     assert "boot id 1 -> 2" in out and out.rstrip().endswith("rig OK")  # v2: a new boot id per boot
     # without K3 the step runs
     rc = main(["doctor", "--sim", "--toggle", "--rig", str(bad_rig(tmp_path, "brake_hold_relay = true",

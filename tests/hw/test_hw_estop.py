@@ -31,6 +31,7 @@ def test_estop_open_puts_outputs_safe_within_20ms(rig_estop, factory, clock, act
     e = EstopInput(ESTOP_BCM, actuators, pin_factory=factory)
     e.on_open.append(stops.append)
     assert not e.is_open and not e.tripped
+    assert actuators.finish_release()  # the start-up release's full stroke: the ignition is held open until then
     actuators.engine_kill(False)
     actuators.throttle(1.0)
     t0 = time.thread_time()

@@ -122,6 +122,7 @@ def test_hw_non_blocking_step_to_one_tick(actuators, rig, factory, clock):
 
 def test_hw_throttle_end_points(actuators, rig, factory):
     th, pin = rig.throttle, factory.pin(rig.pins.throttle_servo)
+    assert actuators.finish_release()  # (the ignition is held open until the start-up release has run)
     actuators.engine_kill(False)
     actuators.throttle(1.0)
     assert pin.state == pytest.approx(th.full_pulse_us / th.frame_us)
@@ -139,6 +140,7 @@ def test_hw_thesis_kill_wiring(rig, factory, clock):
     thesis = dataclasses.replace(rig, kill_relay="energise_to_kill")
     with GpioActuators(thesis, pin_factory=factory, clock=clock) as a:
         assert factory.pin(rig.pins.engine_kill).state == 1
+        assert a.finish_release()
         a.engine_kill(False)
         assert factory.pin(rig.pins.engine_kill).state == 0
 

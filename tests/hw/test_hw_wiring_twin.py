@@ -88,7 +88,7 @@ def _apply(act, clock, s: float) -> None:
 def test_a_working_switch_confirms_a_release_from_a_known_position_in_the_travel_it_needs(rig_wired):
     clock = FakeClock()
     toy, twin, act = _build(rig_wired, clock)
-    assert act.finish_release() and act.release_basis == "end_of_travel"  # start-up: the switch gives the zero
+    assert act.finish_release() and act.release_basis == "end_of_travel"  # start-up: the full stroke, the switch confirming
     _apply(act, clock, 0.4)  # 8 mm onto the rotor
     assert toy.model.actuator_mm == pytest.approx(8.0, abs=0.7)
     t0 = clock.now()
@@ -215,6 +215,7 @@ def test_a_signal_inside_a_command_cannot_let_the_command_through_after_the_latc
 def test_the_watchdog_survives_an_exception_in_its_own_handling(rig_wired):
     clock = FakeClock()
     toy, twin, act = _build(rig_wired, clock)
+    assert act.finish_release()  # the start-up release's full stroke (no apply before it)
     _apply(act, clock, 0.4)
 
     class Unwritable:

@@ -51,10 +51,12 @@ def test_the_real_driver_settles_the_relay_before_the_enable_so_no_motion_is_los
     dt = 0.001
 
     def run_apply(actuators, model, clock, on_s):
-        actuators.brake(STOP)  # the driver starts with a release stroke (unknown position): end it
-        clock.advance(0.1)
-        model.step(0.1)
-        actuators.tick(clock.now())
+        # a driver starts with a release of the full stroke (the position is unknown), no apply before it ends
+        actuators.safe_state()
+        for _ in range(200):
+            clock.advance(0.05)
+            model.step(0.05)
+            actuators.tick(clock.now())
         start_mm = model.actuator_mm
         actuators.brake(APPLY)
         for _ in range(round(on_s / dt)):

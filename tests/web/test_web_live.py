@@ -14,8 +14,9 @@ from tests.web.conftest import DroppingProxy, DynoProcess, http_status, needs_br
 pytestmark = needs_browser
 
 SPEED = 4.0
-DRILL_AT_S = 95.0  # simulated seconds from the first frame: after the second point of the speed hold (the first
-# points come at ~75 s: the overdrive setpoints, in the shift region, are skipped first)
+DRILL_AT_S = 104.0  # simulated seconds from the first frame: after the second point of the speed hold (the first
+# points come at ~84 s: the start-up release's full stroke (~8.9 s, the ignition held off), then the overdrive
+# setpoints, in the shift region, are skipped first)
 
 BANNER_WATCH = """
 window.__bannerMs = null;
@@ -61,6 +62,9 @@ def test_run_web_page_live_values_points_and_drill_banner(browser, tmp_path):
         page.add_init_script(BANNER_WATCH)
         page.goto(url)
         page.wait_for_function("document.getElementById('rpm-primary').textContent !== '—'", timeout=30_000)
+        # the engine starts once the start-up release has run its full stroke (the ignition is held off till
+        # then: docs/safety.md): wait for it to turn, then the page must follow its speed
+        page.wait_for_function("parseFloat(document.getElementById('rpm-primary').textContent) > 0", timeout=60_000)
         seen = set()
         for _ in range(12):
             seen.add(page.inner_text("#rpm-primary"))
@@ -113,6 +117,9 @@ def test_run_web_reconnects_after_a_network_drop_and_stop_aborts_through_the_est
         page = browser.new_page()
         page.goto(f"http://127.0.0.1:{proxy.port}/?token={p.token}")
         page.wait_for_function("document.getElementById('rpm-primary').textContent !== '—'", timeout=30_000)
+        # the engine starts once the start-up release has run its full stroke (the ignition is held off till
+        # then: docs/safety.md): wait for it to turn, then the page must follow its speed
+        page.wait_for_function("parseFloat(document.getElementById('rpm-primary').textContent) > 0", timeout=60_000)
         assert page.inner_text("#link") == "live"
         proxy.drop(3.0)
         page.wait_for_function("document.getElementById('link').textContent.includes('reconnecting')", timeout=5_000)

@@ -77,7 +77,8 @@ async def run_engagement(ctx, ep: EngagementPlan | None = None) -> None:
         res["shift_out_vs_load"] = [_load_row(res)] + await _flatness(ctx, ep, res.get("engagement_rpm", math.nan))
         rows = res["shift_out_vs_load"]
         res["shift_out_flatness"] = se.flatness([r["torque_secondary_nm"] for r in rows],
-                                                [r["shift_out_rpm"] for r in rows])
+                                                [r["shift_out_rpm"] for r in rows],
+                                                [r.get("shift_out_rpm_ci95", math.nan) for r in rows])
         if all("shift_out_rpm_true" in r for r in rows):
             res["shift_out_flatness_true"] = se.flatness([r["torque_secondary_nm"] for r in rows],
                                                          [r["shift_out_rpm_true"] for r in rows])
