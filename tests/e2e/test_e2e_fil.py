@@ -39,7 +39,7 @@ def _fil_run(tmp_path, **kw):
 @pytest.mark.quick
 def test_fil_short_run_hands_every_physics_event_to_the_host_and_the_elf_holds_the_kill_chain(tmp_path):
     elf = sim_elf()
-    result, ctx, info = _fil_run(tmp_path, firmware_elf=elf, max_sim_s=6.0)
+    result, ctx, info = _fil_run(tmp_path, firmware_elf=elf, max_sim_s=18.0)  # (the ignition closes ~9 s in: the start-up release)
     fw = ctx.sim.firmware
     assert result["firmware"]["elf"] == str(elf) and not result["firmware"]["harness"]["crashed"]
     assert result["firmware"]["late_events"] == 0 and result["firmware"]["harness"]["dropped_events"] == 0
