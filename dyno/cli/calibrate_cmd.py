@@ -39,6 +39,8 @@ def add_arguments(p) -> None:
     p.add_argument("--mock-pins", action="store_true",
                    help="--sim: the rig's outputs through the Pi's own code (GpioActuators, E-stop input, watchdog "
                         "thread) on the wiring twin (docs/safety.md)")
+    p.add_argument("--firmware-elf", type=Path, default=None, metavar="PATH",
+                   help="--sim: the Nano's real firmware ELF in simavr as the fixture's Nano (firmware in the loop)")
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
                         "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")
@@ -87,6 +89,10 @@ def run(args) -> int:
     masses = args.masses if args.masses is not None else (DEFAULT_INPUT_MASSES if inp else DEFAULT_MASSES)
     radius = args.radius if args.radius is not None else (DEFAULT_INPUT_ARM_M if inp else DEFAULT_RADIUS_M)
     _check_masses(masses)
+    if args.firmware_elf is not None and not args.sim:
+        raise ConfigError("command line", "--firmware-elf", "the firmware ELF runs in the simulated rig only (--sim)")
+    if args.firmware_elf is not None and not args.firmware_elf.is_file():
+        raise ConfigError(str(args.firmware_elf), "--firmware-elf", "no such file (build it: make -C firmware sim)")
     if not args.sim:  # no GPIO / I2C here: one line and exit 2, not a traceback from inside the app
         from dyno.hw.preflight import check_rig_present
 
@@ -123,5 +129,5 @@ def run(args) -> int:
                             settle_samples=args.settle_samples, history_path=history,
                             rig_path=getattr(args, "rig", None), radius_m=radius, masses=masses,
                             drills=drills, channel=args.channel, repeats=args.repeats, in_force_path=in_force,
-                            mock_pins=args.mock_pins)
+                            mock_pins=args.mock_pins, firmware_elf=args.firmware_elf)
     return main(opts)

@@ -39,7 +39,7 @@ class CalibrationContext:
 
 def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig_path=None,
                       fixture_kw: dict | None = None, drills=(), on_trip=None,
-                      mock_pins: bool = False) -> CalibrationContext:
+                      mock_pins: bool = False, firmware_elf=None) -> CalibrationContext:
     from dyno.control.safety import SafetyLimits, SafetyMonitor
     from dyno.rig.config import load_rig
 
@@ -60,6 +60,10 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
         # the simulated rig has the engine-side channel when rig.toml declares it (as in a run); asked for as
         # on the rig (a fixture without it: announced absent); paced: each real-time poll spans `speed` x more
         fixture_kw = {"input_fitted": want_input, **(fixture_kw or {})}
+        if firmware_elf is not None:  # the Nano's own ELF in simavr, on the rig file's link
+            from dyno.sim.elf_firmware import elf_spec
+
+            fixture_kw["firmware_elf"] = elf_spec(firmware_elf, rig_cfg, rig_cfg.protocol)
         fixture, poller = build_fixture_poller(sim_now, seed=seed, poll_hz=rig_cfg.poll_hz, pace=speed,
                                                want_input=want_input or None, **fixture_kw)
         if mock_pins:  # the Pi's own output code (HardwareRig) over the wiring twin and the fixture's actuator
@@ -126,6 +130,11 @@ def _twin_rig(rig_cfg, fixture, sim_now, speed: float):
 def close_calibration(ctx: CalibrationContext) -> None:
     if ctx.drills is not None:
         ctx.drills.cancel()
-    if ctx.hw is not None and not ctx.closed:
+    if ctx.closed:
+        return
+    if ctx.hw is not None:
         ctx.closed = True
         ctx.hw.__exit__(None, None, None)
+    if ctx.sim is not None:
+        ctx.closed = True
+        ctx.sim.close()  # (--firmware-elf: the simavr harness ends with the calibration)

@@ -31,6 +31,8 @@ LOCKSTEP_S = 0.004
 #: a transfer's sensor events are handed to the pins before it runs (the ISRs fire during a transfer): this far
 #: ahead of the host's time, enough for a 100-byte transfer at 100 kHz (the inputs of those cells are fixed then)
 TRANSFER_LOOKAHEAD_S = 0.010
+#: one ``ev`` line's events at most this long (the harness reads lines of 64 KiB)
+EV_LINE_CHARS = 60_000
 #: a Hall sensor's pulse is the magnet's arc, 5 % of a turn; never longer than this
 MAX_PULSE_US = 2000.0
 FIRST_PULSE_US = 500.0
@@ -150,12 +152,24 @@ class ElfFirmware:
         return self._stderr.read()[-500:]
 
     def _with_events(self, line: str) -> str:
-        """``line``, preceded by the events waiting for the pins (one pipe round trip)."""
+        """``line``, preceded by the events waiting for the pins (one pipe round trip; several ``ev`` lines when
+        a long catch-up queued more than the harness's line holds)."""
         if not self._pending:
             return self._cmds(line)[0]
-        ev, reply = self._cmds("ev " + ",".join(self._pending), line)
+        batches, batch, size = [], [], 0
+        for item in self._pending:
+            if size + len(item) > EV_LINE_CHARS and batch:
+                batches.append("ev " + ",".join(batch))
+                batch, size = [], 0
+            batch.append(item)
+            size += len(item) + 1
+        batches.append("ev " + ",".join(batch))
         self._pending.clear()
-        self.late_events += int(ev.split()[1]) if ev.startswith("ok ") else 0
+        *evs, reply = self._cmds(*batches, line)
+        for ev in evs:
+            if not ev.startswith("ok "):
+                raise FirmwareElfError(f"simavr harness: ev: {ev}")
+            self.late_events += int(ev.split()[1])
         return reply
 
     def _run_to(self, t_s: float) -> None:

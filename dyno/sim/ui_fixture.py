@@ -111,6 +111,8 @@ class CalibrationFixture:
         self._rng = np.random.default_rng(np.random.SeedSequence([seed, 0xADC]))
         self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
         self.t_s = 0.0
+        self._ahead: list = []  # conversions made beyond t_s (a firmware in the loop asked for them early)
+        self._made_until_s = 0.0
         self._next_adc_t = float(rng.uniform(0.0, self._adc_period_s))
         self._target_nm = 0.0
         self._from_nm = 0.0
@@ -179,6 +181,22 @@ class CalibrationFixture:
         if not dt_s >= 0.0:
             raise ValueError("dt_s must be >= 0")
         t_end = self.t_s + dt_s
+        self._make(t_end)
+        k = sum(1 for ev in self._ahead if ev.t_s <= t_end)
+        out, self._ahead = self._ahead[:k], self._ahead[k:]
+        self.t_s = t_end
+        return out
+
+    def events_ahead(self, until_s: float) -> list:
+        """The conversions in ``(t, until_s]`` without advancing ``t`` (a firmware in the loop needs those that fall
+        during a bus transfer before it runs; a load hung before ``until_s`` shows from the conversion after)."""
+        self._make(until_s)
+        return [ev for ev in self._ahead if self.t_s < ev.t_s <= until_s]
+
+    def _make(self, t_end: float) -> None:
+        """Every conversion up to ``t_end``, in time order, onto the queue."""
+        if t_end <= self._made_until_s:
+            return
         p = self.params
         out = []
         while self._next_adc_t <= t_end:
@@ -192,8 +210,8 @@ class CalibrationFixture:
         if self.input_fitted:
             self._input_events(t_end, out)
             out.sort(key=lambda e: e.t_s)
-        self.t_s = t_end
-        return out
+        self._ahead.extend(out)
+        self._made_until_s = t_end
 
     def _input_events(self, t_end: float, out: list) -> None:
         """The second converter's conversions up to ``t_end`` (the noise model of :mod:`dyno.sim.input_torque`)."""
@@ -225,7 +243,8 @@ class CalibrationFixture:
 class FixtureRig:
     """Fixture + emulated firmware + simulated bus, ready for a reader and a poller."""
 
-    def __init__(self, now_s, *, seed: int = 0, params=None, pace: float | None = None, **fixture_kw) -> None:
+    def __init__(self, now_s, *, seed: int = 0, params=None, pace: float | None = None, firmware_elf: dict | None = None,
+                 **fixture_kw) -> None:
         from dyno.sim.bus import SimSMBus
         from dyno.sim.device import EmulatedFirmware
 
@@ -235,8 +254,21 @@ class FixtureRig:
         # (two converters: twice the events); None: the firmware's own 64
         per_poll = 128 if self.fixture.input_fitted else 64
         ring = 64 if pace is None else max(per_poll, math.ceil(per_poll * pace))
-        self.firmware = EmulatedFirmware("v2", input_fitted=self.fixture.input_fitted, ring_capacity=ring)
+        if firmware_elf is not None:  # the Nano's own ELF in simavr (dyno calibrate --firmware-elf)
+            from dyno.sim.elf_firmware import ElfFirmware
+
+            self.firmware = ElfFirmware(firmware_elf["elf"], i2c_khz=firmware_elf["i2c_khz"],
+                                        address=firmware_elf["address"], input_fitted=self.fixture.input_fitted,
+                                        events_ahead=self.fixture.events_ahead)
+        else:
+            self.firmware = EmulatedFirmware("v2", input_fitted=self.fixture.input_fitted, ring_capacity=ring)
         self.bus = SimSMBus(self.fixture, self.firmware, now_s, seed=seed)
+
+    def close(self) -> None:
+        """End what the fixture started (the simavr harness of ``--firmware-elf``)."""
+        close = getattr(self.firmware, "close", None)
+        if close is not None:
+            close()
 
     def hang(self, mass_kg: float, radius_m: float, channel: str = "output") -> float:
         self.bus.sync()  # the load changes now, not at the last poll

@@ -68,6 +68,7 @@ class CalibrateOptions:
     repeats: int = 1  # passes of the load sequence; from 2 on the slope's reproducibility is shown
     in_force_path: Path | None = None  # the channel's calibration in force when history_path is new
     mock_pins: bool = False  # sim only: the rig's outputs through the Pi's own code on the wiring twin
+    firmware_elf: Path | None = None  # sim only: the Nano's real ELF in simavr as the fixture's Nano
 
 
 class CalibrateApp(DynoApp):
@@ -148,7 +149,8 @@ class CalibrateApp(DynoApp):
         self.cal_ctx = build_calibration(sim=self.opts.sim, loop=loop, seed=self.opts.seed, speed=self.opts.speed,
                                          rig_path=self.opts.rig_path, fixture_kw=self.opts.fixture_kw,
                                          drills=self.opts.drills, on_trip=self._on_trip,
-                                         mock_pins=self.opts.sim and self.opts.mock_pins)
+                                         mock_pins=self.opts.sim and self.opts.mock_pins,
+                                         firmware_elf=self.opts.firmware_elf if self.opts.sim else None)
         self.rig = self.cal_ctx.sim or self.cal_ctx.hw
         self.poller = self.cal_ctx.poller
         self.feeder = WizardFeeder(self.wizard, reader=self.poller.reader)

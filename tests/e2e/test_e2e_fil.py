@@ -142,6 +142,51 @@ def test_fil_bad_input_is_one_line_and_exit_2(tmp_path):
              ("a serial rig file", ["run", "--sim", "--headless", "--rig", str(serial_rig), "--firmware-elf",
                                     str(sim_elf())], ["rig-input-torque.toml", "transport"]),
              ("the UI off the sim", ["ui", "--rig", str(own_rig), "--firmware-elf", str(sim_elf())],
-              "--firmware-elf")]
+              "--firmware-elf"),
+             ("the wizard off the sim", ["calibrate", "--rig", str(own_rig), "--firmware-elf", str(sim_elf())],
+              "--firmware-elf"),
+             ("the wizard, no such ELF", ["calibrate", "--sim", "--firmware-elf", str(tmp_path / "none.elf")],
+              ["none.elf", "--firmware-elf"])]
     assert not one_line_failures(cases, run)
     assert snapshot(tmp_path) == before
+
+
+@pytest.mark.quick
+def test_fil_calibration_fixture_reads_a_hung_mass_through_the_real_firmware():
+    """``dyno calibrate --sim --firmware-elf``'s acquisition: the calibration fixture's conversions reach the host
+    through the ELF, every one of them up to the last poll, and a hung mass moves the codes by the fixture's true
+    gain x torque (the fixture's truth, not the host's calibration)."""
+    import asyncio
+
+    import numpy as np
+
+    from dyno.session.calibration import build_calibration, close_calibration
+
+    elf = sim_elf()
+
+    async def main():
+        loop = asyncio.get_running_loop()
+        # real time, as the wizard runs (simavr keeps up with it several times over; a pace it cannot keep would
+        # stall the loop, and the Nano's ring would overflow in the gap, as on a rig whose Pi stalls)
+        ctx = build_calibration(sim=True, loop=loop, seed=4, speed=1.0, firmware_elf=elf)
+        task = asyncio.create_task(ctx.poller.run())
+        try:
+            await asyncio.sleep(3.0)  # the tare
+            n_tare = ctx.poller.streams.adc_total
+            torque_nm = ctx.sim.hang(20.0, 0.25)
+            await asyncio.sleep(3.0)  # its settling, and ~2 s at the load
+            return ctx, n_tare, torque_nm
+        finally:
+            ctx.poller.stop()
+            await asyncio.gather(task, return_exceptions=True)
+            close_calibration(ctx)
+
+    ctx, n_tare, torque_nm = asyncio.run(main())
+    fixture, streams, fw = ctx.sim.fixture, ctx.poller.streams, ctx.sim.firmware
+    codes = np.asarray(streams.adc_code, dtype=float)
+    assert fw.events_by_channel["adc"] - 6 <= streams.adc_total <= fw.events_by_channel["adc"]
+    assert fw.late_events == 0 and n_tare > 100 and streams.adc_total > n_tare + 200
+    shift = np.median(codes[-100:]) - np.median(codes[n_tare - 100:n_tare])
+    expected = fixture.true_counts(torque_nm) - fixture.true_counts(0.0)
+    assert abs(shift - expected) < 0.02 * abs(expected) + 5, (shift, expected)
+    assert fw._proc.poll() is not None  # the harness ended with the calibration
