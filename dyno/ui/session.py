@@ -392,6 +392,8 @@ class LiveSession(RearmMixin):
             from dyno.session.safety import close_twin
 
             close_twin(self.ctx)
+        if self.ctx.sim is not None:  # (--firmware-elf: the simavr harness ends with the session)
+            self.ctx.sim.close()
         if getattr(self, "hung_up", False):  # safe state reached, record closed: should the app's shut-down
             from dyno.ui.common import exit_after  # still wait on the terminal that went, end anyway
 

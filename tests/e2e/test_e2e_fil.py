@@ -190,3 +190,36 @@ def test_fil_calibration_fixture_reads_a_hung_mass_through_the_real_firmware():
     expected = fixture.true_counts(torque_nm) - fixture.true_counts(0.0)
     assert abs(shift - expected) < 0.02 * abs(expected) + 5, (shift, expected)
     assert fw._proc.poll() is not None  # the harness ended with the calibration
+
+
+@pytest.mark.quick
+def test_fil_live_session_paces_the_elf_with_the_physics(tmp_path):
+    """``dyno ui --sim --speed 2 --firmware-elf``'s session: the ELF runs on the paced clock with the physics (its
+    clock is the simulated one: it keeps up with real time several times over), arms its run-enable, the engine
+    starts on it and the session reaches ARMED; the harness ends with the session."""
+    import asyncio
+    import time
+
+    from dyno.control.controller import State
+    from dyno.ui.session import LiveOptions, LiveSession
+
+    elf = sim_elf()
+
+    async def main():
+        s = LiveSession(LiveOptions(sim=True, speed=2.0, seed=5, out_dir=tmp_path / "run", firmware_elf=elf))
+        s.start()
+        t_end = time.monotonic() + 120
+        try:
+            while s.controller.state is not State.ARMED and time.monotonic() < t_end:
+                await asyncio.sleep(0.05)
+            return s, s.controller.state, s.sim_now(), s.sim.model.t_s, s.sim.firmware.t_s
+        finally:
+            await s.close("test")
+
+    s, state, sim_now_s, model_t_s, elf_t_s = asyncio.run(main())
+    fw = s.sim.firmware
+    assert state is State.ARMED, s.controller.reason
+    assert [on for _, on, _ in fw.run_enable_log][:1] == [True]  # the ELF closed the chain
+    # one clock: the ELF's is the physics' (a lockstep cell and a transfer's look-ahead apart at most)
+    assert abs(elf_t_s - model_t_s) < 0.02 and model_t_s <= sim_now_s + 0.02, (elf_t_s, model_t_s, sim_now_s)
+    assert fw.late_events == 0 and fw._proc.poll() is not None
