@@ -46,9 +46,13 @@ def _run(args: list[str], out: Path) -> tuple[dict, float, float]:
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    if not proc.stdout.strip():
-        raise SystemExit(f"bench_fil: dyno run {' '.join(args)} printed nothing: {proc.stderr[-800:]}")
-    return json.loads(proc.stdout), wall, cpu
+    try:
+        doc = json.loads(proc.stdout)
+        doc["state"]  # (a run's summary, not an error document)
+    except (ValueError, KeyError):
+        raise SystemExit(f"bench_fil: dyno run {' '.join(args)} exited {proc.returncode} without a run's summary: "
+                         f"{proc.stderr[-800:]}") from None
+    return doc, wall, cpu
 
 
 def agreement(fil_points: list, emu_points: list) -> float:
