@@ -117,6 +117,7 @@ class ElfFirmware:
         self.late_events = 0  # events the ELF's clock had already passed (a sign of a lockstep bug)
         self.run_enable_log: list[tuple[float, bool, str]] = []  # (sim t, D7 on, cause): the truth
         self._on = False
+        self._outstanding: list[tuple[str, float | None]] = []  # commands sent whose replies are not read yet
         self._pending: list[str] = []
         self._write: bytes | None = None
         self._last_edge_us: dict[str, float] = {}
@@ -130,6 +131,7 @@ class ElfFirmware:
 
     # --- the harness ----------------------------------------------------------------------------
     def _cmds(self, *lines: str) -> list[str]:
+        self._drain()
         proc = self._proc
         if proc.poll() is not None:
             raise FirmwareElfError(f"simavr harness exited ({proc.returncode}): {self._stderr_tail()}")
@@ -151,11 +153,11 @@ class ElfFirmware:
         self._stderr.seek(0)
         return self._stderr.read()[-500:]
 
-    def _with_events(self, line: str) -> str:
-        """``line``, preceded by the events waiting for the pins (one pipe round trip; several ``ev`` lines when
-        a long catch-up queued more than the harness's line holds)."""
+    def _ev_lines(self) -> list[str]:
+        """The events waiting for the pins as ``ev`` lines (several when a long catch-up queued more than the
+        harness's line holds)."""
         if not self._pending:
-            return self._cmds(line)[0]
+            return []
         batches, batch, size = [], [], 0
         for item in self._pending:
             if size + len(item) > EV_LINE_CHARS and batch:
@@ -165,7 +167,11 @@ class ElfFirmware:
             size += len(item) + 1
         batches.append("ev " + ",".join(batch))
         self._pending.clear()
-        *evs, reply = self._cmds(*batches, line)
+        return batches
+
+    def _with_events(self, line: str) -> str:
+        """``line``, preceded by the events waiting for the pins (one pipe round trip)."""
+        *evs, reply = self._cmds(*self._ev_lines(), line)
         for ev in evs:
             if not ev.startswith("ok "):
                 raise FirmwareElfError(f"simavr harness: ev: {ev}")
@@ -173,17 +179,49 @@ class ElfFirmware:
         return reply
 
     def _run_to(self, t_s: float) -> None:
+        """The MCU runs to ``t_s`` with the events queued for its pins; the run-enable's changes reach the kill chain
+        at once.  (Not pipelined: sending the next cell before reading this one's reply bought no time here, and
+        while the host is frozen nothing else reads the replies, so a Nano cut would reach the physics late.)"""
         t_s = max(t_s, self.t_s)
-        reply = self._with_events(f"run {self._us(t_s):.3f}").split()
-        if len(reply) != 4 or reply[0] != "ok":
-            raise FirmwareElfError(f"simavr harness: run: {' '.join(reply)}")
+        lines = self._ev_lines() + [f"run {self._us(t_s):.3f}"]
+        proc = self._proc
+        if proc.poll() is not None:
+            raise FirmwareElfError(f"simavr harness exited ({proc.returncode}): {self._stderr_tail()}")
+        try:
+            proc.stdin.write("".join(line + "\n" for line in lines))
+            proc.stdin.flush()
+        except (BrokenPipeError, OSError) as exc:
+            raise FirmwareElfError(f"simavr harness pipe broke: {exc}: {self._stderr_tail()}") from exc
+        self._outstanding += [("ev", None)] * (len(lines) - 1) + [("run", t_s)]
         self.t_s = t_s
-        # the run-enable as the kill chain reads it: every change since the last run, then its level now
-        if reply[3] != "-":
-            for item in reply[3].split(","):
-                t_us, level = item.split(":")
-                self._set_enable(bool(int(level)), max(0.0, float(t_us) * 1e-6 - POWERED_BEFORE_S))
-        self._set_enable(bool(int(reply[2])), self.t_s)
+        self._drain()
+
+    def _drain(self) -> None:
+        """Read the replies of the commands sent ahead, in order, and act on them."""
+        if not self._outstanding:
+            return
+        t0 = time.perf_counter()
+        outstanding, self._outstanding = self._outstanding, []
+        for kind, t_s in outstanding:
+            reply = self._proc.stdout.readline()
+            if not reply:
+                raise FirmwareElfError(f"simavr harness closed its output: {self._stderr_tail()}")
+            fields = reply.split()
+            if kind == "ev":
+                if fields[:1] != ["ok"]:
+                    raise FirmwareElfError(f"simavr harness: ev: {reply.strip()}")
+                self.late_events += int(fields[1])
+                continue
+            if len(fields) != 4 or fields[0] != "ok":
+                raise FirmwareElfError(f"simavr harness: run: {reply.strip()}")
+            # the run-enable as the kill chain reads it: every change since the last run, then its level then
+            if fields[3] != "-":
+                for item in fields[3].split(","):
+                    t_us, level = item.split(":")
+                    self._set_enable(bool(int(level)), max(0.0, float(t_us) * 1e-6 - POWERED_BEFORE_S))
+            self._set_enable(bool(int(fields[2])), t_s)
+        self.wait_s += time.perf_counter() - t0
+        self.round_trips += 1
 
     def _set_enable(self, on: bool, t_s: float) -> None:
         if on == self._on:
@@ -265,6 +303,7 @@ class ElfFirmware:
 
     @property
     def run_enable(self) -> bool:
+        self._drain()
         return self._on
 
     def running(self, now_s: float) -> bool:
@@ -278,6 +317,7 @@ class ElfFirmware:
         self.boot_id = (self.boot_id + 1) & 0xFFFF
         self.boot_count += 1
         self._run_to(now_s)  # (the reset's effect on the run-enable)
+        self._drain()
 
     def write(self, data: bytes, now_s: float) -> None:
         self._write = (self._write or b"") + bytes(data)
