@@ -1,4 +1,4 @@
-"""Map-free efficiency (issue 27): both paths' ``efficiency_u95`` judged over many simulated rigs.
+"""Map-free efficiency (issue 27): both paths' ``efficiency_interval95`` judged over many simulated rigs.
 
 Each seed is a different rig (:mod:`dyno.sim.world`, as in ``bench_uncertainty.py``): its engine differs
 from the shipped map (a smooth deviation, the simulator's own 4.4 % sd), its day is drawn, and each torque
@@ -10,13 +10,14 @@ path's efficiency ``P_out / (T_in w_p)`` with its ``efficiency_u95`` and, beside
 on the same points.  Also judged: the engine's measured torque (``torque_input_nm ± torque_input_u95_nm``)
 against the simulated engine's true torque, and the map's error the measurement reveals.
 
-Printed: coverage (95 % nominal), normalised errors, the mean U95 half-width for each path; the calibration
+Printed: coverage of each path's interval95 (95 % nominal), normalised errors, the mean U95 (the interval's
+half-width) for each path; the calibration
 reproducibility at which the input path's mean half-width would be 2 pp (from the stated terms); and with
 ``--repro R`` the whole bench at reproducibility R (both channels' histories and the rigs' sensors scatter
 by R instead of 1.6 %), to check that claim on the truth.
 
 Pass criteria (exit 1 when one fails, 0 when all hold): the input path's efficiency coverage by its
-``efficiency_u95`` ≥ 0.90 and the engine's measured torque's coverage by ``torque_input_u95_nm`` ≥ 0.90
+``efficiency_interval95`` ≥ 0.90 and the engine's measured torque's coverage by ``torque_input_u95_nm`` ≥ 0.90
 (95 % nominal); with ``--quick`` (3 seeds) ≥ 0.75 each, a smoke check.  ``--miscalibrate-input REL`` hands
 the host an input-channel calibration history whose slopes are all off by REL (a deliberately broken
 input: the criteria must then fail).
@@ -128,8 +129,8 @@ def one_seed(seed: int, tmp: str, files: dict) -> dict:
         if p.get("efficiency") is None or p.get("efficiency_true") is None or not p.get("valid", True):
             continue
         rows.append({k: p.get(k) for k in (
-            "rpm_primary", "efficiency_true", "efficiency", "efficiency_u95", "efficiency_ci95",
-            "efficiency_engine_map", "efficiency_engine_map_u95", "torque_input_nm", "torque_input_u95_nm",
+            "rpm_primary", "efficiency_true", "efficiency", "efficiency_u95", "efficiency_ci95", "efficiency_interval95",
+            "efficiency_engine_map", "efficiency_engine_map_u95", "efficiency_engine_map_interval95", "torque_input_nm", "torque_input_u95_nm",
             "torque_input_true_nm", "efficiency_u95_terms")})
     w = result["sim_world"]
     return {"seed": seed, "rows": rows, "state": result["state"],
@@ -137,18 +138,21 @@ def one_seed(seed: int, tmp: str, files: dict) -> dict:
 
 
 def judge(runs, eff_key: str, u95_key: str) -> dict:
+    """Coverage of the truth by the figure's ``<eff_key>_interval95`` (the point's one 95 % statement; its
+    ``u95_key`` is half its width, used for the normalised errors)."""
     z, covered, half, per_run = [], [], [], []
     for run in runs:
         mids = []
         for r in run["rows"]:
-            eff, u95 = r.get(eff_key), r.get(u95_key)
-            if eff is None or u95 is None or not u95 > 0:
+            eff, u95, iv = r.get(eff_key), r.get(u95_key), r.get(f"{eff_key}_interval95")
+            if eff is None or u95 is None or not u95 > 0 or not iv or None in iv:
                 continue
             err = eff - r["efficiency_true"]
             z.append(err / (u95 / 1.96))
-            covered.append(abs(err) <= u95)
+            inside = iv[0] <= r["efficiency_true"] <= iv[1]
+            covered.append(inside)
             half.append(u95)
-            mids.append(abs(err) <= u95)
+            mids.append(inside)
         if mids:
             per_run.append(mids[len(mids) // 2])
     n = len(z)

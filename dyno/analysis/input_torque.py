@@ -172,7 +172,7 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
     ``calibration_rel_out`` is the brake-side channel's term at this point
     (:func:`~dyno.analysis.systematic.calibration_rel_for`).
     """
-    from dyno.analysis.systematic import interval95
+    from dyno.analysis.systematic import half_width, interval95
 
     eff = point.get("efficiency", math.nan)
     t_in = point.get("torque_input_nm", math.nan)
@@ -192,17 +192,19 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
     cal_in = 2.0 * eff * cal_in_rel
     cradle = 2.0 * eff * cradle_rel
     drive = eff * (1.0 / (1.0 - driveline_max_frac) - 1.0) if driveline_max_frac else 0.0
-    sys95 = math.sqrt(cal * cal + cal_in * cal_in + cradle * cradle + drive * drive)
+    sys_sym95 = math.sqrt(cal * cal + cal_in * cal_in + cradle * cradle)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
-    return {"torque_input_u95_nm": torque_u95, "efficiency_sys95": sys95, "efficiency_sys95_calibration": cal,
+    interval = interval95(eff, math.hypot(ci, sys_sym95), None, driveline_max_frac)
+    return {"torque_input_u95_nm": torque_u95,
+            "efficiency_sys95": half_width(interval95(eff, sys_sym95, None, driveline_max_frac)),
+            "efficiency_sys95_calibration": cal,
             "efficiency_sys95_calibration_input": cal_in, "efficiency_sys95_cradle": cradle,
             "efficiency_sys95_engine_map": 0.0, "efficiency_sys95_air": 0.0, "efficiency_sys95_driveline": drive,
-            "efficiency_u95": math.hypot(ci, sys95),
+            "efficiency_u95": half_width(interval),  # the interval's half-width: one 95 % statement
             "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "calibration_input": cal_in,
                                      "cradle": cradle, "engine_map": 0.0, "air": 0.0, "driveline": drive},
-            "efficiency_interval95": interval95(eff, math.sqrt(ci * ci + cal * cal + cal_in * cal_in + cradle * cradle),
-                                                None, driveline_max_frac)}
+            "efficiency_interval95": interval}
 
 
 def load_channel(cfg, path) -> InputChannel:

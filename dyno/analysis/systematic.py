@@ -16,14 +16,9 @@ and they are shared by every point of a run (so they shift a whole curve, not on
   range, the interval below its quantiles).
 
 Each is given as a 95 % half-width (coverage factor 2), a fraction like ``efficiency``:
-``efficiency_sys95_calibration``, ``efficiency_sys95_engine_map``, ``efficiency_sys95_air`` and, in
-quadrature, ``efficiency_sys95``.  The point's total, ``efficiency_u95``, combines it with the
-statistical ``efficiency_ci95``:
-
-.. math:: U_{95} = \sqrt{CI_{95}^2 + \sum_k (2\,\eta\,u_{k,rel})^2}
-
-and ``efficiency_u95_terms`` lists each part's half-width (``statistical``, ``calibration``,
-``engine_map``, ``air``, ``driveline``).
+``efficiency_sys95_calibration``, ``efficiency_sys95_engine_map``, ``efficiency_sys95_air``, and
+``efficiency_u95_terms`` lists each part's half-width (``statistical``, ``calibration``, ``engine_map``,
+``air``, ``driveline``) so a reader sees which dominates.
 
 * the **driveline** between the CVT and the gauge (chain, bearings; ``rig.toml [driveline]``): a loss only
   ever lowers the reading, so its term is one-sided: the truth is the reading times ``1/(1 − L)``, ``L``
@@ -38,7 +33,12 @@ the 2.5/97.5 % quantiles of :math:`\eta\,A\,D\,(1+\varepsilon)`, with ``A`` the 
 is known), ``D`` the driveline's ``1/(1 − L)`` and ``ε`` normal with sd half the symmetric terms'
 quadrature over η (k = 2).  It is asymmetric where a term is, and clipped to [0, 1] (an efficiency
 cannot exceed 1).  Every efficiency variant ``K`` carries ``K_interval95`` the same way
-(:func:`variant_interval95`).  The systematic parts are one draw per run: every point of a run shares its
+(:func:`variant_interval95`).
+
+The interval is the point's **one** 95 % statement.  ``efficiency_u95`` is its half-width,
+``(high − low)/2`` (:func:`half_width`), so ``±U95`` never says something else than the interval (adding the
+one-sided driveline in quadrature as if it were symmetric did); ``efficiency_sys95`` is the half-width of the
+interval the systematic terms alone give (no ``efficiency_ci95``).  The systematic parts are one draw per run: every point of a run shares its
 engine, sensor and day, so they shift a whole curve together (judged over many runs, never one).
 """
 
@@ -93,6 +93,14 @@ def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac:
         q_lo, q_hi = np.quantile(r, (0.025, 0.975))
         lo, hi = value * float(q_lo), value * float(q_hi)
     return [max(0.0, lo), min(1.0, hi)]
+
+
+def half_width(interval) -> float:
+    """Half the width of a ``[low, high]`` interval: the ``±U95`` that states the same as it; NaN without one."""
+    if not interval or len(interval) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v)
+                                                      for v in interval):
+        return math.nan
+    return 0.5 * (float(interval[1]) - float(interval[0]))
 
 
 def driveline_bound(point: dict | None, unc: dict | None) -> float:
@@ -183,16 +191,30 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
     extra = {k[len("efficiency_sys95_"):]: v for k, v in point.items() if k in _EXTRA_SYS95
              and isinstance(v, float) and math.isfinite(v) and v > 0.0}
     sq_extra = sum(v * v for v in extra.values())
-    sys95 = math.sqrt(cal * cal + emap * emap + air * air + drive * drive + sq_extra)
     ci = point.get("efficiency_ci95", math.nan)
     ci = ci if isinstance(ci, float) and math.isfinite(ci) else 0.0
-    sym95 = math.sqrt(ci * ci + cal * cal + emap * emap + (0.0 if air_factors is not None else air * air) + sq_extra)
-    return {"efficiency_sys95": sys95, "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
-            "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": math.hypot(ci, sys95),
-            "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
-                                     "driveline": drive, **extra},
-            "efficiency_interval95": interval95(eff, sym95, air_factors, driveline_max_frac)}
+    # the symmetric systematic terms (the air's is its factor's distribution instead when the day is unknown)
+    sys_sym95 = math.sqrt(cal * cal + emap * emap + (0.0 if air_factors is not None else air * air) + sq_extra)
+    sym95 = math.hypot(ci, sys_sym95)
+    interval = interval95(eff, sym95, air_factors, driveline_max_frac)
+    out = {"efficiency_sys95": half_width(interval95(eff, sys_sym95, air_factors, driveline_max_frac)),
+           "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
+           "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": half_width(interval),
+           "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
+                                    "driveline": drive, **extra},
+           "efficiency_interval95": interval}
+    # a variant the point already gives (the figure before the I·alpha correction): the same terms, scaled
+    for key in VARIANTS_BEFORE_TERMS:
+        v = point.get(key)
+        if isinstance(v, (int, float)) and math.isfinite(v):
+            out[f"{key}_interval95"] = interval95(v, sym95 * abs(v / eff) if eff else sym95, air_factors,
+                                                  driveline_max_frac)
+    return out
 
+
+#: efficiency variants a point carries before its systematic terms are stated (dyno.analysis.inertia): each
+#: gets ``<variant>_interval95`` here; the later ones (loss-, zero-corrected) from :func:`variant_interval95`
+VARIANTS_BEFORE_TERMS = ("efficiency_uncorrected",)
 
 #: symmetric 95 % terms a point may carry from its reduction, combined here when present
 _EXTRA_SYS95 = ("efficiency_sys95_friction",)

@@ -36,10 +36,11 @@ torque vs speed -> driven_loss.json, which --driven-loss adds back to the effici
 
 The air: the engine map is taken to the day by SAE J1349 (the BME280 the shipped rig.toml [ambient] declares: one \
 that does not answer refuses the run, exit 2; or --ambient; sensor = "none" and neither: "uncorrected"). Each \
-point's efficiency_u95 (statistical + calibration + map + air + driveline) and efficiency_interval95 [low, high] \
-(asymmetric where a term is; at most 1); the JSON's u95_terms says what each term assumes, and `dyno compare` \
+point's efficiency_interval95 [low, high] (statistical + calibration + map + air + driveline; asymmetric where a \
+term is; at most 1) and its half-width efficiency_u95; the JSON's u95_terms says what each term assumes, and `dyno compare` \
 cancels what two runs share. The simulated rig is its own engine, sensor and day, unlike what the host assumes \
-(--sim-ideal: perfect knowledge); bench/bench_uncertainty.py judges U95 over 100 of them (docs/analysis.md).
+(--sim-ideal: perfect knowledge); bench/bench_uncertainty.py judges the interval over 60 of them per world and path \
+(docs/analysis.md).
 
 `--rig hardware/rig-input-torque.toml`: a rig with an engine-side torque channel (a load cell on the engine \
 cradle): each point's efficiency from two measured powers, its own efficiency_u95, the map's figure beside it \

@@ -432,9 +432,10 @@ def _print_table(result: dict) -> None:
 
 
 def _print_points(points: list) -> None:
-    """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``), its
-    U95 (statistics and every systematic term, ``efficiency_u95``), both ± half-widths in pp, and the interval
-    the truth lies in at 95 % (``efficiency_interval95``: asymmetric where a term is, at most 100 %); the speed
+    """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``), the
+    interval the truth lies in at 95 % (``efficiency_interval95``: statistics and every systematic term,
+    asymmetric where a term is, at most 100 %) and its half-width ``efficiency_u95`` (±U95: the same statement,
+    not a second one), both ± half-widths in pp; the speed
     ratio; where P_in comes from (``map``: the engine map at the point's speed and throttle, ``meas``: the input
     torque channel).  Its footer names the term that dominates U95 and what ``dyno compare`` cancels."""
     from dyno.analysis.u95_terms import COMPARE_NOTE, largest_term_text
@@ -453,7 +454,7 @@ def _print_points(points: list) -> None:
               f"{f('efficiency', 100, '{:.1f}'):>5} {f('efficiency_ci95', 100, '{:.1f}'):>5} "
               f"{f('efficiency_u95', 100, '{:.1f}'):>5} {interval:>12}")
     print("from: where P_in comes from (map: the engine map at the point's speed and throttle; meas: the input "
-          "torque channel)")
+          "torque channel); ±U95: half the width of interval95, the point's one 95 % statement")
     largest = largest_term_text(points)
     if largest:
         print(f"{largest}; {COMPARE_NOTE}")

@@ -188,11 +188,11 @@ def _points_table(data: ReportData) -> str:
     if not rows:
         return "<p>No points were recorded.</p>"
     head = ["#", "engine rpm", "secondary rpm", "ratio", "torque N·m", "P out kW", "P in kW",
-            "efficiency %", "CI95 ± pp (the point's statistics)", "systematic ± pp (95 %)",
-            "U95 ± pp (total)", "interval95 % (the truth at 95 %)", "state / notes"]
+            "efficiency %", "CI95 ± pp (the point's statistics)", "systematic ± pp (half their interval's width)",
+            "U95 ± pp (half of interval95's width)", "interval95 % (the truth at 95 %)", "state / notes"]
     if has_input:  # P in and the efficiency from the measured input torque; the map's figure beside
         head[5:5] = ["engine torque N·m (measured)"]
-        head[-1:-1] = ["efficiency % (engine map)", "U95 ± pp (map)", "interval95 % (map)"]
+        head[-1:-1] = ["efficiency % (engine map)", "U95 ± pp (map, half its interval95)", "interval95 % (map)"]
         return ("<p>Efficiency from the engine-side input torque channel: P out / (T in · ω p); the engine "
                 "map's figure beside it for comparison.</p>" + _table(head, rows, left={16}))
     return _table(head, rows, left={12})

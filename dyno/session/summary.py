@@ -148,6 +148,7 @@ POINT_KEYS = ("index", "host_t_start_s", "host_t_end_s", "throttle_frac", "rpm_p
               # closed-loop plans (dyno.control): the setpoint held, and a ramp's I·alpha correction
               "setpoint_rpm", "setpoint", "hold_variable", "alpha_primary_rad_s2", "alpha_secondary_rad_s2",
               "inertia_torque_engine_nm", "inertia_torque_secondary_nm", "efficiency_uncorrected",
+              "efficiency_uncorrected_interval95",
               # the systematic part beside the statistical CI (95 % half-widths; dyno.analysis.systematic)
               "efficiency_sys95", "efficiency_sys95_calibration", "efficiency_sys95_engine_map",
               "efficiency_sys95_friction",

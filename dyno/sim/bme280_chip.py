@@ -47,10 +47,12 @@ def raw_words(temp_c: float, pressure_kpa: float, rh_pct: float, trim=TRIMMING) 
 class SimBME280:
     """Register file of one BME280 answering ``i2c_rdwr`` messages (write pointer, then read)."""
 
-    def __init__(self, world, seed: int = 0) -> None:
+    def __init__(self, world, seed: int = 0, temp_bias_c: float = 0.0) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x280]))
-        # the chip's own error this seed (2 sigma = the data sheet's absolute accuracy)
-        self.error = (0.5 * float(rng.normal()), 0.05 * float(rng.normal()), 1.5 * float(rng.normal()))
+        # the chip's own error this seed (2 sigma = the data sheet's absolute accuracy), and where it sits
+        # (``temp_bias_c``: RigParams.bme280_temp_bias_c, a sensor reading warm)
+        self.error = (0.5 * float(rng.normal()) + float(temp_bias_c), 0.05 * float(rng.normal()),
+                      1.5 * float(rng.normal()))
         self.world = world
         tp, h1, h = pack_trimming(TRIMMING)
         self.regs = bytearray(256)

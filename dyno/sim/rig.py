@@ -365,7 +365,8 @@ class SimRig:
         if bme280_address is not None:  # the simulated air sensor, only when the rig file fits one
             from dyno.sim.bme280_chip import SimBME280
 
-            self.bus.devices[bme280_address] = SimBME280(self.model.world, seed if bme280_seed is None else bme280_seed)
+            self.bus.devices[bme280_address] = SimBME280(self.model.world, seed if bme280_seed is None else bme280_seed,
+                                                         getattr(self.model.params, "bme280_temp_bias_c", 0.0))
         if d7_wired:
             self.model.nano_enable = False  # off until the host's limits arrive
         self.actuators = SimActuators(self.model, full_stroke_s=full_stroke_s, sync=self.bus.sync)

@@ -222,6 +222,15 @@ class RigParams:
     # (chain, bearings) on top of any modelled drag (``driven_loss_nm``).
     world_adc_gain_shift_rel: float = 0.0
     world_driveline_loss_frac: float = 0.0
+    # The gauge's slope drifting *within* a run as the brake warms the shaft beside it: relative change per K
+    # of the rotor above the day (0 by default; bench_uncertainty's gauge-drift world).  A drift the host's
+    # calibration term (one slope scatter per run, independent of the load history) does not describe: it
+    # grows over the run, so the points share it unequally (the later, hotter ones more).
+    adc_gain_rotor_tempco_per_k: float = 0.0
+    # The air sensor reading warm (or cold) by this much (°C) on top of its own data-sheet error: a
+    # sensor beside a warm engine bay or board (0 by default; bench_uncertainty's air-sensor world).  The host
+    # states a rectangular ±1 °C about the reading, not a bias.
+    bme280_temp_bias_c: float = 0.0
     adc_zero_drift_nm_per_min: float = 0.0       # linear zero drift, secondary N m per minute (dyno.sim.driven)
     lockin_cutoff_hz: float = 15.0
     lockin_filter_order: int = 2

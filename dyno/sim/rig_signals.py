@@ -173,7 +173,10 @@ class RigSignals:
                 sig += p.ripple_brake_shaft_frac * amp_base * gm * math.sin(th_b + self._phase_brake + ph)
         t_sec = sig * g
         sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
-        code = p.adc_offset_counts + p.adc_gain_counts_per_nm * t_sec + sigma * self._normal()
+        gain = p.adc_gain_counts_per_nm
+        if p.adc_gain_rotor_tempco_per_k:  # the slope drifting as the rotor warms the shaft (a bench world)
+            gain *= 1.0 + p.adc_gain_rotor_tempco_per_k * (self._rotor_c - p.ambient_temp_c)
+        code = p.adc_offset_counts + gain * t_sec + sigma * self._normal()
         if self._zero_drift_counts_per_s:
             code += self._zero_drift_counts_per_s * ta
         code_i = math.floor(code + 0.5)

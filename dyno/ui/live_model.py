@@ -64,9 +64,10 @@ def temp_colour(temp_c: float, limit_c: float, ambient_c: float = 25.0) -> tuple
 
 def last_point_text(points: list) -> tuple[str, str]:
     """The last point's total 95 % half-width and its interval, for the points row and the row under it:
-    ``("U95 ±x pp", "a…b %")`` (its ``efficiency_u95``: the window's scatter with the calibration, the engine
-    map, the air and the driveline, dyno.analysis.systematic; ``efficiency_interval95``: where the truth lies at
-    95 %, asymmetric where a term is; the CI alone is on the measuring line); ``("", "")`` before a point."""
+    ``("U95 ±x pp", "a…b %")`` (``efficiency_interval95``: where the truth lies at 95 % with the window's scatter,
+    the calibration, the engine map, the air and the driveline, asymmetric where a term is, dyno.analysis.systematic;
+    ``efficiency_u95``: half its width, the same statement; the CI alone is on the measuring line); ``("", "")``
+    before a point."""
     p = next((q for q in reversed(points) if isinstance(q.get("efficiency"), float)
               and math.isfinite(q["efficiency"])), None)
     if p is None:

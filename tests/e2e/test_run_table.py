@@ -44,6 +44,7 @@ def test_the_table_shows_the_ratio_where_p_in_comes_from_and_the_largest_term(ca
     assert row_map.split()[src] == "map" and row_meas.split()[src] == "meas"
     footer = "\n".join(lines[3:])
     assert "map: the engine map" in footer and "meas: the input torque channel" in footer
+    assert "±U95: half the width of interval95, the point's one 95 % statement" in footer  # not a second one
     # the term that dominates: the map's (rms over the two points: 3.5 pp against the statistical 2.1 pp)
     assert "largest U95 term: engine_map (±3.5 pp of" in footer, footer
     assert "`dyno compare` cancels what two runs share" in footer

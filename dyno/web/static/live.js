@@ -33,7 +33,7 @@ function render(f) {
   $("run-enable").dataset.off = String((f.run_enable || "").startsWith("off"));
   $("efficiency").textContent = fmt(f.efficiency === null ? null : f.efficiency * 100, 1, " %");
   $("eff-ci").textContent = f.efficiency_ci95 !== null && f.efficiency_ci95 !== undefined
-    ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp"
+    ? "CI95 ±" + fmt(f.efficiency_ci95 * 100, 1) + " pp · U95 ±" + fmt(f.efficiency_u95 * 100, 1) + " pp (½ interval95)"
       + (f.efficiency_interval95 ? " · interval95 " + interval(f.efficiency_interval95) + " %" : "") : "";
   const ban = $("banner");
   if (f.abort_cause) {
@@ -88,12 +88,13 @@ function plots() {
   }
   const pts = (last && last.points || []).filter(p => p.efficiency !== null && p.ratio !== null);
   const pct = v => v === null || v === undefined ? null : v * 100;
-  // the axis fits the points and their CI; a U95 bar wider than that is cut at the frame
+  // the axis fits the points and their CI; an interval95 bar wider than that is cut at the frame
   const lo = Math.min(...pts.map(p => pct(p.efficiency - (p.efficiency_ci95 || 0)))), hi = Math.max(...pts.map(p => pct(p.efficiency + (p.efficiency_ci95 || 0))));
   const yRange = pts.length ? [Math.max(0, lo - 5), Math.min(110, hi + 5)] : [0, 100];
   const series = [{ kind: "points", x: pts.map(p => p.ratio), y: pts.map(p => pct(p.efficiency)),
-    err95: pts.map(p => pct(p.efficiency_ci95)), u95: pts.map(p => pct(p.efficiency_u95)), color: "#81c784",
-    label: "points: eff % (thick: CI95, thin: U95)" }];
+    err95: pts.map(p => pct(p.efficiency_ci95)),
+    iv95: pts.map(p => p.efficiency_interval95 ? [pct(p.efficiency_interval95[0]), pct(p.efficiency_interval95[1])] : null),
+    color: "#81c784", label: "points: eff % (thick: CI95, thin: interval95)" }];
   // the belt model at each point: the full model where solved (a line), the closed form's creep-only upper
   // bound (grey dots) where not yet
   const m = last && last.model, mp = (m && m.points || []).filter(p => p.ratio !== null && p.efficiency !== null);

@@ -17,7 +17,8 @@ const DynoPlot = (() => {
     const p = (hi - lo) * (pad || 0.05);
     return [lo - p, hi + p];
   }
-  // series: [{x:[], y:[], color, axis:'left'|'right', kind:'line'|'points', err95:[], u95:[], label}]
+  // series: [{x:[], y:[], color, axis:'left'|'right', kind:'line'|'points', err95:[], iv95:[[lo, hi]], label}]
+  // err95: a symmetric half-width (thick bar); iv95: an interval drawn as it is (thin bar; asymmetric where it is)
   function draw(canvas, series, o) {
     o = o || {};
     const dpr = window.devicePixelRatio || 1, cssW = canvas.clientWidth || 300, cssH = canvas.clientHeight || 220;
@@ -29,8 +30,7 @@ const DynoPlot = (() => {
     const L = 46, R = hasRight ? 46 : 10, T = 18, B = 24, W = cssW - L - R, H = cssH - T - B;
     const xs = o.xRange || extent([].concat(...series.map(s => s.x)), 0.02);
     const yl = o.yRange || extent([].concat(...series.filter(s => s.axis !== "right").map(s => s.y.concat(
-      (s.u95 || []).map((e, i) => e === null || s.y[i] === null ? null : s.y[i] + e),
-      (s.u95 || []).map((e, i) => e === null || s.y[i] === null ? null : s.y[i] - e)))), 0.08);
+      (s.iv95 || []).map(iv => iv ? iv[0] : null), (s.iv95 || []).map(iv => iv ? iv[1] : null)))), 0.08);
     const yr = extent([].concat(...series.filter(s => s.axis === "right").map(s => s.y)), 0.08);
     const X = v => L + (v - xs[0]) / (xs[1] - xs[0]) * W;
     const Y = (v, ax) => { const r = ax === "right" ? yr : yl; return T + H - (v - r[0]) / (r[1] - r[0]) * H; };
@@ -49,9 +49,10 @@ const DynoPlot = (() => {
         s.x.forEach((xv, i) => {
           const yv = s.y[i]; if (xv === null || yv === null) return;
           const x = X(xv), y = Y(yv, s.axis);
-          for (const [arr, w] of [[s.u95, 1], [s.err95, 3]]) {
-            const e = arr && arr[i]; if (e === null || e === undefined) continue;
-            g.lineWidth = w; g.beginPath(); g.moveTo(x, Y(yv - e, s.axis)); g.lineTo(x, Y(yv + e, s.axis)); g.stroke();
+          const iv = s.iv95 && s.iv95[i], e = s.err95 && s.err95[i];
+          for (const [b, w] of [[iv ? iv : null, 1], [e === null || e === undefined ? null : [yv - e, yv + e], 3]]) {
+            if (!b || b[0] === null || b[1] === null) continue;
+            g.lineWidth = w; g.beginPath(); g.moveTo(x, Y(b[0], s.axis)); g.lineTo(x, Y(b[1], s.axis)); g.stroke();
           }
           g.beginPath(); g.arc(x, y, 3.2, 0, 2 * Math.PI); g.fill();
         });
