@@ -39,6 +39,8 @@ DIP_MIN_RPM = 12.0       # the smallest dip taken for a cut (the sim's idle lose
 SPREAD_FACTOR = 3.0      # ... and at least this many times the idle's own spread of two-revolution means
 BASELINE_S = 0.5
 RECOVERED_RPM = 6.0      # back to within this of the idle before the next probe (or the spread, if larger)
+STEADY_SPREAD_RPM = 40.0  # the probe starts once the idle's spread is within this (a racing engine: not idle)
+STEADY_MAX_S = 3.0       # ... within this long, or the test ends (idle_unsteady): nothing proven, nothing loaded
 SETTLE_WAIT_S = 0.02     # the probe's polling step while it waits
 
 
@@ -91,6 +93,20 @@ async def _wait_recovered(ctrl, idle_rpm: float, tolerance_rpm: float) -> float 
     return None
 
 
+async def _wait_steady(ctrl) -> float | None:
+    """Wait for a steady idle (the spread of two-revolution means over BASELINE_S within STEADY_SPREAD_RPM);
+    that spread, or None after STEADY_MAX_S (an engine running up or racing: a dip could not be told)."""
+    t0 = ctrl.rig_now()
+    while True:
+        dev_now = ctrl.poller.device_now_us()
+        spread = idle_spread(ctrl.poller.streams.edges[v1.CH_PRIMARY], dev_now) if dev_now is not None else None
+        if spread is not None and spread <= STEADY_SPREAD_RPM:
+            return spread
+        if ctrl.rig_now() - t0 > STEADY_MAX_S:
+            return None
+        await ctrl.rig_sleep(SETTLE_WAIT_S * 5)
+
+
 async def _probe_pi(ctrl, spread: float | None) -> dict:
     rec = {"path": "pi_relay"}
     t_cut = ctrl.poller.device_now_us()
@@ -134,11 +150,17 @@ async def prove_kill_chain(ctrl, result: dict) -> dict:
     reader = getattr(ctrl.poller, "reader", None)
     result.update(cut_s=CUT_S, paths=[], ok=None)
     t_start = ctrl.rig_now()
+    spread = await _wait_steady(ctrl)
     base = cycle_rpm(ctrl.poller.streams.last_edges(v1.CH_PRIMARY, 3))
     idle = base[-1][1] if base else ctrl.poller.rpm(v1.CH_PRIMARY)
-    dev_now = ctrl.poller.device_now_us()
-    spread = idle_spread(ctrl.poller.streams.edges[v1.CH_PRIMARY], dev_now) if dev_now is not None else None
     result["idle_rpm"], result["idle_spread_rpm"] = round(idle, 1), spread
+    if spread is None:
+        result.update(ok=False, probe_s=round(ctrl.rig_now() - t_start, 3))
+        ctrl.plan_context.log("kill_probe", **result)
+        ctrl.abort("idle_unsteady", f"the engine did not idle steadily within {STEADY_MAX_S:g} s (two-revolution "
+                                    f"means spread over {STEADY_SPREAD_RPM:g} rpm): the kill chain cannot be proven, "
+                                    "the test does not start")
+        return result
     tolerance = max(RECOVERED_RPM, spread or 0.0)
     pi = await _probe_pi(ctrl, spread)
     result["paths"].append(pi)
