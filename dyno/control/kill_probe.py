@@ -185,12 +185,14 @@ async def prove_kill_chain(ctrl, result: dict) -> dict:
     ctrl.plan_context.log("kill_probe", **result)
     if not failed:
         return result
-    if nano is not None and len(failed) == 2:
+    if len(failed) == len([p for p in result["paths"] if p["cut"] is not None]):  # no path left that cuts
         path = "kill_lead"
-        detail = ("neither the Pi's kill relay nor the Nano's run-enable cut the engine (dips "
-                  f"{pi['dip_rpm']} and {nano['dip_rpm']} rpm, {pi['needed_rpm']} needed): the kill lead or its "
-                  "ground return is open and nothing here can stop the engine: stop the engine at its own "
-                  "switch or fuel shut-off NOW")
+        dips = " and ".join(f"{p['dip_rpm']}" for p in result["paths"] if p["cut"] is False)
+        detail = (("neither the Pi's kill relay nor the Nano's run-enable" if nano is not None else
+                   "the Pi's kill relay, this rig's only kill path,") + f" cut the engine (dips {dips} rpm, "
+                  f"{pi['needed_rpm']} needed): the kill lead or its ground return is open (or every path is "
+                  "welded shut) and nothing here can stop the engine: stop the engine at its own switch or fuel "
+                  "shut-off NOW")
     else:
         path = failed[0]
         rec = pi if path == "pi_relay" else nano
