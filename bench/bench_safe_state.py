@@ -23,8 +23,8 @@ agree with the physics (``driver_agrees``).
 
 ``--quick`` (CI's smoke run): every plan once, one mid-test drill each, on ``sim``; plus one ``mock`` row and
 two ``twin`` rows (and one ``fil`` row where the ELF is built).  The full matrix is 8 plans x 25 drills x 4 phases
-x 5 modes + the ``fil`` column, less the wiring drills off the
-twin (~3,400 runs, hours on 2 cores): run by hand, or a slice of it with the filters
+x 5 modes + the ``fil`` column, less the wiring drills off the twin, plus the 3 kill-chain drills at ``@0`` only
+(~3,500 runs, hours on 2 cores): run by hand, or a slice of it with the filters
 (``--modes twin,twin+k3 --drills wiring``: the wiring drills alone); docs/safety.md has the figures.
 """
 
@@ -57,9 +57,13 @@ DRILLS = {
     # finds it, names it, falls back to the full stroke time: judged on the physics at the end)
     "endswitch-stuck-closed": None, "endswitch-stuck-open": None, "endswitch-bounce": None,
     "estop-held:3": 0.1, "watchdog-error": 0.1, "sigint-in-command": 0.1,
+    # the kill-chain drills (issue 49): a path broken from the start; the probe before GO ends the test (no bound:
+    # judged on the abort's cause and path, no point, the brake never applied)
+    "kill-lead-open": None, "kill-relay-welded": None, "run-enable-shorted": None,
 }
 WIRING = ("endswitch-stuck-closed", "endswitch-stuck-open", "endswitch-bounce", "estop-held:3", "watchdog-error",
           "sigint-in-command")
+KILL = ("kill-lead-open", "kill-relay-welded", "run-enable-shorted")  # posed at @0 only: before the engine starts
 PHASES = ("armed", "loaded+2", "measure+1", "after+0.5")
 MODES = ("sim", "mock", "sim+faults", "twin", "twin+k3", "fil")
 #: ``fil``: the Nano's real ELF in simavr as the rig's Nano (``--firmware-elf``), on the drills that concern the
@@ -105,7 +109,8 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
     r = run_test(opts)
     m = held["ctx"].sim.model
     physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0
-                    and not m.ignition_on)
+                    and not m.magneto_fires)  # (no spark: a welded path or an open kill lead leave it firing)
+    truth = held["ctx"].sim.truth
     a = r["aborts"][0] if r["aborts"] else {}
     d = (r.get("drills") or [{}])[0]
     out_s = r["outputs"]
@@ -122,7 +127,8 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
             "driver_agrees": out_s.get("driver_agrees"), "driver_disagreement": out_s.get("driver_disagreement"),
             "rig_faults": len(r.get("rig_faults") or []),
             "physics_safe": bool(physics_safe), "points": len(r["points"]), "replayed": replayed,
-            "exit": exit_code(r), "run_dir": r["run_dir"]}
+            "exit": exit_code(r), "run_dir": r["run_dir"], "path": a.get("path"),
+            "pads_ever_on": any(x > m.brake.a0_mm for x in truth.act)}
 
 
 def judge(row: dict) -> list[str]:
@@ -130,7 +136,14 @@ def judge(row: dict) -> list[str]:
     bad = []
     name = row["drill"].partition("@")[0]
     bound = DRILLS.get(name)
-    if not row["physics_safe"]:
+    if name in KILL:  # the probe must end the test before any load, naming the broken path
+        from dyno.session.drills_kill import KILL_DRILL_PATH
+
+        if (row["state"], row["cause"], row.get("path")) != ("aborted", "kill_path_failed", KILL_DRILL_PATH[name]):
+            bad.append(f"not ended by the kill-path probe: {row['state']} {row['cause']} {row.get('path')}")
+        if row["points"] or row.get("pads_ever_on") or row.get("exit") != 3:
+            bad.append("a point, a load or an exit code other than 3")
+    if not row["physics_safe"] and name != "kill-lead-open":  # (that engine cannot be stopped: rig_safe says so)
         bad.append("physics not safe")
     if row["rig_safe"] != row["physics_safe"]:
         bad.append("rig_safe disagrees with the physics")
@@ -160,7 +173,8 @@ def matrix(args) -> list[tuple[str, str, str]]:
     drills = WIRING if args.drills == "wiring" else (args.drills.split(",") if args.drills else list(DRILLS))
     phases = args.phases.split(",") if args.phases else PHASES
     modes = args.modes.split(",") if args.modes else MODES
-    return [(p, f"{d}@{ph}", m) for m in modes for p in plans for d in drills for ph in phases
+    return [(p, f"{d}@{'0' if d in KILL else ph}", m) for m in modes for p in plans for d in drills
+            for ph in (phases[:1] if d in KILL else phases)
             if (m in TWIN_MODES or d not in WIRING) and (m != "fil" or d in FIL_DRILLS)]
 
 

@@ -59,7 +59,12 @@ DRILLS = {
     "sigint": ((8.0, 90.0), 0.1, ""),
     "sigterm": ((8.0, 90.0), 0.1, ""),
     "sighup": ((8.0, 90.0), 0.1, ""),
+    # issue 49: a kill path broken from the start; the probe before GO ends the test (no latency: no load yet)
+    "kill-lead-open": ((0.0,), None, "neither path cuts: kill_path_failed, path kill_lead, rig_safe false"),
+    "kill-relay-welded": ((0.0,), None, "the Pi's path does not cut: kill_path_failed, path pi_relay"),
+    "run-enable-shorted": ((0.0,), None, "the Nano's path does not cut: kill_path_failed, path nano_run_enable"),
 }
+KILL_PATH = {"kill-lead-open": "kill_lead", "kill-relay-welded": "pi_relay", "run-enable-shorted": "nano_run_enable"}
 SURVIVABLE = {"loop-stall:200"}  # (a device reset cuts the engine through the Nano's run-enable: issue 37)
 
 
@@ -79,7 +84,7 @@ def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, p
     a = r["aborts"][0] if r["aborts"] else {}
     m = held["ctx"].sim.model  # the physics' own verdict: pads off the rotor, actuator off, idle, killed
     physics_safe = (m.actuator_mm <= m.brake.a0_mm and m.actuator_dir == 0 and m.throttle_frac == 0.0
-                    and not m.ignition_on)
+                    and not m.magneto_fires)  # (no spark: a welded path or an open kill lead leave it firing)
     o = r["outputs"]
     try:
         replayed = len(load_run(r["run_dir"]).docs("point"))
@@ -92,10 +97,16 @@ def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, p
             "note": a.get("latency_note", ""), "physics_safe": physics_safe,
             "brake_mm_at_safe": o.get("brake_position_at_safe_mm"), "release_s": o.get("release_s"),
             "release_bound_s": o.get("release_bound_s"),
-            "resets_seen": r["frames"]["device_resets"]}
+            "resets_seen": r["frames"]["device_resets"], "path": a.get("path"),
+            "pads_ever_on": any(x > m.brake.a0_mm for x in held["ctx"].sim.truth.act)}
 
 
 def within(row: dict, bound) -> bool:
+    if row["drill"] in KILL_PATH:  # ended before any load, the path named; the open lead leaves it unsafe, said so
+        ended = (row["state"], row["cause"], row["path"], row["points"], row["exit"]) == (
+            "aborted", "kill_path_failed", KILL_PATH[row["drill"]], 0, 3) and not row["pads_ever_on"]
+        safe = row["rig_safe"] == row["physics_safe"] == (row["drill"] != "kill-lead-open")
+        return ended and safe
     released = (row["physics_safe"] and row["rig_safe"] == row["physics_safe"] and row["release_s"] is not None
                 and row["release_s"] <= row["release_bound_s"])
     if not released:

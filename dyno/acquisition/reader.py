@@ -96,6 +96,8 @@ class V1Reader:
         self._gap_carry = False  # a stripped tag-5 event's GAP mark, for the next event kept
         self.supervisor_sent: list = []  # the boot id each SET_SUPERVISOR was written to, in order
         self._sup_rearm_polls: int | None = None  # an operator's re-arm waiting for RUN: polls since
+        self._pulse_ms: int | None = None  # a kill-path probe's PULSE_RUN_ENABLE, written at the next poll
+        self.pulses_sent: list[int] = []  # the ms of each PULSE_RUN_ENABLE written, in order
 
     @property
     def stats(self) -> LinkStats:
@@ -161,6 +163,29 @@ class V1Reader:
         if self.supervisor_command is not None and self.version == 2 and self.supervisor_present:
             self._sup_rearm_polls = 0
 
+    def can_pulse_run_enable(self) -> bool:
+        """The Nano's run-enable exists and is armed in this boot: a pulse can probe it (issue 49)."""
+        return self.supervisor_command is not None and self.version == 2 and bool(self.supervisor_present) \
+            and self.supervisor_armed
+
+    def pulse_run_enable(self, ms: int) -> None:
+        """Ask the Nano to drop its run-enable for ``ms`` and turn it back on (written by the next poll, on the
+        thread that polls: the transport is never written from two threads)."""
+        self._pulse_ms = int(ms)
+
+    def cut_run_enable(self) -> None:
+        """Ask the Nano to drop its run-enable and keep it off until the operator's re-arm (PULSE_LATCH): the
+        host's cut when its own kill path failed the probe."""
+        self._pulse_ms = v2.PULSE_LATCH
+
+    def _pulse_step(self) -> None:
+        ms, self._pulse_ms = self._pulse_ms, None
+        try:
+            self.transport.write(v2.pulse_command(ms))
+            self.pulses_sent.append(ms)
+        except TransportFault:
+            pass
+
     def _rearm_step(self) -> None:
         if self.run_enable:
             self._sup_rearm_polls = None
@@ -184,7 +209,7 @@ class V1Reader:
             cause = v2.SUP_CAUSE_NAMES.get(e.status, f"cause {e.status}")
             self.supervisor_events.append({"t_us": e.t_us, "cause": cause, "code": e.code, "status": e.status,
                                            "boot_id": self.session.boot_id})
-            if e.status != v2.SUP_ON:
+            if e.status not in (v2.SUP_ON, v2.SUP_PULSE):  # (a pulse is the host's own probe, not a drop)
                 self.run_enable_drops.append({"cause": cause, "t_us": e.t_us, "code": e.code})
         if self.supervisor_ever_armed:
             self.run_enable = bool(frame.flags & v2.FLAG_RUN)
@@ -242,6 +267,8 @@ class V1Reader:
             self._negotiate_input()
         elif self._sup_rearm_polls is not None:
             self._rearm_step()
+        if self._pulse_ms is not None:
+            self._pulse_step()
         return out
 
     @property

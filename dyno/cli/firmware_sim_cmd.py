@@ -85,6 +85,11 @@ def _supervisor_arguments(parser) -> None:
     parser.add_argument("--rearm-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
                         help="the operator re-arms the run-enable at S simulated seconds (after a Nano reset the "
                              "new boot stays cut until then)")
+    parser.add_argument("--pulse-at", type=number_in(0.0, 3600.0), default=None, metavar="S",
+                        help="the host's kill-path probe: PULSE_RUN_ENABLE at S simulated seconds (D7 off for "
+                             "--pulse-ms, then on again, unlatched)")
+    parser.add_argument("--pulse-ms", type=number_in(1, 1000, integer=True), default=100, metavar="MS",
+                        help="the probe's pulse length, 1 ... 1000 ms (default 100)")
     parser.add_argument("--no-limits", action="store_true",
                         help="never send the rig file's limits (SET_SUPERVISOR): the run-enable stays off")
     parser.add_argument("--enable-model", choices=("auto", "static", "pump"), default="auto",

@@ -29,6 +29,7 @@ from dyno.control.api import ENGINE_STATES as _ENGINE_STATES
 from dyno.control.api import LOADED_STATES as _LOADED_STATES
 from dyno.control.api import TRANSITIONS, State, TestPlan
 from dyno.control.engine import EngineContext
+from dyno.control.kill_probe import prove_kill_chain
 from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
 from dyno.control.outputs import APPLY, DeadlineService, enter_safe_state, ignition_hold_ended
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
@@ -111,6 +112,7 @@ class TestController(Measuring):
         # actuators themselves latch. Only a new controller (a re-arm) starts open.
         self.outputs_latched = False
         self.refused: list[dict] = []
+        self.kill_probe: dict = {}  # the kill chain's proof before GO (dyno.control.kill_probe): each path's dip
         poller.listeners.append(self._on_poll)
         self.plan_context = EngineContext(self)  # all a plan runner is handed (dyno.control.api.PlanContext)
 
@@ -212,7 +214,8 @@ class TestController(Measuring):
                 t = math.nan
             self.writer.doc(doc_type, host_t_s=t, device_t_us=self.poller.device_now_us(), **fields)
 
-    def abort(self, cause: str, detail: str, trigger_s: float | None = None, *, after_done: bool = False) -> None:
+    def abort(self, cause: str, detail: str, trigger_s: float | None = None, *, after_done: bool = False,
+              **fields) -> None:
         """Safe state now, then record why. Idempotent.
 
         ``trigger_s`` is when the condition became true (e.g. the thermometer
@@ -226,7 +229,7 @@ class TestController(Measuring):
         safe_s = self._now()
         trigger_s = now if trigger_s is None else trigger_s
         entry = {"cause": cause, "detail": detail, "state": self.state.value, "trigger_s": trigger_s,
-                 "safe_state_s": safe_s, "latency_s": safe_s - trigger_s}
+                 "safe_state_s": safe_s, "latency_s": safe_s - trigger_s, **fields}
         self.aborts.append(entry)
         self._log("abort", **entry)
         if self.state is not State.DONE:
@@ -386,6 +389,10 @@ class TestController(Measuring):
 
         self.zero_before = await read_zero(self)  # torque zero at rest (idle is below engagement)
         self._tare()
+        # every path that can cut the engine, opened briefly at idle before GO (docs/safety.md): one that does
+        # not cut ends the test here, before any load
+        if not (await prove_kill_chain(self, self.kill_probe))["ok"]:
+            return
         if self.auto_go:
             self._go.set()
         await self._go.wait()

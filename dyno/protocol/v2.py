@@ -70,8 +70,12 @@ OP_INFO = v1.OP_INFO
 OP_SET_CHANNELS = 0x22  # u8 mask of optional channels to queue (CHANNEL_INPUT); the device's reply: none
 OP_CAPS = 0x31          # the next read returns one capabilities frame, then data frames again
 OP_SET_SUPERVISOR = 0x23  # u16 min period primary us, u16 min period secondary us, u16 heartbeat timeout ms
+# u16 ms: drop the run-enable for that long and turn it back on, without latching (the kill-path probe, issue 49)
+OP_PULSE_RUN_ENABLE = 0x24
+PULSE_MS_MAX = 1000  # a longer (or zero) pulse is not a command: ignored, counted as a bad command ...
+PULSE_LATCH = 0xFFFF  # ... but this: off and latched until the next SET_SUPERVISOR (the host's own cut)
 COMMAND_ARGS = {OP_POLL: 0, OP_ACK_POLL: 3, OP_SET_DEBOUNCE: 4, OP_CLEAR_COUNTERS: 0, OP_INFO: 0,
-                OP_SET_CHANNELS: 1, OP_CAPS: 0, OP_SET_SUPERVISOR: 6}
+                OP_SET_CHANNELS: 1, OP_CAPS: 0, OP_SET_SUPERVISOR: 6, OP_PULSE_RUN_ENABLE: 2}
 
 # The optional engine-side torque channel: a second AD7171 (tag 4, tag 3's 6-byte layout).
 CH_INPUT = 4
@@ -80,9 +84,9 @@ CH_SUPERVISOR = 5
 EVENT_LEN = {**EVENT_LEN, CH_INPUT: 6, CH_SUPERVISOR: 6}
 CHANNEL_NAMES = {**CHANNEL_NAMES, CH_INPUT: "input", CH_SUPERVISOR: "supervisor"}
 ADC_TAGS = (CH_ADC, CH_INPUT, CH_SUPERVISOR)  # (the 6-byte events: code and status)
-SUP_ON, SUP_HEARTBEAT, SUP_OVERSPEED_PRIMARY, SUP_OVERSPEED_SECONDARY = 0, 1, 2, 3
+SUP_ON, SUP_HEARTBEAT, SUP_OVERSPEED_PRIMARY, SUP_OVERSPEED_SECONDARY, SUP_PULSE = 0, 1, 2, 3, 4
 SUP_CAUSE_NAMES = {SUP_ON: "on", SUP_HEARTBEAT: "heartbeat", SUP_OVERSPEED_PRIMARY: "overspeed_primary",
-                   SUP_OVERSPEED_SECONDARY: "overspeed_secondary"}
+                   SUP_OVERSPEED_SECONDARY: "overspeed_secondary", SUP_PULSE: "pulse"}
 
 KIND_CAPS = 0x43  # 'C'
 CAPS_LEN = 20
@@ -232,6 +236,9 @@ def encode_command(op: int, *args: int) -> bytes:
         body = struct.pack(">BHH", op, *args)
     elif op == OP_SET_SUPERVISOR:
         body = struct.pack(">BHHH", op, *(a & 0xFFFF for a in args))
+    elif op == OP_PULSE_RUN_ENABLE:
+        (ms,) = args
+        body = struct.pack(">BH", op, ms & 0xFFFF)
     elif op == OP_ACK_POLL:
         boot_id, seq = args
         body = struct.pack(">BHB", op, boot_id & 0xFFFF, seq & 0xFF)
@@ -319,6 +326,8 @@ def decode_command(buf: bytes) -> v1.Command:
         return v1.Command(op, (buf[1],))
     if op == OP_SET_SUPERVISOR:
         return v1.Command(op, struct.unpack(">HHH", buf[1:7]))
+    if op == OP_PULSE_RUN_ENABLE:
+        return v1.Command(op, struct.unpack(">H", buf[1:3]))
     return v1.Command(op, ())
 
 
@@ -338,3 +347,11 @@ def supervisor_command(limit_primary_rpm: float | None, limit_secondary_rpm: flo
     timeout_ms = max(1, min(0xFFFF, round(float(timeout_s) * 1000.0)))
     return encode_command(OP_SET_SUPERVISOR, min_period_us(limit_primary_rpm), min_period_us(limit_secondary_rpm),
                           timeout_ms)
+
+
+def pulse_command(ms: int) -> bytes:
+    """PULSE_RUN_ENABLE: the Nano drops its run-enable for ``ms`` (1 ... PULSE_MS_MAX) and turns it back on,
+    unlatched, if it was on (docs/protocol.md; the kill-path probe, issue 49); ``PULSE_LATCH``: off, latched."""
+    if not (1 <= int(ms) <= PULSE_MS_MAX or int(ms) == PULSE_LATCH):
+        raise ValueError(f"pulse of {ms} ms: 1 ... {PULSE_MS_MAX}")
+    return encode_command(OP_PULSE_RUN_ENABLE, int(ms))

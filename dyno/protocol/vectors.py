@@ -216,6 +216,9 @@ def render_v2_supervisor() -> str:
         ("sup_overspeed_secondary_gap", 11, v2.FLAG_OVERFLOW | por, 7, 2,
          [E(5, 5_000_000, 7600, v2.SUP_OVERSPEED_SECONDARY, gap=True)], 0),
         ("run_empty", 12, por | run | v2.FLAG_RESET, 7, 0, [], 6_000_000),
+        # the kill-path probe (issue 49): off for a 100 ms pulse (no RUN while it lasts), on again at its end
+        ("sup_pulse", 13, por, 7, 0, [E(5, 7_000_000, 100, v2.SUP_PULSE), E(1, 7_020_000)], 0),
+        ("sup_pulse_end", 14, por | run, 7, 0, [E(1, 7_090_000), E(5, 7_100_000, 0, v2.SUP_ON)], 0),
     )
     for name, seq, flags, boot, dropped, events, now in frames:
         raw = v2.encode_data_frame(seq, flags, boot, dropped, events, now)
@@ -237,9 +240,15 @@ def render_v2_supervisor() -> str:
                        ("set_supervisor_primary_only", (v2.min_period_us(4200.0), 0, 65535))):
         raw = v2.encode_command(v2.OP_SET_SUPERVISOR, *args)
         lines.append(f"cmd {name} op={v2.OP_SET_SUPERVISOR} args={','.join(map(str, args))} hex={raw.hex()}")
+    for name, ms in (("pulse_run_enable_100", 100), ("pulse_run_enable_max", v2.PULSE_MS_MAX),
+                     ("pulse_run_enable_latch", v2.PULSE_LATCH)):
+        raw = v2.pulse_command(ms)
+        lines.append(f"cmd {name} op={v2.OP_PULSE_RUN_ENABLE} args={ms} hex={raw.hex()}")
     good = v2.encode_command(v2.OP_SET_SUPERVISOR, 14285, 7692, 200)
     lines.append(f"badcmd supervisor_crc cause=crc hex={(good[:-1] + bytes([good[-1] ^ 0x01])).hex()}")
     lines.append(f"badcmd supervisor_short cause=length hex={(good[:-3] + good[-2:]).hex()}")
+    good = v2.pulse_command(100)
+    lines.append(f"badcmd pulse_crc cause=crc hex={(good[:-1] + bytes([good[-1] ^ 0x01])).hex()}")
     return "\n".join(lines) + "\n"
 
 

@@ -28,7 +28,7 @@ controller-crash       the control task raises
 disk-full              the run directory refuses writes (ENOSPC)
 sigint|sigterm|sighup  the process receives the signal
 =====================  ==================================================================
-and the wiring drills through the twin (``--mock-pins``): :mod:`dyno.session.drills_wiring`.
+and the wiring drills (``--mock-pins``): :mod:`dyno.session.drills_wiring`; the kill chain's: :mod:`.drills_kill`.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import signal
 from bisect import bisect_left
 from dataclasses import dataclass
 
+from dyno.session.drills_kill import KILL_DRILLS, KillDrills, probe_kill_windows
 from dyno.session.drills_wiring import NO_TRIP_DRILLS, WIRING_DRILLS, WiringDrills, check_wiring_drill
 from dyno.errors import ConfigError
 
@@ -65,7 +66,7 @@ DRILLS: dict[str, tuple[bool, tuple | None, bool]] = {
     "sigint": (False, None, False),
     "sigterm": (False, None, False),
     "sighup": (False, None, False),
-    **WIRING_DRILLS,
+    **WIRING_DRILLS, **KILL_DRILLS,
 }
 SIGNAL_DRILLS = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM, "sighup": signal.SIGHUP}
 
@@ -144,7 +145,7 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
     return Drill(name, arg, t_s, phase)
 
 
-class DrillRunner(WiringDrills):
+class DrillRunner(WiringDrills, KillDrills):
     """Arms drills on a running rig and records when each fault physically began.
 
     ``ctx``: the composition root's RunContext (``sim``, ``controller``, ``writer``, ``poller``); ``loop``: the
@@ -308,7 +309,7 @@ def enospc(path) -> OSError:
     return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
 
-def first_safe_s(history, t_from_s: float) -> float | None:
+def first_safe_s(history, t_from_s: float, ignore_kill=()) -> float | None:
     """First simulated instant >= ``t_from_s`` at which the physics' inputs were all safe.
 
     Safe: throttle idle, ignition killed, actuator not applying (stopped or releasing).
@@ -319,7 +320,7 @@ def first_safe_s(history, t_from_s: float) -> float | None:
     from dyno.sim.rig import wired_states
 
     safe_before = False
-    for _, t, safe in wired_states(history):
+    for _, t, safe in wired_states(history, ignore_kill):
         if t >= t_from_s:
             if safe_before:
                 return t_from_s  # already safe when the fault began
@@ -354,7 +355,7 @@ def true_latencies(ctx, aborts: list[dict], drills_from: int = 0) -> None:
     rec = min([r for r in fired if r["name"] not in NO_TRIP_DRILLS] or fired, key=lambda r: r["onset_s"])
     onset = rec["onset_s"]
     t_from = rec["onset_s"] - 1e-9
-    safe = [first_safe_s(sim.actuators.history, t_from)]
+    safe = [first_safe_s(sim.actuators.history, t_from, probe_kill_windows(ctx))]
     safe = [t for t in safe if t is not None]
     if rec.get("onset_from") == "rotor_temp_c":
         crossing = truth.crossing_s("rotor_c", lim.rotor_temp_max_c, onset)
@@ -450,7 +451,7 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
     end_s = sim.model.t_s
     for rec in drills.fired[drills_from:]:
         t0 = rec["onset_s"]
-        t_safe = first_safe_s(sim.actuators.history, t0 - 1e-9)
+        t_safe = first_safe_s(sim.actuators.history, t0 - 1e-9, probe_kill_windows(ctx))
         t1 = t_safe if t_safe is not None and t_safe > t0 else end_s
         name, arg = rec["name"], rec["drill"].partition(":")[2].partition("@")[0]
         arose, note = True, ""
@@ -487,8 +488,8 @@ def hazard_verdicts(ctx, drills_from: int = 0) -> None:
         elif name == "disk-full":
             arose = getattr(ctx.writer, "error", None) is not None
             note = "no write was attempted after the disk filled"
-        elif name in WIRING_DRILLS:
-            arose, note = drills._wiring_verdict(rec, name)
+        elif name in WIRING_DRILLS or name in KILL_DRILLS:
+            arose, note = drills._wiring_verdict(rec, name) if name in WIRING_DRILLS else drills._kill_verdict(rec)
         elif name in FREEZE_DRILLS:
             from dyno.session.drills_freeze import freeze_verdict
 

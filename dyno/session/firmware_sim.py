@@ -73,6 +73,8 @@ class FirmwareSimSpec:
     rig: object = None  # the rig file whose [limits] arm the run-enable at every boot (None: the default)
     host_stop_at: float | None = None  # the host stops polling at S simulated seconds
     rearm_at: float | None = None  # the operator re-arms the run-enable at S simulated seconds (issue 49)
+    pulse_at: float | None = None  # the host's kill-path probe: PULSE_RUN_ENABLE at S simulated seconds (issue 49)
+    pulse_ms: int = 100  # ... of this many ms
     no_limits: bool = False  # never send the limits (SET_SUPERVISOR): the run-enable stays off
     enable_model: str = "auto"  # how the harness reads D7: auto | static | pump
 
@@ -143,8 +145,9 @@ def simulate(args: FirmwareSimSpec) -> dict:
             tr.advance_to(t)
             if sup and not sup.polling(t, t_end):
                 continue  # --host-stop-at: the simulation goes on, the host does not poll
-            if sup:  # --rearm-at: the operator's re-arm (the only way a new boot is armed again)
+            if sup:  # --rearm-at: the operator's re-arm (the only way a new boot is armed again); --pulse-at
                 sup.maybe_rearm(reader, t)
+                sup.maybe_pulse(reader, t)
             for _ in range(args.max_burst):  # as the Poller: read again at once while the device says MORE
                 resets_before = reader.stats.device_resets
                 new = reader.poll(t)

@@ -5,7 +5,8 @@ The host sends the rig file's ``[limits]`` (``overspeed_primary_rpm``, ``overspe
 will (:func:`dyno.protocol.v2.supervisor_command`); until then the output stays off. ``--host-stop-at S``
 stops the host's polls at S simulated seconds while the simulation goes on (the host comes back after the
 drain to read what the device kept, as a host recovering from a freeze would, so the cause event can be
-decoded). ``--no-limits`` never sends the limits.
+decoded). ``--no-limits`` never sends the limits. ``--pulse-at S`` sends the kill-path probe's
+PULSE_RUN_ENABLE (``--pulse-ms``, issue 49): D7 off that long, then on again (cause ``pulse``).
 
 The report, ``supervisor: {on_at_s, off_at_s, cause, ...}``, is on the simulation's time base (seconds
 since power-up): on and off come from the pin (D7 as the harness saw it: the physics' truth; for the
@@ -47,6 +48,8 @@ class SupervisorHost:
         self.stop_at = spec.host_stop_at
         self.rearm_at = getattr(spec, "rearm_at", None)
         self.rearmed_at_s = None  # when the operator's re-arm was asked for
+        self.pulse_at, self.pulse_ms = getattr(spec, "pulse_at", None), getattr(spec, "pulse_ms", 100)
+        self.pulsed_at_s = None  # when the kill-path probe's pulse was asked for
         self.sends: list = []          # (t_s, boot_id)
         self.events: list = []         # (t_s decoded, boot_id, Event)
         self.boot_seen: list = []      # (t_s, boot_id): the host's first frame of each boot
@@ -62,6 +65,13 @@ class SupervisorHost:
         if self.rearm_at is not None and self.rearmed_at_s is None and t >= self.rearm_at:
             self.rearmed_at_s = t
             reader.rearm_supervisor()
+
+    def maybe_pulse(self, reader, t: float) -> None:
+        """``--pulse-at S``: the kill-path probe (issue 49): PULSE_RUN_ENABLE of ``--pulse-ms``, written by the next
+        poll (the reader's own path, as ``dyno run``'s probe)."""
+        if self.pulse_at is not None and self.pulsed_at_s is None and t >= self.pulse_at:
+            self.pulsed_at_s = t
+            reader.pulse_run_enable(self.pulse_ms)
 
     def after_poll(self, reader, t: float, new: list) -> None:
         """After each poll: note the boot, the limits the reader sent (it arms every boot as ``dyno run``'s
@@ -138,6 +148,8 @@ def report(host: SupervisorHost, hs: dict, first_frame_s) -> dict:
         "limits_sent_at_s": [t for t, _ in host.sends],
         "host_stop_at_s": host.stop_at, "last_poll_s": host.last_poll_s,
         "rearm_at_s": host.rearm_at, "rearmed_at_s": host.rearmed_at_s,
+        "pulse_at_s": host.pulse_at, "pulse_ms": host.pulse_ms if host.pulse_at is not None else None,
+        "pulsed_at_s": host.pulsed_at_s,
         "history": history,
         "events": [{"decoded_at_s": round(t, 6), "boot_id": b, "t_us": ev.t_us,
                     "cause": v2.SUP_CAUSE_NAMES.get(ev.status, f"status_{ev.status}"), "code": ev.code}

@@ -18,7 +18,7 @@ from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor
 from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
-from dyno.session.safety import make_watchdog, start_watchdog  # noqa: F401 (start_watchdog: re-exported, the UI)
+from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -350,6 +350,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
         "safe state; what was recorded before stays readable")
     watchdog = make_watchdog(controller, poller, hw, estop, rig_cfg.actuator.watchdog_s, now_s)
+    warn_when_uncuttable(controller)  # the kill-path probe found no way to stop the engine: say so at once
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
                      ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter,
                      twin=twin, estop=estop, watchdog=watchdog,

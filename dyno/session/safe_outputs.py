@@ -24,7 +24,7 @@ import asyncio
 RELEASE_BOUND_MARGIN_S = 0.2
 
 
-def last_safe_transition(history: list, history_mm: list) -> tuple[float | None, float | None]:
+def last_safe_transition(history: list, history_mm: list, ignore_kill=()) -> tuple[float | None, float | None]:
     """(sim time, actuator mm) of the last moment the wired inputs went from not safe to safe.
 
     Safe inputs: throttle idle, ignition killed, actuator not applying.  ``history`` is
@@ -34,7 +34,7 @@ def last_safe_transition(history: list, history_mm: list) -> tuple[float | None,
 
     was_safe = False
     found: tuple[float | None, float | None] = (None, None)
-    for i, t, safe in wired_states(history):
+    for i, t, safe in wired_states(history, ignore_kill):
         if safe and not was_safe:
             found = (t, history_mm[i] if i < len(history_mm) else None)
         was_safe = safe
@@ -57,7 +57,10 @@ def sim_outputs(ctx) -> dict:
         outs["driver_faults"] = d.get("faults", [])
         judge_driver(outs)
     wiring = getattr(sim.actuators, "wiring", None)
-    t_cmd, mm_at = last_safe_transition(wiring.history, wiring.history_mm) if wiring is not None else (None, None)
+    from dyno.session.drills_kill import probe_kill_windows
+
+    t_cmd, mm_at = (last_safe_transition(wiring.history, wiring.history_mm, probe_kill_windows(ctx))
+                    if wiring is not None else (None, None))
     outs["safe_commanded_s"] = t_cmd
     outs["brake_position_at_safe_mm"] = None if mm_at is None else round(mm_at, 3)
     released_at = model.pads_off_at_s if model.pads_off else None
@@ -128,6 +131,8 @@ def _why_not(outs: dict) -> str:
         why.append(f"throttle {outs.get('throttle')}")
     if outs.get("engine_kill") != "killed":
         why.append("ignition on")
+    elif outs.get("engine_firing"):
+        why.append("the engine still fires though killed (a kill path welded shut, or the kill lead open)")
     if outs.get("pads_off_rotor") is False:
         why.append(f"brake pads on the rotor (actuator at {outs.get('brake_position_mm')} mm)")
     if outs.get("brake_actuator") != "stopped":

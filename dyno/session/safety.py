@@ -142,3 +142,25 @@ def start_watchdog(ctx, loop) -> object:
         return lambda: loop.remove_ticker(entry)
     wd.start_thread()
     return wd.stop_thread
+
+
+#: the operator's line when nothing the program commands can stop the engine (the kill-path probe: kill_lead)
+KILL_LEAD_WARNING = ("DANGER: the engine cannot be cut by dyno: neither the Pi's kill relay nor the Nano's run-enable "
+                     "stopped it (kill lead or its ground return open). Stop the engine NOW at its own switch or fuel "
+                     "shut-off; the E-stop's S1.2 contact on the kill wire may not stop it either.")
+
+
+def warn_when_uncuttable(controller, stream=None) -> None:
+    """On the controller's abort ``kill_path_failed`` with ``path`` ``kill_lead``: one line on stderr at once
+    (whatever the face: ``dyno run``, ``dyno ui``), for the person at the rig (issue 49)."""
+    import sys
+
+    said = []
+
+    def listener(ctrl) -> None:
+        if said or not any(a.get("path") == "kill_lead" for a in ctrl.aborts):
+            return
+        said.append(True)
+        print(f"dyno: {KILL_LEAD_WARNING}", file=stream or sys.stderr, flush=True)
+
+    controller.listeners.append(listener)

@@ -47,6 +47,7 @@ def summarize(ctx, drills_from: int = 0) -> dict:
                 pub.update(corrected_point_keys(p, zc, basis))
     out["link"] = link_document(ctx)
     out["supervisor"] = supervisor_document(reader)
+    out["kill_probe"] = dict(getattr(ctx.controller, "kill_probe", None) or {})  # each kill path's dip before GO
     out["ambient"] = dict(getattr(ctx, "ambient", None) or {})  # the run's air (dyno.session.ambient)
     if getattr(ctx, "u95_terms", None):
         out["u95_terms"] = ctx.u95_terms  # what each term of efficiency_u95 assumes (dyno.analysis.u95_terms)
@@ -62,6 +63,10 @@ def summarize(ctx, drills_from: int = 0) -> dict:
     outputs = rig_outputs(ctx)
     out["outputs"] = outputs
     out["rig_safe"] = bool(outputs.get("safe"))  # the physical state (dyno.session.safe_outputs), not a wish
+    if any(a.get("path") == "kill_lead" for a in aborts):  # nothing here can stop the engine (kill_probe)
+        out["rig_safe"] = False
+        outputs["unsafe_because"] = ("the engine cannot be cut: neither the Pi's kill relay nor the Nano's "
+                                     "run-enable stops it (the kill lead is open); stop it at its own switch or fuel")
     # wiring faults the Pi's output code found (an end switch contradicting the travel): [] when none
     out["rig_faults"] = list(outputs.get("driver_faults") or outputs.get("faults") or [])
     if not out["rig_safe"]:
@@ -174,7 +179,7 @@ def public_point(p: dict) -> dict:
 
 
 SAFETY_KEYS = ("state", "reason", "aborts", "drills", "outputs", "rig_safe", "rig_unsafe_because", "rig_faults",
-               "refused",
+               "refused", "kill_probe",
                "signal", "faults_injected", "sim_time_s", "events_lost")
 
 

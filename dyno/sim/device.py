@@ -233,8 +233,13 @@ class EmulatedFirmware:
             return  # ignored, as the firmware does: the current frame is served again
         if not self.knows_caps and cmd.op in (v2.OP_CAPS, v2.OP_SET_CHANNELS):
             return  # older firmware: an unknown op, ignored the same way
-        if cmd.op == v2.OP_SET_SUPERVISOR and not self.has_supervisor:
+        if cmd.op in (v2.OP_SET_SUPERVISOR, v2.OP_PULSE_RUN_ENABLE) and not self.has_supervisor:
             return  # firmware before the run-enable: an unknown op
+        if cmd.op == v2.OP_PULSE_RUN_ENABLE:
+            (ms,) = cmd.args
+            if 1 <= ms <= v2.PULSE_MS_MAX or ms == v2.PULSE_LATCH:  # (else ignored, as by the firmware; not a heartbeat either way)
+                self.supervisor.pulse(now_s, ms)
+            return
         if self.has_supervisor and cmd.op in (v1.OP_POLL, v1.OP_ACK_POLL, v2.OP_SET_SUPERVISOR):
             self.supervisor.heartbeat(now_s)
         if cmd.op == v2.OP_SET_SUPERVISOR:

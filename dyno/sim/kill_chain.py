@@ -7,9 +7,17 @@ first also releases the brake by wiring.  The first input to open the chain is r
 as the physics sees it: ``ignition_log`` holds ``(t_s, on, by)`` at every change, ``by`` one of
 ``"pi"``, ``"nano"``, ``"estop"``, and ``ignition_cut_mm`` the actuator's true position at each opening
 (the start of K3's release).
+
+Three wiring faults (the drills of :mod:`dyno.session.drills_kill`, issue 49) defeat a path: ``pi_switch_welded``
+(the Pi's switch in the chain conducts whatever GPIO24 says: Q1 shorted, or an ``energise_to_kill`` rig's own
+kill relay welded), ``run_enable_shorted`` (Q2 or D7's wire shorted: the chain ignores the Nano) and
+``kill_lead_open`` (the magneto's kill lead or its ground return open: K1's contact grounds nothing, so the
+engine fires whatever the chain does; the chain itself, and K3 on it, still switch).
 """
 
 from __future__ import annotations
+
+import math
 
 
 class KillChain:
@@ -18,16 +26,25 @@ class KillChain:
     nano_enable: bool = True     # the Nano's run-enable (a rig or firmware without one: always closed)
     estop_open: bool = False     # the E-stop chain's NC contact opened (the wiring twin sets it)
     _ignition_was_on: bool | None = None
+    pi_switch_welded: bool = False
+    run_enable_shorted: bool = False
+    kill_lead_open: bool = False
 
     @property
     def ignition_on(self) -> bool:
         """The kill relay is energised: Pi, Nano and E-stop all allow the engine to run."""
-        return bool(self.engine_enabled) and bool(self.nano_enable) and not self.estop_open
+        return ((bool(self.engine_enabled) or self.pi_switch_welded) and (bool(self.nano_enable) or self.run_enable_shorted)
+                and not self.estop_open)
+
+    @property
+    def magneto_fires(self) -> bool:
+        """The ignition sparks: the chain holds K1 off the kill lead, or the kill lead is open."""
+        return self.ignition_on or self.kill_lead_open
 
     def _who_opened(self) -> str:
         if self.estop_open:
             return "estop"
-        if not self.nano_enable and self.engine_enabled:
+        if not self.nano_enable and not self.run_enable_shorted and (self.engine_enabled or self.pi_switch_welded):
             return "nano"
         return "pi"
 
@@ -46,6 +63,16 @@ class KillChain:
     def ignition_enabled_at_s(self) -> float | None:
         """When the chain first closed (true time); None if it never did."""
         return next((t_s for t_s, on, _ in self.__dict__.get("ignition_log", []) if on), None)
+
+    def ignition_step(self, t0: float) -> None:
+        """The chain recorded at ``t0`` and the engine firing or not: no spark stops it; a spark back while the
+        crank still turns above its stall speed re-fires it, as a magneto engine does (the 100 ms kill-path
+        probe at idle, issue 49)."""
+        self.note_ignition(t0)
+        if not self.magneto_fires:
+            self._running = False
+        elif not self._running and self._w_e * 30.0 / math.pi > self._stall_rpm:
+            self._running = True
 
     def engine_cut(self, after_s: float = 0.0) -> tuple[float, str] | None:
         """(true time, by whom) of the first opening of the chain at or after ``after_s``, while the engine

@@ -245,7 +245,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
     # ------------------------------------------------------------ inputs
     def start_engine(self) -> None:
         """Operator pull-start: if enabled and stopped, the engine fires and runs up to idle."""
-        if not self.ignition_on or self._running:
+        if not self.magneto_fires or self._running:
             return
         self._running = True
         self._w_e = max(self._w_e, self.params.engine_start_rpm * RAD_S_PER_RPM)
@@ -339,8 +339,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         g = self._g
         j_e = self._j_e
         j_s = self._j_s
-        if not self.note_ignition(t0):
-            self._running = False
+        self.ignition_step(t0)
 
         # --- actuator and brake capacity (inputs act from the start of the step)
         if self.actuator_dir:  # powered: the coil is wherever the command points

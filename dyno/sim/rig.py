@@ -81,11 +81,14 @@ class SimWiring:
         self.record("kill", bool(killed))
 
 
-def wired_states(history):
+def wired_states(history, ignore_kill=()):
     """Replay :class:`SimWiring`'s ``history``: yields ``(index, t, safe)`` after each entry, ``safe`` being
-    throttle idle, ignition killed and the actuator not applying (stopped or releasing)."""
+    throttle idle, ignition killed and the actuator not applying (stopped or releasing).  ``ignore_kill``:
+    (t0, t1) spans whose kill changes are not a safe state (the kill-path probe's 100 ms cuts, issue 49)."""
     throttle, enabled, direction = 0.0, True, 0
     for i, (t, what, value) in enumerate(history):
+        if what == "kill" and any(t0 <= t <= t1 for t0, t1 in ignore_kill):
+            continue
         if what == "safe_state":
             throttle, enabled, direction = 0.0, False, -1
         elif what == "throttle":
@@ -225,14 +228,17 @@ class SimActuators:
 
 def physical_outputs(model) -> dict:
     """The simulated rig's outputs as the physics has them, and ``safe``: throttle idle, ignition
-    killed, pads off the rotor (actuator at or inside the free travel) and the actuator de-energised."""
+    killed (the Pi's command, and no spark: a welded path or an open kill lead leave the engine firing),
+    pads off the rotor (actuator at or inside the free travel) and the actuator de-energised."""
     m = model
     brake = {RELEASE: "releasing", STOP: "stopped"}.get(m.actuator_dir, "applying")
     return {"throttle": "idle" if m.throttle_frac == 0.0 else f"{m.throttle_frac:.2f}",
             "engine_kill": "killed" if not m.engine_enabled else "run",
             "brake_actuator": brake, "brake_position_mm": round(m.actuator_mm, 3),
             "pads_off_rotor": bool(m.pads_off),
-            "safe": m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir == STOP and bool(m.pads_off)}
+            "engine_firing": bool(getattr(m, "magneto_fires", False)),
+            "safe": m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_dir == STOP and bool(m.pads_off)
+            and not getattr(m, "magneto_fires", False)}
 
 
 class TruthRecorder:

@@ -11,6 +11,9 @@
 #define OP_SET_CHANNELS 0x22u  /* u8 mask of optional channels to queue (bit 0: input torque) */
 #define OP_CAPS 0x31u          /* the next read returns the capabilities frame */
 #define OP_SET_SUPERVISOR 0x23u  /* u16 min period primary us, u16 min period secondary us, u16 timeout ms */
+#define OP_PULSE_RUN_ENABLE 0x24u  /* u16 ms: drop the run-enable that long, then on again (no latch) */
+#define PULSE_MS_MAX 1000u         /* a longer (or zero) pulse is ignored, counted bad ... */
+#define PULSE_LATCH 0xFFFFu        /* ... but this one: off, latched until the next SET_SUPERVISOR */
 
 #define CMD_MAX_LEN 9u  /* SET_SUPERVISOR: op + 6 + crc */
 
@@ -22,6 +25,7 @@ static inline uint8_t cmd_length(uint8_t op)
     switch (op) {
     case OP_POLL: case OP_CLEAR_COUNTERS: case OP_INFO: case OP_CAPS: return 3;
     case OP_SET_CHANNELS: return 4;
+    case OP_PULSE_RUN_ENABLE: return 5;
     case OP_ACK_POLL: return 6;  /* v2: op, u16 boot_id, u8 seq, crc */
     case OP_SET_DEBOUNCE: return 7;
     case OP_SET_SUPERVISOR: return 9;

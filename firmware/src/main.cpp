@@ -108,7 +108,7 @@ static void sup_emit(const dyno_event_t *ev)
  * measured, the heartbeat timeout; then the pin. */
 static void supervisor_pass(void)
 {
-    uint16_t args[3];
+    uint16_t args[3], pulse_ms;
     dyno_event_t ev;
     uint32_t now = capture_now_us();
     uint8_t periods = capture_take_periods();
@@ -120,6 +120,8 @@ static void supervisor_pass(void)
     } else if (beat) {
         supervisor_beat(&g_sup, now);
     }
+    if (proto_take_pulse(&g_proto, &pulse_ms) && supervisor_pulse(&g_sup, pulse_ms, now, &ev))
+        sup_emit(&ev);
     for (uint8_t c = 0; c < 2; c++)
         if ((periods >> c) & 1u && supervisor_period(&g_sup, c, capture_period_us(c), capture_last_us(c), &ev))
             sup_emit(&ev);

@@ -157,6 +157,23 @@ uint8_t proto_take_supervisor(proto_t *p, uint16_t args[3])
     return pending;
 }
 
+uint8_t proto_take_pulse(proto_t *p, uint16_t *ms)
+{
+    uint8_t pending;
+    if (!p->pulse_pending)  /* (one byte: read atomically) the usual pass takes no critical section */
+        return 0;
+    PORT_CRITICAL_BEGIN();
+    pending = p->pulse_pending;
+    p->pulse_pending = 0;
+    *ms = (uint16_t)(p->pulse_args[0] << 8 | p->pulse_args[1]);
+    if (pending && (!*ms || (*ms > PULSE_MS_MAX && *ms != PULSE_LATCH))) {
+        p->cmds_bad++;
+        pending = 0;
+    }
+    PORT_CRITICAL_END();
+    return pending;
+}
+
 uint8_t proto_take_beat(proto_t *p)
 {
 #ifdef __AVR__

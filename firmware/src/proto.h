@@ -68,6 +68,8 @@ typedef struct {
      * loop (proto_take_supervisor); the output's state as the loop last published it (proto_set_run) */
     uint8_t sup_args[6];           /* u16 min period primary, secondary (us), timeout (ms), big-endian */
     volatile uint8_t sup_pending;
+    uint8_t pulse_args[2];         /* PULSE_RUN_ENABLE's u16 ms as sent (big-endian), taken by the loop */
+    volatile uint8_t pulse_pending;
     uint8_t run_flag;              /* FLAG_RUN while the output is on: in data and info frames */
     uint8_t sup_armed;             /* capabilities: enabled bit CHANNEL_SUPERVISOR */
 #ifndef __AVR__
@@ -99,6 +101,9 @@ void proto_set_fitted(proto_t *p, uint8_t channels);
 /* Main loop: a SET_SUPERVISOR arrived since the last call? 1 and its args (min periods in us, timeout in
  * ms), or 0; one with timeout 0 is ignored here (counted in cmds_bad, no heartbeat). */
 uint8_t proto_take_supervisor(proto_t *p, uint16_t args[3]);
+/* Main loop: a PULSE_RUN_ENABLE arrived since the last call? 1 and its length in ms, or 0; one of 0 ms or over
+ * PULSE_MS_MAX but PULSE_LATCH is ignored here (counted in cmds_bad). Not a heartbeat. */
+uint8_t proto_take_pulse(proto_t *p, uint16_t *ms);
 /* Main loop: a heartbeat arrived since the last call? */
 uint8_t proto_take_beat(proto_t *p);
 /* Main loop: the output's state (FLAG_RUN in the frames built from now on) and whether the supervisor is
@@ -154,6 +159,11 @@ static inline __attribute__((always_inline)) uint8_t proto_command(proto_t *p, c
         for (uint8_t i = 0; i < 6; i++)
             p->sup_args[i] = buf[1 + i];
         p->sup_pending = 1;
+        break;
+    case OP_PULSE_RUN_ENABLE:
+        p->pulse_args[0] = buf[1];
+        p->pulse_args[1] = buf[2];
+        p->pulse_pending = 1;
         break;
     case OP_SET_DEBOUNCE:
         p->debounce_primary_us = (uint16_t)(buf[1] << 8 | buf[2]);

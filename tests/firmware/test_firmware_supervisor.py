@@ -173,3 +173,26 @@ def test_supervisor_old_bootloader_hang_stops_the_pump(firmware_build, sim_args)
     assert sv["off_at_s"] == pytest.approx(sv["last_pulse_s"] + PUMP_HOLD_S, abs=1e-6), sv
     assert sv["cause"] == "pump_stopped"
     assert rep["frames"]["device_resets"] == 0  # no watchdog: hung for good
+
+
+def test_supervisor_pulse_drops_d7_for_its_length_and_does_not_latch(firmware_build, sim_args):
+    """The kill-path probe's PULSE_RUN_ENABLE (issue 49) on the real ELF: D7 (the pin, as the harness saw it)
+    goes off within a loop pass of the command's transfer, stays off the pulse's 100 ms and comes back on by
+    itself (no re-arm, no SET_SUPERVISOR sent); the device's account is a PULSE event (code 100) and an ON event
+    100 ms later."""
+    rep = simulate(sim_args("--elf", str(firmware_build["elf"]), "--seconds", "2", "--primary-rpm", "3000",
+                            "--pulse-at", "1.0", "--pulse-ms", "100"))
+    sv = _sv(rep)
+    assert sv["on"] and sv["off_at_s"] is None, sv  # on again at the end
+    (first, second) = sv["history"]
+    assert first["cause"] == "pulse" and second["off_at_s"] is None
+    # the command goes out with the first poll at or after 1.0 s (150 Hz: within 1/150 s) and is taken by the
+    # next loop pass
+    assert 0.0 <= first["off_at_s"] - sv["pulsed_at_s"] <= 1 / 150 + 2 * LOOP_PASS_S, sv
+    off_s = second["on_at_s"] - first["off_at_s"]
+    assert 0.1 - LOOP_PASS_S <= off_s <= 0.1 + 2 * LOOP_PASS_S, off_s
+    assert len(sv["limits_sent_at_s"]) == 1  # nothing re-armed it: the pulse ended by itself
+    causes = [(e["cause"], e["code"]) for e in sv["events"]]
+    assert causes == [("on", 0), ("pulse", 100), ("on", 0)], causes
+    pulse, back = sv["events"][1], sv["events"][2]
+    assert back["t_us"] - pulse["t_us"] == 100_000  # device time: exactly its length

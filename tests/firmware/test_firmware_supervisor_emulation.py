@@ -132,5 +132,7 @@ def test_overspeed_drop_the_same_in_firmware_and_emulation(firmware_build):
     log, events = _firmware_run(firmware_build, 4600.0, end_s=0.8)
     sup, n_frames, n_differ = _compare(log, events)
     assert [s for s, _, _ in sup] == [v2.SUP_ON, v2.SUP_OVERSPEED_PRIMARY]
-    assert sup[1][1] == pytest.approx(60e6 / 4600.0, abs=3)
+    # the period as the edges' ISRs dated them: each may wait out a critical section of the loop or another ISR
+    # (a few us at 16 MHz; where the edges fall in the loop's passes moves with any change to the loop's code)
+    assert sup[1][1] == pytest.approx(60e6 / 4600.0, abs=8)
     assert n_frames > 80 and n_differ <= 2

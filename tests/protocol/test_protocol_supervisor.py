@@ -33,13 +33,13 @@ def test_supervisor_vectors_decode_and_reencode():
             assert v2.encode_info_frame(fr) == raw
         elif kind == "cmd":
             cmd = v2.decode_command(raw)
-            assert cmd.op == v2.OP_SET_SUPERVISOR == int(f["op"])
+            assert cmd.op == int(f["op"]) in (v2.OP_SET_SUPERVISOR, v2.OP_PULSE_RUN_ENABLE)
             assert cmd.args == tuple(int(a) for a in f["args"].split(","))
         else:
             with pytest.raises(FrameError) as e:
                 v2.decode_command(raw)
             assert e.value.cause == f["cause"]
-    assert seen == {"frame": 5, "caps": 3, "cmd": 2, "info": 1, "badcmd": 2}
+    assert seen == {"frame": 7, "caps": 3, "cmd": 5, "info": 1, "badcmd": 3}
 
 
 def test_supervisor_event_carries_cause_and_measured_value():
@@ -50,6 +50,25 @@ def test_supervisor_event_carries_cause_and_measured_value():
             ev = v2.decode_frame(bytes.fromhex(f["hex"])).events[-1]
             assert ev.channel == v2.CH_SUPERVISOR and ev.status == v2.SUP_OVERSPEED_PRIMARY and ev.code == 13000
             assert v2.SUP_CAUSE_NAMES[ev.status] == "overspeed_primary"
+
+
+def test_pulse_command_and_its_events():
+    """PULSE_RUN_ENABLE (issue 49): u16 ms, CRC-16 like every command; its drop is a PULSE event (code = the
+    length), its end an ON event; 0 ms and over PULSE_MS_MAX are refused by the host's encoder."""
+    raw = v2.pulse_command(100)
+    assert raw[:3] == bytes([0x24, 0x00, 0x64]) and len(raw) == 5
+    assert v2.decode_command(raw).args == (100,)
+    assert v2.decode_command(v2.pulse_command(v2.PULSE_LATCH)).args == (0xFFFF,)
+    for bad in (0, v2.PULSE_MS_MAX + 1, v2.PULSE_LATCH - 1):
+        with pytest.raises(ValueError):
+            v2.pulse_command(bad)
+    frames = {int(f["seq"]): v2.decode_frame(bytes.fromhex(f["hex"])) for k, f in _lines("v2-supervisor.hex")
+              if k == "frame"}
+    start, end = frames[13], frames[14]
+    assert [(e.channel, e.status, e.code) for e in start.events] == [(5, v2.SUP_PULSE, 100), (1, 0, 0)]
+    assert [(e.channel, e.status, e.code) for e in end.events] == [(1, 0, 0), (5, v2.SUP_ON, 0)]
+    assert not start.flags & v2.FLAG_RUN and end.flags & v2.FLAG_RUN
+    assert end.events[-1].t_us - start.events[0].t_us == 100_000 and v2.SUP_CAUSE_NAMES[v2.SUP_PULSE] == "pulse"
 
 
 def test_min_period_from_the_rig_limits():

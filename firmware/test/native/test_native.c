@@ -289,7 +289,6 @@ static void test_supervisor_vectors(const char *path)
             size_t n = unhex(field(line, "hex="), data, sizeof data);
             unsigned op = (unsigned)atoi(field(line, "op=")), a0, a1, a2;
             sscanf(field(line, "args="), "%u,%u,%u", &a0, &a1, &a2);
-            CHECK(data[0] == op && op == OP_SET_SUPERVISOR && n == CMD_MAX_LEN, "SET_SUPERVISOR: %s", line);
             CHECK(cmd_check(data, (uint8_t)n, crc16(data, (uint8_t)n)) == CMD_OK, "cmd ok: %s", line);
             static ring_t r;
             static proto_t p;
@@ -297,6 +296,15 @@ static void test_supervisor_vectors(const char *path)
             uint16_t args[3];
             ring_init(&r);
             proto_init(&p, &r, &cnt, 7, 1, 1000, 1000, 0);
+            if (op == OP_PULSE_RUN_ENABLE) {  /* the kill-path probe (issue 49) */
+                uint16_t ms = 0;
+                CHECK(data[0] == op && n == 5, "PULSE_RUN_ENABLE: %s", line);
+                CHECK(proto_command(&p, data, (uint8_t)n, crc16(data, (uint8_t)n)) == OP_PULSE_RUN_ENABLE &&
+                      proto_take_pulse(&p, &ms) && ms == a0, "pulse %u ms: %s", ms, line);
+                n_cmd++;
+                continue;
+            }
+            CHECK(data[0] == op && op == OP_SET_SUPERVISOR && n == CMD_MAX_LEN, "SET_SUPERVISOR: %s", line);
             CHECK(proto_command(&p, data, (uint8_t)n, crc16(data, (uint8_t)n)) == OP_SET_SUPERVISOR, "taken: %s", line);
             CHECK(proto_take_supervisor(&p, args) && args[0] == a0 && args[1] == a1 && args[2] == a2,
                   "args %u,%u,%u: %s", args[0], args[1], args[2], line);
@@ -309,11 +317,11 @@ static void test_supervisor_vectors(const char *path)
             static ring_t r;
             static proto_t p;
             static dyno_counters_t cnt;
-            uint16_t args[3];
+            uint16_t args[3], ms;
             ring_init(&r);
             proto_init(&p, &r, &cnt, 7, 1, 1000, 1000, 0);
             CHECK(proto_command(&p, data, (uint8_t)n, crc16(data, (uint8_t)n)) == 0 && p.cmds_bad == 1 &&
-                  !proto_take_supervisor(&p, args), "bad SET_SUPERVISOR ignored: %s", line);
+                  !proto_take_supervisor(&p, args) && !proto_take_pulse(&p, &ms), "bad command ignored: %s", line);
             n_bad++;
         }
     }

@@ -69,6 +69,39 @@ void test_supervisor_machine(void)
     CHECK(supervisor_check(&s, 4000000u + 65535001u, &ev) && ev_is(&ev, 4000000u + 65535000u, 65535, SUP_HEARTBEAT),
           "the longest timeout");
 
+    /* A pulse (issue 49): off for its length, on again unlatched; nothing when off; a silence or an
+     * over-speed during it latches it off with that cause. */
+    supervisor_arm(&s, 14285, 7692, 200, 5000000u, &ev);
+    CHECK(supervisor_pulse(&s, 100, 5010000u, &ev) && !s.on && s.pulsing, "pulse: off");
+    CHECK(ev_is(&ev, 5010000u, 100, SUP_PULSE), "PULSE event, code = its ms");
+    CHECK(!supervisor_pulse(&s, 100, 5020000u, &ev), "a pulse during a pulse: nothing");
+    supervisor_beat(&s, 5100000u);
+    CHECK(!supervisor_check(&s, 5109999u, &ev) && !s.on, "still off before its end");
+    CHECK(supervisor_check(&s, 5110400u, &ev) && s.on && !s.pulsing, "on again at its end");
+    CHECK(ev_is(&ev, 5110000u, 0, SUP_ON), "ON event at the pulse's end");
+    CHECK(!supervisor_check(&s, 5300000u, &ev) && s.on, "the heartbeat runs on from the last beat");
+    supervisor_beat(&s, 5300000u);
+    CHECK(supervisor_pulse(&s, 100, 5310000u, &ev), "second pulse");
+    CHECK(supervisor_check(&s, 5510001u, &ev) && !s.on && !s.pulsing, "no beat within the timeout: off for good");
+    CHECK(ev_is(&ev, 5500000u, 200, SUP_HEARTBEAT), "HEARTBEAT event: last beat + timeout");
+    CHECK(!supervisor_pulse(&s, 100, 5600000u, &ev) && !s.on, "latched: a pulse does not turn it on");
+    supervisor_arm(&s, 14285, 7692, 200, 6000000u, &ev);
+    CHECK(supervisor_pulse(&s, 100, 6000000u, &ev), "third pulse");
+    CHECK(supervisor_period(&s, 0, 13000, 6050000u, &ev) && !s.on && !s.pulsing, "over-speed in a pulse: latched");
+    CHECK(!supervisor_check(&s, 6200000u, &ev) && !s.on, "it stays off after the pulse's length");
+    supervisor_arm(&s, 14285, 7692, 200, 7000000u, &ev);
+    CHECK(supervisor_pulse(&s, 0xFFFF, 7000000u, &ev) && !s.on && !s.pulsing, "PULSE_LATCH: off");
+    CHECK(ev_is(&ev, 7000000u, 0xFFFF, SUP_PULSE), "PULSE event with the latch's code");
+    supervisor_beat(&s, 7100000u);
+    CHECK(!supervisor_check(&s, 8000000u, &ev) && !s.on, "latched: no end, beats change nothing");
+    supervisor_arm(&s, 14285, 7692, 200, 9000000u, &ev);
+    CHECK(supervisor_pulse(&s, 100, 9000000u, &ev) && supervisor_pulse(&s, 0xFFFF, 9050000u, &ev) && !s.pulsing,
+          "PULSE_LATCH during a pulse: latched");
+    CHECK(!supervisor_check(&s, 9200000u, &ev) && !s.on, "stays off past the pulse's end");
+    supervisor_init(&s);
+    CHECK(!supervisor_pulse(&s, 100, 1000u, &ev) && !s.on, "not armed: a pulse does nothing");
+    CHECK(!supervisor_pulse(&s, 0xFFFF, 1000u, &ev) && !s.on, "not armed: nor a latch");
+
     /* Across the u32 wrap of device time. */
     supervisor_arm(&s, 0, 0, 200, 0xFFFF0000u, &ev);
     CHECK(!supervisor_check(&s, 0xFFFF0000u + 200000u, &ev), "wrap: at the timeout");
@@ -126,6 +159,26 @@ void test_supervisor_proto(void)
     cmd(&p, c, n);
     CHECK(!proto_take_supervisor(&p, args) && p.cmds_bad == bad_before + 1, "timeout 0: ignored, counted bad");
     CHECK(cmd(&p, c, 8) == 0, "8 bytes: a length error");
+
+    /* PULSE_RUN_ENABLE: taken once by the loop, not a heartbeat; 0 ms or over PULSE_MS_MAX ignored, counted. */
+    uint16_t ms = 0;
+    uint8_t pa[2] = {0x00, 0x64};
+    n = mk_cmd(c, OP_PULSE_RUN_ENABLE, pa, 2);
+    CHECK(n == 5 && cmd(&p, c, n) == OP_PULSE_RUN_ENABLE, "PULSE_RUN_ENABLE accepted");
+    CHECK(!proto_take_beat(&p), "a pulse is no heartbeat");
+    CHECK(proto_take_pulse(&p, &ms) && ms == 100 && !proto_take_pulse(&p, &ms), "100 ms taken once");
+    bad_before = p.cmds_bad;
+    uint8_t pz[2] = {0x00, 0x00}, pl[2] = {0x03, 0xE9};
+    n = mk_cmd(c, OP_PULSE_RUN_ENABLE, pz, 2);
+    cmd(&p, c, n);
+    CHECK(!proto_take_pulse(&p, &ms) && p.cmds_bad == bad_before + 1, "0 ms: ignored, counted bad");
+    n = mk_cmd(c, OP_PULSE_RUN_ENABLE, pl, 2);
+    cmd(&p, c, n);
+    CHECK(!proto_take_pulse(&p, &ms) && p.cmds_bad == bad_before + 2, "1001 ms: ignored, counted bad");
+    uint8_t px[2] = {0xFF, 0xFF};
+    n = mk_cmd(c, OP_PULSE_RUN_ENABLE, px, 2);
+    cmd(&p, c, n);
+    CHECK(proto_take_pulse(&p, &ms) && ms == PULSE_LATCH && p.cmds_bad == bad_before + 2, "PULSE_LATCH taken");
 
     /* FLAG_RUN: the unsent current frame and the info frame follow the output; the caps' bits too. */
     proto_service(&p, 5000, 5);
