@@ -62,10 +62,13 @@ def test_every_plan_runs_its_commands_on_the_fake_rig_and_leaves_it_safe(name):
         assert set(brakes[1:]) == {APPLY, STOP} and all(a != b for a, b in zip(brakes[1:], brakes[2:]))
         torques = [p["torque_secondary_nm"] for p in c.points]
         assert len(torques) >= 5 and all(b > a for a, b in zip(torques, torques[1:]))  # each step loads more
-    elif name in ("speed-hold", "torque-hold", "drive-grid"):  # closed loop: a pulse train, a point a setpoint
+    elif name in ("speed-hold", "torque-hold"):  # closed loop: a pulse train, a point a setpoint
         assert brakes.count(APPLY) >= 20 and len(c.points) >= 5
-        if name == "drive-grid":  # the brake released before each throttle's row
-            assert RELEASE in brakes
+    elif name == "drive-grid":  # a pulse train per cell; the brake released before each throttle's row
+        # (the fake plant is no CVT: several cells of the grid lie where its crude map cannot be held, and how many
+        # depends on where the 100 ms kill-path probes put GO; each cell ends as a point or a skip naming why)
+        assert brakes.count(APPLY) >= 20 and len(c.points) >= 3 and RELEASE in brakes
+        assert len(c.points) + len(c.skips) >= 10 and all(c.skips), (c.points, c.skips)
     elif name == "coast-down":  # the engine cut on purpose, the brake never applied
         assert APPLY not in brakes
         assert any(w == "safe_state" and latch is False for t, w, latch in rig.act.log if t > c.go_s)
