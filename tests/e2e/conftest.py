@@ -23,6 +23,17 @@ IDEAL = RigParams(ideal=True)
 # drill timed from the first frame to land in a state of the test comes this much later than it would without.
 STARTUP_HOLD_S = 8.0 * 1.1 + 0.05
 
+
+def bench_safe_state_module():
+    """bench/bench_safe_state.py as a module (its plans x drills matrix: the tests run its rows)."""
+    bench = str(Path(__file__).resolve().parents[2] / "bench")
+    sys.path.insert(0, bench)
+    try:
+        import bench_safe_state
+    finally:
+        sys.path.remove(bench)
+    return bench_safe_state
+
 def tare_allowance(result: dict, point: dict) -> float:
     """What the tare (the zero read at rest before GO, ±u_nm) can move a point's efficiency by (~99 %):
     even with perfect knowledge the zero is *measured*, so a test of the statistics alone allows it."""

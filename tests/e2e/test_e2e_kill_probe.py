@@ -19,7 +19,7 @@ from dyno.session.drills import parse_drill
 from dyno.session.root import RunOptions, run_test
 from dyno.session.safety import KILL_LEAD_WARNING
 
-from .conftest import QUICK_PLAN, drill_as_the_user_runs_it
+from .conftest import bench_safe_state_module, QUICK_PLAN, drill_as_the_user_runs_it
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -144,19 +144,10 @@ def test_kill_drills_through_the_pis_own_output_code(tmp_path, drill):
     assert r["rig_safe"] is (drill != "kill-lead-open")
 
 
-def _bench_safe_state():
-    sys.path.insert(0, str(REPO / "bench"))
-    try:
-        import bench_safe_state
-    finally:
-        sys.path.remove(str(REPO / "bench"))
-    return bench_safe_state
-
-
 def test_kill_drills_in_the_plans_by_drills_matrix(tmp_path):
     """bench/bench_safe_state.py's rows for the kill-chain drills: every shipped plan ends at the probe, before
     its first load, with that cause and path (its judge), whatever the plan would have done after GO."""
-    bench = _bench_safe_state()
+    bench = bench_safe_state_module()
     cases = [c for c in bench.matrix(bench_args(bench)) if c[1].partition("@")[0] in bench.KILL]
     assert {c[0] for c in cases} == set(bench.PLANS) and {c[1] for c in cases} == {f"{d}@0" for d in bench.KILL}
     for i, (plan, drill, mode) in enumerate(cases):

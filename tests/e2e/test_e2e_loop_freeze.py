@@ -7,9 +7,6 @@ through the real-rig output code (``--mock-pins``, the loop frozen inside one of
 its lock) the watchdog thread's kill relay opens while the loop is still frozen.
 """
 
-import sys
-from pathlib import Path
-
 import pytest
 
 from dyno.cli.run_cmd import exit_code
@@ -19,9 +16,8 @@ from dyno.runlog.replay import replay
 from dyno.session.drills import parse_drill
 from dyno.session.root import RunOptions, run_test
 
-from .conftest import QUICK_PLAN, drill_as_the_user_runs_it
+from .conftest import bench_safe_state_module, QUICK_PLAN, drill_as_the_user_runs_it
 
-REPO = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 0.2  # hardware/rig.toml [limits] supervisor_timeout_s
 WATCHDOG_S = 0.5  # hardware/rig.toml [actuator] watchdog_s
 
@@ -113,20 +109,11 @@ def test_loop_freeze_as_the_user_runs_it(tmp_path):
     assert r["outputs"]["engine_cut_by"] in ("nano", "pi") and rec["latency_s"] <= TIMEOUT_S + 0.1
 
 
-def _bench_safe_state():
-    sys.path.insert(0, str(REPO / "bench"))
-    try:
-        import bench_safe_state
-    finally:
-        sys.path.remove(str(REPO / "bench"))
-    return bench_safe_state
-
-
 @pytest.mark.parametrize("mode", ["sim", "mock"])
 def test_loop_freeze_in_the_plans_by_drills_matrix(tmp_path, mode):
     """bench/bench_safe_state.py's matrix row for every shipped plan, the loop frozen 2 s after the pads first bite:
     physically safe, rig_safe agrees with the physics, release and latency within their bounds (its judge)."""
-    bench = _bench_safe_state()
+    bench = bench_safe_state_module()
     assert bench.DRILLS["loop-freeze"] == pytest.approx(TIMEOUT_S + 0.1)
     fired = 0
     for plan in bench.PLANS:
