@@ -33,8 +33,10 @@ def _run(tmp_path, drills=(), *, mock_pins=False, name="run"):
 
 
 def _openings(model, t0, t1):
-    """(t, by) of every opening of the kill chain in [t0, t1] (sim time), from the physics' record."""
-    return [(t, by) for t, on, by in model.ignition_log if not on and t0 <= t <= t1]
+    """(t, by) of every opening of the kill chain in [t0, t1] (sim time), from the physics' record, once the chain
+    first closed (before that it is open from the start: the start-up release holds the ignition off)."""
+    t0 = max(t0, model.ignition_enabled_at_s or 0.0)
+    return [(t, by) for t, on, by in model.ignition_log if not on and t0 < t <= t1]
 
 
 def _never_loaded(ctx) -> bool:
