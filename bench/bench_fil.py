@@ -15,8 +15,9 @@ and events lost; 0 late events; the FIL run's wall time <= 4x the emulated run's
     python bench/bench_fil.py [--quick] [--plan thesis-step|all] [--seeds 3,4] [--json]
 
 ``--quick`` (CI's smoke run): one run of each kind ended by ``--drill pi-freeze@loaded+2`` (~25 simulated s),
-judged on the lockstep's correctness (0 lost, 0 late, the ELF's run-enable closed the chain and cut the engine:
-``engine_cut_by`` "nano"); the time ratio printed, not judged (a loaded CI machine shares its cores).  Without the AVR toolchain and simavr it prints one ``skipped:`` line and exits 0.
+judged on the lockstep's correctness (0 frames lost, 0 late, the ELF's run-enable closed the chain and cut the
+engine: ``engine_cut_by`` "nano"; the events the Nano's ring dropped while the Pi was frozen 5 s -- ~330 a second
+against a ring of a few hundred -- counted alike by the ELF and the emulation, within 5 %); the time ratio printed, not judged (a loaded CI machine shares its cores).  Without the AVR toolchain and simavr it prints one ``skipped:`` line and exits 0.
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ def one_seed(seed: int, plan: str, quick: bool, tmp: Path) -> dict:
     return {"seed": seed, "plan": plan, "state": (emu["state"], fil["state"]),
             "points": (len(emu["points"]), len(fil["points"])), "agreement": agreement(fil["points"], emu["points"]),
             "frames_lost": fil["link"]["frames_lost"], "events_lost": fil["events_lost"],
+            "events_lost_emulated": emu["events_lost"],
             "late_events": fw.get("late_events"), "run_enable_changes": fw.get("run_enable_changes"),
             "engine_cut_by": fil["outputs"].get("engine_cut_by"),
             "wall_s": (round(emu_wall, 1), round(fil_wall, 1)), "cpu_s": (round(emu_cpu, 1), round(fil_cpu, 1)),
@@ -87,8 +89,10 @@ def one_seed(seed: int, plan: str, quick: bool, tmp: Path) -> dict:
 
 def judge(row: dict, quick: bool) -> list[str]:
     bad = []
-    if row["frames_lost"] or row["events_lost"]:
-        bad.append(f"lost frames {row['frames_lost']} events {row['events_lost']}")
+    # (quick: a frozen Pi polls nothing for 5 s and the Nano's ring overflows, in the ELF as in the emulation)
+    events_bound = max(5, 0.05 * row["events_lost_emulated"]) if quick else 0
+    if row["frames_lost"] or abs(row["events_lost"] - (row["events_lost_emulated"] if quick else 0)) > events_bound:
+        bad.append(f"lost frames {row['frames_lost']} events {row['events_lost']} (emulated {row['events_lost_emulated']})")
     if row["late_events"] != 0:
         bad.append(f"{row['late_events']} events reached the pins late")
     if not row["run_enable_changes"]:

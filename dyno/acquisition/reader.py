@@ -178,6 +178,11 @@ class V1Reader:
         host's cut when its own kill path failed the probe."""
         self._pulse_ms = v2.PULSE_LATCH
 
+    @property
+    def commands_pending(self) -> bool:
+        """A PULSE_RUN_ENABLE asked for and not yet written (it goes with the next poll)."""
+        return self._pulse_ms is not None
+
     def _pulse_step(self) -> None:
         ms, self._pulse_ms = self._pulse_ms, None
         try:

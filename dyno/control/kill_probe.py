@@ -39,9 +39,12 @@ DIP_MIN_RPM = 12.0       # the smallest dip taken for a cut (the sim's idle lose
 SPREAD_FACTOR = 3.0      # ... and at least this many times the idle's own spread of two-revolution means
 BASELINE_S = 0.5
 RECOVERED_RPM = 6.0      # back to within this of the idle before the next probe (or the spread, if larger)
-STEADY_SPREAD_RPM = 40.0  # the probe starts once the idle's spread is within this (a racing engine: not idle)
-STEADY_MAX_S = 3.0       # ... within this long, or the test ends (idle_unsteady): nothing proven, nothing loaded
+# The probe starts once the idle's spread is within this: the dip needed is 3x the spread, so a spread of 8 asks
+# 24 rpm of a cut that takes ~30 (the sim's idle; a restarted engine still settling spread 23 and failed both)
+STEADY_SPREAD_RPM = 8.0
+STEADY_MAX_S = 6.0       # ... within this long, or the test ends (idle_unsteady): nothing proven, nothing loaded
 SETTLE_WAIT_S = 0.02     # the probe's polling step while it waits
+DATA_WAIT_MAX_S = 1.0    # the frames covering a judged window must have arrived within this (else: judged on what came)
 
 
 def cycle_rpm(edges_us) -> list[tuple[int, float]]:
@@ -81,6 +84,17 @@ def judge_dip(edges_us, t_cut_us: int, spread_rpm: float | None = None, cut_s: f
     return out
 
 
+async def _wait_data_until(ctrl, t_us: int) -> None:
+    """Wait until the host holds the device's events up to ``t_us`` (device time): a rig sleep is not the
+    device's clock, and the frames of the window's last edges arrive a poll or more after them."""
+    t0 = ctrl.rig_now()
+    while ctrl.rig_now() - t0 <= DATA_WAIT_MAX_S:
+        now_us = ctrl.poller.device_now_us()
+        if now_us is not None and now_us >= t_us:
+            return
+        await ctrl.rig_sleep(SETTLE_WAIT_S)
+
+
 async def _wait_recovered(ctrl, idle_rpm: float, tolerance_rpm: float) -> float | None:
     """Wait until the latest two-revolution mean is back within ``tolerance_rpm`` of ``idle_rpm``; the rig
     seconds it took, or None (the engine did not re-fire and come back within RECOVER_MAX_S)."""
@@ -115,8 +129,14 @@ async def _probe_pi(ctrl, spread: float | None) -> dict:
     await ctrl.rig_sleep(CUT_S)
     ctrl.act.engine_kill(False)
     rec["restore_host_s"] = ctrl.plan_context.host_now()
+    # The device time known at the kill is a poll or more old: the cut began up to the time known at the
+    # restore, so the window runs on from there (a later end only adds recovered cycles, never a dip).
+    t_restore = ctrl.poller.device_now_us() or t_cut
+    observe_s = max(0, t_restore - t_cut) / 1e6 + OBSERVE_S
     await ctrl.rig_sleep(OBSERVE_S)
-    rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], t_cut, spread), end_host_s=ctrl.plan_context.host_now())
+    await _wait_data_until(ctrl, t_cut + int((CUT_S + observe_s) * 1e6))
+    rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], t_cut, spread, observe_s=observe_s),
+               end_host_s=ctrl.plan_context.host_now())
     return rec
 
 
@@ -139,6 +159,7 @@ async def _probe_nano(ctrl, reader, spread: float | None) -> dict:
     left = CUT_S + OBSERVE_S - (ctrl.rig_now() - t0)
     if left > 0:
         await ctrl.rig_sleep(left)
+    await _wait_data_until(ctrl, pulse["t_us"] + int((CUT_S + OBSERVE_S) * 1e6))
     rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], pulse["t_us"], spread), end_host_s=ctrl.plan_context.host_now())
     return rec
 

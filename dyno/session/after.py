@@ -32,6 +32,7 @@ async def end_test(ctx, *, finish_release: bool = True, poll_s: float = 0.1, pad
 
         zero_task = asyncio.create_task(after_test(ctx.controller), name="torque-zero")
     try:
+        await flush_commands(ctx)
         if finish_release:
             await release(ctx, poll_s=poll_s, pads_only=pads_only)
         if zero_task is not None:
@@ -39,6 +40,20 @@ async def end_test(ctx, *, finish_release: bool = True, poll_s: float = 0.1, pad
     finally:
         if zero_task is not None and not zero_task.done():  # (cancelled: a quit or a hang-up meanwhile)
             zero_task.cancel()
+
+
+async def flush_commands(ctx, *, max_s: float = 1.0, step_s: float = 0.01) -> bool:
+    """Keep the rig polled until the Nano has the commands the test left pending (the kill probe's latched
+    cut of the run-enable goes with the next poll: a test that ends at once must not stop the polls first);
+    True when none is left within ``max_s`` (loop seconds)."""
+    reader = getattr(ctx.poller, "reader", None)
+    loop = asyncio.get_running_loop()
+    end = loop.time() + max_s
+    while getattr(reader, "commands_pending", False):
+        if loop.time() >= end:
+            return False
+        await asyncio.sleep(step_s)
+    return True
 
 
 def close_run(ctx, status: str | None = None, *, drills_from: int = 0) -> dict:

@@ -23,7 +23,7 @@ class FixtureActuatorModel:
         self.travel_mm = params.actuator_travel_mm
         self.free_travel_mm = params.brake_free_travel_mm
         self.transfer_s = params.relay_transfer_s
-        self.actuator_mm = float(start_mm)
+        self.start_mm = self.actuator_mm = float(start_mm)  # (start_mm: where the fixture stood when powered)
         self.t_s = 0.0
         self.actuator_dir = STOP
         self.relay_dir = -1

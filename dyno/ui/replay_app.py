@@ -188,7 +188,9 @@ class ReplayApp(DynoApp):
         w.refresh()
 
     def _draw_difference(self, plt) -> None:
-        """This run's efficiency minus run 1's on a common rpm grid, ±1.96 s.e. band (docs/library.md)."""
+        """This run's efficiency minus run 1's on a common rpm grid, with the difference's stated 95 %
+        uncertainty as the band (statistics, each run's own tare and what systematics do not cancel:
+        :mod:`dyno.library.compare`); ±1.96 s.e. where a run states none (docs/library.md)."""
         if self.current == 0:
             plt.title("difference: run 1 is the reference; n = next run")
             return
@@ -199,14 +201,18 @@ class ReplayApp(DynoApp):
             return
         d = res["differences"][0]
         q = d["quantities"]["efficiency"]
-        rows = [(g, v * 100, s * 100, sig) for g, v, s, sig in
-                zip(res["grid_rpm_secondary"], q["difference"], q["sem"], q["significant"]) if v is not None]
+        stated = q.get("difference_u95") is not None and q.get("significant_u95") is not None
+        half = q["difference_u95"] if stated else [None if s is None else 1.96 * s for s in q["sem"]]
+        half = [h if h is not None else (None if s is None else 1.96 * s) for h, s in zip(half, q["sem"])]
+        rows = [(g, v * 100, h * 100, sig) for g, v, h, sig in
+                zip(res["grid_rpm_secondary"], q["difference"], half,
+                    q["significant_u95"] if stated else q["significant"]) if v is not None and h is not None]
         if not rows:
             plt.title("no difference: no common grid speed")
             return
         x = [r[0] for r in rows]
-        plt.plot(x, [1.96 * r[2] for r in rows], color="gray")
-        plt.plot(x, [-1.96 * r[2] for r in rows], color="gray", label="±1.96 s.e.")
+        plt.plot(x, [r[2] for r in rows], color="gray")
+        plt.plot(x, [-r[2] for r in rows], color="gray", label="±U95" if stated else "±1.96 s.e.")
         plt.hline(0.0, color="gray")
         sig = [r for r in rows if r[3]]
         if sig:

@@ -26,7 +26,7 @@ def test_calibration_through_the_twin_releases_the_brake_and_ends_safe(tmp_path)
                                             drills=[parse_drill("bus-lost@20", engine=False)]))
         async with app.run_test(size=SIZE) as pilot:
             act, wiring = app.cal_ctx.hw.actuators, app.cal_ctx.twin.sim
-            seen["start_mm"] = wiring.model.actuator_mm
+            seen["start_mm"] = wiring.model.start_mm  # (the release may have begun before the app let us look)
             await pilot.press("enter", "enter")
             t_end = time.monotonic() + 30
             while True:
