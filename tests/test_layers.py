@@ -53,6 +53,18 @@ RULES = [("dyno/ui", ("dyno.cli",)), ("dyno/web", ("dyno.cli", "dyno.ui")), ("dy
          # models of them: the advisor, the fit, the shift curve (issue 38)
          ("dyno/sim", ("dyno.tuning.advisor_model", "dyno.tuning.fit", "dyno.tuning.shift_curve", "dyno.cli",
                        "dyno.ui", "dyno.web", "dyno.report"))]
+# the composition root (dyno.session) is above every part it wires: nothing below it imports it (issue 50)
+BELOW_THE_ROOT = ("acquisition", "analysis", "control", "hw", "library", "model", "protocol", "report", "resources",
+                  "rig", "runlog", "sim", "transports", "tuning")
+RULES += [(f"dyno/{pkg}", ("dyno.session",)) for pkg in BELOW_THE_ROOT]
+
+
+@pytest.mark.quick
+def test_every_package_is_placed_above_or_below_the_root():
+    """A new package under dyno/ is either a face or the root (it may import dyno.session) or below it (ruled)."""
+    faces = {"cli", "ui", "web", "session", "__pycache__"}
+    found = {p.name for p in DYNO.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert found - faces == set(BELOW_THE_ROOT), found - faces ^ set(BELOW_THE_ROOT)
 
 
 @pytest.mark.quick

@@ -201,7 +201,7 @@ def calibration() -> CalibrationEntry:
 
 
 def engine_map():
-    from dyno.session.root import DEFAULT_ENGINE_MAP  # (the points' input power; the fake plant does not use it)
+    from dyno.resources import DEFAULT_ENGINE_MAP  # (the points' input power; the fake plant does not use it)
 
     return load_engine_map(DEFAULT_ENGINE_MAP)
 

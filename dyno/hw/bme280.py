@@ -147,3 +147,18 @@ class BME280:
         else:
             raise AmbientSensorError(f"BME280 at 0x{self.address:02x}: conversion did not finish in 50 ms")
         return compensate(self._read(REG_DATA, 8), trim)
+
+
+def read_sensor(sensor, what: str, rig_path: str = "rig.toml") -> Ambient:
+    """One reading as an :class:`Ambient`; a sensor that fails or reads nonsense: ConfigError naming
+    ``[ambient] sensor`` (the run is refused in one line, exit 2)."""
+    from dyno.analysis.air import Ambient, check_air
+    from dyno.errors import ConfigError
+
+    try:
+        t, p, rh = sensor.read()
+        check_air(t, p, rh, what)
+    except (AmbientSensorError, ValueError) as exc:
+        raise ConfigError(rig_path, "[ambient] sensor", f"\"bme280\" is declared but does not answer with a plausible "
+                          f"day ({exc}); check its wiring and address, or set sensor = \"none\"") from None
+    return Ambient(round(t, 3), round(p, 4), round(rh, 2), "sensor")

@@ -142,9 +142,8 @@ def check_ambient(report: Report, cfg, bus) -> None:
     if bus is None:
         report.add("ambient", FAIL, "BME280: no I2C bus")
         return
-    from dyno.session.ambient import read_sensor
     from dyno.errors import ConfigError
-    from dyno.hw.bme280 import BME280
+    from dyno.hw.bme280 import BME280, read_sensor
 
     try:
         a = read_sensor(BME280(bus, amb.address), "BME280")
@@ -325,7 +324,7 @@ def diagnose(cfg, *, bus=None, serial_port=None, transport_kind=None, toggle=Fal
 @dataclass(frozen=True)
 class DoctorSpec:
     """What :func:`diagnose` examines and how: the rig file's description and the parts to use (None: the
-    real ones, opened by the diagnosis; the simulated rig's by :func:`doctor_spec`)."""
+    real ones, opened by the diagnosis; the simulated rig's by :func:`dyno.session.doctor_rig.doctor_spec`)."""
 
     cfg: object  # dyno.rig.config.RigConfig
     toggle: bool = False  # exercise the outputs (reset pulse, a brake step out and back)
@@ -337,41 +336,6 @@ class DoctorSpec:
     operator: object = None  # who turns the rig by hand for the data check (a terminal, the simulated one)
 
 
-def doctor_spec(cfg, *, sim: bool = False, mock_pins: bool = False, drills=(), toggle: bool = False,
-                transport_kind: str | None = None, interactive: bool = False) -> DoctorSpec:
-    """The diagnosis of ``cfg``'s rig: the real one, or (``sim``) the simulated rig with the engine idling, the
-    operator simulated and one fake clock (:mod:`dyno.sim.doctor_rig`); ``mock_pins``: the output checks
-    through the Pi's own code on the wiring twin; ``drills``: faults there from the start (``sim`` only);
-    ``interactive``: a person at the terminal turns the rig for the data check."""
-    if (mock_pins or drills) and not sim:
-        from dyno.errors import ConfigError
-
-        raise ConfigError("command line", "--mock-pins/--drill", "the wiring twin and the drills are for --sim")
-    if not sim:
-        operator = None
-        if interactive:
-            from dyno.hw.doctor_data import TerminalOperator
-
-            operator = TerminalOperator()
-        return DoctorSpec(cfg, toggle=toggle, transport_kind=transport_kind, operator=operator)
-    from dyno.sim.doctor_rig import build
-
-    ds = build(cfg, mock_pins=mock_pins, drills=list(drills), twin=mock_pins or _declares_inputs(cfg))
-    clock, pin_factory, serial_port = ds.clock, ds.pin_factory, None
-    if (transport_kind or cfg.transport) == "serial":  # opened as diagnose opens it: the Nano resets
-        from dyno.sim.serial_port import SimSerialPort
-
-        serial_port = SimSerialPort(ds.sim, clock)
-    toggle = toggle or mock_pins  # --mock-pins: the output checks run (nothing moves but the simulation)
-    if toggle and pin_factory is None:  # --sim --toggle alone: the twin as well (the reset pin wired)
-        from dyno.hw.mockpins import SimPinFactory
-
-        pin_factory = SimPinFactory(cfg, ds.sim.actuators, clock, armed=True,
-                                    reset=lambda: ds.sim.firmware.reset(clock.now()))
-    return DoctorSpec(cfg, toggle=toggle, transport_kind=transport_kind, bus=ds.sim.bus, serial_port=serial_port,
-                      clock=clock, pin_factory=pin_factory, operator=ds.operator)
-
-
 def run_diagnosis(spec: DoctorSpec) -> Report:
     """:func:`diagnose` with the spec's parts (the driver's own log findings are the report's lines)."""
     import logging
@@ -380,9 +344,3 @@ def run_diagnosis(spec: DoctorSpec) -> Report:
     return diagnose(spec.cfg, bus=spec.bus, transport_kind=spec.transport_kind, toggle=spec.toggle,
                     serial_port=spec.serial_port, clock=spec.clock, pin_factory=spec.pin_factory,
                     operator=spec.operator)
-
-
-def _declares_inputs(cfg) -> bool:
-    """The rig file declares an input the twin drives (the E-stop monitor, the end switch): the simulated
-    doctor reads it through the twin even read-only."""
-    return cfg.pins.estop_input is not None or cfg.pins.brake_released_input is not None

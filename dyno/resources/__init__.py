@@ -35,3 +35,9 @@ def resource(relative: str) -> Path:
 def packaged_root(folder: str) -> Path:
     """The shipped folder ``hardware`` or ``calibration`` (whole, for ``dyno init``)."""
     return resource(folder)
+
+
+#: the shipped calibration history and the representative engine map: a run's defaults (dyno.session.root), the
+#: fake rig's (dyno.control.fake_rig)
+DEFAULT_CALIBRATION = resource("calibration/torque_calibration.csv")
+DEFAULT_ENGINE_MAP = resource("calibration/engine_maps/baja-10hp-representative.csv")

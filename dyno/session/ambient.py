@@ -8,8 +8,9 @@ the first reading takes the engine map to the run's day (SAE J1349), both are lo
 
 from __future__ import annotations
 
-from dyno.analysis.air import Ambient, check_air
+from dyno.analysis.air import Ambient
 from dyno.errors import ConfigError
+from dyno.hw.bme280 import read_sensor  # noqa: F401 (one reading as an Ambient; re-exported)
 
 
 def sim_bme280_address(rig_cfg) -> int | None:
@@ -28,20 +29,6 @@ def ambient_sensor(rig_cfg, *, sim=None, hw=None):
     from dyno.hw.bme280 import BME280
 
     return BME280(sim.bus, rig_cfg.ambient.address, sleep=lambda dt_s: None)  # (the chip converts at once)
-
-
-def read_sensor(sensor, what: str, rig_path: str = "rig.toml") -> Ambient:
-    """One reading as an :class:`Ambient`; a sensor that fails or reads nonsense: ConfigError naming
-    ``[ambient] sensor`` (the run is refused in one line, exit 2)."""
-    from dyno.hw.bme280 import AmbientSensorError
-
-    try:
-        t, p, rh = sensor.read()
-        check_air(t, p, rh, what)
-    except (AmbientSensorError, ValueError) as exc:
-        raise ConfigError(rig_path, "[ambient] sensor", f"\"bme280\" is declared but does not answer with a plausible "
-                          f"day ({exc}); check its wiring and address, or set sensor = \"none\"") from None
-    return Ambient(round(t, 3), round(p, 4), round(rh, 2), "sensor")
 
 
 def run_ambient(rig_cfg, given: Ambient | None, sensor) -> Ambient:

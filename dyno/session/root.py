@@ -23,12 +23,10 @@ from dyno.session import input_channel as app_input  # rig.toml [input_torque]: 
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
-from dyno.resources import resource
+from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP  # noqa: F401 (the defaults, re-exported)
 from dyno.rig.locate import find_rig
 from dyno.session.calibration_files import calibration_in_force
 
-DEFAULT_CALIBRATION = resource("calibration/torque_calibration.csv")  # the shipped history
-DEFAULT_ENGINE_MAP = resource("calibration/engine_maps/baja-10hp-representative.csv")
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from dyno.hw.doctor import doctor_spec, run_diagnosis
+from dyno.hw.doctor import run_diagnosis
+from dyno.session.doctor_rig import doctor_spec
 from dyno.hw.mockpins import END_SWITCH_CLOSES_MM
 from dyno.rig.config import DEFAULT_RIG_PATH, load_rig
 

@@ -1,4 +1,5 @@
-"""``dyno doctor --sim``: the simulated rig as the doctor meets it, and the simulated operator.
+"""``dyno doctor``'s parts, composed here at the root: the real rig's, or (``--sim``) the simulated rig as the
+doctor meets it, and the simulated operator (:func:`doctor_spec`).
 
 One fake clock for the physics, the firmware and the Pi's output code (an 8 s release stroke, a few seconds of
 data frames, take no wall time); the engine started and idling (the operator pulled the cord), so the primary
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 from dataclasses import dataclass
+
+from dyno.hw.doctor import DoctorSpec
 
 SENSOR_DRILLS = ("hall-dead", "adc-stuck", "adc-error", "thermometer-lost")
 TWIN_DRILLS = {"endswitch-stuck-closed": "stuck_closed", "endswitch-stuck-open": "stuck_open",
@@ -120,3 +123,42 @@ def _apply(ds: DoctorSim, d) -> None:
             m.adc_error_prob = 1.0
     elif d.name == "thermometer-lost":
         ds.sim.bus.thermometer_lost = True
+
+
+def doctor_spec(cfg, *, sim: bool = False, mock_pins: bool = False, drills=(), toggle: bool = False,
+                transport_kind: str | None = None, interactive: bool = False) -> DoctorSpec:
+    """The diagnosis of ``cfg``'s rig: the real one, or (``sim``) the simulated rig with the engine idling, the
+    operator simulated and one fake clock (:func:`build`); ``mock_pins``: the output checks
+    through the Pi's own code on the wiring twin; ``drills``: faults there from the start (``sim`` only);
+    ``interactive``: a person at the terminal turns the rig for the data check."""
+    if (mock_pins or drills) and not sim:
+        from dyno.errors import ConfigError
+
+        raise ConfigError("command line", "--mock-pins/--drill", "the wiring twin and the drills are for --sim")
+    if not sim:
+        operator = None
+        if interactive:
+            from dyno.hw.doctor_data import TerminalOperator
+
+            operator = TerminalOperator()
+        return DoctorSpec(cfg, toggle=toggle, transport_kind=transport_kind, operator=operator)
+    ds = build(cfg, mock_pins=mock_pins, drills=list(drills), twin=mock_pins or _declares_inputs(cfg))
+    clock, pin_factory, serial_port = ds.clock, ds.pin_factory, None
+    if (transport_kind or cfg.transport) == "serial":  # opened as diagnose opens it: the Nano resets
+        from dyno.sim.serial_port import SimSerialPort
+
+        serial_port = SimSerialPort(ds.sim, clock)
+    toggle = toggle or mock_pins  # --mock-pins: the output checks run (nothing moves but the simulation)
+    if toggle and pin_factory is None:  # --sim --toggle alone: the twin as well (the reset pin wired)
+        from dyno.hw.mockpins import SimPinFactory
+
+        pin_factory = SimPinFactory(cfg, ds.sim.actuators, clock, armed=True,
+                                    reset=lambda: ds.sim.firmware.reset(clock.now()))
+    return DoctorSpec(cfg, toggle=toggle, transport_kind=transport_kind, bus=ds.sim.bus, serial_port=serial_port,
+                      clock=clock, pin_factory=pin_factory, operator=ds.operator)
+
+
+def _declares_inputs(cfg) -> bool:
+    """The rig file declares an input the twin drives (the E-stop monitor, the end switch): the simulated
+    doctor reads it through the twin even read-only."""
+    return cfg.pins.estop_input is not None or cfg.pins.brake_released_input is not None
