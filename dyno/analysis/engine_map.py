@@ -16,8 +16,11 @@ makes torque at a given speed steep in throttle).
 A map states its own uncertainty: a comment line ``# stated_u_rel = 0.05 | basis`` gives the relative
 standard uncertainty of its torque and why (:attr:`EngineMap.stated_u_rel`, ``stated_u_basis``); a map
 that states none has ``stated_u_rel = None`` and the run takes ``rig.toml [uncertainty] engine_map_rel``
-(:mod:`dyno.analysis.u95_terms`).  The shipped representative map states 5 %; a map measured through the
-input torque channel (:func:`dyno.analysis.measured_map.write_map`) states its measurement's.
+(:mod:`dyno.analysis.u95_terms`).  ``# measured_on_this_engine = yes | no`` says whether the map is a
+measurement of the rig's own engine (:attr:`EngineMap.measured_on_this_engine`; None when not said): one
+that is not takes at least the spread of real engines about maps (``u95_terms.UNMEASURED_MAP_U_REL``, 9.8 %).
+The shipped representative maps say no and state 10 %; a map measured through the input torque channel
+(:func:`dyno.analysis.measured_map.write_map`) says yes and states its measurement's.
 
 Only :func:`load_engine_map` and :func:`load_legacy_engine_map` read files;
 malformed files raise :class:`dyno.errors.ConfigError` naming file, line and
@@ -125,6 +128,7 @@ class EngineMap:
         self.throttle_frac = 1.0  # the throttle this curve is at
         self.stated_u_rel: float | None = None  # the file's '# stated_u_rel' (relative standard), None: not stated
         self.stated_u_basis = ""
+        self.measured_on_this_engine: bool | None = None  # the file's '# measured_on_this_engine', None: not said
         self.part_throttle: dict[float, EngineMap] = {}  # (on the full-throttle map) throttle -> curve
 
     # -- throttle ------------------------------------------------------------
@@ -226,6 +230,7 @@ class EngineMap:
                         _standard_torque_nm=std)
         out.throttle_frac = self.throttle_frac
         out.stated_u_rel, out.stated_u_basis = self.stated_u_rel, self.stated_u_basis
+        out.measured_on_this_engine = self.measured_on_this_engine
         out.file_source = getattr(self, "file_source", None) or self.source  # the file, for code that reloads it
         out.part_throttle = {t: self._part_at_ambient(c, temp_c, dry_pressure_kpa, cf)
                              for t, c in self.part_throttle.items()}
@@ -253,7 +258,8 @@ class EngineMap:
                 "rpm_max": self.rpm_max, "j1349_factor": self.j1349_factor,
                 "ambient_temp_c": None if self.ambient is None else self.ambient[0],
                 "ambient_dry_pressure_kpa": None if self.ambient is None else self.ambient[1],
-                "throttles": self.throttles, "stated_u_rel": self.stated_u_rel, "stated_u_basis": self.stated_u_basis}
+                "throttles": self.throttles, "stated_u_rel": self.stated_u_rel, "stated_u_basis": self.stated_u_basis,
+                "measured_on_this_engine": self.measured_on_this_engine}
 
 
 # ----------------------------------------------------------------------------
@@ -335,9 +341,28 @@ def _stated_u(path: Path, text: str) -> tuple[float | None, str]:
     return None, ""
 
 
-def _with_stated_u(m: EngineMap, stated: tuple[float | None, str]) -> EngineMap:
+MEASURED_FIELD = "measured_on_this_engine"
+
+
+def _measured(path: Path, text: str) -> bool | None:
+    """The map's ``# measured_on_this_engine = yes | no`` comment, None when it says neither."""
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        body = line.strip().lstrip("#").strip() if line.lstrip().startswith("#") else ""
+        key, eq, value = body.partition("=")
+        if key.strip() != MEASURED_FIELD or not eq:
+            continue
+        word = value.split("|")[0].strip().lower()
+        if word not in ("yes", "no"):
+            raise ConfigError(path, f"line {lineno}, field {MEASURED_FIELD}",
+                              f"'# {MEASURED_FIELD} = yes' or '= no', got {line.strip()!r}")
+        return word == "yes"
+    return None
+
+
+def _with_stated_u(m: EngineMap, stated: tuple[float | None, str], measured: bool | None = None) -> EngineMap:
     for c in (m, *m.part_throttle.values()):
         c.stated_u_rel, c.stated_u_basis = stated
+        c.measured_on_this_engine = measured
     return m
 
 
@@ -353,6 +378,7 @@ def load_engine_map(path) -> EngineMap:
 
     ``# stated_u_rel = REL | basis`` (a comment line anywhere before the data) states the map's relative
     standard uncertainty of torque and its basis; without it :attr:`EngineMap.stated_u_rel` is None.
+    ``# measured_on_this_engine = yes | no``: whether the map is a measurement of the rig's own engine.
 
     Part throttle: a header ``throttle,rpm,torque_nm`` (or ``power_hp`` /
     ``power_kw``) adds a first column, the throttle fraction (0 < throttle <= 1);
@@ -403,9 +429,9 @@ def load_engine_map(path) -> EngineMap:
             torque = _torque_from_power_w(rpm, val * 1000.0)
         return EngineMap(rpm, torque, source=str(path), sha256=sha)
 
-    stated = _stated_u(path, text)
+    stated, measured = _stated_u(path, text), _measured(path, text)
     if not throttle:
-        return _with_stated_u(curve(lines[1:]), stated)
+        return _with_stated_u(curve(lines[1:]), stated, measured)
     groups = _throttle_groups(path, lines[1:], cols[1])
     full = curve(groups.pop(1.0))
     for u, rows in groups.items():
@@ -413,7 +439,7 @@ def load_engine_map(path) -> EngineMap:
         c.throttle_frac = u
         c.source = f"{path} (throttle {u:g})"
         full.part_throttle[u] = c
-    return _with_stated_u(full, stated)
+    return _with_stated_u(full, stated, measured)
 
 
 def _throttle_groups(path: Path, rows: list[tuple[int, str]], value_name: str) -> dict[float, list]:

@@ -86,6 +86,7 @@ def write_map(curve: list[dict], path, *, source: str = "") -> str:
              "interpolates / refuses as any map.",
              f"# stated_u_rel = {math.ceil(u_rel * 1000) / 1000:.3f} | measured through the input torque channel: "
              f"the largest row's relative standard uncertainty ({u_rel:.4f}; calibration, tare, cradle, scatter)",
+             "# measured_on_this_engine = yes | the rig's engine, through its input torque channel",
              "# per row: rpm, torque_nm, its 95 % half-width (N m), points: "
              + "; ".join(f"{r['rpm']:.0f} {r['torque_nm']:.3f} ±{r['torque_u95_nm']:.3f} ({r['n_points']})"
                          for r in curve),

@@ -407,7 +407,7 @@ def _print_figures(result: dict) -> None:
 def _print_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
     if result["points"]:
-        _print_points(result["points"])
+        _print_points(result["points"], result.get("u95_terms"))
     for why in result.get("skipped") or []:  # a setpoint the plan asked for that gave no point, and why
         print(f"skipped: {why}")
     _print_figures(result)
@@ -431,14 +431,15 @@ def _print_table(result: dict) -> None:
                           if k != "safe" and not isinstance(v, (list, dict))))
 
 
-def _print_points(points: list) -> None:
+def _print_points(points: list, terms=None) -> None:
     """The points table: each efficiency with its 95 % CI (the point's own statistics, ``efficiency_ci95``), the
     interval the truth lies in at 95 % (``efficiency_interval95``: statistics and every systematic term,
     asymmetric where a term is, at most 100 %) and its half-width ``efficiency_u95`` (±U95: the same statement,
     not a second one), both ± half-widths in pp; the speed
     ratio; where P_in comes from (``map``: the engine map at the point's speed and throttle, ``meas``: the input
-    torque channel).  Its footer names the term that dominates U95 and what ``dyno compare`` cancels."""
-    from dyno.analysis.u95_terms import COMPARE_NOTE, largest_term_text
+    torque channel).  Its footer names the term that dominates U95, what ``dyno compare`` cancels, and what
+    would narrow the intervals when that is obvious (an engine map not measured on this engine)."""
+    from dyno.analysis.u95_terms import COMPARE_NOTE, advice, largest_term_text
 
     print(f"{'#':>3} {'rpm_p':>6} {'rpm_s':>6} {'ratio':>5} {'T_s N·m':>7} {'P_out W':>7} {'P_in W':>6} {'from':<4} "
           f"{'eff %':>5} {'±CI95':>5} {'±U95':>5} {'interval95 %':>12}")
@@ -458,3 +459,5 @@ def _print_points(points: list) -> None:
     largest = largest_term_text(points)
     if largest:
         print(f"{largest}; {COMPARE_NOTE}")
+    if advice(terms, points):
+        print(f"to narrow: {advice(terms, points)}")

@@ -286,7 +286,7 @@ def _u95_terms(data: ReportData) -> str:
     """What each term of the points' efficiency_u95 assumes (meta.json uncertainty.u95_terms)."""
     from dyno.analysis.u95_terms import describe
 
-    from dyno.analysis.u95_terms import COMPARE_NOTE, largest_term_text
+    from dyno.analysis.u95_terms import COMPARE_NOTE, advice, largest_term_text
 
     terms = (data.meta.get("uncertainty") or {}).get("u95_terms")
     if not terms:
@@ -295,7 +295,9 @@ def _u95_terms(data: ReportData) -> str:
     largest = largest_term_text(data.docs("point"))
     lead = f'<p id="u95-largest"><b>{escape(largest)}</b>.</p>' if largest else ""
     return (f'<h2 id="u95-terms">What efficiency_u95 assumes</h2>{lead}<ul>{items}</ul>'
-            f'<p id="u95-compare">{escape(COMPARE_NOTE)}.</p>')
+            f'<p id="u95-compare">{escape(COMPARE_NOTE)}.</p>'
+            + (f'<p id="u95-advice"><b>To narrow:</b> {escape(hint)}.</p>'
+               if (hint := advice(terms, data.docs("point"))) else ""))
 
 
 def _tune(data: ReportData) -> str:

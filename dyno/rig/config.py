@@ -176,7 +176,7 @@ class TorqueZeroConfig:
 class UncertaintyConfig:
     """Systematic uncertainties stated beside each point's CI (dyno/analysis/systematic.py)."""
 
-    engine_map_rel: float = 0.05  # engine map torque, relative standard uncertainty (representative map)
+    engine_map_rel: float = 0.10  # engine map torque, relative standard uncertainty, a map stating none (u95_terms)
 
 
 @dataclass(frozen=True)

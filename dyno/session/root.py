@@ -125,7 +125,7 @@ def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) ->
     cal = calibration_rel_u(history, calibration)
     emap, basis = u95_terms.map_basis(engine_map, rig_cfg.uncertainty.engine_map_rel)
     return {"torque_calibration_rel": cal, "engine_map_rel": emap, "calibration_entries": len(history),
-            "u95_terms": u95_terms.base_terms(cal, len(history), emap, basis)}
+            "u95_terms": u95_terms.base_terms(cal, len(history), emap, basis, u95_terms.map_measured(engine_map))}
 
 
 def limits_from_config(rig_cfg) -> SafetyLimits:

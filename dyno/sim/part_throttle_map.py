@@ -80,8 +80,9 @@ def write_map(out: Path, throttles=DEFAULT_THROTTLES) -> float:
              f"# friction {p.engine_friction_nm:g}..{p.engine_friction_at_3600_rpm_nm:g} N*m). A real rig needs a part-throttle",
              "# map measured on an engine dyno. Columns: throttle fraction, engine rpm, net brake torque N*m.",
              # the host's stated uncertainty of this map (dyno.analysis.engine_map), for the host's reading only
-             f"# stated_u_rel = 0.05 | as {Path(src).name} at full throttle (representative, not measured); "
+             f"# stated_u_rel = 0.10 | as {Path(src).name} at full throttle (representative, not measured); "
              "the part-throttle curves are synthetic and no better",
+             "# measured_on_this_engine = no",
              "throttle,rpm,torque_nm"]
     lines += [f"1,{r.strip()}" for r in full_rows]
     for u in sorted(throttles, reverse=True):

@@ -7,6 +7,7 @@ against the true difference (interpolated onto the grid the same way as the meas
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -66,7 +67,10 @@ def _arr(x):
 
 def _own_u95(run_dir: Path) -> float:
     docs = [json.loads(x) for x in (run_dir / "documents.jsonl").read_text().splitlines() if x.strip()]
-    return min(d["efficiency_u95"] for d in docs if d.get("type") == "point" and d.get("valid"))
+    # each point's terms in quadrature: its U95 before the interval is clipped at 100 % (with the map not measured
+    # on this engine, most points' intervals reach 100 %, and half a clipped width understates what a run knows)
+    return min(math.sqrt(sum(v * v for v in d["efficiency_u95_terms"].values()))
+               for d in docs if d.get("type") == "point" and d.get("valid"))
 
 
 def test_one_rig_the_calibration_and_map_cancel_and_u_d_covers_the_truth(runs):
@@ -87,7 +91,7 @@ def test_one_rig_the_calibration_and_map_cancel_and_u_d_covers_the_truth(runs):
     # the terms make the total: U_d^2 = sum of the terms' squares
     parts = np.sqrt(sum(_arr(v) ** 2 for v in q["difference_u95_terms"].values()))
     assert parts[ok] == pytest.approx(u95[ok], rel=1e-9)
-    # what cancels is most of each run's own uncertainty (the map's 5 % dominates a single run)
+    # what cancels is most of each run's own uncertainty (the map's 10 % dominates a single run)
     own = min(_own_u95(runs / "stock"), _own_u95(runs / "heavy"))
     assert np.nanmax(u95) < 0.6 * own and np.nanmedian(u95) < 0.5 * own, (np.nanmax(u95), own)
     # yet more than the statistics alone: the residuals are stated, not dropped

@@ -76,6 +76,8 @@ def test_run_writes_a_self_contained_report_with_its_points(cli_run):
     m = re.search(r'<p id="u95-largest"><b>largest U95 term: (\w+) \(±([\d.]+) pp', page)
     assert m and m.group(1) == largest and float(m.group(2)) == pytest.approx(100 * rms[largest], abs=0.051), m
     assert "`dyno compare` cancels what two runs share" in page
+    # the shipped map is no engine's and its term dominates: the report says what narrows the interval
+    assert largest == "engine_map" and '<p id="u95-advice"><b>To narrow:</b> the engine map is not measured' in page
 
     data = _data_block(page)
     eff = data["efficiency"]["points"]

@@ -49,3 +49,13 @@ def test_the_table_shows_the_ratio_where_p_in_comes_from_and_the_largest_term(ca
     assert "largest U95 term: engine_map (±3.5 pp of" in footer, footer
     assert "`dyno compare` cancels what two runs share" in footer
     assert all(len(x) == len(header) for x in (row_map, row_meas))
+
+
+def test_the_footer_says_to_measure_the_engine_when_an_unmeasured_map_dominates(capsys):
+    terms = [{"term": "engine_map", "u_rel": 0.10, "basis": "…", "measured": False}]
+    _print_points([_point(0)], terms)
+    assert "to narrow: the engine map is not measured on this engine" in capsys.readouterr().out
+    _print_points([_point(0)], [{**terms[0], "measured": True}])  # a map measured on this engine: nothing to add
+    assert "to narrow" not in capsys.readouterr().out
+    _print_points([_point(0)])  # a run from before the terms said it
+    assert "to narrow" not in capsys.readouterr().out
