@@ -3,6 +3,7 @@ and the web view do not reach into the terminal UI for what they share (that liv
 
 Read with tokenize (not ast: a module's source is enough, and nothing is imported)."""
 
+import ast
 import io
 import tokenize
 from pathlib import Path
@@ -161,3 +162,35 @@ def test_the_tree_shows_the_architecture():
     assert loose <= SHARED_MODULES, f"loose modules beside the packages: {sorted(loose - SHARED_MODULES)}"
     packages = {p.name for p in DYNO.iterdir() if (p / "__init__.py").is_file()}
     assert {"session", "rig", "sim", "control", "acquisition", "protocol", "transports"} <= packages
+
+
+# The faces get a run's parts from dyno.session (the root builds the first run, dyno.session.next_run each re-arm's):
+# they construct no controller or run log of their own and reach into no private name of the layer below.
+BUILT_BY_THE_ROOT = {"TestController", "RunWriter"}
+
+
+def face_violations(source: str) -> list[str]:
+    """Constructions of a root-built part, and imports of a private name from dyno.session, in ``source``."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call):
+            name = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
+            if name in BUILT_BY_THE_ROOT:
+                out.append(f"line {node.lineno}: builds {name}")
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("dyno.session"):
+            out += [f"line {node.lineno}: imports {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+    return out
+
+
+@pytest.mark.parametrize("face", ["dyno/ui", "dyno/web", "dyno/cli"])
+def test_the_faces_build_no_run_of_their_own(face):
+    found = {str(p.relative_to(DYNO.parent)): v for p in sorted((DYNO.parent / face).rglob("*.py"))
+             if (v := face_violations(p.read_text()))}
+    assert not found, found
+
+
+def test_the_face_check_sees_a_second_root(tmp_path):
+    planted = ("from dyno.session.safety import _WatchdogKick\n"
+               "def rearm(self):\n    return TestController(self.poller, act, cal, emap)\n")
+    assert face_violations(planted) == ["line 1: imports dyno.session.safety._WatchdogKick",
+                                        "line 3: builds TestController"]

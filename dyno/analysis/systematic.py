@@ -7,8 +7,15 @@ and they are shared by every point of a run (so they shift a whole curve, not on
   standard deviation of the slopes in the calibration history (the rig's calibrations scatter more than
   one fit's own slope error says), combined with the entry's own fit error when its sample count is known;
 * the **engine map**'s torque (efficiency ∝ 1/map power): the relative standard uncertainty the map file
-  states (``# stated_u_rel``: 5 % in the shipped representative map; a measured map states its
-  measurement's), else ``rig.toml [uncertainty] engine_map_rel`` (:mod:`dyno.analysis.u95_terms`).
+  states (``# stated_u_rel``: 10 % in the shipped representative map; a measured map states its
+  measurement's), else ``rig.toml [uncertainty] engine_map_rel`` (:mod:`dyno.analysis.u95_terms`);
+  a map not measured on this engine never less than real engines' spread about maps (9.8 %).
+* the **engine's wear**, for a map not measured on this engine: a map is a new engine's (or a class's), and
+  an engine in service only loses power to it (rings, valves, carbon, a loaded filter), so the truth is the
+  reading times ``1/(1 − w)``, ``w`` uniform on ``[0, w_max]`` (``engine_wear_max_frac`` in the run's
+  ``uncertainty``: 14 %, the far end of the one real engine's 4–14 % under its map,
+  ``u95_terms.ENGINE_WEAR_MAX_FRAC``); one-sided like the driveline's, its ``engine_wear`` entry
+  ``η·(1/(1 − w_max) − 1)``.  A map measured on this engine has none.
 
 * the **air** (efficiency ∝ CF, the SAE J1349 factor the map is taken to the run's day by): what the
   day is known to (a BME280 or a given reading), or, for a run *uncorrected* (no air known), the factor's
@@ -30,7 +37,7 @@ Each is given as a 95 % half-width (coverage factor 2), a fraction like ``effici
 The **interval** ``efficiency_interval95 = [low, high]`` is what the truth is said to lie in at 95 %:
 the 2.5/97.5 % quantiles of :math:`\eta\,A\,D\,(1+\varepsilon)`, with ``A`` the uncorrected air's factor
 (its distribution over the plausible day, :func:`dyno.analysis.air.uncorrected_factors`; 1 when the day
-is known), ``D`` the driveline's ``1/(1 − L)`` and ``ε`` normal with sd half the symmetric terms'
+is known), ``D`` the one-sided terms' ``1/((1 − L)(1 − w))`` (the driveline's, the engine's wear) and ``ε`` normal with sd half the symmetric terms'
 quadrature over η (k = 2).  It is asymmetric where a term is, and clipped to [0, 1] (an efficiency
 cannot exceed 1).  Every efficiency variant ``K`` carries ``K_interval95`` the same way
 (:func:`variant_interval95`).
@@ -69,25 +76,29 @@ SYSTEMATIC_KEYS = ("efficiency_sys95", "efficiency_sys95_calibration", "efficien
                    "efficiency_interval95")
 
 
-def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac: float = 0.0) -> list | None:
+def interval95(value: float, sym95: float, air_factors=None, driveline_max_frac: float = 0.0,
+               wear_max_frac: float = 0.0) -> list | None:
     """``[low, high]``: the 95 % interval of the truth about a reading ``value`` (see the module docstring).
 
     ``sym95``: the symmetric terms' 95 % half-width (quadrature, absolute); ``air_factors``: equal-probability
     quantiles of the uncorrected air's factor (None: the day is known); ``driveline_max_frac``: the
-    one-sided loss bound.  Clipped to [0, 1].  None for a value that is not a finite number.
+    one-sided loss bound; ``wear_max_frac``: the engine's one-sided wear bound (a map not measured on this
+    engine).  Clipped to [0, 1].  None for a value that is not a finite number.
     """
     if not (isinstance(value, (int, float)) and math.isfinite(value)):
         return None
     sym95 = sym95 if isinstance(sym95, (int, float)) and math.isfinite(sym95) else 0.0
     no_air = air_factors is None or len(air_factors) == 0
-    if value <= 0.0 or (no_air and not driveline_max_frac):
+    if value <= 0.0 or (no_air and not driveline_max_frac and not wear_max_frac):
         lo, hi = value - sym95, value + sym95
     else:
         import numpy as np
 
         a = np.asarray((1.0,) if no_air else air_factors, dtype=float)
-        lm = float(driveline_max_frac or 0.0)
-        d = 1.0 / (1.0 - lm * (np.arange(_N_DRIVELINE) + 0.5) / _N_DRIVELINE)
+        mid = (np.arange(_N_DRIVELINE) + 0.5) / _N_DRIVELINE
+        d = 1.0 / (1.0 - float(driveline_max_frac or 0.0) * mid)
+        if wear_max_frac:  # two independent one-sided factors: their product's equal-probability midpoints
+            d = np.quantile(np.outer(d, 1.0 / (1.0 - float(wear_max_frac) * mid)).ravel(), mid)
         e = 1.0 + np.asarray(_Z) * (0.5 * sym95 / value)
         r = (a[:, None, None] * d[None, :, None] * e[None, None, :]).ravel()
         q_lo, q_hi = np.quantile(r, (0.025, 0.975))
@@ -119,13 +130,15 @@ def driveline_bound(point: dict | None, unc: dict | None) -> float:
 def interval_basis(unc: dict | None, point: dict | None = None) -> dict:
     """The interval's asymmetric inputs from a run's ``uncertainty`` record (meta.json): the uncorrected air's
     factor quantiles (``air_day``: the site's ``altitude_m`` when the air is unknown, absent when known) and
-    the driveline's bound at ``point`` (:func:`driveline_bound`)."""
+    the driveline's bound at ``point`` (:func:`driveline_bound`) and the engine's wear bound (a map not
+    measured on this engine)."""
     from dyno.analysis.air import uncorrected_factors
 
     unc = unc or {}
     day = unc.get("air_day")
     return {"air_factors": uncorrected_factors(day.get("altitude_m")) if isinstance(day, dict) else None,
-            "driveline_max_frac": driveline_bound(point, unc)}
+            "driveline_max_frac": driveline_bound(point, unc),
+            "wear_max_frac": float(unc.get("engine_wear_max_frac") or 0.0)}
 
 
 def run_basis(ambient: dict | None, rig_cfg) -> dict:
@@ -147,11 +160,12 @@ def variant_interval95(value, point: dict, unc: dict | None, *, driveline: bool 
     if not (isinstance(value, (int, float)) and math.isfinite(value)):
         return None
     basis = interval_basis(unc, point)
-    skip = {"driveline", *drop} | ({"air"} if basis["air_factors"] is not None else set())
+    skip = {"driveline", "engine_wear", *drop} | ({"air"} if basis["air_factors"] is not None else set())
     k = value / eta if isinstance(eta, (int, float)) and math.isfinite(eta) and eta else 1.0
     sym95 = math.sqrt(sum((k * v) ** 2 for n, v in terms.items() if n not in skip and isinstance(v, (int, float))
                           and math.isfinite(v)) + (extra95 or 0.0) ** 2)
-    return interval95(value, sym95, basis["air_factors"], basis["driveline_max_frac"] if driveline else 0.0)
+    return interval95(value, sym95, basis["air_factors"], basis["driveline_max_frac"] if driveline else 0.0,
+                      basis["wear_max_frac"])
 
 
 def range_fault(name: str, value) -> dict | None:
@@ -173,9 +187,9 @@ def calibration_rel_for(calibration_rel: float, point: dict, tare: dict | None) 
 
 
 def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float, air_rel: float = 0.0,
-                     air_factors=None, driveline_max_frac: float = 0.0) -> dict:
+                     air_factors=None, driveline_max_frac: float = 0.0, wear_max_frac: float = 0.0) -> dict:
     """The 95 % systematic half-widths of ``point``'s efficiency, its total ``efficiency_u95`` and its
-    ``efficiency_interval95`` (``air_factors``, ``driveline_max_frac``: :func:`interval_basis`).
+    ``efficiency_interval95`` (``air_factors``, ``driveline_max_frac``, ``wear_max_frac``: :func:`interval_basis`).
 
     NaN (and no terms) without an efficiency.  ``air_rel`` 0 is a run from before the air was stated.
     """
@@ -187,6 +201,7 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
                 "efficiency_interval95": None}
     cal, emap, air = 2.0 * eff * calibration_rel, 2.0 * eff * engine_map_rel, 2.0 * eff * (air_rel or 0.0)
     drive = eff * (1.0 / (1.0 - driveline_max_frac) - 1.0) if driveline_max_frac else 0.0
+    wear = eff * (1.0 / (1.0 - wear_max_frac) - 1.0) if wear_max_frac else 0.0
     # any other symmetric term the point already states (e.g. a part-throttle curve's friction estimate)
     extra = {k[len("efficiency_sys95_"):]: v for k, v in point.items() if k in _EXTRA_SYS95
              and isinstance(v, float) and math.isfinite(v) and v > 0.0}
@@ -196,19 +211,19 @@ def point_systematic(point: dict, calibration_rel: float, engine_map_rel: float,
     # the symmetric systematic terms (the air's is its factor's distribution instead when the day is unknown)
     sys_sym95 = math.sqrt(cal * cal + emap * emap + (0.0 if air_factors is not None else air * air) + sq_extra)
     sym95 = math.hypot(ci, sys_sym95)
-    interval = interval95(eff, sym95, air_factors, driveline_max_frac)
-    out = {"efficiency_sys95": half_width(interval95(eff, sys_sym95, air_factors, driveline_max_frac)),
+    interval = interval95(eff, sym95, air_factors, driveline_max_frac, wear_max_frac)
+    out = {"efficiency_sys95": half_width(interval95(eff, sys_sym95, air_factors, driveline_max_frac, wear_max_frac)),
            "efficiency_sys95_calibration": cal, "efficiency_sys95_engine_map": emap,
            "efficiency_sys95_air": air, "efficiency_sys95_driveline": drive, "efficiency_u95": half_width(interval),
            "efficiency_u95_terms": {"statistical": ci, "calibration": cal, "engine_map": emap, "air": air,
-                                    "driveline": drive, **extra},
+                                    "driveline": drive, **({"engine_wear": wear} if wear else {}), **extra},
            "efficiency_interval95": interval}
     # a variant the point already gives (the figure before the I·alpha correction): the same terms, scaled
     for key in VARIANTS_BEFORE_TERMS:
         v = point.get(key)
         if isinstance(v, (int, float)) and math.isfinite(v):
             out[f"{key}_interval95"] = interval95(v, sym95 * abs(v / eff) if eff else sym95, air_factors,
-                                                  driveline_max_frac)
+                                                  driveline_max_frac, wear_max_frac)
     return out
 
 

@@ -48,6 +48,10 @@ USED_ENGINE_SHAPE_RMS_REL = 0.039
 #: scale; the shape's scatter adds in quadrature:  u = sqrt(0.09^2 + 0.039^2) = 0.098.  A map not measured on
 #: the rig's engine (``# measured_on_this_engine = no``, or not said) never states less.
 UNMEASURED_MAP_U_REL = math.hypot(ENGINE_2019_VS_MAP_REL, USED_ENGINE_SHAPE_RMS_REL)
+#: A map is a new engine's (or a class's); an engine in service only loses power to it (ring and valve wear,
+#: carbon, a loaded filter), so a map not measured on this engine also carries a one-sided term: the engine up
+#: to this much weaker, uniform (:mod:`dyno.analysis.systematic`).  The far end of the one real engine's range.
+ENGINE_WEAR_MAX_FRAC = 0.14
 
 MEASURE_THE_ENGINE = ("the engine map is not measured on this engine, and its term dominates: measure the engine "
                       "(the input torque channel, hardware/rig-input-torque.toml; or a map from `dyno replay "
@@ -80,9 +84,16 @@ def advice(terms, points) -> str:
     """What narrows the run's intervals, when something obvious does: '' otherwise."""
     found = largest_term(points)
     emap = next((t for t in terms or [] if t.get("term") == "engine_map"), None)
-    if found and found[0] == "engine_map" and emap is not None and emap.get("measured") is False:
+    if found and found[0] in ("engine_map", "engine_wear") and emap is not None and emap.get("measured") is False:
         return MEASURE_THE_ENGINE
     return ""
+
+
+def engine_wear_term(wear_max_frac: float) -> dict:
+    """The engine's wear for a map not measured on this engine: one-sided (a worn engine only makes less)."""
+    return term("engine_wear", None, f"one-sided: the map is not measured on this engine, and an engine in "
+                f"service only loses power to its map (wear, carbon, filter): up to {100 * wear_max_frac:g} % weaker "
+                "(the 2019 rig's engine: 4-14 % under its own), so the truth may lie above the reading")
 
 
 def air_term(air_rel: float, source: str | None) -> dict:
@@ -128,7 +139,8 @@ COMPARE_NOTE = ("`dyno compare` cancels what two runs share (the same calibratio
 
 COMPARE_NOTE_SHORT = "`dyno compare` cancels what runs share"
 #: the terms' names in a 30-column screen field
-TERM_SHORT = {"statistical": "scatter", "calibration": "calib.", "engine_map": "map", "calibration_input": "calib.in",
+TERM_SHORT = {"statistical": "scatter", "calibration": "calib.", "engine_map": "map", "engine_wear": "wear",
+              "calibration_input": "calib.in",
               "driveline": "driveline", "air": "air", "cradle": "cradle", "friction": "friction"}
 
 

@@ -44,7 +44,7 @@ class TestController(Measuring):
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
                  on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None,
                  control=None, inertia=None, input_channel=None, clock=None,
-                 point_hooks=(), result_hooks=()) -> None:
+                 point_hooks=(), result_hooks=(), listeners=()) -> None:
         # Everything the composition root (dyno.session.root.build) wires is given here, never set afterwards
         # (tests/test_layers.py checks that no module assigns to a built controller's attributes).
         self.poller = poller
@@ -76,7 +76,7 @@ class TestController(Measuring):
         #: The safety deadlines (heartbeat, link timeout, watchdog) and the log's host times stay on the loop.
         self.clock = clock if clock is not None else LOOP_RIG_CLOCK
         self.point_hooks: list = list(point_hooks)  # callables(point, host_t0_s, host_t1_s) -> None
-        self.listeners: list = []  # callables(controller) on every state change
+        self.listeners: list = list(listeners)  # callables(controller) on every state change
         self.paused = False
         self._go = asyncio.Event()
         self._resume = asyncio.Event()
@@ -115,6 +115,10 @@ class TestController(Measuring):
         self.kill_probe: dict = {}  # the kill chain's proof before GO (dyno.control.kill_probe): each path's dip
         poller.listeners.append(self._on_poll)
         self.plan_context = EngineContext(self)  # all a plan runner is handed (dyno.control.api.PlanContext)
+
+    def detach(self) -> None:
+        """Stop listening to the poller (an ended controller a re-arm replaces: dyno.session.next_run)."""
+        self.poller.listeners[:] = [fn for fn in self.poller.listeners if fn != self._on_poll]
 
     # --- commands (from the UI / CLI) ------------------------------------------------------
     def go(self) -> None:

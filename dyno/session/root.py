@@ -18,6 +18,7 @@ from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor
 from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
+from dyno.session.next_run import abort_on_write_error
 from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
@@ -124,8 +125,13 @@ def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) ->
     history = load_history(opts.calibration_path)
     cal = calibration_rel_u(history, calibration)
     emap, basis = u95_terms.map_basis(engine_map, rig_cfg.uncertainty.engine_map_rel)
+    measured = u95_terms.map_measured(engine_map)
+    terms = u95_terms.base_terms(cal, len(history), emap, basis, measured)
+    wear = {} if measured else {"engine_wear_max_frac": u95_terms.ENGINE_WEAR_MAX_FRAC}  # (one-sided: systematic)
+    if wear:
+        terms.append(u95_terms.engine_wear_term(wear["engine_wear_max_frac"]))
     return {"torque_calibration_rel": cal, "engine_map_rel": emap, "calibration_entries": len(history),
-            "u95_terms": u95_terms.base_terms(cal, len(history), emap, basis, u95_terms.map_measured(engine_map))}
+            **wear, "u95_terms": terms}
 
 
 def limits_from_config(rig_cfg) -> SafetyLimits:
@@ -344,9 +350,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 tune_path=tune_path,  # the characterisations compare with the tune's prediction
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
                                 clock=clock)  # rig time for the plan (None: the loop's; safety stays on the loop)
-    writer.on_error = lambda exc: controller.abort(
-        "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or out}): "
-        "safe state; what was recorded before stays readable")
+    writer.on_error = abort_on_write_error(controller, out)  # (a re-arm's next run: the same, dyno.session.next_run)
     watchdog = make_watchdog(controller, poller, hw, estop, rig_cfg.actuator.watchdog_s, now_s)
     warn_when_uncuttable(controller)  # the kill-path probe found no way to stop the engine: say so at once
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,

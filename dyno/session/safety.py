@@ -119,6 +119,18 @@ class _WatchdogKick:
         self.wd.kick()
 
 
+def rehook_watchdog(ctx, controller, loop, stop_running):
+    """The watchdog's heartbeat aborts through the controller: hook it to a re-armed session's new one.
+    The rig's own watchdog thread runs on and reports to the new controller; the session's own (no ``ctx.hw``)
+    is stopped (``stop_running``) and a new one started beside the new controller.  Returns its stop callable."""
+    poller = ctx.poller
+    poller.listeners[:] = [fn for fn in poller.listeners if not isinstance(fn, _WatchdogKick)]
+    if ctx.hw is None and stop_running is not None:
+        stop_running()
+    ctx.watchdog = make_watchdog(controller, poller, ctx.hw, ctx.estop, ctx.rig_cfg.actuator.watchdog_s, loop.time)
+    return start_watchdog(ctx, loop) if ctx.hw is None else stop_running
+
+
 def start_watchdog(ctx, loop) -> object:
     """Start ``ctx.watchdog`` beside ``loop``; returns a stop() callable."""
     from dyno.clock import LoopClock, VirtualTimeLoop

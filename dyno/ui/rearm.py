@@ -7,12 +7,10 @@ checks, the new run's log and controller, and what the long-lived session must f
 from __future__ import annotations
 
 import asyncio
-import json
-import shutil
 from pathlib import Path
 
 from dyno.control.controller import State
-from dyno.ui.run_dirs import _finish_in_background, _next_run_dir
+from dyno.ui.run_dirs import finish_in_background, next_run_dir
 
 FINISHED = (State.DONE, State.ABORTED)
 
@@ -72,36 +70,18 @@ class RearmMixin:
         why = self.rearm_refusal()
         if why:
             return None, why
-        from dyno.control.controller import TestController
         from dyno.errors import DynoError
-        from dyno.runlog.writer import RunWriter
+        from dyno.session.next_run import open_next_log, start_next_controller
 
-        old, old_writer = self.controller, self.ctx.writer
-        old_dir = Path(old_writer.run_dir)
-        new_dir = _next_run_dir(old_dir, self.opts.out_dir)
+        old_dir = Path(self.ctx.writer.run_dir)
+        new_dir = next_run_dir(old_dir, self.opts.out_dir)
         try:  # first the new log: if it cannot be written, nothing changes
-            meta = json.loads((old_dir / "meta.json").read_text())
-            for k in ("software_version", "created_unix_s", "format"):
-                meta.pop(k, None)
-            meta["rearmed_after"] = str(old_dir)
-            engine_map = old.engine_map
-            if self.ctx.ambient_sensor is not None:  # each run its own air, read when it is armed
-                from dyno.session.ambient import read_sensor
-
-                amb = read_sensor(self.ctx.ambient_sensor, "BME280")
-                engine_map = engine_map.at_ambient(amb.temp_c, amb.dry_pressure_kpa)
-                meta["ambient"] = amb.to_dict()
-            tune = old_dir / "tune.toml"
-            writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
-                               engine_map_text=(old_dir / "engine_map.csv").read_text(),
-                               tune_text=tune.read_text() if tune.is_file() else None)
-            for name in INPUT_COPIES:  # any other input the run keeps beside its log (e.g. its plan file)
-                if (old_dir / name).is_file() and not (new_dir / name).exists():
-                    shutil.copy2(old_dir / name, new_dir / name)
+            log = open_next_log(self.ctx, old_dir, new_dir)
         except (DynoError, OSError, ValueError) as exc:
             return None, f"not re-armed: new run directory {new_dir}: {exc}"
         self.cancel_jog()
         self.manual = False
+        old = self.controller
         clear = getattr(old.act, "clear_latch", None)
         if clear is not None:  # the explicit re-arm: the released rig accepts commands again
             clear()
@@ -109,23 +89,10 @@ class RearmMixin:
         if rearm_nano is not None:  # the Nano latched its run-enable off after a drop: the limits again
             rearm_nano()
         reported = not self._close_log()  # (closed at the test's end: its report.html is already under way)
-        self.poller.listeners.remove(old_writer.events)
-        self.poller.listeners.remove(old._on_poll)  # an ended controller checks nothing, but costs a call
-        self.ctx.ambient = dict(meta.get("ambient") or {})
-        ctrl = TestController(self.poller, old.act, old.calibration, engine_map, plan=old.plan,
-                              limits=old.limits, writer=writer, auto_go=False, on_wait_engine=old.on_wait_engine,
-                              runner_for=old.runner_for, from_idle=old.from_idle,
-                              # what the composition root gave the first controller (dyno.session.root.build): the same
-                              **{name: getattr(old, name) for name in REBUILT_ATTRS},
-                              point_hooks=old.point_hooks,  # (the simulated rig's truth: keyed by time, not by run)
-                              result_hooks=old.result_hooks)  # (the characterisations' sim truths)
-        ctrl.listeners.append(self._on_controller)
-        writer.on_error = lambda exc: ctrl.abort(
-            "disk_full", f"cannot write the run log ({exc.strerror or exc}: {getattr(exc, 'filename', '') or new_dir}): "
-            "safe state; what was recorded before stays readable")
-        self.poller.listeners.append(writer.events)
-        self.ctx.writer, self.ctx.controller, self.controller = writer, ctrl, ctrl
-        self._rehook_watchdog()
+        ctrl, self._stop_watchdog = start_next_controller(self.ctx, log, loop=self.loop,
+                                                          stop_watchdog=self._stop_watchdog,
+                                                          listeners=(self._on_controller,))
+        self.controller = ctrl
         self._trim_history()
         if self.ctx.drills is not None:
             self._drills_fired_before = len(self.ctx.drills.fired)
@@ -135,7 +102,7 @@ class RearmMixin:
         self._tasks.append(asyncio.create_task(ctrl.run(), name="controller"))
         self.run_dirs.append(new_dir)
         if not reported:
-            self._reports.append(asyncio.create_task(_finish_in_background(old_dir), name="report"))
+            self._reports.append(asyncio.create_task(finish_in_background(old_dir), name="report"))
         self._after_task = None
         return new_dir, f"re-armed: new run {new_dir} (report of the last one: {old_dir / 'report.html'})"
 
@@ -156,27 +123,6 @@ class RearmMixin:
 
         return_free_heap()
 
-    def _rehook_watchdog(self) -> None:
-        """The watchdog's heartbeat aborts through the controller: hook it to the new one."""
-        from dyno.session.safety import _WatchdogKick, make_watchdog, start_watchdog
-
-        self.poller.listeners[:] = [fn for fn in self.poller.listeners if not isinstance(fn, _WatchdogKick)]
-        ctx = self.ctx
-        timeout_s = ctx.rig_cfg.actuator.watchdog_s
-        if ctx.hw is None and self._stop_watchdog is not None:  # the session's own: a new one beside the new controller
-            self._stop_watchdog()
-        # (the rig's own watchdog thread runs on: it reports to the new controller)
-        ctx.watchdog = make_watchdog(self.controller, self.poller, ctx.hw, ctx.estop, timeout_s, self.loop.time)
-        if ctx.hw is None:
-            self._stop_watchdog = start_watchdog(ctx, self.loop)
-
-
-# What dyno.session.root.build gives a controller's constructor beside the plan and its parts (rig.toml's description,
-# control gains and inertias, the tune, the input channel as tared): a re-armed controller is given the same.
-# (clock: the paced session's scaled clock -- lost, a re-armed x4 session would time its plan in host seconds;
-# input_channel: the live screen's T_in)
-REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "clock", "input_channel")
-INPUT_COPIES = ("plan.toml",)
 
 #: seconds of events and truth a re-arm keeps (more than any window or drill check looks back over)
 HISTORY_KEEP_S = 120.0

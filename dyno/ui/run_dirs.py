@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 
-def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
+def next_run_dir(old: Path, out_dir: Path | None) -> Path:
     """The next run's directory: ``<--out>-2``, ``-3``, ... beside the one given, else a new runs/<timestamp>."""
     if out_dir is None:
         from dyno.session.root import default_run_dir
@@ -20,7 +20,7 @@ def _next_run_dir(old: Path, out_dir: Path | None) -> Path:
     return base.parent / f"{base.name}-{n}"
 
 
-async def _finish_in_background(run_dir: Path) -> None:
+async def finish_in_background(run_dir: Path) -> None:
     """report.html and the run library's entry for an ended run, in a low-priority child process
     (matplotlib would hold the loop, and the GIL, for seconds)."""
     code = "import os, sys; os.nice(10); from dyno.session.after import _background_main; _background_main(sys.argv)"

@@ -199,14 +199,14 @@ class LiveSession(RearmMixin):
         run's log closed with its summary and safety document, and its report.html written (in the background:
         matplotlib holds the GIL for seconds) while the screen stays up."""
         from dyno.session.after import end_test
-        from dyno.ui.run_dirs import _finish_in_background
+        from dyno.ui.run_dirs import finish_in_background
 
         await end_test(self.ctx, poll_s=0.05)
         if ctrl is not self.controller or self.closed:
             return
         run_dir = Path(self.ctx.writer.run_dir)
         self._close_log()
-        self._reports.append(asyncio.create_task(_finish_in_background(run_dir), name="report"))
+        self._reports.append(asyncio.create_task(finish_in_background(run_dir), name="report"))
 
     @property
     def after_test_running(self) -> bool:

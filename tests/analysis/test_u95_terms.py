@@ -69,7 +69,7 @@ def test_a_map_not_measured_on_this_engine_never_states_less_than_real_engines_s
 def test_a_map_measured_on_this_engine_keeps_its_statement(tmp_path):
     (tmp_path / "m.csv").write_text(f"# stated_u_rel = 0.03 | dyno'd\n# measured_on_this_engine = yes\n{PLAIN}")
     unc = _terms(load_engine_map(tmp_path / "m.csv"))
-    assert unc["engine_map_rel"] == 0.03
+    assert unc["engine_map_rel"] == 0.03 and "engine_wear_max_frac" not in unc  # its own engine: no wear term
     assert next(t for t in unc["u95_terms"] if t["term"] == "engine_map")["measured"] is True
 
 
@@ -77,12 +77,13 @@ def test_the_maps_statement_is_the_runs_map_term():
     unc = _terms(load_engine_map(SHIPPED), default_rel=0.2)  # the map's own 10 %, not the rig file's 20 %
     assert unc["engine_map_rel"] == 0.10
     names = [t["term"] for t in unc["u95_terms"]]
-    assert names == ["statistical", "calibration", "engine_map"]
+    assert names == ["statistical", "calibration", "engine_map", "engine_wear"]  # (one-sided: not measured on it)
+    assert unc["engine_wear_max_frac"] == u95_terms.ENGINE_WEAR_MAX_FRAC == 0.14
     cal = next(t for t in unc["u95_terms"] if t["term"] == "calibration")
     assert cal["u_rel"] == pytest.approx(unc["torque_calibration_rel"]) and "4 entries" in cal["basis"]
     assert "stated in the map file" in unc["u95_terms"][2]["basis"]
     lines = u95_terms.describe(unc["u95_terms"] + [u95_terms.air_term(0.001, "sensor")])
-    assert lines[2].startswith("engine_map: 10.00 %") and "BME280" in lines[3]
+    assert lines[2].startswith("engine_map: 10.00 %") and "BME280" in lines[4]
 
 
 def test_the_advice_to_measure_the_engine_follows_the_dominant_term():

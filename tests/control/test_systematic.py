@@ -5,7 +5,7 @@ import math
 import pytest
 
 from dyno.analysis.calibration import CalibrationEntry
-from dyno.analysis.systematic import calibration_rel_u, point_systematic
+from dyno.analysis.systematic import calibration_rel_u, interval95, interval_basis, point_systematic
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
@@ -78,7 +78,8 @@ def test_the_driveline_bound_is_the_chains_share_plus_the_bearings_drag_over_the
     assert driveline_bound({"torque_secondary_nm": math.nan}, unc) == pytest.approx(0.03)
     assert driveline_bound({"torque_secondary_nm": 0.01}, unc) == 0.5
     assert interval_basis(unc, {"torque_secondary_nm": 5.0})["driveline_max_frac"] == pytest.approx(0.08)
-    assert interval_basis({}, {"torque_secondary_nm": 5.0}) == {"air_factors": None, "driveline_max_frac": 0.0}
+    assert interval_basis({}, {"torque_secondary_nm": 5.0}) == {"air_factors": None, "driveline_max_frac": 0.0,
+                                                               "wear_max_frac": 0.0}
 
 
 def test_a_term_the_point_already_states_is_combined():
@@ -87,3 +88,15 @@ def test_a_term_the_point_already_states_is_combined():
     assert s["efficiency_u95_terms"]["friction"] == 0.03
     assert s["efficiency_u95"] == pytest.approx(math.hypot(base["efficiency_u95"], 0.03))
     assert s["efficiency_interval95"][1] - 0.5 == pytest.approx(s["efficiency_u95"])
+
+
+def test_the_engines_wear_is_one_sided_and_only_for_a_map_not_measured_on_it():
+    """A worn engine only makes less than its map: the truth may lie above the reading, never further below."""
+    sym = interval95(0.70, 0.10)
+    worn = interval95(0.70, 0.10, wear_max_frac=0.14)
+    assert worn[1] > sym[1] and worn[0] >= sym[0]  # the upper end moves out; the lower end no further down
+    assert interval_basis({"engine_wear_max_frac": 0.14}, {})["wear_max_frac"] == 0.14
+    p = {"efficiency": 0.7, "efficiency_ci95": 0.01, "torque_secondary_nm": 10.0}
+    s = point_systematic(p, 0.016, 0.10, wear_max_frac=0.14)
+    assert s["efficiency_u95_terms"]["engine_wear"] == pytest.approx(0.7 * (1 / 0.86 - 1))
+    assert "engine_wear" not in point_systematic(p, 0.016, 0.10)["efficiency_u95_terms"]

@@ -68,7 +68,7 @@ def test_with_the_sensor_the_j1349_factor_is_applied_and_logged(tmp_path):
     assert amb["end"]["source"] == "sensor"  # read again after the run
     # what each u95 term assumes, in the run's JSON, meta.json and the report
     terms = {t["term"]: t for t in result["u95_terms"]}
-    assert list(terms) == ["statistical", "calibration", "engine_map", "air", "driveline"]
+    assert list(terms) == ["statistical", "calibration", "engine_map", "engine_wear", "air", "driveline"]
     assert terms["engine_map"]["u_rel"] == 0.10 and "stated in the map file" in terms["engine_map"]["basis"]
     assert terms["engine_map"]["measured"] is False  # the shipped map is no engine's: it says so
     assert "BME280" in terms["air"]["basis"] and terms["air"]["u_rel"] < 0.005
