@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +23,7 @@ REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "clock", "input_chann
 INPUT_COPIES = ("plan.toml",)
 
 
-def abort_on_write_error(controller, run_dir) -> callable:
+def abort_on_write_error(controller, run_dir) -> Callable[[BaseException], None]:
     """The writer's ``on_error``: a log that cannot be written aborts the test into the safe state."""
     def on_error(exc) -> None:
         controller.abort("disk_full", f"cannot write the run log ({getattr(exc, 'strerror', None) or exc}: "
