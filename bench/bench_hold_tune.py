@@ -19,7 +19,6 @@ Through the real-rig output code on mock pins (rig.toml's relay settle honoured)
 from __future__ import annotations
 
 import argparse
-import asyncio
 import statistics
 import sys
 import tempfile
@@ -28,10 +27,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import dyno.control.plans.speed_hold as sh  # noqa: E402
+from dyno.control.api import Hold, SpeedHold  # noqa: E402
+from dyno.control.holds import gains_for  # noqa: E402
+from dyno.control.outputs import STOP  # noqa: E402
 from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.control.controller import State, TestPlan  # noqa: E402
-from dyno.control.plans.steps import find_contact  # noqa: E402
+from dyno.control.plans.speed_hold import find_contact  # noqa: E402
 
 OPERATING = {"torque": 16.0, "engine": None}  # engine: where it is with the secondary at 3,000 rpm
 SIGN = {"torque": -1.0, "engine": -1.0}  # engine at heavy load: more brake raises it (the CVT back-shifts)
@@ -48,7 +49,7 @@ async def trace_of(ctx, variable: str, window_s: float, seconds: float):
     t0, out = ctx.now(), []
     while ctx.now() - t0 < seconds:
         await ctx.sleep(0.05)
-        out.append((ctx.now() - t0, sh.measured(ctx, variable, window_s)))
+        out.append((ctx.now() - t0, ctx.read.value(variable, window_s)))
     return out
 
 
@@ -56,47 +57,44 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         deadband: float | None = None) -> dict:
     found: dict = {}
 
-    async def runner(ctx):
+    async def runner(ctx, params=None):
         ctx.phase(State.STEP, "bench: contact")
         assert await find_contact(ctx)
         if variable == "engine":  # into the heavy-load region first, as the engine-hold plan does
-            pre = {"rpm": 3000.0}
-            task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(sh.gains_for(ctx, "secondary")), pre), "hold")
+            await ctx.hold(SpeedHold(3000.0, wait=False))
             await ctx.sleep(8.0)
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
-        sp0 = OPERATING[variable] or sh.measured(ctx, variable, 1.0)
+            ctx.brake(STOP)
+        sp0 = OPERATING[variable] or ctx.read.value(variable, 1.0)
         if identify:
             from dyno.control.plans.autotune import identify_gain
 
-            res = await identify_gain(ctx, variable, sp0, sign=SIGN[variable])
+            res = await identify_gain(ctx, variable, sp0, gains_for(ctx.config.control, variable),
+                                      load_raises=SIGN[variable] < 0)
             found["identify"] = res
-        gains = sh.gains_for(ctx, variable)
+        gains = gains_for(ctx.config.control, variable)
+        if identify and found["identify"]["ok"]:
+            gains = replace(gains, kp=found["identify"]["kp_identified"])
         if kp is not None:
             gains = replace(gains, kp=kp)
         if deadband is not None:
             gains = replace(gains, deadband_rel=deadband)
         found["kp"] = gains.kp
-        hold = sh.SpeedHold(gains)
-        target = {"rpm": sp0, "sign": SIGN[variable]}
-        task = ctx.hold_task(sh._hold_loop(ctx, hold, target, variable), "hold")
+        await ctx.hold(Hold(variable, sp0, gains=gains, load_raises=SIGN[variable] < 0, wait=False))
         await trace_of(ctx, variable, gains.speed_window_s, 8.0)
         steps = []
         for sp in (sp0 * 1.05, sp0):
-            start = sh.measured(ctx, variable, gains.speed_window_s)
-            target["rpm"] = sp
+            start = ctx.read.value(variable, gains.speed_window_s)
+            await ctx.hold(Hold(variable, sp, gains=gains, load_raises=SIGN[variable] < 0, wait=False))
             tr = await trace_of(ctx, variable, gains.speed_window_s, 8.0)
             steps.append({"from": start, "to": sp, **figures(tr, sp, start)})
         found["steps"] = steps
         # the noise floor: the brake frozen where the hold put it, the same reading's sd over 3 s
-        target["frozen"] = True
+        ctx.brake(STOP)  # (ends the hold: the brake stays where it put it)
         await ctx.sleep(1.0)
         tr = await trace_of(ctx, variable, gains.speed_window_s, 3.0)
         found["frozen_sd_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
         tr = await trace_of(ctx, variable, 1.0, 3.0)
         found["frozen_sd_1s_pc"] = 100 * statistics.pstdev(x for _, x in tr) / sp0
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
         ctx.phase(State.SETTLE, "bench")
         ctx.phase(State.DONE, "bench done")
 

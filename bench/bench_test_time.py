@@ -28,7 +28,6 @@ thesis-step), judging points and CI only (one seed's coverage and time are luck;
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import math
 import statistics
@@ -39,6 +38,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import dyno.control.plans.speed_hold as sh  # noqa: E402
+from dyno.control.api import SpeedHold  # noqa: E402
+from dyno.control.hold_law import HoldLaw  # noqa: E402
+from dyno.control.holds import gains_for  # noqa: E402
 from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.controller import State  # noqa: E402
@@ -58,7 +60,7 @@ class PulseCount:
     def __init__(self) -> None:
         self.periods = self.pulses = self.reversals = 0
         self._last = None
-        self._real = sh.SpeedHold.pulse
+        self._real = HoldLaw.pulse
 
     def __enter__(self):
         count = self
@@ -72,11 +74,11 @@ class PulseCount:
                 count._last = direction
             return direction, on_s
 
-        sh.SpeedHold.pulse = pulse
+        HoldLaw.pulse = pulse
         return self
 
     def __exit__(self, *exc):
-        sh.SpeedHold.pulse = self._real
+        HoldLaw.pulse = self._real
 
     def per_s(self, period_s: float = 0.05) -> tuple[float, float]:
         """(pulses, reversals) per second of holding."""
@@ -89,32 +91,30 @@ def step_responses(tmp: Path, seed: int = 1, rig_path=None) -> tuple[list[dict],
     rows, rates = [], {}
 
     async def plan(ctx, *_a, **_k):
-        hold = sh.SpeedHold(sh.gains_for(ctx, "secondary"))
+        period_s = gains_for(ctx.config.control, "secondary").period_s
         ctx.phase(State.STEP, "bench: contact")
-        no_load = sh.secondary_rpm(ctx, 1.0)
+        no_load = ctx.read.secondary_rpm(1.0)
         ctx.brake(APPLY)
-        while sh.secondary_rpm(ctx, 0.3) > 0.99 * no_load:
+        while ctx.read.secondary_rpm(0.3) > 0.99 * no_load:
             await ctx.sleep(0.02)
         ctx.brake(STOP)
-        target = {"rpm": 3000.0}
         with PulseCount() as count:
-            task = ctx.hold_task(sh._hold_loop(ctx, hold, target), "hold")
+            await ctx.hold(SpeedHold(3000.0, wait=False))
             await ctx.sleep(15.0)
             for sp in STEPS:
-                target["rpm"] = sp
+                await ctx.hold(SpeedHold(sp, wait=False))
                 t0, trace = ctx.now(), []
                 while ctx.now() - t0 < 8.0:
                     await ctx.sleep(0.05)
-                    trace.append((ctx.now() - t0, sh.secondary_rpm(ctx, 0.1)))
+                    trace.append((ctx.now() - t0, ctx.read.secondary_rpm(0.1)))
                 outside = [t for t, r in trace if abs(r - sp) > 0.005 * sp]
                 start = trace[0][1]
                 beyond = [(r - sp) * (1 if sp > start else -1) for _, r in trace]
                 rows.append({"from_rpm": start, "to_rpm": sp, "within_0p5pc_s": max(outside) if outside else 0.0,
                              "overshoot_pc": 100 * max(0.0, max(beyond)) / sp,
                              "sd_last3s_pc": 100 * statistics.pstdev(r for t, r in trace if t > 5.0) / sp})
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
-        rates["pulses_per_s"], rates["reversals_per_s"] = count.per_s(hold.g.period_s)
+            ctx.brake(STOP)  # (ends the hold)
+        rates["pulses_per_s"], rates["reversals_per_s"] = count.per_s(period_s)
         ctx.phase(State.SETTLE, "bench")
         ctx.phase(State.DONE, "bench done")
 

@@ -133,6 +133,11 @@ class Streams:
         i, j = bisect_left(ts, t0_us), bisect_right(ts, t1_us)
         return np.frombuffer(self.edge_gap[channel], dtype=np.int8)[i:j].astype(bool)
 
+    def last_edge_us(self, channel: int) -> int | None:
+        """The channel's newest edge time (µs), None before its first."""
+        ts = self.edges[channel]
+        return ts[-1] if ts else None
+
     def last_edges(self, channel: int, n: int = 2):
         ts = self.edges[channel]
         return ts[-n:]

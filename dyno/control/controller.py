@@ -42,7 +42,7 @@ __all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
 class TestController(Measuring):
     def __init__(self, poller, actuators, calibration, engine_map, *, plan: TestPlan = TestPlan(),
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
-                 on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None,
+                 on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None, shift_prediction=None,
                  control=None, inertia=None, input_channel=None, clock=None,
                  point_hooks=(), result_hooks=(), listeners=()) -> None:
         # Everything the composition root (dyno.session.root.build) wires is given here, never set afterwards
@@ -68,7 +68,8 @@ class TestController(Measuring):
         # rig.toml's description, [control] gains and [inertia] (the plans read them: dyno.control.api.PlanConfig),
         # the tune a characterisation compares with, the engine-side torque channel (or None; tared at GO)
         self.rig, self.control, self.inertia = rig, control, inertia
-        self.tune_path = tune_path
+        self.tune_path = tune_path  # (the faces' overlay reads it; a plan gets ``shift_prediction``)
+        self.shift_prediction = shift_prediction  # the tune's predicted shift (dyno.control.api.ShiftPrediction)
         self.input_channel = input_channel
         #: the run's clock: rig time (``now()``, ``await sleep(rig_s)``) for everything the plan times (its
         #: durations, the runners' hold periods and approach times, settling, measuring windows); the loop's
@@ -128,6 +129,14 @@ class TestController(Measuring):
         self.paused = True
         self._resume.clear()
         self._log("pause")
+
+    async def wait_resumed(self) -> None:
+        """Return when the operator has not paused the test."""
+        await self._resume.wait()
+
+    def host_now(self) -> float:
+        """Host (loop) seconds: the time base of the log and of the points' windows."""
+        return self._now()
 
     def resume(self) -> None:
         self.paused = False
@@ -277,7 +286,7 @@ class TestController(Measuring):
             for t in (plan_task, aborted, safety):
                 t.cancel()
             await asyncio.gather(plan_task, aborted, safety, return_exceptions=True)
-            await self.plan_context.cancel_tasks()  # what the plan left running beside it
+            await self.plan_context.end_holds()  # a hold the plan left running
             # The engine has the last word, after the plan's cleanup: whatever the plan did on its way
             # out, the outputs are in the latched safe state (a release already under way keeps going).
             if self.state is State.ABORTED and not getattr(self.act, "latched", False):
@@ -402,12 +411,12 @@ class TestController(Measuring):
         await self._go.wait()
         self.go_s, self.go_rig_s = self._now(), self.rig_now()
         if p.mode in self.from_idle:  # characterisations start from idle: no full-throttle warm-up
-            await self.runner_for(p.mode)(self.plan_context)
+            await self.runner_for(p.mode)(self.plan_context, _registry.params_of(p))
             return
         self._enter(State.WARMUP, "full throttle, no brake")
         self.set_throttle(1.0)
         await self.rig_sleep(p.warmup_s)
-        await self.runner_for(p.mode)(self.plan_context)
+        await self.runner_for(p.mode)(self.plan_context, _registry.params_of(p))
 
     # --- safety ----------------------------------------------------------------------------------
     def _on_poll(self, events, now_s: float) -> None:

@@ -2,9 +2,9 @@
 
 A plan runner is handed an :class:`EngineContext` and nothing else: what it may do is listed in the
 protocol, and every call lands here, in the engine, which alone touches the controller's insides (its
-state table, its gate on the outputs, its measuring windows, its log).  Tasks a plan needs beside it
-(a closed-loop hold) are the engine's: :meth:`EngineContext.hold_task` keeps them and the controller
-cancels what is left when the run ends, after which its last word (the latched safe state) stands.
+state table, its gate on the outputs, its measuring windows, its log).  A closed loop a plan needs is
+the engine's hold service (:mod:`dyno.control.holds`); the controller ends it with the run, after which
+its last word (the latched safe state) stands.
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ import asyncio
 import json
 from pathlib import Path
 
-from dyno.control.api import PlanConfig, State, TestPlan
-
-#: controller attributes a plan may read, by the PlanConfig field that carries them
-_CONFIG_FIELDS = tuple(PlanConfig.__dataclass_fields__)
+from dyno.control.api import Hold, HoldResult, PlanConfig, State, TestPlan
+from dyno.control.holds import HoldService
+from dyno.control.readings import Readings
+from dyno.rig.config import InertiaConfig
 
 
 class EngineContext:
@@ -24,7 +24,9 @@ class EngineContext:
 
     def __init__(self, engine) -> None:
         self._engine = engine
-        self.tasks: set[asyncio.Task] = set()
+        self.read = Readings(engine.poller, lambda: self.config)
+        self._holds = HoldService(_HoldPrimitives(self))
+        self._steps: set[asyncio.Task] = set()  # a bounded step under way (the engine's task, not the plan's)
 
     # --- what the plan reads ---------------------------------------------------------------------
     @property
@@ -34,49 +36,26 @@ class EngineContext:
     @property
     def config(self) -> PlanConfig:
         e = self._engine
-        return PlanConfig(**{name: getattr(e, name, None) for name in _CONFIG_FIELDS})
+        return PlanConfig(limits=e.limits, calibration=e.calibration, engine_map=e.engine_map, control=e.control,
+                          inertia=e.inertia or InertiaConfig(), shift_prediction=e.shift_prediction)
 
     @property
     def state(self) -> State:
         return self._engine.state
 
-    @property
-    def points(self) -> tuple:
-        return tuple(self._engine.points)
-
-    @property
-    def throttle_frac(self) -> float:
-        return self._engine.throttle_frac
-
-    @property
-    def streams(self):
-        return self._engine.poller.streams
-
-    def rpm(self, channel: int) -> float:
-        return self._engine.poller.rpm(channel)
-
-    def device_now_us(self):
-        return self._engine.poller.device_now_us()
-
     # --- time ------------------------------------------------------------------------------------
     def now(self) -> float:
         return self._engine.rig_now()
-
-    def host_now(self) -> float:
-        return self._engine._now()
-
-    def test_time_s(self) -> float:
-        e = self._engine
-        return e.rig_now() - e.go_rig_s
 
     async def sleep(self, dt_s: float) -> None:
         await self._engine.rig_sleep(dt_s)
 
     async def checkpoint(self) -> None:
-        await self._engine._resume.wait()
+        await self._engine.wait_resumed()
 
     # --- outputs (the engine's gate) -------------------------------------------------------------
     def brake(self, direction: int) -> None:
+        self._holds.cancel()  # a direct command ends a hold under way
         self._engine.brake(direction)
 
     def throttle(self, fraction: float, *, log: bool = True) -> None:
@@ -85,6 +64,28 @@ class EngineContext:
     def cut_engine(self) -> None:
         self._engine.cut_engine()
 
+    async def hold(self, request: Hold) -> HoldResult:
+        return await self._holds.hold(request)
+
+    async def bounded(self, step, limit) -> str | None:
+        task = asyncio.create_task(step, name="plan-step")
+        self._steps.add(task)
+        why = None
+        try:
+            while not task.done():
+                await asyncio.wait({task}, timeout=0.05)
+                why = None if task.done() else limit()
+                if why:
+                    break
+            if not why:
+                task.result()
+        finally:
+            if not task.done():
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+            self._steps.discard(task)
+        return why
+
     # --- the state table, the log, the points ----------------------------------------------------
     def phase(self, state: State, reason: str = "") -> None:
         self._engine._enter(state, reason)
@@ -92,52 +93,45 @@ class EngineContext:
     def log(self, doc_type: str, **fields) -> None:
         self._engine._log(doc_type, **fields)
 
-    async def measure(self, give_up=None, plan: TestPlan | None = None, since_s: float = 0.0) -> tuple:
+    async def measure(self, give_up=None, plan: TestPlan | None = None, since_s: float = 0.0,
+                      fixed_s: float | None = None) -> tuple:
         e = self._engine
-        if plan is None:
-            return await e._measure(give_up=give_up, since_s=since_s)
-        saved, e.plan = e.plan, plan  # the window's own targets, for this window only
+        saved = e.plan
+        if plan is not None:
+            e.plan = plan  # the window's own targets, for this window only
         try:
-            return await e._measure(give_up=give_up, since_s=since_s)
+            if fixed_s is not None:
+                self._holds.raise_if_failed()
+                return await e._measure(since_s=0.0, fixed_s=fixed_s)
+            async with self._holds.frozen():
+                result = await e._measure(give_up=give_up, since_s=since_s)
+            self._holds.raise_if_failed()
+            return result
         finally:
             e.plan = saved
 
     def record(self, point: dict, host_t0: float, host_t1: float) -> None:
         self._engine._record_point(point, host_t0, host_t1)
 
-    async def warm_up_at_load(self) -> None:
-        await self._engine._warm_up_at_load()
-
-    def mark_loaded(self) -> None:
+    async def loaded(self, *, wait_warm_up: bool = False) -> None:
         e = self._engine
         if e.load_since_s is None:
             e.load_since_s = e.rig_now()
+        if wait_warm_up:
+            await e._warm_up_at_load()
 
-    def set_results(self, results: dict, *, hooks: bool = True, log: bool = True) -> None:
-        if log:
-            self._engine._set_results(results, hooks=hooks)
-            return
-        if hooks:
-            self.add_truths(results)
-        self._engine.results = results
-
-    def add_truths(self, results: dict) -> None:
-        for hook in self._engine.result_hooks:
-            hook(results)
-
-    def tune_control(self, control, identified: dict) -> None:
+    def set_results(self, results: dict, *, truths: bool = True, log: bool = True) -> None:
         e = self._engine
-        if control is not None:
-            e.control = control
-        e.identified = identified
+        results.setdefault("test_time_s", e.rig_now() - e.go_rig_s if e.go_rig_s is not None else None)
+        if log:
+            e._set_results(results, hooks=truths)
+            return
+        if truths:
+            for hook in e.result_hooks:
+                hook(results)
+        e.results = results
 
-    # --- tasks, failure, files -------------------------------------------------------------------
-    def hold_task(self, coro, name: str) -> asyncio.Task:
-        task = asyncio.create_task(coro, name=name)
-        self.tasks.add(task)
-        task.add_done_callback(self.tasks.discard)
-        return task
-
+    # --- failure, files --------------------------------------------------------------------------
     def fail(self, cause: str, detail: str) -> None:
         self._engine.abort(cause, detail)
 
@@ -150,10 +144,27 @@ class EngineContext:
         except (OSError, ValueError) as exc:
             self.log("warning", detail=f"{name} not written: {exc}")
 
-    async def cancel_tasks(self) -> None:
-        """The end of the run: the plan's tasks still running are cancelled (the engine's, not the plan's)."""
-        left = [t for t in self.tasks if not t.done()]
+    # --- the engine's own (not the plan's) -------------------------------------------------------
+    async def end_holds(self) -> None:
+        """The end of the run: a bounded step or a hold still running is stopped (the engine's, not the plan's)."""
+        left = [t for t in self._steps if not t.done()]
         for t in left:
             t.cancel()
         if left:
             await asyncio.gather(*left, return_exceptions=True)
+        await self._holds.stop()
+
+
+class _HoldPrimitives:
+    """What the hold service drives, over one run's context: the gated brake without ending the hold."""
+
+    def __init__(self, ctx: EngineContext) -> None:
+        self._ctx = ctx
+        self.read = ctx.read
+        self.now, self.sleep, self.checkpoint = ctx.now, ctx.sleep, ctx.checkpoint
+
+    def actuate(self, direction: int) -> None:
+        self._ctx._engine.brake(direction)
+
+    def control(self):
+        return self._ctx._engine.control

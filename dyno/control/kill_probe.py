@@ -124,11 +124,11 @@ async def _wait_steady(ctrl) -> float | None:
 async def _probe_pi(ctrl, spread: float | None) -> dict:
     rec = {"path": "pi_relay"}
     t_cut = ctrl.poller.device_now_us()
-    rec["kill_host_s"] = ctrl.plan_context.host_now()
+    rec["kill_host_s"] = ctrl.host_now()
     ctrl.act.engine_kill(True)
     await ctrl.rig_sleep(CUT_S)
     ctrl.act.engine_kill(False)
-    rec["restore_host_s"] = ctrl.plan_context.host_now()
+    rec["restore_host_s"] = ctrl.host_now()
     # The device time known at the kill is a poll or more old: the cut began up to the time known at the
     # restore, so the window runs on from there (a later end only adds recovered cycles, never a dip).
     t_restore = ctrl.poller.device_now_us() or t_cut
@@ -136,12 +136,12 @@ async def _probe_pi(ctrl, spread: float | None) -> dict:
     await ctrl.rig_sleep(OBSERVE_S)
     await _wait_data_until(ctrl, t_cut + int((CUT_S + observe_s) * 1e6))
     rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], t_cut, spread, observe_s=observe_s),
-               end_host_s=ctrl.plan_context.host_now())
+               end_host_s=ctrl.host_now())
     return rec
 
 
 async def _probe_nano(ctrl, reader, spread: float | None) -> dict:
-    rec = {"path": "nano_run_enable", "request_host_s": ctrl.plan_context.host_now()}
+    rec = {"path": "nano_run_enable", "request_host_s": ctrl.host_now()}
     seen = len(reader.supervisor_events)
     t_req = ctrl.poller.device_now_us()
     reader.pulse_run_enable(round(CUT_S * 1000))
@@ -153,14 +153,14 @@ async def _probe_nano(ctrl, reader, spread: float | None) -> dict:
     if pulse is None:
         rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], t_req, spread))
         rec.update(cut=False, why="the Nano never reported the pulse (a firmware without PULSE_RUN_ENABLE, or "
-                                  "its run-enable was off)", end_host_s=ctrl.plan_context.host_now())
+                                  "its run-enable was off)", end_host_s=ctrl.host_now())
         return rec
     rec["pulse_device_us"] = pulse["t_us"]
     left = CUT_S + OBSERVE_S - (ctrl.rig_now() - t0)
     if left > 0:
         await ctrl.rig_sleep(left)
     await _wait_data_until(ctrl, pulse["t_us"] + int((CUT_S + OBSERVE_S) * 1e6))
-    rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], pulse["t_us"], spread), end_host_s=ctrl.plan_context.host_now())
+    rec.update(judge_dip(ctrl.poller.streams.edges[v1.CH_PRIMARY], pulse["t_us"], spread), end_host_s=ctrl.host_now())
     return rec
 
 

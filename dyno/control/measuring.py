@@ -20,13 +20,15 @@ MAX_REMEASURE = 3  # a disturbed measurement window is measured again at most th
 
 class Measuring:
     """Measurement methods of the TestController (they use its poller, plan, clock and log)."""
-    async def _measure(self, give_up=None, since_s: float = 0.0) -> tuple[dict, float, float]:
+    async def _measure(self, give_up=None, since_s: float = 0.0,
+                       fixed_s: float | None = None) -> tuple[dict, float, float]:
         """MEASURE: average until the efficiency's uncertainty target or the time cap; a window that a
         disturbance touched is discarded and measured again (at most MAX_REMEASURE times).  ``give_up``
         (a callable, checked each second) ends a window that cannot become a point early: the point
         comes back with ``gave_up`` set (a closed-loop plan's drifting speed).  ``since_s``: the window
         already began this many rig seconds ago (a plan that saw the rig steady and untouched over that
         span: the data are in the streams); not before the warm-up's end, not on a re-measure.
+        ``fixed_s``: a window of exactly that length, no stopping rule (a ramp's).
 
         Returns the reduced point and the window's host start and end times.
         """
@@ -36,19 +38,22 @@ class Measuring:
         if self.rig_now() > rig_before or not since_s > 0:
             since_s = 0.0  # (the warm-up was waited out: data from before its end are not a point's)
         for attempt in range(MAX_REMEASURE + 1):
-            self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s")
+            self._enter(State.MEASURE, f"measuring {p.measure_s:.0f}-{p.max_measure_s:.0f} s" if fixed_s is None
+                        else f"measuring {fixed_s:g} s")
             # the window's length is the plan's, in rig seconds (self.clock); its ends are kept in host time
             host_t0, rig_t0, dev_t0 = self._now(), self.rig_now(), self.poller.device_now_us()
             if since_s > 0 and dev_t0 is not None:
                 host_t0 -= since_s * self.time_scale
                 rig_t0 -= since_s
                 dev_t0 -= int(since_s * 1e6)
-            await self.rig_sleep(max(0.0, rig_t0 + p.measure_s - self.rig_now()))
+            await self.rig_sleep(max(0.0, rig_t0 + (p.measure_s if fixed_s is None else fixed_s) - self.rig_now()))
             since_s = 0.0
             while True:
                 host_t1, rig_t1, dev_t1 = self._now(), self.rig_now(), self.poller.device_now_us()
                 point = reduce_point(self.poller.streams, dev_t0, dev_t1, self.calibration, self.engine_map,
                                      index=len(self.points), throttle_frac=self.throttle_frac)
+                if fixed_s is not None:
+                    break
                 # Against the error's upper bound, not the estimate: few batches must not stop a window
                 # on a luckily small estimate (dyno/analysis/stopping.py).
                 ci = p.target_efficiency_ci95 is not None

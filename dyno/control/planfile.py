@@ -25,7 +25,7 @@ import tomllib
 from pathlib import Path
 
 from dyno.control.api import TestPlan
-from dyno.control.registry import known_modes
+from dyno.control.registry import known_modes, params_class
 from dyno.control.steady import SettleCriteria
 from dyno.errors import ConfigError
 
@@ -34,9 +34,6 @@ SHIPPED_DIR = Path(__file__).resolve().parent / "plan_files"
 TOP_KEYS = {"schema", "name", "description", "mode", "test", "step"}
 #: TestPlan fields a file may not set ([test] is for measurement settings; these come from elsewhere)
 _NOT_IN_TEST = {"mode", "name", "params", "steps", "settle", "source", "text"}
-#: a mode's parameter table, checked against these dataclasses' fields (other modes: passed through)
-PARAM_SCHEMAS = {"speed-hold": "dyno.control.plans.speed_hold:SpeedHoldPlan",
-                 "drive-grid": "dyno.control.plans.drive_grid:DriveGridPlan"}
 
 
 def shipped_plans() -> dict[str, Path]:
@@ -99,27 +96,26 @@ def plan_from_dict(data: dict, path="plan", *, text: str = "") -> TestPlan:
             raise err(f"test.{key}", "not a test setting (see docs/control.md)")
         kw[key] = _typed(value, getattr(TestPlan(), key), f"test.{key}", err)
 
-    params = data.get(table_key, {})
-    if not isinstance(params, dict):
+    table = data.get(table_key, {})
+    if not isinstance(table, dict):
         raise err(table_key, f"a table [{table_key}]")
-    if mode in PARAM_SCHEMAS:
-        import importlib
-
-        mod, _, cls = PARAM_SCHEMAS[mode].partition(":")
-        obj = _dataclass_from(getattr(importlib.import_module(mod), cls), params, table_key, err)
-        if hasattr(obj, "check"):  # the mode's own checks beyond the types
-            obj.check(lambda field, expected: err(f"{table_key}.{field}", expected))
-    steps = ()
+    params = None
     if mode == "steps":
-        from dyno.control.plans.steps import validate_steps
+        from dyno.control.plans.steps import StepsPlan, validate_steps
 
         raw = data.get("step")
         if not isinstance(raw, list) or not raw:
             raise err("step", "one or more [[step]] tables (mode \"steps\")")
-        steps = validate_steps(raw, err)
+        params = StepsPlan(steps=validate_steps(raw, err))
     elif "step" in data:
         raise err("step", f'[[step]] tables only with mode = "steps" (mode is {mode!r})')
-    return TestPlan(mode=mode, name=name, params=dict(params), steps=steps, source=str(path), text=text, **kw)
+    elif params_class(mode) is not None:
+        params = _dataclass_from(params_class(mode), table, table_key, err)
+        if hasattr(params, "check"):  # the mode's own checks beyond the types
+            params.check(lambda field, expected: err(f"{table_key}.{field}", expected))
+    elif table:
+        params = dict(table)  # a mode registered in code without a parameter class: its table as given
+    return TestPlan(mode=mode, name=name, params=params, source=str(path), text=text, **kw)
 
 
 def _typed(value, default, field: str, err):
@@ -169,5 +165,4 @@ def canonical(plan: TestPlan) -> dict:
     """The plan as plain data (what meta.json keeps; its text goes to plan.toml)."""
     d = dataclasses.asdict(plan)
     d.pop("text", None)
-    d["steps"] = list(d.get("steps", ()))
     return d

@@ -19,7 +19,7 @@ from dyno.control.api import TestPlan
 from dyno.errors import ConfigError
 
 #: mode -> "module:coroutine" (or the coroutine function itself); it takes the plan context
-#: (:class:`dyno.control.api.PlanContext`) after the warm-up (those in FROM_IDLE right after GO).
+#: (:class:`dyno.control.api.PlanContext`) and its parameters (:func:`params_of`) after the warm-up (those in FROM_IDLE right after GO).
 #: Read-only: a run's own extra modes (a test's, a bench's) come with its spec (``dyno.session.root.RunSpec.runners``).
 RUNNERS: Mapping[str, object] = MappingProxyType({
     "step": "dyno.control.plans.thesis_step:run_thesis_step",
@@ -38,6 +38,39 @@ PLANS: dict[str, TestPlan] = {
     "engagement": TestPlan(mode="engagement", name="engagement"),  # dyno.control.plans.characterise
     "coast-down": TestPlan(mode="coast-down", name="coast-down"),  # dyno.control.plans.coastdown
 }
+
+
+#: mode -> "module:dataclass" of its own parameters (a plan file's table named after the mode, e.g.
+#: [speed_hold]; mode "steps": its [[step]] list).  Mode "step" has none: its parameters are the plan's
+#: [test] fields (:class:`TestPlan`).  A runner is called ``runner(ctx, params)`` with an instance.
+PARAMS: Mapping[str, str] = MappingProxyType({
+    "speed-hold": "dyno.control.plans.speed_hold:SpeedHoldPlan",
+    "steps": "dyno.control.plans.steps:StepsPlan",
+    "engagement": "dyno.control.plans.characterise:EngagementPlan",
+    "coast-down": "dyno.control.plans.coastdown:CoastDownPlan",
+    "drive-grid": "dyno.control.plans.drive_grid:DriveGridPlan",
+})
+
+
+def params_class(mode: str) -> type | None:
+    """The dataclass of ``mode``'s parameters (None: the mode has none of its own)."""
+    if mode not in PARAMS:
+        return None
+    module, _, cls = PARAMS[mode].partition(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def params_of(plan: TestPlan):
+    """What ``plan``'s runner is handed: its mode's parameters (the defaults where the plan gives none),
+    or, for mode "step", the plan itself."""
+    if plan.mode == "step":
+        return plan
+    cls = params_class(plan.mode)
+    if cls is None or isinstance(plan.params, cls):
+        return plan.params
+    if plan.params is None:
+        return cls()
+    raise ConfigError("plan", "params", f"a {cls.__name__} for mode {plan.mode!r}, got {type(plan.params).__name__}")
 
 
 def runner_for(mode: str):

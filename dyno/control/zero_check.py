@@ -24,27 +24,27 @@ def _config(ctrl):
 async def _sleep(ctrl, dt_s: float) -> None:
     # after the test the controller's _sleep still works (it only ticks the outputs)
     await asyncio.sleep(dt_s)
-    ctrl.act.tick(ctrl.plan_context.host_now())
+    ctrl.act.tick(ctrl.host_now())
 
 
 async def read_zero(ctrl, *, wait_rest_s: float = 0.0) -> dict:
     """Mean torque over ``read_s`` with the secondary at rest (waiting up to ``wait_rest_s`` for it)."""
     cfg = _config(ctrl)
     poller = ctrl.poller
-    t_wait = ctrl.plan_context.host_now()
+    t_wait = ctrl.host_now()
     # with an engine-side input torque channel the zero after the test waits for the crank too: a
     # coasting engine's friction reacts on its cradle (before GO it idles unloaded: no reaction)
     crank = wait_rest_s > 0 and getattr(ctrl, "input_channel", None) is not None
     while poller.rpm(v1.CH_SECONDARY) > 0.0 or (crank and poller.rpm(v1.CH_PRIMARY) > 0.0):
-        if ctrl.plan_context.host_now() - t_wait >= wait_rest_s:
+        if ctrl.host_now() - t_wait >= wait_rest_s:
             why = f"the secondary turns ({poller.rpm(v1.CH_SECONDARY):.0f} rpm): not at rest"
             if crank and poller.rpm(v1.CH_PRIMARY) > 0.0:
                 why = f"the engine turns ({poller.rpm(v1.CH_PRIMARY):.0f} rpm): not at rest"
             return {"torque_nm": math.nan, "ci95_nm": math.nan, "why": why}
         await _sleep(ctrl, 0.1)
-    h0, d0 = ctrl.plan_context.host_now(), poller.device_now_us()
+    h0, d0 = ctrl.host_now(), poller.device_now_us()
     await _sleep(ctrl, cfg.read_s)
-    h1, d1 = ctrl.plan_context.host_now(), poller.device_now_us()
+    h1, d1 = ctrl.host_now(), poller.device_now_us()
     if d0 is None or d1 is None:
         return {"torque_nm": math.nan, "ci95_nm": math.nan, "why": "no device time"}
     if poller.rpm(v1.CH_SECONDARY) > 0.0:

@@ -18,7 +18,7 @@ from pathlib import Path
 # What the root gives a controller's constructor beside the plan and its parts (rig.toml's description, control
 # gains and inertias, the tune, the input channel as tared, the paced session's clock): a re-armed controller is
 # given the same.  (Without ``clock`` a re-armed x4 session would time its plan in host seconds.)
-REBUILT_ATTRS = ("rig", "tune_path", "control", "inertia", "clock", "input_channel")
+REBUILT_ATTRS = ("rig", "tune_path", "shift_prediction", "control", "inertia", "clock", "input_channel")
 #: inputs a run keeps beside its log that the next run keeps too
 INPUT_COPIES = ("plan.toml",)
 

@@ -20,6 +20,7 @@ from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
 from dyno.session.next_run import abort_on_write_error
 from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
+from dyno.session.shift_prediction import shift_prediction_for
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
@@ -321,13 +322,13 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
 
         tune_path = getattr(sim.model.params, "cvt_tune_path", None)
         tune_path = _resolve_map_path(tune_path) if tune_path else None
-    tune_text = None
+    tune_text = tune = None
     if tune_path is not None:
         import hashlib
 
         from dyno.tuning.tune import load_tune
 
-        load_tune(tune_path)  # validate: a bad tune is refused before anything is written
+        tune = load_tune(tune_path)  # validate: a bad tune is refused before anything is written
         tune_text = Path(tune_path).read_text()
         meta["tune_source"] = str(tune_path)
         meta["tune_sha256"] = hashlib.sha256(tune_text.encode()).hexdigest()
@@ -347,7 +348,8 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 on_wait_engine=sim.start_engine if sim else None,
                                 runner_for=_runner_for(opts.runners), from_idle=plans.FROM_IDLE,  # (the plan modes)
                                 rig=rig_cfg, control=rig_cfg.control, inertia=rig_cfg.inertia,  # [control], [inertia]
-                                tune_path=tune_path,  # the characterisations compare with the tune's prediction
+                                tune_path=tune_path,  # (stored with the run; the faces' overlay)
+                                shift_prediction=shift_prediction_for(tune, engine_map),  # the characterisations'
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
                                 clock=clock)  # rig time for the plan (None: the loop's; safety stays on the loop)
     writer.on_error = abort_on_write_error(controller, out)  # (a re-arm's next run: the same, dyno.session.next_run)

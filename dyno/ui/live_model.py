@@ -99,7 +99,7 @@ def go_text(plan) -> tuple[str, str]:
         return ("Throttle goes to FULL with the brake released, then the ENGINE IS CUT and the rig coasts to rest.",
                 "GO: full throttle, then engine cut and coast-down")
     if mode == "speed-hold":
-        n = (plan.params or {}).get("points")
+        n = getattr(plan.params, "points", None)
         many = f"{n} " if isinstance(n, int) else ""
         return (f"Throttle goes to FULL; the brake finds its contact point, then HOLDS the secondary at {many}speed "
                 "setpoints down the range (closed loop).", "GO: full throttle, brake holding speed setpoints")
@@ -108,7 +108,7 @@ def go_text(plan) -> tuple[str, str]:
                 "secondary at each reachable speed (closed loop).", "GO: throttle x speed grid, brake holding")
     if mode == "steps":
         def variables(kind: str) -> list[str]:
-            return sorted({str(st.get("variable")) for st in plan.steps or ()
+            return sorted({str(st.get("variable")) for st in getattr(plan.params, "steps", None) or ()
                            if isinstance(st, dict) and st.get("kind") == kind and st.get("variable")})
 
         holds, ramps = variables("hold"), variables("ramp")

@@ -4,18 +4,20 @@ there, and the identification refuses with the physical reason (a pulse moves th
 on three seeds and on a brake twice as stiff; the hold with rig.toml's kp stays near its setpoint.
 Simulated time: deterministic, not a wall-clock assertion."""
 
-import asyncio
 import statistics
 from dataclasses import replace
 
 import pytest
 
 from dyno.session.root import RunOptions, run_test
+from dyno.control.api import EngineHold, SpeedHold
+from dyno.control.holds import gains_for
+from dyno.control.outputs import STOP
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_gain
-from dyno.control.plans.steps import probe_load_sign
+from dyno.control.plans.steps import probe_load_raises
 from dyno.control.controller import State, TestPlan as Plan
-from dyno.control.plans.steps import find_contact
+from dyno.control.plans.speed_hold import find_contact
 from dyno.sim.physics import RigParams
 
 
@@ -32,36 +34,33 @@ async def _trace(ctx, seconds: float, window_s: float):
     t0, out = ctx.now(), []
     while ctx.now() - t0 < seconds:
         await ctx.sleep(0.05)
-        out.append((ctx.now() - t0, sh.engine_rpm(ctx, window_s)))
+        out.append((ctx.now() - t0, ctx.read.engine_rpm(window_s)))
     return out
 
 
 def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
     found = {}
 
-    async def runner(ctx):
+    async def runner(ctx, params=None):
         ctx.phase(State.STEP, "test: contact")
         assert await find_contact(ctx)
-        pre = {"rpm": 3000.0}  # heavy load: where the engine-hold plan starts
-        task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(sh.gains_for(ctx, "secondary")), pre), "hold")
+        await ctx.hold(SpeedHold(3000.0, wait=False))  # heavy load: where the engine-hold plan starts
         await ctx.sleep(8.0)
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        sign = found["sign"] = await probe_load_sign(ctx, "engine")  # which way more brake moves the engine here
-        sp0 = sh.engine_rpm(ctx, 1.0)
-        found["identify"] = await identify_gain(ctx, "engine", sp0, sign=sign)
-        gains = sh.gains_for(ctx, "engine")  # the identified kp, applied to the controller's [control]
+        ctx.brake(STOP)
+        raises = found["raises"] = await probe_load_raises(ctx, "engine")  # which way more brake moves the engine
+        sp0 = ctx.read.engine_rpm(1.0)
+        base = gains_for(ctx.config.control, "engine")
+        found["identify"] = await identify_gain(ctx, "engine", sp0, base, load_raises=raises)
+        gains = replace(base, kp=found["identify"]["kp_identified"]) if found["identify"]["ok"] else base
         found["kp"] = gains.kp
-        target = {"rpm": sp0, "sign": sign}
-        task = ctx.hold_task(sh._hold_loop(ctx, sh.SpeedHold(gains), target, "engine"), "hold")
+        await ctx.hold(EngineHold(sp0, load_raises=raises, gains=gains, wait=False))
         await _trace(ctx, 8.0, gains.speed_window_s)
         found["steps"] = []
         for sp in (sp0 * 1.05, sp0):
-            start = sh.engine_rpm(ctx, gains.speed_window_s)
-            target["rpm"] = sp
+            start = ctx.read.engine_rpm(gains.speed_window_s)
+            await ctx.hold(EngineHold(sp, load_raises=raises, gains=gains, wait=False))
             found["steps"].append(_figures(await _trace(ctx, 8.0, gains.speed_window_s), sp, start))
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
+        ctx.brake(STOP)
         ctx.phase(State.SETTLE, "test")
         ctx.phase(State.DONE, "test done")
 

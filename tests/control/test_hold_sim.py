@@ -15,7 +15,9 @@ from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams
 from dyno.control.plans import speed_hold as sh
 from dyno.control.controller import State, TestPlan as Plan
-from dyno.control.plans.steps import find_contact
+from dyno.control.outputs import STOP
+from dyno.control.api import SpeedHold
+from dyno.control.plans.speed_hold import find_contact
 
 
 def _trace(ctx, sp: float, seconds: float):
@@ -23,7 +25,7 @@ def _trace(ctx, sp: float, seconds: float):
         t0, out = ctx.now(), []
         while ctx.now() - t0 < seconds:
             await ctx.sleep(0.05)
-            out.append((ctx.now() - t0, sh.secondary_rpm(ctx, 0.1)))
+            out.append((ctx.now() - t0, ctx.read.secondary_rpm(0.1)))
         return out
     return go()
 
@@ -40,31 +42,30 @@ def _figures(trace, sp: float, start: float) -> dict:
 def _hold_run(out_dir, seed: int, end_stop: bool) -> dict:
     found = {}
 
-    async def runner(ctx):
+    async def runner(ctx, params=None):
         ctx.phase(State.STEP, "test: contact")
-        no_load = sh.secondary_rpm(ctx, 1.0)
+        no_load = ctx.read.secondary_rpm(1.0)
         t_c = ctx.now()
         assert await find_contact(ctx)
         found["contact_s"] = ctx.now() - t_c  # the free travel from the released end to the pads
-        hold = sh.SpeedHold(sh.gains_for(ctx, "secondary"))
-        target = {"rpm": 3000.0}
-        task = ctx.hold_task(sh._hold_loop(ctx, hold, target), "hold")
+        await ctx.hold(SpeedHold(3000.0, wait=False))  # the engine's hold loop, the rig's [control] gains
         found["from_contact"] = _figures(await _trace(ctx, 3000.0, 12.0), 3000.0, no_load)
         for sp in STEPS_RPM:
-            start = sh.secondary_rpm(ctx, 0.1)
-            target["rpm"] = sp
+            start = ctx.read.secondary_rpm(0.1)
+            await ctx.hold(SpeedHold(sp, wait=False))
             found[sp] = _figures(await _trace(ctx, sp, 8.0), sp, start)
         if end_stop:
             # An unreachable setpoint above the no-load speed: full release into the end stop for 12 s.
-            target["rpm"] = 1.3 * no_load
+            await ctx.hold(SpeedHold(1.3 * no_load, wait=False))
             await ctx.sleep(12.0)
-            found["owed_s"], found["integral"] = hold.owed_s, hold.integral
-            start = sh.secondary_rpm(ctx, 0.1)
-            target["rpm"] = 3000.0
+            law = ctx._holds.law  # (white box: the running law's state)
+            found["owed_s"], found["integral"] = law.owed_s, law.integral
+            start = ctx.read.secondary_rpm(0.1)
+            await ctx.hold(SpeedHold(3000.0, wait=False))
             trace = await _trace(ctx, 3000.0, 12.0)
             found["after_end_stop"] = _figures(trace, 3000.0, start)
             found["bite_s"] = next(t for t, r in trace if r < 0.99 * start)  # the pads slow the secondary again
-        task.cancel()
+        ctx.brake(STOP)  # (ends the hold)
         ctx.phase(State.SETTLE, "test")
         ctx.phase(State.DONE, "test done")
 

@@ -8,7 +8,8 @@ from dyno.control import plans as plans_mod
 from dyno.control.controller import TestPlan as Plan
 from dyno.control.planfile import load_plan_file, plan_from_text, shipped_plans
 from dyno.control.plans import plan_named, plan_names
-from dyno.control.plans.speed_hold import SpeedHoldPlan, speed_hold_plan_of
+from dyno.control.plans.speed_hold import SpeedHoldPlan
+from dyno.control.plans.steps import StepsPlan
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
@@ -27,10 +28,9 @@ def test_shipped_plans_load_by_name():
     assert replace(step, name="", source="", text="") == Plan()
     hold = plan_named("speed-hold")
     assert hold.mode == "speed-hold" and hold.target_efficiency_ci95 <= 0.01 and hold.warmup_at_load_s > 0
-    assert isinstance(speed_hold_plan_of(hold), SpeedHoldPlan)
-    assert speed_hold_plan_of(hold).points == hold.params["points"]
+    assert isinstance(hold.params, SpeedHoldPlan) and hold.params.points == 19  # the file's [speed_hold] table, typed
     sweep = plan_named("sweep")
-    assert sweep.mode == "steps" and [s["kind"] for s in sweep.steps] == ["contact", "ramp"]
+    assert sweep.mode == "steps" and isinstance(sweep.params, StepsPlan) and [s["kind"] for s in sweep.params.steps] == ["contact", "ramp"]
 
 
 def test_overrides_and_paths(tmp_path):
@@ -38,7 +38,7 @@ def test_overrides_and_paths(tmp_path):
     f = tmp_path / "p.toml"
     f.write_text(HEAD + 'mode = "steps"\n[test]\nmeasure_s = 2.5\n[[step]]\nkind = "wait"\ns = 1\n')
     p = plan_named(str(f))
-    assert p.name == "mine" and p.measure_s == 2.5 and p.steps == ({"kind": "wait", "s": 1},)
+    assert p.name == "mine" and p.measure_s == 2.5 and p.params.steps == ({"kind": "wait", "s": 1},)
     assert p.text == f.read_text()
 
 
@@ -90,19 +90,19 @@ def test_unknown_name_and_missing_file():
 
 
 def test_a_mode_registered_in_code_is_selectable_and_usable_from_a_file(monkeypatch):
-    """Another module adds a mode (e.g. "engagement"): a code plan by name, and plan files may use it."""
+    """Another module adds a mode (e.g. "endurance"): a code plan by name, and plan files may use it."""
     from types import MappingProxyType
 
     from dyno.control import registry
 
     # (the table is read-only: another module's mode is a different table, as a build of the package would ship)
     monkeypatch.setattr(registry, "RUNNERS",
-                        MappingProxyType({**registry.RUNNERS, "engagement": "dyno.control.plans.steps:run_steps"}))
-    monkeypatch.setitem(plans_mod.PLANS, "engagement", Plan(mode="engagement", warmup_s=1.0))
-    p = plan_named("engagement")
-    assert p.mode == "engagement" and p.name == "engagement" and p.warmup_s == 1.0
-    assert plans_mod.runner_for("engagement").__name__ == "run_steps"
-    f = plan_from_text(HEAD + 'mode = "engagement"\n[engagement]\nthrottle_rate = 0.1\n', "e.toml")
-    assert f.mode == "engagement" and f.params == {"throttle_rate": 0.1}
+                        MappingProxyType({**registry.RUNNERS, "endurance": "dyno.control.plans.steps:run_steps"}))
+    monkeypatch.setitem(plans_mod.PLANS, "endurance", Plan(mode="endurance", warmup_s=1.0))
+    p = plan_named("endurance")
+    assert p.mode == "endurance" and p.name == "endurance" and p.warmup_s == 1.0
+    assert plans_mod.runner_for("endurance").__name__ == "run_steps"
+    f = plan_from_text(HEAD + 'mode = "endurance"\n[endurance]\nthrottle_rate = 0.1\n', "e.toml")
+    assert f.mode == "endurance" and f.params == {"throttle_rate": 0.1}  # (a mode without a parameter class: its table as given)
     with pytest.raises(ConfigError):
         plans_mod.runner_for("warp")

@@ -5,7 +5,7 @@ import tomllib
 
 import pytest
 
-from dyno.control.plans.speed_hold import SpeedHoldGains
+from dyno.control.hold_law import HoldGains
 from dyno.errors import ConfigError
 from dyno.rig.config import DEFAULT_RIG_PATH, ControlConfig, InertiaConfig, rig_from_dict
 
@@ -24,8 +24,8 @@ def test_gains_and_inertias_from_rig_toml(base):
     d["control"]["kp_torque"] = 0.7
     d["inertia"]["secondary_kg_m2"] = 0.02
     rig = rig_from_dict(d, "r.toml")
-    assert SpeedHoldGains.from_config(rig.control, "secondary").kp == 4.5
-    assert SpeedHoldGains.from_config(rig.control, "torque").kp == 0.7
+    assert HoldGains.from_config(rig.control, "secondary").kp == 4.5
+    assert HoldGains.from_config(rig.control, "torque").kp == 0.7
     assert rig.inertia.secondary_kg_m2 == 0.02
     for k in ("control", "inertia", "uncertainty"):  # optional tables: defaults without them
         d.pop(k)

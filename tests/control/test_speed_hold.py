@@ -2,7 +2,7 @@ import pytest
 """The speed-hold law (pure): sign, sigma-delta pulses, dead band, anti-windup."""
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
-from dyno.control.plans.speed_hold import SpeedHold, SpeedHoldGains
+from dyno.control.hold_law import HoldGains as SpeedHoldGains, HoldLaw as SpeedHold
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

@@ -36,7 +36,7 @@ def test_sweep_is_stored_with_its_plan_and_corrected_for_inertia(sweep_run):
     assert (out / "plan.toml").read_text() == shipped_plans()["sweep"].read_text()
     meta = json.loads((out / "meta.json").read_text())
     assert meta["plan"]["name"] == "sweep" and meta["plan"]["mode"] == "steps" and "text" not in meta["plan"]
-    assert [s["kind"] for s in meta["plan"]["steps"]] == ["contact", "ramp"]
+    assert [s["kind"] for s in meta["plan"]["params"]["steps"]] == ["contact", "ramp"]
     pts = result["points"]
     assert len(pts) >= 12
     rs = [p["rpm_secondary"] for p in pts]

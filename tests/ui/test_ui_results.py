@@ -7,6 +7,7 @@ import asyncio
 import json
 import math
 import re
+from dataclasses import replace
 
 from dyno.control.plans.characterise import EngagementPlan
 from dyno.control.controller import State
@@ -115,7 +116,7 @@ def test_coast_down_results_panel(tmp_path):
 def test_engagement_results_panel(tmp_path):
     # one ramp (no back-shift, no flatness ramps): the panel, not the plan's length, is under test here
     def short(ctrl):
-        ctrl.engagement_plan = EngagementPlan(back_shift=False, flatness_apply_s=())
+        ctrl.plan = replace(ctrl.plan, params=EngagementPlan(back_shift=False, flatness_apply_s=()))
 
     shots, r, run_dir = _run(tmp_path, "engagement", setup=short)
     _check_layout(shots)

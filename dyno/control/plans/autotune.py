@@ -18,11 +18,12 @@ hold's 0.2 s window, brake frozen) is larger than the step figures it would be t
 
 from __future__ import annotations
 
-import asyncio
 import math
 import statistics
 from dataclasses import replace
 
+from dyno.control.api import Hold, PlanContext
+from dyno.control.hold_law import HoldGains
 from dyno.control.outputs import APPLY, RELEASE, STOP
 
 # Engine at heavy load (bench/bench_hold_tune.py, 5 % steps from ~2,860 rpm, seeds 1-3, mock pins): g ≈ 0.071 /s,
@@ -44,22 +45,7 @@ KP_RANGE = (0.3, 30.0)
 MAX_SHIFT_SHARE = 3.0
 
 
-async def _reach(ctx, variable: str, setpoint: float, timeout_s: float = 10.0) -> bool:
-    from dyno.control.plans.speed_hold import measured
-
-    t0, since = ctx.now(), None
-    while ctx.now() - t0 < timeout_s:
-        await ctx.sleep(0.05)
-        if abs(measured(ctx, variable, 0.15) - setpoint) <= 0.0075 * setpoint:
-            since = since if since is not None else ctx.now()
-            if ctx.now() - since >= 1.0:
-                return True
-        else:
-            since = None
-    return False
-
-
-async def _pulse(ctx, direction: int, pulse_s: float) -> None:
+async def _pulse(ctx: PlanContext, direction: int, pulse_s: float) -> None:
     ctx.brake(direction)
     try:
         await ctx.sleep(pulse_s)
@@ -67,52 +53,39 @@ async def _pulse(ctx, direction: int, pulse_s: float) -> None:
         ctx.brake(STOP)
 
 
-async def identify_speed_gain(ctx, setpoint: float, *, pulse_s: float = 0.2, repeats: int = 2,
-                              apply: bool = True) -> dict:
-    """Identify ``g`` at ``setpoint`` (secondary rpm); returns (and logs) what was found and done."""
-    return await identify_gain(ctx, "secondary", setpoint, pulse_s=pulse_s, repeats=repeats, apply=apply)
-
-
-async def identify_gain(ctx, variable: str, setpoint: float, *, sign: float = 1.0, pulse_s: float = 0.2,
-                        repeats: int = 2, apply: bool = True) -> dict:
-    """Identify ``g`` of ``variable`` (secondary | engine rpm) at ``setpoint`` while holding it (``sign``
-    -1 where more brake raises the speed: the engine while the CVT back-shifts); returns (and logs) what
-    was found and done."""
-    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
-
+async def identify_gain(ctx: PlanContext, variable: str, setpoint: float, base: HoldGains, *,
+                        load_raises: bool = False, pulse_s: float = 0.2, repeats: int = 2) -> dict:
+    """Identify ``g`` of ``variable`` (secondary | engine rpm) at ``setpoint`` while holding it with ``base``
+    (``load_raises``: more brake raises the speed, the engine while the CVT back-shifts).  Returns what was
+    found: ``ok``, ``kp_identified`` (the kp for ``base``'s loop gain), the pulses' gains, and why not."""
     if variable not in LOOP_GAIN_PER_S:
         raise ValueError(f"no auto-tune for {variable!r}: one of {', '.join(LOOP_GAIN_PER_S)}")
-    base = gains_for(ctx, variable)
-    target = {"rpm": setpoint, "sign": sign}
     gains = []
-    task = None
     try:
         # The hold must settle before the plant can be pulsed.  The gain being tuned may be too high
         # for this plant (a stiffer brake: the loop rings instead of holding), so halve it and retry.
         reached, hold_kp = False, base.kp
         for attempt in range(REACH_ATTEMPTS):
             hold_kp = base.kp / 2 ** attempt
-            task = ctx.hold_task(_hold_loop(ctx, SpeedHold(replace(base, kp=hold_kp)), target, variable),
-                                       name="identify-hold")
-            if await _reach(ctx, variable, setpoint):
+            held = await ctx.hold(Hold(variable, setpoint, in_band_s=1.0, max_approach_s=10.0,
+                                       load_raises=load_raises, gains=replace(base, kp=hold_kp)))
+            if held.reached:
                 reached = True
                 break
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
             ctx.brake(STOP)
         if not reached:
             result = {"ok": False, "reason": f"could not hold {setpoint:.0f} rpm to identify (kp {base.kp:g} "
                                              f"down to {hold_kp:g})"}
         else:
-            target["frozen"] = True
+            ctx.brake(STOP)  # the hold ends: the brake stays where it put it
             await ctx.sleep(1.0)
             shares = []  # the secondary's relative move over the engine's, per pulse (engine only)
             for _ in range(repeats):
                 for direction in (APPLY, RELEASE):
-                    n0, s0 = measured(ctx, variable, 0.5), measured(ctx, "secondary", 0.5)
+                    n0, s0 = ctx.read.value(variable, 0.5), ctx.read.secondary_rpm(0.5)
                     await _pulse(ctx, direction, pulse_s)
                     await ctx.sleep(1.5)
-                    n1, s1 = measured(ctx, variable, 0.5), measured(ctx, "secondary", 0.5)
+                    n1, s1 = ctx.read.value(variable, 0.5), ctx.read.secondary_rpm(0.5)
                     gains.append(abs(n1 - n0) / n0 / pulse_s)
                     if variable == "engine" and n1 != n0 and s0 > 0:
                         shares.append(abs(s1 - s0) / s0 / (abs(n1 - n0) / n0))
@@ -134,19 +107,7 @@ async def identify_gain(ctx, variable: str, setpoint: float, *, sign: float = 1.
                     else f"pulses disagree (spread {spread:.0%})" if spread > MAX_SPREAD
                     else f"kp {kp:.2f} outside {KP_RANGE[0]}..{KP_RANGE[1]}")
     finally:
-        if task is not None:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
         ctx.brake(STOP)
-    control = ctx.config.control
-    key = KP_KEY[variable]
-    result.update(variable=variable, setpoint_rpm=setpoint, kp_key=key, kp_before=getattr(control, key, None),
+    result.update(variable=variable, setpoint_rpm=setpoint, kp_key=KP_KEY[variable], kp_before=base.kp,
                   applied=False)
-    if result["ok"] and apply and control is not None:
-        control = replace(control, **{key: result["kp_identified"]})
-        result["applied"] = True
-    else:
-        control = None  # (unchanged)
-    ctx.log("identify", **result)
-    ctx.tune_control(control, result)
     return result

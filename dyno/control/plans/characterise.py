@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dyno.analysis import shift_events as se
-from dyno.control.api import State
+from dyno.control.api import PlanContext, State
 from dyno.control.outputs import APPLY, STOP
 from dyno.protocol import v1
 
@@ -45,24 +45,12 @@ class EngagementPlan:
     check_margin_rpm: float = 60.0  # no heavier load once engagement is this close to the Hall check speed
 
 
-def _live_ratio(ctx, window_s: float = 0.3) -> float:
-    now = ctx.device_now_us()
-    if now is None:
-        return math.nan
-    st = ctx.streams
-    rp = se.rpm_at(st.edge_window(v1.CH_PRIMARY, now - int(window_s * 1e6), now), now - window_s * 5e5, window_s * 5e5)
-    rs = se.rpm_at(st.edge_window(v1.CH_SECONDARY, now - int(window_s * 1e6), now), now - window_s * 5e5,
-                   window_s * 5e5)
-    return rp / rs if rs > 0 else math.nan
-
-
-async def run_engagement(ctx, ep: EngagementPlan | None = None) -> None:
-    ep = ep or ctx.config.engagement_plan or EngagementPlan()
+async def run_engagement(ctx: PlanContext, ep: EngagementPlan) -> None:
     ctx.phase(State.WARMUP, "idle, brake released: the secondary must be at rest")
     ctx.throttle(0.0)
     await ctx.sleep(ep.idle_s)
-    if ctx.rpm(v1.CH_SECONDARY) > 0:
-        ctx.fail("error", f"engagement: the secondary turns at idle ({ctx.rpm(v1.CH_PRIMARY):.0f} rpm "
+    if ctx.read.rpm(v1.CH_SECONDARY) > 0:
+        ctx.fail("error", f"engagement: the secondary turns at idle ({ctx.read.rpm(v1.CH_PRIMARY):.0f} rpm "
                             "engine): the clutch engages below idle, nothing to characterise")
         return
     p, s, t0_dev, t1_dev, ended = await _ramp(ctx, ep)
@@ -70,7 +58,7 @@ async def run_engagement(ctx, ep: EngagementPlan | None = None) -> None:
     res["ramp_ended"] = ended
     res["throttle_rate_per_s"] = ep.throttle_rate_per_s
     res["shift_out_torque_nm"] = _torque_near(ctx, res.get("shift_out_t_us"))
-    ctx.add_truths(res)  # the sim's truths for the ramp's load, before the back-shift step
+    ctx.set_results(res, log=False)  # the sim's truths for the ramp's load, before the back-shift step
     if ep.back_shift and math.isfinite(res.get("full_shift_ratio", math.nan)):
         res["back_shift"] = await _back_shift(ctx, ep, res)
     if ep.flatness_apply_s:
@@ -85,18 +73,24 @@ async def run_engagement(ctx, ep: EngagementPlan | None = None) -> None:
     res.update(predicted_from_tune(ctx, [r["torque_secondary_nm"] for r in res.get("shift_out_vs_load", [])]
                                    or [res.get("shift_out_torque_nm", math.nan)]))
     ctx.throttle(0.0)
-    res["test_time_s"] = ctx.test_time_s()  # rig seconds
-    ctx.set_results(res, hooks=False)
+    res.pop("test_time_s", None)  # (the final figure's: the engine stamps it)
+    ctx.set_results(res, truths=False)
     ctx.phase(State.DONE, "engagement characterised" if math.isfinite(res["engagement_rpm"])
                 else "engagement not found in the ramp")
 
 
-async def _ramp(ctx, ep: EngagementPlan):
+def _add_truths(ctx: PlanContext, r: dict) -> None:
+    """Let the simulator annotate a flatness ramp's figures with its truths (no document; the run's final
+    figures replace them)."""
+    ctx.set_results(r, log=False)
+
+
+async def _ramp(ctx: PlanContext, ep: EngagementPlan):
     """From idle with the secondary at rest: the throttle ramp; returns the ramp's edges and times."""
     ctx.phase(State.STEP, f"throttle ramp {ep.throttle_rate_per_s:g}/s through engagement and the shift")
     t0_rig = ctx.now()
-    t0_dev = ctx.device_now_us()
-    over_s = getattr(ctx.config.limits, "overspeed_secondary_rpm", 7800.0) * ep.secondary_max_frac
+    t0_dev = ctx.read.device_now_us()
+    over_s = ctx.config.limits.overspeed_secondary_rpm * ep.secondary_max_frac
     recent: deque = deque()
     low_plateau = math.nan  # the live ratio once flat (+-1 %) for 1 s after engagement: the low stop
     ended = "throttle at its maximum"
@@ -105,7 +99,7 @@ async def _ramp(ctx, ep: EngagementPlan):
         u = min(ep.throttle_max, ep.throttle_rate_per_s * el)
         ctx.throttle(u, log=False)
         await ctx.sleep(0.1)
-        r = _live_ratio(ctx)
+        r = ctx.read.ratio()
         recent.append((ctx.now(), r))
         while recent and recent[0][0] < ctx.now() - ep.high_plateau_s:
             recent.popleft()
@@ -117,7 +111,7 @@ async def _ramp(ctx, ep: EngagementPlan):
         if shifted and len(rs) >= 0.9 * ep.high_plateau_s / 0.1 and (max(rs) - min(rs)) < 0.01 * min(rs):
             ended = f"ratio flat on the high stop for {ep.high_plateau_s:g} s"
             break
-        if ctx.rpm(v1.CH_SECONDARY) > over_s:
+        if ctx.read.rpm(v1.CH_SECONDARY) > over_s:
             ended = f"secondary at {ep.secondary_max_frac:.0%} of its over-speed limit"
             break
         if u >= ep.throttle_max and el > ep.throttle_max / ep.throttle_rate_per_s + ep.high_plateau_s:
@@ -125,21 +119,18 @@ async def _ramp(ctx, ep: EngagementPlan):
         if el > ep.max_ramp_s:
             ended = f"ramp time cap {ep.max_ramp_s:g} s"
             break
-    t1_dev = ctx.device_now_us()
+    t1_dev = ctx.read.device_now_us()
     ctx.log("ramp", ended=ended, t_start_us=t0_dev, t_end_us=t1_dev, throttle_rate_per_s=ep.throttle_rate_per_s)
-    st = ctx.streams
-    p = st.edge_window(v1.CH_PRIMARY, t0_dev - 2_000_000, t1_dev)
-    s = st.edge_window(v1.CH_SECONDARY, t0_dev - 2_000_000, t1_dev)
+    p = ctx.read.edges(v1.CH_PRIMARY, t0_dev - 2_000_000, t1_dev)
+    s = ctx.read.edges(v1.CH_SECONDARY, t0_dev - 2_000_000, t1_dev)
     return p, s, t0_dev, t1_dev, ended
 
 
-def _torque_near(ctx, t_us, half_s: float = 0.5) -> float:
-    """Mean secondary torque (N m) through the calibration over +- ``half_s`` around ``t_us``."""
+def _torque_near(ctx: PlanContext, t_us, half_s: float = 0.5) -> float:
+    """Mean secondary torque (N m) over +- ``half_s`` around ``t_us``."""
     if t_us is None:
         return math.nan
-    _, codes, status = ctx.streams.adc_window(int(t_us - half_s * 1e6), int(t_us + half_s * 1e6))
-    good = codes[(status & v1.ADC_STATUS_ERR) == 0]
-    return float(ctx.config.calibration.torque_secondary_nm(float(good.mean()))) if good.size else math.nan
+    return ctx.read.torque_between_nm(int(t_us - half_s * 1e6), int(t_us + half_s * 1e6))
 
 
 def _load_row(r: dict) -> dict:
@@ -151,12 +142,12 @@ def _load_row(r: dict) -> dict:
     return row
 
 
-async def _flatness(ctx, ep: EngagementPlan, last_eng: float) -> list:
+async def _flatness(ctx: PlanContext, ep: EngagementPlan, last_eng: float) -> list:
     """More ramps, each with the brake preset a little further: shift-out against load."""
     from dyno.control.outputs import RELEASE
 
     rows = []
-    check_rpm = getattr(ctx.config.limits, "secondary_check_primary_rpm", math.inf)
+    check_rpm = ctx.config.limits.secondary_check_primary_rpm
     for apply_s in ep.flatness_apply_s:
         # A heavier load engages higher: keep the engagement clear of the safety check's "the secondary
         # must turn" speed, which would (rightly) trip while the brake holds the secondary there.
@@ -178,13 +169,13 @@ async def _flatness(ctx, ep: EngagementPlan, last_eng: float) -> list:
         finally:
             ctx.brake(STOP)
         t0 = ctx.now()
-        while ctx.rpm(v1.CH_SECONDARY) > 0 and ctx.now() - t0 < 30.0:
+        while ctx.read.rpm(v1.CH_SECONDARY) > 0 and ctx.now() - t0 < 30.0:
             await ctx.sleep(0.1)
         await ctx.sleep(1.0)
         p, s, t0_dev, t1_dev, ended = await _ramp(ctx, ep)
         r = characterise_ramp(p, s, t0_dev, t1_dev)
         r["shift_out_torque_nm"] = _torque_near(ctx, r.get("shift_out_t_us"))
-        ctx.add_truths(r)
+        _add_truths(ctx, r)
         row = _load_row(r)
         row.update(brake_apply_s=apply_s, ramp_ended=ended, curve=r.get("curve"))
         rows.append(row)
@@ -213,9 +204,9 @@ def characterise_ramp(p_edges, s_edges, t0_us: int, t1_us: int) -> dict:
     return out
 
 
-async def _back_shift(ctx, ep: EngagementPlan, res: dict) -> dict:
+async def _back_shift(ctx: PlanContext, ep: EngagementPlan, res: dict) -> dict:
     """At full shift: a brake load step; the ratio's rise (the CVT back-shifts) and its time."""
-    r0 = _live_ratio(ctx, 0.5)
+    r0 = ctx.read.ratio(0.5)
     t0 = ctx.now()
     ctx.brake(APPLY)
     try:
@@ -225,10 +216,10 @@ async def _back_shift(ctx, ep: EngagementPlan, res: dict) -> dict:
     trace = []
     while ctx.now() - t0 < ep.back_shift_step_s + ep.back_shift_watch_s:
         await ctx.sleep(0.1)
-        trace.append((ctx.now() - t0, _live_ratio(ctx)))
+        trace.append((ctx.now() - t0, ctx.read.ratio()))
     r1 = float(np.nanmedian([r for t, r in trace if t > trace[-1][0] - 1.0]))
-    out = {"ratio_before": r0, "ratio_after": r1, "rpm_primary_after": ctx.rpm(v1.CH_PRIMARY),
-           "rpm_secondary_after": ctx.rpm(v1.CH_SECONDARY), "t63_s": math.nan}
+    out = {"ratio_before": r0, "ratio_after": r1, "rpm_primary_after": ctx.read.rpm(v1.CH_PRIMARY),
+           "rpm_secondary_after": ctx.read.rpm(v1.CH_SECONDARY), "t63_s": math.nan}
     if math.isfinite(r0) and r1 > r0:
         target = r0 + 0.63 * (r1 - r0)
         for t, r in trace:
@@ -238,37 +229,17 @@ async def _back_shift(ctx, ep: EngagementPlan, res: dict) -> dict:
     return out
 
 
-def predicted_from_tune(ctx, loads_nm=()) -> dict:
-    """The tune's predicted engagement and shift-out (dyno.tuning) and the measured minus predicted."""
-    tune_path = ctx.config.tune_path
-    em = ctx.config.engine_map  # (a map taken to the day names its file in file_source)
-    src = getattr(em, "file_source", None) or getattr(em, "source", None)
-    if not tune_path or not src:
+def predicted_from_tune(ctx: PlanContext, loads_nm=()) -> dict:
+    """The tune's predicted engagement and shift-out (``ctx.config.shift_prediction``) beside the measured."""
+    pred_of = ctx.config.shift_prediction
+    if pred_of is None:
         return {}
     try:
-        from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
-        from dyno.tuning.tune import load_tune
-
-        tune = load_tune(tune_path)
-        solver = Solver(tune, load_engine_map(src), model_params_for(tune))
-        pred = {"engagement_rpm": solver.engagement_rpm(),
-                "shift_out_rpm_full_load": solver.balance_rpm(solver.ratio_low_stop),
-                "ratio_low_stop": solver.ratio_low_stop, "ratio_high_stop": solver.ratio_high_stop}
+        pred = {"engagement_rpm": pred_of.engagement_rpm(), "shift_out_rpm_full_load": pred_of.shift_out_rpm_full_load(),
+                "ratio_low_stop": pred_of.ratio_low_stop, "ratio_high_stop": pred_of.ratio_high_stop}
         if loads_nm:
-            pred["shift_out_rpm_at_load"] = [shift_out_at_load_rpm(tune, t) for t in loads_nm]
+            pred["shift_out_rpm_at_load"] = [pred_of.shift_out_at_load_rpm(t) for t in loads_nm]
             pred["shift_out_rpm"] = pred["shift_out_rpm_at_load"][0]  # at the first (lightest) ramp's load
     except Exception as exc:  # noqa: BLE001  a prediction that fails is noted, the measurement stands
         return {"predicted": {"error": f"{type(exc).__name__}: {exc}"}}
-    return {"predicted": pred, "tune": tune.name}
-
-
-def shift_out_at_load_rpm(tune, torque_secondary_nm: float) -> float:
-    """The tune's shift-out at a (light) measured load: flyweights against spring and secondary clamp at
-    the tune's low stop, the belt passing the clamp unchanged (dyno.tuning.actuators)."""
-    from dyno.tuning import actuators as act
-
-    if not math.isfinite(torque_secondary_nm):
-        return math.nan
-    rp = tune.drive.primary_radius_min_m
-    f_s = act.secondary_axial_force_n(tune, max(0.0, torque_secondary_nm), act.secondary_radius_closed_m(tune))
-    return float(act.primary_speed_for_force_rpm(tune, f_s, rp))
+    return {"predicted": pred, "tune": pred_of.tune_name}

@@ -17,11 +17,9 @@ run's ``drive_grid`` (in ``dyno run --json``, ``dyno replay --json`` and the rep
 
 from __future__ import annotations
 
-import asyncio
-import math
 from dataclasses import dataclass
 
-from dyno.control.api import State
+from dyno.control.api import PlanContext, State
 from dyno.control.outputs import RELEASE, STOP
 
 
@@ -50,25 +48,15 @@ class DriveGridPlan:
             raise err("setpoints_rpm", f"a non-empty list of secondary speeds > 0 rpm, got {list(self.setpoints_rpm)}")
 
 
-def drive_grid_plan_of(plan) -> DriveGridPlan:
-    params = dict(getattr(plan, "params", None) or {})
-    for key in ("throttles", "setpoints_rpm"):
-        if key in params:
-            params[key] = tuple(float(v) for v in params[key])
-    return DriveGridPlan(**params)
-
-
-async def release_brake(ctx, g: DriveGridPlan) -> float:
+async def release_brake(ctx: PlanContext, g: DriveGridPlan) -> float:
     """Release until the secondary has stopped rising for ``release_quiet_s`` (pads clear) or ``release_s``."""
-    from dyno.control.plans.speed_hold import secondary_rpm
-
     t0 = ctx.now()
-    best, best_t = secondary_rpm(ctx, 0.3), t0
+    best, best_t = ctx.read.secondary_rpm(0.3), t0
     ctx.brake(RELEASE)
     try:
         while ctx.now() - t0 < g.release_s:
             await ctx.sleep(0.1)
-            rs = secondary_rpm(ctx, 0.3)
+            rs = ctx.read.secondary_rpm(0.3)
             if rs > best * 1.002:
                 best, best_t = rs, ctx.now()
             elif ctx.now() - best_t >= g.release_quiet_s:
@@ -78,16 +66,15 @@ async def release_brake(ctx, g: DriveGridPlan) -> float:
     return ctx.now() - t0
 
 
-async def run_drive_grid(ctx) -> None:
+async def run_drive_grid(ctx: PlanContext, g: DriveGridPlan) -> None:
     from dyno.analysis.drive_grid import grid_table
-    from dyno.control.plans.speed_hold import SpeedHold, SpeedHoldPlan, _hold_loop, gains_for, hold_point, secondary_rpm
-    from dyno.control.plans.steps import find_contact
+    from dyno.control.plans.speed_hold import SpeedHoldPlan, find_contact, hold_point
 
-    g = drive_grid_plan_of(ctx.plan)
     sh = SpeedHoldPlan(tolerance_rel=g.tolerance_rel, in_band_s=g.in_band_s, max_approach_s=g.max_approach_s,
                        unholdable_rel=g.unholdable_rel, drift_rel=g.drift_rel)
     setpoints = sorted(g.setpoints_rpm, reverse=True)
     cells: list[dict] = []
+    recorded: list[dict] = []
 
     def cell(u: float, sp: float, point: dict | None, reason: str | None) -> None:
         doc = {"throttle_frac": u, "setpoint_rpm": sp, "index": None if point is None else point["index"],
@@ -95,13 +82,12 @@ async def run_drive_grid(ctx) -> None:
         cells.append(doc)
         ctx.log("grid_cell", **doc)
 
-    hold = SpeedHold(gains_for(ctx, "secondary"))
     for u in g.throttles:
         ctx.phase(State.STEP, f"drive grid: throttle {u:.2f}, brake released")
         await release_brake(ctx, g)
         ctx.throttle(u)
         await ctx.sleep(g.throttle_settle_s)
-        free_rpm = secondary_rpm(ctx, 1.0)
+        free_rpm = ctx.read.secondary_rpm(1.0)
         ctx.log("grid_throttle", throttle_frac=u, secondary_released_rpm=free_rpm)
         reach = [sp for sp in setpoints if sp <= free_rpm * (1.0 - g.reach_margin_rel)]
         for sp in setpoints:
@@ -112,21 +98,18 @@ async def run_drive_grid(ctx) -> None:
             continue
         if not await find_contact(ctx, g.contact_drop_rel, g.contact_timeout_s):
             return  # (aborted: the brake did not bite)
-        hold.reset()
-        target = {"rpm": reach[0], "last_rpm": math.nan}
-        loop_task = ctx.hold_task(_hold_loop(ctx, hold, target), name="drive-grid-hold")
         try:
             for sp in reach:
                 point, why = await hold_point(
-                    ctx, sp, sh, target, loop_task, hold.g.speed_window_s, throttle_frac=u, setpoint_rpm=sp,
+                    ctx, sp, sh, throttle_frac=u, setpoint_rpm=sp,
                     unholdable_why=f"at throttle {u:.2f} the brake cannot hold the secondary there "
                                    "(the CVT's shift region, or clutch slip at a low governed speed)")
                 cell(u, sp, point, why)
+                if point is not None:
+                    recorded.append(point)
         finally:
-            loop_task.cancel()
-            await asyncio.gather(loop_task, return_exceptions=True)
-            ctx.brake(STOP)
+            ctx.brake(STOP)  # (ends the hold: the next throttle starts from a released brake)
     # (not _set_results: the grid is no characterisation document; the grid_cell documents are its record)
-    ctx.set_results({"drive_grid": grid_table(cells, ctx.points)}, hooks=False, log=False)
+    ctx.set_results({"drive_grid": grid_table(cells, recorded)}, truths=False, log=False)
     ctx.phase(State.DONE, f"drive grid: {len(g.throttles)} throttles x {len(setpoints)} speeds, "
                             f"{sum(c['index'] is not None for c in cells)} points")

@@ -27,10 +27,12 @@ checks of the controller run underneath, unchanged, whatever a plan says.
 
 from __future__ import annotations
 
-import asyncio
 import math
+from dataclasses import dataclass, replace
 
-from dyno.control.api import State
+from dyno.control.api import Hold, PlanContext, State
+from dyno.control.hold_law import HoldGains
+from dyno.control.holds import gains_for
 from dyno.control.outputs import APPLY, RELEASE, STOP
 
 KINDS = {
@@ -95,29 +97,32 @@ def validate_steps(raw: list, err) -> tuple:
     return tuple(steps)
 
 
-class LimitReached(Exception):
-    pass
+@dataclass(frozen=True)
+class StepsPlan:
+    """Mode ``steps``'s parameters: the plan file's ``[[step]]`` tables, checked (:func:`validate_steps`)."""
+
+    steps: tuple = ()
 
 
-async def run_steps(ctx) -> None:
-    for i, st in enumerate(ctx.plan.steps):
-        task = ctx.hold_task(_run_step(ctx, st), name=f"step-{i + 1}")
-        why = None
+class _Run:
+    """What one run of the steps keeps between steps: the holds' gains (an ``identify`` step's replace the
+    rig's for the rest of the run)."""
+
+    def __init__(self, ctx: PlanContext) -> None:
+        self.ctx = ctx
+        self.gains: dict[str, HoldGains] = {}
+
+    def gains_of(self, variable: str) -> HoldGains:
+        return self.gains.get(variable) or gains_for(self.ctx.config.control, variable)
+
+
+async def run_steps(ctx: PlanContext, sp: StepsPlan) -> None:
+    run = _Run(ctx)
+    for i, st in enumerate(sp.steps):
         t0 = ctx.now()
         try:
-            while not task.done():
-                await asyncio.wait({task}, timeout=0.05)
-                why = None if task.done() else _limit_passed(ctx, st, ctx.now() - t0)
-                if why:
-                    task.cancel()
-                    await asyncio.gather(task, return_exceptions=True)
-                    break
-            if not why:
-                task.result()
+            why = await ctx.bounded(_run_step(run, st), lambda st=st, t0=t0: _limit_passed(ctx, st, ctx.now() - t0))
         finally:
-            if not task.done():
-                task.cancel()
-                await asyncio.gather(task, return_exceptions=True)
             ctx.brake(STOP)
         if ctx.state in (State.DONE, State.ABORTED):
             return
@@ -126,31 +131,29 @@ async def run_steps(ctx) -> None:
             if st.get("on_limit", "next") == "abort":
                 ctx.fail("plan_limit", f"step {i + 1} ({st['kind']}): {why}")
                 return
-    if ctx.state is not State.DONE:
-        if ctx.state is State.WARMUP:
-            ctx.phase(State.STEP, "plan: no step took a point")
-        ctx.phase(State.DONE, f"plan {ctx.plan.name or 'steps'}: {len(ctx.plan.steps)} steps")
+    if ctx.state is State.WARMUP:
+        ctx.phase(State.STEP, "plan: no step took a point")
+    ctx.phase(State.DONE, f"plan {ctx.plan.name or 'steps'}: {len(sp.steps)} steps")
 
 
-def _limit_passed(ctx, st: dict, elapsed_s: float) -> str | None:
-    from dyno.control.plans.speed_hold import brake_torque_nm, secondary_rpm
-
+def _limit_passed(ctx: PlanContext, st: dict, elapsed_s: float) -> str | None:
     if "limit_s" in st and elapsed_s > st["limit_s"]:
         return f"step time over {st['limit_s']:g} s"
     if "limit_min_secondary_rpm" in st or "limit_max_secondary_rpm" in st:
-        rs = secondary_rpm(ctx, 0.2)
+        rs = ctx.read.secondary_rpm(0.2)
         if rs < st.get("limit_min_secondary_rpm", -math.inf):
             return f"secondary {rs:.0f} rpm below {st['limit_min_secondary_rpm']:g} rpm"
         if rs > st.get("limit_max_secondary_rpm", math.inf):
             return f"secondary {rs:.0f} rpm above {st['limit_max_secondary_rpm']:g} rpm"
     if "limit_max_torque_nm" in st:
-        tq = brake_torque_nm(ctx, 0.2)
+        tq = ctx.read.torque_nm(0.2)
         if tq > st["limit_max_torque_nm"]:
             return f"torque {tq:.1f} N·m above {st['limit_max_torque_nm']:g} N·m"
     return None
 
 
-async def _run_step(ctx, st: dict) -> None:
+async def _run_step(run: _Run, st: dict) -> None:
+    ctx = run.ctx
     kind = st["kind"]
     if ctx.state is State.WARMUP or ctx.state is State.MEASURE:
         ctx.phase(State.STEP, f"plan step: {kind}")
@@ -166,64 +169,49 @@ async def _run_step(ctx, st: dict) -> None:
         finally:
             ctx.brake(STOP)
     elif kind == "contact":
+        from dyno.control.plans.speed_hold import find_contact
+
         await find_contact(ctx, st.get("drop_rel", 0.01), st.get("limit_s", 10.0))
     elif kind == "hold":
-        await _hold_step(ctx, st)
+        await _hold_step(run, st)
     elif kind == "ramp":
-        await _ramp_step(ctx, st)
+        await _ramp_step(run, st)
     elif kind == "identify":
         from dyno.control.plans.autotune import identify_gain
 
         variable = st.get("variable", "secondary")
-        await identify_gain(ctx, variable, st["setpoint"],
-                            sign=await load_sign(ctx, st, variable), pulse_s=st.get("pulse_s", 0.2),
-                            repeats=int(st.get("repeats", 2)), apply=st.get("apply", True))
+        base = run.gains_of(variable)
+        result = await identify_gain(ctx, variable, st["setpoint"], base,
+                                     load_raises=await load_raises(ctx, st, variable),
+                                     pulse_s=st.get("pulse_s", 0.2), repeats=int(st.get("repeats", 2)))
+        if result["ok"] and st.get("apply", True):
+            run.gains[variable] = replace(base, kp=result["kp_identified"])
+            result["applied"] = True
+        ctx.log("identify", **result)
 
 
-async def load_sign(ctx, st: dict, variable: str) -> float:
-    """+1 where more brake lowers ``variable`` (the hold's usual sense), -1 where it raises it: as the step
-    says (``load_raises_speed``), else, for the engine, probed (:func:`probe_load_sign`) — a CVT that
-    back-shifts under load raises the engine, one that shifts flat (the stock CVT on the 2019 logs) lowers it."""
+async def load_raises(ctx: PlanContext, st: dict, variable: str) -> bool:
+    """Whether more brake raises ``variable`` (the hold's usual sense is the other): as the step says
+    (``load_raises_speed``), else, for the engine, probed (:func:`probe_load_raises`) — a CVT that
+    back-shifts under load raises the engine, one that shifts flat lowers it."""
     if "load_raises_speed" in st:
-        return -1.0 if st["load_raises_speed"] else 1.0
-    return await probe_load_sign(ctx, variable) if variable == "engine" else 1.0
+        return bool(st["load_raises_speed"])
+    return await probe_load_raises(ctx, variable) if variable == "engine" else False
 
 
-async def probe_load_sign(ctx, variable: str, pulse_s: float = 0.4, watch_s: float = 1.5) -> float:
-    """One apply pulse, and which way ``variable`` went: +1 down (more brake lowers it), -1 up (logged ``probe``)."""
-    from dyno.control.plans.speed_hold import measured
-
-    before = measured(ctx, variable, 0.5)
+async def probe_load_raises(ctx: PlanContext, variable: str, pulse_s: float = 0.4, watch_s: float = 1.5) -> bool:
+    """One apply pulse, and which way ``variable`` went: True when it rose (logged ``probe``)."""
+    before = ctx.read.value(variable, 0.5)
     ctx.brake(APPLY)
     try:
         await ctx.sleep(pulse_s)
     finally:
         ctx.brake(STOP)
     await ctx.sleep(watch_s)
-    after = measured(ctx, variable, 0.5)
-    sign = -1.0 if after > before else 1.0
-    ctx.log("probe", variable=variable, before=before, after=after, pulse_s=pulse_s, load_raises_speed=sign < 0)
-    return sign
-
-
-async def find_contact(ctx, drop_rel: float = 0.01, timeout_s: float = 10.0) -> bool:
-    """Full-speed apply until the secondary drops ``drop_rel`` below its speed now (the pads bite)."""
-    from dyno.control.plans.speed_hold import secondary_rpm
-
-    no_load = secondary_rpm(ctx, 1.0)
-    t_c = ctx.now()
-    ctx.brake(APPLY)
-    try:
-        while secondary_rpm(ctx, 0.15) > no_load * (1.0 - drop_rel):
-            if ctx.now() - t_c > timeout_s:
-                ctx.fail("error", f"the brake did not slow the secondary in {timeout_s:g} s")
-                return False
-            await ctx.sleep(0.02)
-    finally:
-        ctx.brake(STOP)
-    ctx.log("contact", after_s=ctx.now() - t_c)
-    ctx.mark_loaded()  # the CVT is loaded from here (warm-up criterion)
-    return True
+    after = ctx.read.value(variable, 0.5)
+    raises = after > before
+    ctx.log("probe", variable=variable, before=before, after=after, pulse_s=pulse_s, load_raises_speed=raises)
+    return raises
 
 
 def _setpoints(st: dict) -> list[float]:
@@ -236,120 +224,72 @@ def _setpoints(st: dict) -> list[float]:
     return [a + (b - a) * i / max(1, n - 1) for i in range(n)]
 
 
-async def _hold_step(ctx, st: dict) -> None:
+#: each hold variable's figure in a point
+POINT_FIELD = {"secondary": "rpm_secondary", "engine": "rpm_primary", "torque": "torque_secondary_nm"}
+
+
+async def _hold_step(run: _Run, st: dict) -> None:
     """Hold each setpoint, measure a point with the brake frozen there (as the speed-hold plan does)."""
-    from dataclasses import replace
-
-    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
-
+    ctx = run.ctx
     variable = st.get("variable", "secondary")
-    gains = gains_for(ctx, variable)
-    hold = SpeedHold(gains)
-    sps = _setpoints(st)
-    target = {"rpm": sps[0]}
-    if await load_sign(ctx, st, variable) < 0:
-        target["sign"] = -1.0
+    raises = await load_raises(ctx, st, variable)
     tol = st.get("tolerance_rel", 0.0075)
+    band = max(0.02, 2 * tol)  # a window's mean, or a timed-out hold, this far off is no point
     p = ctx.plan
     measure_plan = replace(p, measure_s=st.get("min_s", p.measure_s), max_measure_s=st.get("max_s", p.max_measure_s),
                            target_efficiency_ci95=st.get("ci95", p.target_efficiency_ci95 or 0.01))
-    task = ctx.hold_task(_hold_loop(ctx, hold, target, variable), name=f"hold-{variable}")
-    try:
-        for sp in sps:
-            target["rpm"] = sp
-            if ctx.state is not State.STEP:
-                ctx.phase(State.STEP, f"hold {variable} at {sp:g}")
-            ctx.phase(State.SETTLE, f"holding {variable} at {sp:g} until within {tol:.1%}")
-            t0, since, by = ctx.now(), None, "held"
-            while True:
-                await ctx.sleep(0.05)
-                if task.done():
-                    task.result()
-                x = measured(ctx, variable, gains.speed_window_s)
-                if abs(x - sp) <= tol * sp:
-                    since = since if since is not None else ctx.now()
-                    if ctx.now() - since >= st.get("in_band_s", 0.8):
-                        break
-                else:
-                    since = None
-                if ctx.now() - t0 > st.get("max_approach_s", 8.0):
-                    by = "timeout"
-                    break
-            if by == "timeout":
-                # judged as the measurement's give-up judges it (0.5 s of data, its band), not by the last
-                # short window alone: a torque's 0.2 s mean scatters by several % about a steady hold
-                x = measured(ctx, variable, 0.5)
-            if by == "timeout" and not abs(x - sp) <= max(0.02, 2 * tol) * sp:
-                ctx.log("skip", reason=f"cannot hold {variable} at {sp:g} (at {x:.1f} after "
-                                         f"{ctx.now() - t0:.1f} s)")
-                continue
-            settle_s = ctx.now() - t0
-            if not st.get("measure", True):  # a "go to" hold: reach the setpoint, take no point
-                continue
-            target["frozen"] = True
-            try:
-                point, h0, h1 = await ctx.measure(give_up=lambda: not abs(
-                    measured(ctx, variable, 0.5) - sp) <= max(0.02, 2 * tol) * sp, plan=measure_plan)
-            finally:
-                target["frozen"] = False
-            point.update(settled_by=by, settle_s=settle_s, setpoint=sp, hold_variable=variable)
-            mean = point[{"secondary": "rpm_secondary", "engine": "rpm_primary", "torque": "torque_secondary_nm"}[variable]]
-            if point.get("gave_up") or not abs(mean - sp) <= max(0.02, 2 * tol) * sp:  # shifted under the brake
-                ctx.log("skip", reason=f"{variable} drifted to {mean:.1f} while measuring at {sp:g}: not steady")
-                continue
-            ctx.record(point, h0, h1)
-    finally:
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        ctx.brake(STOP)
-
-
-async def _ramp_step(ctx, st: dict) -> None:
-    """Move the held setpoint at ``rate_rpm_s``; a point (I·alpha corrected) every ``point_s``."""
-    from dyno.analysis.inertia import correct_inertia
-    from dyno.analysis.points import reduce_point
-    from dyno.control.plans.speed_hold import SpeedHold, _hold_loop, gains_for, measured
-
-    variable = st.get("variable", "secondary")
-    gains = gains_for(ctx, variable)
-    hold = SpeedHold(gains)
-    a = float(st.get("from", measured(ctx, variable, 0.3)))
-    b = float(st["to"])
-    rate = float(st["rate_rpm_s"]) * (1.0 if b >= a else -1.0)
-    point_s = float(st.get("point_s", 1.0))
-    from dyno.rig.config import InertiaConfig
-
-    inertia = ctx.config.inertia or InertiaConfig()  # rig.toml [inertia]: the one source
-    j_e, j_s = inertia.engine_kg_m2, inertia.secondary_kg_m2
-    target = {"rpm": a}
-    task = ctx.hold_task(_hold_loop(ctx, hold, target, variable), name=f"ramp-{variable}")
-    try:
+    for sp in _setpoints(st):
         if ctx.state is not State.STEP:
-            ctx.phase(State.STEP, f"ramp {variable} {a:.0f} -> {b:.0f} rpm at {abs(rate):g} rpm/s")
-        ctx.phase(State.SETTLE, f"ramp: reaching {a:.0f} rpm")
-        t0 = ctx.now()
-        while abs(measured(ctx, variable, gains.speed_window_s) - a) > 0.01 * a and ctx.now() - t0 < 8.0:
-            await ctx.sleep(0.05)
-        await ctx.warm_up_at_load()
-        ctx.phase(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
-        t_start = ctx.now()
-        duration = abs(b - a) / abs(rate)
-        while ctx.now() - t_start < duration - 1e-9:
-            h0, d0, r0 = ctx.host_now(), ctx.device_now_us(), ctx.now()
-            t_end = min(r0 + point_s, t_start + duration)
-            while ctx.now() < t_end - 1e-9:
-                await ctx.sleep(0.05)
-                if task.done():
-                    task.result()
-                target["rpm"] = a + rate * (ctx.now() - t_start)
-            h1, d1 = ctx.host_now(), ctx.device_now_us()
-            point = reduce_point(ctx.streams, d0, d1, ctx.config.calibration, ctx.config.engine_map,
-                                 index=len(ctx.points), throttle_frac=ctx.throttle_frac)
-            point = correct_inertia(point, ctx.streams, ctx.config.engine_map, j_e, j_s)
-            point.update(settled_by="ramp", settle_s=0.0, setpoint=target["rpm"], hold_variable=variable,
-                         ramp_rate_rpm_s=rate)
-            ctx.record(point, h0, h1)
-    finally:
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        ctx.brake(STOP)
+            ctx.phase(State.STEP, f"hold {variable} at {sp:g}")
+        ctx.phase(State.SETTLE, f"holding {variable} at {sp:g} until within {tol:.1%}")
+        held = await ctx.hold(Hold(variable, sp, tolerance_rel=tol, in_band_s=st.get("in_band_s", 0.8),
+                                   max_approach_s=st.get("max_approach_s", 8.0), load_raises=raises,
+                                   gains=run.gains_of(variable)))
+        if not held.reached:
+            # judged as the measurement's give-up judges it (0.5 s of data, its band), not by the hold's
+            # short window alone: a torque's 0.2 s mean scatters by several % about a steady hold
+            x = ctx.read.value(variable, 0.5)
+            if not abs(x - sp) <= band * sp:
+                ctx.log("skip", reason=f"cannot hold {variable} at {sp:g} (at {x:.1f} after {held.settle_s:.1f} s)")
+                continue
+        if not st.get("measure", True):  # a "go to" hold: reach the setpoint, take no point
+            continue
+        point, h0, h1 = await ctx.measure(
+            give_up=lambda: not abs(ctx.read.value(variable, 0.5) - sp) <= band * sp, plan=measure_plan)
+        point.update(settled_by="held" if held.reached else "timeout", settle_s=held.settle_s, setpoint=sp,
+                     hold_variable=variable)
+        mean = point[POINT_FIELD[variable]]
+        if point.get("gave_up") or not abs(mean - sp) <= band * sp:  # shifted under the brake
+            ctx.log("skip", reason=f"{variable} drifted to {mean:.1f} while measuring at {sp:g}: not steady")
+            continue
+        ctx.record(point, h0, h1)
+
+
+async def _ramp_step(run: _Run, st: dict) -> None:
+    """Move the held setpoint at ``rate_rpm_s``; a point (I·α corrected) every ``point_s``."""
+    ctx = run.ctx
+    variable = st.get("variable", "secondary")
+    a = float(st.get("from", ctx.read.value(variable, 0.3)))
+    b = float(st["to"])
+    rate = float(st["rate_rpm_s"])
+    point_s = float(st.get("point_s", 1.0))
+    gains = run.gains_of(variable)
+    if ctx.state is not State.STEP:
+        ctx.phase(State.STEP, f"ramp {variable} {a:.0f} -> {b:.0f} rpm at {rate:g} rpm/s")
+    ctx.phase(State.SETTLE, f"ramp: reaching {a:.0f} rpm")
+    await ctx.hold(Hold(variable, a, tolerance_rel=0.01, in_band_s=0.0, max_approach_s=8.0, gains=gains))
+    await ctx.loaded(wait_warm_up=True)
+    ctx.phase(State.MEASURE, f"ramp {variable} {a:.0f} -> {b:.0f} rpm")
+    t_start = ctx.now()
+    duration = abs(b - a) / rate
+    await ctx.hold(Hold(variable, b, gains=gains, rate_per_s=rate, wait=False))
+    while ctx.now() - t_start < duration - 1e-9:
+        window_s = min(point_s, t_start + duration - ctx.now())
+        if window_s < 0.05:
+            break
+        point, h0, h1 = await ctx.measure(fixed_s=window_s)
+        point = ctx.read.inertia_corrected(point)
+        setpoint = a + math.copysign(rate, b - a) * min(duration, ctx.now() - t_start)
+        point.update(settled_by="ramp", settle_s=0.0, setpoint=setpoint, hold_variable=variable,
+                     ramp_rate_rpm_s=math.copysign(rate, b - a))
+        ctx.record(point, h0, h1)

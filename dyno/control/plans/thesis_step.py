@@ -12,23 +12,23 @@ from __future__ import annotations
 
 import math
 
-from dyno.control.api import State
+from dyno.control.api import PlanContext, State, TestPlan
 from dyno.control.outputs import APPLY, STOP
-from dyno.control.steady import is_settled
 from dyno.protocol import v1
 
 
-async def run_thesis_step(ctx) -> None:
-    p = ctx.plan
+async def run_thesis_step(ctx: PlanContext, p: TestPlan) -> None:
+    """The steps (module doc); ``p``: the plan, whose [test] fields are this mode's parameters."""
     step_s = p.step_s
-    last_rs = ctx.rpm(v1.CH_SECONDARY)
+    last_rs = ctx.read.rpm(v1.CH_SECONDARY)
+    recorded = 0
     while True:
         await ctx.checkpoint()
         ctx.phase(State.STEP, f"brake step {step_s * 1e3:.0f} ms")
         ctx.brake(APPLY)
         await ctx.sleep(step_s)
         ctx.brake(STOP)
-        ctx.mark_loaded()
+        await ctx.loaded()
         ctx.phase(State.SETTLE, "waiting for steady state")
         settled_by, settle_s = await settle(ctx)
         if await secondary_below(ctx, p.min_secondary_rpm):
@@ -42,13 +42,14 @@ async def run_thesis_step(ctx) -> None:
             continue
         point.update(settled_by=settled_by, settle_s=settle_s, step_s=step_s)
         ctx.record(point, host_t0, host_t1)
+        recorded += 1
         rs = point["rpm_secondary"]
         step_s = adapt_step(p, step_s, last_rs, rs)
         last_rs = rs
         if not math.isnan(rs) and rs < p.min_secondary_rpm:
             ctx.phase(State.DONE, f"secondary below {p.min_secondary_rpm:.0f} rpm")
             return
-        if len(ctx.points) >= p.max_points:
+        if recorded >= p.max_points:
             ctx.phase(State.DONE, f"{p.max_points} points")
             return
 
@@ -67,26 +68,20 @@ def adapt_step(p, step_s: float, rs_before: float, rs_after: float) -> float:
     return step_s
 
 
-def _channel_quiet_s(ctx, channel: int) -> float:
-    e = ctx.streams.edges[channel]
-    now = ctx.device_now_us()
-    return math.inf if not e or now is None else (now - e[-1]) * 1e-6
-
-
-async def secondary_below(ctx, rpm_min: float) -> bool:
+async def secondary_below(ctx: PlanContext, rpm_min: float) -> bool:
     """The secondary really turns slower than ``rpm_min`` (measured by its edges, not a silent sensor)."""
-    rs = ctx.rpm(v1.CH_SECONDARY)
+    rs = ctx.read.rpm(v1.CH_SECONDARY)
     if rs >= rpm_min:
         return False
-    if rs == 0.0 and _channel_quiet_s(ctx, v1.CH_SECONDARY) < 2.0:
+    if rs == 0.0 and ctx.read.channel_quiet_s(v1.CH_SECONDARY) < 2.0:
         # Silent, not slow: a dead sensor or a stall, which the safety monitor judges
         # within secondary_quiet_s; never read it as "the test has reached its end".
         await ctx.sleep(ctx.config.limits.secondary_quiet_s + 0.1)
-        rs = ctx.rpm(v1.CH_SECONDARY)
+        rs = ctx.read.rpm(v1.CH_SECONDARY)
     return rs < rpm_min
 
 
-async def settle(ctx) -> tuple[str, float]:
+async def settle(ctx: PlanContext) -> tuple[str, float]:
     """SETTLE: the thesis's fixed wait, or until the speeds and torque are steady (:func:`is_settled`),
     the time cap, or the secondary below the plan's end.  Returns (how, rig seconds)."""
     p, c = ctx.plan, ctx.plan.settle
@@ -95,16 +90,12 @@ async def settle(ctx) -> tuple[str, float]:
         await ctx.sleep(c.fixed_settle_s)
         return "fixed", c.fixed_settle_s
     await ctx.sleep(c.min_settle_s)
-    cal = ctx.config.calibration
     while True:
-        now_dev = ctx.device_now_us()
-        if now_dev is not None and ctx.now() - t0 >= c.window_s:
-            ok, _ = is_settled(ctx.streams, now_dev, cal.slope_counts_per_nm, cal.intercept_counts, c)
-            if ok:
-                return "detected", ctx.now() - t0
+        if ctx.now() - t0 >= c.window_s and ctx.read.settled(c):
+            return "detected", ctx.now() - t0
         if ctx.now() - t0 >= c.max_settle_s:
             return "timeout", ctx.now() - t0
-        if (ctx.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and ctx.now() - t0 > c.min_settle_s + 1
+        if (ctx.read.rpm(v1.CH_SECONDARY) < p.min_secondary_rpm and ctx.now() - t0 > c.min_settle_s + 1
                 and await secondary_below(ctx, p.min_secondary_rpm)):
             return "below_min", ctx.now() - t0
         await ctx.sleep(0.1)
