@@ -29,8 +29,10 @@ SIGN = {"secondary": 1.0, "engine": 1.0, "torque": -1.0}
 
 
 def gains_for(control, variable: str) -> HoldGains:
-    """The law's gains for ``variable`` from rig.toml's ``[control]`` (None: the defaults)."""
-    return HoldGains.from_config(control, variable) if control is not None else HoldGains()
+    """The law's gains for ``variable`` from rig.toml's ``[control]`` (None: that table's defaults)."""
+    from dyno.rig.config import ControlConfig
+
+    return HoldGains.from_config(control if control is not None else ControlConfig(), variable)
 
 
 class HoldService:
