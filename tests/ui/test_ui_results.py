@@ -27,12 +27,14 @@ def _stored(run_dir) -> dict:
     return c
 
 
-def _run(tmp_path, plan_name: str, setup=None, timeout_s: float = 90.0, rearm: bool = False):
-    """Run ``plan_name`` in the live app at 8x to its end; returns (screens, results, run_dir)."""
+def _run(tmp_path, plan_name: str, setup=None, timeout_s: float = 90.0, rearm: bool = False, params=None):
+    """Run ``plan_name`` (its mode's ``params``, if given) in the live app at 8x to its end; returns (screens,
+    results, run_dir)."""
     run_dir = tmp_path / "run"
 
     async def scenario():
-        app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=2, out_dir=run_dir, plan=plan_named(plan_name)))
+        app = LiveApp(LiveOptions(sim=True, speed=SPEED, seed=2, out_dir=run_dir, plan=plan_named(plan_name) if params is None
+                                  else replace(plan_named(plan_name), params=params)))
         shots = {}
         async with app.run_test(size=SIZE) as pilot:
             assert await wait_for(pilot, lambda: app.session is not None, 10)
@@ -115,10 +117,7 @@ def test_coast_down_results_panel(tmp_path):
 
 def test_engagement_results_panel(tmp_path):
     # one ramp (no back-shift, no flatness ramps): the panel, not the plan's length, is under test here
-    def short(ctrl):
-        ctrl.plan = replace(ctrl.plan, params=EngagementPlan(back_shift=False, flatness_apply_s=()))
-
-    shots, r, run_dir = _run(tmp_path, "engagement", setup=short)
+    shots, r, run_dir = _run(tmp_path, "engagement", params=EngagementPlan(back_shift=False, flatness_apply_s=()))
     _check_layout(shots)
     text = shots["results"]
     assert _stored(run_dir)["engagement_rpm"] == r["engagement_rpm"]

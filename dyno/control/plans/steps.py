@@ -285,8 +285,8 @@ async def _ramp_step(run: _Run, st: dict) -> None:
     await ctx.hold(Hold(variable, b, gains=gains, rate_per_s=rate, wait=False))
     while ctx.now() - t_start < duration - 1e-9:
         window_s = min(point_s, t_start + duration - ctx.now())
-        if window_s < 0.05:
-            break
+        if window_s < 0.5 * point_s:
+            break  # (a sliver at the ramp's end is no point: too few revolutions for its I·α)
         point, h0, h1 = await ctx.measure(fixed_s=window_s)
         point = ctx.read.inertia_corrected(point)
         setpoint = a + math.copysign(rate, b - a) * min(duration, ctx.now() - t_start)
