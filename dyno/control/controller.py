@@ -293,7 +293,7 @@ class TestController(Measuring):
                 self.latch_safe_state()
         if self.state not in (State.DONE, State.ABORTED):
             # The plan task ended (returned, or was cancelled and swallowed it) without finishing the test:
-            # never leave the rig running as it was (found by bench_safety: a crash injected mid-measure).
+            # never leave the rig running as it was (a crash injected mid-measure, bench/bench_safety.py).
             # (an injected crash may have been raised in a plan's helper task, e.g. the speed hold's loop,
             # while the plan task itself was cancelled)
             crash, self.fault_injection = self.fault_injection or self._injected, None

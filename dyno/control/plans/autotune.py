@@ -26,12 +26,9 @@ from dyno.control.api import Hold, PlanContext
 from dyno.control.hold_law import HoldGains
 from dyno.control.outputs import APPLY, RELEASE, STOP
 
-# Engine at heavy load (bench/bench_hold_tune.py, 5 % steps from ~2,860 rpm, seeds 1-3, mock pins): g ≈ 0.071 /s,
-# and kp 11-12.5 settles within +-0.5 % in <= 2 s (10 and 14 do not); with a brake twice as stiff g ≈ 0.138 /s
-# and kp 5.5-6.0.  Both give kp·g ≈ 0.82.  A narrow window (+-5 %): the identification must be repeatable.
+# The loop gains kp·g each hold was tuned to on the simulated rig (bench/bench_hold_tune.py, the engine at heavy
+# load; bench/bench_test_time.py, the secondary): a narrow window (±5 %), so the identification must be repeatable.
 ENGINE_LOOP_GAIN = 0.82
-# Secondary (the logs' plant, seeds 1-10 of tests/control/test_hold_sim.py): kp 12 with the 0.5 s lead on
-# g ≈ 0.38 /s (0.2 s pulses; short pulses lose their first ~30 ms to the relay) settles 5 % steps in <= 1.5 s.
 SECONDARY_LOOP_GAIN = 4.5
 LOOP_GAIN_PER_S = {"secondary": SECONDARY_LOOP_GAIN, "engine": ENGINE_LOOP_GAIN}
 #: the rig.toml [control] key each variable's identified kp replaces
