@@ -67,8 +67,8 @@ class Pace:
 
     Each wait for the next timer sleeps until the wall instant at which the loop's virtual clock is due
     there (anchor + virtual elapsed / speed), not for the timeout itself: the work done between waits
-    does not add to the pace (sleeping each whole timeout after the work made ``dyno run --speed 1`` run
-    4-5 % slower than real time on one core here, more on a slower CPU), and a loop that fell behind
+    does not add to the pace (sleeping each whole timeout after the work would lag real time by the work's
+    share), and a loop that fell behind
     catches up as a real one is on time again after a late tick.  A debt over ``MAX_DEBT_S`` is written
     off (the anchor moves: real time lost, as a real loop's poller skips ticks).  Each wake-up's lateness
     past its deadline is kept (a 20 us histogram): the wall-clock jitter a real-time loop would have had.

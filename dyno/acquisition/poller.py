@@ -7,9 +7,8 @@ them to the listeners (the run log, the safety check), and every
 loop, so under :class:`dyno.clock.VirtualTimeLoop` the same code runs faster
 than real time.
 
-How a tick is driven (measured for an empty 150 Hz tick beside a 50 Hz one: a
-sleeping coroutine 0.7 % of a core, a ``loop.call_at`` timer 0.3 %; a blocking
-read via ``asyncio.to_thread`` per tick 2.1 %, one paced I/O thread 1.0 %):
+How a tick is driven (a sleeping coroutine or one paced I/O thread, not a
+thread hop per tick: the cheaper in CPU for each kind of transport):
 
 * non-blocking transports (the simulated bus): the task polls synchronously and sleeps to the
   next tick (a ``loop.call_at`` timer would save a loop iteration per tick, but it changes the
@@ -174,9 +173,9 @@ class Poller:
                 io_stop.set()  # not joined: a hung transfer must not block the loop
         else:
             # Ticks in this task, not as a loop timer: a timer callback runs before the tasks waking
-            # at the same instant, and that order moved the speed hold's 5 % step response from
-            # 1.5 s to 7.65 s (bench/bench_test_time.py): the controller sees its data one poll
-            # earlier at the instants it shares with the polls.  Kept as it was tuned.
+            # at the same instant, and the speed hold is tuned to this order (the controller sees its
+            # data one poll earlier at the instants it shares with the polls; under the timer's order
+            # its step response is several times slower, bench/bench_test_time.py).
             next_t = self._next_t
             full_period_s = 1.0 / self.full_poll_hz
             stall_ticker = _stall_ticker(self, loop)

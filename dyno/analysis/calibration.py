@@ -401,8 +401,8 @@ def check_loads(masses_kg, *, min_distinct: int = 3) -> list[str]:
 # repeats: the slope's reproducibility
 
 #: The calibration reproducibility (relative standard deviation of the slope, each channel) that brings
-#: the mean ``efficiency_u95`` of the map-free path to about 2 pp: 0.40 % gave 2.01 pp on 30 simulated rigs
-#: (``bench/bench_input_torque.py --repro 0.004``; the thesis rig's 1.6 % gives 4.2 pp; docs/analysis.md).
+#: the mean ``efficiency_u95`` of the map-free path to about 2 pp, on simulated rigs
+#: (``bench/bench_input_torque.py --repro 0.004``; docs/analysis.md).
 REPRODUCIBILITY_TARGET_REL = 0.004
 
 

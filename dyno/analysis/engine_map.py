@@ -385,7 +385,7 @@ def load_engine_map(path) -> EngineMap:
     each throttle's rows are one curve (contiguous, rpm strictly increasing, at
     least 2 rows), and a curve at throttle 1 (full) is required: it is the map
     every full-throttle point and every other reader (the simulator, the shift
-    curve) uses.  A two-column file is a full-throttle map, as before.
+    curve) uses.  A two-column file is a full-throttle map.
 
     For the thesis's headerless ``rpm,hp`` file use
     :func:`load_legacy_engine_map`; guessing units from numbers is how

@@ -7,9 +7,7 @@ chi-squared law with ``B - 1`` degrees of freedom, so 6 batches underestimate
 the true standard error by 2x about one time in 40.  Checked once a second,
 a window whose true error is well above the target still stops, sooner or
 later, on such a lucky estimate: the points that stop early are exactly the
-ones whose error is understated (optional stopping; measured on the sim: a 3 s
-window whose 6-batch estimate was 0.3x its true error, 5.4 estimated standard
-errors off the truth).
+ones whose error is understated (optional stopping).
 
 The stopping rule therefore compares the one-sided upper confidence bound of
 the standard error with the target, not the estimate itself:
@@ -27,7 +25,7 @@ import math
 from functools import lru_cache
 
 #: One-sided level of the bound: a window whose true error equals the target stops at a given check
-#: with this probability (25 %); one whose true error is 3x the target, at 6 batches, ~0.2 % (was ~1 %).
+#: with this probability (25 %); one whose true error is 3x the target, at 6 batches, ~0.2 %.
 STOP_QUANTILE = 0.25
 
 

@@ -1,7 +1,7 @@
 """Before a rig entry point takes over the screen: is the rig's hardware there at all?
 
 ``dyno ui`` and ``dyno calibrate`` without ``--sim`` open the pins and the bus inside their Textual app; on a
-machine without GPIO or I2C (a laptop, a Pi with I2C disabled, lgpio missing) that used to end in a
+machine without GPIO or I2C (a laptop, a Pi with I2C disabled, lgpio missing) that would end in a
 hundreds-of-lines traceback.  This check says the same thing as ``dyno doctor`` in one line, before anything
 is claimed: :class:`RigUnavailable` (a :class:`~dyno.errors.ConfigError`: the CLI prints one line and
 exits 2; no output was touched, so nothing needs making safe).

@@ -220,8 +220,8 @@ class Watchdog:
     def period_s(self) -> float:
         """How often it looks: a twentieth of the timeout (25 ms at 0.5 s).  Once tripped, its looks are
         what advance the release's relay sequencing (enable off -> settle -> relay -> settle -> enable on)
-        while the loop is gone, so a coarse period would delay the release itself (at timeout/5 = 0.1 s the
-        pads left the rotor 0.2 s late: bench_safety, --mock-pins loop-stall:800)."""
+        while the loop is gone, so a coarse period would delay the release itself (bench_safety, --mock-pins
+        loop-stall:800)."""
         return max(self.timeout_s / 20, 0.005)
 
     def next_wait_s(self, period_s: float) -> float:

@@ -5,7 +5,7 @@ points (:mod:`dyno.analysis.systematic`): the torque calibration, the engine map
 difference ``d = η_B − η_A`` of two runs at one secondary speed a term that is *common* to both runs
 largely cancels; what it leaves is stated, term by term, as a 95 % half-width (coverage factor 2):
 
-* **statistical**: never cancels (each run's noise is its own): ``1.96 · sqrt(s_A² + s_B²)`` as before.
+* **statistical**: never cancels (each run's noise is its own): ``1.96 · sqrt(s_A² + s_B²)``.
 * **calibration**, the same entry (date and slope) in both runs: the slope's error is one factor on both
   efficiencies, ``(1+g) η``, so only ``|d| · u_slope`` is left — plus each run's own tare (the zero read at
   rest before GO), which is independent per run.  Different entries: both full terms in quadrature.

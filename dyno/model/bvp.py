@@ -88,15 +88,15 @@ from dyno.model.guess import (  # noqa: F401  (re-exported)
 )
 
 
-# Largest slip-threshold step, in nominal steps (x0.4 each): at 2 (before) the grown steps below
-# ~1e-3 m/s failed and were halved; 1.3 measured 18 % faster over four cold grid points (same load).
+# Largest slip-threshold step, in nominal steps (x0.4 each): steps grown beyond it below ~1e-3 m/s fail and
+# are halved (docs/measurements/2026-12-06-docstring-history.md).
 SLIP_STEP_GROWTH = 1.0
 # Tolerance of the continuation's intermediate solves: they only carry the solution to the next step; the
 # target is then solved again to ``tol`` on a mesh equidistributed from its own residual (``polish``).  The
 # final solution does not depend on the path beyond the discretisation's own error: Table 6.1 at tol 1e-3
 # and 1e-4 agrees to 1e-7 in efficiency and clamp forces, and the 14-case cold grid to 8e-7 of the
-# all-at-tol march (tests/model/test_solve_speed.py).  5e-2 against 1e-2: 16 % less CPU over a warm chain,
-# 24 % cold (fewer, smaller meshes on the way).
+# all-at-tol march (tests/model/test_solve_speed.py).  A looser tolerance costs less CPU (fewer, smaller meshes
+# on the way).
 CONTINUATION_TOL = 5e-2
 MIN_STEP_NODES = 600
 STEP_NODE_FACTOR = 3.0

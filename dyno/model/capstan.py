@@ -21,11 +21,10 @@ frictionless wedge ``T dphi / (2 tan beta)``.  In the arc without
 circumferential sliding the belt is not stuck: it enters the groove and is
 wedged in radially (Gerbert), so there the friction is radial (gamma = 90 deg)
 and ``dF_z = T dphi / (2 tan(beta + atan mu))`` -- the same factor as the
-closed form's driver thrust at rho = 0.  The frictionless wedge over the whole
-wrap (as before) put the thrusts at 1.96-2.61x (primary) and 1.24-1.60x
-(secondary) the full model's (corrected, 100 N slack, ratio 0.72-1.75,
-8/18 N m, 3400 rpm); with the radial friction they are 0.73-1.13x and
-0.60-0.79x, the thrust ratio F_s/F_p 0.59-0.95x the full model's (docs/belt-model.md).
+closed form's driver thrust at rho = 0.  Against the full model (corrected,
+100 N slack, ratio 0.72-1.75, 8/18 N m, 3400 rpm) the thrusts are 0.73-1.13x
+(primary) and 0.60-0.79x (secondary), the thrust ratio F_s/F_p 0.59-0.95x
+(docs/belt-model.md).
 """
 
 from __future__ import annotations

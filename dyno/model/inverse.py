@@ -161,7 +161,7 @@ def invert_speed_ratio(speed_ratio: float, primary_speed_rpm: float, primary_tor
     """Geometric ratio ``i`` and slip ``s`` with ``i / (1 - s(i)) == speed_ratio``.
 
     ``clamp(ratio) -> N`` (e.g. :func:`clamp_from_tune`) or a fixed clamp, or
-    ``slack_tension_n`` (no tune: the old fixed tension level).  ``ratio_range``
+    ``slack_tension_n`` (no tune: the thesis's fixed slack-span tension).  ``ratio_range``
     keeps the iteration inside the drive's geometric range.  Never raises for a
     physical reason: the result's ``state`` says ``gross_slip`` (the tier finds no
     steady belt at this load and clamp), ``no_clamp`` (the spring holds the

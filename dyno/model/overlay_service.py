@@ -13,8 +13,8 @@ step).  :class:`OverlayService` therefore
   (:func:`process_pool`), a thread pool, :class:`InlineExecutor` for a batch),
   so every solve can start from all the solutions before it;
 * warm-starts each solve from the nearest solved point (:func:`op_distance`),
-  when it is near enough (a far neighbour is a worse start than none:
-  ratio 1.0 -> 0.73 took 8.8 s warm against 2.6 s cold), else solves cold;
+  when it is near enough (a far neighbour is a worse start than none), else
+  solves cold;
   a failed warm start is retried cold, a failed cold start warm from the
   nearest solution however far (:func:`solve_job`'s ``fallback``);
 * keeps the solutions it warm-starts from on disk too (``warm/`` under the cache

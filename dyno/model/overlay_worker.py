@@ -50,8 +50,7 @@ def process_pool():
     """(executor, cancel event): a one-process pool for the service and the event its worker got at start.
 
     The solver then runs in its own interpreter: its numerics never hold the GIL of the process whose event
-    loop polls the rig (with a thread, the control loop was seen silent for 0.68 s under load, tripping the
-    watchdog).  Spawned, not forked: the parent has threads (Textual, the watchdog).
+    loop polls the rig (in a thread, a solve can stall the control loop long enough to trip the watchdog).  Spawned, not forked: the parent has threads (Textual, the watchdog).
     """
     import multiprocessing
     import sys

@@ -8,7 +8,7 @@ minus spring, Messick eq. 9.3, at :data:`TABLE_RPM`), by continuation: a cold
 solve at ratio 1, 18 N m, warm starts outward in ratio at the reference
 torque, then each other torque warm-started from the same ratio.  Without a
 tune (the sim's closed-form CVT) the tension level is a fixed 100 N slack
-tension, as before.  Every result is stored in the
+tension.  Every result is stored in the
 overlay's disk cache (:func:`dyno.model.overlay.point_key`, same JSON entries
 as :func:`~dyno.model.overlay.predict_overlay` writes), so the table is
 computed once per machine and read back in milliseconds afterwards.

@@ -16,11 +16,9 @@ this module's own random stream (``0x26``; the engine, sensor and day use ``0x24
 * **sheave bushings** :math:`F_{sh}`: the two moving sheaves on their posts, 2-8 N together
   (``SHEAVE_N_RANGE``), load-independent.
 
-The shift frictions' ranges are bounded by the 2019 logs: the steady points of a loading run sit on the
-back-shift edge of the dead band, and wider ranges (ramps 2-6 %, helix 5-15 %, 5-20 N, a first estimate
-from pin/roller and button friction coefficients) put the simulated engine 117 rpm under the logs on run2
-(RMS 134 rpm against the 75 rpm limit of bench/bench_fidelity.py); these ranges give 57/64 rpm RMS on
-run2/run3.  (Firing-pulse vibration dithers part of a real CVT's static friction away in steady running.)
+The shift frictions' ranges are bounded by the 2019 logs (run2 and run3, against the 75 rpm limit of
+bench/bench_fidelity.py): the steady points of a loading run sit on the back-shift edge of the dead band.
+(Firing-pulse vibration dithers part of a real CVT's static friction away in steady running.)
 
 Friction opposes the sheaves' motion, so the shift balance has a dead band
 :math:`|F_p - F_s| \le F_f` in which the sheaves stay where they are, with

@@ -111,7 +111,7 @@ class RigParams:
     # (--sim-tune-deviation); 0 = every part exactly its label.
     tune_deviation_rel: float = 0.0
     # Engagement (dyno.sim.driven): "clamp" = the primary's slip torque from the net flyweight
-    # clamp (the tune's flyweights against its spring preload); "smoothstep" = the former fixed
+    # clamp (the tune's flyweights against its spring preload); "smoothstep" = a fixed
     # ramp of capacity from cvt_engage_start_rpm to cvt_engage_full_rpm, whatever the tune.
     cvt_engagement_model: str = "clamp"
     # The CVT's friction (dyno.sim.cvt_friction): None = drawn per world within its real range (the clutch's
@@ -141,9 +141,8 @@ class RigParams:
     # friction coefficient instead (--sim-belt-thrust F).
     cvt_belt_friction_coefficient: float | None = None
     # Added to the tune's flyweight radius table: the real weights' centre of mass, which no drawing gives.
-    # -3 mm: fitted to the 2019 logs' run2 alone (engine speed against speed ratio, default thesis-step, seed
-    # 4; 0.5 mm grid, least RMS) and shown on run3 and run4 (bench/bench_fidelity.py, docs/simulator-fidelity.md).
-    # With the CVT's friction (dyno.sim.cvt_friction) run2/3/4 are 57/64/65 rpm RMS (frictionless 46/48/45).
+    # -3 mm: a fit (least RMS engine speed against speed ratio) to the 2019 logs' run2, checked on run3 and run4
+    # (bench/bench_fidelity.py; docs/measurements/2026-11-29-fidelity-driveline.md).
     cvt_flyweight_radius_offset_m: float = -0.003
     # Which belt tier gives the true thrust ratio: "full" (the full model's cells; with a friction given,
     # the capstan tier), "capstan" (Gerbert's V-belt limit, dyno.model.capstan) or "closed_form" (the
@@ -163,10 +162,9 @@ class RigParams:
     # shaft drag 0.05-0.1 N·m each lightly loaded (bearing makers' friction models: a speed-dependent viscous
     # part and a load-independent seal part), the chain's slack-side churn adds a little: 0.12 N·m + 0.01 N·m
     # per 1000 rpm from the makers' figures.  The 2019 logs hold the drag to half that: run3's CVT sat on its
-    # overdrive stop up to 6.4 N·m at the gauge (five points, n_p ~3,300 rpm), and more light-load drag pulls
-    # the simulated CVT off the stop sooner (bench_fidelity --quick, seed 4, run3's RMS: no driveline 64 rpm,
-    # 0.06 N·m 57, 0.08 N·m 74, 0.10 N·m 81, 0.12 N·m 86 > 75; the CVT's friction ranges and flyweight offset
-    # were fitted to those logs without a driveline, so part of the real one is already in them): 0.06 N·m +
+    # overdrive stop up to 6.4 N·m at the gauge, and more light-load drag pulls the simulated CVT off the stop
+    # sooner (the CVT's friction ranges and flyweight offset were fitted to those logs without a driveline, so
+    # part of the real one is already in them; docs/measurements/2026-11-29-fidelity-driveline.md): 0.06 N·m +
     # 0.005 N·m per 1000 rpm, the chain's 1 % kept.  So 2-3 % at light load and high speed, ~1.2 % at full
     # load.  Fixed (one rig's driveline, not drawn per seed).  None = that default (DEFAULT_DRIVELINE_LOSS), or none with ``ideal``
     # (perfect knowledge: the host assumes no driveline); a number is used as given, ideal or not.

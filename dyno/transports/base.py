@@ -99,7 +99,7 @@ class I2CTransport(Transport):
 
     def _transfer(self, request: bytes, read_len: int) -> bytes:
         # The i2c_msg structures are built once per thread and length and refilled: building them
-        # (two ctypes buffers a transfer) was ~9 % of the idle poll loop's CPU.  Per thread, because
+        # (two ctypes buffers a transfer) costs much of the idle poll loop's CPU.  Per thread, because
         # the kernel lets two threads transfer at once but a shared buffer would mix their bytes.
         cache = getattr(self._local, "msgs", None)
         if cache is None:

@@ -83,8 +83,8 @@ def check_device_clocks(rig) -> None:
 
 def min_poll_hz(rig) -> int:
     """The slowest poll rate a derate may choose: two polls a control decision (``control.period_s``: the
-    load control then acts on data at most half a period old; 26 Hz on the two-converter rig skipped 5 of 19
-    points as not steady, docs/measurements/2026-12-05-link-budget.md), and two within the link's staleness
+    load control then acts on data at most half a period old; slower, points go unsteady:
+    docs/measurements/2026-12-05-link-budget.md), and two within the link's staleness
     limit (``limits.comms_timeout_s``) and the Nano's heartbeat timeout (``limits.supervisor_timeout_s``)."""
     import math
 

@@ -34,8 +34,8 @@ from dyno.tuning.parts import apply_part, part_identity
 
 N_DRAWS = 2000
 #: below the rig's "the secondary must turn" speed (SafetyLimits.secondary_check_primary_rpm, 2,600): a tune
-#: that engages within this margin of it aborts the engagement plan's loaded ramps (measured: 2,254 rpm
-#: predicted at the light load aborted three times), so such an outcome teaches nothing
+#: that engages within this margin of it aborts the engagement plan's loaded ramps, so such an outcome teaches
+#: nothing
 ENGAGEMENT_MARGIN_RPM = 100.0
 
 

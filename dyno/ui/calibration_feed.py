@@ -16,7 +16,7 @@ class WizardFeeder:
     device (a frame without MORE after the step began): conversions still queued in the firmware's ring
     from before the load was hung are not the load's, and a backlog longer than the settling samples
     (the simulated fixture at ``--speed N`` buffers N times the Nano's ring; a busy host) would
-    otherwise be averaged into the step (seen: one step 4 % short, R² 0.9999, non-linearity 1.7 %FS).
+    otherwise be averaged into the step.
     """
 
     def __init__(self, wizard: CalibrationWizard, adc_channel: int | None = None, reader=None) -> None:

@@ -118,9 +118,8 @@ def forget_removed_widgets() -> None:
 
     ``textual._styles_cache.StylesCache.get_inner_outer`` is an ``lru_cache`` (1,024 entries) on a *method*:
     each key holds the widget's ``StylesCache``, and with it every line the widget last rendered.  A
-    dismissed dialog's widgets stayed alive through it: 4 per ``ConfirmScreen``, ~180 KB a dialog at
-    120x40, two dialogs a test (GO, re-arm) — the UI soak's RSS grew with every test until the cache's
-    1,024 entries (~250 dialogs) were full (docs/safety.md, "Soak").  The entries are two ``Style`` objects,
+    dismissed dialog's widgets stay alive through it (4 per ``ConfirmScreen``), so memory grows with every
+    dialog until the cache's 1,024 entries are full (docs/safety.md, "Soak").  The entries are two ``Style`` objects,
     recomputed on the next draw.  A Textual without that cache (a later version): nothing to do.
     """
     try:

@@ -110,8 +110,8 @@ class RearmMixin:
         """Forget the ended run's events and the sim's truth samples (kept: the last ``HISTORY_KEEP_S``).
 
         The poller and the simulated rig live as long as the session; without this each re-arm adds the
-        last run's events (~10 bytes each, a few hundred a second) to memory that no later run reads:
-        the UI soak's RSS grew 17 % over two simulated hours.  The ended run is in its log by now.
+        last run's events (~10 bytes each, a few hundred a second) to memory that no later run reads.
+        The ended run is in its log by now.
         """
         dev_now_us = self.poller.device_now_us()
         if dev_now_us is not None:

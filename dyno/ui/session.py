@@ -147,13 +147,9 @@ class LiveSession(RearmMixin):
     async def _poll_from_rig_zero(self, restart: bool) -> None:
         """The poller, its first poll in the same loop step as the simulated rig's time zero.
 
-        The clock is held at 0 while the session is built.  It once ran from the session's construction: the
-        build reads the air sensor over the simulated bus, which stepped the physics to the clock's time, and the
-        restart (then guarded by "the physics has not run yet") never happened; the rig's time ran on through
-        the building and the first screen (~0.65 s of wall time: 5 s of rig time at x8), the idling engine's
-        edges and the ADC overfilled the simulated Nano's 64-event ring, and the first frame's
-        ``events_dropped`` (150-700 before GO) were counted as lost.  A headless run's first poll is at rig
-        time 0 (virtual time): 0 lost.  Now the session's is too.
+        The rig's time starts at the first poll, as a headless run's does: with ``restart`` the clock is set back
+        to 0 here, so the building and the first screen take no rig time (rig time running through them lets the
+        idling engine's edges and the ADC overfill the simulated Nano's 64-event ring, counted as lost before GO).
         """
         if restart:
             self.clock.restart()
