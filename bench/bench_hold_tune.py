@@ -31,7 +31,7 @@ from dyno.control.api import Hold, SpeedHold  # noqa: E402
 from dyno.control.holds import gains_for  # noqa: E402
 from dyno.control.outputs import STOP  # noqa: E402
 from dyno.session.root import RunOptions, run_test  # noqa: E402
-from dyno.control.controller import State, TestPlan  # noqa: E402
+from dyno.control.api import State, TestPlan  # noqa: E402
 from dyno.control.plans.speed_hold import find_contact  # noqa: E402
 
 OPERATING = {"torque": 16.0, "engine": None}  # engine: where it is with the secondary at 3,000 rpm

@@ -170,7 +170,7 @@ def main() -> None:
     if args.quick:
         from dataclasses import replace
 
-        from dyno.control.controller import TestPlan
+        from dyno.control.api import TestPlan
 
         s = bench_sim(plan=replace(TestPlan(), target_points=6, max_measure_s=3.0, warmup_s=2.0))
     else:

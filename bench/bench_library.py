@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dyno.session.root import RunOptions, run_test  # noqa: E402
-from dyno.control.controller import TestPlan  # noqa: E402
+from dyno.control.api import TestPlan  # noqa: E402
 from dyno.session.drills import parse_drill  # noqa: E402
 from dyno.library import index as lib  # noqa: E402
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dyno.control.controller import State, TestPlan  # noqa: E402
+from dyno.control.api import State, TestPlan  # noqa: E402
 from dyno.ui.live_app import LiveApp  # noqa: E402
 from dyno.ui.session import LiveOptions  # noqa: E402
 

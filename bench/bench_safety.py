@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.cli.run_cmd import exit_code  # noqa: E402
-from dyno.control.controller import TestPlan  # noqa: E402
+from dyno.control.api import TestPlan  # noqa: E402
 from dyno.session.drills import parse_drill  # noqa: E402
 from dyno.runlog.reader import load_run  # noqa: E402
 

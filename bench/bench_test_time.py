@@ -43,7 +43,7 @@ from dyno.control.hold_law import HoldLaw  # noqa: E402
 from dyno.control.holds import gains_for  # noqa: E402
 from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
-from dyno.control.controller import State  # noqa: E402
+from dyno.control.api import State  # noqa: E402
 from dyno.control.outputs import APPLY, STOP  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 

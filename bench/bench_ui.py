@@ -305,7 +305,7 @@ def _run(a, seconds: float, cpu_s: float, speed: float, pace: str, status: dict)
         print(fmt_timing("with UI + model overlay", ov) + f"  overlay: {ov.get('overlay_tier') or 'pending'}")
 
         from dyno.session.root import RunOptions, run_test
-        from dyno.control.controller import TestPlan
+        from dyno.control.api import TestPlan
 
         run_dir = tmp / "replay_run"
         run_test(RunOptions(sim=True, out_dir=run_dir, plan=replace(TestPlan(), max_points=3)))

@@ -26,7 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from dyno.session.root import RunOptions, run_test  # noqa: E402
-from dyno.control.controller import TestPlan  # noqa: E402
+from dyno.control.api import TestPlan  # noqa: E402
 from dyno.sim.bus import BusFaults  # noqa: E402
 
 

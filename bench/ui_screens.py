@@ -32,7 +32,7 @@ def _commit() -> str:
 
 
 async def _capture(speed: float, seed: int, plan_name: str, run_dir: Path) -> dict:
-    from dyno.control.controller import State
+    from dyno.control.api import State
     from dyno.control.plans import plan_named
     from dyno.ui.live_app import LiveApp
     from dyno.ui.session import LiveOptions

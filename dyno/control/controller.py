@@ -19,8 +19,7 @@ import asyncio
 import math
 
 # The dependency runs one way: this engine and the plan runners are siblings that meet at
-# dyno.control.api (State, TestPlan: defined there, re-exported here), and no plan module imports this
-# one.  Nor does this module import dyno.control.plans: the plan modes' runners are handed in
+# dyno.control.api (State, TestPlan are defined there), and no plan module imports this one.  Nor does this module import dyno.control.plans: the plan modes' runners are handed in
 # (``runner_for``/``from_idle``, as the app's composition root does); the default is the mode table in
 # dyno.control.registry, a leaf over the api that imports a runner's module only when its mode runs.
 from dyno.clock import LOOP_RIG_CLOCK
@@ -30,13 +29,13 @@ from dyno.control.api import LOADED_STATES as _LOADED_STATES
 from dyno.control.api import TRANSITIONS, State, TestPlan
 from dyno.control.engine import EngineContext
 from dyno.control.kill_probe import prove_kill_chain
-from dyno.control.measuring import MAX_REMEASURE, Measuring  # noqa: F401 (MAX_REMEASURE: re-exported)
+from dyno.control.measuring import Measuring
 from dyno.control.outputs import APPLY, DeadlineService, enter_safe_state, ignition_hold_ended
 from dyno.control.safety import SafetyLimits, SafetyMonitor, Trip
 from dyno.errors import SafetyAbort
 from dyno.protocol import v1
 
-__all__ = ["State", "TestController", "TestPlan", "SafetyLimits", "TRANSITIONS"]
+__all__ = ["TestController"]
 
 
 class TestController(Measuring):
@@ -363,9 +362,9 @@ class TestController(Measuring):
     def _tare(self) -> None:
         """The points measure torque from the zero just read at rest (rig.toml [torque_zero] tare)."""
         from dyno.analysis.zero_check import tare
-        from dyno.control.zero_check import _config
+        from dyno.control.zero_check import zero_config
 
-        if not _config(self).tare:
+        if not zero_config(self).tare:
             return
         self.calibration, rec = tare(self.calibration, self.zero_before)
         if rec is not None:

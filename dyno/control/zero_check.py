@@ -15,7 +15,8 @@ from dyno.analysis.zero_check import zero_reading
 from dyno.protocol import v1
 
 
-def _config(ctrl):
+def zero_config(ctrl):
+    """rig.toml's [torque_zero] (its defaults where the rig has none)."""
     from dyno.rig.config import TorqueZeroConfig
 
     return getattr(getattr(ctrl, "rig", None), "torque_zero", None) or TorqueZeroConfig()
@@ -29,7 +30,7 @@ async def _sleep(ctrl, dt_s: float) -> None:
 
 async def read_zero(ctrl, *, wait_rest_s: float = 0.0) -> dict:
     """Mean torque over ``read_s`` with the secondary at rest (waiting up to ``wait_rest_s`` for it)."""
-    cfg = _config(ctrl)
+    cfg = zero_config(ctrl)
     poller = ctrl.poller
     t_wait = ctrl.host_now()
     # with an engine-side input torque channel the zero after the test waits for the crank too: a
@@ -62,8 +63,8 @@ async def after_test(ctrl, *, wait_rest_s: float = 30.0) -> dict:
     after = await read_zero(ctrl, wait_rest_s=wait_rest_s)
     before = getattr(ctrl, "zero_before", None) or {"torque_nm": math.nan, "ci95_nm": math.nan,
                                                     "why": "not read"}
-    check = drift_check(before, after, _config(ctrl).drift_max_nm)
-    check["correct"] = _config(ctrl).correct
+    check = drift_check(before, after, zero_config(ctrl).drift_max_nm)
+    check["correct"] = zero_config(ctrl).correct
     ctrl.set_zero_check(check)
     ctrl.plan_context.log("torque_zero", **check)
     channel = getattr(ctrl, "input_channel", None)

@@ -22,8 +22,10 @@ from dyno.session.next_run import abort_on_write_error
 from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
 from dyno.session.shift_prediction import shift_prediction_for
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
-from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
-from dyno.control.controller import SafetyLimits, TestController, TestPlan
+from dyno.control import registry  # the plan modes' runners, handed to the controller (_build)
+from dyno.control.safety import SafetyLimits
+from dyno.control.controller import TestController
+from dyno.control.api import TestPlan
 from dyno.transports.base import I2CTransport
 from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP  # noqa: F401 (the defaults, re-exported)
 from dyno.rig.locate import find_rig
@@ -346,7 +348,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     controller = TestController(poller, actuators, calibration, engine_map, plan=plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None,
-                                runner_for=_runner_for(opts.runners), from_idle=plans.FROM_IDLE,  # (the plan modes)
+                                runner_for=_runner_for(opts.runners), from_idle=registry.FROM_IDLE,  # (the plan modes)
                                 rig=rig_cfg, control=rig_cfg.control, inertia=rig_cfg.inertia,  # [control], [inertia]
                                 tune_path=tune_path,  # (stored with the run; the faces' overlay)
                                 shift_prediction=shift_prediction_for(tune, engine_map),  # the characterisations'
@@ -388,8 +390,8 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
 def _runner_for(extra: dict):
     """The plan modes' runners: the shipped table (dyno.control.registry), with the spec's own modes."""
     if not extra:
-        return plans.runner_for
-    return lambda mode: extra[mode] if mode in extra else plans.runner_for(mode)
+        return registry.runner_for
+    return lambda mode: extra[mode] if mode in extra else registry.runner_for(mode)
 
 
 def _thermometer(bus, address: int):

@@ -20,7 +20,7 @@ from textual.css.query import NoMatches
 from textual.widgets import Static
 from textual_plotext import PlotextPlot
 
-from dyno.control.plans import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
+from dyno.control.registry import FROM_IDLE  # the characterisations: no steady points, no point count or ETA
 from dyno.ui.common import ESTOP_KEYS, ConfirmScreen, DynoApp, Readout, bottom_lines
 from dyno.analysis.live import RateMeter, ideal_engine_rpm, live_values
 from dyno.analysis.u95_terms import COMPARE_NOTE_SHORT, TERM_SHORT, largest_term

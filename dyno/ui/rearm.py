@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.ui.run_dirs import finish_in_background, next_run_dir
 
 FINISHED = (State.DONE, State.ABORTED)

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dyno.control.controller import State, TestPlan
+from dyno.control.api import State, TestPlan
 from dyno.session.pacing import ScaledClock, SimTimeActuators  # noqa: F401 (re-exported)
 from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
 

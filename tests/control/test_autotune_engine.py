@@ -16,7 +16,7 @@ from dyno.control.outputs import STOP
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_gain
 from dyno.control.plans.steps import probe_load_raises
-from dyno.control.controller import State, TestPlan as Plan
+from dyno.control.api import State, TestPlan as Plan
 from dyno.control.plans.speed_hold import find_contact
 from dyno.sim.physics import RigParams
 

@@ -14,7 +14,7 @@ import pytest
 from dyno.session.root import RunOptions, run_test
 from dyno.sim.rig_params import RigParams
 from dyno.control.plans import speed_hold as sh
-from dyno.control.controller import State, TestPlan as Plan
+from dyno.control.api import State, TestPlan as Plan
 from dyno.control.outputs import STOP
 from dyno.control.api import SpeedHold
 from dyno.control.plans.speed_hold import find_contact

@@ -4,8 +4,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.control import plans as plans_mod
-from dyno.control.controller import TestPlan as Plan
+from dyno.control.api import TestPlan as Plan
 from dyno.control.planfile import load_plan_file, plan_from_text, shipped_plans
 from dyno.control.plans import plan_named, plan_names
 from dyno.control.plans.speed_hold import SpeedHoldPlan
@@ -98,11 +97,11 @@ def test_a_mode_registered_in_code_is_selectable_and_usable_from_a_file(monkeypa
     # (the table is read-only: another module's mode is a different table, as a build of the package would ship)
     monkeypatch.setattr(registry, "RUNNERS",
                         MappingProxyType({**registry.RUNNERS, "endurance": "dyno.control.plans.steps:run_steps"}))
-    monkeypatch.setitem(plans_mod.PLANS, "endurance", Plan(mode="endurance", warmup_s=1.0))
+    monkeypatch.setitem(registry.PLANS, "endurance", Plan(mode="endurance", warmup_s=1.0))
     p = plan_named("endurance")
     assert p.mode == "endurance" and p.name == "endurance" and p.warmup_s == 1.0
-    assert plans_mod.runner_for("endurance").__name__ == "run_steps"
+    assert registry.runner_for("endurance").__name__ == "run_steps"
     f = plan_from_text(HEAD + 'mode = "endurance"\n[endurance]\nthrottle_rate = 0.1\n', "e.toml")
     assert f.mode == "endurance" and f.params == {"throttle_rate": 0.1}  # (a mode without a parameter class: its table as given)
     with pytest.raises(ConfigError):
-        plans_mod.runner_for("warp")
+        registry.runner_for("warp")

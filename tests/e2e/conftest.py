@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import TestPlan
+from dyno.control.api import TestPlan
 from dyno.sim.rig_params import RigParams
 from tests.rig_files import rig_without_run_enable  # noqa: F401 (the e2e tests import it from here)
 

@@ -8,7 +8,7 @@ controller waits in ARMED, measure the latency in true simulated time from the p
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import SafetyLimits
+from dyno.control.safety import SafetyLimits
 from dyno.session.drills import parse_drill
 
 from .conftest import QUICK_PLAN

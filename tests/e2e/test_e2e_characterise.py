@@ -107,7 +107,7 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
 
     from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
     from dyno.session.root import RunOptions, run_test
-    from dyno.control.controller import TestPlan
+    from dyno.control.api import TestPlan
     from dyno.control.plans import plan_named
     from dyno.sim.physics import RigParams
 

@@ -18,7 +18,7 @@ import pytest
 
 from dyno.session.root import RunOptions, run_test
 from dyno.cli.run_cmd import exit_code
-from dyno.control.controller import SafetyLimits
+from dyno.control.safety import SafetyLimits
 from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
 from dyno.runlog.replay import replay

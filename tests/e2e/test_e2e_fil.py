@@ -200,7 +200,7 @@ def test_fil_live_session_paces_the_elf_with_the_physics(tmp_path):
     import asyncio
     import time
 
-    from dyno.control.controller import State
+    from dyno.control.api import State
     from dyno.ui.session import LiveOptions, LiveSession
 
     elf = sim_elf()

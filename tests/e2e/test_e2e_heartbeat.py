@@ -6,7 +6,7 @@ import asyncio
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import SafetyLimits
+from dyno.control.safety import SafetyLimits
 
 from .conftest import QUICK_PLAN
 

@@ -115,7 +115,7 @@ def test_the_ui_runs_a_closed_loop_plan_paced(tmp_path):
     import asyncio
     import time
 
-    from dyno.control.controller import State
+    from dyno.control.api import State
     from dyno.control.plans import plan_named
     from dyno.ui.live_app import LiveApp
     from dyno.ui.session import LiveOptions

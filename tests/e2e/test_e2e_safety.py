@@ -6,7 +6,7 @@ from dataclasses import replace
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import SafetyLimits
+from dyno.control.safety import SafetyLimits
 from dyno.runlog.reader import load_run
 
 from .conftest import QUICK_PLAN

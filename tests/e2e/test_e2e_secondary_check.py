@@ -5,7 +5,7 @@ through engagement at full throttle, and a dead secondary sensor still caught wi
 from dataclasses import replace
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import TestPlan as StepPlan
+from dyno.control.api import TestPlan as StepPlan
 from dyno.session.drills import parse_drill
 from dyno.control.safety import SafetyLimits
 

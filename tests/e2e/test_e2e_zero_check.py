@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import TestPlan as StepPlan
+from dyno.control.api import TestPlan as StepPlan
 from dyno.sim.physics import RigParams
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import TestPlan as Plan
+from dyno.control.api import TestPlan as Plan
 from dyno.library.exports import POINT_UNITS
 from dyno.runlog.replay import replay
 from dyno.runlog.reader import load_run

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from dyno.session.root import RunOptions, run_test
-from dyno.control.controller import TestPlan as Plan
+from dyno.control.api import TestPlan as Plan
 from dyno.session.drills import parse_drill
 from dyno.library import index as lib
 

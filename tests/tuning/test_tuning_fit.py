@@ -48,7 +48,7 @@ def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
     """One complete simulated steady-state test (~10-15 s), its tune saved
     with the run (runs do not store their tune yet; the setup hook does)."""
     from dyno.session.root import RunOptions, run_test
-    from dyno.control.controller import TestPlan
+    from dyno.control.api import TestPlan
     from dyno.sim.physics import RigParams
     from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
 

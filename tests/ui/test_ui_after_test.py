@@ -9,7 +9,7 @@ import json
 import re
 from dataclasses import replace
 
-from dyno.control.controller import State, TestPlan
+from dyno.control.api import State, TestPlan
 from dyno.ui.live_app import LiveApp
 from dyno.ui.session import LiveOptions
 from tests.screens import screen_text, wait_for

@@ -8,7 +8,7 @@ import asyncio
 import sys
 from pathlib import Path
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.session.drills import parse_drill
 from dyno.ui.session import LiveOptions, LiveSession
 

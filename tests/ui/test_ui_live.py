@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.ui.live_app import LiveApp
 from dyno.model.overlay_inputs import overlay_inputs
 from dyno.analysis.live import RateMeter, ideal_engine_rpm

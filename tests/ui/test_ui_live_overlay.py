@@ -7,7 +7,7 @@ import re
 
 import asyncio
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.ui.live_app import LiveApp
 from dyno.sim.rig_params import RigParams
 from dyno.ui.session import LiveOptions

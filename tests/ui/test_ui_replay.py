@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 def two_runs(tmp_path_factory):
     """Two short simulated runs of one rig (3 points each, different seeds), as fast as the sim goes."""
     from dyno.session.root import RunOptions, run_test
-    from dyno.control.controller import TestPlan
+    from dyno.control.api import TestPlan
     from dyno.sim.rig_params import RigParams
 
     root = tmp_path_factory.mktemp("runs")

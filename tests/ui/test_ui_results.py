@@ -10,7 +10,7 @@ import re
 from dataclasses import replace
 
 from dyno.control.plans.characterise import EngagementPlan
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.control.plans import plan_named
 from dyno.ui.live_app import LiveApp
 from dyno.ui.results_view import WIDTH, has_results, results_lines

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from dyno.clock import LOOP_RIG_CLOCK, run
-from dyno.control.controller import State, TestPlan
+from dyno.control.api import State, TestPlan
 from dyno.session.pacing import ScaledClock
 from dyno.ui.session import LiveOptions, LiveSession
 

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.control.outputs import STOP
 from dyno.ui.session import LiveOptions, LiveSession
 

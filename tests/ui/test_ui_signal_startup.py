@@ -9,7 +9,7 @@ import os
 import signal
 
 import dyno.session.root
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.ui.session import LiveOptions, LiveSession
 
 

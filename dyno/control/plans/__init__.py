@@ -3,13 +3,13 @@
 A plan is a :class:`~dyno.control.api.TestPlan`; the shipped ones are TOML files in
 ``dyno/control/plan_files/`` (:mod:`dyno.control.planfile` reads them), so a user's own plan
 file is the same thing as a shipped one.  ``--plan`` takes a shipped name, a name registered
-in :data:`PLANS` by code, or a path (a value ending in ``.toml`` or containing ``/``).
+in ``dyno.control.registry.PLANS`` by code, or a path (a value ending in ``.toml`` or containing ``/``).
 
 A plan's ``mode`` names its runner, a coroutine ``runner(ctx)`` handed the plan context
-(:class:`dyno.control.api.PlanContext`) and registered in :data:`RUNNERS` as ``"module:function"``
-(imported when used); this package holds the shipped runners (``step``: :mod:`.thesis_step`).  To add a mode: add its runner to :data:`RUNNERS`
-(kept in :mod:`dyno.control.registry`, re-exported here; and, if it needs no file, a
-:class:`TestPlan` to :data:`PLANS`); a plan file can then use it by name.
+(:class:`dyno.control.api.PlanContext`) and registered in ``dyno.control.registry.RUNNERS`` as ``"module:function"``
+(imported when used); this package holds the shipped runners (``step``: :mod:`.thesis_step`).  To add a
+mode: add its runner and its parameters to :mod:`dyno.control.registry` (and, if it needs no file, a
+:class:`TestPlan` to its ``PLANS``); a plan file can then use it by name (docs/plans.md).
 """
 
 from __future__ import annotations
@@ -19,12 +19,11 @@ from dataclasses import replace
 from dyno.control.api import TestPlan
 from dyno.control.planfile import load_plan_file, shipped_plans
 # The mode table lives in dyno.control.registry (the plan-file reader needs it too, and this module
-# needs the reader: one way, registry <- planfile <- plans); the same objects, re-exported here.
-from dyno.control.registry import FROM_IDLE, PLANS, RUNNERS, known_modes, runner_for
+# needs the reader: one way, registry <- planfile <- plans).
+from dyno.control.registry import PLANS
 from dyno.errors import ConfigError
 
-__all__ = ["FROM_IDLE", "PLANS", "RUNNERS", "TestPlan", "default_plan_name", "is_plan_path", "known_modes",
-           "plan_named", "plan_names", "runner_for"]
+__all__ = ["default_plan_name", "is_plan_path", "plan_named", "plan_names"]
 
 
 def plan_names() -> list[str]:
