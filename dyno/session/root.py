@@ -368,7 +368,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 listeners=(uncuttable_warning(), *opts.listeners))
     kick_on_polls(poller, watchdog)
     drills = None
-    if opts.drills:  # armed by the test's start (TestRun), from the first frame
+    if opts.drills:  # armed when the test starts (RunningTest.start), from the first frame
         from dyno.session.drills import DrillRunner
 
         drills = DrillRunner(opts.drills, asyncio.get_running_loop(), sim_now=clock.now if clock is not None else None,
