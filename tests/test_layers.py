@@ -194,3 +194,162 @@ def test_the_face_check_sees_a_second_root(tmp_path):
                "def rearm(self):\n    return TestController(self.poller, act, cal, emap)\n")
     assert face_violations(planted) == ["line 1: imports dyno.session.safety._WatchdogKick",
                                         "line 3: builds TestController"]
+
+
+# The test is run one way (issue 50): `dyno run` and `dyno ui` get the exit guard, the watchdog, the drills, the polls
+# and the controller's run from dyno.session.root (run_test, RunningTest). No face installs a SafetyGuard, starts
+# the watchdog or the drills, or runs a run's controller or poller itself.
+RUN_LOOP_NAMES = {"SafetyGuard", "start_watchdog", "rehook_watchdog", "make_watchdog", "arm_from_first_frame",
+                  "start_next_controller", "DrillRunner", "run_test_async"}
+RUN_LOOP_OWNERS = {"controller", "ctrl", "poller"}  # ``X.run()``: a run's controller or poller run by hand
+#: the calibration wizard's poller is all it runs (no controller, no test; dyno.session.calibration builds it)
+OWN_POLLS = {"dyno/ui/calibrate_app.py", "dyno/ui/calibration_feed.py"}
+
+
+def run_loop_violations(source: str, *, own_polls: bool = False) -> list[str]:
+    """Uses of the run loop's parts in ``source`` other than through the root's RunningTest / run_test."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.alias) and node.name.split(".")[-1] in RUN_LOOP_NAMES:
+            out.append(f"imports {node.name}")
+        elif isinstance(node, ast.Name) and node.id in RUN_LOOP_NAMES:
+            out.append(f"line {node.lineno}: {node.id}")
+        elif isinstance(node, ast.Attribute) and node.attr in RUN_LOOP_NAMES:
+            out.append(f"line {node.lineno}: .{node.attr}")
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "run":
+            owner = node.func.value
+            name = getattr(owner, "attr", None) or getattr(owner, "id", None)
+            if name in RUN_LOOP_OWNERS and not (own_polls and name == "poller"):
+                out.append(f"line {node.lineno}: {name}.run()")
+    return out
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("face", ["dyno/ui", "dyno/web", "dyno/cli"])
+def test_the_faces_run_the_test_through_the_root(face):
+    found = {}
+    for p in sorted((DYNO.parent / face).rglob("*.py")):
+        rel = str(p.relative_to(DYNO.parent))
+        if v := run_loop_violations(p.read_text(), own_polls=rel in OWN_POLLS):
+            found[rel] = v
+    assert not found, found
+
+
+def test_the_run_loop_check_sees_a_second_run_loop():
+    planted = ("import signal\nfrom dyno.hw.safety import SafetyGuard\nfrom dyno.session.root import start_watchdog\n"
+               "def start(self):\n    self.guard = SafetyGuard(self.ctx.controller.act, signals=(signal.SIGTERM,))\n"
+               "    self.stop = start_watchdog(self.ctx, self.loop)\n"
+               "    self.tasks = [asyncio.create_task(self.poller.run()), asyncio.create_task(self.controller.run())]\n"
+               "    self.running.start()\n    app.run()\n")
+    assert run_loop_violations(planted) == [
+        "imports SafetyGuard", "imports start_watchdog", "line 5: SafetyGuard", "line 6: start_watchdog",
+        "line 7: poller.run()", "line 7: controller.run()"]
+    assert run_loop_violations(planted, own_polls=True)[-1] == "line 7: controller.run()"
+
+
+def test_a_face_with_its_own_run_loop_fails_the_rule(tmp_path, monkeypatch):
+    """The rule on a copy of dyno/ui/session.py that installs the guard itself, as it once did."""
+    src = (DYNO / "ui" / "session.py").read_text()
+    planted = src.replace("        self.running = RunningTest(self.ctx, loop, exit_guard=True)\n",
+                          "        self.running = RunningTest(self.ctx, loop)\n"
+                          "        if not opts.sim:\n            from dyno.hw.safety import SafetyGuard\n\n"
+                          "            self.guard = SafetyGuard(self.ctx.controller.act)\n"
+                          "            self.guard.__enter__()\n")
+    assert planted != src and not run_loop_violations(src)
+    assert [v.split(": ")[-1] for v in run_loop_violations(planted)] == ["imports SafetyGuard", "SafetyGuard"]
+
+
+@pytest.mark.quick
+def test_both_faces_use_the_roots_run():
+    """`dyno run` through run_test, `dyno ui`'s session through RunningTest (the headless run_test_async's own)."""
+    assert "run_test(" in (DYNO / "cli" / "run_cmd.py").read_text()
+    session = (DYNO / "ui" / "session.py").read_text()
+    assert "RunningTest(" in session and "self.running.start(" in session
+    root = (DYNO / "session" / "root.py").read_text()
+    headless = root[root.index("async def run_test_async"):root.index("def run_test(")]
+    assert "RunningTest(ctx, loop)" in headless and "run.start(" in headless
+
+
+# Callbacks are given at construction (issue 50): the run log's ``on_error``, the watchdog's ``on_trip``, a context's
+# ``drills``, and every ``*_hooks`` list (the controller's point, result and heartbeat hooks) are constructor
+# arguments; nothing assigns or appends them on a built object (only the owning class, on ``self``).
+CALLBACK_ATTRS = {"on_error", "on_trip", "drills"}
+
+
+def callback_wiring(source: str) -> list[str]:
+    """``x.on_error = ...`` (and ``on_trip``, ``drills``) and ``x.<name>_hooks.append/extend/insert(...)`` or ``+=``
+    where ``x`` is not ``self`` (the owner sets its own in its constructor)."""
+    def chain(node):
+        parts = []
+        while isinstance(node, ast.Attribute):
+            parts.append(node.attr)
+            node = node.value
+        parts.append(node.id if isinstance(node, ast.Name) else "?")
+        return parts[::-1]
+
+    def owned(c):  # the class's own attribute: self.attr
+        return len(c) == 2 and c[0] == "self"
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+        for target in targets:
+            for t in (target.elts if isinstance(target, (ast.Tuple, ast.List)) else [target]):
+                if not isinstance(t, ast.Attribute):
+                    continue
+                c = chain(t)
+                hooks = t.attr.endswith("_hooks") and isinstance(node, ast.AugAssign)
+                if (t.attr in CALLBACK_ATTRS or hooks) and not owned(c):
+                    found.append(f"{node.lineno}: {'.'.join(c)}")
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                node.func.attr in ("append", "extend", "insert") and isinstance(node.func.value, ast.Attribute) and \
+                node.func.value.attr.endswith("_hooks"):
+            c = chain(node.func.value)
+            if not owned(c):
+                found.append(f"{node.lineno}: {'.'.join(c)}.{node.func.attr}")
+    return found
+
+
+@pytest.mark.quick
+def test_callbacks_are_given_at_construction():
+    bad = [f"{p.relative_to(DYNO.parent)}:{hit}" for p in sorted(DYNO.rglob("*.py"))
+           for hit in callback_wiring(p.read_text())]
+    assert not bad, "callbacks wired after construction:\n" + "\n".join(bad)
+
+
+def test_the_callback_check_sees_wiring_after_construction():
+    src = ("def f(ctx, writer, wd, controller):\n    writer.on_error = abort\n    hw.watchdog.on_trip = trip\n"
+           "    ctx.drills = DrillRunner(d, ctx, loop)\n    controller.heartbeat_hooks.append(beat)\n"
+           "    ctx.controller.point_hooks += [hook]\n    self.on_error = on_error\n    self.point_hooks.append(h)\n"
+           "    poller.listeners.append(x)\n    self.ctx.drills = None\n")
+    assert sorted(callback_wiring(src)) == ["10: self.ctx.drills", "2: writer.on_error", "3: hw.watchdog.on_trip",
+                                            "4: ctx.drills", "5: controller.heartbeat_hooks.append",
+                                            "6: ctx.controller.point_hooks"]
+
+
+def test_the_root_wired_as_it_once_was_fails_the_rule():
+    """The rule on a copy of dyno/session/root.py with the writer's error callback assigned after construction."""
+    src = (DYNO / "session" / "root.py").read_text()
+    planted = src.replace("                       on_error=abort_on_write_error(lambda: controller, out))\n",
+                          "                       )\n    writer.on_error = abort_on_write_error(lambda: controller, out)\n")
+    assert planted != src and not callback_wiring(src)
+    assert [h.split(": ")[1] for h in callback_wiring(planted)] == ["writer.on_error"]
+
+
+@pytest.mark.quick
+def test_the_architecture_doc_says_what_is_checked():
+    """docs/architecture.md names the rules above, the callbacks they cover and what RunningTest does."""
+    import re
+
+    doc = (DYNO.parent / "docs" / "architecture.md").read_text()
+    named = set(re.findall(r"tests/test_layers\.py::(\w+)", doc))
+    assert {"test_the_faces_build_no_run_of_their_own", "test_the_faces_run_the_test_through_the_root",
+            "test_callbacks_are_given_at_construction"} <= named
+    assert named <= set(globals()), f"the doc names tests that do not exist: {named - set(globals())}"
+    assert all(f"`{attr}`" in doc for attr in CALLBACK_ATTRS) and "`*_hooks`" in doc
+    root = ast.parse((DYNO / "session" / "root.py").read_text())
+    cls = next(n for n in root.body if isinstance(n, ast.ClassDef) and n.name == "RunningTest")
+    methods = {n.name for n in cls.body if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
+    said = set(re.findall(r"`(\w+)`", doc[doc.index("The test is run one way: `RunningTest`"):]))
+    assert methods - {"started"} <= said, methods - said

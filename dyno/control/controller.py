@@ -43,7 +43,7 @@ class TestController(Measuring):
                  limits: SafetyLimits = SafetyLimits(), writer=None, auto_go: bool = False,
                  on_wait_engine=None, runner_for=None, from_idle=None, rig=None, tune_path=None, shift_prediction=None,
                  control=None, inertia=None, input_channel=None, clock=None,
-                 point_hooks=(), result_hooks=(), listeners=()) -> None:
+                 point_hooks=(), result_hooks=(), listeners=(), heartbeat_hooks=()) -> None:
         # Everything the composition root (dyno.session.root.build) wires is given here, never set afterwards
         # (tests/test_layers.py checks that no module assigns to a built controller's attributes).
         self.poller = poller
@@ -88,7 +88,7 @@ class TestController(Measuring):
             def torque_from_code(code: float) -> float:
                 return (code - cal.intercept_counts) / cal.slope_counts_per_nm
         self.monitor = SafetyMonitor(limits, poller, torque_from_code)
-        self.heartbeat_hooks: list = []  # callables() on every safety heartbeat (the watchdog's feed)
+        self.heartbeat_hooks: list = list(heartbeat_hooks)  # callables() on every safety heartbeat (the watchdog's feed)
         self.discards: list[dict] = []
         self.skips: list[str] = []  # why a setpoint or step gave no point (each also a "skip" document)
         self.engine_cut = False  # a coast-down cut the engine on purpose: Hall checks stop expecting it

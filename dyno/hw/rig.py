@@ -87,9 +87,8 @@ class HardwareRig:
                 from dyno.hw.bme280 import BME280
 
                 self.ambient_sensor = BME280(_CurrentBus(self._i2c), cfg.ambient.address)
-            self.watchdog = Watchdog(self.actuators, cfg.actuator.watchdog_s, clock=clock)
-            if self.estop is not None:
-                self.watchdog.level_checks.append(self.estop.poll)
+            self.watchdog = Watchdog(self.actuators, cfg.actuator.watchdog_s, clock=clock,
+                                     level_checks=(self.estop.poll,) if self.estop is not None else ())
         except BaseException as exc:
             self.__exit__(type(exc), exc, exc.__traceback__)
             raise

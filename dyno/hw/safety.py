@@ -118,14 +118,18 @@ class Watchdog:
     dead nobody else would finish the release stroke.
     """
 
-    def __init__(self, actuators, timeout_s: float, clock=None, on_trip=None) -> None:
+    def __init__(self, actuators, timeout_s: float, clock=None, on_trip=None, level_checks=()) -> None:
         self.actuators = actuators
         self.timeout_s = float(timeout_s)
         self.clock = clock or getattr(actuators, "clock", None) or MonotonicClock()
         self.on_trip = on_trip
         self._last_kick_s = self.clock.now()
         self.tripped = False
-        self.level_checks = []  # callables run on every look, e.g. the E-stop input's level
+        # the liveness trip as the look saw it (the session's heartbeat reports it: dyno.session.safety); None
+        # when it has not tripped that way (a look that raised trips it without)
+        self.silent_s: float | None = None
+        self.tripped_at_s: float | None = None
+        self.level_checks = list(level_checks)  # callables run on every look, e.g. the E-stop input's level
         self.errors: list[str] = []  # exceptions caught inside a look (each one safed the rig; it kept watching)
         self.error_counts: dict[str, int] = {}  # how often each of them came (a stuck input: every look)
         self.errors_dropped = 0  # distinct errors beyond MAX_ERRORS (counted, not kept)
@@ -195,8 +199,10 @@ class Watchdog:
             if cut is not None:  # the engine first, without the driver's lock (the frozen loop may hold it)
                 cut()
             enter_safe_state(self.actuators)
+            self.silent_s = now - self.last_alive_s()
+            self.tripped_at_s = self.clock.now()
             if self.on_trip is not None:
-                self.on_trip(now - self.last_alive_s())
+                self.on_trip(self.silent_s)
         if self.tripped:
             service = getattr(self.actuators, "service", None)
             if service is not None:

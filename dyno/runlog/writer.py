@@ -35,7 +35,7 @@ LOCK_NAME = ".dyno-lock"  # present while a process writes the run (see RunWrite
 class RunWriter:
     def __init__(self, run_dir: Path, meta: dict, calibration: dict | None = None,
                  engine_map_text: str | None = None, tune_text: str | None = None,
-                 plan_text: str | None = None) -> None:
+                 plan_text: str | None = None, on_error=None) -> None:
         from dyno.errors import ConfigError
 
         self.run_dir = Path(run_dir)
@@ -74,7 +74,7 @@ class RunWriter:
         self._pack = EVENT_RECORD.pack
         self.closed = False
         self.error: OSError | None = None
-        self.on_error = None  # callable(OSError), once
+        self.on_error = on_error  # callable(OSError), once
         self.doc("start", **{k: meta[k] for k in ("software_version", "format") if k in meta})
 
     def _append(self, f, data) -> None:

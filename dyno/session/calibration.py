@@ -80,8 +80,13 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
     if hw is not None:  # nothing else runs the rig's outputs here: the watchdog thread, and the polls tick
         hw.watchdog.start_thread()  # them (the start-up release stroke ends and de-energises on time)
     lim = rig_cfg.limits
+    runner = None
+    if drills:  # armed below, from the first frame
+        from dyno.session.drills import DrillRunner
+
+        runner = DrillRunner(drills, loop, sim_now=sim_now, speed=speed)
     ctx = CalibrationContext(poller, sim=fixture, hw=hw, twin=twin, watchdog=hw.watchdog if hw is not None else None,
-                             rig_cfg=rig_cfg, monitor=SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s),
+                             rig_cfg=rig_cfg, drills=runner, monitor=SafetyMonitor(SafetyLimits(comms_timeout_s=lim.comms_timeout_s),
                                                                     poller))
 
     def check(events, now_s: float) -> None:
@@ -102,10 +107,8 @@ def build_calibration(*, sim: bool, loop, seed: int = 0, speed: float = 1.0, rig
                 on_trip(trip)
 
     poller.listeners.append(check)
-    if drills:
-        from dyno.session.drills import DrillRunner
-
-        ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(poller)
+    if ctx.drills is not None:
+        ctx.drills.arm_from_first_frame(ctx)
     return ctx
 
 

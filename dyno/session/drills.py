@@ -148,12 +148,14 @@ def parse_drill(text: str, *, engine: bool = True) -> Drill:
 class DrillRunner(WiringDrills, KillDrills):
     """Arms drills on a running rig and records when each fault physically began.
 
-    ``ctx``: the composition root's RunContext (``sim``, ``controller``, ``writer``, ``poller``); ``loop``: the
-    running asyncio loop.  Drills are scheduled from the first accepted frame (:meth:`arm_from_first_frame`)."""
+    Given to the run's context at its construction (:class:`dyno.session.root.RunContext`, ``drills``; the
+    calibration's too) with ``loop``, the running asyncio loop; :meth:`arm_from_first_frame` hands it that context
+    (``sim``, ``controller``, ``writer``, ``poller``) when the test starts, checks the drills against it, and
+    schedules them from the first accepted frame."""
 
-    def __init__(self, drills, ctx, loop, *, sim_now=None, speed: float = 1.0) -> None:
+    def __init__(self, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
         self.drills = list(drills)
-        self.ctx = ctx
+        self.ctx = None  # the run's context, from arm_from_first_frame
         self.loop = loop
         # The UI paces the simulated rig on a real loop: sim time = (loop time - t0) x speed.
         self._sim_now = sim_now
@@ -162,8 +164,11 @@ class DrillRunner(WiringDrills, KillDrills):
         self.t_first_frame_s: float | None = None
         self._handles: list = []
         self._phased: list[Drill] = []  # waiting for their phase (checked on every poll)
+
+    def _check(self, ctx) -> None:
+        """A drill that cannot happen on ``ctx``'s rig must not pass as done."""
         sim = getattr(ctx, "sim", None)
-        for d in self.drills:  # a drill that cannot happen must not pass as done
+        for d in self.drills:
             check_wiring_drill(d, getattr(ctx, "rig_cfg", None), getattr(ctx, "twin", None) is not None)
             if d.arg == "input" and sim is not None and not getattr(sim.model, "input_fitted", False):
                 raise ConfigError("command line", "--drill", f"{d}: the rig has no input torque channel "
@@ -171,12 +176,9 @@ class DrillRunner(WiringDrills, KillDrills):
         from dyno.clock import VirtualTimeLoop
 
         frozen = next((d.name for d in self.drills if d.name in FREEZE_DRILLS), None)
-        if frozen and not isinstance(loop, VirtualTimeLoop):
+        if frozen and not isinstance(self.loop, VirtualTimeLoop):
             raise ConfigError("command line", "--drill", f"{frozen} freezes the host on the simulated clock: only "
                               "in simulated time (dyno run --sim), not in a live session")
-        poller = getattr(ctx, "poller", None)
-        if any(d.phase for d in self.drills) and poller is not None:
-            poller.listeners.append(self._on_poll)
 
     def _in_phase(self, phase: str) -> bool:
         ctrl = getattr(self.ctx, "controller", None)
@@ -196,8 +198,15 @@ class DrillRunner(WiringDrills, KillDrills):
                 self._phased.remove(d)
                 self._handles.append(self.loop.call_later(d.at_s / self.speed, self._fire, d))
 
-    def arm_from_first_frame(self, poller) -> DrillRunner:
-        """Schedule the drills from ``poller``'s first accepted frame (a run and a calibration alike)."""
+    def arm_from_first_frame(self, ctx) -> DrillRunner:
+        """Act on ``ctx``'s rig: the drills checked against it, scheduled from its poller's first accepted frame
+        (a run and a calibration alike)."""
+        self._check(ctx)
+        self.ctx = ctx
+        poller = ctx.poller
+        if any(d.phase for d in self.drills):
+            poller.listeners.append(self._on_poll)
+
         def first(events, now_s: float) -> None:
             if poller.last_valid_frame_s is not None:
                 self.on_first_frame(poller.last_valid_frame_s)

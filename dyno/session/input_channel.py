@@ -84,12 +84,17 @@ class InputPointHook:
 
     The first point tares the channel from GO's zero window, as the brake-side channel is
     (:meth:`dyno.control.controller.TestController.tare_input` keeps it for the live screen and the zero
-    check); every point then gets ``input_point`` and its systematic terms."""
+    check); every point then gets ``input_point`` and its systematic terms.  ``controller_of()``: the controller
+    the hook is given to (at its construction: called only when a point is recorded)."""
 
-    def __init__(self, controller, channel, streams, uncertainty: dict) -> None:
-        self.controller, self.channel, self.streams = controller, channel, streams
+    def __init__(self, controller_of, channel, streams, uncertainty: dict) -> None:
+        self._controller_of, self.channel, self.streams = controller_of, channel, streams
         self.uncertainty = uncertainty
         self.tared = False
+
+    @property
+    def controller(self):
+        return self._controller_of()
 
     def __call__(self, point: dict, t0_s, t1_s) -> None:
         from dyno.analysis.input_torque import input_point, input_systematic, input_zero

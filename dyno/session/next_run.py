@@ -23,9 +23,15 @@ REBUILT_ATTRS = ("rig", "tune_path", "shift_prediction", "control", "inertia", "
 INPUT_COPIES = ("plan.toml",)
 
 
-def abort_on_write_error(controller, run_dir) -> Callable[[BaseException], None]:
-    """The writer's ``on_error``: a log that cannot be written aborts the test into the safe state."""
+def abort_on_write_error(controller_of: Callable[[], object], run_dir) -> Callable[[BaseException], None]:
+    """The writer's ``on_error``, given to its constructor: a log that cannot be written aborts the test
+    (``controller_of()``: the controller built after the writer, it is given the writer) into the safe state.  A
+    write that fails before the controller exists (the writer's own ``start`` record) is kept in the writer's
+    ``error``, as it always was."""
     def on_error(exc) -> None:
+        controller = controller_of()
+        if controller is None:
+            return
         controller.abort("disk_full", f"cannot write the run log ({getattr(exc, 'strerror', None) or exc}: "
                          f"{getattr(exc, 'filename', '') or run_dir}): safe state; what was recorded before stays "
                          "readable")
@@ -60,9 +66,14 @@ def open_next_log(ctx, old_dir: Path, new_dir: Path) -> NextLog:
         engine_map = engine_map.at_ambient(amb.temp_c, amb.dry_pressure_kpa)
         meta["ambient"] = amb.to_dict()
     tune = old_dir / "tune.toml"
+
+    def writing_controller():  # the session's controller once it writes this log (start_next_controller)
+        return ctx.controller if ctx.controller.writer is writer else None
+
     writer = RunWriter(new_dir, meta, calibration=old.calibration.to_dict(),
                        engine_map_text=(old_dir / "engine_map.csv").read_text(),
-                       tune_text=tune.read_text() if tune.is_file() else None)
+                       tune_text=tune.read_text() if tune.is_file() else None,
+                       on_error=abort_on_write_error(writing_controller, new_dir))
     for name in INPUT_COPIES:
         if (old_dir / name).is_file() and not (new_dir / name).exists():
             shutil.copy2(old_dir / name, new_dir / name)
@@ -75,19 +86,21 @@ def start_next_controller(ctx, log: NextLog, *, loop, stop_watchdog, listeners=(
     loop runs it; the watchdog's stop callable).  ``listeners``: the face's controller listeners, given at
     construction; ``stop_watchdog``: what :func:`dyno.session.safety.start_watchdog` returned."""
     from dyno.control.controller import TestController
-    from dyno.session.safety import rehook_watchdog
+    from dyno.session.safety import next_watchdog, rehook_watchdog, uncuttable_warning, watchdog_beat
 
     old, poller = ctx.controller, ctx.poller
     poller.listeners.remove(ctx.writer.events)
     old.detach()  # an ended controller checks nothing, but costs a call per poll
+    wd = next_watchdog(ctx, loop)
     ctrl = TestController(poller, old.act, old.calibration, log.engine_map, plan=old.plan, limits=old.limits,
                           writer=log.writer, auto_go=False, on_wait_engine=old.on_wait_engine,
                           runner_for=old.runner_for, from_idle=old.from_idle,
                           **{name: getattr(old, name) for name in REBUILT_ATTRS},
                           point_hooks=old.point_hooks,  # (the simulated rig's truth: keyed by time, not by run)
-                          result_hooks=old.result_hooks, listeners=listeners)
-    log.writer.on_error = abort_on_write_error(ctrl, log.run_dir)
+                          result_hooks=old.result_hooks, listeners=(uncuttable_warning(), *listeners),
+                          # (the beat aborts through the controller it beats for: called once it runs)
+                          heartbeat_hooks=(watchdog_beat(wd, lambda: ctrl, ctx.rig_cfg.actuator.watchdog_s),))
     poller.listeners.append(log.writer.events)
     ctx.ambient = dict(log.meta.get("ambient") or {})
     ctx.writer, ctx.controller = log.writer, ctrl
-    return ctrl, rehook_watchdog(ctx, ctrl, loop, stop_watchdog)
+    return ctrl, rehook_watchdog(ctx, wd, loop, stop_watchdog)

@@ -19,7 +19,7 @@ from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
 from dyno.session.next_run import abort_on_write_error
-from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
+from dyno.session.safety import kick_on_polls, make_watchdog, start_watchdog, uncuttable_warning, watchdog_beat
 from dyno.session.shift_prediction import shift_prediction_for
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import registry  # the plan modes' runners, handed to the controller (_build)
@@ -73,6 +73,7 @@ class RunSpec:
     clock: object = None
     on_belt_table_build: object = None  # callable(tune name): the simulated CVT solves its table (a minute)
     runners: dict = field(default_factory=dict)  # this run's own plan modes beside the shipped ones (tests, benches)
+    listeners: tuple = ()  # the face's controller listeners, callables(controller): given to its constructor
 
 
 RunOptions = RunSpec  # (the name the tests and benches use)
@@ -210,6 +211,10 @@ def build(opts: RunOptions, now_s) -> RunContext:
     uncertainty = systematic_terms(opts, rig_cfg, calibration, engine_map)
     from dyno.session.drills_wiring import check_wiring_drill
 
+    if opts.drills and not opts.sim:
+        from dyno.errors import ConfigError
+
+        raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
     for d in opts.drills:  # before anything is built or written: a drill this rig cannot have is bad input
         check_wiring_drill(d, rig_cfg, opts.sim and opts.mock_pins)
     hw = None
@@ -341,10 +346,15 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
         meta["plan_source"] = opts.plan.source
         meta["plan_text_sha256"] = hashlib.sha256(plan_text.encode()).hexdigest()
     out = Path(opts.out_dir) if opts.out_dir else default_run_dir()  # (last: a bad input leaves no directory)
+    # Every callback is given to its part's constructor.  Those that act on the controller (the log's write error,
+    # the watchdog's beat, the points' terms) are made before it and reach it when called (it exists by then).
+    controller = None
     writer = RunWriter(out, meta, calibration=calibration.to_dict(),
                        engine_map_text=Path(opts.engine_map_path).read_text(), tune_text=tune_text,
-                       plan_text=plan_text)
+                       plan_text=plan_text,  # (a re-arm's next run: the same error callback, dyno.session.next_run)
+                       on_error=abort_on_write_error(lambda: controller, out))
     poller.listeners.append(writer.events)
+    watchdog = make_watchdog(actuators, hw, estop, rig_cfg.actuator.watchdog_s, now_s)
     controller = TestController(poller, actuators, calibration, engine_map, plan=plan, limits=limits,
                                 writer=writer, auto_go=opts.auto_go,
                                 on_wait_engine=sim.start_engine if sim else None,
@@ -353,38 +363,61 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 tune_path=tune_path,  # (stored with the run; the faces' overlay)
                                 shift_prediction=shift_prediction_for(tune, engine_map),  # the characterisations'
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
-                                clock=clock)  # rig time for the plan (None: the loop's; safety stays on the loop)
-    writer.on_error = abort_on_write_error(controller, out)  # (a re-arm's next run: the same, dyno.session.next_run)
-    watchdog = make_watchdog(controller, poller, hw, estop, rig_cfg.actuator.watchdog_s, now_s)
-    warn_when_uncuttable(controller)  # the kill-path probe found no way to stop the engine: say so at once
+                                clock=clock,  # rig time for the plan (None: the loop's; safety stays on the loop)
+                                point_hooks=_point_hooks(uncertainty, input_channel, poller, sim, lambda: controller),
+                                result_hooks=_result_hooks(sim),
+                                heartbeat_hooks=(watchdog_beat(watchdog, lambda: controller,
+                                                               rig_cfg.actuator.watchdog_s),),
+                                # the kill-path probe found no way to stop the engine: said at once; the face's own
+                                listeners=(uncuttable_warning(), *opts.listeners))
+    kick_on_polls(poller, watchdog)
+    drills = None
+    if opts.drills:  # armed when the test starts (RunningTest.start), from the first frame
+        from dyno.session.drills import DrillRunner
+
+        drills = DrillRunner(opts.drills, asyncio.get_running_loop(), sim_now=clock.now if clock is not None else None,
+                             speed=clock.speed if clock is not None else 1.0)
+    if sim is not None:
+        poller.listeners.append(sim.truth)
     ctx = RunContext(poller, controller, writer, sim, thermometer, rig_cfg=rig_cfg, hw=hw,
                      ambient=ambient.to_dict(), ambient_sensor=ambient_dev, link_meter=link_meter,
-                     twin=twin, estop=estop, watchdog=watchdog,
+                     twin=twin, estop=estop, watchdog=watchdog, drills=drills,
                      pi_outputs=hw is not None or twin is not None,  # the outputs are the Pi's code (signal path)
                      host_to_sim=clock.host_to_sim if clock is not None else None,  # drills' true-time latencies
                      u95_terms=uncertainty.get("u95_terms"))  # what each term assumes (dyno.session.summary)
-    unc = uncertainty
-    if unc:
-        from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic
-
-        controller.point_hooks.append(lambda point, t0, t1: point.update(point_systematic(
-            point, calibration_rel_for(unc["torque_calibration_rel"], point, controller.tare),
-            unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc, point))))
-    if input_channel is not None:  # after the map's terms: its figure stays beside
-        controller.point_hooks.append(app_input.InputPointHook(controller, input_channel, poller.streams, unc or {}))
     if sim is not None:
-        poller.listeners.append(sim.truth)
-        controller.point_hooks.append(sim.truth.point_hook)
-        from dyno.sim.driven import results_truth_hook
-
-        controller.result_hooks.append(results_truth_hook(sim.model))
-
         def audit(raw: bytes) -> None:
             if not sim.audit(raw):
                 ctx.audit["corrupted_accepted"] += 1
 
         reader.session.frame_listeners.append(audit)
     return ctx
+
+
+def _result_hooks(sim) -> tuple:
+    """The simulated rig's truths added to a characterisation's figures."""
+    if sim is None:
+        return ()
+    from dyno.sim.driven import results_truth_hook
+
+    return (results_truth_hook(sim.model),)
+
+
+def _point_hooks(unc: dict, input_channel, poller, sim, controller_of) -> list:
+    """What every point gets beside its reduction, in order: the systematic terms, the input channel's figure
+    (after the map's terms: it stays beside), the simulated rig's truth."""
+    hooks = []
+    if unc:
+        from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic
+
+        hooks.append(lambda point, t0, t1: point.update(point_systematic(
+            point, calibration_rel_for(unc["torque_calibration_rel"], point, controller_of().tare),
+            unc["engine_map_rel"], unc["air_rel"], **interval_basis(unc, point))))
+    if input_channel is not None:
+        hooks.append(app_input.InputPointHook(controller_of, input_channel, poller.streams, unc or {}))
+    if sim is not None:
+        hooks.append(sim.truth.point_hook)
+    return hooks
 
 
 def _runner_for(extra: dict):
@@ -425,6 +458,97 @@ def _asdict(obj):
     return obj
 
 
+class RunningTest:
+    """A built run's test on the running loop: the one way ``dyno run`` (:func:`run_test_async`) and ``dyno ui``
+    (:class:`dyno.ui.session.LiveSession`) run it, between :func:`build` and the run's close.
+
+    Constructing it on the real rig with ``exit_guard`` (a long-lived face: the UI) installs a
+    :class:`~dyno.hw.safety.SafetyGuard` (the safe state on SIGTERM and at the interpreter's exit) until
+    :meth:`release_guard`.  :meth:`start`: the drills armed from the first frame, the watchdog beside the loop, the
+    poller's task; :meth:`run_controller` (headless) or :meth:`start_controller` (a task: the UI) runs the test;
+    :meth:`rearm` hands the rig to the next run's controller (:mod:`dyno.session.next_run`); :meth:`stop` ends the
+    polls, the drills and the watchdog.
+    """
+
+    def __init__(self, ctx: RunContext, loop, *, exit_guard: bool = False) -> None:
+        self.ctx = ctx
+        self.loop = loop
+        self.poll_task: asyncio.Task | None = None
+        self._stop_watchdog = None
+        self.guard = None
+        if exit_guard and ctx.hw is not None:  # pragma: no cover - needs the rig
+            import signal
+
+            from dyno.hw.safety import SafetyGuard
+
+            self.guard = SafetyGuard(ctx.controller.act, signals=(signal.SIGTERM,))
+            self.guard.__enter__()
+
+    @property
+    def started(self) -> bool:
+        return self.poll_task is not None
+
+    def start(self, *, signals: RunSignals | None = None, before_first_poll=None) -> None:
+        """The safety first (the watchdog started, the drills checked and armed from the first frame), then
+        ``signals`` (the run's handlers, held while it was built) handed the context, then the poller's task
+        (``before_first_poll()`` in it, in the same loop step as the first poll: the UI's rig time zero)."""
+        ctx = self.ctx
+        self._stop_watchdog = start_watchdog(ctx, self.loop)
+        if ctx.drills is not None:
+            ctx.drills.arm_from_first_frame(ctx)
+        if signals is not None:
+            signals.armed(ctx)
+        self.poll_task = asyncio.create_task(self._polls(before_first_poll), name="poller")
+
+    async def _polls(self, before_first_poll) -> None:
+        if before_first_poll is not None:
+            before_first_poll()
+        await self.ctx.poller.run()  # (its first tick reads the bus before it first awaits)
+
+    async def run_controller(self, max_s: float | None):
+        """Run the controller to its end in this task (at most ``max_s``: then aborted); returns its state."""
+        ctrl = self.ctx.controller
+        try:
+            return await asyncio.wait_for(ctrl.run(), max_s)
+        except TimeoutError:
+            ctrl.abort("timeout", f"run exceeded {max_s:.0f} s")
+            return ctrl.state
+
+    def start_controller(self) -> asyncio.Task:
+        """The context's controller run as a task (the UI's: its loop is the app's)."""
+        return asyncio.create_task(self.ctx.controller.run(), name="controller")
+
+    def rearm(self, log, *, listeners=()):
+        """The next run's controller over the same rig and watchdog (:func:`dyno.session.next_run.start_next_controller`);
+        returns it, not started."""
+        from dyno.session.next_run import start_next_controller
+
+        ctrl, self._stop_watchdog = start_next_controller(self.ctx, log, loop=self.loop,
+                                                          stop_watchdog=self._stop_watchdog, listeners=listeners)
+        return ctrl
+
+    async def stop(self, *, cancel=()) -> None:
+        """The drills cancelled, the polls stopped and the ``cancel`` tasks cancelled, all awaited, the watchdog
+        stopped."""
+        ctx = self.ctx
+        if ctx.drills is not None:
+            ctx.drills.cancel()
+        for t in reversed(list(cancel)):
+            t.cancel()
+        if self.poll_task is not None:
+            ctx.poller.stop()
+        await asyncio.gather(*cancel, *([self.poll_task] if self.poll_task is not None else []),
+                             return_exceptions=True)
+        if self._stop_watchdog is not None:
+            self._stop_watchdog()
+            self._stop_watchdog = None
+
+    def release_guard(self) -> None:
+        if self.guard is not None:  # pragma: no cover - needs the rig
+            self.guard.__exit__(None, None, None)
+            self.guard = None
+
+
 async def run_test_async(opts: RunOptions) -> dict:
     loop = asyncio.get_running_loop()
     # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
@@ -438,26 +562,15 @@ async def run_test_async(opts: RunOptions) -> dict:
         raise
     if opts.setup:
         opts.setup(ctx)
-    stop_watchdog = start_watchdog(ctx, loop)
-    arm_drills(ctx, opts.drills, loop)
-    if signals is not None:
-        signals.armed(ctx)
-    poll_task = asyncio.create_task(ctx.poller.run(), name="poller")
+    run = RunningTest(ctx, loop)
+    run.start(signals=signals)
     status = "fail"
     try:
-        try:
-            state = await asyncio.wait_for(ctx.controller.run(), opts.max_sim_s if opts.sim else None)
-        except TimeoutError:
-            ctx.controller.abort("timeout", f"run exceeded {opts.max_sim_s:.0f} s")
-            state = ctx.controller.state
+        state = await run.run_controller(opts.max_sim_s if opts.sim else None)
         status = "success" if state.value == "done" else "abort"
         await end_test(ctx, finish_release=opts.finish_release)  # (the UI's session ends its tests through it too)
     finally:
-        if ctx.drills is not None:
-            ctx.drills.cancel()
-        ctx.poller.stop()
-        await asyncio.gather(poll_task, return_exceptions=True)
-        stop_watchdog()
+        await run.stop()
         if signals is not None:
             signals.restore()
         try:
@@ -465,19 +578,6 @@ async def run_test_async(opts: RunOptions) -> dict:
         finally:
             close_rig(ctx)
     return result
-
-
-def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.0) -> None:
-    """Schedule ``drills`` (dyno.session.drills.Drill) from the run's first accepted frame."""
-    if not drills:
-        return
-    if ctx.sim is None:
-        from dyno.errors import ConfigError
-
-        raise ConfigError("command line", "--drill", "drills run on the simulated rig only (--sim)")
-    from dyno.session.drills import DrillRunner
-
-    ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(ctx.poller)
 
 
 def run_test(opts: RunOptions) -> dict:

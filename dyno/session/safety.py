@@ -56,57 +56,51 @@ def close_twin(ctx) -> None:
         close()
 
 
-class _TripRecord:
-    """What the watchdog's trip callback saw (its thread), reported once by the controller's heartbeat."""
+def make_watchdog(actuators, hw, estop, timeout_s: float, now_s):
+    """The run's watchdog, not an asyncio task: it safes the rig if the loop stops beating.
 
-    def __init__(self) -> None:
-        self.silent_s: float | None = None
-        self.t_s: float | None = None
-        self.reported = False
-
-
-def make_watchdog(controller, poller, hw, estop, timeout_s: float, now_s):
-    """A watchdog that is not an asyncio task: it safes the rig if the loop stops beating.
-
-    On a :class:`~dyno.clock.VirtualTimeLoop` it is a background ticker (the loop's
-    stand-in for an OS thread: it runs while a callback blocks the loop); on a real
-    loop it is a daemon thread.  The controller's safety heartbeat feeds it, and reports its trip.
-    ``hw``: the real rig (its own watchdog, built over the real outputs), else None.
+    ``hw``: the real rig, whose own watchdog (built by HardwareRig over the real outputs, the E-stop's level among
+    its checks) is the run's; else one over ``actuators`` (the twin's E-stop input checked on every look).  On a
+    :class:`~dyno.clock.VirtualTimeLoop` it runs as a background ticker (the loop's stand-in for an OS thread: it
+    runs while a callback blocks the loop), on a real loop as a daemon thread (:func:`start_watchdog`).  The
+    controller's safety heartbeat feeds it and reports its trip (:func:`watchdog_beat`, given to the controller's
+    constructor); the polls kick it too (:func:`kick_on_polls`).
     """
     from dyno.hw.safety import Watchdog
 
-    trip = _TripRecord()
-
-    def on_trip(silent_s: float) -> None:
-        trip.silent_s = silent_s
-        trip.t_s = wd.clock.now()
+    wd = getattr(hw, "watchdog", None)
+    if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
+        return wd
 
     class _Clock:  # until start_watchdog() gives it the loop's clock
         now = staticmethod(now_s)
 
-    wd = getattr(hw, "watchdog", None)
-    if wd is not None:  # the rig's own (HardwareRig built it over the real outputs)
-        wd.on_trip = on_trip
-    else:
-        wd = Watchdog(controller.act, timeout_s, clock=_Clock(), on_trip=on_trip)
-        if estop is not None:  # the twin's E-stop input: the rig's level check, every look
-            wd.level_checks.append(estop.poll)
+    return Watchdog(actuators, timeout_s, clock=_Clock(), level_checks=(estop.poll,) if estop is not None else ())
+
+
+def watchdog_beat(wd, controller_of, timeout_s: float):
+    """The controller's heartbeat hook (a ``heartbeat_hooks`` entry, given at its construction): feeds ``wd`` and
+    reports its trip once, as an abort of ``controller_of()`` (the controller being built: called only on a beat)."""
+    reported = []
 
     def beat() -> None:
-        if wd.tripped and not trip.reported:
-            trip.reported = True
-            if trip.silent_s is not None:
-                controller.abort("watchdog", f"control loop silent for {trip.silent_s:.3f} s (watchdog "
-                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", trip.t_s)
+        if wd.tripped and not reported:
+            reported.append(True)
+            controller = controller_of()
+            if wd.silent_s is not None:
+                controller.abort("watchdog", f"control loop silent for {wd.silent_s:.3f} s (watchdog "
+                                 f"{timeout_s:.2f} s): the watchdog put the rig in its safe state", wd.tripped_at_s)
             else:  # a look that raised: safed, logged, still watching
                 errs = getattr(wd, "errors", None) or ["tripped"]
                 controller.abort("watchdog", f"{errs[0]}: the watchdog put the rig in its safe state")
         wd.kick()
 
-    controller.heartbeat_hooks.append(beat)
-    # Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on).
+    return beat
+
+
+def kick_on_polls(poller, wd) -> None:
+    """Polls are signs of life too (the controller's heartbeat stops with the test; the UI polls on)."""
     poller.listeners.append(_WatchdogKick(wd))
-    return wd
 
 
 class _WatchdogKick:
@@ -119,15 +113,22 @@ class _WatchdogKick:
         self.wd.kick()
 
 
-def rehook_watchdog(ctx, controller, loop, stop_running):
-    """The watchdog's heartbeat aborts through the controller: hook it to a re-armed session's new one.
+def next_watchdog(ctx, loop):
+    """The watchdog a re-armed session's next controller beats for (made before it, :func:`watchdog_beat`): the
+    rig's own runs on; the session's own is replaced by a new one (:func:`rehook_watchdog` starts it)."""
+    return make_watchdog(ctx.controller.act, ctx.hw, ctx.estop, ctx.rig_cfg.actuator.watchdog_s, loop.time)
+
+
+def rehook_watchdog(ctx, wd, loop, stop_running):
+    """Hand the polls' kick and ``ctx.watchdog`` to ``wd`` (:func:`next_watchdog`, the new controller built).
     The rig's own watchdog thread runs on and reports to the new controller; the session's own (no ``ctx.hw``)
-    is stopped (``stop_running``) and a new one started beside the new controller.  Returns its stop callable."""
+    is stopped (``stop_running``) and ``wd`` started beside the new controller.  Returns its stop callable."""
     poller = ctx.poller
     poller.listeners[:] = [fn for fn in poller.listeners if not isinstance(fn, _WatchdogKick)]
     if ctx.hw is None and stop_running is not None:
         stop_running()
-    ctx.watchdog = make_watchdog(controller, poller, ctx.hw, ctx.estop, ctx.rig_cfg.actuator.watchdog_s, loop.time)
+    ctx.watchdog = wd
+    kick_on_polls(poller, wd)
     return start_watchdog(ctx, loop) if ctx.hw is None else stop_running
 
 
@@ -162,9 +163,10 @@ KILL_LEAD_WARNING = ("DANGER: the engine cannot be cut by dyno: neither the Pi's
                      "shut-off; the E-stop's S1.2 contact on the kill wire may not stop it either.")
 
 
-def warn_when_uncuttable(controller, stream=None) -> None:
-    """On the controller's abort ``kill_path_failed`` with ``path`` ``kill_lead``: one line on stderr at once
-    (whatever the face: ``dyno run``, ``dyno ui``), for the person at the rig (issue 49)."""
+def uncuttable_warning(stream=None):
+    """A controller listener (given at its construction): on its abort ``kill_path_failed`` with ``path``
+    ``kill_lead``, one line on stderr at once (whatever the face: ``dyno run``, ``dyno ui``), for the person at
+    the rig (issue 49)."""
     import sys
 
     said = []
@@ -175,4 +177,4 @@ def warn_when_uncuttable(controller, stream=None) -> None:
         said.append(True)
         print(f"dyno: {KILL_LEAD_WARNING}", file=stream or sys.stderr, flush=True)
 
-    controller.listeners.append(listener)
+    return listener

@@ -71,7 +71,7 @@ class RearmMixin:
         if why:
             return None, why
         from dyno.errors import DynoError
-        from dyno.session.next_run import open_next_log, start_next_controller
+        from dyno.session.next_run import open_next_log
 
         old_dir = Path(self.ctx.writer.run_dir)
         new_dir = next_run_dir(old_dir, self.opts.out_dir)
@@ -89,9 +89,7 @@ class RearmMixin:
         if rearm_nano is not None:  # the Nano latched its run-enable off after a drop: the limits again
             rearm_nano()
         reported = not self._close_log()  # (closed at the test's end: its report.html is already under way)
-        ctrl, self._stop_watchdog = start_next_controller(self.ctx, log, loop=self.loop,
-                                                          stop_watchdog=self._stop_watchdog,
-                                                          listeners=(self._on_controller,))
+        ctrl = self.running.rearm(log, listeners=(self._on_controller,))
         self.controller = ctrl
         self._trim_history()
         if self.ctx.drills is not None:
@@ -99,7 +97,7 @@ class RearmMixin:
         self._pause_points = 0
         self.state_since_s = self.loop.time()
         self._tasks = [t for t in self._tasks if t.get_name() != "controller"]
-        self._tasks.append(asyncio.create_task(ctrl.run(), name="controller"))
+        self._tasks.append(self.running.start_controller())
         self.run_dirs.append(new_dir)
         if not reported:
             self._reports.append(asyncio.create_task(finish_in_background(old_dir), name="report"))

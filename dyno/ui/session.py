@@ -58,10 +58,15 @@ class LiveSession(RearmMixin):
                                    ("engine_map_path", opts.engine_map_path)) if v}
         run_opts = RunSpec(sim=opts.sim, seed=opts.seed, auto_go=False, out_dir=opts.out_dir,
                            rig_path=opts.rig_path, plan=opts.plan, clock=self.clock if opts.sim else None,
-                           mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient, drills=list(opts.drills),
+                           mock_pins=opts.sim and opts.mock_pins, ambient=opts.ambient,
+                           drills=list(opts.drills) if opts.sim else [],  # (sim only)
                            firmware_elf=opts.firmware_elf if opts.sim else None,
-                           sim_params=opts.sim_params if opts.sim else None, **paths)
-        self.guard = None
+                           sim_params=opts.sim_params if opts.sim else None,
+                           listeners=(self._on_controller,), **paths)
+        self._tasks: list[asyncio.Task] = []  # the controller's and the rest rate's (the polls: self.running's)
+        self.closed = False
+        self._after_task: asyncio.Task | None = None  # the ended test's release, zero, log and report (_end_test)
+        self.state_since_s = loop.time()
         self.run_dir_removed = False  # set by close() when a simulated session never started a test
         self.started = False
         self.on_signal = None  # callable(exit_code) after a signal's abort (the app quits)
@@ -87,32 +92,23 @@ class LiveSession(RearmMixin):
             self._signals.armed(self.ctx)
 
     def _build(self, opts, run_opts, build, loop) -> None:
-        if opts.sim:  # paced from the scaled clock by the root: the controller's clock, actuators' clock, polls, ring
-            self.ctx = build(run_opts, self.sim_now)
-        else:  # pragma: no cover - needs the rig
-            from dyno.hw.safety import SafetyGuard
+        from dyno.session.root import RunningTest
 
-            self.ctx = build(run_opts, loop.time)
-            # Safe state on SIGTERM and at exit; Ctrl+C reaches the app as a key (raw mode) = E-STOP.
-            import signal
-
-            self.guard = SafetyGuard(self.ctx.controller.act, signals=(signal.SIGTERM,))
-            self.guard.__enter__()
+        # the simulated rig paced from the scaled clock by the root: the controller's clock, actuators', polls, ring
+        self.ctx = build(run_opts, self.sim_now if opts.sim else loop.time)
+        # the test is run as `dyno run` runs it; on the rig with the guard of a long-lived face: the safe state on
+        # SIGTERM and at exit (Ctrl+C reaches the app as a key, raw mode: the E-STOP)
+        self.running = RunningTest(self.ctx, loop, exit_guard=True)
         self.poller = self.ctx.poller
         self.controller = self.ctx.controller
-        self._stop_watchdog = None
-        self._tasks: list[asyncio.Task] = []
-        self.closed = False
         self.manual = False
         self._jog_handle = None
         self._pause_points = 0
         # progress: when the controller last changed state (MEASURE's elapsed time), when each point arrived
         self.state_since_s = loop.time()
-        self.controller.listeners.append(self._on_controller)
         self.run_dirs: list[Path] = [Path(self.ctx.writer.run_dir)]  # this session's runs, oldest first
         self._reports: list[asyncio.Task] = []  # report.html of re-armed-from runs, written in the background
         self._drills_fired_before = 0  # drills fired in earlier runs of the session (re-arm)
-        self._after_task: asyncio.Task | None = None  # the ended test's release, zero, log and report (_end_test)
         self._closed_writer = None  # the run log closed last (each is closed once: at the test's end, or the quit)
 
     @property
@@ -133,27 +129,19 @@ class LiveSession(RearmMixin):
         if self.closed or self.controller.state in FINISHED:  # (a signal during start-up: nothing starts)
             return
         self.started = True
-        from dyno.session.root import arm_drills, start_watchdog
-
         # The safety path does not depend on the UI: the watchdog is a thread, the checks run
         # in the poller and the controller's own heartbeat, drills act on the rig itself.
-        self._stop_watchdog = start_watchdog(self.ctx, self.loop)
-        arm_drills(self.ctx, self.opts.drills if self.opts.sim else [], self.loop, sim_now=self.sim_now,
-                   speed=self.speed)
-        restart = self.ctx.sim is not None
-        self._tasks = [asyncio.create_task(self._poll_from_rig_zero(restart), name="poller"),
-                       asyncio.create_task(self.controller.run(), name="controller")]
+        self.running.start(before_first_poll=self._rig_time_zero if self.ctx.sim is not None else None)
+        self._tasks = [self.running.start_controller()]
 
-    async def _poll_from_rig_zero(self, restart: bool) -> None:
-        """The poller, its first poll in the same loop step as the simulated rig's time zero.
+    def _rig_time_zero(self) -> None:
+        """The simulated rig's time zero, in the same loop step as the poller's first poll (the test's start).
 
         The rig's time starts at the first poll, as a headless run's does: with ``restart`` the clock is set back
         to 0 here, so the building and the first screen take no rig time (rig time running through them lets the
         idling engine's edges and the ADC overfill the simulated Nano's 64-event ring, counted as lost before GO).
         """
-        if restart:
-            self.clock.restart()
-        await self.poller.run()  # (its first tick reads the bus before it first awaits)
+        self.clock.restart()
 
     def _on_hangup(self, signum: int) -> None:
         import signal
@@ -368,22 +356,12 @@ class LiveSession(RearmMixin):
             # before GO: a safe state entered then (a watchdog trip when re-armed) powers the stroke too,
             # and a quit at once recorded it still "releasing" (rig_safe false, the pads never on the rotor)
             await finish_release(self.ctx, poll_s=0.05, pads_only=getattr(self, "hung_up", False))
-        for t in reversed(self._tasks):
-            if t.get_name() == "poller":
-                self.poller.stop()
-            else:
-                t.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
-        if self.ctx.drills is not None:
-            self.ctx.drills.cancel()
-        if self._stop_watchdog is not None:
-            self._stop_watchdog()
+        await self.running.stop(cancel=self._tasks)  # the polls, the controller, the drills, the watchdog
         self._restore_signals()
         self._close_log()
         if self._reports:  # the re-armed-from runs' reports (usually long done)
             await asyncio.wait(self._reports, timeout=60.0)
-        if self.guard is not None:  # pragma: no cover - rig only
-            self.guard.__exit__(None, None, None)
+        self.running.release_guard()  # (the rig's: its release stroke finished, the pins released)
         if self.ctx.twin is not None:  # --mock-pins: release the mock pins (the record is closed)
             from dyno.session.safety import close_twin
 

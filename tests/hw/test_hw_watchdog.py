@@ -193,3 +193,46 @@ def test_watchdog_thread_cuts_the_engine_while_the_frozen_loop_holds_the_drivers
         assert killed_at[0] < result["resumed_at"] and idle_at[0] < result["resumed_at"]
         assert killed_at[0] - result["blocked_at"] <= wd.timeout_s + wd.period_s + 0.15  # (scheduling: see above)
         assert wd.tripped and hw.actuators.latched  # (the driver's own safe state, once the lock was free)
+
+
+def test_the_watchdog_keeps_its_trip_and_the_sessions_beat_reports_it_once(rig, factory, clock):
+    """The trip as the look saw it is the watchdog's own (``silent_s``, ``tripped_at_s``): the session's beat, given
+    to the controller's constructor before the controller exists, reports it once as a watchdog abort (issue 50: no
+    ``on_trip`` set on the rig's own watchdog after it is built); a look that raised has no ``silent_s``."""
+    from dyno.session.safety import watchdog_beat
+
+    act = GpioActuators(rig, pin_factory=factory, clock=clock)
+    act.finish_release()
+    seen = []
+    dog = Watchdog(act, 0.5, clock=clock, on_trip=seen.append, level_checks=())
+    aborts = []
+
+    class Ctrl:
+        def abort(self, cause, detail, t_s=None):
+            aborts.append((cause, detail, t_s))
+
+    ctrl = None
+    beat = watchdog_beat(dog, lambda: ctrl, 0.5)
+    ctrl = Ctrl()
+    act.tick()
+    beat()
+    assert dog.silent_s is None and not aborts
+    clock.advance(0.7)
+    assert dog.check()
+    assert dog.silent_s == seen[0] and dog.silent_s >= 0.7 and dog.tripped_at_s == clock.now()
+    beat()
+    beat()
+    assert len(aborts) == 1 and aborts[0][0] == "watchdog" and aborts[0][2] == dog.tripped_at_s
+    assert f"silent for {dog.silent_s:.3f} s" in aborts[0][1]
+
+    def broken():
+        raise OSError(5, "E-stop input read failed")
+
+    act.finish_release()
+    act.clear_latch()
+    raised = Watchdog(act, 0.5, clock=clock, level_checks=(broken,))
+    raised.check()
+    assert raised.tripped and raised.silent_s is None and raised.tripped_at_s is None
+    watchdog_beat(raised, lambda: ctrl, 0.5)()
+    assert aborts[-1][0] == "watchdog" and "OSError" in aborts[-1][1] and aborts[-1][2] is None
+    act.close()

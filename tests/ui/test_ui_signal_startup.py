@@ -38,7 +38,7 @@ def test_signal_during_build_aborts_once_built_and_leaves_nothing(tmp_path, monk
         assert codes == [128 + signal.SIGTERM]
         assert s.controller.state is State.ABORTED and s.controller.aborts[0]["cause"] == "signal"
         s.start()  # the app's start-up may still call it: nothing starts after the signal
-        assert not s.started and not {t.get_name() for t in s._tasks} & {"poller", "controller"}
+        assert not s.started and not s.running.started and not {t.get_name() for t in s._tasks} & {"controller"}
         m = s.sim.model  # the physics: nothing moved, nothing runs
         assert m.throttle_frac == 0.0 and not m.engine_enabled and m.actuator_mm <= m.brake.a0_mm
         await s.close("signal")
