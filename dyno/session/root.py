@@ -364,7 +364,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
                                 shift_prediction=shift_prediction_for(tune, engine_map),  # the characterisations'
                                 input_channel=input_channel,  # the live screen's T_in; tared at the first point
                                 clock=clock,  # rig time for the plan (None: the loop's; safety stays on the loop)
-                                point_hooks=_point_hooks(uncertainty, input_channel, poller, sim, lambda: controller),
+                                point_hooks=_point_hooks(uncertainty, input_channel, poller, sim, lambda: ctx.controller),
                                 result_hooks=_result_hooks(sim),
                                 heartbeat_hooks=(watchdog_beat(watchdog, lambda: controller,
                                                                rig_cfg.actuator.watchdog_s),),
@@ -405,7 +405,8 @@ def _result_hooks(sim) -> tuple:
 
 def _point_hooks(unc: dict, input_channel, poller, sim, controller_of) -> list:
     """What every point gets beside its reduction, in order: the systematic terms, the input channel's figure
-    (after the map's terms: it stays beside), the simulated rig's truth."""
+    (after the map's terms: it stays beside), the simulated rig's truth.  ``controller_of``: the run's
+    controller now (a re-arm's next one takes the hooks over: its own tare, its own log)."""
     hooks = []
     if unc:
         from dyno.analysis.systematic import calibration_rel_for, interval_basis, point_systematic

@@ -40,6 +40,14 @@ def test_a_rearmed_run_is_wired_at_construction_and_its_log_error_aborts_it(tmp_
             kicks = [fn for fn in s.poller.listeners if isinstance(fn, _WatchdogKick)]
             assert len(kicks) == 1 and kicks[0].wd is s.ctx.watchdog and s.ctx.watchdog is not first_wd
             assert first._on_poll not in s.poller.listeners and ctrl._on_poll in s.poller.listeners
+            # the points' systematic terms read the run's own tare (the next controller's, not the ended one's)
+            first.tare, ctrl.tare = {"u_nm": 0.0}, {"u_nm": 2.0}
+            point = dict(first.points[0]) if first.points else {
+                "torque_secondary_nm": 10.0, "efficiency": 0.8, "efficiency_sem": 0.002, "efficiency_ci95": 0.004,
+                "rpm_primary": 3000.0, "rpm_secondary": 3000.0, "throttle_frac": 1.0, "power_in_w": 4000.0}
+            point["torque_secondary_nm"] = 10.0
+            ctrl.point_hooks[0](point, 0.0, 1.0)
+            assert point["efficiency_sys95_calibration"] > 0.8 * 1.96 * 0.2 * 0.9, point  # u 2 N·m of 10 N·m: 20 %
             assert await _until(lambda: ctrl.state is State.WAIT_ENGINE or ctrl.state is State.ARMED, 30)
             # the next log's write error, given to its RunWriter at construction: the next controller aborts
             aborts_before = list(first.aborts)
