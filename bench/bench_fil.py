@@ -69,7 +69,9 @@ def agreement(fil_points: list, emu_points: list) -> float:
         return math.nan
     ok = 0
     for pa in fil_points:
-        pb = min(emu_points, key=lambda p: abs(p["rpm_secondary"] - pa["rpm_secondary"]))
+        # (a grid's cells share speeds: the emulated point of the same throttle, where points carry one)
+        same = [p for p in emu_points if p.get("throttle_frac") == pa.get("throttle_frac")] or emu_points
+        pb = min(same, key=lambda p: abs(p["rpm_secondary"] - pa["rpm_secondary"]))
         ok += abs(pa["efficiency"] - pb["efficiency"]) <= math.hypot(pa["efficiency_ci95"], pb["efficiency_ci95"])
     return ok / len(fil_points)
 
