@@ -67,6 +67,26 @@ def test_fil_short_run_hands_every_physics_event_to_the_host_and_the_elf_holds_t
     assert ctx.sim.model.engine_cut(0.0) is not None  # the timeout's safe state: the chain opened
 
 
+@pytest.mark.quick
+def test_fil_a_shaft_speeding_up_from_a_crawl_gives_a_pulse_per_edge():
+    """A real edge is a pulse of its own however much sooner than the last period it comes (a secondary turning
+    once in 2 s, then engaging: 0.3 s, 0.1 s, 0.02 s); only an edge within the physics' bounce window of a pulse is
+    that pulse's bounce.  (The old rule, a quarter of the last period, made those real edges 20 us spikes that the
+    firmware rejects: the engagement plan aborted through the ELF, "secondary stopped under load".)"""
+    from dyno.sim.elf_firmware import BOUNCE_HIGH_US, MAX_PULSE_US, ElfFirmware
+
+    fw = ElfFirmware(sim_elf())
+    try:
+        for t_s in (1.0, 3.0, 3.3, 3.4, 3.42, 3.4203):  # (the last: 0.3 ms after its edge, in its pulse)
+            fw.capture("secondary", t_s)
+        pending = [item.split(":") for item in fw._pending]
+    finally:
+        fw.close()
+    assert [p[0] for p in pending] == ["h1"] * 5 + ["b1"], pending
+    assert all(float(p[2]) > BOUNCE_HIGH_US for p in pending[:5]), pending  # pulses, not spikes
+    assert float(pending[4][2]) == MAX_PULSE_US  # (5 % of the period before it, 0.1 s: capped)
+
+
 @pytest.fixture(scope="module")
 def fil_thesis_step(tmp_path_factory):
     """The issue's command as a real process: ``dyno run --sim --firmware-elf ELF --headless --json --plan
