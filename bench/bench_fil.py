@@ -152,14 +152,14 @@ def _output(points: int, fig: dict) -> str:
 
 def markdown(rows: list[dict]) -> str:
     lines = ["| plan | seed | FIL state | FIL output | emulated state | emulated output | agreement | frames / events "
-             "lost, late | wall emu s | wall FIL s | ratio | simulated s | judged |",
+             "lost, late | wall emu s | wall FIL s | ratio (CPU) | simulated s | judged |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         agree = "-" if not math.isfinite(r["agreement"]) else f"{r['agreement']:.2f}"
         lines.append(f"| {r['plan']} | {r['seed']} | {r['state'][1]} | {_output(r['points'][1], r['figures'][1])} | "
                      f"{r['state'][0]} | {_output(r['points'][0], r['figures'][0])} | {agree} | "
                      f"{r['frames_lost']} / {r['events_lost']}, {r['late_events']} | {r['wall_s'][0]} | "
-                     f"{r['wall_s'][1]} | {r['wall_ratio']:.1f} | {r['sim_s']:.0f} | "
+                     f"{r['wall_s'][1]} | {r['wall_ratio']:.1f} ({r['cpu_ratio']:.1f}) | {r['sim_s']:.0f} | "
                      f"{'ok' if not r['bad'] else 'BAD: ' + '; '.join(r['bad'])} |")
     return "\n".join(lines)
 
