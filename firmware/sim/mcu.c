@@ -137,6 +137,7 @@ double now_s(void)
 /* ---- batched stepping ------------------------------------------------------------- */
 #define BATCH_MAX_CYCLES (1u << 20)
 static int stop_tag, break_tag;
+static int reset_unwatched;  /* a reset command cleared DDRD/PORTD with no write: D7 not watched since */
 
 static avr_cycle_count_t no_op_timer(avr_t *a, avr_cycle_count_t when, void *param)
 {
@@ -169,6 +170,14 @@ void run_until(uint64_t cycle)
          * ends the run after the instruction that reaches it, as the loop below stops.  What the harness
          * watches between instructions ends a batch at once (batch_break): a write to PORTD or DDRD (the
          * run-enable, D7: timed to the cycle as before) and the TWI ISR's write to TWCR. */
+        if (reset_unwatched) {  /* the first instruction after a reset alone: D7's drop seen after it, as before */
+            reset_unwatched = 0;
+            avr->run_cycle_limit = avr->run_cycle_count = 1;
+            avr->run(avr);
+            if (avr->state == cpu_Crashed || avr->state == cpu_Done)
+                crashed = 1;
+            run_enable_watch();
+        }
         avr->run_cycle_limit = BATCH_MAX_CYCLES;
         avr_cycle_timer_register(avr, cycle - avr->cycle, no_op_timer, &stop_tag);
         while (avr->cycle < cycle && !crashed) {
@@ -405,6 +414,7 @@ int mcu_load(const char *elf)
 void mcu_reset(uint8_t mcusr)
 {
     avr_reset(avr);
+    reset_unwatched = 1;
     /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
     avr->data[MCUSR_ADDR] = mcusr;
     in_isr = trace_vec = -1;
