@@ -36,7 +36,12 @@ EV_LINE_CHARS = 60_000
 #: a Hall sensor's pulse is the magnet's arc, 5 % of a turn; never longer than this
 MAX_PULSE_US = 2000.0
 FIRST_PULSE_US = 500.0
-#: a second edge of the physics inside a pulse is its sensor's bounce: the line rings high this long and falls
+#: an edge of the physics this soon after the start of its sensor's last pulse is that pulse's bounce (the
+#: physics' bounce edge comes 50-500 us after its edge: ``hall_bounce_max_s``); inside the pulse the line rings
+#: high this long and falls, after it the line spikes low as long.  A real edge never comes that soon (one turn
+#: in 0.5 ms is 120,000 rpm), however fast the shaft speeds up: a secondary starting from a crawl (a turn in
+#: seconds) and engaging within the next turn gives real edges, each its own pulse
+BOUNCE_WITHIN_S = 500e-6
 BOUNCE_HIGH_US = 20.0
 #: the Nano is powered (and its sketch set up: its TWI slave answers) this long before the run's time zero, as
 #: on the rig, where it boots when the rig is powered, before the Pi starts a run
@@ -87,12 +92,14 @@ class ElfFirmware:
     address : the firmware's I2C address
     input_fitted : the engine-side AD7171 is wired (its pins driven; the host enables it)
     on_run_enable : ``f(on, t_s, cause)``: the wiring behind D7 (the physics' kill chain)
+    bounce_within_s : an edge this soon after its sensor's last pulse started is that pulse's bounce (the
+        physics' ``hall_bounce_max_s``)
     """
 
     protocol = "v2"
 
     def __init__(self, elf, *, i2c_khz: int = 100, address: int = 0x03, input_fitted: bool = False,
-                 on_run_enable=None, events_ahead=None, harness=None) -> None:
+                 on_run_enable=None, events_ahead=None, harness=None, bounce_within_s: float = BOUNCE_WITHIN_S) -> None:
         self.elf = Path(elf)
         if not self.elf.is_file():
             raise FirmwareElfError(f"firmware ELF not found: {self.elf}")
@@ -120,6 +127,7 @@ class ElfFirmware:
         self._outstanding: list[tuple[str, float | None]] = []  # commands sent whose replies are not read yet
         self._pending: list[str] = []
         self._write: bytes | None = None
+        self._bounce_within_us = float(bounce_within_s) * 1e6
         self._last_edge_us: dict[str, float] = {}
         self._period_us: dict[str, float] = {}
         self.transactions = 0
@@ -280,10 +288,11 @@ class ElfFirmware:
             last = self._last_edge_us.get(pin)
             period = self._period_us.get(pin)
             width = FIRST_PULSE_US if period is None else min(MAX_PULSE_US, 0.05 * period)
-            if last is not None and t_us < last + width:  # inside the pulse: the line bounces high
-                self._pending.append(f"b{pin[1]}:{t_us:.3f}:{BOUNCE_HIGH_US:.1f}")
-            elif last is not None and period is not None and t_us - last < 0.25 * period:
-                self._pending.append(f"{pin}:{t_us:.3f}:{BOUNCE_HIGH_US:.1f}")  # just after it: a short low spike
+            if last is not None and t_us - last <= self._bounce_within_us:  # the last pulse's bounce
+                if t_us < last + width:  # inside the pulse: the line rings high
+                    self._pending.append(f"b{pin[1]}:{t_us:.3f}:{BOUNCE_HIGH_US:.1f}")
+                else:  # just after it: a short low spike
+                    self._pending.append(f"{pin}:{t_us:.3f}:{BOUNCE_HIGH_US:.1f}")
             else:
                 if last is not None:
                     self._period_us[pin] = t_us - last

@@ -360,7 +360,8 @@ class SimRig:
             self.firmware = ElfFirmware(firmware_elf["elf"], i2c_khz=firmware_elf["i2c_khz"],
                                         address=firmware_elf["address"], input_fitted=self.model.input_fitted,
                                         on_run_enable=_d7 if d7_wired else None,
-                                        events_ahead=self.model.events_ahead)
+                                        events_ahead=self.model.events_ahead,
+                                        bounce_within_s=self.model.params.hall_bounce_max_s)
         else:
             self.firmware = EmulatedFirmware(protocol, clock_offset_us=clock_offset_us, clock_ppm=clock_ppm,
                                              input_fitted=self.model.input_fitted, ring_capacity=ring,

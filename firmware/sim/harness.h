@@ -25,6 +25,7 @@ int mcu_load(const char *elf);
 void mcu_reset(uint8_t mcusr);
 void step(void);
 void run_until(uint64_t cycle);
+void batch_break(void);  /* the batched run_until stops after the current instruction */
 double now_s(void);
 avr_int_vector_t *find_vector(int num);
 void print_profile(FILE *o);

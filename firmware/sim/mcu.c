@@ -12,7 +12,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "avr_ioport.h"
 #include "sim_avr.h"
+#include "sim_cycle_timers.h"
 #include "sim_elf.h"
 #include "sim_interrupts.h"
 #include "harness.h"
@@ -132,10 +134,62 @@ double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* ---- batched stepping ------------------------------------------------------------- */
+#define BATCH_MAX_CYCLES (1u << 20)
+static int stop_tag, break_tag;
+static int reset_unwatched;  /* a reset command cleared DDRD/PORTD with no write: D7 not watched since */
+
+static avr_cycle_count_t no_op_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a; (void)when; (void)param;
+    return 0;
+}
+
+/* The batch in progress ends after the current instruction: a cycle timer due now.  (simavr recounts a batch
+ * from the earliest timer whenever one is set or cancelled, so a later recount in the same instruction keeps it.) */
+void batch_break(void)
+{
+    avr_cycle_timer_register(avr, 0, no_op_timer, &break_tag);
+}
+
+static void port_d_write_notify(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)value; (void)param;
+    batch_break();
+}
+
 void run_until(uint64_t cycle)
 {
     double w0 = now_s();
     uint64_t c0 = avr->cycle;
+    if (!trace_out && !cfg_profile && avr->cycle < cycle) {
+        /* Batched: simavr's avr_run_one runs instruction after instruction while no cycle timer is due, no
+         * interrupt is pending and the CPU runs (run_cycle_limit; 1 by default: one instruction per call).
+         * The same instructions at the same cycles as one per call: timers fire after the instruction that
+         * reaches them, interrupts are taken after the instruction that raised them, and a timer at `cycle`
+         * ends the run after the instruction that reaches it, as the loop below stops.  What the harness
+         * watches between instructions ends a batch at once (batch_break): a write to PORTD or DDRD (the
+         * run-enable, D7: timed to the cycle as before) and the TWI ISR's write to TWCR. */
+        if (reset_unwatched) {  /* the first instruction after a reset alone: D7's drop seen after it, as before */
+            reset_unwatched = 0;
+            avr->run_cycle_limit = avr->run_cycle_count = 1;
+            avr->run(avr);
+            if (avr->state == cpu_Crashed || avr->state == cpu_Done)
+                crashed = 1;
+            run_enable_watch();
+        }
+        avr->run_cycle_limit = BATCH_MAX_CYCLES;
+        avr_cycle_timer_register(avr, cycle - avr->cycle, no_op_timer, &stop_tag);
+        while (avr->cycle < cycle && !crashed) {
+            avr->run(avr);
+            if (avr->state == cpu_Crashed || avr->state == cpu_Done)
+                crashed = 1;
+            run_enable_watch();
+        }
+        avr_cycle_timer_cancel(avr, no_op_timer, &stop_tag);
+        avr->run_cycle_limit = 1;  /* step() (profiles, traces, the TWI master's waits): one instruction a call */
+        avr->run_cycle_count = 1;
+    }
     while (avr->cycle < cycle && !crashed)
         step();
     wall_s += now_s() - w0;
@@ -342,6 +396,11 @@ int mcu_load(const char *elf)
         int_vec[b] = find_vector(1 + b);  /* INT0, INT1 */
     avr_register_io_write(avr, REG_EIFR, eifr_write_hook, NULL);
     avr_register_io_write(avr, REG_EECR, eecr_write_hook, NULL);
+    /* PORTD and DDRD writes end a batch: run_enable_watch() sees D7 after the instruction that changed it */
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), IOPORT_IRQ_REG_PORT),
+                            port_d_write_notify, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), IOPORT_IRQ_DIRECTION_ALL),
+                            port_d_write_notify, NULL);
     guard_init(elf);
     const char *tp = getenv("DYNO_HARNESS_TRACE");
     uint32_t sz;
@@ -355,6 +414,7 @@ int mcu_load(const char *elf)
 void mcu_reset(uint8_t mcusr)
 {
     avr_reset(avr);
+    reset_unwatched = 1;
     /* simavr clears the I/O registers; a real reset sets its cause in MCUSR. */
     avr->data[MCUSR_ADDR] = mcusr;
     in_isr = trace_vec = -1;

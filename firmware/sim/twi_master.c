@@ -68,6 +68,7 @@ static void twcr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param
     (void)a; (void)addr; (void)param;
     if (v & TWCR_TWINT)
         twint_written = 1;
+    batch_break();  /* (the master acts after the instruction that wrote TWCR) */
     if (bus_held && !(v & TWCR_TWEN)) {
         bus_held = 0;
         bus_release_cycles = avr->cycle - bus_held_since;

@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from tests.fw_build import sim_elf
 
 SEED = 3
+#: the shipped plan and seed the suite's --plans check runs (the cheapest through the ELF:
+#: docs/measurements/2026-12-06-fil-plans.md)
+CHEAP_PLAN, CHEAP_SEED = "coast-down", 1
 
 
 def _fil_run(tmp_path, **kw):
@@ -60,6 +65,26 @@ def test_fil_short_run_hands_every_physics_event_to_the_host_and_the_elf_holds_t
     on_log = [(t, on) for t, on, _ in fw.run_enable_log]
     assert on_log and on_log[0][1] is True, on_log
     assert ctx.sim.model.engine_cut(0.0) is not None  # the timeout's safe state: the chain opened
+
+
+@pytest.mark.quick
+def test_fil_a_shaft_speeding_up_from_a_crawl_gives_a_pulse_per_edge():
+    """A real edge is a pulse of its own however much sooner than the last period it comes (a secondary turning
+    once in 2 s, then engaging: 0.3 s, 0.1 s, 0.02 s); only an edge within the physics' bounce window of a pulse is
+    that pulse's bounce.  (The old rule, a quarter of the last period, made those real edges 20 us spikes that the
+    firmware rejects: the engagement plan aborted through the ELF, "secondary stopped under load".)"""
+    from dyno.sim.elf_firmware import BOUNCE_HIGH_US, MAX_PULSE_US, ElfFirmware
+
+    fw = ElfFirmware(sim_elf())
+    try:
+        for t_s in (1.0, 3.0, 3.3, 3.4, 3.42, 3.4203):  # (the last: 0.3 ms after its edge, in its pulse)
+            fw.capture("secondary", t_s)
+        pending = [item.split(":") for item in fw._pending]
+    finally:
+        fw.close()
+    assert [p[0] for p in pending] == ["h1"] * 5 + ["b1"], pending
+    assert all(float(p[2]) > BOUNCE_HIGH_US for p in pending[:5]), pending  # pulses, not spikes
+    assert float(pending[4][2]) == MAX_PULSE_US  # (5 % of the period before it, 0.1 s: capped)
 
 
 @pytest.fixture(scope="module")
@@ -223,3 +248,21 @@ def test_fil_live_session_paces_the_elf_with_the_physics(tmp_path):
     # one clock: the ELF's is the physics' (a lockstep cell and a transfer's look-ahead apart at most)
     assert abs(elf_t_s - model_t_s) < 0.02 and model_t_s <= sim_now_s + 0.02, (elf_t_s, model_t_s, sim_now_s)
     assert fw.late_events == 0 and fw._proc.poll() is not None
+
+
+@pytest.mark.slow
+def test_bench_fil_plans_mode_runs_a_shipped_plan_through_the_real_firmware_to_done():
+    """``bench/bench_fil.py --plans`` (every shipped plan on two seeds through the ELF: the check behind
+    docs/measurements/2026-12-06-fil-plans.md) on one cheap plan and seed: the plan runs with and without the ELF,
+    the FIL run reaches done with its output, losing nothing and handing nothing late; exit 0, and its table row
+    says so.  (The whole matrix is the bench's, not the suite's: ~15 FIL runs of up to 13 simulated minutes.)"""
+    sim_elf()  # (built here; skips, naming what is missing, without the AVR toolchain)
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, str(repo / "bench" / "bench_fil.py"), "--plans", CHEAP_PLAN, "--seeds",
+                           str(CHEAP_SEED), "--md"], capture_output=True, text=True, timeout=900, cwd=repo,
+                          env={**os.environ, "PYTHONPATH": str(repo)})
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    (row,) = [line for line in proc.stdout.splitlines() if line.startswith(f"| {CHEAP_PLAN} | {CHEAP_SEED} |")]
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[2] == "done" and cells[-1] == "ok", row
+    assert cells[7].startswith("0 / 0, 0"), row  # frames / events lost, late
