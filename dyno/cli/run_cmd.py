@@ -262,7 +262,7 @@ def run(args) -> int:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
         else:
-            _print_table(result)
+            print_result_table(result)
         sys.stdout.flush()
     except (BrokenPipeError, OSError):  # a closed pipe or a vanished terminal (SIGHUP): the run is on disk
         pass
@@ -404,7 +404,7 @@ def _print_figures(result: dict) -> None:
             print(format_line(adv))
 
 
-def _print_table(result: dict) -> None:
+def print_result_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
     if result["points"]:
         _print_points(result["points"], result.get("u95_terms"))

@@ -21,8 +21,8 @@ import numpy as np
 
 from dyno.errors import DidNotConverge, GrossSlip
 from dyno.model import geometry
-from dyno.model.boundary import _contact_points, make_bc, make_bc_jac  # noqa: F401  (re-exported)
-from dyno.model.collocation import _block_global_jac, solve_bvp_fast  # noqa: F401  (re-exported)
+from dyno.model.boundary import contact_points, make_bc, make_bc_jac  # noqa: F401  (re-exported)
+from dyno.model.collocation import block_global_jac, solve_bvp_fast  # noqa: F401  (re-exported)
 from dyno.model.equations import (  # noqa: F401  (re-exported: layout, scales, Case, rhs)
     AXIAL_REF_N,
     CREEP_SCALE,
@@ -77,10 +77,10 @@ from dyno.model.equations import (  # noqa: F401  (re-exported: layout, scales, 
     make_fun_jac,
     span_terms,
 )
-from dyno.model.equations import RawSolution, _belt_speed, _mass_flow_for_speed, _unpack_params  # noqa: F401
+from dyno.model.equations import RawSolution, belt_speed, mass_flow_for_speed, unpack_params  # noqa: F401
 from dyno.model.guess import (  # noqa: F401  (re-exported)
-    _interp_case,
-    _span_bending_length_m,
+    interp_case,
+    span_bending_length_m,
     equidistributed_mesh,
     initial_guess,
     remesh,
@@ -149,14 +149,14 @@ def _slip_diagnosis(case: Case, y: np.ndarray, p: np.ndarray) -> str:
     from dyno.model.capstan import max_tension_ratio
 
     try:
-        omega_s, g = _unpack_params(case, p)
+        omega_s, g = unpack_params(case, p)
         parts = []
         for name, i_t, i_th, i_x, k_phi, radius, omega in (
             ("primary", P_T, P_TH, P_X, K_PHIP, case.r_primary_m, case.omega_primary_rad_s),
             ("secondary", S_T, S_TH, S_X, K_PHIS, case.r_secondary_m, omega_s),
         ):
             t_n = y[i_t] * TENSION_REF_N
-            v = _belt_speed(case, g, t_n)
+            v = belt_speed(case, g, t_n)
             x_m = y[i_x] * PENETRATION_REF_M
             slip = np.hypot(v * np.sin(y[i_th]), v * np.cos(y[i_th]) - (radius - x_m) * omega)
             use = t_n.max() / t_n.min() / max_tension_ratio(p[k_phi], case.mu, case.beta_rad)
@@ -294,7 +294,7 @@ def solve_case(
             if time.thread_time() - cpu0 > time_limit_s:
                 fail(f"time limit {time_limit_s:g} s of CPU during {what} at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p))
             s_new = min(1.0, s + ds)
-            c = _interp_case(start, target, s_new)
+            c = interp_case(start, target, s_new)
             last_step = final and s_new >= 1.0 and not POLISH
             if t.size > keep_mesh_below:
                 mesh = new_mesh(t, rms, tol, FINAL_FRACTION) if last_step else new_mesh(t, rms, loose_tol)

@@ -1,7 +1,7 @@
 """One belt-model prediction, as stored: the solving strategy (warm, cold, a far neighbour) and the result's
 shape — the part of the overlay that decides the numbers.
 
-The cache's key hashes this module with the maths (:data:`dyno.model.cache_keys._MODEL_MODULES`); the
+The cache's key hashes this module with the maths (:data:`dyno.model.cache_keys.MODEL_MODULES`); the
 service, the worker processes and the executors that carry a job (:mod:`dyno.model.overlay_service`,
 :mod:`dyno.model.overlay_worker`) do not, so a change to the plumbing keeps every cached result.
 """

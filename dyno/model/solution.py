@@ -43,7 +43,7 @@ def _gauss_nodes(t: np.ndarray):
 
 
 def _contact_eval(case: bvp.Case, y: np.ndarray, p: np.ndarray, which: str):
-    omega_s, g = bvp._unpack_params(case, p)
+    omega_s, g = bvp.unpack_params(case, p)
     if which == "primary":
         idx = (bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.P_TH2, bvp.P_X, bvp.P_X1)
         radius, phi, omega = case.r_primary_m, p[bvp.K_PHIP], case.omega_primary_rad_s
@@ -125,7 +125,7 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
     case, p, y_mesh = raw.case, raw.p, raw.y
     tq, w = _gauss_nodes(raw.t)
     y = raw.sol(tq)
-    omega_s, g = bvp._unpack_params(case, p)
+    omega_s, g = bvp.unpack_params(case, p)
     ratio_geom = case.r_secondary_m / case.r_primary_m
 
     res = {}

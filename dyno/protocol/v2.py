@@ -186,7 +186,7 @@ def encode_data_frame(seq: int, flags: int, boot_id: int, events_dropped: int, e
     t0 = events[0].t_us if events else now_us & 0xFFFFFFFF
     body = bytearray()
     for ev in events:
-        dt = v1._signed32((ev.t_us - t0) & 0xFFFFFFFF)
+        dt = v1.signed32((ev.t_us - t0) & 0xFFFFFFFF)
         tag = ev.channel | (TAG_GAP if ev.gap else 0)
         if ev.channel in ADC_TAGS:
             body += struct.pack(">BhHB", tag, dt, ev.code & 0xFFFF, ev.status & 0xFF)

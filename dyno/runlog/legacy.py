@@ -34,7 +34,7 @@ import numpy as np
 from dyno.errors import ConfigError
 from dyno.protocol import v1
 from dyno.runlog.legacy_faults import (  # noqa: F401 (thresholds re-exported: docs/legacy-import.md)
-    EXPECTED_POLL_HZ, EXPECTED_ADC_HZ, NOMINAL_POINT_S, DISCARDED_DEFAULT, U32_MAX, U16_MAX, ERROR, point_faults, _fault, PREFIX_CHANNEL)
+    EXPECTED_POLL_HZ, EXPECTED_ADC_HZ, NOMINAL_POINT_S, DISCARDED_DEFAULT, U32_MAX, U16_MAX, ERROR, point_faults, fault_record, PREFIX_CHANNEL)
 
 FILE_RE = re.compile(r"^(P|S|ADC|TORQUE)_(\d+)\.csv$")
 CHANNEL_ID = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
@@ -370,7 +370,7 @@ def _write(writer, folder: Path, points: list[LegacyPoint], nominal_s: float, di
     for index, p in enumerate(points):
         legacy = point_faults(p, nominal_s, cal, engine_map)
         if p.t_start_us is None:
-            legacy.append(_fault("all", "no timestamps in any file: no point", ERROR, kind="empty"))
+            legacy.append(fault_record("all", "no timestamps in any file: no point", ERROR, kind="empty"))
             flat += [{"point": p.number, **f} for f in legacy]
             continue
         doc = reduce_point(run.streams, p.t_start_us, p.t_end_us, cal, engine_map, index=index)

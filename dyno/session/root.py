@@ -317,10 +317,10 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     }
     tune_path = opts.tune_path
     if tune_path is None and sim is not None:
-        from dyno.sim.physics import _resolve_map_path  # repo-relative default, as the sim resolves it
+        from dyno.sim.physics import resolve_map_path  # repo-relative default, as the sim resolves it
 
         tune_path = getattr(sim.model.params, "cvt_tune_path", None)
-        tune_path = _resolve_map_path(tune_path) if tune_path else None
+        tune_path = resolve_map_path(tune_path) if tune_path else None
     tune_text = None
     if tune_path is not None:
         import hashlib

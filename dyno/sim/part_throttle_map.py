@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from dyno.sim.physics import RigModel, RigParams, _resolve_map_path
+from dyno.sim.physics import RigModel, RigParams, resolve_map_path
 
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv"
 DEFAULT_THROTTLES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -70,7 +70,7 @@ def write_map(out: Path, throttles=DEFAULT_THROTTLES) -> float:
     # engine's, not one seed's (dyno.sim.world)
     model = RigModel(RigParams(ideal=True))
     eng, p = model.engine, model.params
-    src = _resolve_map_path(p.engine_map_path)
+    src = resolve_map_path(p.engine_map_path)
     full_rows = [ln for ln in Path(src).read_text().splitlines()
                  if ln.strip() and not ln.startswith("#")][1:]
     lines = ["# SYNTHETIC part-throttle engine map, GENERATED from the simulator's engine model",

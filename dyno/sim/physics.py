@@ -74,8 +74,8 @@ from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.input_torque import InputTorqueSignals
 # The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
 # keep importing them from dyno.sim.physics.
-from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for, _load_tune
-from dyno.sim.rig_params import _resolve_map_path
+from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, belt_tables_for, load_sim_tune
+from dyno.sim.rig_params import resolve_map_path
 from dyno.sim.kill_chain import KillChain
 from dyno.sim.pads import PadsRecord
 from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
@@ -105,7 +105,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
 
     def __init__(self, params: RigParams | None = None, seed: int = 0):
         p = params if params is not None else RigParams()
-        nominal = EngineMap.from_csv(_resolve_map_path(p.engine_map_path))
+        nominal = EngineMap.from_csv(resolve_map_path(p.engine_map_path))
         # this seed's own engine, sensor and day (dyno.sim.world): p becomes the rig as it is
         p, rpm, torque_true_nm, self.world = realise(p, seed, nominal.rpm, nominal.torque_nm)
         self.params = p
@@ -115,7 +115,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
-        labelled = _load_tune(p.cvt_tune_path)
+        labelled = load_sim_tune(p.cvt_tune_path)
         # the parts on the rig are not their labels (--sim-tune-deviation); the host only has the labels
         self.tune_true, self.world = parts_on_the_rig(labelled, p, seed, self.world)
         tune = self.tune_true
@@ -139,7 +139,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient if tune is not None else None,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       **_belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
+                       **belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
         friction = attach_friction(self.cvt, p, seed)  # this world's CVT friction (dyno.sim.cvt_friction)
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")

@@ -149,7 +149,8 @@ class OverlayMixin:
             svc.prime(seed[0])
 
     def _closed_form_work(self, pairs) -> None:
-        from dyno.model.overlay import _as_point, _closed_form_result
+        from dyno.model.cache_keys import as_point
+        from dyno.model.point_solve import closed_form_result as _closed_form_result
         from dyno.model.params import TABLE_6_1
 
         out = {}
@@ -157,7 +158,7 @@ class OverlayMixin:
             if op in self._overlay_closed:
                 continue
             try:
-                out[op] = _closed_form_result(TABLE_6_1, _as_point(op, 100.0, None))
+                out[op] = _closed_form_result(TABLE_6_1, as_point(op, 100.0, None))
             except Exception:  # noqa: BLE001  (a placeholder: a point outside its range has none)
                 pass
         self.call_from_thread(self._set_closed_form, out)

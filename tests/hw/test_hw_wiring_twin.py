@@ -183,10 +183,10 @@ def test_a_held_estop_gives_one_release_stroke_then_nothing(rig_wired):
 def test_a_signal_inside_a_command_cannot_let_the_command_through_after_the_latch(rig_wired):
     """The handler (the rig path's: safe state, latched) runs inside ``brake(APPLY)``, between its latch check
     and its writes.  From the latch on, the actuator is never powered toward the rotor."""
-    from dyno.session.safety import _LoopTimeClock
+    from dyno.session.safety import LoopTimeClock
 
     fake = FakeClock()
-    clock = _LoopTimeClock(fake.now)
+    clock = LoopTimeClock(fake.now)
     toy, twin, act = _build(rig_wired, clock)
     while not act.released:
         fake.advance(0.01)

@@ -220,7 +220,7 @@ def test_fast_jacobians_match_scipy_estimates():
     dya, dyb, dp = sb.estimate_bc_jac(bc, y[:, 0], y[:, -1], p)
     i_jac, j_jac = sb.compute_jac_indices(n, m, k)
     ref = sb.construct_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
-    ours = bvp._block_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
+    ours = bvp.block_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
     assert abs(ref - ours).max() < 1e-12 * abs(ref).max()
     ours.check_format(full_check=True)  # written straight into compressed columns: a valid, sorted CSC matrix
     assert ours.has_sorted_indices and ours.nnz == abs(ref).astype(bool).sum() + np.count_nonzero(ours.data == 0)

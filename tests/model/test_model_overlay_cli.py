@@ -119,8 +119,8 @@ def test_model_code_hash_reads_every_model_module():
     plumbing = {"overlay", "overlay_service", "overlay_worker", "cache_keys"}
     on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies", "inverse", "overlay_inputs",
                                                       "executor", "study_tasks"} - plumbing
-    assert on_disk <= set(overlay._MODEL_MODULES), on_disk - set(overlay._MODEL_MODULES)
-    assert not plumbing & set(overlay._MODEL_MODULES)
+    assert on_disk <= set(overlay.MODEL_MODULES), on_disk - set(overlay.MODEL_MODULES)
+    assert not plumbing & set(overlay.MODEL_MODULES)
 
 
 def test_the_cache_key_follows_the_maths_not_the_plumbing(tmp_path):

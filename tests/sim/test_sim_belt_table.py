@@ -140,9 +140,9 @@ def test_belt_efficiency_source_is_validated():
 def test_default_table_covers_the_sim_range_at_the_tunes_clamp(tmp_path):
     """The default grid spans the simulated CVT's whole ratio range, each cell at the tune's clamp."""
     from dyno.model.inverse import clamp_from_tune
-    from dyno.sim.physics import DEFAULT_TUNE, _load_tune
+    from dyno.sim.physics import DEFAULT_TUNE, load_sim_tune
 
-    tune = _load_tune(DEFAULT_TUNE)
+    tune = load_sim_tune(DEFAULT_TUNE)
     cvt = RigModel(RigParams(belt_efficiency_source="loss_model")).cvt
     assert min(DEFAULT_RATIOS) <= cvt.ratio_high and max(DEFAULT_RATIOS) >= cvt.ratio_low
     seen = []

@@ -107,18 +107,18 @@ def test_the_run_library_shows_advised_beside_measured(loop):
 def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch, capsys):
     """`dyno run`'s text summary of an engagement run (no points table): the figures it measured, the tune's
     label prediction, and the advisor's prediction beside the measurement (the same function prints it)."""
-    from dyno.cli.run_cmd import _print_table
+    from dyno.cli.run_cmd import print_result_table
 
     monkeypatch.setenv("DYNO_RUNS_DIR", loop["env"]["DYNO_RUNS_DIR"])
     second = loop["second"]
-    _print_table(second)
+    print_result_table(second)
     out = capsys.readouterr().out
     assert "rpm_p" not in out  # no empty table
     assert f"engagement {second['engagement_rpm']:.0f} ± " in out and f"shift-out {second['shift_out_rpm']:.0f}" in out
     pred = loop["advice"]["tunes"][0]["predicted"]["engagement"]
     assert (f"advised: engagement predicted {pred['rpm']:.0f} ± {pred['u95_rpm']:.0f}, "
             f"measured {second['engagement_rpm']:.0f}") in out
-    _print_table(loop["first"])  # the stock tune was never advised
+    print_result_table(loop["first"])  # the stock tune was never advised
     assert "advised:" not in capsys.readouterr().out
     # and its report.html, which `dyno run` writes at the end (and `dyno report RUN` again)
     from dyno.report.writer import write_report
