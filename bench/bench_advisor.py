@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 from dyno.errors import ConfigError  # noqa: E402
-from dyno.sim.physics import RigParams  # noqa: E402
+from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.tuning.advisor import advise  # noqa: E402
 from dyno.tuning.advisor_model import load_run_data  # noqa: E402
 from dyno.tuning.parts import apply_part, load_catalogue, match_parts  # noqa: E402

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from dyno.session.root import RunOptions, run_test  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
-from dyno.sim.physics import RigParams  # noqa: E402
+from dyno.sim.rig_params import RigParams  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TUNES = ("cvtech-stock", "heavy-flyweights", "stiff-primary-spring")

@@ -58,7 +58,7 @@ def one_world(world: int, tmp: str, rig_path: str, plan_path: str) -> dict:
     from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
     from dyno.library.compare import compare
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     same_day = world % 2 == 0
     outs = {}

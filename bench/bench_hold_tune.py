@@ -121,7 +121,7 @@ def main() -> int:
         a.seeds = "1"
     params = None
     if a.stiff:
-        from dyno.sim.physics import RigParams
+        from dyno.sim.rig_params import RigParams
 
         params = replace(RigParams(), brake_spring_rate_n_per_mm=13.0)
     kps = [float(x) for x in a.kp.split(",") if x] or [None]

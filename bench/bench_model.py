@@ -297,7 +297,8 @@ def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0, ma
     import tempfile
     from concurrent.futures import ThreadPoolExecutor
 
-    from dyno.model.overlay_service import OverlayService, solve_job
+    from dyno.model.overlay_service import OverlayService
+    from dyno.model.overlay_worker import solve_job
 
     print("\n== 5. Live overlay latency: each point of a simulated run submitted at its acceptance time (1x), "
           "one background thread, fresh cache ==")

@@ -92,7 +92,8 @@ def wired_rig_file(out_dir: Path, k3: bool) -> Path:
 
 
 def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> dict:
-    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
+    from dyno.resources import DEFAULT_ENGINE_MAP
+    from dyno.session.root import RunOptions, run_test
     from dyno.cli.run_cmd import exit_code
     from dyno.control.plans import plan_named
     from dyno.session.drills import parse_drill

@@ -103,7 +103,8 @@ class Errors:
 
 
 def options(plan: str, seed: int, drill, fault_rate: float):
-    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions
+    from dyno.resources import DEFAULT_ENGINE_MAP
+    from dyno.session.root import RunOptions
     from dyno.control.plans import plan_named
 
     opts = RunOptions(sim=True, seed=seed, speed=None, fault_rate=fault_rate, plan=plan_named(plan),

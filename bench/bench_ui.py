@@ -195,7 +195,7 @@ def main() -> int:
         # not built again (about a minute); removed at the end.
         import shutil
 
-        from dyno.model.overlay import default_cache_dir
+        from dyno.model.cache_keys import default_cache_dir
 
         quick_cache = Path(tempfile.mkdtemp(prefix="bench-ui-cache-"))
         if default_cache_dir().is_dir():

@@ -124,10 +124,10 @@ DEFAULT_SEEDS = 60
 
 def host_stated() -> dict:
     """The spreads the host states with its shipped inputs (the map file's, else rig.toml's; the history's)."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.analysis.systematic import calibration_rel_u
-    from dyno.session.root import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
+    from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
     from dyno.rig.config import load_rig
 
     emap = load_engine_map(DEFAULT_ENGINE_MAP).stated_u_rel

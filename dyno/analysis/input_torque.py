@@ -205,7 +205,7 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
 
 def load_channel(cfg, path) -> InputChannel:
     """The channel rig.toml ``[input_torque]`` (``cfg``) declares, with its calibration history at ``path``."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(path)
@@ -220,7 +220,7 @@ def channel_from_meta(meta: dict, tare: dict | None = None) -> InputChannel | No
     rec = (meta or {}).get("input_torque")
     if not rec:
         return None
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
 
     cal = CalibrationEntry.from_dict(rec["calibration"])
     if tare:

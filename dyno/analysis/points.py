@@ -20,7 +20,7 @@ import numpy as np
 
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
 from dyno.analysis.efficiency import batch_mean, point_efficiency
-from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange
+from dyno.analysis.engine_map_range import NoThrottleCurve, OutOfMapRange
 from dyno.analysis.part_throttle_air import friction_u95_nm
 from dyno.analysis.spectral_sem import satterthwaite_dof, spectral_sem
 from dyno.protocol import v1

@@ -178,7 +178,7 @@ def command_parser(name: str):
         if "--rig" not in p._option_string_actions:
             # every command (and every action of one, `dyno model point`) takes --rig PATH (the rig
             # description), even where it only records it, so scripts can pass it uniformly
-            from dyno.rig.config import add_rig_argument
+            from dyno.rig.locate import add_rig_argument
 
             add_rig_argument(p)
     return mod, parser

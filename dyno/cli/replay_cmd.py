@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from dyno.session.root import public_point
+    from dyno.session.summary import public_point
     from dyno.runlog.replay import replay
 
     if getattr(args, "measured_map", None) is not None:

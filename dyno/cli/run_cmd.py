@@ -55,7 +55,7 @@ def add_arguments(p) -> None:
     from dyno.session.drill_help import drill_help
 
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@WHEN", help=drill_help())
-    from dyno.rig.config import add_rig_argument
+    from dyno.rig.locate import add_rig_argument
     from dyno.web.attach import add_web_arguments
 
     add_web_arguments(p)  # --web [ADDR:PORT], --web-stop (docs/web.md)
@@ -197,7 +197,7 @@ def run_spec(args):
     if bad:
         return None, None, bad
     if sim_kw:
-        from dyno.sim.physics import RigParams
+        from dyno.sim.rig_params import RigParams
 
         kw["sim_params"] = RigParams(**sim_kw)
     return RunSpec(**kw), driven_loss, None

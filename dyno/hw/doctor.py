@@ -18,9 +18,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 
-from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Check, Report  # noqa: F401 (the report's types)
-from dyno.hw.doctor_switch import (SWITCH_READS, switch_sample, check_end_switch,  # noqa: F401
-                                   check_end_switch_k3, check_safety_inputs)
+from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Report
+from dyno.hw.doctor_switch import switch_sample, check_end_switch, check_end_switch_k3, check_safety_inputs
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:

@@ -69,8 +69,6 @@ def span_bending_length_m(case: Case, tension_n: float) -> float:
 
 def initial_guess(case: Case, n_nodes: int = 301):
     """Geometric initial guess ``(t, y, p)``; needs no starting solution."""
-    from dyno.model.closed_form import closed_form_point  # noqa: F401  (tension level estimate below)
-
     r_p, r_s, lc = case.r_primary_m, case.r_secondary_m, case.centre_distance_m
     dt_n = case.torque_nm / r_p
     if case.bc == "slack_tension":

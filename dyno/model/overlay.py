@@ -30,9 +30,8 @@ from pathlib import Path
 
 from dyno.model.params import ModelParams, TABLE_6_1, bad_input
 
-# the cache's keys and the model's code hash live in cache_keys (the overlay service needs them without this
-# module, which runs the service: no import cycle); re-exported here, where callers have always found them
-from dyno.model.cache_keys import TIERS, MODEL_MODULES, as_point, default_cache_dir, model_code_hash, point_key  # noqa: E402,F401
+# the cache's keys live in cache_keys (the overlay service needs them without this module, which runs the service)
+from dyno.model.cache_keys import TIERS, as_point, default_cache_dir, point_key
 from dyno.model.point_solve import closed_form_result as _closed_form_result  # noqa: E402
 
 
@@ -93,7 +92,8 @@ def predict_overlay(
     if tier == "full":
         # The live overlay's service, run inline: cache, nearest-neighbour warm starts (also from solutions
         # stored by earlier sessions), cold fallback.
-        from dyno.model.overlay_service import InlineExecutor, OverlayService
+        from dyno.model.overlay_worker import InlineExecutor
+        from dyno.model.overlay_service import OverlayService
 
         svc = OverlayService(params, executor=InlineExecutor(), variant=variant, slip_threshold_m_s=slip_threshold_m_s,
                              tol=tol, cache_dir=cache_dir, use_cache=use_cache, time_limit_s=time_limit_s)

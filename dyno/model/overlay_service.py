@@ -46,8 +46,8 @@ import numpy as np
 
 from dyno.model import cache_keys as _keys
 from dyno.model.cache_keys import as_point, default_cache_dir, point_key
-from dyno.model.overlay_worker import (Cancelled, InlineExecutor, WarmState, process_pool,  # noqa: F401  (re-exported)
-                                       solve_job)
+from dyno.model.overlay_worker import Cancelled, InlineExecutor, solve_job
+from dyno.model.point_solve import WarmState
 from dyno.model.params import TABLE_6_1, ModelParams, OperatingPoint
 
 #: Scales of :func:`op_distance` (per unit of log): a warm start is tried up to distance 1.  Measured on a

@@ -30,7 +30,7 @@ class WarmState:
 
     @property
     def raw(self):
-        from dyno.model.bvp import RawSolution
+        from dyno.model.equations import RawSolution
 
         return RawSolution(case=self.case, t=self.t, y=self.y, p=self.p, sol=None, residual_max=0.0,
                            bc_residual_max=0.0, tol=0.0, rms_residuals=self.rms)

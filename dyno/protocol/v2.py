@@ -41,8 +41,7 @@ from dataclasses import dataclass, field
 from dyno.errors import FrameError
 from dyno.protocol import v1
 from dyno.protocol.crc import crc16, crc32c
-from dyno.protocol.v1 import (ADC_STATUS_ERR, CH_ADC, CH_PRIMARY, CH_SECONDARY, CHANNEL_NAMES,  # noqa: F401
-                              DT_MAX, DT_MIN, EVENT_LEN, KIND_DATA, KIND_INFO, Event)
+from dyno.protocol.v1 import CH_ADC, CHANNEL_NAMES, EVENT_LEN, KIND_DATA, KIND_INFO, Event
 
 VERSION = 2
 FRAME_MAX = 32

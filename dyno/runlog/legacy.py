@@ -33,7 +33,7 @@ import numpy as np
 
 from dyno.errors import ConfigError
 from dyno.protocol import v1
-from dyno.runlog.legacy_faults import (  # noqa: F401 (thresholds re-exported: docs/legacy-import.md)
+from dyno.runlog.legacy_faults import (
     EXPECTED_POLL_HZ, EXPECTED_ADC_HZ, NOMINAL_POINT_S, DISCARDED_DEFAULT, U32_MAX, U16_MAX, ERROR, point_faults, fault_record, PREFIX_CHANNEL)
 
 FILE_RE = re.compile(r"^(P|S|ADC|TORQUE)_(\d+)\.csv$")
@@ -118,7 +118,7 @@ def _find_shared(folder: Path, name: str, given: Path | None, option: str) -> Pa
 
 def load_calibration(path: Path):
     """(entry in force, row number or None, sha256) from a legacy cal_values.csv or a dyno history."""
-    from dyno.analysis.calibration import latest, load_history, load_legacy_cal_values
+    from dyno.analysis.calibration_history import latest, load_history, load_legacy_cal_values
 
     raw = _read_bytes(path, "a calibration file (cal_values.csv or a dyno calibration history)")
     first = next((ln for ln in raw.decode("utf-8-sig", "replace").splitlines() if ln.strip()), "")
@@ -351,7 +351,7 @@ def import_legacy(folder, out_dir=None, *, calibration_path=None, engine_map_pat
 
 
 def _write(writer, folder: Path, points: list[LegacyPoint], nominal_s: float, discard: set, calibration) -> dict:
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
     from dyno.analysis.engine_map import load_engine_map
     from dyno.analysis.points import reduce_point
     from dyno.runlog.reader import load_run

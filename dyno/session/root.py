@@ -13,18 +13,16 @@ from pathlib import Path
 
 from dyno.acquisition.poller import Poller
 from dyno.session.after import close_run, end_test
-from dyno.session.safe_outputs import finish_release, rig_outputs  # noqa: F401 (re-exported)
-from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
 from dyno.session.next_run import abort_on_write_error
-from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable  # noqa: F401 (start_watchdog: re-exported, the UI)
+from dyno.session.safety import make_watchdog, start_watchdog, warn_when_uncuttable
 from dyno.session import input_channel as app_input  # rig.toml [input_torque]: the engine-side channel (issue 27)
 from dyno.control import plans  # the plan modes' runners, handed to the controller (_build)
 from dyno.control.controller import SafetyLimits, TestController, TestPlan
 from dyno.transports.base import I2CTransport
-from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP  # noqa: F401 (the defaults, re-exported)
+from dyno.resources import DEFAULT_ENGINE_MAP
 from dyno.rig.locate import find_rig
 from dyno.session.calibration_files import calibration_in_force
 
@@ -97,7 +95,7 @@ def default_run_dir(root: Path | None = None) -> Path:
 
 def load_inputs(opts: RunOptions):
     """Rig config, calibration entry and engine map; every error names file and field."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.rig.config import load_rig
     from dyno.rig.locate import find_rig, require_own_rig
@@ -119,7 +117,7 @@ def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) ->
     with what each assumes (``u95_terms``, dyno.analysis.u95_terms): the map's term is the map file's stated
     uncertainty, else rig.toml's ``engine_map_rel``."""
     from dyno.analysis import u95_terms
-    from dyno.analysis.calibration import load_history
+    from dyno.analysis.calibration_history import load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(opts.calibration_path)
@@ -317,7 +315,7 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     }
     tune_path = opts.tune_path
     if tune_path is None and sim is not None:
-        from dyno.sim.physics import resolve_map_path  # repo-relative default, as the sim resolves it
+        from dyno.sim.rig_params import resolve_map_path  # repo-relative default, as the sim resolves it
 
         tune_path = getattr(sim.model.params, "cvt_tune_path", None)
         tune_path = resolve_map_path(tune_path) if tune_path else None

@@ -49,7 +49,6 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from dyno.errors import ConfigError
 
 RPM_PER_RAD_S = 30.0 / math.pi
 RAD_S_PER_RPM = math.pi / 30.0
@@ -132,7 +131,7 @@ UNGOVERNED_ZERO_RPM = 6500.0
 class Engine:
     """Mean-torque engine model (see module docstring for the equations).
 
-    Parameters are taken from :class:`dyno.sim.physics.RigParams`.
+    Parameters are taken from :class:`dyno.sim.rig_params.RigParams`.
     """
 
     def __init__(self, engine_map: EngineMap, *, idle_rpm: float, idle_offset_rpm: float,

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from dyno.sim.physics import RigModel, RigParams, resolve_map_path
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams, resolve_map_path
 
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv"
 DEFAULT_THROTTLES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)

@@ -56,7 +56,7 @@ buffered ahead of the caller (the events do not depend on how the host slices
 time); explicit for the mean speeds, exact exponentials for the rotor
 temperature and lock-in filter, exact within-cell edge timing.
 
-Sensor outputs, truth: :mod:`dyno.sim.rig_signals`; parameters: :mod:`dyno.sim.rig_params` (re-exported).
+Sensor outputs, truth: :mod:`dyno.sim.rig_signals`; parameters: :mod:`dyno.sim.rig_params`.
 """
 
 from __future__ import annotations
@@ -72,20 +72,17 @@ from dyno.sim.driveline import Driveline
 from dyno.sim.driven import Engagement, after_drag, clamp_radius_m
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
 from dyno.sim.input_torque import InputTorqueSignals
-# The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
-# keep importing them from dyno.sim.physics.
-from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, belt_tables_for, load_sim_tune
+from dyno.sim.rig_params import RigParams, belt_tables_for, load_sim_tune
 from dyno.sim.rig_params import resolve_map_path
 from dyno.sim.kill_chain import KillChain
 from dyno.sim.pads import PadsRecord
-from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
+from dyno.sim.rig_signals import TWO_PI, RigSignals, SensorEvent
 from dyno.sim.sensors import LowPassFilter
 from dyno.sim.tune_deviation import parts_on_the_rig
 from dyno.sim.cvt_friction import attach_friction
 from dyno.sim.world import realise
 
-__all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
-           "Truth"]
+__all__ = ["RigModel"]
 
 
 class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):

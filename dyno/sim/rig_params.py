@@ -1,7 +1,6 @@
 """Every parameter of the simulated rig (:class:`RigParams`, units in the names) and its file defaults.
 
-Split from :mod:`dyno.sim.physics` (which re-exports these names, so ``from dyno.sim.physics import
-RigParams`` keeps working): the parameters with their sources, and the repository-relative defaults
+The parameters with their sources, and the repository-relative defaults
 (engine map, CVT tune) with how a path is resolved.  What the numbers of the signal chain were
 measured from is in :mod:`dyno.sim.rig_signals`.
 """

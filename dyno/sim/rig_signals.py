@@ -1,7 +1,6 @@
 """The simulated rig's outputs: sensor events (Hall edges, ADC conversions) with their noise, and its truth.
 
-Split from :mod:`dyno.sim.physics` (which re-exports :class:`SensorEvent` and :class:`Truth`): the
-integrator there advances the state one cell at a time and calls these to turn each cell's motion into
+The integrator of :mod:`dyno.sim.physics` advances the state one cell at a time and calls these to turn each cell's motion into
 what the sensors report (:class:`RigSignals`, a mixin of :class:`~dyno.sim.physics.RigModel`), and
 :meth:`RigSignals.truth` reports the true state for the tests.  Each random stream is its own
 (seeded in ``RigModel.__init__``), so changing one fault's probability leaves the others unchanged.

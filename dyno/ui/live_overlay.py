@@ -79,7 +79,8 @@ class OverlayMixin:
         if self.overlay_service is None:
             # The solver runs in its own process (its numerics must not hold this interpreter's GIL, which
             # the poller and the controller need), imported there.
-            from dyno.model.overlay_service import OverlayService, process_pool
+            from dyno.model.overlay_service import OverlayService
+            from dyno.model.overlay_worker import process_pool
 
             loop = self._overlay_loop
             pool, cancel = process_pool()

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.controller import State, TestPlan
-from dyno.session.pacing import ScaledClock, SimTimeActuators  # noqa: F401 (re-exported)
-from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
+from dyno.session.pacing import ScaledClock
+from dyno.ui.rearm import RearmMixin
 
 FINISHED = (State.DONE, State.ABORTED)
 
@@ -39,7 +39,7 @@ class LiveOptions:
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
     firmware_elf: object = None  # sim: the Nano's real ELF in simavr as the rig's Nano (paced with the physics)
     ambient: object = None  # dyno.analysis.air.Ambient from --ambient (else rig.toml's sensor or day)
-    sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
+    sim_params: object = None  # dyno.sim.rig_params.RigParams (--sim-ideal, --sim-ambient, ...)
 
 
 class LiveSession(RearmMixin):
@@ -133,7 +133,8 @@ class LiveSession(RearmMixin):
         if self.closed or self.controller.state in FINISHED:  # (a signal during start-up: nothing starts)
             return
         self.started = True
-        from dyno.session.root import arm_drills, start_watchdog
+        from dyno.session.root import arm_drills
+        from dyno.session.safety import start_watchdog
 
         # The safety path does not depend on the UI: the watchdog is a thread, the checks run
         # in the poller and the controller's own heartbeat, drills act on the rig itself.

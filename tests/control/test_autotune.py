@@ -8,7 +8,7 @@ import pytest
 
 from dyno.session.root import RunOptions, run_test
 from dyno.control.planfile import plan_from_text
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 PLAN = plan_from_text('schema = "dyno.plan/1"\nname = "tune"\nmode = "steps"\n[[step]]\nkind = "contact"\n'
                       '[[step]]\nkind = "identify"\nsetpoint = 3000.0\nrepeats = 2\n', "tune.toml")

@@ -16,7 +16,7 @@ from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_ga
 from dyno.control.plans.steps import probe_load_sign
 from dyno.control.controller import State, TestPlan as Plan
 from dyno.control.plans.steps import find_contact
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 
 def _figures(trace, sp: float, start: float) -> dict:

@@ -138,7 +138,7 @@ def test_an_eio_on_the_broadcom_controller_is_a_stretch_timeout_not_a_nack():
 def test_the_bus_is_not_reset_again_while_the_nano_boots():
     """After pulsing RESET the Nano's bootloader NACKs for ~1 s: those failures must not pulse it again (with
     20 failures a reset at 150 Hz, the old transport reset it every ~0.13 s, for ever)."""
-    from dyno.hw.clock import FakeClock
+    from dyno.clock import FakeClock
     from dyno.transports.i2c import RecoveringI2CTransport
 
     class Bus:

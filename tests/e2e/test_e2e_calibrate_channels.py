@@ -62,8 +62,8 @@ def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(
     appended to the channel's history has the gain of the simulated cradle load cell (the physics' draw for
     the seed, computed here from the simulator's parameters, not read off the program), 1.8 % from the
     host's nominal 600; the spread across the repeats is shown; the old rows are untouched."""
-    from dyno.analysis.calibration import load_history
-    from dyno.sim.physics import RigParams
+    from dyno.analysis.calibration_history import load_history
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.world import input_channel_truth
 
     seed = 3

@@ -74,7 +74,8 @@ def test_engagement_plan_recovers_the_simulated_cvt(tmp_path, tune):
 
 def test_engagement_differs_between_tunes_as_the_physics_says(tmp_path):
     """Heavier flyweights engage lower, a stiffer primary spring higher (the sim's engagement is the tune's)."""
-    from dyno.sim.physics import RigModel, RigParams
+    from dyno.sim.physics import RigModel
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.driven import characterisation_truth
 
     true = {t: characterisation_truth(RigModel(RigParams(belt_efficiency_source="loss_model",
@@ -109,7 +110,7 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
     from dyno.session.root import RunOptions, run_test
     from dyno.control.controller import TestPlan
     from dyno.control.plans import plan_named
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     params = RigParams(driven_loss_nm=(0.10, 4e-4, 1.2e-6), ideal=True)  # (perfect knowledge: the loss alone)
     cd = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
@@ -140,7 +141,7 @@ def test_a_clutch_engaging_below_idle_is_refused_safely(tmp_path):
     """Flyweights so heavy the secondary already turns at idle: nothing to characterise, said in one line."""
     from dyno.session.root import RunOptions, run_test
     from dyno.control.plans import plan_named
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     tune = tmp_path / "very-heavy.toml"
     tune.write_text((ROOT / "calibration" / "tunes" / "cvtech-stock.toml").read_text()

@@ -10,7 +10,8 @@ from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
 from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 from dyno.sim.rig_params import DEFAULT_DRIVELINE_LOSS, driveline_loss_of
 
 from .conftest import tare_error

@@ -8,7 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
+from dyno.resources import DEFAULT_ENGINE_MAP
+from dyno.session.root import RunOptions, run_test
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.control.plans import plan_named
 from dyno.session.drills import parse_drill

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, public_point, run_test
+from dyno.session.root import RunOptions, run_test
+from dyno.session.summary import public_point
 from dyno.control.plans import plan_named
 from dyno.session.drills import parse_drill
 from dyno.runlog.replay import replay

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from dyno.session.root import RunOptions, run_test
 from dyno.control.controller import TestPlan as StepPlan
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from dyno.acquisition.reader import make_reader
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.rig.config import load_rig
 from dyno.sim.device import BOOTLOADER_S
 from dyno.sim.rig import SimRig

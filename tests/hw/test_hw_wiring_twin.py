@@ -14,7 +14,7 @@ import pytest
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.hw.estop import EstopInput
 from dyno.hw.mockpins import SimPinFactory
 from dyno.hw.outputs import GpioActuators
@@ -265,7 +265,8 @@ def test_clear_latch_refuses_while_the_release_runs(rig_wired):
 def test_a_switch_fault_outlives_the_process_until_doctor_passes(rig_wired, tmp_path, monkeypatch):
     """Found stuck in one session, the switch is not trusted by the next (a new driver would have forgotten):
     releases run their full stroke and the re-arm is refused until ``dyno doctor --toggle``'s switch check passes."""
-    from dyno.hw.doctor import Report, check_end_switch
+    from dyno.hw.doctor_report import Report
+    from dyno.hw.doctor_switch import check_end_switch
     from dyno.hw import rig_faults
     from dyno.hw.rig import HardwareRig
 
@@ -306,7 +307,7 @@ def test_the_nano_reset_wait_keeps_the_watchdog_fed(rig_wired, factory):
     """``dyno doctor --toggle`` pulses RESET and waits 1.25 s for the bootloader: longer than the watchdog's
     0.5 s.  The wait is the control loop while it runs (it used to sleep silently: the watchdog thread tripped
     and the brake step that followed was refused, "the watchdog tripped during the step")."""
-    from dyno.hw.clock import MonotonicClock
+    from dyno.clock import MonotonicClock
 
     act = GpioActuators(rig_wired, pin_factory=factory, clock=MonotonicClock())
     wd = Watchdog(act, 0.2, clock=MonotonicClock())

@@ -9,7 +9,8 @@ import pytest
 
 from dyno.errors import ConfigError
 from dyno.sim.engine import EngineMap, load_engine_map
-from dyno.sim.physics import RigModel, RigParams, resolve_map_path
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams, resolve_map_path
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

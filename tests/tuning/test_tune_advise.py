@@ -15,7 +15,7 @@ import pytest
 
 from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 STOCK = Path("calibration/tunes/cvtech-stock.toml").resolve()
 WORLD = 23

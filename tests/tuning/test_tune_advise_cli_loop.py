@@ -22,7 +22,7 @@ from pathlib import Path
 
 from dyno.session.root import RunOptions, run_test
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 from dyno.tuning.parts import apply_part, load_catalogue
 from dyno.tuning.tune import dumps_tune, load_tune
 

@@ -49,8 +49,9 @@ def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
     with the run (runs do not store their tune yet; the setup hook does)."""
     from dyno.session.root import RunOptions, run_test
     from dyno.control.controller import TestPlan
-    from dyno.sim.physics import RigParams
-    from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
+    from dyno.sim.rig_params import RigParams
+    from dyno.tuning.shift_curve import Solver, load_engine_map
+    from dyno.tuning.tune import model_params_for
 
     tune = load_tune(STOCK).with_changes(**{"drive.primary_radius_max_m": 0.079, "name": name, **changes})
     tune_path = Path(root) / f"{name}.toml"

@@ -263,7 +263,7 @@ def test_ui_live_model_pieces():
     # the geometric ratio is the speed ratio less the belt's slip (Table 6.1 belt, 100 N slack)
     assert 1.5 * (1 - 0.01) < op.ratio < 1.5 and op.slack_tension_n == 100.0
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.session.root import DEFAULT_ENGINE_MAP
+    from dyno.resources import DEFAULT_ENGINE_MAP
 
     assert 2800 < ideal_engine_rpm(load_engine_map(DEFAULT_ENGINE_MAP)) < 4000
 

@@ -47,7 +47,7 @@ def test_ui_replay_model_reprocess_and_png(two_runs, tmp_path):
     d = point_streams(rs.runs[0].run, rs.runs[0].points[0])
     assert d["adc_counts"] and d["primary_rpm"] and d["window_s"] > 2.9
     # Re-process with a calibration whose slope is 10 % higher: torque (and efficiency) 10 % lower.
-    from dyno.analysis.calibration import CalibrationEntry, append_entry
+    from dyno.analysis.calibration_history import CalibrationEntry, append_entry
 
     cal = rs.runs[0].result["calibration"]
     hist = tmp_path / "cal.csv"
