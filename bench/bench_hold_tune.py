@@ -29,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import dyno.control.plans.speed_hold as sh  # noqa: E402
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.controller import State, TestPlan  # noqa: E402
 from dyno.control.plans.steps import find_contact  # noqa: E402
 
@@ -100,7 +100,7 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         ctx.phase(State.SETTLE, "bench")
         ctx.phase(State.DONE, "bench done")
 
-    r = run_test(RunOptions(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
+    r = run_test(RunSpec(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
                             runners={"bench-hold": runner},  # the bench's own mode, with the run's spec
                             out_dir=tmp / f"{variable}-{seed}-{kp}-{identify}", sim_params=params))
     found["aborts"] = [a for a in r["aborts"] if a["cause"] != "no_points"]

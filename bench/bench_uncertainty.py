@@ -154,7 +154,7 @@ def _interval_row(p: dict) -> tuple:
 def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = None, path: str = "map") -> dict:
     """One simulated rig in ``world`` on ``path``: its points (air known, and uncorrected), and its truth."""
     from dyno.analysis.air import Ambient
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
     from dyno.runlog.replay import replay
     from dyno.sim.rig_params import RigParams
@@ -165,7 +165,7 @@ def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = N
     kw = world_params(world)
     extra = {"engine_map_path": Path(engine_map)} if engine_map else {}
     rig = (_input_rig if path == "input" else _rig_with_sensor)(tmp_dir, f"rig-{path}-{world}-{seed}.toml")
-    opts = RunOptions(sim=True, seed=seed, out_dir=out, rig_path=rig, plan=plan_named(str(plan_path)),
+    opts = RunSpec(sim=True, seed=seed, out_dir=out, rig_path=rig, plan=plan_named(str(plan_path)),
                       sim_params=RigParams(**kw), **extra)
     result = run_test(opts)
     world_rec = result["sim_world"]

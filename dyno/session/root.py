@@ -70,9 +70,6 @@ class RunSpec:
     runners: dict = field(default_factory=dict)  # this run's own plan modes beside the shipped ones (tests, benches)
 
 
-RunOptions = RunSpec  # (the name the tests and benches use)
-
-
 def default_run_dir(root: Path | None = None) -> Path:
     """A new run directory ``<root>/<timestamp>[-N]``, created here: claimed atomically (``mkdir`` fails on
     a name another process took in the meantime, and the next suffix is tried), so runs started together
@@ -93,7 +90,7 @@ def default_run_dir(root: Path | None = None) -> Path:
     raise FileExistsError(root / stamp)
 
 
-def load_inputs(opts: RunOptions):
+def load_inputs(opts: RunSpec):
     """Rig config, calibration entry and engine map; every error names file and field."""
     from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
@@ -112,7 +109,7 @@ def load_inputs(opts: RunOptions):
     return rig_cfg, calibration, engine_map
 
 
-def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) -> dict:
+def systematic_terms(opts: RunSpec, rig_cfg, calibration, engine_map=None) -> dict:
     """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them),
     with what each assumes (``u95_terms``, dyno.analysis.u95_terms): the map's term is the map file's stated
     uncertainty, else rig.toml's ``engine_map_rel``."""
@@ -195,7 +192,7 @@ def close_rig(ctx) -> None:
         close_twin(ctx)
 
 
-def build(opts: RunOptions, now_s) -> RunContext:
+def build(opts: RunSpec, now_s) -> RunContext:
     """Assemble poller, controller and run writer for a simulated or real rig.
 
     The one composition root: ``dyno run``, ``dyno ui`` (through the live session) and
@@ -419,7 +416,7 @@ def _asdict(obj):
     return obj
 
 
-async def run_test_async(opts: RunOptions) -> dict:
+async def run_test_async(opts: RunSpec) -> dict:
     loop = asyncio.get_running_loop()
     # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
     # then ends the run like one that came a moment later (not a directory holding a `start` alone).
@@ -474,7 +471,7 @@ def arm_drills(ctx: RunContext, drills, loop, *, sim_now=None, speed: float = 1.
     ctx.drills = DrillRunner(drills, ctx, loop, sim_now=sim_now, speed=speed).arm_from_first_frame(ctx.poller)
 
 
-def run_test(opts: RunOptions) -> dict:
+def run_test(opts: RunSpec) -> dict:
     from dyno.clock import run
     from dyno.session.heap import return_free_heap
 

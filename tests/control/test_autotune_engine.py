@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import speed_hold as sh
 from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_gain
 from dyno.control.plans.steps import probe_load_sign
@@ -66,7 +66,7 @@ def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
         ctx.phase(State.DONE, "test done")
 
     # the test's own mode comes with the run's spec
-    r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
+    r = run_test(RunSpec(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
                             runners={"test-engine-tune": runner}, out_dir=tmp_path / "run", sim_params=params))
     assert not [a for a in r["aborts"] if a["cause"] != "no_points"], r["aborts"]
     return found

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.rig_params import RigParams
 
@@ -24,7 +24,7 @@ TARGETS = {"engagement": 2300.0, "shift_out": 2850.0}  # (the stock rig of world
 
 def _run(tune: Path, seed: int, out: Path) -> dict:
     # in-process on the sim's loss-model efficiency: the belt-model table costs ~90 s per new tune
-    return run_test(RunOptions(sim=True, seed=seed, out_dir=out, tune_path=tune, plan=plan_named("engagement"),
+    return run_test(RunSpec(sim=True, seed=seed, out_dir=out, tune_path=tune, plan=plan_named("engagement"),
                                sim_params=RigParams(cvt_tune_path=str(tune), tune_deviation_rel=0.1,
                                                     world_seed=WORLD, belt_efficiency_source="loss_model")))
 
@@ -178,7 +178,7 @@ def test_steady_points_calibrate_the_full_load_figure(loop):
     from dyno.tuning.fit import NOMINAL, newton_residual_rpm, solver_for
     from dyno.tuning.parts import load_catalogue
 
-    sh = run_test(RunOptions(sim=True, seed=5, out_dir=loop["tmp"] / "sh", tune_path=STOCK,
+    sh = run_test(RunSpec(sim=True, seed=5, out_dir=loop["tmp"] / "sh", tune_path=STOCK,
                              plan=plan_named("speed-hold"),
                              sim_params=RigParams(cvt_tune_path=str(STOCK), tune_deviation_rel=0.1, world_seed=WORLD,
                                                   belt_efficiency_source="loss_model")))
