@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from dyno.model import overlay
+from dyno.model import cache_keys, overlay
 from dyno.model.overlay_worker import Cancelled, InlineExecutor, solve_job
 from dyno.model.overlay_service import OverlayService, op_distance
 from dyno.model.point_solve import WarmState
@@ -192,7 +192,7 @@ def test_stored_warm_states_are_bounded(tmp_path, monkeypatch):
     warm = tmp_path / "warm"
     warm.mkdir()
     (warm / "0123456789abcdef-old.npz").write_bytes(b"other model code")
-    code = overlay.model_code_hash()[:16]
+    code = cache_keys.model_code_hash()[:16]
     for i in range(5):
         (warm / f"{code}-{i}.npz").write_bytes(b"damaged")  # unreadable: skipped, not fatal
     monkeypatch.setattr(overlay_service, "KEEP_WARM_FILES", 3)
