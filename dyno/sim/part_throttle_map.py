@@ -42,7 +42,7 @@ def curve_knots(engine, u: float) -> tuple[np.ndarray, np.ndarray]:
     def torque(n: float) -> float:
         return engine.torque_nm(n, u, True)
 
-    n_set = engine.idle_rpm + engine.idle_offset_rpm + u * engine._set_span_rpm
+    n_set = engine.set_speed_rpm(u)
     knee = n_set - engine.droop_rpm  # fuel fraction 1 below this (the full map)
     hi = min(n_set, m.rpm_max)
     if torque(hi) > 0.0:
