@@ -311,3 +311,26 @@ def test_the_re_export_check_sees_a_shim(tmp_path):
     assert reexports(tmp_path, folders=("dyno",)) == [
         "dyno/sim/physics.py:1: dyno.sim.params.RigParams (imported, never used here)",
         "dyno/sim/rig.py:2: dyno.sim.physics.RigParams (not defined there)"]
+
+
+def type_aliases(source: str) -> list[str]:
+    """Module-level ``Alias = Type`` in ``source``, ``Type`` a class defined there or a CamelCase name imported."""
+    tree = ast.parse(source)
+    classes = {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
+    imported = {a.asname or a.name for n in tree.body if isinstance(n, ast.ImportFrom) for a in n.names}
+    return [f"line {n.lineno}: {n.targets[0].id} = {n.value.id}" for n in tree.body
+            if isinstance(n, ast.Assign) and len(n.targets) == 1 and isinstance(n.targets[0], ast.Name)
+            and isinstance(n.value, ast.Name) and (n.value.id in classes or n.value.id in imported
+                                                   and n.value.id[:1].isupper() and not n.value.id.isupper())]
+
+
+@pytest.mark.quick
+def test_one_name_per_type():
+    found = {str(p.relative_to(ROOT)): v for p in sorted(DYNO.rglob("*.py")) if (v := type_aliases(p.read_text()))}
+    assert not found, found
+
+
+def test_the_type_alias_check_sees_a_second_name():
+    planted = ("from dyno.session.pacing import ScaledClock\nDEFAULT = ScaledClock\nclass RunSpec:\n    pass\n"
+               "RunOptions = RunSpec\nCLOCK = DEFAULT\n")
+    assert type_aliases(planted) == ["line 2: DEFAULT = ScaledClock", "line 5: RunOptions = RunSpec"]
