@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dyno.errors import DidNotConverge, GrossSlip
-from dyno.model import boundary, capstan, equations, guess
+from dyno.model import boundary, capstan, equations
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
 from dyno.model.solution import solve_point
 
@@ -94,8 +94,7 @@ def test_a_heavy_clamp_at_a_light_torque_solves_cold(table_6_1, monkeypatch, rat
         # Since the exact bc Jacobian the equal-radii anchor passes on these cases; the last resort is driven here
         # by a geometric guess that is useless at any clamp-force condition (NaN states), as it was before
         from dyno.model import bvp
-
-        real_guess = guess.initial_guess
+        from dyno.model.guess import initial_guess as real_guess
 
         def guess(case, n):
             t, y, p = real_guess(case, n)
