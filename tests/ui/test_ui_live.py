@@ -217,7 +217,7 @@ async def main():
         while time.monotonic() < t_end and not (solved() or stored()):
             await pilot.pause(0.2)
         out["seed"] = "stored" if stored() else [e.result.get("converged") for e in svc().entries.values() if e.result]
-        out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay") if m in sys.modules]
+        out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay_service") if m in sys.modules]
         await pilot.press("space")
         await pilot.pause(0.2)
         await pilot.press("q")
@@ -239,7 +239,7 @@ def test_ui_live_imports_belt_model_only_when_overlay_requested(tmp_path):
     # after it: the solver runs in the overlay's own process (its numerics never hold this interpreter's GIL,
     # which the poller and the controller need); here only the light overlay modules
     assert out["seed"] in ([True], "stored"), out
-    assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay" in out["after"], out
+    assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay_service" in out["after"], out
 
 
 # --- the pure parts ------------------------------------------------------------------------
