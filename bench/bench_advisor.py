@@ -48,10 +48,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 from dyno.errors import ConfigError  # noqa: E402
-from dyno.sim.physics import RigParams  # noqa: E402
+from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.tuning.advisor import advise  # noqa: E402
 from dyno.tuning.advisor_model import load_run_data  # noqa: E402
 from dyno.tuning.parts import apply_part, load_catalogue, match_parts  # noqa: E402
@@ -92,7 +92,7 @@ def _part(cat, pid: str):
 def engagement_run(tune, seed: int, world_seed: int, out: Path) -> dict:
     path = out.with_suffix(".toml")
     path.write_text(dumps_tune(tune))
-    r = run_test(RunOptions(sim=True, seed=seed, out_dir=out, tune_path=path, plan=plan_named("engagement"),
+    r = run_test(RunSpec(sim=True, seed=seed, out_dir=out, tune_path=path, plan=plan_named("engagement"),
                             sim_params=RigParams(cvt_tune_path=str(path), tune_deviation_rel=REL,
                                                  world_seed=world_seed, belt_efficiency_source="loss_model")))
     return r

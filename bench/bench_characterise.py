@@ -24,9 +24,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
-from dyno.sim.physics import RigParams  # noqa: E402
+from dyno.sim.rig_params import RigParams  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TUNES = ("cvtech-stock", "heavy-flyweights", "stiff-primary-spring")
@@ -61,7 +61,7 @@ def _tables(a, tunes, drifts, tmp: Path) -> None:
         for seed in range(1, a.seeds + 1):
             t0 = time.monotonic()
             path = ROOT / "calibration" / "tunes" / f"{tune}.toml"
-            r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp / f"{tune}-{seed}", tune_path=path,
+            r = run_test(RunSpec(sim=True, seed=seed, out_dir=tmp / f"{tune}-{seed}", tune_path=path,
                                     plan=plan_named("engagement"), sim_params=RigParams(cvt_tune_path=str(path))))
             wall = time.monotonic() - t0
             e = r["engagement_rpm"] - r["engagement_rpm_true"]
@@ -87,7 +87,7 @@ def _tables(a, tunes, drifts, tmp: Path) -> None:
     print("|---|---|---|---|---|---|")
     for seed in range(1, a.seeds + 1):
         t0 = time.monotonic()
-        r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp / f"cd-{seed}", plan=plan_named("coast-down"),
+        r = run_test(RunSpec(sim=True, seed=seed, out_dir=tmp / f"cd-{seed}", plan=plan_named("coast-down"),
                                 sim_params=RigParams(driven_loss_nm=LOSS)))
         f = r["loss_fit"]
         print(f"| {seed} | {f['rpm_min']:.0f}-{f['rpm_max']:.0f} | {f['n_revolutions']} | "
@@ -96,7 +96,7 @@ def _tables(a, tunes, drifts, tmp: Path) -> None:
     print("\n| zero drift N·m/min | true drift N·m | measured N·m (±95 %) | flagged |")
     print("|---|---|---|---|")
     for drift in drifts:
-        r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp / f"z-{drift}", plan=plan_named("engagement"),
+        r = run_test(RunSpec(sim=True, seed=1, out_dir=tmp / f"z-{drift}", plan=plan_named("engagement"),
                                 sim_params=RigParams(adc_zero_drift_nm_per_min=drift)))
         z = r["torque_zero"]
         true = drift * (z["after"]["t_mid_s"] - z["before"]["t_mid_s"]) / 60

@@ -55,10 +55,10 @@ def _as_compared(out: Path, name: str, uncorrected: bool) -> dict:
 
 def one_world(world: int, tmp: str, rig_path: str, plan_path: str) -> dict:
     """Two runs on one rig (stock, heavy flyweights) and the three pairs' coverage records."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
     from dyno.library.compare import compare
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     same_day = world % 2 == 0
     outs = {}
@@ -67,7 +67,7 @@ def one_world(world: int, tmp: str, rig_path: str, plan_path: str) -> dict:
         out = Path(tmp) / f"w{world}{k}"
         tune_path = TUNES / f"{tune}.toml"
         params = RigParams(cvt_tune_path=str(tune_path), world_seed=world, ambient_day=day)
-        run_test(RunOptions(sim=True, seed=10_000 + 2 * world + (k == "B"), out_dir=out, rig_path=Path(rig_path),
+        run_test(RunSpec(sim=True, seed=10_000 + 2 * world + (k == "B"), out_dir=out, rig_path=Path(rig_path),
                             plan=plan_named(plan_path), tune_path=tune_path, sim_params=params))
         outs[k] = out
     pairs = []

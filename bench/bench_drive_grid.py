@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.plans import plan_named  # noqa: E402
 
@@ -44,7 +44,7 @@ def main() -> int:
             t0 = time.perf_counter()
             # perfect knowledge (RigParams(ideal=True)): the CI coverage below is of the statistics alone;
             # the total uncertainty against a rig unlike its map is bench_uncertainty.py's
-            r = run_test(RunOptions(sim=True, seed=seed, plan=plan_named(a.plan), out_dir=Path(tmp) / f"s{seed}",
+            r = run_test(RunSpec(sim=True, seed=seed, plan=plan_named(a.plan), out_dir=Path(tmp) / f"s{seed}",
                                     engine_map_path=PART_MAP, sim_params=RigParams(ideal=True)))
             wall = time.perf_counter() - t0
             cells = r["drive_grid"]["cells"]

@@ -84,10 +84,10 @@ def logged_points(run_dir: Path) -> list[dict]:
 
 def simulated_run(seed: int, out_dir: Path) -> dict:
     """The default simulated rig's thesis-step run (in this process, on virtual time)."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
 
-    return run_test(RunOptions(sim=True, seed=seed, plan=plan_named("thesis-step"), out_dir=out_dir))
+    return run_test(RunSpec(sim=True, seed=seed, plan=plan_named("thesis-step"), out_dir=out_dir))
 
 
 def compare(sim_points: list[dict], logs: dict[str, list[dict]]) -> dict:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from dyno.control.api import Hold, SpeedHold  # noqa: E402
 from dyno.control.holds import gains_for  # noqa: E402
 from dyno.control.outputs import STOP  # noqa: E402
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.api import State, TestPlan  # noqa: E402
 from dyno.control.plans.speed_hold import find_contact  # noqa: E402
 
@@ -98,7 +98,7 @@ def run(variable: str, seed: int, kp: float | None, identify: bool, tmp: Path, p
         ctx.phase(State.SETTLE, "bench")
         ctx.phase(State.DONE, "bench done")
 
-    r = run_test(RunOptions(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
+    r = run_test(RunSpec(sim=True, seed=seed, plan=TestPlan(mode="bench-hold"), mock_pins=True,
                             runners={"bench-hold": runner},  # the bench's own mode, with the run's spec
                             out_dir=tmp / f"{variable}-{seed}-{kp}-{identify}", sim_params=params))
     found["aborts"] = [a for a in r["aborts"] if a["cause"] != "no_points"]
@@ -119,7 +119,7 @@ def main() -> int:
         a.seeds = "1"
     params = None
     if a.stiff:
-        from dyno.sim.physics import RigParams
+        from dyno.sim.rig_params import RigParams
 
         params = replace(RigParams(), brake_spring_rate_n_per_mm=13.0)
     kps = [float(x) for x in a.kp.split(",") if x] or [None]

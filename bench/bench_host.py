@@ -108,13 +108,13 @@ def false_accepts(frames: list[bytes], ber: float, seed: int, version: int = 1) 
 
 
 def bench_sim(seconds_cap: float = 600.0, plan=None) -> dict:
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
 
     kw = {} if plan is None else {"plan": plan}
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
         c0 = time.process_time()
-        r = run_test(RunOptions(sim=True, seed=0, out_dir=Path(d) / "r", max_sim_s=seconds_cap, **kw))
+        r = run_test(RunSpec(sim=True, seed=0, out_dir=Path(d) / "r", max_sim_s=seconds_cap, **kw))
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
     return {"sim_s": r["sim_time_s"], "wall_s": wall, "cpu_s": cpu, "points": len(r["points"]),

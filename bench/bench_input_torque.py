@@ -114,14 +114,14 @@ def setup_files(tmp: Path, repro: float | None, miscalibrate: float | None = Non
 
 
 def one_seed(seed: int, tmp: str, files: dict) -> dict:
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
     from dyno.sim.rig_params import RigParams
 
     params = None
     if files["repro"] is not None:  # the rigs' sensors scatter as their histories now say
         params = RigParams(adc_gain_drift_rel_sd=files["repro"], input_gain_drift_rel_sd=files["repro"])
-    result = run_test(RunOptions(sim=True, seed=seed, out_dir=Path(tmp) / f"seed{seed}", rig_path=Path(files["rig"]),
+    result = run_test(RunSpec(sim=True, seed=seed, out_dir=Path(tmp) / f"seed{seed}", rig_path=Path(files["rig"]),
                                  calibration_path=Path(files["calibration"]), plan=plan_named(files["plan"]),
                                  sim_params=params))
     rows = []

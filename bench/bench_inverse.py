@@ -66,9 +66,9 @@ def main() -> None:
                       f"{time.perf_counter() - t0:.1f} s")
         if args.table_build:
             from dyno.sim.belt_table import build_belt_table
-            from dyno.sim.physics import DEFAULT_TUNE, _load_tune
+            from dyno.sim.rig_params import DEFAULT_TUNE, load_sim_tune
 
-            tab = build_belt_table(cache_dir=Path(tmp) / "cache", tune=_load_tune(DEFAULT_TUNE))
+            tab = build_belt_table(cache_dir=Path(tmp) / "cache", tune=load_sim_tune(DEFAULT_TUNE))
             print(f"belt table at the stock tune's clamp: {tab.ok.size} cells, {int(tab.ok.sum())} solved, "
                   f"first build {tab.build_s:.1f} s")
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.api import TestPlan  # noqa: E402
 from dyno.session.drills import parse_drill  # noqa: E402
 from dyno.library import index as lib  # noqa: E402
@@ -41,7 +41,7 @@ def make_seeds(where: Path) -> list[Path]:
     seeds = []
     for i, (tune, drills) in enumerate([(TUNES[0], []), (TUNES[1], []), (TUNES[0], [parse_drill("overspeed@3")])]):
         out = where / f"seed{i}"
-        run_test(RunOptions(sim=True, seed=i, out_dir=out, plan=plan, tune_path=tune, drills=drills))
+        run_test(RunSpec(sim=True, seed=i, out_dir=out, plan=plan, tune_path=tune, drills=drills))
         seeds.append(out)
     return seeds
 

@@ -40,7 +40,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dyno.errors import DidNotConverge, GrossSlip  # noqa: E402
-from dyno.model import bvp, capstan, closed_form, sweep  # noqa: E402
+from dyno.model import boundary, capstan, closed_form, sweep  # noqa: E402
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT  # noqa: E402
 from dyno.model.solution import solve_point  # noqa: E402
 
@@ -203,7 +203,7 @@ def table_extremes(base, quick: bool = False):
         try:
             s = solve_point(params, op, slip_threshold_m_s=slip, guess=guess, friction_corner=0.2, time_limit_s=30)
             raw = s.raw
-            bc = bvp.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
+            bc = boundary.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
             verified = raw.residual_max <= raw.tol and abs(bc).max() < raw.tol
             sm = s.summary
             print(f"{name:<20}{'verified' if verified else 'UNVERIFIED':<12}{time.perf_counter() - t:>7.1f}"
@@ -297,7 +297,8 @@ def table_overlay_latency(plans=("thesis-step", "speed-hold"), seed: int = 0, ma
     import tempfile
     from concurrent.futures import ThreadPoolExecutor
 
-    from dyno.model.overlay_service import OverlayService, solve_job
+    from dyno.model.overlay_service import OverlayService
+    from dyno.model.overlay_worker import solve_job
 
     print("\n== 5. Live overlay latency: each point of a simulated run submitted at its acceptance time (1x), "
           "one background thread, fresh cache ==")

@@ -67,7 +67,7 @@ OVERLAY_LAST_S = 30.0  # the last point's answer after the test's end, at most
 
 
 def env_for(home: Path) -> dict:
-    from dyno.model.overlay import default_cache_dir
+    from dyno.model.cache_keys import default_cache_dir
 
     return {**os.environ, "PYTHONPATH": str(REPO), "HOME": str(home), "TERM": "xterm-256color",
             # the belt-model table the machine has built (a fresh HOME would build it again: minutes)

@@ -92,7 +92,8 @@ def wired_rig_file(out_dir: Path, k3: bool) -> Path:
 
 
 def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> dict:
-    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
+    from dyno.resources import DEFAULT_ENGINE_MAP
+    from dyno.session.root import RunSpec, run_test
     from dyno.cli.run_cmd import exit_code
     from dyno.control.plans import plan_named
     from dyno.session.drills import parse_drill
@@ -100,7 +101,7 @@ def run_one(plan: str, drill_text: str, mode: str, out: str, seed: int = 3) -> d
 
     held: dict = {}
     rig = wired_rig_file(Path(out), k3=mode == "twin+k3") if mode in TWIN_MODES else None
-    opts = RunOptions(sim=True, seed=seed, out_dir=Path(out), drills=[parse_drill(drill_text)],
+    opts = RunSpec(sim=True, seed=seed, out_dir=Path(out), drills=[parse_drill(drill_text)],
                       handle_signals=True, plan=plan_named(plan), setup=lambda ctx: held.update(ctx=ctx),
                       mock_pins=mode in ("mock", *TWIN_MODES), fault_rate=0.01 if mode == "sim+faults" else 0.0,
                       rig_path=rig, firmware_elf=FIL_ELF if mode == "fil" else None)

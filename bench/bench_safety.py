@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.cli.run_cmd import exit_code  # noqa: E402
 from dyno.control.api import TestPlan  # noqa: E402
 from dyno.session.drills import parse_drill  # noqa: E402
@@ -76,7 +76,7 @@ def _drills_for(name: str, t: float):
 
 def run_one(name: str, t: float, out: Path, *, mock_pins: bool, seed: int = 3, plan=None) -> dict:
     held: dict = {}
-    opts = RunOptions(sim=True, seed=seed, out_dir=out, drills=_drills_for(name, t), handle_signals=True,
+    opts = RunSpec(sim=True, seed=seed, out_dir=out, drills=_drills_for(name, t), handle_signals=True,
                       plan=plan or TestPlan(), setup=lambda ctx: held.update(ctx=ctx))
     if mock_pins:
         opts = replace(opts, mock_pins=True)

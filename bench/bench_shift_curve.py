@@ -58,7 +58,7 @@ def main() -> None:
 def _bench_full(tune, engine, curve, n_points: int) -> None:
     from dyno.model.params import OperatingPoint
     from dyno.model.solution import solve_point
-    from dyno.tuning.shift_curve import model_params_for
+    from dyno.tuning.tune import model_params_for
 
     params = model_params_for(tune)
     mid = [p for p in curve.points if p.segment == "shifting"]

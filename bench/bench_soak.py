@@ -103,10 +103,11 @@ class Errors:
 
 
 def options(plan: str, seed: int, drill, fault_rate: float):
-    from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions
+    from dyno.resources import DEFAULT_ENGINE_MAP
+    from dyno.session.root import RunSpec
     from dyno.control.plans import plan_named
 
-    opts = RunOptions(sim=True, seed=seed, speed=None, fault_rate=fault_rate, plan=plan_named(plan),
+    opts = RunSpec(sim=True, seed=seed, speed=None, fault_rate=fault_rate, plan=plan_named(plan),
                       drills=[drill] if drill is not None else [], handle_signals=True)
     if plan == "drive-grid":  # its grid needs the part-throttle curves (as bench_safe_state runs it)
         opts = replace(opts, engine_map_path=DEFAULT_ENGINE_MAP.with_name("baja-10hp-representative-part-throttle.csv"))

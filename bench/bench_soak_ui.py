@@ -153,7 +153,7 @@ def soak(args) -> dict:
     name = f"dyno-soak-ui-{uuid.uuid4().hex[:8]}"
     log = sys.stderr if args.json else sys.stdout
     # (in the command: a tmux server that is already running gives a new session its own environment)
-    from dyno.model.overlay import default_cache_dir
+    from dyno.model.cache_keys import default_cache_dir
 
     cache = default_cache_dir()  # the belt-model table's cache (HOME is the work dir: a cold cache costs minutes)
     cmd = (f"env PYTHONPATH={shlex.quote(str(REPO))} DYNO_RUNS_DIR={shlex.quote(str(root))} "

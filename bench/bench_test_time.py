@@ -41,7 +41,7 @@ import dyno.control.plans.speed_hold as sh  # noqa: E402
 from dyno.control.api import SpeedHold  # noqa: E402
 from dyno.control.hold_law import HoldLaw  # noqa: E402
 from dyno.control.holds import gains_for  # noqa: E402
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.rig_params import RigParams  # noqa: E402
 from dyno.control.api import State  # noqa: E402
 from dyno.control.outputs import APPLY, STOP  # noqa: E402
@@ -121,7 +121,7 @@ def step_responses(tmp: Path, seed: int = 1, rig_path=None) -> tuple[list[dict],
     real = sh.run_speed_hold
     sh.run_speed_hold = plan
     try:
-        run_test(RunOptions(sim=True, seed=seed, plan=plan_named("speed-hold"), out_dir=tmp / f"steps-{seed}",
+        run_test(RunSpec(sim=True, seed=seed, plan=plan_named("speed-hold"), out_dir=tmp / f"steps-{seed}",
                             mock_pins=True, rig_path=rig_path))
     finally:
         sh.run_speed_hold = real
@@ -236,7 +236,7 @@ def main() -> int:
                 with PulseCount() as count:
                     # (perfect knowledge: the CI coverage here is of the statistics alone; bench_uncertainty
                     # judges the total against rigs unlike their map)
-                    s = summary(run_test(RunOptions(sim=True, seed=seed, plan=plan_named(plan), mock_pins=True,
+                    s = summary(run_test(RunSpec(sim=True, seed=seed, plan=plan_named(plan), mock_pins=True,
                                                     out_dir=tmp / f"{plan}-{seed}", sim_params=RigParams(ideal=True))))
                 s["pulses_per_s"], s["reversals_per_s"] = count.per_s() if count.periods else (math.nan, math.nan)
                 if plan == "speed-hold":

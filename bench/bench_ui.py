@@ -195,7 +195,7 @@ def main() -> int:
         # not built again (about a minute); removed at the end.
         import shutil
 
-        from dyno.model.overlay import default_cache_dir
+        from dyno.model.cache_keys import default_cache_dir
 
         quick_cache = Path(tempfile.mkdtemp(prefix="bench-ui-cache-"))
         if default_cache_dir().is_dir():
@@ -218,7 +218,7 @@ IDLE_UI_MAX_PCT = 4.0  # issue 42: dyno ui --sim idle while ARMED, % of one core
 
 def headless_floor(quick: bool) -> dict:
     """``dyno run --sim --headless``'s work per rig-second with nothing to wait for (its virtual clock unpaced)."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.cli.run_cmd import plan_named
 
     plan = plan_named("speed-hold")
@@ -226,7 +226,7 @@ def headless_floor(quick: bool) -> dict:
         plan = replace(plan, target_points=3, max_measure_s=3.0)
     with tempfile.TemporaryDirectory() as d:
         c0 = time.process_time()
-        r = run_test(RunOptions(sim=True, seed=0, out_dir=Path(d) / "r", plan=plan, max_sim_s=60.0 if quick else 600.0))
+        r = run_test(RunSpec(sim=True, seed=0, out_dir=Path(d) / "r", plan=plan, max_sim_s=60.0 if quick else 600.0))
         cpu_s = time.process_time() - c0
     return {"ms_per_rig_s": 1e3 * cpu_s / r["sim_time_s"], "sim_s": r["sim_time_s"], "points": len(r["points"])}
 
@@ -304,11 +304,11 @@ def _run(a, seconds: float, cpu_s: float, speed: float, pace: str, status: dict)
         ov = asyncio.run(_with_ui(seconds, tmp / "ov", overlay=True, speed=speed))
         print(fmt_timing("with UI + model overlay", ov) + f"  overlay: {ov.get('overlay_tier') or 'pending'}")
 
-        from dyno.session.root import RunOptions, run_test
+        from dyno.session.root import RunSpec, run_test
         from dyno.control.api import TestPlan
 
         run_dir = tmp / "replay_run"
-        run_test(RunOptions(sim=True, out_dir=run_dir, plan=replace(TestPlan(), max_points=3)))
+        run_test(RunSpec(sim=True, out_dir=run_dir, plan=replace(TestPlan(), max_points=3)))
         print("\nentry points (fresh interpreter, headless, until the first screen is drawn):")
         for which, arg in (("ui", str(tmp / "st_ui")), ("calibrate", str(tmp / "st_cal.csv")),
                            ("replay", str(run_dir))):

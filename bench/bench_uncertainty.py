@@ -124,10 +124,10 @@ DEFAULT_SEEDS = 60
 
 def host_stated() -> dict:
     """The spreads the host states with its shipped inputs (the map file's, else rig.toml's; the history's)."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.analysis.systematic import calibration_rel_u
-    from dyno.session.root import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
+    from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP
     from dyno.rig.config import load_rig
 
     emap = load_engine_map(DEFAULT_ENGINE_MAP).stated_u_rel
@@ -154,7 +154,7 @@ def _interval_row(p: dict) -> tuple:
 def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = None, path: str = "map") -> dict:
     """One simulated rig in ``world`` on ``path``: its points (air known, and uncorrected), and its truth."""
     from dyno.analysis.air import Ambient
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
     from dyno.runlog.replay import replay
     from dyno.sim.rig_params import RigParams
@@ -165,7 +165,7 @@ def one_seed(seed: int, tmp: str, world: str = "own", engine_map: str | None = N
     kw = world_params(world)
     extra = {"engine_map_path": Path(engine_map)} if engine_map else {}
     rig = (_input_rig if path == "input" else _rig_with_sensor)(tmp_dir, f"rig-{path}-{world}-{seed}.toml")
-    opts = RunOptions(sim=True, seed=seed, out_dir=out, rig_path=rig, plan=plan_named(str(plan_path)),
+    opts = RunSpec(sim=True, seed=seed, out_dir=out, rig_path=rig, plan=plan_named(str(plan_path)),
                       sim_params=RigParams(**kw), **extra)
     result = run_test(opts)
     world_rec = result["sim_world"]

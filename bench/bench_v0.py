@@ -25,16 +25,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.control.api import TestPlan  # noqa: E402
 from dyno.sim.bus import BusFaults  # noqa: E402
 
 
 def run_pair(seed: int, ber: float, tmp: Path, plan: TestPlan | None = None) -> dict:
     kw = {} if plan is None else {"plan": plan}
-    faulty = run_test(RunOptions(sim=True, seed=seed, protocol="v0", faults=BusFaults(bit_error_rate=ber),
+    faulty = run_test(RunSpec(sim=True, seed=seed, protocol="v0", faults=BusFaults(bit_error_rate=ber),
                                  out_dir=tmp / f"f{seed}", **kw))
-    clean = run_test(RunOptions(sim=True, seed=seed, protocol="v0", out_dir=tmp / f"c{seed}", **kw))
+    clean = run_test(RunSpec(sim=True, seed=seed, protocol="v0", out_dir=tmp / f"c{seed}", **kw))
     fr = faulty["frames"]
     implausible = sum(v for k, v in fr["rejected"].items() if k.startswith("implausible"))
     early = faulty["state"] != "done" or not faulty["reason"].startswith("secondary below") \

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from dyno.session.root import RunOptions, run_test  # noqa: E402
+from dyno.session.root import RunSpec, run_test  # noqa: E402
 from dyno.cli.run_cmd import plan_named  # noqa: E402
 from dyno.session.drills import parse_drill  # noqa: E402
 
@@ -109,7 +109,7 @@ def run_config(n_clients: int, drill: str, *, rate_hz: float, web: bool, out: Pa
     if web:
         feed = LiveFeed(None, rate_hz=rate_hz)
         server, _hub = start_live_server(feed, "127.0.0.1:0")
-    opts = RunOptions(sim=True, speed=speed, out_dir=out, plan=plan_named("speed-hold"), drills=[parse_drill(drill)],
+    opts = RunSpec(sim=True, speed=speed, out_dir=out, plan=plan_named("speed-hold"), drills=[parse_drill(drill)],
                       seed=3)
     wall = time.perf_counter
 

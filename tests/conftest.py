@@ -96,9 +96,9 @@ def belt_table_built():
     Parallel workers share the cache; a lock file makes one of them build.
     """
     from dyno.sim.belt_table import belt_table
-    from dyno.sim.physics import DEFAULT_TUNE, _load_tune
+    from dyno.sim.rig_params import DEFAULT_TUNE, load_sim_tune
 
-    belt_table(None, _load_tune(DEFAULT_TUNE))  # the default sim's table: at the stock tune's clamp
+    belt_table(None, load_sim_tune(DEFAULT_TUNE))  # the default sim's table: at the stock tune's clamp
     yield
 
 

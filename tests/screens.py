@@ -39,7 +39,7 @@ class Terminal:
     """
 
     def __init__(self, command: str, *, size=(80, 24), cwd=None, env: dict | None = None) -> None:
-        from dyno.model.overlay import default_cache_dir
+        from dyno.model.cache_keys import default_cache_dir
 
         self.socket = f"dyno-test-{uuid.uuid4().hex[:12]}"
         self.command = command

@@ -353,3 +353,141 @@ def test_the_architecture_doc_says_what_is_checked():
     methods = {n.name for n in cls.body if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
     said = set(re.findall(r"`(\w+)`", doc[doc.index("The test is run one way: `RunningTest`"):]))
     assert methods - {"started"} <= said, methods - said
+
+# --- one home per name (issue 50): no private name crosses a module, no module re-exports another's names -------
+# A private name (``_x``) is its module's own; what another module needs is public where it is defined.  A
+# re-export shim is a module that imports a name only for others to import from it: every import names the module
+# that defines the name.
+#: packages not yet checked (none: dyno/control/'s plan API rewrite is in)
+PENDING_CONTROL_REWRITE: tuple[str, ...] = ()
+ROOT = DYNO.parent
+
+
+def _pending(rel: str) -> bool:
+    return bool(PENDING_CONTROL_REWRITE) and rel.startswith(PENDING_CONTROL_REWRITE)
+
+
+def _module_pending(module: str) -> bool:
+    return _pending(module.replace(".", "/") + "/")
+
+
+def private_imports(source: str) -> list[str]:
+    """``from dyno... import _x`` (or a relative import of ``_x``) in ``source``: private names, not dunders."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("dyno")):
+            out += [f"line {node.lineno}: {'.' * node.level}{node.module or ''}.{a.name}" for a in node.names
+                    if a.name.startswith("_") and not (a.name.startswith("__") and a.name.endswith("__"))]
+    return out
+
+
+@pytest.mark.quick
+def test_no_private_name_is_imported_from_another_module():
+    found = {rel: v for p in sorted(DYNO.rglob("*.py"))
+             if not _pending(rel := p.relative_to(ROOT).as_posix()) and (v := private_imports(p.read_text()))}
+    assert not found, found
+
+
+def test_the_private_import_check_sees_one():
+    planted = ("from dyno.model.cache_keys import point_key, _as_point\nfrom dyno import __version__\n"
+               "def f():\n    from dyno.sim.rig_params import (RigParams,\n        _load_tune)\n")
+    assert private_imports(planted) == ["line 1: dyno.model.cache_keys._as_point",
+                                        "line 4: dyno.sim.rig_params._load_tune"]
+
+
+def _top_level(body, defined: set, imported: set) -> None:
+    """Names a module's top level binds: by definition or assignment (``defined``), by import (``imported``)."""
+    for node in body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign, ast.For)):
+            for target in (node.targets if isinstance(node, ast.Assign) else [node.target]):
+                defined.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            imported.update((a.asname or a.name).split(".")[0] for a in node.names)
+        elif isinstance(node, (ast.If, ast.Try, ast.With)):
+            for block in (node.body, getattr(node, "orelse", []), getattr(node, "finalbody", []),
+                          *[h.body for h in getattr(node, "handlers", [])]):
+                _top_level(block, defined, imported)
+
+
+def module_names(root: Path) -> dict[str, set[str]]:
+    """Every ``dyno`` module under ``root`` -> the names it defines (submodules of a package included)."""
+    names = {}
+    for p in sorted((root / "dyno").rglob("*.py")):
+        parts = p.relative_to(root).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        defined = set()
+        _top_level(ast.parse(p.read_text()).body, defined, set())
+        names.setdefault(module, set()).update(defined)
+        if parts[-1] != "__init__":
+            names.setdefault(".".join(parts[:-1]), set()).add(parts[-1])
+    return names
+
+
+def reexports(root: Path, folders=("dyno", "tests", "bench")) -> list[str]:
+    """Re-export shims under ``root``: (1) a dyno module's top-level import of a dyno name that the module itself
+    never uses (imported for others, e.g. only listed in ``__all__``), (2) anywhere, ``from dyno.X import n`` where
+    ``X`` does not define ``n`` (it only imports it) and ``n`` is no submodule of ``X``."""
+    names, out = module_names(root), []
+    for folder in folders:
+        for p in sorted((root / folder).rglob("*.py")):
+            rel = p.relative_to(root).as_posix()
+            if _pending(rel):
+                continue
+            tree = ast.parse(p.read_text())
+            used = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+            for node in ast.walk(tree):
+                if not (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module in names) \
+                        or _module_pending(node.module):
+                    continue
+                for a in node.names:
+                    if a.name not in names[node.module]:
+                        out.append(f"{rel}:{node.lineno}: {node.module}.{a.name} (not defined there)")
+                    elif folder == "dyno" and node in tree.body and (a.asname or a.name) not in used:
+                        out.append(f"{rel}:{node.lineno}: {node.module}.{a.name} (imported, never used here)")
+    return out
+
+
+@pytest.mark.quick
+def test_no_module_re_exports_another_modules_names():
+    found = reexports(ROOT)
+    assert not found, "import each name from the module that defines it:\n" + "\n".join(found)
+
+
+def test_the_re_export_check_sees_a_shim(tmp_path):
+    pkg = tmp_path / "dyno" / "sim"
+    pkg.mkdir(parents=True)
+    (tmp_path / "dyno" / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "params.py").write_text("class RigParams:\n    pass\n")
+    (pkg / "physics.py").write_text("from dyno.sim.params import RigParams  # noqa: F401 (re-exported)\n"
+                                    "__all__ = ['RigParams']\n")
+    (pkg / "rig.py").write_text("from dyno.sim import params\nfrom dyno.sim.physics import RigParams\n\n"
+                                "def build():\n    return RigParams(), params\n")
+    assert reexports(tmp_path, folders=("dyno",)) == [
+        "dyno/sim/physics.py:1: dyno.sim.params.RigParams (imported, never used here)",
+        "dyno/sim/rig.py:2: dyno.sim.physics.RigParams (not defined there)"]
+
+
+def type_aliases(source: str) -> list[str]:
+    """Module-level ``Alias = Type`` in ``source``, ``Type`` a class defined there or a CamelCase name imported."""
+    tree = ast.parse(source)
+    classes = {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
+    imported = {a.asname or a.name for n in tree.body if isinstance(n, ast.ImportFrom) for a in n.names}
+    return [f"line {n.lineno}: {n.targets[0].id} = {n.value.id}" for n in tree.body
+            if isinstance(n, ast.Assign) and len(n.targets) == 1 and isinstance(n.targets[0], ast.Name)
+            and isinstance(n.value, ast.Name) and (n.value.id in classes or n.value.id in imported
+                                                   and n.value.id[:1].isupper() and not n.value.id.isupper())]
+
+
+@pytest.mark.quick
+def test_one_name_per_type():
+    found = {str(p.relative_to(ROOT)): v for p in sorted(DYNO.rglob("*.py")) if (v := type_aliases(p.read_text()))}
+    assert not found, found
+
+
+def test_the_type_alias_check_sees_a_second_name():
+    planted = ("from dyno.session.pacing import ScaledClock\nDEFAULT = ScaledClock\nclass RunSpec:\n    pass\n"
+               "RunOptions = RunSpec\nCLOCK = DEFAULT\n")
+    assert type_aliases(planted) == ["line 2: DEFAULT = ScaledClock", "line 5: RunOptions = RunSpec"]

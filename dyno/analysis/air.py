@@ -1,5 +1,5 @@
 """SAE J1349 power correction and the air it needs (pure).  Used by the engine map
-(:meth:`dyno.analysis.engine_map.EngineMap.at_ambient`), which re-exports these names."""
+(:meth:`dyno.analysis.engine_map.EngineMap.at_ambient`)."""
 
 from __future__ import annotations
 

@@ -14,9 +14,7 @@ rotor with the secondary locked (or on the cradle's arm); see
 :func:`torque_from_mass`.
 
 The history entry and the history file (parsing, validation, atomic append)
-are in :mod:`dyno.analysis.calibration_history`; its names are re-exported
-here, so ``from dyno.analysis.calibration import load_history`` keeps working.
-This module does no I/O.
+are in :mod:`dyno.analysis.calibration_history`.  This module does no I/O.
 """
 
 from __future__ import annotations
@@ -26,15 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dyno.analysis.calibration_history import (  # noqa: F401  (re-exported: the calibration's public names)
-    G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY, HISTORY_COLUMNS, R2_MIN_DEFAULT,
-    CalibrationEntry, CalibrationRejected, NoCalibration, append_entry, latest, load_history,
-    load_legacy_cal_values,
-)
+from dyno.analysis.calibration_history import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                                               R2_MIN_DEFAULT, CalibrationEntry, CalibrationRejected)
 
-__all__ = ["G_STANDARD_M_PER_S2", "GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY", "HISTORY_COLUMNS", "R2_MIN_DEFAULT",
-           "CalibrationEntry", "CalibrationRejected", "NoCalibration", "append_entry", "latest", "load_history",
-           "load_legacy_cal_values", "torque_from_mass", "CalibrationFit", "fit_calibration",
+__all__ = ["torque_from_mass", "CalibrationFit", "fit_calibration",
            "REPRODUCIBILITY_TARGET_REL", "Reproducibility", "slope_reproducibility", "fit_repeats", "check_loads"]
 
 # --------------------------------------------------------------------------

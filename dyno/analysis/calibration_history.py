@@ -1,5 +1,5 @@
-"""Torque-sensor calibration history: the entry, its validation, the history file (split from
-:mod:`dyno.analysis.calibration`, which re-exports everything here and keeps the fit maths).
+"""Torque-sensor calibration history: the entry, its validation, the history file (the fit maths
+is in :mod:`dyno.analysis.calibration`).
 
 A calibration maps ADC counts to torque (thesis eq 9.1)::
 

@@ -15,7 +15,8 @@ import math
 
 import numpy as np
 
-from dyno.analysis.engine_map import RAD_PER_S_PER_RPM, EngineMap, NoMapPower
+from dyno.analysis.engine_map import RAD_PER_S_PER_RPM, EngineMap
+from dyno.analysis.engine_map_range import NoMapPower
 
 #: Default number of batches for :func:`batch_mean`.  A 3 s steady point split
 #: in 6 gives 0.5 s batches, >10 firing periods at 3000 rpm (25 Hz) and >5

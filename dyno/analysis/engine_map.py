@@ -36,12 +36,8 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-# SAE J1349 and air (dyno.analysis.air): at_ambient uses them; re-exported for the callers that import them here
-from dyno.analysis.air import (  # noqa: F401
-    J1349_REFERENCE_DRY_PRESSURE_KPA, J1349_REFERENCE_TEMP_C, dry_air_pressure_kpa, j1349_correction_factor,
-    saturation_vapour_pressure_kpa)
-from dyno.analysis.engine_map_range import (  # noqa: F401 (re-exported: callers import them from here)
-    THROTTLE_TOL, NoMapPower, NoThrottleCurve, OutOfMapRange)
+from dyno.analysis.air import j1349_correction_factor
+from dyno.analysis.engine_map_range import THROTTLE_TOL, NoThrottleCurve, OutOfMapRange
 from dyno.errors import ConfigError
 
 #: Mechanical (imperial) horsepower in W: 550 ft·lbf/s.  US engine dyno

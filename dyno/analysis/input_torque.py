@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from dyno.analysis.efficiency import batch_mean
+from dyno.analysis.points import batch_count
 from dyno.protocol import v1
 
 ADC_RAILS = (0, 0xFFFF)
-BATCH_S = 0.5  # as dyno.analysis.points
 
 
 @dataclass(frozen=True)
@@ -52,10 +52,6 @@ class InputChannel:
 
         cal, rec = tare(self.calibration, zero)
         return dataclasses.replace(self, calibration=cal, tare=rec) if rec is not None else self
-
-
-def _n_batches(t0_us: int, t1_us: int) -> int:
-    return max(6, int((t1_us - t0_us) / 1e6 / BATCH_S))
 
 
 def _t975(dof: int) -> float:
@@ -124,7 +120,7 @@ def input_point(streams, point: dict, channel: InputChannel) -> dict:
     if out["n_input_rail"]:
         faults.append({"channel": "input", "severity": "warning",
                        "reason": f"{out['n_input_rail']} input conversions at a rail excluded"})
-    nb = _n_batches(t0, t1)
+    nb = batch_count(t0, t1)
     if good.size < 2:
         out["efficiency_reason"] = f"{good.size} valid input torque conversions in the window"
         faults.append({"channel": "input", "reason": out["efficiency_reason"]})
@@ -209,7 +205,7 @@ def input_systematic(point: dict, calibration_rel_out: float, channel: InputChan
 
 def load_channel(cfg, path) -> InputChannel:
     """The channel rig.toml ``[input_torque]`` (``cfg``) declares, with its calibration history at ``path``."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(path)
@@ -224,7 +220,7 @@ def channel_from_meta(meta: dict, tare: dict | None = None) -> InputChannel | No
     rec = (meta or {}).get("input_torque")
     if not rec:
         return None
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
 
     cal = CalibrationEntry.from_dict(rec["calibration"])
     if tare:

@@ -10,7 +10,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from dyno.analysis.engine_map import NoThrottleCurve
+from dyno.analysis.engine_map_range import NoThrottleCurve
 from dyno.protocol import v1
 
 RAD_S_PER_RPM = 2.0 * math.pi / 60.0

@@ -20,7 +20,7 @@ import numpy as np
 
 from dyno.acquisition.rpm import rpm_by_count, rpm_per_period
 from dyno.analysis.efficiency import batch_mean, point_efficiency
-from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange
+from dyno.analysis.engine_map_range import NoThrottleCurve, OutOfMapRange
 from dyno.analysis.part_throttle_air import friction_u95_nm
 from dyno.analysis.spectral_sem import satterthwaite_dof, spectral_sem
 from dyno.protocol import v1
@@ -31,7 +31,7 @@ ADC_RAILS = (0, 0xFFFF)
 BATCH_S = 0.5  # batch length for standard errors: >> the firing-ripple correlation time (~40 ms)
 
 
-def _n_batches(t0_us: int, t1_us: int) -> int:
+def batch_count(t0_us: int, t1_us: int) -> int:
     """Batches of ~0.5 s: a 3 s point gets 6, a 24 s point 48.
 
     Few batches make the standard error itself uncertain (chi-squared with
@@ -49,7 +49,7 @@ def _speed(streams, channel: int, t0_us: int, t1_us: int) -> dict:
     device_rpm = streams.edge_rpm_window(channel, t0_us, t1_us)
     out = {"rpm": rpm, "n_edges": int(edges.size), "std": float(per.std()) if per.size > 1 else math.nan,
            "sem": math.nan, "source": "edge_count"}
-    nb = _n_batches(t0_us, t1_us)
+    nb = batch_count(t0_us, t1_us)
     if per.size >= 2 * nb:
         out["sem"] = batch_mean(per, nb)[1]
     if device_rpm.size and np.any(device_rpm > 0):
@@ -101,7 +101,7 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
     if good.size >= 2:
         point["adc_mean"] = float(good.mean())
         point["adc_std"] = float(good.std())
-        nb = _n_batches(t0_us, t1_us)
+        nb = batch_count(t0_us, t1_us)
         adc_sem = batch_mean(good, nb)[1] if good.size >= 2 * nb else float(good.std() / math.sqrt(good.size))
         adc_dof = nb - 1
         # the spectrum's low end: many more degrees of freedom than the batches (dyno.analysis.spectral_sem)
@@ -147,7 +147,7 @@ def reduce_point(streams, t0_us: int, t1_us: int, calibration, engine_map, *, in
                 point["efficiency_sys95_friction"] = float(eff["efficiency"] * fr95 / curve.torque_nm(rp))
             # 95 % interval half-width: the standard errors are estimates (the torque's from its spectrum, the
             # speeds' from batch means), so Student's t on their combined degrees of freedom, not 1.96
-            dof = efficiency_dof(point, eff["efficiency"], eff["efficiency_sem"], _n_batches(t0_us, t1_us) - 1)
+            dof = efficiency_dof(point, eff["efficiency"], eff["efficiency_sem"], batch_count(t0_us, t1_us) - 1)
             point["efficiency_dof"] = dof
             point["efficiency_ci95"] = float(_t975(dof) * eff["efficiency_sem"])
     eff = point["efficiency"]

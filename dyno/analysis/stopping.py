@@ -43,9 +43,9 @@ def sem_bound_factor(n_batches: int, quantile: float = STOP_QUANTILE) -> float:
 def stop_uncertainty(point: dict, *, ci95: bool, quantile: float = STOP_QUANTILE) -> float:
     """The uncertainty a stopping rule compares with its target: the point's ``efficiency_ci95`` (or
     ``efficiency_sem``) times :func:`sem_bound_factor` of the window's batch count (NaN stays NaN)."""
-    from dyno.analysis.points import _n_batches
+    from dyno.analysis.points import batch_count
 
     u = point["efficiency_ci95"] if ci95 else point["efficiency_sem"]
     dof = point.get("efficiency_dof")  # (the estimate's own degrees of freedom: dyno.analysis.spectral_sem)
-    n = int(dof) + 1 if dof else _n_batches(point["t_start_us"], point["t_end_us"])
+    n = int(dof) + 1 if dof else batch_count(point["t_start_us"], point["t_end_us"])
     return float(u) * sem_bound_factor(n, quantile)

@@ -77,7 +77,7 @@ def number_in(lo: float, hi: float, *, integer: bool = False, lo_open: bool = Fa
     return parse
 
 
-def _available(name: str) -> bool:
+def command_available(name: str) -> bool:
     return importlib.util.find_spec(COMMANDS[name][0]) is not None
 
 
@@ -88,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="store_true", help="print the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():
-        if not _available(name):
+        if not command_available(name):
             continue
         sub.add_parser(name, help=help_text, add_help=False)
     return parser
@@ -178,7 +178,7 @@ def command_parser(name: str):
         if "--rig" not in p._option_string_actions:
             # every command (and every action of one, `dyno model point`) takes --rig PATH (the rig
             # description), even where it only records it, so scripts can pass it uniformly
-            from dyno.rig.config import add_rig_argument
+            from dyno.rig.locate import add_rig_argument
 
             add_rig_argument(p)
     return mod, parser
@@ -190,7 +190,7 @@ def sub_parsers(parser) -> list:
 
 
 def _dispatch(argv: list[str]) -> int:
-    if argv and argv[0] in COMMANDS and _available(argv[0]):
+    if argv and argv[0] in COMMANDS and command_available(argv[0]):
         name = argv[0]
         mod, parser = command_parser(name)
         try:

@@ -44,7 +44,7 @@ def add_arguments(p) -> None:
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@T",
                    help="fault drill at T simulated seconds from the first frame (--sim only): device-reset, "
                         "adc-error, adc-stuck, bus-lost, loop-stall:MS, sigint, sigterm, sighup (docs/safety.md)")
-    from dyno.rig.config import add_rig_argument
+    from dyno.rig.locate import add_rig_argument
 
     add_rig_argument(p)
 
@@ -52,7 +52,8 @@ def add_arguments(p) -> None:
 def _check_masses(text: str) -> None:
     """The masses before the screen is taken over: one line naming --masses, exit 2 (the wizard's rules)."""
     from dyno.errors import ConfigError
-    from dyno.ui.calibration_wizard import check_loads, parse_masses
+    from dyno.analysis.calibration import check_loads
+    from dyno.ui.calibration_wizard import parse_masses
 
     try:
         masses = parse_masses(text)
@@ -121,7 +122,7 @@ def run(args) -> int:
             history = history_to_append(in_force.name) if is_shipped(in_force) else in_force
     history = Path(history)
     if history.exists():  # a malformed history: one line naming its file, line and field; nothing written
-        from dyno.analysis.calibration import load_history
+        from dyno.analysis.calibration_history import load_history
 
         load_history(history)
     history.parent.mkdir(parents=True, exist_ok=True)

@@ -28,7 +28,8 @@ def _write_csv(path: Path, columns: dict[str, list]) -> None:
 
 
 def run(args) -> int:
-    from dyno.tuning.design import design, load_belt_catalogue, load_requirements
+    from dyno.tuning.design import design
+    from dyno.tuning.design_inputs import load_belt_catalogue, load_requirements
 
     req = load_requirements(args.requirements)
     result = design(req, load_belt_catalogue(args.catalogue))

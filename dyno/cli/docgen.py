@@ -22,14 +22,14 @@ why and how.
 
 def render() -> str:
     """The page: the top-level help, then each command's (and each action's, `dyno model point`)."""
-    from dyno.cli import COMMANDS, _available, build_parser, command_parser, sub_parsers
+    from dyno.cli import COMMANDS, command_available, build_parser, command_parser, sub_parsers
 
     before = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = str(WIDTH_COLUMNS + 2)  # (argparse wraps at the terminal's width less 2)
     try:
         out = [HEAD, "## dyno\n", _block(build_parser().format_help())]
         for name in COMMANDS:
-            if not _available(name):
+            if not command_available(name):
                 continue
             _, parser = command_parser(name)
             out += [f"## dyno {name}\n", _block(parser.format_help())]

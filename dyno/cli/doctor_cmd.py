@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import sys
 
-from dyno.hw.doctor import (FAIL, OK, SKIP, WARN, Check, Report, _boots, _new_boot,  # noqa: F401 (re-exported)
-                            check_end_switch, diagnose, run_diagnosis)
+from dyno.hw.doctor import run_diagnosis
 from dyno.session.doctor_rig import doctor_spec
-from dyno.rig.config import add_rig_argument, load_rig  # noqa: F401 (load_rig: re-exported)
+from dyno.rig.locate import add_rig_argument
 from dyno.rig.config import load_rig_for
 
 

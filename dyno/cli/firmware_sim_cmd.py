@@ -76,7 +76,7 @@ def add_arguments(parser) -> None:
 
 
 def _supervisor_arguments(parser) -> None:
-    from dyno.rig.config import add_rig_argument
+    from dyno.rig.locate import add_rig_argument
 
     add_rig_argument(parser)  # --rig PATH: its [limits] arm the run-enable at every boot
     parser.add_argument("--host-stop-at", type=number_in(0.0, 3600.0), default=None, metavar="S",

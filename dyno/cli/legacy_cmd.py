@@ -22,7 +22,7 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from dyno.session.root import public_point
+    from dyno.session.summary import public_point
     from dyno.runlog.legacy import import_legacy
 
     result = import_legacy(args.dir, args.out, calibration_path=args.calibration,

@@ -30,7 +30,7 @@ def _model_point(res, pred, tier: str) -> dict:
 def run_overlay(args) -> int:
     from dyno.model.inverse import invert_points, invertible
     from dyno.runlog.reader import load_run
-    from dyno.tuning.shift_curve import model_params_for
+    from dyno.tuning.tune import model_params_for
     from dyno.tuning.tune import load_tune
 
     run = load_run(args.run_dir, with_events=False)

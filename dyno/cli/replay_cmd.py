@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from dyno.session.root import public_point
+    from dyno.session.summary import public_point
     from dyno.runlog.replay import replay
 
     if getattr(args, "measured_map", None) is not None:
@@ -55,10 +55,10 @@ def run(args) -> int:
                  **({"drive_grid": r["drive_grid"]} if "drive_grid" in r else {})} for r in results]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1, default=str))
         return 0
-    from dyno.cli.run_cmd import _print_table
+    from dyno.cli.run_cmd import print_result_table
 
     for r in results:
-        _print_table({"run_dir": r["run_dir"], "state": (r["stop"] or {}).get("exit_status", "killed?"),
+        print_result_table({"run_dir": r["run_dir"], "state": (r["stop"] or {}).get("exit_status", "killed?"),
                       "reason": (r["stop"] or {}).get("reason", "no stop document"),
                       "points": [public_point(p) for p in r["points"]],
                       "frames": {"read": "-", "accepted": "-", "rejected": "-"}, "events_lost": "-",

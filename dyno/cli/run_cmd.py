@@ -55,7 +55,7 @@ def add_arguments(p) -> None:
     from dyno.session.drill_help import drill_help
 
     p.add_argument("--drill", action="append", default=[], metavar="NAME[:ARG]@WHEN", help=drill_help())
-    from dyno.rig.config import add_rig_argument
+    from dyno.rig.locate import add_rig_argument
     from dyno.web.attach import add_web_arguments
 
     add_web_arguments(p)  # --web [ADDR:PORT], --web-stop (docs/web.md)
@@ -197,7 +197,7 @@ def run_spec(args):
     if bad:
         return None, None, bad
     if sim_kw:
-        from dyno.sim.physics import RigParams
+        from dyno.sim.rig_params import RigParams
 
         kw["sim_params"] = RigParams(**sim_kw)
     return RunSpec(**kw), driven_loss, None
@@ -262,7 +262,7 @@ def run(args) -> int:
         if args.json:
             print(json.dumps(result, indent=1, default=str, allow_nan=False))
         else:
-            _print_table(result)
+            print_result_table(result)
         sys.stdout.flush()
     except (BrokenPipeError, OSError):  # a closed pipe or a vanished terminal (SIGHUP): the run is on disk
         pass
@@ -404,7 +404,7 @@ def _print_figures(result: dict) -> None:
             print(format_line(adv))
 
 
-def _print_table(result: dict) -> None:
+def print_result_table(result: dict) -> None:
     print(f"run: {result['run_dir']}  state: {result['state']} ({result['reason']})")
     if result["points"]:
         _print_points(result["points"], result.get("u95_terms"))

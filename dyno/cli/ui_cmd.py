@@ -29,7 +29,7 @@ def add_arguments(p) -> None:
                    help="--sim: the Nano's real firmware ELF in simavr as the rig's Nano, in lockstep with the physics "
                         "(--speed paces both)")
     from dyno.cli.run_cmd import add_air_arguments
-    from dyno.rig.config import add_rig_argument
+    from dyno.rig.locate import add_rig_argument
 
     from dyno.web.attach import add_web_arguments
 
@@ -84,7 +84,7 @@ def run(args) -> int:
         return 2
     sim_params = None
     if sim_kw and args.sim:
-        from dyno.sim.physics import RigParams
+        from dyno.sim.rig_params import RigParams
 
         sim_params = RigParams(**sim_kw)
     opts = LiveOptions(sim=args.sim, speed=args.speed, seed=args.seed, out_dir=args.out,

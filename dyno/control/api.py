@@ -31,7 +31,8 @@ if TYPE_CHECKING:  # (types only: the engine's collaborators, not imported at ru
     from dyno.analysis.engine_map import EngineMap
     from dyno.control.readings import Readings
     from dyno.control.safety import SafetyLimits
-    from dyno.rig.config import ControlConfig, InertiaConfig
+    from dyno.rig.config import ControlConfig
+    from dyno.rig.inertia import InertiaConfig
 
 
 class State(enum.Enum):

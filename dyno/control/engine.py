@@ -16,7 +16,7 @@ from pathlib import Path
 from dyno.control.api import Hold, HoldResult, PlanConfig, State, TestPlan
 from dyno.control.holds import HoldService
 from dyno.control.readings import Readings
-from dyno.rig.config import InertiaConfig
+from dyno.rig.inertia import InertiaConfig
 
 
 class EngineContext:

@@ -18,9 +18,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 
-from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Check, Report  # noqa: F401 (the report's types)
-from dyno.hw.doctor_switch import (SWITCH_READS, _switch_sample, check_end_switch,  # noqa: F401
-                                   check_end_switch_k3, check_safety_inputs)
+from dyno.hw.doctor_report import FAIL, OK, SKIP, WARN, Report
+from dyno.hw.doctor_switch import switch_sample, check_end_switch, check_end_switch_k3, check_safety_inputs
 
 
 def _i2c_clock_hz(bus_number: int) -> int | None:
@@ -186,9 +185,9 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
             report.add("brake release", FAIL, "release stroke did not complete")
             return
         report.add("brake release", OK, f"released ({cfg.actuator.full_stroke_s:.1f} s stroke)", essential=False)
-        before = _boots(cfg, transport)
+        before = boot_identity(cfg, transport)
         act.reset_arduino()
-        after = _new_boot(cfg, transport, before, act.clock, act)
+        after = boot_identity_after_reset(cfg, transport, before, act.clock, act)
         if cfg.protocol in ("v1", "v2") and before is not None:
             moved = after is not None and after != before
             what = "boot id" if cfg.protocol == "v2" else "boot count"
@@ -200,9 +199,9 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
             # K3's NO contacts carry the driver's path: the step needs the kill chain closed (dyno.hw.doctor_switch)
             check_end_switch_k3(report, cfg, hw, transport, act.clock)
             return
-        at_stop = _switch_sample(act)
+        at_stop = switch_sample(act)
         act.step(APPLY, cfg.actuator.step_s)
-        out = _switch_sample(act)
+        out = switch_sample(act)
         act.step(RELEASE, cfg.actuator.step_s)
         if hw.watchdog.tripped:
             report.add("brake step", FAIL, "the watchdog tripped during the step")
@@ -212,7 +211,7 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
         if at_stop is not None:
             act.safe_state()  # back to the retracted stop, the switch confirming (or the full stroke)
             act.finish_release()
-            check_end_switch(report, cfg, act, at_stop, out, _switch_sample(act), hw.persist_faults)
+            check_end_switch(report, cfg, act, at_stop, out, switch_sample(act), hw.persist_faults)
     finally:
         hw.__exit__(None, None, None)  # release stroke finished, outputs de-energised, pins released
 
@@ -221,12 +220,12 @@ def check_outputs(report: Report, cfg, transport, clock=None, pin_factory=None, 
 BOOT_DEADLINE_S = 3.0
 
 
-def _new_boot(cfg, transport, before, clock, act=None):
+def boot_identity_after_reset(cfg, transport, before, clock, act=None):
     """The boot identity after a reset: asked until it differs from ``before`` or :data:`BOOT_DEADLINE_S` has
     passed (a fixed wait shorter than the bootloader read the old boot, or none: "reset line not wired?")."""
     end = clock.now() + BOOT_DEADLINE_S
     while True:
-        now_boot = _boots(cfg, transport)
+        now_boot = boot_identity(cfg, transport)
         if (now_boot is not None and now_boot != before) or clock.now() >= end:
             return now_boot
         clock.sleep(0.1)
@@ -234,7 +233,7 @@ def _new_boot(cfg, transport, before, clock, act=None):
             act.tick(clock.now())  # (doctor is the loop here: its tick is the watchdog's sign of life)
 
 
-def _boots(cfg, transport):
+def boot_identity(cfg, transport):
     """The device's boot identity: v2 boot id (new on every boot), v1 EEPROM boot count."""
     if cfg.protocol not in ("v1", "v2"):
         return None

@@ -54,7 +54,7 @@ def check_data(report: Report, cfg, transport, clock, operator, *, simulated: bo
     rig file's clock (:func:`check_link_measured`)."""
     from dyno.acquisition.reader import make_reader
     from dyno.hw import doctor_data
-    from dyno.hw.clock import MonotonicClock
+    from dyno.clock import MonotonicClock
     from dyno.transports.budget import ChargedTransport, LinkMeter
 
     clock = clock or MonotonicClock()

@@ -22,7 +22,7 @@ from dyno.hw.doctor_report import FAIL, OK, SKIP
 SWITCH_READS = 200
 
 
-def _switch_sample(act) -> str | None:
+def switch_sample(act) -> str | None:
     """"closed", "open" or "chatters" over :data:`SWITCH_READS` reads (None: no switch declared)."""
     if act.end_switch_closed() is None:
         return None
@@ -86,7 +86,7 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
     from dyno.control.outputs import APPLY
 
     act = hw.actuators
-    at_stop = _switch_sample(act)  # after the start-up's full-stroke release (check_outputs waited it out)
+    at_stop = switch_sample(act)  # after the start-up's full-stroke release (check_outputs waited it out)
     if at_stop is None:
         report.add("brake step", SKIP, "K3 fitted and no end switch declared: nothing to check the step with",
                    essential=False)
@@ -118,7 +118,7 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
         act.brake_step(APPLY, cfg.actuator.step_s)
         turned = _serviced(act, reader, clock, 2 * cfg.actuator.relay_settle_s + cfg.actuator.step_s + 0.05,
                            cfg.poll_hz)
-        out = _switch_sample(act)
+        out = switch_sample(act)
     except SafetyAbort as e:  # the driver refused the step (it latched on a fault it found): name the switch
         report.add("end switch", FAIL, f"{wire}: the step was refused: {_found(act) or e} (check the switch and "
                    "its wire)")
@@ -127,7 +127,7 @@ def check_end_switch_k3(report, cfg, hw, transport, clock) -> None:
         act.engine_kill(True)  # open again at once: K3 releases by wiring, the driver's release follows
     act.safe_state()
     act.finish_release()
-    back = _switch_sample(act)
+    back = switch_sample(act)
     if turned:
         report.add("end switch", FAIL, f"{wire}: the step was cut short: {turned} Hall edges with the chain closed")
         return

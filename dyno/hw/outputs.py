@@ -29,7 +29,7 @@ from gpiozero import DigitalInputDevice, DigitalOutputDevice, PWMOutputDevice
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 from dyno.hw.endswitch import EndSwitch, tolerance
 from dyno.hw.blocking import BlockingMixin
 from dyno.hw.readback import ReadbackMixin
@@ -49,7 +49,7 @@ class GpioActuators(BlockingMixin, ReadbackMixin):
     pin_factory : gpiozero pin factory, optional
         ``MockFactory`` in tests; ``None`` lets gpiozero pick (lgpio on a Pi 5).
     clock : object with ``now()`` and ``sleep(s)``, optional
-        :class:`dyno.hw.clock.MonotonicClock` by default.
+        :class:`dyno.clock.MonotonicClock` by default.
 
     Construction puts every output in its safe value at once (throttle idle,
     engine killed, brake enable off, relay at rest) and starts a release

@@ -27,7 +27,7 @@ import signal
 import threading
 
 from dyno.control.outputs import enter_safe_state
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 
 #: distinct look errors a watchdog keeps (each further one is counted in ``errors_dropped``)
 MAX_ERRORS = 20

@@ -61,9 +61,9 @@ class MLX90614:
         try:
             self.bus.i2c_rdwr(wr, rd)
         except OSError as exc:
-            from dyno.transports.base import _ERRNO_CAUSE
+            from dyno.transports.base import ERRNO_CAUSE
 
-            self._fail(_ERRNO_CAUSE.get(exc.errno, "io"), str(exc))
+            self._fail(ERRNO_CAUSE.get(exc.errno, "io"), str(exc))
         lsb, msb, pec = bytes(rd)[:3]
         want = smbus_pec(bytes([a << 1, command, (a << 1) | 1, lsb, msb]))
         if pec != want:

@@ -149,7 +149,7 @@ def _distributed(raw: eq.RawSolution, which: str):
     rows, phi, radius, _, alpha0 = _pulley_geometry(case, p, which)
     tq, w = _gauss_nodes(raw.t)
     y = raw.sol(tq)
-    omega_s, g = eq._unpack_params(case, p)
+    omega_s, g = eq.unpack_params(case, p)
     omega = case.omega_primary_rad_s if which == "primary" else omega_s
     t_n = y[rows[0]] * eq.TENSION_REF_N
     x_m, x1_m = y[rows[4]] * eq.PENETRATION_REF_M, y[rows[5]] * eq.PENETRATION_REF_M

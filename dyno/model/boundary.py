@@ -197,7 +197,7 @@ def make_bc_jac(case: Case, bc=None):
 
 
 
-def _contact_points(case: Case, p):
+def contact_points(case: Case, p):
     r_s, r_p, lc = case.r_secondary_m, case.r_primary_m, case.centre_distance_m
     c_s, phi_s, c_p, phi_p = p[K_CS], p[K_PHIS], p[K_CP], p[K_PHIP]
     return {

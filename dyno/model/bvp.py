@@ -8,7 +8,7 @@ transfer, re-meshing, homotopy), ``collocation.py`` (scipy's ``solve_bvp``
 with our linear algebra, in a private copy of its module).  This module
 solves: continuation from the geometric guess (in the slip threshold, and
 from equal radii in the radii and torque when the guess fails), warm starts,
-and the checks of every result.  Its public names are re-exported here.
+and the checks of every result.
 """
 
 from __future__ import annotations
@@ -21,71 +21,13 @@ import numpy as np
 
 from dyno.errors import DidNotConverge, GrossSlip
 from dyno.model import geometry
-from dyno.model.boundary import _contact_points, make_bc, make_bc_jac  # noqa: F401  (re-exported)
-from dyno.model.collocation import _block_global_jac, solve_bvp_fast  # noqa: F401  (re-exported)
-from dyno.model.equations import (  # noqa: F401  (re-exported: layout, scales, Case, rhs)
-    AXIAL_REF_N,
-    CREEP_SCALE,
-    Case,
-    K_CP,
-    K_CS,
-    K_G,
-    K_LS,
-    K_LT,
-    K_PHIP,
-    K_PHIS,
-    K_WS,
-    L_TAU,
-    L_V,
-    L_V1,
-    L_V2,
-    L_XP,
-    L_YP,
-    MIN_RADIUS_M,
-    N_PARAMS,
-    N_STATES,
-    PENETRATION_REF_M,
-    POSITION_BC_REF_M,
-    P_A,
-    P_M,
-    P_T,
-    P_TH,
-    P_TH1,
-    P_TH2,
-    P_X,
-    P_X1,
-    S_T,
-    S_TH,
-    S_TH1,
-    S_TH2,
-    S_X,
-    S_X1,
-    TENSION_REF_N,
-    TORQUE_REF_NM,
-    T_TAU,
-    T_V,
-    T_V1,
-    T_V2,
-    T_XP,
-    T_YP,
-    contact_shear,
-    contact_terms,
-    exact_shear,
-    friction_shape,
-    make_case,
-    make_fun,
-    make_fun_jac,
-    span_terms,
-)
-from dyno.model.equations import RawSolution, _belt_speed, _mass_flow_for_speed, _unpack_params  # noqa: F401
-from dyno.model.guess import (  # noqa: F401  (re-exported)
-    _interp_case,
-    _span_bending_length_m,
-    equidistributed_mesh,
-    initial_guess,
-    remesh,
-    transfer_guess,
-)
+from dyno.model.boundary import make_bc, make_bc_jac
+from dyno.model.collocation import solve_bvp_fast
+from dyno.model.equations import (AXIAL_REF_N, CREEP_SCALE, Case, K_LS, K_LT, K_PHIP, K_PHIS, K_WS, L_TAU,
+                                  PENETRATION_REF_M, P_A, P_T, P_TH, P_X, S_T, S_TH, S_X, TENSION_REF_N, T_TAU,
+                                  make_fun, make_fun_jac)
+from dyno.model.equations import RawSolution, belt_speed, unpack_params
+from dyno.model.guess import interp_case, equidistributed_mesh, initial_guess, remesh, transfer_guess
 
 
 # Largest slip-threshold step, in nominal steps (x0.4 each): steps grown beyond it below ~1e-3 m/s fail and
@@ -149,14 +91,14 @@ def _slip_diagnosis(case: Case, y: np.ndarray, p: np.ndarray) -> str:
     from dyno.model.capstan import max_tension_ratio
 
     try:
-        omega_s, g = _unpack_params(case, p)
+        omega_s, g = unpack_params(case, p)
         parts = []
         for name, i_t, i_th, i_x, k_phi, radius, omega in (
             ("primary", P_T, P_TH, P_X, K_PHIP, case.r_primary_m, case.omega_primary_rad_s),
             ("secondary", S_T, S_TH, S_X, K_PHIS, case.r_secondary_m, omega_s),
         ):
             t_n = y[i_t] * TENSION_REF_N
-            v = _belt_speed(case, g, t_n)
+            v = belt_speed(case, g, t_n)
             x_m = y[i_x] * PENETRATION_REF_M
             slip = np.hypot(v * np.sin(y[i_th]), v * np.cos(y[i_th]) - (radius - x_m) * omega)
             use = t_n.max() / t_n.min() / max_tension_ratio(p[k_phi], case.mu, case.beta_rad)
@@ -294,7 +236,7 @@ def solve_case(
             if time.thread_time() - cpu0 > time_limit_s:
                 fail(f"time limit {time_limit_s:g} s of CPU during {what} at fraction {s:.3g}" + _slip_diagnosis(c_prev, y, p))
             s_new = min(1.0, s + ds)
-            c = _interp_case(start, target, s_new)
+            c = interp_case(start, target, s_new)
             last_step = final and s_new >= 1.0 and not POLISH
             if t.size > keep_mesh_below:
                 mesh = new_mesh(t, rms, tol, FINAL_FRACTION) if last_step else new_mesh(t, rms, loose_tol)

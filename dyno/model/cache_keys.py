@@ -22,7 +22,7 @@ TIERS = ("closed_form", "full")
 # (a fix, a new boundary condition) invalidates old entries and retries cached failures, with no version to
 # bump; the plumbing that carries a job (overlay, overlay_service, overlay_worker, this module) is not hashed,
 # so reshaping it keeps the cache (issue 34: a line split in the worker threw away every cell).
-_MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
+MODEL_MODULES = ("params", "geometry", "capstan", "closed_form", "equations", "boundary", "guess", "collocation",
                   "bvp", "balance", "solution", "point_solve")
 
 
@@ -33,9 +33,9 @@ def model_code_hash() -> str:
 
 
 def code_hash(model_dir: Path) -> str:
-    """SHA-256 of the :data:`_MODEL_MODULES` found in ``model_dir`` and scipy's version."""
+    """SHA-256 of the :data:`MODEL_MODULES` found in ``model_dir`` and scipy's version."""
     h = hashlib.sha256()
-    for name in _MODEL_MODULES:
+    for name in MODEL_MODULES:
         h.update(name.encode())
         h.update((Path(model_dir) / f"{name}.py").read_bytes())
     try:
@@ -66,7 +66,7 @@ def point_key(params: ModelParams, op: OperatingPoint, tier: str, variant: str, 
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _as_point(item, slack_tension_n, primary_axial_force_n) -> OperatingPoint:
+def as_point(item, slack_tension_n, primary_axial_force_n) -> OperatingPoint:
     if isinstance(item, OperatingPoint):
         return item
     if isinstance(item, dict):

@@ -8,7 +8,7 @@ private copy of that module from scipy's own file and sets the two names in
 the copy only: scipy's module, and everybody else's ``solve_bvp``, are
 untouched.  Same Newton iterates to rounding (tested against scipy's).
 
-* ``construct_global_jac`` -> :func:`_block_global_jac` (the rhs Jacobian is
+* ``construct_global_jac`` -> :func:`block_global_jac` (the rhs Jacobian is
   block-diagonal by region: 1/15 of the flops, only structural non-zeros), and
   ``compute_jac_indices`` (scipy's dense index lists, which ours does not use) skipped;
 * ``splu``: natural order, threshold pivoting 0.1, explicit zeros dropped
@@ -25,13 +25,13 @@ import threading
 
 import numpy as np
 
-from dyno.model.equations import _BLOCKS, N_STATES
+from dyno.model.equations import BLOCKS, N_STATES
 
 _LOAD_LOCK = threading.Lock()
 _PRIVATE = {}
 
 
-def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_dp_middle, dbc_dya, dbc_dyb, dbc_dp):
+def block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_dp_middle, dbc_dya, dbc_dyb, dbc_dp):
     """scipy's ``construct_global_jac`` for this model, exploiting the block-diagonal rhs Jacobian.
 
     Same formulas (Kierzenka & Shampine's Lobatto IIIA collocation blocks)
@@ -48,7 +48,7 @@ def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_d
     h3 = h[:, None, None]
     n_bc = n + k
     block_size = np.empty(n, dtype=np.int64)
-    for blk in _BLOCKS:
+    for blk in BLOCKS:
         block_size[list(blk)] = len(blk)
     lengths = np.empty(n * m + k, dtype=np.int64)
     lengths[:n * m] = np.tile(2 * block_size, m)
@@ -60,7 +60,7 @@ def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_d
     data = np.empty(indptr[-1])
     indices = np.empty(indptr[-1], dtype=np.int32)
     intervals = np.arange(m - 1)
-    for blk in _BLOCKS:
+    for blk in BLOCKS:
         idx = np.sort(np.asarray(blk))
         b = idx.size
         a = np.transpose(df_dy[idx[:, None], idx[None, :], :], (2, 0, 1))
@@ -85,7 +85,7 @@ def _block_global_jac(n, m, k, i_jac, j_jac, h, df_dy, df_dy_middle, df_dp, df_d
         fp_mid = np.transpose(df_dp_middle, (2, 0, 1)).copy()
         a_mid_full = np.transpose(df_dy_middle, (2, 0, 1))
         diff = fp[:-1] - fp[1:]
-        for blk in _BLOCKS:
+        for blk in BLOCKS:
             idx = np.asarray(blk)
             fp_mid[:, idx, :] += 0.125 * h3 * np.einsum("...ij,...jk->...ik", a_mid_full[:, idx[:, None], idx[None, :]],
                                                        diff[:, idx, :])
@@ -122,7 +122,7 @@ def _private_bvp_module():
                 return original_splu(a, *args, **kwargs)
 
             def global_jac(n, *args):
-                return _block_global_jac(n, *args) if n == N_STATES else original_jac(n, *args)
+                return block_global_jac(n, *args) if n == N_STATES else original_jac(n, *args)
 
             def jac_indices(n, m, k):
                 # scipy's dense (row, col) lists for its own assembly (~4 ms at 400 nodes, every Newton

@@ -336,7 +336,7 @@ def span_terms(case: Case, tau_n, v1, v2, length_m):
     return -(ei / length_m**2) * v1 * v2, length_m**2 * tau_n / ei * v1
 
 
-def _unpack_params(case: Case, p):
+def unpack_params(case: Case, p):
     omega_s = case.omega_secondary_ref * (1.0 + CREEP_SCALE * p[K_WS])
     g = case.g_ref * (1.0 + CREEP_SCALE * p[K_G])
     return omega_s, g
@@ -351,7 +351,7 @@ def make_fun(case: Case):
     """
 
     def fun(t, y, p):
-        omega_s, g = _unpack_params(case, p)
+        omega_s, g = unpack_params(case, p)
         dy = np.empty_like(y)
         for (i_t, i_th, i_th1, i_th2, i_x, i_x1), radius, phi, omega in (
             ((S_T, S_TH, S_TH1, S_TH2, S_X, S_X1), case.r_secondary_m, p[K_PHIS], omega_s),
@@ -390,20 +390,20 @@ def make_fun(case: Case):
 
 # Column colouring of the rhs Jacobian: every region's rhs depends only on its own states
 # (and a few parameters), so the j-th state of all four regions can be perturbed at once.
-_BLOCKS = (
+BLOCKS = (
     (S_T, S_TH, S_TH1, S_TH2, S_X, S_X1),
     (P_T, P_TH, P_TH1, P_TH2, P_X, P_X1, P_M, P_A),
     (T_TAU, T_V, T_V1, T_V2, T_XP, T_YP),
     (L_TAU, L_V, L_V1, L_V2, L_XP, L_YP),
 )
 _BLOCK_OF_ROW = np.empty(N_STATES, dtype=int)
-for _b, _rows in enumerate(_BLOCKS):
+for _b, _rows in enumerate(BLOCKS):
     _BLOCK_OF_ROW[list(_rows)] = _b
 # Parameter groups with disjoint row supports (K_CS, K_CP do not enter the rhs).
 _PARAM_GROUPS = ((K_WS, K_PHIP, K_LT, K_LS), (K_PHIS,), (K_G,))
 _PARAM_ROWS = {
-    K_WS: _BLOCKS[0], K_PHIS: _BLOCKS[0], K_PHIP: _BLOCKS[1], K_LT: _BLOCKS[2], K_LS: _BLOCKS[3],
-    K_G: _BLOCKS[0] + _BLOCKS[1],
+    K_WS: BLOCKS[0], K_PHIS: BLOCKS[0], K_PHIP: BLOCKS[1], K_LT: BLOCKS[2], K_LS: BLOCKS[3],
+    K_G: BLOCKS[0] + BLOCKS[1],
 }
 _EPS_SQRT = math.sqrt(np.finfo(float).eps)
 
@@ -418,7 +418,7 @@ def make_fun_jac(case: Case, fun=None):
     array: ~1/3 of the rhs work and 1/34 of its Python overhead.
     """
     fun = make_fun(case) if fun is None else fun
-    n_groups = max(len(b) for b in _BLOCKS)
+    n_groups = max(len(b) for b in BLOCKS)
     n_eval = 1 + n_groups + len(_PARAM_GROUPS)
 
     def fun_jac(t, y, p):
@@ -429,7 +429,7 @@ def make_fun_jac(case: Case, fun=None):
         p_all = np.repeat(p[:, None], n_eval * m, axis=1)
         for j in range(n_groups):
             cols = slice((1 + j) * m, (2 + j) * m)
-            for rows in _BLOCKS:
+            for rows in BLOCKS:
                 if j < len(rows):
                     y_all[rows[j], cols] += h_y[rows[j]]
         for g_i, group in enumerate(_PARAM_GROUPS):
@@ -441,7 +441,7 @@ def make_fun_jac(case: Case, fun=None):
         df_dy = np.zeros((n, n, m))
         for j in range(n_groups):
             diff = f_all[:, (1 + j) * m:(2 + j) * m] - f0
-            for rows in _BLOCKS:
+            for rows in BLOCKS:
                 if j < len(rows):
                     i = rows[j]
                     hi = (y[i] + h_y[i]) - y[i]
@@ -460,11 +460,11 @@ def make_fun_jac(case: Case, fun=None):
 
 
 
-def _belt_speed(case: Case, g, t_n):
+def belt_speed(case: Case, g, t_n):
     return g * (t_n + case.ea_n) / (case.ea_n * case.mass_kg_m - g * g)
 
 
-def _mass_flow_for_speed(case: Case, v, t_n):
-    """Inverse of :func:`_belt_speed` in G (the root of V G^2 + (T + EA) G - V EA m = 0)."""
+def mass_flow_for_speed(case: Case, v, t_n):
+    """Inverse of :func:`belt_speed` in G (the root of V G^2 + (T + EA) G - V EA m = 0)."""
     b = t_n + case.ea_n
     return (-b + math.sqrt(b * b + 4.0 * v * v * case.ea_n * case.mass_kg_m)) / (2.0 * v)

@@ -8,7 +8,7 @@ from dataclasses import fields, replace
 import numpy as np
 
 from dyno.model import geometry
-from dyno.model.boundary import _contact_points
+from dyno.model.boundary import contact_points
 from dyno.model.equations import (  # the state layout and scales
     AXIAL_REF_N,
     CREEP_SCALE,
@@ -52,7 +52,7 @@ from dyno.model.equations import (  # the state layout and scales
     T_XP,
     T_YP,
 )
-from dyno.model.equations import Case, _belt_speed, _mass_flow_for_speed, _unpack_params
+from dyno.model.equations import Case, belt_speed, mass_flow_for_speed, unpack_params
 
 
 
@@ -60,7 +60,7 @@ def _smoothstep(t):
     return t * t * (3.0 - 2.0 * t)
 
 
-def _span_bending_length_m(case: Case, tension_n: float) -> float:
+def span_bending_length_m(case: Case, tension_n: float) -> float:
     ei_eff = case.ei_nm2
     if case.variant == "as_published":
         ei_eff = case.ei_nm2 * 0.2**4  # swapped L^2 terms: EI L^4 with L ~ the span length
@@ -69,8 +69,6 @@ def _span_bending_length_m(case: Case, tension_n: float) -> float:
 
 def initial_guess(case: Case, n_nodes: int = 301):
     """Geometric initial guess ``(t, y, p)``; needs no starting solution."""
-    from dyno.model.closed_form import closed_form_point  # noqa: F401  (tension level estimate below)
-
     r_p, r_s, lc = case.r_primary_m, case.r_secondary_m, case.centre_distance_m
     dt_n = case.torque_nm / r_p
     if case.bc == "slack_tension":
@@ -82,10 +80,10 @@ def initial_guess(case: Case, n_nodes: int = 301):
         t_slack = max(t_tight - dt_n, 0.2 * dt_n)
     t_tight = t_slack + dt_n
     theta_t = geometry.tangent_angle_rad(r_p, r_s, lc)
-    d_pt = _span_bending_length_m(case, t_tight) / r_p
-    d_ps = _span_bending_length_m(case, t_slack) / r_p
-    d_st = _span_bending_length_m(case, t_tight) / r_s
-    d_ss = _span_bending_length_m(case, t_slack) / r_s
+    d_pt = span_bending_length_m(case, t_tight) / r_p
+    d_ps = span_bending_length_m(case, t_slack) / r_p
+    d_st = span_bending_length_m(case, t_tight) / r_s
+    d_ss = span_bending_length_m(case, t_slack) / r_s
     c_p = math.pi / 2 + theta_t + d_pt
     phi_p = math.pi - 2 * theta_t - d_pt - d_ps
     c_s = math.pi / 2 - theta_t + d_st
@@ -162,26 +160,26 @@ def _transfer_speeds(old: Case, new: Case, y: np.ndarray, p: np.ndarray) -> None
     point of least slip, and the secondary speed to keep it at the
     secondary's.
     """
-    omega_s_old, g_old = _unpack_params(old, p)
+    omega_s_old, g_old = unpack_params(old, p)
     # primary: the point of least slip (the adhesion zone, if any)
     t_p = y[P_T] * TENSION_REF_N
     x_p = y[P_X] * PENETRATION_REF_M
-    v_old = _belt_speed(old, g_old, t_p)
+    v_old = belt_speed(old, g_old, t_p)
     slip = np.abs(v_old * np.cos(y[P_TH]) - (old.r_primary_m - x_p) * old.omega_primary_rad_s)
     j = int(np.argmin(slip))
     surf_shift = (new.r_primary_m - x_p[j]) * new.omega_primary_rad_s - (old.r_primary_m - x_p[j]) * old.omega_primary_rad_s
     v_new = v_old[j] + surf_shift / math.cos(y[P_TH, j])
     if not (math.isfinite(v_new) and v_new > 0):
         return
-    g_new = _mass_flow_for_speed(new, v_new, t_p[j])
+    g_new = mass_flow_for_speed(new, v_new, t_p[j])
     p[K_G] = (g_new / new.g_ref - 1.0) / CREEP_SCALE
     # secondary: keep the sliding speed at its point of least slip
     t_s = y[S_T] * TENSION_REF_N
     x_s = y[S_X] * PENETRATION_REF_M
-    vs_old = _belt_speed(old, g_old, t_s)
+    vs_old = belt_speed(old, g_old, t_s)
     slip_s = vs_old * np.cos(y[S_TH]) - (old.r_secondary_m - x_s) * omega_s_old
     k = int(np.argmin(np.abs(slip_s)))
-    vs_new = _belt_speed(new, g_new, t_s[k])
+    vs_new = belt_speed(new, g_new, t_s[k])
     omega_s_new = (vs_new * math.cos(y[S_TH, k]) - slip_s[k]) / (new.r_secondary_m - x_s[k])
     p[K_WS] = (omega_s_new / new.omega_secondary_ref - 1.0) / CREEP_SCALE
 
@@ -209,7 +207,7 @@ def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
         t_tight, t_slack = y[P_T, 0] * TENSION_REF_N, y[P_T, -1] * TENSION_REF_N
 
         def lost(case, tension, radius):
-            return _span_bending_length_m(case, tension) / radius
+            return span_bending_length_m(case, tension) / radius
 
         d_pt = lost(new, t_tight, new.r_primary_m) - lost(old, t_tight, old.r_primary_m)
         d_ps = lost(new, t_slack, new.r_primary_m) - lost(old, t_slack, old.r_primary_m)
@@ -221,7 +219,7 @@ def transfer_guess(old: Case, new: Case, y: np.ndarray, p: np.ndarray):
             p[K_CS] += d_st
             p[K_PHIS] -= d_ss + d_st
     # Spans: similarity transform of the old curves onto the new end points.
-    old_pts, new_pts = _contact_points(old, p), _contact_points(new, p)
+    old_pts, new_pts = contact_points(old, p), contact_points(new, p)
     for rows, k_len, a, b in (
         ((T_XP, T_YP, T_V), K_LT, "st", "pt"),
         ((L_XP, L_YP, L_V), K_LS, "ps", "ss"),
@@ -285,7 +283,7 @@ def equidistributed_mesh(t_old: np.ndarray, rms_residuals: np.ndarray, tol: floa
 
 
 
-def _interp_case(a: Case, b: Case, s: float) -> Case:
+def interp_case(a: Case, b: Case, s: float) -> Case:
     """Homotopy between two cases: geometric in EI and the slip threshold, linear otherwise."""
     changes = {}
     for f_ in fields(Case):

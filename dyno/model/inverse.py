@@ -249,7 +249,7 @@ def invert_points(points, tune=None, *, tier: str = "closed_form", params: Model
         raise bad_input("tier", f"one of {', '.join(INVERSE_TIERS)}, got {tier!r}")
     if params is None:
         if tune is not None:
-            from dyno.tuning.shift_curve import model_params_for
+            from dyno.tuning.tune import model_params_for
 
             params = model_params_for(tune)
         else:

@@ -30,9 +30,8 @@ from pathlib import Path
 
 from dyno.model.params import ModelParams, TABLE_6_1, bad_input
 
-# the cache's keys and the model's code hash live in cache_keys (the overlay service needs them without this
-# module, which runs the service: no import cycle); re-exported here, where callers have always found them
-from dyno.model.cache_keys import TIERS, _MODEL_MODULES, _as_point, default_cache_dir, model_code_hash, point_key  # noqa: E402,F401
+# the cache's keys live in cache_keys (the overlay service needs them without this module, which runs the service)
+from dyno.model.cache_keys import TIERS, as_point, default_cache_dir, point_key
 from dyno.model.point_solve import closed_form_result as _closed_form_result  # noqa: E402
 
 
@@ -58,7 +57,7 @@ def cached_mask(
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     out = []
     for item in points:
-        op = _as_point(item, slack_tension_n, primary_axial_force_n)
+        op = as_point(item, slack_tension_n, primary_axial_force_n)
         out.append((cache / f"{point_key(params, op, tier, variant, slip_threshold_m_s, tol)}.json").is_file())
     return out
 
@@ -89,11 +88,12 @@ def predict_overlay(
     """
     if tier not in TIERS:
         raise bad_input("tier", f"one of {', '.join(TIERS)}, got {tier!r}")
-    ops = [_as_point(p, slack_tension_n, primary_axial_force_n) for p in points]
+    ops = [as_point(p, slack_tension_n, primary_axial_force_n) for p in points]
     if tier == "full":
         # The live overlay's service, run inline: cache, nearest-neighbour warm starts (also from solutions
         # stored by earlier sessions), cold fallback.
-        from dyno.model.overlay_service import InlineExecutor, OverlayService
+        from dyno.model.overlay_worker import InlineExecutor
+        from dyno.model.overlay_service import OverlayService
 
         svc = OverlayService(params, executor=InlineExecutor(), variant=variant, slip_threshold_m_s=slip_threshold_m_s,
                              tol=tol, cache_dir=cache_dir, use_cache=use_cache, time_limit_s=time_limit_s)

@@ -45,9 +45,9 @@ from pathlib import Path
 import numpy as np
 
 from dyno.model import cache_keys as _keys
-from dyno.model.cache_keys import _as_point, default_cache_dir, point_key
-from dyno.model.overlay_worker import (Cancelled, InlineExecutor, WarmState, process_pool,  # noqa: F401  (re-exported)
-                                       solve_job)
+from dyno.model.cache_keys import as_point, default_cache_dir, point_key
+from dyno.model.overlay_worker import Cancelled, InlineExecutor, solve_job
+from dyno.model.point_solve import WarmState
 from dyno.model.params import TABLE_6_1, ModelParams, OperatingPoint
 
 #: Scales of :func:`op_distance` (per unit of log): a warm start is tried up to distance 1.  Measured on a
@@ -131,12 +131,12 @@ class OverlayService:
 
     # --- public -------------------------------------------------------------------------------------
     def key(self, item) -> str:
-        op = _as_point(item, self.slack_tension_n, self.primary_axial_force_n)
+        op = as_point(item, self.slack_tension_n, self.primary_axial_force_n)
         return point_key(self.params, op, "full", self.variant, self.slip_threshold_m_s, self.tol)
 
     def submit(self, item, *, prime: bool = False) -> str:
         """Queue a point (a triple, dict or OperatingPoint); returns its key.  Known points are not solved again."""
-        op = _as_point(item, self.slack_tension_n, self.primary_axial_force_n)
+        op = as_point(item, self.slack_tension_n, self.primary_axial_force_n)
         key = point_key(self.params, op, "full", self.variant, self.slip_threshold_m_s, self.tol)
         with self._lock:
             if key in self.entries:
@@ -191,7 +191,7 @@ class OverlayService:
 
     def nearest_distance(self, item) -> float:
         """:func:`op_distance` from ``item`` to the nearest solution a warm start could use (inf: none)."""
-        op = _as_point(item, self.slack_tension_n, self.primary_axial_force_n)
+        op = as_point(item, self.slack_tension_n, self.primary_axial_force_n)
         with self._lock:
             return self._nearest(op)[0]
 

@@ -10,7 +10,7 @@ import time
 from concurrent.futures import Future
 
 from dyno.model.params import ModelParams, OperatingPoint
-from dyno.model.point_solve import WarmState, solve_strategy  # noqa: F401  (WarmState: where callers find it)
+from dyno.model.point_solve import WarmState, solve_strategy
 
 
 class Cancelled(Exception):

@@ -1,7 +1,7 @@
 """One belt-model prediction, as stored: the solving strategy (warm, cold, a far neighbour) and the result's
 shape — the part of the overlay that decides the numbers.
 
-The cache's key hashes this module with the maths (:data:`dyno.model.cache_keys._MODEL_MODULES`); the
+The cache's key hashes this module with the maths (:data:`dyno.model.cache_keys.MODEL_MODULES`); the
 service, the worker processes and the executors that carry a job (:mod:`dyno.model.overlay_service`,
 :mod:`dyno.model.overlay_worker`) do not, so a change to the plumbing keeps every cached result.
 """
@@ -30,7 +30,7 @@ class WarmState:
 
     @property
     def raw(self):
-        from dyno.model.bvp import RawSolution
+        from dyno.model.equations import RawSolution
 
         return RawSolution(case=self.case, t=self.t, y=self.y, p=self.p, sol=None, residual_max=0.0,
                            bc_residual_max=0.0, tol=0.0, rms_residuals=self.rms)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dyno.model import balance, bvp
+from dyno.model import balance, bvp, equations
 
 AS_PUBLISHED_WARNING = (
     "as_published reproduces the thesis's code, which is out of energy balance: bending energy vanishes where "
@@ -42,24 +42,24 @@ def _gauss_nodes(t: np.ndarray):
     return nodes, weights
 
 
-def _contact_eval(case: bvp.Case, y: np.ndarray, p: np.ndarray, which: str):
-    omega_s, g = bvp._unpack_params(case, p)
+def _contact_eval(case: equations.Case, y: np.ndarray, p: np.ndarray, which: str):
+    omega_s, g = equations.unpack_params(case, p)
     if which == "primary":
-        idx = (bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.P_TH2, bvp.P_X, bvp.P_X1)
-        radius, phi, omega = case.r_primary_m, p[bvp.K_PHIP], case.omega_primary_rad_s
+        idx = (equations.P_T, equations.P_TH, equations.P_TH1, equations.P_TH2, equations.P_X, equations.P_X1)
+        radius, phi, omega = case.r_primary_m, p[equations.K_PHIP], case.omega_primary_rad_s
     else:
-        idx = (bvp.S_T, bvp.S_TH, bvp.S_TH1, bvp.S_TH2, bvp.S_X, bvp.S_X1)
-        radius, phi, omega = case.r_secondary_m, p[bvp.K_PHIS], omega_s
-    t_n = y[idx[0]] * bvp.TENSION_REF_N
-    x_m = y[idx[4]] * bvp.PENETRATION_REF_M
-    x1_m = y[idx[5]] * bvp.PENETRATION_REF_M
-    d_t, d_th3, x2, d_m, d_a, extras = bvp.contact_terms(
+        idx = (equations.S_T, equations.S_TH, equations.S_TH1, equations.S_TH2, equations.S_X, equations.S_X1)
+        radius, phi, omega = case.r_secondary_m, p[equations.K_PHIS], omega_s
+    t_n = y[idx[0]] * equations.TENSION_REF_N
+    x_m = y[idx[4]] * equations.PENETRATION_REF_M
+    x1_m = y[idx[5]] * equations.PENETRATION_REF_M
+    d_t, d_th3, x2, d_m, d_a, extras = equations.contact_terms(
         case, t_n, y[idx[1]], y[idx[2]], y[idx[3]], x_m, x1_m, radius, phi, omega, g
     )
     return t_n, x_m, d_m, d_a, extras, g
 
 
-def _effective_tension(case: bvp.Case, t_n, g):
+def _effective_tension(case: equations.Case, t_n, g):
     """Belt tension F from the tractive tension (eq 3.10)."""
     m, ea = case.mass_kg_m, case.ea_n
     return (t_n + g * g / m) / (1.0 - g * g / (ea * m))
@@ -69,12 +69,12 @@ def _effective_tension(case: bvp.Case, t_n, g):
 class BeltSolution:
     """A converged full-model solution with its summary and profiles."""
 
-    raw: bvp.RawSolution
+    raw: equations.RawSolution
     variant: str
     summary: dict = field(default_factory=dict)
 
     @property
-    def case(self) -> bvp.Case:
+    def case(self) -> equations.Case:
         return self.raw.case
 
     def as_dict(self) -> dict:
@@ -93,7 +93,7 @@ class BeltSolution:
         t = np.linspace(0.0, 1.0, n_points)
         y = raw.sol(t)
         out = {}
-        for which, phi_idx, th_i in (("primary", bvp.K_PHIP, bvp.P_TH), ("secondary", bvp.K_PHIS, bvp.S_TH)):
+        for which, phi_idx, th_i in (("primary", equations.K_PHIP, equations.P_TH), ("secondary", equations.K_PHIS, equations.S_TH)):
             t_n, x_m, d_m, d_a, ex, _ = _contact_eval(case, y, p, which)
             out[which] = {
                 "wrap_angle_deg": np.degrees(p[phi_idx] * t),
@@ -106,13 +106,13 @@ class BeltSolution:
                 "axial_pressure_n_m": 0.5 * case.k_n_m2 * x_m,
             }
         for which, l_idx, rows in (
-            ("tight_span", bvp.K_LT, (bvp.T_TAU, bvp.T_V, bvp.T_XP, bvp.T_YP)),
-            ("slack_span", bvp.K_LS, (bvp.L_TAU, bvp.L_V, bvp.L_XP, bvp.L_YP)),
+            ("tight_span", equations.K_LT, (equations.T_TAU, equations.T_V, equations.T_XP, equations.T_YP)),
+            ("slack_span", equations.K_LS, (equations.L_TAU, equations.L_V, equations.L_XP, equations.L_YP)),
         ):
             length = p[l_idx]
             out[which] = {
                 "arc_length_m": length * t,
-                "tension_n": y[rows[0]] * bvp.TENSION_REF_N,
+                "tension_n": y[rows[0]] * equations.TENSION_REF_N,
                 "direction_deg": np.degrees(y[rows[1]]),
                 "x_m": y[rows[2]] * length,
                 "y_m": y[rows[3]] * length,
@@ -120,16 +120,16 @@ class BeltSolution:
         return out
 
 
-def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> BeltSolution:
+def postprocess(raw: equations.RawSolution, pitch_length_m: float | None = None) -> BeltSolution:
     """Summary figures of a solved case (see module docstring for conventions)."""
     case, p, y_mesh = raw.case, raw.p, raw.y
     tq, w = _gauss_nodes(raw.t)
     y = raw.sol(tq)
-    omega_s, g = bvp._unpack_params(case, p)
+    omega_s, g = equations.unpack_params(case, p)
     ratio_geom = case.r_secondary_m / case.r_primary_m
 
     res = {}
-    for which, phi_idx, c_idx in (("primary", bvp.K_PHIP, bvp.K_CP), ("secondary", bvp.K_PHIS, bvp.K_CS)):
+    for which, phi_idx, c_idx in (("primary", equations.K_PHIP, equations.K_CP), ("secondary", equations.K_PHIS, equations.K_CS)):
         t_n, x_m, d_m, d_a, ex, _ = _contact_eval(case, y, p, which)
         radius = case.r_primary_m if which == "primary" else case.r_secondary_m
         phi, c = p[phi_idx], p[c_idx]
@@ -150,26 +150,26 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
             "unstretched_m": unstretched,
             "min_sliding_m_s": float(min(ex["sliding_speed_m_s"].min(), ex_mesh["sliding_speed_m_s"].min())),
             "adhesion_fraction": float(np.sum(w[ex["sliding_speed_m_s"] < case.slip_threshold_m_s])),
-            "max_penetration_m": float(max(x_m.max(), y_mesh[bvp.P_X if which == "primary" else bvp.S_X].max() * bvp.PENETRATION_REF_M)),
+            "max_penetration_m": float(max(x_m.max(), y_mesh[equations.P_X if which == "primary" else equations.S_X].max() * equations.PENETRATION_REF_M)),
         }
     spans = {}
-    for which, l_idx, tau_i in (("tight", bvp.K_LT, bvp.T_TAU), ("slack", bvp.K_LS, bvp.L_TAU)):
-        tau = y[tau_i] * bvp.TENSION_REF_N
+    for which, l_idx, tau_i in (("tight", equations.K_LT, equations.T_TAU), ("slack", equations.K_LS, equations.L_TAU)):
+        tau = y[tau_i] * equations.TENSION_REF_N
         f_eff = _effective_tension(case, tau, g)
         spans[which] = float(np.sum(w * p[l_idx] / (1.0 + f_eff / case.ea_n)))
 
     # Point loads at the contact ends (shear jumps) would add to the pulleys' torques; the corrected
     # variant makes the shear continuous, so they vanish there (computed anyway: the balances check it).
     loads = balance.interface_loads(raw)
-    torque_in = -float(y_mesh[bvp.P_M, -1] * bvp.TORQUE_REF_NM) + balance.point_load_torque_nm(loads, "primary")
+    torque_in = -float(y_mesh[equations.P_M, -1] * equations.TORQUE_REF_NM) + balance.point_load_torque_nm(loads, "primary")
     torque_out = res["secondary"]["torque_nm"] - balance.point_load_torque_nm(loads, "secondary")
     bal = balance.balances(raw)
     eta_speed = omega_s / (case.omega_primary_rad_s * case.r_primary_m / case.r_secondary_m)
     eta_torque = (torque_out / torque_in) / ratio_geom
-    t_tight = float(y_mesh[bvp.P_T, 0] * bvp.TENSION_REF_N)
-    t_slack = float(y_mesh[bvp.P_T, -1] * bvp.TENSION_REF_N)
+    t_tight = float(y_mesh[equations.P_T, 0] * equations.TENSION_REF_N)
+    t_slack = float(y_mesh[equations.P_T, -1] * equations.TENSION_REF_N)
     unstretched_total = sum(r["unstretched_m"] for r in res.values()) + sum(spans.values())
-    a_p = float(y_mesh[bvp.P_A, -1] * bvp.AXIAL_REF_N)
+    a_p = float(y_mesh[equations.P_A, -1] * equations.AXIAL_REF_N)
     a_s = res["secondary"]["axial_force_n"]
 
     def moment(which, force):
@@ -191,20 +191,20 @@ def postprocess(raw: bvp.RawSolution, pitch_length_m: float | None = None) -> Be
         "radius_m": {"primary": case.r_primary_m, "secondary": case.r_secondary_m},
         "primary_speed_rpm": case.omega_primary_rad_s * 60.0 / (2 * math.pi),
         "secondary_speed_rpm": omega_s * 60.0 / (2 * math.pi),
-        "wrap_deg": {"primary": math.degrees(p[bvp.K_PHIP]), "secondary": math.degrees(p[bvp.K_PHIS])},
-        "orientation_deg": {"primary": math.degrees(p[bvp.K_CP]), "secondary": math.degrees(p[bvp.K_CS])},
+        "wrap_deg": {"primary": math.degrees(p[equations.K_PHIP]), "secondary": math.degrees(p[equations.K_PHIS])},
+        "orientation_deg": {"primary": math.degrees(p[equations.K_CP]), "secondary": math.degrees(p[equations.K_CS])},
         "inclination_deg": {
-            "primary_entry": math.degrees(y_mesh[bvp.P_TH, 0]),
-            "primary_exit": math.degrees(y_mesh[bvp.P_TH, -1]),
-            "secondary_entry": math.degrees(y_mesh[bvp.S_TH, 0]),
-            "secondary_exit": math.degrees(y_mesh[bvp.S_TH, -1]),
+            "primary_entry": math.degrees(y_mesh[equations.P_TH, 0]),
+            "primary_exit": math.degrees(y_mesh[equations.P_TH, -1]),
+            "secondary_entry": math.degrees(y_mesh[equations.S_TH, 0]),
+            "secondary_exit": math.degrees(y_mesh[equations.S_TH, -1]),
         },
         "span_tension_n": {"tight": t_tight, "slack": t_slack},
         "span_tension_range_n": {
-            "tight": [float(y_mesh[bvp.T_TAU].min() * 100), float(y_mesh[bvp.T_TAU].max() * 100)],
-            "slack": [float(y_mesh[bvp.L_TAU].min() * 100), float(y_mesh[bvp.L_TAU].max() * 100)],
+            "tight": [float(y_mesh[equations.T_TAU].min() * 100), float(y_mesh[equations.T_TAU].max() * 100)],
+            "slack": [float(y_mesh[equations.L_TAU].min() * 100), float(y_mesh[equations.L_TAU].max() * 100)],
         },
-        "span_length_m": {"tight": float(p[bvp.K_LT]), "slack": float(p[bvp.K_LS])},
+        "span_length_m": {"tight": float(p[equations.K_LT]), "slack": float(p[equations.K_LS])},
         "mass_flow_kg_s": g,
         "torque_nm": {"primary": torque_in, "secondary": torque_out},
         "axial_force_n": {"primary": a_p, "secondary": a_s},
@@ -278,7 +278,7 @@ def solve_point(
 
     params = TABLE_6_1 if params is None else params
     op = TABLE_6_1_POINT if op is None else op
-    case = bvp.make_case(params, op, variant, slip_threshold_m_s)
+    case = equations.make_case(params, op, variant, slip_threshold_m_s)
     if friction_corner:
         from dataclasses import replace as _replace
 

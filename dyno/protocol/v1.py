@@ -118,7 +118,7 @@ def fit_events(events, t0_us: int | None = None, payload_max: int = PAYLOAD_MAX,
     for ev in events:
         if t0_us is None:
             t0_us = ev.t_us
-        dt = _signed32((ev.t_us - t0_us) & 0xFFFFFFFF)
+        dt = signed32((ev.t_us - t0_us) & 0xFFFFFFFF)
         size = event_len[ev.channel]
         if used + size > payload_max or not DT_MIN <= dt <= DT_MAX:
             break
@@ -137,7 +137,7 @@ def encode_data_frame(seq: int, flags: int, events_dropped: int, events, now_us:
     t0 = events[0].t_us if events else now_us & 0xFFFFFFFF
     body = bytearray()
     for ev in events:
-        dt = _signed32((ev.t_us - t0) & 0xFFFFFFFF)
+        dt = signed32((ev.t_us - t0) & 0xFFFFFFFF)
         if ev.channel == CH_ADC:
             body += struct.pack(">BhHB", ev.channel, dt, ev.code & 0xFFFF, ev.status & 0xFF)
         else:
@@ -265,5 +265,5 @@ def decode_command(buf: bytes) -> Command:
     return Command(op, tuple(buf[1:-2]))
 
 
-def _signed32(x: int) -> int:
+def signed32(x: int) -> int:
     return x - 0x100000000 if x & 0x80000000 else x

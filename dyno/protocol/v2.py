@@ -41,8 +41,7 @@ from dataclasses import dataclass, field
 from dyno.errors import FrameError
 from dyno.protocol import v1
 from dyno.protocol.crc import crc16, crc32c
-from dyno.protocol.v1 import (ADC_STATUS_ERR, CH_ADC, CH_PRIMARY, CH_SECONDARY, CHANNEL_NAMES,  # noqa: F401
-                              DT_MAX, DT_MIN, EVENT_LEN, KIND_DATA, KIND_INFO, Event)
+from dyno.protocol.v1 import CH_ADC, CHANNEL_NAMES, EVENT_LEN, KIND_DATA, KIND_INFO, Event
 
 VERSION = 2
 FRAME_MAX = 32
@@ -186,7 +185,7 @@ def encode_data_frame(seq: int, flags: int, boot_id: int, events_dropped: int, e
     t0 = events[0].t_us if events else now_us & 0xFFFFFFFF
     body = bytearray()
     for ev in events:
-        dt = v1._signed32((ev.t_us - t0) & 0xFFFFFFFF)
+        dt = v1.signed32((ev.t_us - t0) & 0xFFFFFFFF)
         tag = ev.channel | (TAG_GAP if ev.gap else 0)
         if ev.channel in ADC_TAGS:
             body += struct.pack(">BhHB", tag, dt, ev.code & 0xFFFF, ev.status & 0xFF)

@@ -15,7 +15,7 @@ _RC = {"svg.fonttype": "none", "svg.hashsalt": "dyno-report", "font.size": 9, "a
        "grid.alpha": 0.3}
 
 
-def _figure(width_in: float = 7.0, height_in: float = 4.2, ncols: int = 1):
+def new_figure(width_in: float = 7.0, height_in: float = 4.2, ncols: int = 1):
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width_in, height_in), dpi=100, layout="constrained")
@@ -23,7 +23,7 @@ def _figure(width_in: float = 7.0, height_in: float = 4.2, ncols: int = 1):
     return fig, axes
 
 
-def _svg(fig) -> str:
+def svg_text(fig) -> str:
     buf = io.StringIO()
     fig.savefig(buf, format="svg", metadata={"Date": None})
     return buf.getvalue()
@@ -37,14 +37,14 @@ def _plain(values) -> list[float]:
     return [math.nan if v is None else float(v) for v in values]
 
 
-def _legend(ax) -> None:
+def legend_or_note(ax) -> None:
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7)
     else:  # say so, rather than leave an empty frame to be puzzled over
         ax.text(0.5, 0.5, "no points to plot", transform=ax.transAxes, ha="center", va="center", color="0.4")
 
 
-def _render(draw) -> str:
+def render_styled(draw) -> str:
     import matplotlib
 
     with matplotlib.rc_context(_RC):
@@ -54,7 +54,7 @@ def _render(draw) -> str:
 def efficiency_svg(series: dict) -> str:
     """Efficiency (%) vs secondary rpm: valid points ± 1 standard error, excluded points, model, sim truth."""
     def draw() -> str:
-        fig, (ax,) = _figure()
+        fig, (ax,) = new_figure()
         v = series["points"]
         if v["rpm_secondary"]:
             bars = ax.errorbar(v["rpm_secondary"], _pct(v["efficiency"]), yerr=_pct(v["efficiency_sem"]),
@@ -77,16 +77,16 @@ def efficiency_svg(series: dict) -> str:
             ax.plot(t["rpm_secondary"], _pct(t["efficiency"]), ".", color="C2", ms=3,
                     label="simulated truth", gid="eff-truth")
         ax.set(xlabel="secondary speed, rpm", ylabel="efficiency, %", title="CVT efficiency")
-        _legend(ax)
-        return _svg(fig)
+        legend_or_note(ax)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)
 
 
 def shift_svg(series: dict) -> str:
     """Shift curve: ratio (engine rpm / secondary rpm) vs engine rpm, measured and predicted from the tune."""
     def draw() -> str:
-        fig, (ax,) = _figure()
+        fig, (ax,) = new_figure()
         v = series["points"]
         if v["rpm_primary"]:
             ax.plot(v["rpm_primary"], v["ratio"], "o", ms=4, color="C0", label="measured", gid="shift-points")
@@ -95,16 +95,16 @@ def shift_svg(series: dict) -> str:
             ax.plot(p["engine_rpm"], p["ratio"], "-", color="C1", lw=1.2, label="predicted from the tune",
                     gid="shift-predicted")
         ax.set(xlabel="engine speed, rpm", ylabel="ratio (engine / secondary speed)", title="shift curve")
-        _legend(ax)
-        return _svg(fig)
+        legend_or_note(ax)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)
 
 
 def torque_power_svg(series: dict) -> str:
     """Secondary torque (N·m) and output / input power (kW) vs secondary rpm."""
     def draw() -> str:
-        fig, (ax_t, ax_p) = _figure(9.0, 3.8, ncols=2)
+        fig, (ax_t, ax_p) = new_figure(9.0, 3.8, ncols=2)
         v = series["points"]
         if v["rpm_secondary"]:
             ax_t.plot(v["rpm_secondary"], v["torque_secondary_nm"], "o", ms=4, color="C0",
@@ -115,16 +115,16 @@ def torque_power_svg(series: dict) -> str:
                       color="C1", label="input (engine map)", gid="power-in-points")
         ax_t.set(xlabel="secondary speed, rpm", ylabel="torque, N·m", title="secondary torque")
         ax_p.set(xlabel="secondary speed, rpm", ylabel="power, kW", title="power")
-        _legend(ax_p)
-        return _svg(fig)
+        legend_or_note(ax_p)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)
 
 
 def engine_map_svg(engine_map: dict) -> str:
     """The engine map the efficiencies were computed with: torque (N·m) and power (kW) vs engine rpm."""
     def draw() -> str:
-        fig, (ax,) = _figure(7.0, 3.6)
+        fig, (ax,) = new_figure(7.0, 3.6)
         ax.plot(engine_map["rpm"], engine_map["torque_nm"], "-", color="C0", label="torque", gid="map-torque")
         ax.set(xlabel="engine speed, rpm", ylabel="torque, N·m", title="engine map")
         ax2 = ax.twinx()
@@ -134,6 +134,6 @@ def engine_map_svg(engine_map: dict) -> str:
         ax2.set_ylabel("power, kW")
         lines = ax.get_lines() + ax2.get_lines()
         ax.legend(lines, [ln.get_label() for ln in lines], fontsize=7, loc="lower center")
-        return _svg(fig)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)

@@ -19,10 +19,10 @@ def _table(head, rows) -> str:
 
 def ramp_svg(doc: dict) -> str:
     """Ratio vs engine speed over each throttle ramp, with the engagement and shift-out found."""
-    from dyno.report.figures import _figure, _legend, _render, _svg
+    from dyno.report.figures import new_figure, legend_or_note, render_styled, svg_text
 
     def draw() -> str:
-        fig, (ax,) = _figure()
+        fig, (ax,) = new_figure()
         rows = [doc] + [r for r in (doc.get("shift_out_vs_load") or [])[1:]]
         for k, r in enumerate(rows):
             c = r.get("curve") or {}
@@ -36,18 +36,18 @@ def ramp_svg(doc: dict) -> str:
                     ax.axvline(r[key], color=f"C{k}", ls=":" if mark == "v" else "--", lw=0.8)
         ax.set(xlabel="engine speed, rpm", ylabel="ratio (engine / secondary speed)",
                title="throttle ramps: engagement (dotted), shift-out (dashed)")
-        _legend(ax)
-        return _svg(fig)
+        legend_or_note(ax)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)
 
 
 def loss_svg(doc: dict) -> str:
     """The coast-down's loss torque vs secondary speed: the fit, its 95 % band, the sim's truth."""
-    from dyno.report.figures import _figure, _legend, _render, _svg
+    from dyno.report.figures import new_figure, legend_or_note, render_styled, svg_text
 
     def draw() -> str:
-        fig, (ax,) = _figure()
+        fig, (ax,) = new_figure()
         f = doc["loss_fit"]
         r, t = f["rpm_grid"], f["torque_nm"]
         band = [math.hypot(a, b) for a, b in zip(f["torque_ci95_nm"], f["torque_sys95_nm"])]
@@ -58,10 +58,10 @@ def loss_svg(doc: dict) -> str:
             ax.plot(r, doc["loss_torque_true_nm"], "--", color="C3", label="simulated truth", gid="loss-true")
         ax.set(xlabel="secondary speed, rpm", ylabel="loss torque at the secondary, N·m",
                title="driven-side loss from the coast-down")
-        _legend(ax)
-        return _svg(fig)
+        legend_or_note(ax)
+        return svg_text(fig)
 
-    return _render(draw)
+    return render_styled(draw)
 
 
 def _embed(svg: str, fig_id: str, alt: str) -> str:

@@ -30,9 +30,8 @@ from dyno.errors import ConfigError
 from dyno.rig.ambient import AmbientConfig, ambient_table
 from dyno.rig.driveline import DrivelineConfig, driveline_table
 from dyno.rig.input_torque import InputTorqueConfig, input_torque_table
-from dyno.rig.inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table  # noqa: F401 (re-exported)
-from dyno.rig.locate import (RIG_ENV, add_rig_argument, find_rig, packaged_rig,  # noqa: F401 (re-exported)
-                             require_own_rig)
+from dyno.rig.inertia import DRIVEN_INERTIA_KEYS, InertiaConfig, inertia_table
+from dyno.rig.locate import find_rig, packaged_rig, require_own_rig
 
 SCHEMA = "dyno.rig/1"
 

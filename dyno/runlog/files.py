@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from dyno.fileio import write_atomic  # noqa: F401  (re-exported for the run log)
+from dyno.fileio import write_atomic
 
 
 def write_json_atomic(path: Path, obj) -> None:

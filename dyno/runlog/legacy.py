@@ -33,8 +33,8 @@ import numpy as np
 
 from dyno.errors import ConfigError
 from dyno.protocol import v1
-from dyno.runlog.legacy_faults import (  # noqa: F401 (thresholds re-exported: docs/legacy-import.md)
-    EXPECTED_POLL_HZ, EXPECTED_ADC_HZ, NOMINAL_POINT_S, DISCARDED_DEFAULT, U32_MAX, U16_MAX, ERROR, point_faults, _fault, PREFIX_CHANNEL)
+from dyno.runlog.legacy_faults import (
+    EXPECTED_POLL_HZ, EXPECTED_ADC_HZ, NOMINAL_POINT_S, DISCARDED_DEFAULT, U32_MAX, U16_MAX, ERROR, point_faults, fault_record, PREFIX_CHANNEL)
 
 FILE_RE = re.compile(r"^(P|S|ADC|TORQUE)_(\d+)\.csv$")
 CHANNEL_ID = {"primary": v1.CH_PRIMARY, "secondary": v1.CH_SECONDARY, "adc": v1.CH_ADC}
@@ -118,7 +118,7 @@ def _find_shared(folder: Path, name: str, given: Path | None, option: str) -> Pa
 
 def load_calibration(path: Path):
     """(entry in force, row number or None, sha256) from a legacy cal_values.csv or a dyno history."""
-    from dyno.analysis.calibration import latest, load_history, load_legacy_cal_values
+    from dyno.analysis.calibration_history import latest, load_history, load_legacy_cal_values
 
     raw = _read_bytes(path, "a calibration file (cal_values.csv or a dyno calibration history)")
     first = next((ln for ln in raw.decode("utf-8-sig", "replace").splitlines() if ln.strip()), "")
@@ -351,7 +351,7 @@ def import_legacy(folder, out_dir=None, *, calibration_path=None, engine_map_pat
 
 
 def _write(writer, folder: Path, points: list[LegacyPoint], nominal_s: float, discard: set, calibration) -> dict:
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
     from dyno.analysis.engine_map import load_engine_map
     from dyno.analysis.points import reduce_point
     from dyno.runlog.reader import load_run
@@ -370,7 +370,7 @@ def _write(writer, folder: Path, points: list[LegacyPoint], nominal_s: float, di
     for index, p in enumerate(points):
         legacy = point_faults(p, nominal_s, cal, engine_map)
         if p.t_start_us is None:
-            legacy.append(_fault("all", "no timestamps in any file: no point", ERROR, kind="empty"))
+            legacy.append(fault_record("all", "no timestamps in any file: no point", ERROR, kind="empty"))
             flat += [{"point": p.number, **f} for f in legacy]
             continue
         doc = reduce_point(run.streams, p.t_start_us, p.t_end_us, cal, engine_map, index=index)

@@ -51,7 +51,7 @@ PREFIX_CHANNEL = {"P": "primary", "S": "secondary", "ADC": "adc", "TORQUE": "tor
 # fault detection (pure: arrays in, fault dicts out)
 
 
-def _fault(channel: str, reason: str, severity: str = WARNING, **extra) -> dict:
+def fault_record(channel: str, reason: str, severity: str = WARNING, **extra) -> dict:
     return {"channel": channel, "reason": reason, "severity": severity, **extra}
 
 
@@ -72,7 +72,7 @@ def _samples_fault(name: str, n: int, expected: float, what: str) -> dict | None
     if expected <= 0 or n >= FEW_SAMPLES_WARN * expected:
         return None
     sev = ERROR if n < FEW_SAMPLES_ERROR * expected else WARNING
-    return _fault(name, f"too few samples: {n} {what} vs ~{expected:.0f} expected", sev,
+    return fault_record(name, f"too few samples: {n} {what} vs ~{expected:.0f} expected", sev,
                   kind="few_samples")
 
 
@@ -81,9 +81,9 @@ def hall_faults(ch, nominal_s: float, engine_map=None) -> list[dict]:
     name, t, rpm = ch.name, ch.t_us, ch.values
     faults = []
     if ch.rows == 0:
-        return [_fault(name, f"{ch.path.name} is empty", ERROR, kind="empty")]
+        return [fault_record(name, f"{ch.path.name} is empty", ERROR, kind="empty")]
     if t.size < 2:
-        return [_fault(name, f"never changes: {t.size} distinct edge time(s) in {ch.rows} rows", ERROR,
+        return [fault_record(name, f"never changes: {t.size} distinct edge time(s) in {ch.rows} rows", ERROR,
                        kind="stuck")]
     f = _samples_fault(name, ch.rows, EXPECTED_POLL_HZ * nominal_s, "polled rows")
     if f:
@@ -91,15 +91,15 @@ def hall_faults(ch, nominal_s: float, engine_map=None) -> list[dict]:
     at_top = int(np.sum(rpm == U16_MAX))
     if at_top:
         # reduce_point averages the device rpm, so an overflowed slot would be averaged in.
-        faults.append(_fault(name, f"{at_top} edges at the {U16_MAX} rpm rail (overflowed period)", ERROR,
+        faults.append(fault_record(name, f"{at_top} edges at the {U16_MAX} rpm rail (overflowed period)", ERROR,
                              kind="rail"))
     zero = int(np.sum(rpm == 0))
     if zero:
-        faults.append(_fault(name, f"{zero} edges report 0 rpm (left out of the device-rpm mean)",
+        faults.append(fault_record(name, f"{zero} edges report 0 rpm (left out of the device-rpm mean)",
                              kind="rail"))
     valid = rpm[(rpm > 0) & (rpm < U16_MAX)]
     if valid.size >= 10 and np.all(valid == valid[0]):
-        faults.append(_fault(name, f"device rpm never changes ({valid[0]:.0f} rpm on {valid.size} edges)",
+        faults.append(fault_record(name, f"device rpm never changes ({valid[0]:.0f} rpm on {valid.size} edges)",
                              ERROR, kind="stuck"))
         return faults
     # Each row's rpm is the device's own period ending at that edge (60e6/period,
@@ -113,19 +113,19 @@ def hall_faults(ch, nominal_s: float, engine_map=None) -> list[dict]:
     if missed:
         by_count = 60e6 * (t.size - 1) / float(t[-1] - t[0])
         dev_mean = float(valid.mean()) if valid.size else math.nan
-        faults.append(_fault(
+        faults.append(fault_record(
             name, f"missed edges: edge-count rpm {by_count:.0f} vs device rpm {dev_mean:.0f} "
                   f"({(by_count / dev_mean - 1) * 100:+.2f} %), ~{missed} edge(s) fell between polls; "
                   "the device rpm is used", kind="missed_edges", missed_edges=missed))
     if short:
-        faults.append(_fault(name, f"{short} edge period(s) shorter than the device's rpm implies "
+        faults.append(fault_record(name, f"{short} edge period(s) shorter than the device's rpm implies "
                                    "(double trigger or a torn read)", kind="inconsistent_period"))
     if valid.size >= 10:
         spikes = _spikes(valid, 0.1 * float(np.median(valid)))
         if spikes.any():
             shift = abs(valid.mean() / valid[~spikes].mean() - 1)
             sev = ERROR if shift > SPIKE_FATAL_SHIFT else WARNING
-            faults.append(_fault(name, f"{int(spikes.sum())} rpm spike(s) (up to {valid[spikes].max():.0f} rpm); "
+            faults.append(fault_record(name, f"{int(spikes.sum())} rpm spike(s) (up to {valid[spikes].max():.0f} rpm); "
                                        f"they move the mean by {shift * 100:.2f} %", sev, kind="spike"))
         tv = (t[1:][(rpm[1:] > 0) & (rpm[1:] < U16_MAX)] - t[0]) / 1e6
         vv = rpm[1:][(rpm[1:] > 0) & (rpm[1:] < U16_MAX)]
@@ -135,13 +135,13 @@ def hall_faults(ch, nominal_s: float, engine_map=None) -> list[dict]:
         drift = float(np.polyfit(tv, vv, 1)[0]) * span_s / mean if tv.size >= 3 and np.ptp(tv) > 0 else 0.0
         if cv > UNSTEADY_CV_WARN or abs(drift) > UNSTEADY_DRIFT_WARN:
             sev = ERROR if cv > UNSTEADY_CV_ERROR or abs(drift) > UNSTEADY_DRIFT_ERROR else WARNING
-            faults.append(_fault(name, f"not steady: rpm {valid.min():.0f}..{valid.max():.0f}, scatter "
+            faults.append(fault_record(name, f"not steady: rpm {valid.min():.0f}..{valid.max():.0f}, scatter "
                                        f"{cv * 100:.1f} %, drift {drift * 100:+.1f} % over the point", sev,
                                  kind="unsteady"))
         if engine_map is not None and name == "primary":
             out = (valid < engine_map.rpm_min) | (valid > engine_map.rpm_max)
             if out.any() and engine_map.covers(mean):
-                faults.append(_fault(name, f"{int(out.sum())} of {valid.size} edges at rpm outside the engine map "
+                faults.append(fault_record(name, f"{int(out.sum())} of {valid.size} edges at rpm outside the engine map "
                                            f"[{engine_map.rpm_min:g}, {engine_map.rpm_max:g}] (the mean is inside)",
                                      kind="outside_map"))
     faults += _timestamp_faults(ch)
@@ -151,18 +151,18 @@ def hall_faults(ch, nominal_s: float, engine_map=None) -> list[dict]:
 def adc_faults(ch, nominal_s: float, calibration, torque_file) -> list[dict]:
     name, t, codes = ch.name, ch.t_us, ch.values
     if ch.rows == 0:
-        return [_fault(name, f"{ch.path.name} is empty", ERROR, kind="empty")]
+        return [fault_record(name, f"{ch.path.name} is empty", ERROR, kind="empty")]
     faults = []
     if codes.size >= 2 and np.all(codes == codes[0]):
         rail = " (a rail: the AD7171 is not converting or not wired)" if codes[0] in RAILS else ""
         thesis = ""
         if torque_file is not None and torque_file.values.size:
             thesis = f"; the thesis's {torque_file.path.name} turned it into {torque_file.values.mean():.1f} N·m"
-        faults.append(_fault(name, f"never changes: all {codes.size} conversions are {codes[0]:.0f} counts"
+        faults.append(fault_record(name, f"never changes: all {codes.size} conversions are {codes[0]:.0f} counts"
                                    f"{rail}{thesis}", ERROR, kind="stuck"))
         rate_hz = (codes.size - 1) / max((t[-1] - t[0]) / 1e6, 1e-9)
         if rate_hz > 1.15 * EXPECTED_ADC_HZ:
-            faults.append(_fault(name, f"timestamps arrive at {rate_hz:.0f} Hz, faster than the AD7171's "
+            faults.append(fault_record(name, f"timestamps arrive at {rate_hz:.0f} Hz, faster than the AD7171's "
                                        f"~{EXPECTED_ADC_HZ:.0f} Hz: stamped by the poll, not by a conversion",
                                  kind="rate"))
         return faults + _timestamp_faults(ch)
@@ -177,7 +177,7 @@ def adc_faults(ch, nominal_s: float, calibration, torque_file) -> list[dict]:
             torque_clean = calibration.torque_secondary_nm(good[~spikes].mean())
             shift = abs(torque_all - torque_clean) / max(abs(torque_clean), 1e-9)
             sev = ERROR if shift > SPIKE_FATAL_SHIFT else WARNING
-            faults.append(_fault(
+            faults.append(fault_record(
                 name, f"{int(spikes.sum())} glitch conversion(s) ({', '.join(f'{c:.0f}' for c in good[spikes][:3])} "
                       f"counts vs median {np.median(good):.0f}); averaged in they move the torque by "
                       f"{torque_all - torque_clean:+.2f} N·m ({shift * 100:.1f} %)", sev, kind="spike"))
@@ -186,19 +186,19 @@ def adc_faults(ch, nominal_s: float, calibration, torque_file) -> list[dict]:
         gaps = np.diff(t) / period
         missed = int(np.sum(np.where(gaps > 1.5, np.rint(gaps) - 1, 0)))
         if missed > 0.05 * codes.size:
-            faults.append(_fault(name, f"~{missed} conversions missed between polls", kind="missed_samples"))
+            faults.append(fault_record(name, f"~{missed} conversions missed between polls", kind="missed_samples"))
     faults += _timestamp_faults(ch)
     if torque_file is None:
-        faults.append(_fault("torque_file", "TORQUE file missing: no cross-check with the thesis's torque",
+        faults.append(fault_record("torque_file", "TORQUE file missing: no cross-check with the thesis's torque",
                              kind="missing"))
     elif torque_file.t_us.size:
         if torque_file.t_us.size != t.size or np.any(torque_file.t_us != t):
-            faults.append(_fault("torque_file", f"{torque_file.path.name} timestamps differ from the ADC file's",
+            faults.append(fault_record("torque_file", f"{torque_file.path.name} timestamps differ from the ADC file's",
                                  kind="mismatch"))
         else:
             diff = np.abs(calibration.torque_secondary_nm(codes) - torque_file.values)
             if diff.max() > 1e-3:
-                faults.append(_fault("torque_file", f"{torque_file.path.name} differs from ADC via the calibration in "
+                faults.append(fault_record("torque_file", f"{torque_file.path.name} differs from ADC via the calibration in "
                                                     f"force by up to {diff.max():.3f} N·m (another calibration?)",
                                      kind="mismatch"))
     return faults
@@ -207,10 +207,10 @@ def adc_faults(ch, nominal_s: float, calibration, torque_file) -> list[dict]:
 def _timestamp_faults(ch) -> list[dict]:
     faults = []
     if ch.backwards:
-        faults.append(_fault(ch.name, f"{ch.backwards} row(s) with a timestamp going back (by up to "
+        faults.append(fault_record(ch.name, f"{ch.backwards} row(s) with a timestamp going back (by up to "
                                       f"{ch.backwards_max_us} us) dropped", kind="non_monotonic"))
     if ch.conflicts:
-        faults.append(_fault(ch.name, f"{ch.conflicts} row(s) repeat a timestamp with a different value "
+        faults.append(fault_record(ch.name, f"{ch.conflicts} row(s) repeat a timestamp with a different value "
                                       "(the first value is kept)", kind="conflict"))
     return faults
 
@@ -221,9 +221,9 @@ def point_faults(p, nominal_s: float, calibration, engine_map) -> list[dict]:
     prefix_of = {v: k for k, v in PREFIX_CHANNEL.items()}
     for name in p.missing:
         if name == "torque_file":
-            faults.append(_fault(name, f"TORQUE_{p.number}.csv missing: no cross-check", kind="missing"))
+            faults.append(fault_record(name, f"TORQUE_{p.number}.csv missing: no cross-check", kind="missing"))
         else:
-            faults.append(_fault(name, f"{prefix_of[name]}_{p.number}.csv missing", ERROR, kind="missing"))
+            faults.append(fault_record(name, f"{prefix_of[name]}_{p.number}.csv missing", ERROR, kind="missing"))
     for name in ("primary", "secondary"):
         if name in p.channels:
             faults += hall_faults(p.channels[name], nominal_s, engine_map)
@@ -234,16 +234,16 @@ def point_faults(p, nominal_s: float, calibration, engine_map) -> list[dict]:
     duration_s = (p.t_end_us - p.t_start_us) / 1e6
     if duration_s < FEW_SAMPLES_WARN * nominal_s:
         sev = ERROR if duration_s < FEW_SAMPLES_ERROR * nominal_s else WARNING
-        faults.append(_fault("all", f"short point: {duration_s:.2f} s of the run's usual {nominal_s:.2f} s", sev,
+        faults.append(fault_record("all", f"short point: {duration_s:.2f} s of the run's usual {nominal_s:.2f} s", sev,
                              kind="short"))
     all_t = np.sort(np.concatenate([c.t_us for n, c in p.channels.items() if n != "torque_file"]))
     if all_t.size >= 2:
         gap_s = float(np.diff(all_t).max()) / 1e6
         if gap_s > STALL_GAP_S:
-            faults.append(_fault("all", f"no new row on any channel for {gap_s:.2f} s (the logger stalled)",
+            faults.append(fault_record("all", f"no new row on any channel for {gap_s:.2f} s (the logger stalled)",
                                  kind="gap"))
     if p.clock_shift_us:
-        faults.append(_fault("all", "timestamps went back before this point (Arduino restarted?); placed 1 s "
+        faults.append(fault_record("all", "timestamps went back before this point (Arduino restarted?); placed 1 s "
                                     "after the previous point", kind="clock_restart"))
     return faults
 

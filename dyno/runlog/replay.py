@@ -27,7 +27,7 @@ WITHHELD_BY_FATAL = ("efficiency", "efficiency_sem")
 def replay(run_dir, calibration_path=None, engine_map_path=None, ambient=None) -> dict:
     """The run's points re-processed (``ambient``: another day than the run's, a
     :class:`dyno.analysis.air.Ambient`; ``Ambient()`` re-processes it uncorrected)."""
-    from dyno.analysis.calibration import CalibrationEntry, latest, load_history
+    from dyno.analysis.calibration_history import CalibrationEntry, latest, load_history
     from dyno.analysis.engine_map import load_engine_map
 
     run = load_run(run_dir)
@@ -126,7 +126,7 @@ def points_csv(points) -> str:
 
 def export(run_dir, out_dir=None, **kw) -> list[Path]:
     """Write points.csv and the raw streams as CSV (primary/secondary edges, ADC)."""
-    from dyno.runlog.files import write_atomic
+    from dyno.fileio import write_atomic
 
     result = replay(run_dir, **kw)
     run = load_run(run_dir)

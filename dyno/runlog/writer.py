@@ -26,7 +26,8 @@ import time
 from pathlib import Path
 
 from dyno import __version__
-from dyno.runlog.files import dumps, write_atomic, write_json_atomic
+from dyno.runlog.files import dumps, write_json_atomic
+from dyno.fileio import write_atomic
 
 EVENT_RECORD = struct.Struct("<BqHB")
 LOCK_NAME = ".dyno-lock"  # present while a process writes the run (see RunWriter)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dyno.analysis.air import Ambient
 from dyno.errors import ConfigError
-from dyno.hw.bme280 import read_sensor  # noqa: F401 (one reading as an Ambient; re-exported)
+from dyno.hw.bme280 import read_sensor  # one reading as an Ambient
 
 
 def sim_bme280_address(rig_cfg) -> int | None:

@@ -117,12 +117,12 @@ def _twin_rig(rig_cfg, fixture, sim_now, speed: float):
     its clock is the fixture's (paced: a blocking wait sleeps the real time it stands for)."""
     import time
 
-    from dyno.session.safety import _LoopTimeClock
+    from dyno.session.safety import LoopTimeClock
     from dyno.hw.mockpins import SimPinFactory
     from dyno.hw.rig import HardwareRig
     from dyno.sim.fixture_actuator import FixtureActuatorWiring
 
-    clock = _LoopTimeClock(sim_now, sleep=lambda dt_s: time.sleep(max(0.0, dt_s) / speed))
+    clock = LoopTimeClock(sim_now, sleep=lambda dt_s: time.sleep(max(0.0, dt_s) / speed))
     wiring = FixtureActuatorWiring(sim_now)
     twin = SimPinFactory(rig_cfg, wiring, clock, armed=True, reset=lambda: fixture.firmware.reset(sim_now()))
     hw = HardwareRig(rig_cfg, pin_factory=twin, clock=clock, bus=fixture.bus, install_signals=False,

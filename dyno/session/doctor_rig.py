@@ -77,7 +77,7 @@ def parse_doctor_drill(text: str, cfg):
 def build(cfg, *, mock_pins: bool, drills=(), seed: int = 0, twin: bool | None = None) -> DoctorSim:
     """The doctor's simulated rig; ``twin`` (default: ``mock_pins``) builds the wiring twin even when the output
     checks do not run (the declared inputs are read through it)."""
-    from dyno.hw.clock import FakeClock
+    from dyno.clock import FakeClock
     from dyno.sim.rig import SimRig
 
     parsed = [parse_doctor_drill(t, cfg) for t in drills]

@@ -20,7 +20,8 @@ def drill_form(name: str) -> str:
 
 def drill_help(names=None) -> str:
     """The ``--drill`` help: the forms of WHEN and every drill (from :data:`DRILLS`: a drill added there is listed)."""
-    from dyno.session.drills import DRILLS, PHASES, WIRING_DRILLS
+    from dyno.session.drills import DRILLS, PHASES
+    from dyno.session.drills_wiring import WIRING_DRILLS
 
     names = list(DRILLS if names is None else names)
     wiring = [n for n in names if n in WIRING_DRILLS]

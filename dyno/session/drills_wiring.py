@@ -124,7 +124,7 @@ class WiringDrills:
     def _sigint_in_command(self, d, rec: dict) -> None:
         from dyno.control.outputs import APPLY
 
-        clock = self.ctx.controller.act.clock  # the driver's clock (dyno.session.safety._LoopTimeClock)
+        clock = self.ctx.controller.act.clock  # the driver's clock (dyno.session.safety.LoopTimeClock)
         rec["delivered_s"] = None
 
         def on_now() -> None:

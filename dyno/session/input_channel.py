@@ -45,7 +45,7 @@ def sim_params_for(params, rig_cfg):
     site_m = getattr(getattr(rig_cfg, "ambient", None), "altitude_m", None)
     if getattr(rig_cfg, "input_torque", None) is None and site_m is None:
         return params
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     params = params if params is not None else RigParams()
     if site_m is not None and params.site_altitude_m is None:

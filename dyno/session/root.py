@@ -13,8 +13,6 @@ from pathlib import Path
 
 from dyno.acquisition.poller import Poller
 from dyno.session.after import close_run, end_test
-from dyno.session.safe_outputs import finish_release, rig_outputs  # noqa: F401 (re-exported)
-from dyno.session.summary import POINT_KEYS, public_point, summarize, supervisor_document  # noqa: F401 (re-exported: the CLI, tests)
 from dyno.acquisition.reader import make_reader
 from dyno.session.ambient import ambient_sensor, run_ambient, sim_bme280_address
 from dyno.session.signals import RunSignals
@@ -27,7 +25,7 @@ from dyno.control.safety import SafetyLimits
 from dyno.control.controller import TestController
 from dyno.control.api import TestPlan
 from dyno.transports.base import I2CTransport
-from dyno.resources import DEFAULT_CALIBRATION, DEFAULT_ENGINE_MAP  # noqa: F401 (the defaults, re-exported)
+from dyno.resources import DEFAULT_ENGINE_MAP
 from dyno.rig.locate import find_rig
 from dyno.session.calibration_files import calibration_in_force
 
@@ -76,9 +74,6 @@ class RunSpec:
     listeners: tuple = ()  # the face's controller listeners, callables(controller): given to its constructor
 
 
-RunOptions = RunSpec  # (the name the tests and benches use)
-
-
 def default_run_dir(root: Path | None = None) -> Path:
     """A new run directory ``<root>/<timestamp>[-N]``, created here: claimed atomically (``mkdir`` fails on
     a name another process took in the meantime, and the next suffix is tried), so runs started together
@@ -99,9 +94,9 @@ def default_run_dir(root: Path | None = None) -> Path:
     raise FileExistsError(root / stamp)
 
 
-def load_inputs(opts: RunOptions):
+def load_inputs(opts: RunSpec):
     """Rig config, calibration entry and engine map; every error names file and field."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.analysis.engine_map import load_engine_map
     from dyno.rig.config import load_rig
     from dyno.rig.locate import find_rig, require_own_rig
@@ -118,12 +113,12 @@ def load_inputs(opts: RunOptions):
     return rig_cfg, calibration, engine_map
 
 
-def systematic_terms(opts: RunOptions, rig_cfg, calibration, engine_map=None) -> dict:
+def systematic_terms(opts: RunSpec, rig_cfg, calibration, engine_map=None) -> dict:
     """The systematic terms every point states beside its CI (dyno.analysis.systematic; meta.json keeps them),
     with what each assumes (``u95_terms``, dyno.analysis.u95_terms): the map's term is the map file's stated
     uncertainty, else rig.toml's ``engine_map_rel``."""
     from dyno.analysis import u95_terms
-    from dyno.analysis.calibration import load_history
+    from dyno.analysis.calibration_history import load_history
     from dyno.analysis.systematic import calibration_rel_u
 
     history = load_history(opts.calibration_path)
@@ -201,7 +196,7 @@ def close_rig(ctx) -> None:
         close_twin(ctx)
 
 
-def build(opts: RunOptions, now_s) -> RunContext:
+def build(opts: RunSpec, now_s) -> RunContext:
     """Assemble poller, controller and run writer for a simulated or real rig.
 
     The one composition root: ``dyno run``, ``dyno ui`` (through the live session) and
@@ -325,10 +320,10 @@ def _build(opts: RunSpec, now_s, rig_cfg, calibration, engine_map, uncertainty: 
     }
     tune_path = opts.tune_path
     if tune_path is None and sim is not None:
-        from dyno.sim.physics import _resolve_map_path  # repo-relative default, as the sim resolves it
+        from dyno.sim.rig_params import resolve_map_path  # repo-relative default, as the sim resolves it
 
         tune_path = getattr(sim.model.params, "cvt_tune_path", None)
-        tune_path = _resolve_map_path(tune_path) if tune_path else None
+        tune_path = resolve_map_path(tune_path) if tune_path else None
     tune_text = tune = None
     if tune_path is not None:
         import hashlib
@@ -550,7 +545,7 @@ class RunningTest:
             self.guard = None
 
 
-async def run_test_async(opts: RunOptions) -> dict:
+async def run_test_async(opts: RunSpec) -> dict:
     loop = asyncio.get_running_loop()
     # The handlers go in before the run directory is made: a signal while the rig is built waits for it,
     # then ends the run like one that came a moment later (not a directory holding a `start` alone).
@@ -581,7 +576,7 @@ async def run_test_async(opts: RunOptions) -> dict:
     return result
 
 
-def run_test(opts: RunOptions) -> dict:
+def run_test(opts: RunSpec) -> dict:
     from dyno.clock import run
     from dyno.session.heap import return_free_heap
 

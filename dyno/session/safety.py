@@ -5,7 +5,7 @@ the E-stop input's record, and under ``--mock-pins`` the Pi's own output code ov
 from __future__ import annotations
 
 
-class _LoopTimeClock:
+class LoopTimeClock:
     """The real-rig output code's clock on the host loop's time (virtual in simulations).
 
     Only the blocking helpers (``step``, ``finish_release``, ``reset_arduino``) sleep;
@@ -35,7 +35,7 @@ def twin_outputs(rig_cfg, sim, now_s, seed: int):
     wiring twin (:mod:`dyno.hw.mockpins`) over ``sim``'s physics; returns (actuators, twin, estop or None)."""
     from dyno.hw.mockpins import mock_pin_actuators
 
-    actuators, twin = mock_pin_actuators(rig_cfg, sim.actuators, _LoopTimeClock(now_s), seed=seed)
+    actuators, twin = mock_pin_actuators(rig_cfg, sim.actuators, LoopTimeClock(now_s), seed=seed)
     estop = None
     if rig_cfg.pins.estop_input is not None:
         from dyno.hw.estop import EstopInput

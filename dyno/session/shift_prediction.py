@@ -28,7 +28,8 @@ class TuneShiftPrediction:
 
     def _solved(self):
         if self._solver is None:
-            from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
+            from dyno.tuning.shift_curve import Solver, load_engine_map
+            from dyno.tuning.tune import model_params_for
 
             self._solver = Solver(self.tune, load_engine_map(self._map_source), model_params_for(self.tune))
         return self._solver

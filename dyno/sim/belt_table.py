@@ -9,7 +9,7 @@ solve at ratio 1, 18 N m, warm starts outward in ratio at the reference
 torque, then each other torque warm-started from the same ratio.  Without a
 tune (the sim's closed-form CVT) the tension level is a fixed 100 N slack
 tension.  Every result is stored in the
-overlay's disk cache (:func:`dyno.model.overlay.point_key`, same JSON entries
+overlay's disk cache (:func:`dyno.model.cache_keys.point_key`, same JSON entries
 as :func:`~dyno.model.overlay.predict_overlay` writes), so the table is
 computed once per machine and read back in milliseconds afterwards.
 
@@ -239,7 +239,7 @@ def build_belt_table(ratios=DEFAULT_RATIOS, torques_nm=DEFAULT_TORQUES_NM, *, ca
     ``solve(op, guess)`` replaces :func:`dyno.model.solution.solve_point` (tests).
     """
     from dyno.errors import MODEL_FAILURES, ConfigError
-    from dyno.model.overlay import default_cache_dir, point_key
+    from dyno.model.cache_keys import default_cache_dir, point_key
     from dyno.model.params import TABLE_6_1, OperatingPoint
 
     t0 = time.perf_counter()
@@ -383,7 +383,7 @@ def belt_table(cache_dir=None, tune=None) -> BeltTable:
     whose every cell is cached is read without the lock (entries are written
     atomically), so a reader never waits for another process building another table.
     """
-    from dyno.model.overlay import default_cache_dir
+    from dyno.model.cache_keys import default_cache_dir
 
     key = (str(cache_dir), None if tune is None else json.dumps(tune.to_dict(), sort_keys=True, default=str))
     if key not in _TABLES:

@@ -28,7 +28,7 @@ def belt_state(cvt, x: float, rpm_primary: float, torque_primary_nm: float) -> t
     if not torque_primary_nm > 1e-6:
         return 0.0, None  # no torque, no tension difference, no creep; kappa kept
     ratio = cvt.ratio_of_travel(x)
-    if cvt._belt_params == "full":
+    if cvt.belt_params == "full":
         return _full(cvt.thrust_table, ratio, f_p, torque_primary_nm)
     return _tiers(cvt, ratio, rpm_primary, f_p, torque_primary_nm)
 
@@ -53,19 +53,19 @@ def _tiers(cvt, ratio: float, rpm_primary: float, f_p: float, torque_primary_nm:
                         primary_torque_nm=max(torque_primary_nm, 0.0), slack_tension_n=None,
                         primary_axial_force_n=f_p)
     try:
-        res = closed_form_point(cvt._creep_params, op)
+        res = closed_form_point(cvt.creep_params, op)
     except (ConfigError, *MODEL_FAILURES):
         # The clamp cannot carry the torque: the secondary wins (as in
         # dyno.tuning.shift_curve.Solver.residual_n), the CVT downshifts.
         return None, 0.0
     creep = 1.0 - res.efficiency_speed
-    if cvt._belt_params is None:
+    if cvt.belt_params is None:
         return creep, None
     if cvt.belt_thrust_model == "capstan":
         from dyno.model.capstan import capstan_point
 
         try:
-            cap = capstan_point(cvt._belt_params, op)
+            cap = capstan_point(cvt.belt_params, op)
         except (ConfigError, ValueError, *MODEL_FAILURES):
             return creep, 0.0
         return creep, (0.0 if cap.gross_slip else cap.axial_force_secondary_n / cap.axial_force_primary_n)

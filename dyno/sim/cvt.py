@@ -325,6 +325,31 @@ class CVT:
         c, sp = self._c, self._sp
         return (c[j] + f * (c[j + 1] - c[j])) * rpm_primary * rpm_primary - (sp[j] + f * (sp[j + 1] - sp[j]))
 
+    def shift_coefficients(self, x: float) -> tuple[float, float]:
+        """``(C, B)`` at travel fraction ``x``, interpolated in the tables of ``F_p - F_s = C n^2 - S - B T``: the
+        flyweights' force per rpm squared (N/rpm^2) and the helix's per N m of secondary torque (N/(N m))."""
+        u = x * self._n
+        j = 0 if u <= 0.0 else (self._n - 1 if u >= self._n else int(u))
+        f = min(max(u - j, 0.0), 1.0)
+        c, b = self._c, self._b
+        return c[j] + f * (c[j + 1] - c[j]), b[j] + f * (b[j + 1] - b[j])
+
+    @property
+    def thrust_ratio(self) -> float:
+        """The thrust ratio ``kappa`` (``F_s,belt = kappa F_p``) the balance uses now; 1 without a belt model."""
+        return self._kappa if self._belt_params is not None else 1.0
+
+    @property
+    def belt_params(self):
+        """The belt model of the thrust ratio: ``"full"`` (the thrust table's cells), the model's parameters
+        (capstan or closed form), or None (no thrust ratio: ``F_p = F_s``)."""
+        return self._belt_params
+
+    @property
+    def creep_params(self):
+        """The belt model of the creep slip: ``"full"``, the model's parameters, or None (the loss model's slip)."""
+        return self._creep_params
+
     def update_belt(self, x: float, rpm_primary: float, torque_primary_nm: float) -> None:
         """Re-evaluate the belt's slip (and, in belt mode, the thrust ratio ``kappa``) at this state."""
         creep, kappa = self.belt_state(x, rpm_primary, torque_primary_nm)

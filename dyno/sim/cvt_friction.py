@@ -97,15 +97,9 @@ def friction_n(cvt, rpm_primary: float, torque_secondary_nm: float, x: float) ->
     fr = cvt.friction
     if fr is None:
         return 0.0
-    u = x * cvt._n
-    j = 0 if u <= 0.0 else (cvt._n - 1 if u >= cvt._n else int(u))
-    f = min(max(u - j, 0.0), 1.0)
-    c, b = cvt._c, cvt._b
-    cc = c[j] + f * (c[j + 1] - c[j])
-    bb = b[j] + f * (b[j + 1] - b[j])
+    cc, bb = cvt.shift_coefficients(x)
     t = torque_secondary_nm if torque_secondary_nm > 0.0 else 0.0
-    kappa = cvt._kappa if cvt._belt_params is not None else 1.0
-    return kappa * fr.ramp_friction_frac * cc * rpm_primary * rpm_primary + fr.helix_friction_frac * bb * t \
+    return cvt.thrust_ratio * fr.ramp_friction_frac * cc * rpm_primary * rpm_primary + fr.helix_friction_frac * bb * t \
         + fr.sheave_friction_n
 
 
@@ -115,7 +109,5 @@ def closing_clamp_n(cvt, rpm_primary: float, x: float) -> float:
     fr = cvt.friction
     if fr is None:
         return f
-    u = min(max(x * cvt._n, 0.0), float(cvt._n))
-    j = min(int(u), cvt._n - 1)
-    c = cvt._c[j] + (u - j) * (cvt._c[j + 1] - cvt._c[j])
+    c = cvt.shift_coefficients(x)[0]
     return f - fr.ramp_friction_frac * c * rpm_primary * rpm_primary - 0.5 * fr.sheave_friction_n

@@ -108,7 +108,7 @@ def _load_at_secondary_nm(model, omega_s_rad_s: float) -> float:
     p = model.params
     brake_nm = model.brake.torque_capacity_nm(model.actuator_mm, model.rotor_temp_c)
     return (brake_nm * p.gear_ratio_brake_per_secondary + p.cvt_secondary_friction_torque_nm
-            + parasitic_nm(model._driven_loss, omega_s_rad_s) + model.driveline_loss_nm(omega_s_rad_s))
+            + parasitic_nm(model.driveline.parasitic, omega_s_rad_s) + model.driveline_loss_nm(omega_s_rad_s))
 
 
 #: what each ``*_true`` figure of the engagement plan means (recorded with them)

@@ -49,7 +49,6 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from dyno.errors import ConfigError
 
 RPM_PER_RAD_S = 30.0 / math.pi
 RAD_S_PER_RPM = math.pi / 30.0
@@ -132,7 +131,7 @@ UNGOVERNED_ZERO_RPM = 6500.0
 class Engine:
     """Mean-torque engine model (see module docstring for the equations).
 
-    Parameters are taken from :class:`dyno.sim.physics.RigParams`.
+    Parameters are taken from :class:`dyno.sim.rig_params.RigParams`.
     """
 
     def __init__(self, engine_map: EngineMap, *, idle_rpm: float, idle_offset_rpm: float,
@@ -155,10 +154,15 @@ class Engine:
         q = rpm / 3600.0
         return self.friction_nm + self.friction_quad_nm * q * q
 
+    def set_speed_rpm(self, u: float) -> float:
+        """The governor's set speed at throttle ``u`` in [0, 1]: idle (with its offset) at 0, the map's top
+        speed plus the droop at 1."""
+        return self.idle_rpm + self.idle_offset_rpm + u * self._set_span_rpm
+
     def fuel_fraction(self, rpm: float, throttle_frac: float) -> float:
         """Governor fuel fraction ``f(u, n)`` in [0, 1]."""
         u = min(max(throttle_frac, 0.0), 1.0)
-        n_set = self.idle_rpm + self.idle_offset_rpm + u * self._set_span_rpm
+        n_set = self.set_speed_rpm(u)
         f = (n_set - rpm) / self.droop_rpm
         return 0.0 if f <= 0.0 else (1.0 if f >= 1.0 else f)
 

@@ -17,18 +17,21 @@ engine fires whatever the chain does; the chain itself, and K3 on it, still swit
 
 from __future__ import annotations
 
-import math
-
 
 class KillChain:
-    """Mixin of :class:`dyno.sim.physics.RigModel`: the chain's inputs and its record."""
+    """The chain's inputs, its wiring faults and its record (owned by :class:`dyno.sim.physics.RigModel`, which
+    notes it every physics cell and stops the engine while the magneto does not fire)."""
 
-    nano_enable: bool = True     # the Nano's run-enable (a rig or firmware without one: always closed)
-    estop_open: bool = False     # the E-stop chain's NC contact opened (the wiring twin sets it)
-    _ignition_was_on: bool | None = None
-    pi_switch_welded: bool = False
-    run_enable_shorted: bool = False
-    kill_lead_open: bool = False
+    def __init__(self) -> None:
+        self.engine_enabled = True      # the Pi's switch (GPIO24)
+        self.nano_enable = True         # the Nano's run-enable (a rig or firmware without one: always closed)
+        self.estop_open = False         # the E-stop chain's NC contact opened (the wiring twin sets it)
+        self.pi_switch_welded = False
+        self.run_enable_shorted = False
+        self.kill_lead_open = False
+        self.log: list[tuple[float, bool, str | None]] = []  # (t_s, on, by) at every change
+        self.cut_mm: dict[float, float] = {}  # the actuator's true position at each opening
+        self._was_on: bool | None = None
 
     @property
     def ignition_on(self) -> bool:
@@ -48,37 +51,26 @@ class KillChain:
             return "nano"
         return "pi"
 
-    def note_ignition(self, t_s: float) -> bool:
-        """Record a change of the chain at ``t_s`` (called on every physics cell); returns ``ignition_on``."""
+    def note(self, t_s: float, actuator_mm: float) -> bool:
+        """Record a change of the chain at ``t_s`` (the actuator then at ``actuator_mm``); returns ``ignition_on``."""
         on = self.ignition_on
-        if on != self._ignition_was_on:
-            log = self.__dict__.setdefault("ignition_log", [])
-            log.append((t_s, on, None if on else self._who_opened()))
+        if on != self._was_on:
+            self.log.append((t_s, on, None if on else self._who_opened()))
             if not on:
-                self.__dict__.setdefault("ignition_cut_mm", {})[t_s] = float(self.actuator_mm)
-            self._ignition_was_on = on
+                self.cut_mm[t_s] = float(actuator_mm)
+            self._was_on = on
         return on
 
     @property
-    def ignition_enabled_at_s(self) -> float | None:
+    def enabled_at_s(self) -> float | None:
         """When the chain first closed (true time); None if it never did."""
-        return next((t_s for t_s, on, _ in self.__dict__.get("ignition_log", []) if on), None)
-
-    def ignition_step(self, t0: float) -> None:
-        """The chain recorded at ``t0`` and the engine firing or not: no spark stops it; a spark back while the
-        crank still turns above its stall speed re-fires it, as a magneto engine does (the 100 ms kill-path
-        probe at idle, issue 49)."""
-        self.note_ignition(t0)
-        if not self.magneto_fires:
-            self._running = False
-        elif not self._running and self._w_e * 30.0 / math.pi > self._stall_rpm:
-            self._running = True
+        return next((t_s for t_s, on, _ in self.log if on), None)
 
     def engine_cut(self, after_s: float = 0.0) -> tuple[float, str] | None:
         """(true time, by whom) of the first opening of the chain at or after ``after_s``, while the engine
         ran or had been enabled; None if the chain stayed closed (or was never closed)."""
         was_on = False
-        for t_s, on, by in self.__dict__.get("ignition_log", []):
+        for t_s, on, by in self.log:
             if not on and was_on and t_s >= after_s:
                 return t_s, by
             was_on = was_on or on

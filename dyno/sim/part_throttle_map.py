@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from dyno.sim.physics import RigModel, RigParams, _resolve_map_path
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams, resolve_map_path
 
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "calibration" / "engine_maps" / "baja-10hp-representative-part-throttle.csv"
 DEFAULT_THROTTLES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -41,7 +42,7 @@ def curve_knots(engine, u: float) -> tuple[np.ndarray, np.ndarray]:
     def torque(n: float) -> float:
         return engine.torque_nm(n, u, True)
 
-    n_set = engine.idle_rpm + engine.idle_offset_rpm + u * engine._set_span_rpm
+    n_set = engine.set_speed_rpm(u)
     knee = n_set - engine.droop_rpm  # fuel fraction 1 below this (the full map)
     hi = min(n_set, m.rpm_max)
     if torque(hi) > 0.0:
@@ -70,7 +71,7 @@ def write_map(out: Path, throttles=DEFAULT_THROTTLES) -> float:
     # engine's, not one seed's (dyno.sim.world)
     model = RigModel(RigParams(ideal=True))
     eng, p = model.engine, model.params
-    src = _resolve_map_path(p.engine_map_path)
+    src = resolve_map_path(p.engine_map_path)
     full_rows = [ln for ln in Path(src).read_text().splitlines()
                  if ln.strip() and not ln.startswith("#")][1:]
     lines = ["# SYNTHETIC part-throttle engine map, GENERATED from the simulator's engine model",

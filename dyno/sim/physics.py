@@ -56,7 +56,7 @@ buffered ahead of the caller (the events do not depend on how the host slices
 time); explicit for the mean speeds, exact exponentials for the rotor
 temperature and lock-in filter, exact within-cell edge timing.
 
-Sensor outputs, truth: :mod:`dyno.sim.rig_signals`; parameters: :mod:`dyno.sim.rig_params` (re-exported).
+Sensor outputs, truth: :mod:`dyno.sim.rig_signals`; parameters: :mod:`dyno.sim.rig_params`.
 """
 
 from __future__ import annotations
@@ -71,29 +71,42 @@ from dyno.sim.cvt import CVT
 from dyno.sim.driveline import Driveline
 from dyno.sim.driven import Engagement, after_drag, clamp_radius_m
 from dyno.sim.engine import RAD_S_PER_RPM, RPM_PER_RAD_S, Engine, EngineMap
-from dyno.sim.input_torque import InputTorqueSignals
-# The parameters and the sensor outputs live in their own modules, re-exported here (__all__): callers
-# keep importing them from dyno.sim.physics.
-from dyno.sim.rig_params import DEFAULT_ENGINE_MAP, DEFAULT_TUNE, RigParams, _belt_tables_for, _load_tune
-from dyno.sim.rig_params import _resolve_map_path
+from dyno.sim.input_torque import CradleLoadCell
+from dyno.sim.rig_params import RigParams, belt_tables_for, load_sim_tune
+from dyno.sim.rig_params import resolve_map_path
 from dyno.sim.kill_chain import KillChain
 from dyno.sim.pads import PadsRecord
-from dyno.sim.rig_signals import ADC_STATUS_ERROR, TWO_PI, RigSignals, SensorEvent, Truth
-from dyno.sim.sensors import LowPassFilter
+from dyno.sim.rig_signals import TWO_PI, SensorEvent, SensorSignals, Truth
 from dyno.sim.tune_deviation import parts_on_the_rig
 from dyno.sim.cvt_friction import attach_friction
 from dyno.sim.world import realise
 
-__all__ = ["ADC_STATUS_ERROR", "DEFAULT_ENGINE_MAP", "DEFAULT_TUNE", "RigModel", "RigParams", "SensorEvent",
-           "Truth"]
+__all__ = ["RigModel"]
 
 
-class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
+def _part_attribute(part: str, name: str, doc: str, writable: bool = True) -> property:
+    """The model's attribute that is the attribute ``name`` of its part ``part`` (read, and set if ``writable``)."""
+    def get(self):
+        return getattr(getattr(self, part), name)
+
+    def set_(self, value) -> None:
+        setattr(getattr(self, part), name, value)
+
+    return property(get, set_ if writable else None, doc=doc)
+
+
+class RigModel:
     """The simulated rig.  See the module docstring for the physics.
+
+    Its parts: ``kill`` (the ignition's :class:`~dyno.sim.kill_chain.KillChain`), ``pads`` (the brake pads'
+    :class:`~dyno.sim.pads.PadsRecord`), ``signals`` (Hall edges and torque conversions,
+    :class:`~dyno.sim.rig_signals.SensorSignals`), ``input_cell`` (the cradle's load cell,
+    :class:`~dyno.sim.input_torque.CradleLoadCell`); the attributes below that belong to a part are that
+    part's, read and set through the model.
 
     Inputs (attributes set by the device/actuator emulation):
     ``throttle_frac`` (0 idle .. 1 full), ``engine_enabled`` (False = the Pi
-    opens the kill chain; :class:`KillChain`), ``actuator_dir`` (the enable: +1/-1 powered, 0 stop),
+    opens the kill chain), ``actuator_dir`` (the enable: +1/-1 powered, 0 stop),
     ``relay_dir`` (the direction relay's coil: +1 apply, -1 release = rest;
     set by a powered ``actuator_dir``, or alone by a driver that switches it
     with the enable off).  The actuator moves the way the relay's contacts
@@ -103,9 +116,36 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
     ``adc_error_prob``.
     """
 
+    # the kill chain's inputs and wiring faults (dyno.sim.kill_chain), and its record
+    engine_enabled = _part_attribute("kill", "engine_enabled", "The Pi's switch in the kill chain (GPIO24).")
+    nano_enable = _part_attribute("kill", "nano_enable", "The Nano's run-enable in the kill chain (D7).")
+    estop_open = _part_attribute("kill", "estop_open", "The E-stop chain's NC contact is open.")
+    pi_switch_welded = _part_attribute("kill", "pi_switch_welded", "Drill: the Pi's switch conducts always.")
+    run_enable_shorted = _part_attribute("kill", "run_enable_shorted", "Drill: the Nano's run-enable conducts always.")
+    kill_lead_open = _part_attribute("kill", "kill_lead_open", "Drill: the magneto's kill lead is open.")
+    ignition_on = _part_attribute("kill", "ignition_on", "The kill relay is energised.", writable=False)
+    magneto_fires = _part_attribute("kill", "magneto_fires", "The ignition sparks.", writable=False)
+    ignition_log = _part_attribute("kill", "log", "``(t_s, on, by)`` at every change of the chain.", writable=False)
+    ignition_cut_mm = _part_attribute("kill", "cut_mm", "The actuator's true position at each opening.",
+                                      writable=False)
+    ignition_enabled_at_s = _part_attribute("kill", "enabled_at_s", "When the chain first closed (true time).",
+                                            writable=False)
+    # the pads' record (dyno.sim.pads)
+    pads_off_at_s = _part_attribute("pads", "off_at_s", "When the pads last left the rotor (true time).",
+                                    writable=False)
+    startup_released_at_s = _part_attribute("pads", "startup_released_at_s",
+                                            "When a brake that started applied first let go (true time).",
+                                            writable=False)
+    # the sensors' fault knobs (dyno.sim.rig_signals, dyno.sim.input_torque)
+    adc_error_prob = _part_attribute("signals", "adc_error_prob", "Probability of the torque ADC's error bit.")
+    adc_stuck = _part_attribute("signals", "adc_stuck", "Drill: every torque conversion repeats one code.")
+    input_fitted = _part_attribute("input_cell", "fitted", "The cradle's load cell is fitted.", writable=False)
+    input_error_prob = _part_attribute("input_cell", "error_prob", "Probability of the input ADC's error bit.")
+    input_stuck = _part_attribute("input_cell", "stuck", "Drill: every input conversion repeats one code.")
+
     def __init__(self, params: RigParams | None = None, seed: int = 0):
         p = params if params is not None else RigParams()
-        nominal = EngineMap.from_csv(_resolve_map_path(p.engine_map_path))
+        nominal = EngineMap.from_csv(resolve_map_path(p.engine_map_path))
         # this seed's own engine, sensor and day (dyno.sim.world): p becomes the rig as it is
         p, rpm, torque_true_nm, self.world = realise(p, seed, nominal.rpm, nominal.torque_nm)
         self.params = p
@@ -115,7 +155,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                              governor_droop_rpm=p.engine_governor_droop_rpm, friction_nm=p.engine_friction_nm,
                              friction_at_3600_rpm_nm=p.engine_friction_at_3600_rpm_nm,
                              firing_ripple_ratio=p.engine_firing_ripple_ratio, inertia_kg_m2=p.engine_inertia_kg_m2)
-        labelled = _load_tune(p.cvt_tune_path)
+        labelled = load_sim_tune(p.cvt_tune_path)
         # the parts on the rig are not their labels (--sim-tune-deviation); the host only has the labels
         self.tune_true, self.world = parts_on_the_rig(labelled, p, seed, self.world)
         tune = self.tune_true
@@ -139,7 +179,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                        belt_friction_coefficient=p.cvt_belt_friction_coefficient if tune is not None else None,
                        belt_thrust_model=p.cvt_belt_thrust_model,
                        flyweight_radius_offset_m=p.cvt_flyweight_radius_offset_m,
-                       **_belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
+                       **belt_tables_for(p, labelled))  # (labelled: see dyno.sim.tune_deviation)
         friction = attach_friction(self.cvt, p, seed)  # this world's CVT friction (dyno.sim.cvt_friction)
         if p.cvt_engagement_model not in ("clamp", "smoothstep"):
             raise ValueError(f"cvt_engagement_model: 'clamp' or 'smoothstep', got {p.cvt_engagement_model!r}")
@@ -151,8 +191,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                                          if self.cvt.tune is not None else p.cvt_sheave_half_angle_deg,
                                          max_torque_nm=p.cvt_clutch_capacity_nm)
         self.driveline = Driveline(p)  # between the CVT and the gauge: driven_loss_nm, driveline_loss_*
-        self._driven_loss, self.driveline_loss_nm = self.driveline.parasitic, self.driveline.loss_nm
-        self._zero_drift_counts_per_s = p.adc_zero_drift_nm_per_min * p.adc_gain_counts_per_nm / 60.0
+        self.driveline_loss_nm = self.driveline.loss_nm
         self.brake = Brake(actuator_speed_mm_s=p.actuator_speed_mm_s, actuator_travel_mm=p.actuator_travel_mm,
                            free_travel_mm=p.brake_free_travel_mm, spring_rate_n_per_mm=p.brake_spring_rate_n_per_mm,
                            master_cylinder_bore_mm=p.master_cylinder_bore_mm,
@@ -163,22 +202,16 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
                            rotor_cooling_w_per_k=p.rotor_cooling_w_per_k,
                            rotor_cooling_w_per_k_per_rad_s=p.rotor_cooling_w_per_k_per_rad_s,
                            ambient_c=p.ambient_temp_c)
-        self.lockin = LowPassFilter(p.lockin_cutoff_hz, p.lockin_filter_order)
+        self.kill = KillChain()
+        self.pads = PadsRecord(self.brake.a0_mm, self.brake.a_max_mm)
 
         # Independent random streams, so that e.g. changing the bounce
         # probability does not change the ADC noise sequence.
         ss = np.random.SeedSequence(seed)
         s_noise, s_bounce, s_err, s_phase = ss.spawn(4)
-        self._rng_noise = np.random.default_rng(s_noise)
-        self._rng_bounce = np.random.default_rng(s_bounce)
-        self._rng_err = np.random.default_rng(s_err)
         rng_phase = np.random.default_rng(s_phase)
-        self._noise_buf: list[float] = []
-        self._bounce_buf: list[float] = []
-        self._err_buf: list[float] = []
 
         self.throttle_frac = 0.0  # inputs
-        self.engine_enabled = True
         self.actuator_dir = 0
         self.relay_dir = -1                 # at rest: release
         self._relay_goal = -1
@@ -186,9 +219,6 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         self.brake_hold_relay = False       # K3 fitted (rig.toml actuator.brake_hold_relay): see _substep
         # fault knobs
         self.stuck_hall: set[str] = set()
-        self.adc_error_prob = p.adc_error_prob
-        self.adc_stuck = False              # drill adc-stuck: every conversion repeats one code
-        self._adc_stuck_code: int | None = None
         self.extra_rotor_heat_c_per_s = 0.0  # drill overtemp: a dragging pad heats the rotor while the engine runs
         self.governor_failed = False         # drill overspeed: throttle stuck wide open, governor gone
 
@@ -196,8 +226,6 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         self._g = g
         self._j_e = p.engine_inertia_kg_m2
         self._j_s = p.secondary_inertia_kg_m2 + p.brake_shaft_inertia_kg_m2 * g * g
-        self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
-        self._firing_table = tuple((float(a), float(b)) for a, b in p.ripple_firing_frac_table)
         # hot-loop constants
         self._stall_rpm = p.engine_stall_rpm
         self._j_rotor_g = p.brake_shaft_inertia_kg_m2 * g
@@ -215,7 +243,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         self._slip = p.cvt_slip_base_frac
         self._locked = False
         self._cap = 0.0
-        self._act_mm = self._start_pads(p.brake_start_mm)  # (dyno.sim.pads: the pads' record)
+        self._act_mm = self.pads.start(p.brake_start_mm)
         self._rotor_c = p.ambient_temp_c
         self._thermo_c = p.ambient_temp_c
         tau = p.thermometer_time_constant_s
@@ -225,15 +253,10 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         self._t_s = 0.0
         self._t_gauge = 0.0
         self._t_brake_cap = self.brake.torque_capacity_nm(self._act_mm, self._rotor_c)
-        self._filt_x = self.lockin.steady_state(0.0)
-        self._filt_y = 0.0
-        self._next_edge_e = 1       # index k of the next primary edge (measured angle 2 pi k)
-        self._next_edge_s = int(self._th_s // TWO_PI) + 1
-        self._phase_firing = float(rng_phase.uniform(0.0, TWO_PI))
-        self._phase_rev = float(rng_phase.uniform(0.0, TWO_PI))
-        self._phase_brake = float(rng_phase.uniform(0.0, TWO_PI))
-        self._next_adc_t = float(rng_phase.uniform(0.0, self._adc_period_s))
-        self._init_input(p, seed)  # the engine cradle's load cell, when fitted (dyno.sim.input_torque)
+        # (rng_phase: the secondary's angle above, then the signals' phases)
+        self.signals = SensorSignals(p, np.random.default_rng(s_noise), np.random.default_rng(s_bounce),
+                                     np.random.default_rng(s_err), rng_phase, self._th_s)
+        self.input_cell = CradleLoadCell(p, seed, self.world, self.engine)  # the engine cradle's load cell
         self._buffer: list[SensorEvent] = []    # events computed ahead of the caller's time
         self._h = p.max_substep_s
         self._cell_index = 0
@@ -274,6 +297,21 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
     @property
     def engine_running(self) -> bool:
         return self._running
+
+    def engine_cut(self, after_s: float = 0.0) -> tuple[float, str] | None:
+        """(true time, by whom) of the first opening of the kill chain at or after ``after_s``
+        (:meth:`dyno.sim.kill_chain.KillChain.engine_cut`)."""
+        return self.kill.engine_cut(after_s)
+
+    def ignition_step(self, t0: float) -> None:
+        """The chain recorded at ``t0`` and the engine firing or not: no spark stops it; a spark back while the
+        crank still turns above its stall speed re-fires it, as a magneto engine does (the 100 ms kill-path
+        probe at idle, issue 49)."""
+        self.kill.note(t0, self._act_mm)
+        if not self.kill.magneto_fires:
+            self._running = False
+        elif not self._running and self._w_e * 30.0 / math.pi > self._stall_rpm:
+            self._running = True
 
     def _kin_ratio(self) -> float:
         return (1.0 - self._slip) / self._ratio_geo
@@ -356,7 +394,7 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
             run_s = t0 + h - self._relay_made_s  # powered time with the contacts made, in this cell
             if run_s > 0.0:
                 self._act_mm = brk.move_actuator_mm(self._act_mm, self._relay_goal, h if run_s > h else run_s)
-        self._note_pads(t0, h, a_before, self._act_mm)
+        self.pads.note(t0, h, a_before, self._act_mm)
         t_brake_cap = brk.torque_capacity_nm(self._act_mm, self._rotor_c)   # brake shaft
         fric = p.cvt_secondary_friction_torque_nm + p.world_driveline_loss_frac * max(self._t_s, 0.0)  # after the helix
         if self.driveline.on:  # bearings, mesh, windage; the chain's load share (on the last cell's belt torque)
@@ -471,28 +509,61 @@ class RigModel(KillChain, PadsRecord, RigSignals, InputTorqueSignals):
         self._thermo_c += (self._rotor_c - self._thermo_c) * self._thermo_alpha
 
         # --- Hall edges
-        t1 = t0 + h
-        if th_e1 > TWO_PI * self._next_edge_e - 0.25:
+        sig = self.signals
+        if sig.primary_edge_near(th_e1):
             amp = eng.firing_angle_amplitude_rad(w_e1, t_e, rpm_e) if running else 0.0
-            self._primary_edges(t0, h, th_e0, w_e0, a_e, th_e1, amp, events)
-        if th_s1 >= TWO_PI * self._next_edge_s:
-            self._secondary_edges(t0, h, th_s0, w_s0, a_s, th_s1, events)
+            sig.primary_edges(t0, h, th_e0, w_e0, a_e, th_e1, amp, events)
+        sig.secondary_edges(t0, h, th_s0, w_s0, a_s, th_s1, events)
 
         # --- lock-in filter (exact ZOH) and ADC conversions
-        y0 = self._filt_y
-        xf, y1 = self.lockin.advance(self._filt_x, t_gauge, h)
-        self._filt_x = xf
-        self._filt_y = y1
-        while self._next_adc_t <= t1:
-            ta = self._next_adc_t
-            tau = ta - t0
-            y = y0 + (y1 - y0) * (tau / h)
-            events.append(self._adc_event(ta, tau, y, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge))
-            self._next_adc_t = ta + self._adc_period_s
-        if self.input_fitted:
+        sig.adc_events(t0, h, t_gauge, self._rotor_c, th_e0, w_e0, a_e, th_s0, w_s0, a_s, events)
+        if self.input_cell.fitted:
             # the cradle's reaction R = T_p + J_e a_e (= T_e while the crank turns; 0 at rest, where the
             # engine's friction holds nothing)
-            self._input_events(t0, h, th_e0, w_e0, a_e, t_p + j_e * a_e, t_e, rpm_e, running, events)
+            self.input_cell.cell_events(t0, h, th_e0, w_e0, a_e, t_p + j_e * a_e, t_e, rpm_e, running, events)
+
+    # ------------------------------------------------------------ truth
+    def truth(self) -> Truth:
+        """True state at the caller's time ``t_s``.
+
+        Speeds are interpolated within the physics cell (they vary linearly
+        there); torques, powers and temperatures are the cell's values.
+        """
+        span = self._cell_end_s - self._cell_start_s
+        f = (self.t_s - self._cell_start_s) / span if span > 0.0 else 1.0
+        f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
+        w_e = self._w_e_start + f * (self._w_e - self._w_e_start)
+        w_s = self._w_s_start + f * (self._w_s - self._w_s_start)
+        p_in = self._t_p * w_e
+        p_out = self._t_s * w_s
+        eff = p_out / p_in if p_in > 1e-9 and p_out > 0.0 else 0.0
+        speed_ratio = w_e / w_s if w_s > 1e-9 else 0.0
+        return Truth(
+            t_s=self.t_s,
+            rpm_primary=w_e * RPM_PER_RAD_S,
+            rpm_secondary=w_s * RPM_PER_RAD_S,
+            ratio=speed_ratio,
+            torque_engine_nm=self._t_e,
+            torque_primary_nm=self._t_p,
+            torque_secondary_nm=self._t_s,
+            torque_brake_shaft_nm=self._t_gauge,
+            power_in_w=p_in,
+            power_out_w=p_out,
+            efficiency=eff,
+            rotor_temp_c=self._rotor_c,
+            actuator_mm=self._act_mm,
+            engine_running=self._running,
+            ratio_geometric=self._ratio_geo,
+            shift_travel_frac=self._x,
+            power_engine_w=self._t_e * w_e,
+            power_loss_w=p_in - p_out,
+            brake_mu=self.brake.mu(self._rotor_c),
+            brake_torque_capacity_nm=self._t_brake_cap,
+            clutch_locked=self._locked,
+            clutch_capacity_nm=self._cap,
+            belt_slip=self._slip,
+            driveline_loss_nm=self.driveline_loss_nm(w_s, self._t_s) if w_s > 0.0 else 0.0,
+        )
 
     def _locked_accel(self, t_e, i, k, eta_m, t_d, t_load):
         """Crank acceleration and belt input torque with the belt gripping."""

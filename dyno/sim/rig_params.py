@@ -1,7 +1,6 @@
 """Every parameter of the simulated rig (:class:`RigParams`, units in the names) and its file defaults.
 
-Split from :mod:`dyno.sim.physics` (which re-exports these names, so ``from dyno.sim.physics import
-RigParams`` keeps working): the parameters with their sources, and the repository-relative defaults
+The parameters with their sources, and the repository-relative defaults
 (engine map, CVT tune) with how a path is resolved.  What the numbers of the signal chain were
 measured from is in :mod:`dyno.sim.rig_signals`.
 """
@@ -17,7 +16,7 @@ DEFAULT_ENGINE_MAP = "calibration/engine_maps/baja-10hp-representative.csv"
 DEFAULT_TUNE = "calibration/tunes/cvtech-stock.toml"
 
 
-def _load_tune(path: str | None):
+def load_sim_tune(path: str | None):
     """The CVT tune for the shift balance, or None for the closed form.
 
     Uses :mod:`dyno.tuning` (another part of the project) when it is
@@ -30,10 +29,10 @@ def _load_tune(path: str | None):
         from dyno.tuning.tune import load_tune
     except ImportError:
         return None
-    return load_tune(_resolve_map_path(path))
+    return load_tune(resolve_map_path(path))
 
 
-def _resolve_map_path(path: str) -> Path:
+def resolve_map_path(path: str) -> Path:
     p = Path(path)
     if p.is_absolute():
         return p
@@ -297,7 +296,7 @@ def _belt_table_for(p: RigParams, tune=None):
     return belt_table(p.belt_table_cache_dir, tune)
 
 
-def _belt_tables_for(p: RigParams, tune=None) -> dict:
+def belt_tables_for(p: RigParams, tune=None) -> dict:
     """The CVT's tables: ``belt_table`` (efficiency, :func:`_belt_table_for`) and ``thrust_table`` (the full
     model's thrust ratio, :mod:`dyno.sim.belt_thrust`).  The thrust ratio is a property of the belt on its drive
     at a load relative to the clamp, so a tune without its own table (``belt_efficiency_source = "loss_model"``,
@@ -309,7 +308,7 @@ def _belt_tables_for(p: RigParams, tune=None) -> dict:
             and p.cvt_belt_friction_coefficient is None):
         from dyno.sim.belt_table import belt_table
 
-        stock = _load_tune(DEFAULT_TUNE)
+        stock = load_sim_tune(DEFAULT_TUNE)
         same_drive = stock is not None and stock.to_dict().get("drive") == tune.to_dict().get("drive")
         thrust = belt_table(p.belt_table_cache_dir, stock if same_drive else tune)
     return {"belt_table": eff, "thrust_table": thrust}

@@ -1,10 +1,9 @@
 """The simulated rig's outputs: sensor events (Hall edges, ADC conversions) with their noise, and its truth.
 
-Split from :mod:`dyno.sim.physics` (which re-exports :class:`SensorEvent` and :class:`Truth`): the
-integrator there advances the state one cell at a time and calls these to turn each cell's motion into
-what the sensors report (:class:`RigSignals`, a mixin of :class:`~dyno.sim.physics.RigModel`), and
-:meth:`RigSignals.truth` reports the true state for the tests.  Each random stream is its own
-(seeded in ``RigModel.__init__``), so changing one fault's probability leaves the others unchanged.
+The integrator of :mod:`dyno.sim.physics` advances the state one cell at a time and hands each cell's motion
+to its :class:`SensorSignals`, which turns it into what the sensors report; :class:`Truth` is the true state
+the model reports for the tests.  Each random stream is its own (seeded in ``RigModel.__init__``), so changing
+one fault's probability leaves the others unchanged.
 
 Signals calibrated on the thesis rig's real logs
 -------------------------------------------------
@@ -48,8 +47,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from dyno.sim.engine import RPM_PER_RAD_S
-from dyno.sim.sensors import angle_at, crossing_time_s
+from dyno.sim.sensors import LowPassFilter, angle_at, crossing_time_s
 
 TWO_PI = 2.0 * math.pi
 ADC_STATUS_ERROR = 0x20
@@ -97,9 +95,37 @@ class Truth:
     driveline_loss_nm: float = 0.0
 
 
-class RigSignals:
-    """Sensor events and truth from the rig's state (a mixin of :class:`~dyno.sim.physics.RigModel`,
-    whose ``__init__`` sets the state, the random streams and the signal constants these read)."""
+class SensorSignals:
+    """Hall edges and torque-ADC conversions from each physics cell's motion (owned by
+    :class:`~dyno.sim.physics.RigModel`).
+
+    ``rng_noise``, ``rng_bounce``, ``rng_err``: the streams of the ADC noise, the Hall bounce and the ADC error
+    bit; ``rng_phase`` draws the ripples' phases and the first conversion's time; ``th_s0`` is the secondary's
+    starting angle (its first edge).  Fault knobs: ``adc_error_prob``, ``adc_stuck`` (every conversion repeats
+    one code)."""
+
+    def __init__(self, p, rng_noise, rng_bounce, rng_err, rng_phase, th_s0: float) -> None:
+        self.params = p
+        self._g = p.gear_ratio_brake_per_secondary
+        self._firing_table = tuple((float(a), float(b)) for a, b in p.ripple_firing_frac_table)
+        self._zero_drift_counts_per_s = p.adc_zero_drift_nm_per_min * p.adc_gain_counts_per_nm / 60.0
+        self._adc_period_s = 1.0 / (p.adc_rate_hz * (1.0 + p.adc_clock_error_frac))
+        self.lockin = LowPassFilter(p.lockin_cutoff_hz, p.lockin_filter_order)
+        self._filt_x = self.lockin.steady_state(0.0)
+        self._filt_y = 0.0
+        self._rng_noise, self._rng_bounce, self._rng_err = rng_noise, rng_bounce, rng_err
+        self._noise_buf: list[float] = []
+        self._bounce_buf: list[float] = []
+        self._err_buf: list[float] = []
+        self.adc_error_prob = p.adc_error_prob
+        self.adc_stuck = False              # drill adc-stuck: every conversion repeats one code
+        self._adc_stuck_code: int | None = None
+        self._next_edge_e = 1       # index k of the next primary edge (measured angle 2 pi k)
+        self._next_edge_s = int(th_s0 // TWO_PI) + 1
+        self._phase_firing = float(rng_phase.uniform(0.0, TWO_PI))
+        self._phase_rev = float(rng_phase.uniform(0.0, TWO_PI))
+        self._phase_brake = float(rng_phase.uniform(0.0, TWO_PI))
+        self._next_adc_t = float(rng_phase.uniform(0.0, self._adc_period_s))
 
     # ------------------------------------------------------------ random buffers
     def _normal(self) -> float:
@@ -120,7 +146,7 @@ class RigSignals:
             buf.extend(self._rng_err.random(4096).tolist())
         return buf.pop()
 
-    # ------------------------------------------------------------ sensor events
+    # ------------------------------------------------------------ Hall edges
     def _emit_edge(self, channel: str, t: float, events: list[SensorEvent]) -> None:
         events.append(SensorEvent(channel, t))
         pb = self.params.hall_bounce_prob
@@ -129,8 +155,12 @@ class RigSignals:
             tb = t + p.hall_bounce_min_s + (p.hall_bounce_max_s - p.hall_bounce_min_s) * self._uniform_bounce()
             events.append(SensorEvent(channel, tb))
 
-    def _primary_edges(self, t0, h, th0, w0, a, th1, amp, events) -> None:
-        """Edges where the *measured* crank angle (mean + firing ripple) crosses 2 pi k."""
+    def primary_edge_near(self, th1: float) -> bool:
+        """The crank's mean angle ``th1`` is within the firing ripple's reach of the next primary edge."""
+        return th1 > TWO_PI * self._next_edge_e - 0.25
+
+    def primary_edges(self, t0, h, th0, w0, a, th1, amp, events) -> None:
+        """Edges where the *measured* crank angle (mean + firing ripple of amplitude ``amp``) crosses 2 pi k."""
         ph = self.params.hall_primary_phase_rad
         while True:
             target = TWO_PI * self._next_edge_e
@@ -145,14 +175,30 @@ class RigSignals:
             self._emit_edge("primary", t0 + tau, events)
             self._next_edge_e += 1
 
-    def _secondary_edges(self, t0, h, th0, w0, a, th1, events) -> None:
+    def secondary_edges(self, t0, h, th0, w0, a, th1, events) -> None:
+        """Edges where the secondary's angle crosses 2 pi k in the cell."""
         while th1 >= TWO_PI * self._next_edge_s:
             tau = crossing_time_s(th0, w0, a, TWO_PI * self._next_edge_s)
             tau = min(max(tau, 0.0), h)
             self._emit_edge("secondary", t0 + tau, events)
             self._next_edge_s += 1
 
-    def _adc_event(self, ta, tau, y_mean, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge) -> SensorEvent:
+    # ------------------------------------------------------------ torque ADC
+    def adc_events(self, t0, h, t_gauge, rotor_c, th_e0, w_e0, a_e, th_s0, w_s0, a_s, events) -> None:
+        """The cell's lock-in filter (exact ZOH, the gauge torque ``t_gauge`` held) and its ADC conversions."""
+        y0 = self._filt_y
+        xf, y1 = self.lockin.advance(self._filt_x, t_gauge, h)
+        self._filt_x = xf
+        self._filt_y = y1
+        t1 = t0 + h
+        while self._next_adc_t <= t1:
+            ta = self._next_adc_t
+            tau = ta - t0
+            y = y0 + (y1 - y0) * (tau / h)
+            events.append(self._adc_event(ta, tau, y, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge, rotor_c))
+            self._next_adc_t = ta + self._adc_period_s
+
+    def _adc_event(self, ta, tau, y_mean, th_e0, w_e0, a_e, th_s0, w_s0, a_s, t_gauge, rotor_c) -> SensorEvent:
         p = self.params
         g = self._g
         th_e = angle_at(th_e0, w_e0, a_e, tau)
@@ -172,10 +218,10 @@ class RigSignals:
                 gm, ph = lp.gain_phase(g * w_s)
                 sig += p.ripple_brake_shaft_frac * amp_base * gm * math.sin(th_b + self._phase_brake + ph)
         t_sec = sig * g
-        sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(self._t_gauge * g)
+        sigma = p.adc_noise_counts + p.adc_noise_counts_per_nm * abs(t_gauge * g)
         gain = p.adc_gain_counts_per_nm
         if p.adc_gain_rotor_tempco_per_k:  # the slope drifting as the rotor warms the shaft (a bench world)
-            gain *= 1.0 + p.adc_gain_rotor_tempco_per_k * (self._rotor_c - p.ambient_temp_c)
+            gain *= 1.0 + p.adc_gain_rotor_tempco_per_k * (rotor_c - p.ambient_temp_c)
         code = p.adc_offset_counts + gain * t_sec + sigma * self._normal()
         if self._zero_drift_counts_per_s:
             code += self._zero_drift_counts_per_s * ta
@@ -189,49 +235,6 @@ class RigSignals:
                 self._adc_stuck_code = code_i
             code_i = self._adc_stuck_code
         return SensorEvent("adc", ta, code_i, status)
-
-    # ------------------------------------------------------------ truth
-    def truth(self) -> Truth:
-        """True state at the caller's time ``t_s``.
-
-        Speeds are interpolated within the physics cell (they vary linearly
-        there); torques, powers and temperatures are the cell's values.
-        """
-        span = self._cell_end_s - self._cell_start_s
-        f = (self.t_s - self._cell_start_s) / span if span > 0.0 else 1.0
-        f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
-        w_e = self._w_e_start + f * (self._w_e - self._w_e_start)
-        w_s = self._w_s_start + f * (self._w_s - self._w_s_start)
-        p_in = self._t_p * w_e
-        p_out = self._t_s * w_s
-        eff = p_out / p_in if p_in > 1e-9 and p_out > 0.0 else 0.0
-        speed_ratio = w_e / w_s if w_s > 1e-9 else 0.0
-        return Truth(
-            t_s=self.t_s,
-            rpm_primary=w_e * RPM_PER_RAD_S,
-            rpm_secondary=w_s * RPM_PER_RAD_S,
-            ratio=speed_ratio,
-            torque_engine_nm=self._t_e,
-            torque_primary_nm=self._t_p,
-            torque_secondary_nm=self._t_s,
-            torque_brake_shaft_nm=self._t_gauge,
-            power_in_w=p_in,
-            power_out_w=p_out,
-            efficiency=eff,
-            rotor_temp_c=self._rotor_c,
-            actuator_mm=self._act_mm,
-            engine_running=self._running,
-            ratio_geometric=self._ratio_geo,
-            shift_travel_frac=self._x,
-            power_engine_w=self._t_e * w_e,
-            power_loss_w=p_in - p_out,
-            brake_mu=self.brake.mu(self._rotor_c),
-            brake_torque_capacity_nm=self._t_brake_cap,
-            clutch_locked=self._locked,
-            clutch_capacity_nm=self._cap,
-            belt_slip=self._slip,
-            driveline_loss_nm=self.driveline_loss_nm(w_s, self._t_s) if w_s > 0.0 else 0.0,
-        )
 
 
 def _interp_table(table: tuple, x: float) -> float:

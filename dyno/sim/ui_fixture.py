@@ -41,11 +41,11 @@ import math
 
 import numpy as np
 
-from dyno.analysis.calibration import G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY
+from dyno.analysis.calibration_history import G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY
 
 
 class _Event:
-    """Shape of :class:`dyno.sim.physics.SensorEvent` (avoids importing the physics)."""
+    """Shape of :class:`dyno.sim.rig_signals.SensorEvent` (avoids importing the physics)."""
 
     __slots__ = ("channel", "t_s", "code", "status")
 
@@ -58,7 +58,7 @@ class FixtureParams:
 
     def __init__(self, params=None) -> None:
         if params is None:
-            from dyno.sim.physics import RigParams
+            from dyno.sim.rig_params import RigParams
 
             params = RigParams()
         self.adc_gain_counts_per_nm = params.adc_gain_counts_per_nm

@@ -20,9 +20,9 @@ from dyno.errors import TransportError
 # Linux i2c-dev reports a missing ACK as EREMOTEIO/ENXIO (i2c-algo-bit, under i2c-gpio: EIO for a data byte's),
 # a hung bus as ETIMEDOUT.  The Pi's Broadcom controller (i2c-bcm2835) gives EIO for its clock-stretch timeout
 # (CLKT): the transport of a bus on that controller names it so (RecoveringI2CTransport, hardware_controller).
-_ERRNO_CAUSE = {errno.EREMOTEIO: "nack", errno.ENXIO: "nack", errno.EIO: "nack",
+ERRNO_CAUSE = {errno.EREMOTEIO: "nack", errno.ENXIO: "nack", errno.EIO: "nack",
                 errno.ETIMEDOUT: "timeout", errno.EAGAIN: "timeout"}
-STRETCH_CAUSES = {**_ERRNO_CAUSE, errno.EIO: "stretch_timeout"}
+STRETCH_CAUSES = {**ERRNO_CAUSE, errno.EIO: "stretch_timeout"}
 
 
 class TransportFault(TransportError):
@@ -36,7 +36,7 @@ class Transport(ABC):
 
     name = "transport"
 
-    errno_cause = _ERRNO_CAUSE  # OSError errno -> failure cause
+    errno_cause = ERRNO_CAUSE  # OSError errno -> failure cause
     meter = None  # a dyno.transports.budget.LinkMeter charged each attempt's own time on the wire (None: not metered)
 
     def __init__(self) -> None:

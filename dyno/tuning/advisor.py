@@ -124,7 +124,8 @@ def advise(runs: list[RunData], catalogue: list[Part], targets: dict[str, float]
     if eng_runs:
         low = eng_runs[-1].low_ratio
     else:
-        from dyno.tuning.shift_curve import Solver, model_params_for
+        from dyno.tuning.shift_curve import Solver
+        from dyno.tuning.tune import model_params_for
 
         low = Solver(base, None, model_params_for(base)).ratio_low_stop
     engine = base_run.engine or next((r.engine for r in reversed(runs) if r.engine is not None), None)

@@ -164,7 +164,8 @@ def _steady_points(run, tune) -> list:
         if not (p.get("valid", True) and all(math.isfinite(v) for v in (n_e, n_s, t)) and n_s > 0):
             continue
         if lo is None:
-            from dyno.tuning.shift_curve import Solver, model_params_for
+            from dyno.tuning.shift_curve import Solver
+            from dyno.tuning.tune import model_params_for
 
             s = Solver(tune, None, model_params_for(tune))
             lo, hi = s.ratio_low_stop, s.ratio_high_stop

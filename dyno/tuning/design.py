@@ -31,9 +31,8 @@ from scipy.optimize import brentq
 
 from dyno.errors import DynoError
 
-from dyno.tuning.design_inputs import (  # noqa: F401 (re-exported: the CLI, the tests)
-    G_M_S2, REQ_SCHEMA, BeltSection, Requirements, load_belt_catalogue, load_requirements, requirements_from_dict)
-from dyno.tuning.design_sections import (  # noqa: F401 (re-exported: the tests)
+from dyno.tuning.design_inputs import BeltSection, Requirements
+from dyno.tuning.design_sections import (
     bending_tension_n, belt_length_mm, centre_distance_eq18_mm, clamp_force_integral_n, clamp_force_n,
     driven_spring, flyweight_cam_profile, lateral_displacement_mm, min_driver_diameter_eq8_mm,
     tight_side_tension_n, torque_cam_profile, traction_forces_n, weight_ramp_profile, wrap_angles_rad)

@@ -49,7 +49,8 @@ from dyno.errors import MODEL_FAILURES, ConfigError
 from dyno.model.closed_form import closed_form_point
 from dyno.model.params import BeltParams, OperatingPoint
 from dyno.tuning import actuators as act
-from dyno.tuning.shift_curve import EngineMap, Solver, load_engine_map, model_params_for
+from dyno.tuning.shift_curve import EngineMap, Solver, load_engine_map
+from dyno.tuning.tune import model_params_for
 from dyno.tuning.tune import Tune, load_tune
 
 #: Fit parameters, in order, with the nominal value (the prior guess the fit

@@ -117,7 +117,7 @@ class CalibrateApp(DynoApp):
         yield bottom_lines(HELP)
 
     async def on_mount(self) -> None:
-        from dyno.analysis.calibration import latest, load_history
+        from dyno.analysis.calibration_history import latest, load_history
         from dyno.session.calibration_files import calibration_in_force
         from dyno.errors import DynoError
 

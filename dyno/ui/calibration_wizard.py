@@ -43,9 +43,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dyno.analysis.calibration import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
-                                       R2_MIN_DEFAULT, REPRODUCIBILITY_TARGET_REL, CalibrationRejected,
-                                       append_entry, check_loads, fit_repeats, torque_from_mass)
+from dyno.analysis.calibration_history import (G_STANDARD_M_PER_S2, GEAR_RATIO_THESIS_BRAKE_PER_SECONDARY,
+                                               R2_MIN_DEFAULT, CalibrationRejected, append_entry)
+from dyno.analysis.calibration import REPRODUCIBILITY_TARGET_REL, check_loads, fit_repeats, torque_from_mass
 
 ADC_STATUS_ERR = 0x20
 ADC_RAILS = (0, 0xFFFF)

@@ -79,7 +79,8 @@ class OverlayMixin:
         if self.overlay_service is None:
             # The solver runs in its own process (its numerics must not hold this interpreter's GIL, which
             # the poller and the controller need), imported there.
-            from dyno.model.overlay_service import OverlayService, process_pool
+            from dyno.model.overlay_service import OverlayService
+            from dyno.model.overlay_worker import process_pool
 
             loop = self._overlay_loop
             pool, cancel = process_pool()
@@ -149,7 +150,8 @@ class OverlayMixin:
             svc.prime(seed[0])
 
     def _closed_form_work(self, pairs) -> None:
-        from dyno.model.overlay import _as_point, _closed_form_result
+        from dyno.model.cache_keys import as_point
+        from dyno.model.point_solve import closed_form_result as _closed_form_result
         from dyno.model.params import TABLE_6_1
 
         out = {}
@@ -157,7 +159,7 @@ class OverlayMixin:
             if op in self._overlay_closed:
                 continue
             try:
-                out[op] = _closed_form_result(TABLE_6_1, _as_point(op, 100.0, None))
+                out[op] = _closed_form_result(TABLE_6_1, as_point(op, 100.0, None))
             except Exception:  # noqa: BLE001  (a placeholder: a point outside its range has none)
                 pass
         self.call_from_thread(self._set_closed_form, out)

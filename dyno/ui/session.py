@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dyno.control.api import State, TestPlan
-from dyno.session.pacing import ScaledClock, SimTimeActuators  # noqa: F401 (re-exported)
-from dyno.ui.rearm import NO_REARM, RearmMixin  # noqa: F401 (NO_REARM: re-exported)
+from dyno.session.pacing import ScaledClock
+from dyno.ui.rearm import RearmMixin
 
 FINISHED = (State.DONE, State.ABORTED)
 
@@ -39,7 +39,7 @@ class LiveOptions:
     mock_pins: bool = False  # sim: the physics driven through the real-rig output code (GpioActuators)
     firmware_elf: object = None  # sim: the Nano's real ELF in simavr as the rig's Nano (paced with the physics)
     ambient: object = None  # dyno.analysis.air.Ambient from --ambient (else rig.toml's sensor or day)
-    sim_params: object = None  # dyno.sim.physics.RigParams (--sim-ideal, --sim-ambient, ...)
+    sim_params: object = None  # dyno.sim.rig_params.RigParams (--sim-ideal, --sim-ambient, ...)
 
 
 class LiveSession(RearmMixin):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from aiohttp import web
 
-from dyno.web.server import STATIC, TOKEN_COOKIE, WebServer
+from dyno.web.server import TOKEN_COOKIE, WebServer
 from dyno.web.live import static_file
 
 E = html.escape
@@ -261,4 +261,4 @@ def start_library_server(root: Path, bind: str | None) -> WebServer:
     return server
 
 
-__all__ = ["Library", "start_library_server", "STATIC"]
+__all__ = ["Library", "start_library_server"]

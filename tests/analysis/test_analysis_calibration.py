@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.analysis.calibration import (
-    HISTORY_COLUMNS, CalibrationEntry, CalibrationRejected, NoCalibration, append_entry,
-    fit_calibration, latest, load_history, load_legacy_cal_values, torque_from_mass,
-)
+from dyno.analysis.calibration_history import (HISTORY_COLUMNS, CalibrationEntry, CalibrationRejected, NoCalibration,
+                                               append_entry, latest, load_history, load_legacy_cal_values)
+from dyno.analysis.calibration import fit_calibration, torque_from_mass
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from dyno.analysis.efficiency import batch_mean, point_efficiency
-from dyno.analysis.engine_map import EngineMap, NoMapPower, OutOfMapRange
+from dyno.analysis.engine_map import EngineMap
+from dyno.analysis.engine_map_range import NoMapPower, OutOfMapRange
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

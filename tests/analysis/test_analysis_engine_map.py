@@ -7,10 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.analysis.engine_map import (
-    W_PER_HP, EngineMap, OutOfMapRange, dry_air_pressure_kpa, j1349_correction_factor,
-    load_engine_map, load_legacy_engine_map, saturation_vapour_pressure_kpa,
-)
+from dyno.analysis.engine_map import W_PER_HP, EngineMap, load_engine_map, load_legacy_engine_map
+from dyno.analysis.engine_map_range import OutOfMapRange
+from dyno.analysis.air import dry_air_pressure_kpa, j1349_correction_factor, saturation_vapour_pressure_kpa
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError
 

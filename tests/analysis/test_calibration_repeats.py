@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from dyno.analysis.calibration import (REPRODUCIBILITY_TARGET_REL, CalibrationRejected, fit_calibration,
-                                       fit_repeats, slope_reproducibility)
+from dyno.analysis.calibration import REPRODUCIBILITY_TARGET_REL, fit_calibration, fit_repeats, slope_reproducibility
+from dyno.analysis.calibration_history import CalibrationRejected
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

@@ -72,7 +72,7 @@ def test_the_engine_maps_figure_beside_the_input_path_keeps_its_interval_and_ran
     import numpy as np
 
     from dyno.analysis.input_torque import InputChannel, input_point, input_systematic
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
     from dyno.protocol import v1
 
     cal = CalibrationEntry(date="2026-01-01", slope_counts_per_nm=100.0, intercept_counts=30000.0, r2=0.9999, n_samples=0)

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.analysis.engine_map import NoThrottleCurve, OutOfMapRange, load_engine_map
+from dyno.analysis.engine_map_range import NoThrottleCurve, OutOfMapRange
+from dyno.analysis.engine_map import load_engine_map
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
@@ -84,7 +85,8 @@ def test_shipped_synthetic_map_is_reproducible_and_follows_the_sim(tmp_path):
     assert np.array_equal(m.rpm, full.rpm) and np.array_equal(m.torque_nm_knots, full.torque_nm_knots)
     assert m.throttles == [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
     # The host's interpolation of the grid against the model, independently evaluated here.
-    from dyno.sim.physics import RigModel, RigParams
+    from dyno.sim.physics import RigModel
+    from dyno.sim.rig_params import RigParams
 
     eng = RigModel(RigParams(ideal=True)).engine  # the nominal engine (a seed's own deviates: dyno.sim.world)
     for u in m.throttles[:-1]:

@@ -69,7 +69,7 @@ def test_the_interval_covers_the_world_it_describes_and_u95_with_it():
 
 
 def test_the_input_paths_u95_is_its_intervals_half_width():
-    from dyno.analysis.calibration import CalibrationEntry
+    from dyno.analysis.calibration_history import CalibrationEntry
     from dyno.analysis.input_torque import InputChannel, input_systematic
 
     ch = InputChannel(CalibrationEntry(date="2026-01-01", slope_counts_per_nm=100.0, intercept_counts=30000.0,

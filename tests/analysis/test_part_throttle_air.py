@@ -8,7 +8,8 @@ import pytest
 from dyno.analysis.air import dry_air_pressure_kpa
 from dyno.analysis.engine_map import load_engine_map
 from dyno.analysis.part_throttle_air import FRICTION_ESTIMATE_NM, friction_u95_nm, part_throttle_at_ambient
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 
 pytestmark = pytest.mark.quick
 

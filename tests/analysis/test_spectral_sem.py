@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from dyno.analysis.points import _n_batches
+from dyno.analysis.points import batch_count
 from dyno.analysis.spectral_sem import spectral_sem
 
 pytestmark = pytest.mark.quick
@@ -40,6 +40,6 @@ def test_more_degrees_of_freedom_than_batches_and_none_from_too_short_a_window()
     rng = np.random.default_rng(3)
     _, x = _window(rng, 3.0)
     sem, dof = spectral_sem(x, 3.0)
-    assert dof == 24 > _n_batches(0, 3_000_000) - 1 == 5
+    assert dof == 24 > batch_count(0, 3_000_000) - 1 == 5
     assert sem == pytest.approx(160.0 / math.sqrt(x.size), rel=0.35)
     assert spectral_sem(x[:100], 0.8) == (pytest.approx(math.nan, nan_ok=True), 0)  # 3 bins: too few

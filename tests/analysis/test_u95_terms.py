@@ -11,7 +11,8 @@ import pytest
 from dyno.analysis import u95_terms
 from dyno.analysis.engine_map import load_engine_map
 from dyno.analysis.measured_map import write_map
-from dyno.session.root import DEFAULT_CALIBRATION, RunOptions, systematic_terms
+from dyno.resources import DEFAULT_CALIBRATION
+from dyno.session.root import RunSpec, systematic_terms
 from dyno.errors import ConfigError
 
 pytestmark = pytest.mark.quick
@@ -26,10 +27,10 @@ def _rig(default_rel=0.05):
 
 
 def _terms(engine_map, default_rel=0.05):
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
 
     cal = latest(load_history(DEFAULT_CALIBRATION))
-    return systematic_terms(RunOptions(), _rig(default_rel), cal, engine_map)
+    return systematic_terms(RunSpec(), _rig(default_rel), cal, engine_map)
 
 
 def test_shipped_maps_say_they_are_not_measured_and_state_the_evidence():

@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.planfile import plan_from_text
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 PLAN = plan_from_text('schema = "dyno.plan/1"\nname = "tune"\nmode = "steps"\n[[step]]\nkind = "contact"\n'
                       '[[step]]\nkind = "identify"\nsetpoint = 3000.0\nrepeats = 2\n', "tune.toml")
@@ -16,7 +16,7 @@ PLAN = plan_from_text('schema = "dyno.plan/1"\nname = "tune"\nmode = "steps"\n[[
 
 def _identify(tmp_path, name, params=None) -> dict:
     out = tmp_path / name
-    run_test(RunOptions(sim=True, seed=1, plan=PLAN, out_dir=out, mock_pins=True, sim_params=params))
+    run_test(RunSpec(sim=True, seed=1, plan=PLAN, out_dir=out, mock_pins=True, sim_params=params))
     docs = [json.loads(line) for line in (out / "documents.jsonl").read_text().splitlines()]
     (found,) = [d for d in docs if d["type"] == "identify"]
     return found

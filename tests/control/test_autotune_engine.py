@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import EngineHold, SpeedHold
 from dyno.control.holds import gains_for
 from dyno.control.outputs import STOP
@@ -18,7 +18,7 @@ from dyno.control.plans.autotune import MAX_SHIFT_SHARE, MAX_SPREAD, identify_ga
 from dyno.control.plans.steps import probe_load_raises
 from dyno.control.api import State, TestPlan as Plan
 from dyno.control.plans.speed_hold import find_contact
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 
 def _figures(trace, sp: float, start: float) -> dict:
@@ -65,7 +65,7 @@ def _tune_and_step(tmp_path, seed: int, params=None) -> dict:
         ctx.phase(State.DONE, "test done")
 
     # the test's own mode comes with the run's spec
-    r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
+    r = run_test(RunSpec(sim=True, seed=seed, plan=Plan(mode="test-engine-tune"), mock_pins=True,
                             runners={"test-engine-tune": runner}, out_dir=tmp_path / "run", sim_params=params))
     assert not [a for a in r["aborts"] if a["cause"] != "no_points"], r["aborts"]
     return found

@@ -11,7 +11,7 @@ import statistics
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.rig_params import RigParams
 from dyno.control.plans import speed_hold as sh
 from dyno.control.api import State, TestPlan as Plan
@@ -73,7 +73,7 @@ def _hold_run(out_dir, seed: int, end_stop: bool) -> dict:
     # day): these are the hold's figures on that plant; a seed's own engine (dyno.sim.world, up to
     # ~20 % down on a hot day at altitude) changes the plant's gain, which is not what this checks.
     # The test's own mode comes with the run's spec.
-    r = run_test(RunOptions(sim=True, seed=seed, plan=Plan(mode="test-hold"), mock_pins=True,
+    r = run_test(RunSpec(sim=True, seed=seed, plan=Plan(mode="test-hold"), mock_pins=True,
                             runners={"test-hold": runner}, out_dir=out_dir / "run", sim_params=RigParams(ideal=True)))
     assert r["state"] in ("done", "aborted") and not [a for a in r["aborts"] if a["cause"] != "no_points"]
     return found

@@ -7,7 +7,8 @@ import pytest
 
 from dyno.control.hold_law import HoldGains
 from dyno.errors import ConfigError
-from dyno.rig.config import DEFAULT_RIG_PATH, ControlConfig, InertiaConfig, rig_from_dict
+from dyno.rig.config import DEFAULT_RIG_PATH, ControlConfig, rig_from_dict
+from dyno.rig.inertia import InertiaConfig
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

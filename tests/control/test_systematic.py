@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from dyno.analysis.calibration import CalibrationEntry
+from dyno.analysis.calibration_history import CalibrationEntry
 from dyno.analysis.systematic import calibration_rel_u, interval95, interval_basis, point_systematic
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan
 from dyno.sim.rig_params import RigParams
 from tests.rig_files import rig_without_run_enable  # noqa: F401 (the e2e tests import it from here)
@@ -60,13 +60,13 @@ QUICK_PLAN = replace(TestPlan(), max_measure_s=3.0, warmup_s=2.0)
 def full_run(tmp_path_factory):
     """One complete default simulated test, shared by the tests that inspect it."""
     out = tmp_path_factory.mktemp("runs") / "full"
-    return run_test(RunOptions(sim=True, seed=1, out_dir=out, sim_params=IDEAL))
+    return run_test(RunSpec(sim=True, seed=1, out_dir=out, sim_params=IDEAL))
 
 
 @pytest.fixture(scope="session")
 def faulty_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "faulty"
-    return run_test(RunOptions(sim=True, seed=1, fault_rate=0.05, out_dir=out, sim_params=IDEAL))
+    return run_test(RunSpec(sim=True, seed=1, fault_rate=0.05, out_dir=out, sim_params=IDEAL))
 
 
 @pytest.fixture(scope="session")

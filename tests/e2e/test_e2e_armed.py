@@ -7,7 +7,7 @@ controller waits in ARMED, measure the latency in true simulated time from the p
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.safety import SafetyLimits
 from dyno.session.drills import parse_drill
 
@@ -35,7 +35,7 @@ def _armed_run(tmp_path, drill: str):
         poller = ctx.poller
         ctx.controller.listeners.append(lambda c: periods.append((c.state.value, poller.poll_period_s)))
 
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, auto_go=False,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, auto_go=False,
                             drills=[parse_drill(f"{drill}@{ONSET_S:g}")], setup=setup, max_sim_s=60.0))
     return r, captured["ctx"], captured["periods"]
 
@@ -64,7 +64,7 @@ def test_go_restores_the_full_poll_rate(tmp_path):
         poller = ctx.poller
         ctx.controller.listeners.append(lambda c: periods.append((c.state.value, poller.poll_period_s)))
 
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=setup))
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=setup))
     assert r["state"] == "done"
     by_state = dict(periods)
     assert by_state["armed"] == pytest.approx(1 / SafetyLimits().armed_poll_hz)

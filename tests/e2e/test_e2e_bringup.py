@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.cli import main
 from dyno.control.plans import plan_named
 
@@ -61,7 +61,7 @@ def test_a_poll_rate_the_bus_cannot_carry_is_derated_to_fit_and_said(tmp_path, c
 
 
 def test_the_default_rigs_link_fits_with_its_margin_and_loses_nothing(tmp_path):
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run"))
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run"))
     link = r["link"]
     assert link["transport"] == "i2c" and link["clock_hz"] == 100_000 and link["poll_hz"] == 150
     assert link["busy_basis"] == "measured"
@@ -72,7 +72,7 @@ def test_the_default_rigs_link_fits_with_its_margin_and_loses_nothing(tmp_path):
 
 def test_a_serial_rig_is_charged_at_its_baud(tmp_path):
     rig = _rig(tmp_path, **{'transport = "i2c"': 'transport = "serial"'})
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", rig_path=rig,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", rig_path=rig,
                             plan=plan_named("thesis-step")))
     link = r["link"]
     assert link["transport"] == "serial" and link["clock_hz"] == 115_200
@@ -138,7 +138,7 @@ def test_an_eio_on_the_broadcom_controller_is_a_stretch_timeout_not_a_nack():
 def test_the_bus_is_not_reset_again_while_the_nano_boots():
     """After pulsing RESET the Nano's bootloader NACKs for ~1 s: those failures must not pulse it again (with
     20 failures a reset at 150 Hz, the old transport reset it every ~0.13 s, for ever)."""
-    from dyno.hw.clock import FakeClock
+    from dyno.clock import FakeClock
     from dyno.transports.i2c import RecoveringI2CTransport
 
     class Bus:

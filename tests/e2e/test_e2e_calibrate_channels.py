@@ -62,8 +62,8 @@ def test_calibrate_input_channel_in_a_terminal_against_the_simulators_true_gain(
     appended to the channel's history has the gain of the simulated cradle load cell (the physics' draw for
     the seed, computed here from the simulator's parameters, not read off the program), 1.8 % from the
     host's nominal 600; the spread across the repeats is shown; the old rows are untouched."""
-    from dyno.analysis.calibration import load_history
-    from dyno.sim.physics import RigParams
+    from dyno.analysis.calibration_history import load_history
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.world import input_channel_truth
 
     seed = 3
@@ -115,13 +115,13 @@ def test_a_runs_zero_checks_see_the_input_channels_own_drift(tmp_path):
     the amount the physics drifted between the two windows, and ``torque_zero`` is not."""
     import dataclasses
 
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.sim.rig_params import RigParams
     from tests.e2e.conftest import QUICK_PLAN
 
     rate = 0.6  # crank N m per minute
     captured = {}
-    r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", rig_path=INPUT_RIG, plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "run", rig_path=INPUT_RIG, plan=QUICK_PLAN,
                             sim_params=dataclasses.replace(RigParams(), input_zero_drift_nm_per_min=rate),
                             setup=lambda ctx: captured.setdefault("ctx", ctx)))
     zi, zo = r["torque_zero_input"], r["torque_zero"]

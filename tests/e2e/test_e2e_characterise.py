@@ -74,7 +74,8 @@ def test_engagement_plan_recovers_the_simulated_cvt(tmp_path, tune):
 
 def test_engagement_differs_between_tunes_as_the_physics_says(tmp_path):
     """Heavier flyweights engage lower, a stiffer primary spring higher (the sim's engagement is the tune's)."""
-    from dyno.sim.physics import RigModel, RigParams
+    from dyno.sim.physics import RigModel
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.driven import characterisation_truth
 
     true = {t: characterisation_truth(RigModel(RigParams(belt_efficiency_source="loss_model",
@@ -106,17 +107,17 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
     from dataclasses import replace
 
     from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.api import TestPlan
     from dyno.control.plans import plan_named
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     params = RigParams(driven_loss_nm=(0.10, 4e-4, 1.2e-6), ideal=True)  # (perfect knowledge: the loss alone)
-    cd = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
+    cd = run_test(RunSpec(sim=True, seed=4, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
                              sim_params=params))
     assert cd["state"] == "done"
     loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
-    run = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", sim_params=params,
+    run = run_test(RunSpec(sim=True, seed=4, out_dir=tmp_path / "run", sim_params=params,
                               plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
     inside = 0
     for p in run["points"]:
@@ -138,14 +139,14 @@ def test_driven_loss_added_back_recovers_the_cvt_efficiency(tmp_path):
 
 def test_a_clutch_engaging_below_idle_is_refused_safely(tmp_path):
     """Flyweights so heavy the secondary already turns at idle: nothing to characterise, said in one line."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.plans import plan_named
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
 
     tune = tmp_path / "very-heavy.toml"
     tune.write_text((ROOT / "calibration" / "tunes" / "cvtech-stock.toml").read_text()
                     .replace("mass_each_kg = 0.228", "mass_each_kg = 0.400"))
-    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run", plan=plan_named("engagement"),
+    r = run_test(RunSpec(sim=True, seed=1, out_dir=tmp_path / "run", plan=plan_named("engagement"),
                             tune_path=tune, sim_params=RigParams(cvt_tune_path=str(tune))))
     assert r["state"] == "aborted" and r["rig_safe"]
     assert "engages below idle" in r["aborts"][0]["detail"]

@@ -10,7 +10,7 @@ import random
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.session.drills import parse_drill
 
 from .conftest import QUICK_PLAN, rig_without_run_enable
@@ -26,7 +26,7 @@ def _run(tmp_path, drills, *, seed, fault_rate, protocol=None):
         captured["accepted"] = accepted = set()
         ctx.poller.reader.session.frame_listeners.append(accepted.add)
 
-    r = run_test(RunOptions(sim=True, seed=seed, fault_rate=fault_rate, out_dir=tmp_path / "run", plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=seed, fault_rate=fault_rate, out_dir=tmp_path / "run", plan=QUICK_PLAN,
                             protocol=protocol, drills=[parse_drill(d) for d in drills], setup=setup,
                             rig_path=rig_without_run_enable(tmp_path)))  # the link's own behaviour across resets
     return r, captured
@@ -74,10 +74,10 @@ def test_a_nano_reset_stays_a_cut_on_the_firmware_twin(tmp_path):
     (only the operator's re-arm would), so the twin's run-enable stays off to the end, as the real ELF's does
     (tests/firmware/test_firmware_supervisor.py)."""
     from dyno.session.drills import parse_drill
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
 
     held = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", drills=[parse_drill("device-reset@armed+1")],
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", drills=[parse_drill("device-reset@armed+1")],
                             setup=lambda ctx: held.update(ctx=ctx)))
     ctx = held["ctx"]
     reader = ctx.poller.reader

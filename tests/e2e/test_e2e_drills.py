@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.cli.run_cmd import exit_code
 from dyno.control.safety import SafetyLimits
 from dyno.session.drills import parse_drill
@@ -52,7 +52,7 @@ def _run(tmp_path, drills, *, seed=3, limits=None, name="run", mock_pins=False, 
     def setup(ctx):
         captured["ctx"] = ctx
 
-    r = run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / name, plan=QUICK_PLAN, limits=limits, sim_params=IDEAL,
+    r = run_test(RunSpec(sim=True, seed=seed, out_dir=tmp_path / name, plan=QUICK_PLAN, limits=limits, sim_params=IDEAL,
                             drills=[parse_drill(d) for d in drills], handle_signals=True, setup=setup,
                             mock_pins=mock_pins, rig_path=rig_path))
     return r, captured["ctx"]

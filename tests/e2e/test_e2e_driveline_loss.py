@@ -7,10 +7,11 @@ from dataclasses import replace
 import pytest
 
 from dyno.analysis.coastdown import driven_loss_keys, load_driven_loss
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 from dyno.sim.rig_params import DEFAULT_DRIVELINE_LOSS, driveline_loss_of
 
 from .conftest import tare_error
@@ -49,7 +50,7 @@ def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_
     # perfect knowledge otherwise (engine, sensor, day): the driveline alone
     params = RigParams(ideal=True, driveline_loss_drag_nm=HEAVY_DRAG_NM,
                        driveline_loss_drag_nm_per_krpm=HEAVY_PER_KRPM_NM, driveline_loss_load_frac=LOAD_FRAC)
-    cd = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
+    cd = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "cd", plan=plan_named("coast-down"),
                              sim_params=params))
     assert cd["state"] == "done"
     fit = cd["loss_fit"]
@@ -59,7 +60,7 @@ def test_coast_down_measures_the_driveline_drag_and_corrects_the_efficiency(tmp_
         assert t >= HEAVY_DRAG_NM + HEAVY_PER_KRPM_NM * rpm / 1000  # the truth holds the driveline's drag
         assert abs(f - t) <= s + y + 0.02
     loss = load_driven_loss(tmp_path / "cd" / "driven_loss.json")
-    run = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", sim_params=params,
+    run = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "run", sim_params=params,
                               plan=replace(TestPlan(), max_points=6, max_measure_s=6.0)))
     # the tare (one zero that every point shares) judged on its own bound, its error taken out of each point
     assert abs(run["torque_tare"]["zero_nm"]) <= 2.6 * run["torque_tare"]["u_nm"], run["torque_tare"]

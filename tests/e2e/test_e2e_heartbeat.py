@@ -5,7 +5,7 @@ import asyncio
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.safety import SafetyLimits
 
 from .conftest import QUICK_PLAN
@@ -41,7 +41,7 @@ def _run(tmp_path, stop_poller_at_s=None):
         captured["ctx"] = ctx
         setup(ctx)
 
-    result = run_test(RunOptions(sim=True, seed=4, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=_setup,
+    result = run_test(RunSpec(sim=True, seed=4, out_dir=tmp_path / "run", plan=QUICK_PLAN, setup=_setup,
                                  max_sim_s=120.0))
     return result, captured["ctx"], [(t - start[0], dt) for t, dt in zip(ticks, periods)], \
         [t - start[0] for t in beats], [t - start[0] for t in polls]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
 from dyno.runlog.replay import export, replay
@@ -31,7 +31,7 @@ def honest_input_run(tmp_path_factory):
     """One quick run on a rig that is its own engine, sensors and day (not ideal), with the channel."""
     out = tmp_path_factory.mktemp("input") / "run"
     captured = {}
-    r = run_test(RunOptions(sim=True, seed=5, out_dir=out, rig_path=INPUT_RIG, plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=5, out_dir=out, rig_path=INPUT_RIG, plan=QUICK_PLAN,
                             setup=lambda ctx: captured.setdefault("ctx", ctx)))
     return r, captured["ctx"]
 
@@ -101,7 +101,7 @@ def test_input_run_replays_and_exports(honest_input_run, tmp_path):
 
 def test_without_the_channel_nothing_of_it_appears(tmp_path):
     captured = {}
-    r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run", plan=QUICK_PLAN, sim_params=IDEAL,
+    r = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "run", plan=QUICK_PLAN, sim_params=IDEAL,
                             setup=lambda ctx: captured.setdefault("ctx", ctx)))
     ctx = captured["ctx"]
     assert r["state"] == "done" and r["points"]
@@ -110,14 +110,14 @@ def test_without_the_channel_nothing_of_it_appears(tmp_path):
     for p in r["points"]:
         assert p["efficiency_source"] == "engine_map" and "torque_input_nm" not in p
     with pytest.raises(ConfigError, match="no input torque channel"):
-        run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "run2", plan=QUICK_PLAN, sim_params=IDEAL,
+        run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "run2", plan=QUICK_PLAN, sim_params=IDEAL,
                             drills=[parse_drill("adc-error:input@10")]))
 
 
 @pytest.mark.parametrize("drill,bound_s", [("adc-error:input", 0.1), ("adc-stuck:input", 0.6)])
 def test_input_converter_drills_trip_sensor_fault_safe_on_the_truth(tmp_path, drill, bound_s):
     captured = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=INPUT_RIG,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=INPUT_RIG,
                             sim_params=IDEAL, drills=[parse_drill(f"{drill}@{32 + STARTUP_HOLD_S}")], handle_signals=True,
                             setup=lambda ctx: captured.setdefault("ctx", ctx)))
     ctx = captured["ctx"]

@@ -17,10 +17,10 @@ RIG = (REPO / "hardware" / "rig.toml").read_text()
 
 
 def _run_test(tmp_path, seed: int, rig: str | None = None) -> dict:
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.cli.run_cmd import plan_named
 
-    return run_test(RunOptions(sim=True, seed=seed, out_dir=tmp_path / f"t{seed}", rig_path=rig,
+    return run_test(RunSpec(sim=True, seed=seed, out_dir=tmp_path / f"t{seed}", rig_path=rig,
                                plan=plan_named("speed-hold")))
 
 

@@ -16,7 +16,7 @@ import pytest
 from dyno.cli.run_cmd import exit_code
 from dyno.control import kill_probe
 from dyno.session.drills import parse_drill
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.session.safety import KILL_LEAD_WARNING
 
 from .conftest import bench_safe_state_module, QUICK_PLAN, drill_as_the_user_runs_it
@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 def _run(tmp_path, drills=(), *, mock_pins=False, name="run"):
     held = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
                             drills=[parse_drill(d) for d in drills], setup=lambda ctx: held.update(ctx=ctx),
                             mock_pins=mock_pins))
     return r, held["ctx"]

@@ -14,7 +14,7 @@ from dyno.errors import ConfigError
 from dyno.runlog.reader import load_run
 from dyno.runlog.replay import replay
 from dyno.session.drills import parse_drill
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 
 from .conftest import bench_safe_state_module, QUICK_PLAN, drill_as_the_user_runs_it
 
@@ -24,7 +24,7 @@ WATCHDOG_S = 0.5  # hardware/rig.toml [actuator] watchdog_s
 
 def _run(tmp_path, drills, *, mock_pins=False, name="run"):
     held = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
                             drills=[parse_drill(d) for d in drills], setup=lambda ctx: held.update(ctx=ctx),
                             mock_pins=mock_pins))
     return r, held["ctx"]

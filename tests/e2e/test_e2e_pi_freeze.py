@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.cli.run_cmd import exit_code
 from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
@@ -29,7 +29,7 @@ TIMEOUT_S = 0.2  # hardware/rig.toml [limits] supervisor_timeout_s
 
 def _run(tmp_path, drills, *, mock_pins=False, name="run"):
     held = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN,
                             drills=[parse_drill(d) for d in drills], setup=lambda ctx: held.update(ctx=ctx),
                             mock_pins=mock_pins))
     return r, held["ctx"]
@@ -124,7 +124,7 @@ def test_pi_freeze_with_the_end_switch_no_false_rig_fault(tmp_path):
     rig = tmp_path / "wired.toml"
     rig.write_text(text)
     held = {}
-    r = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=rig,
+    r = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", plan=QUICK_PLAN, rig_path=rig,
                             drills=[parse_drill("pi-freeze@loaded+2")], setup=lambda ctx: held.update(ctx=ctx),
                             mock_pins=True))
     _assert_nano_made_it_safe(r, held["ctx"])

@@ -152,17 +152,17 @@ def test_the_ui_runs_a_closed_loop_plan_paced(tmp_path):
 def test_step_limits_end_a_step_or_abort_safely(tmp_path):
     """Limits per step: passed with on_limit = "next" the plan goes on (a `limit` document); with "abort"
     the rig goes to the safe state and the run ends aborted (cause plan_limit)."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.planfile import plan_from_text
 
     head = ('schema = "dyno.plan/1"\nname = "limits"\nmode = "steps"\n[[step]]\nkind = "contact"\n'
             '[[step]]\nkind = "brake"\ndirection = "apply"\ns = 6.0\nlimit_min_secondary_rpm = 3000.0\n')
     ok = plan_from_text(head + '[[step]]\nkind = "brake"\ndirection = "release"\ns = 1.0\n'
                         '[[step]]\nkind = "hold"\nvariable = "torque"\nsetpoint = 16.0\n', "ok.toml")
-    r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "ok", plan=ok))
+    r = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "ok", plan=ok))
     assert r["state"] == "done" and len(r["points"]) == 1
     docs = load_run(tmp_path / "ok", with_events=False).docs("limit")
     assert [d["step"] for d in docs] == [2] and "below 3000 rpm" in docs[0]["reason"]
     stop = plan_from_text(head.replace("3000.0\n", "3000.0\non_limit = \"abort\"\n"), "stop.toml")
-    r = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "stop", plan=stop))
+    r = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "stop", plan=stop))
     assert r["state"] == "aborted" and r["aborts"][0]["cause"] == "plan_limit" and r["rig_safe"]

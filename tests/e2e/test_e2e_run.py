@@ -99,7 +99,7 @@ def test_points_carry_a_95pc_interval_that_covers_the_truth(full_run):
 def test_efficiency_over_one_is_flagged_not_accepted(full_run, tmp_path):
     """Reprocessed with a calibration whose slope is 40 % too low, torque and efficiency come out 1.7x:
     every point over 100 % is marked invalid with the reason, never passed off as a result."""
-    from dyno.analysis.calibration import latest, load_history
+    from dyno.analysis.calibration_history import latest, load_history
     from dyno.runlog.replay import replay
 
     meta_cal = json.loads((Path(full_run["run_dir"]) / "calibration.json").read_text())

@@ -8,7 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import DEFAULT_ENGINE_MAP, RunOptions, run_test
+from dyno.resources import DEFAULT_ENGINE_MAP
+from dyno.session.root import RunSpec, run_test
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.control.plans import plan_named
 from dyno.session.drills import parse_drill
@@ -39,7 +40,7 @@ def _run(plan: str, drill: str, tmp_path, *, mock_pins: bool = False, setup=None
         if setup is not None:
             setup(ctx)
 
-    opts = RunOptions(sim=True, seed=5, out_dir=tmp_path / f"{plan}-{mock_pins}", plan=plan_named(plan),
+    opts = RunSpec(sim=True, seed=5, out_dir=tmp_path / f"{plan}-{mock_pins}", plan=plan_named(plan),
                       drills=[parse_drill(drill)], setup=keep, mock_pins=mock_pins)
     if plan == "drive-grid":
         opts = replace(opts, engine_map_path=PART_THROTTLE_MAP)

@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.safety import SafetyLimits
 from dyno.runlog.reader import load_run
 
@@ -22,7 +22,7 @@ def _run_with(tmp_path, name, setup=None, limits=None):
         if setup:
             setup(ctx)
 
-    result = run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN, setup=_setup,
+    result = run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / name, plan=QUICK_PLAN, setup=_setup,
                                  limits=limits))
     return result, captured["ctx"]
 

@@ -4,7 +4,7 @@ through engagement at full throttle, and a dead secondary sensor still caught wi
 
 from dataclasses import replace
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan as StepPlan
 from dyno.session.drills import parse_drill
 from dyno.control.safety import SafetyLimits
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 def test_dead_secondary_sensor_before_the_warm_up_is_caught_once_the_engine_is_above_the_check_speed(tmp_path):
     got = {}
-    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run", plan=replace(StepPlan(), max_points=2),
+    r = run_test(RunSpec(sim=True, seed=1, out_dir=tmp_path / "run", plan=replace(StepPlan(), max_points=2),
                             drills=[parse_drill("hall-dead:secondary@armed+1.35")], setup=lambda ctx: got.update(ctx=ctx)))
     assert r["state"] == "aborted" and r["rig_safe"]
     a = r["aborts"][0]
@@ -29,6 +29,6 @@ def test_dead_secondary_sensor_before_the_warm_up_is_caught_once_the_engine_is_a
 
 
 def test_full_throttle_through_engagement_does_not_trip(tmp_path):
-    r = run_test(RunOptions(sim=True, seed=1, out_dir=tmp_path / "run",
+    r = run_test(RunSpec(sim=True, seed=1, out_dir=tmp_path / "run",
                             plan=replace(StepPlan(), max_points=1, max_measure_s=3.0)))
     assert r["state"] == "done" and not r["aborts"]

@@ -3,7 +3,7 @@
 import asyncio
 from dataclasses import replace
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.bus import BusFaults
 
 from .conftest import IDEAL, QUICK_PLAN, rig_without_run_enable, tare_allowance
@@ -12,7 +12,7 @@ from .conftest import IDEAL, QUICK_PLAN, rig_without_run_enable, tare_allowance
 def test_device_reset_mid_run_is_survived(tmp_path):
     """A watchdog reset of the Nano: counters restart, the host notices and carries on (the link's own behaviour:
     the Nano's run-enable out of the kill chain; wired, a reset cuts the engine: tests/e2e/test_e2e_drills.py)."""
-    r = run_test(RunOptions(sim=True, seed=6, out_dir=tmp_path / "reset", plan=QUICK_PLAN, sim_params=IDEAL,
+    r = run_test(RunSpec(sim=True, seed=6, out_dir=tmp_path / "reset", plan=QUICK_PLAN, sim_params=IDEAL,
                             faults=BusFaults(reset_times_s=[45.0, 90.0]), rig_path=rig_without_run_enable(tmp_path)))
     assert r["state"] == "done", r["reason"]
     assert r["faults_injected"]["reset"] == 2
@@ -34,7 +34,7 @@ def test_stuck_primary_hall_aborts(tmp_path):
     def setup(ctx):
         asyncio.get_running_loop().call_later(30.0, ctx.sim.model.stuck_hall.add, "primary")
 
-    r = run_test(RunOptions(sim=True, seed=6, out_dir=tmp_path / "stuck", plan=QUICK_PLAN, setup=setup,
+    r = run_test(RunSpec(sim=True, seed=6, out_dir=tmp_path / "stuck", plan=QUICK_PLAN, setup=setup,
                             sim_params=IDEAL))
     assert r["state"] == "aborted"
     assert r["aborts"][0]["cause"] == "sensor_fault" and "primary" in r["aborts"][0]["detail"]
@@ -45,7 +45,7 @@ def test_adc_error_bit_conversions_are_excluded_and_counted(tmp_path):
     def setup(ctx):
         ctx.sim.model.adc_error_prob = 0.05
 
-    r = run_test(RunOptions(sim=True, seed=6, out_dir=tmp_path / "adcerr", setup=setup, sim_params=IDEAL))
+    r = run_test(RunSpec(sim=True, seed=6, out_dir=tmp_path / "adcerr", setup=setup, sim_params=IDEAL))
     assert r["state"] == "done"
     for p in r["points"]:
         reasons = " ".join(f["reason"] for f in p["faults"])

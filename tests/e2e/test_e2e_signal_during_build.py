@@ -11,7 +11,7 @@ import os
 import signal
 
 import dyno.session.root
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
@@ -30,7 +30,7 @@ def test_signal_during_build_ends_the_run_safe_with_its_records(tmp_path, monkey
     monkeypatch.setattr(dyno.session.root, "build", build_then_signalled)
     before = signal.getsignal(signal.SIGTERM)
     out = tmp_path / "run"
-    r = run_test(RunOptions(sim=True, seed=21, speed=None, out_dir=out, plan=plan_named("coast-down"),
+    r = run_test(RunSpec(sim=True, seed=21, speed=None, out_dir=out, plan=plan_named("coast-down"),
                             handle_signals=True))
     assert r["state"] == "aborted" and r["aborts"][0]["cause"] == "signal", r["aborts"]
     assert "SIGTERM" in r["aborts"][0]["detail"]

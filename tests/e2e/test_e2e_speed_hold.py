@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, public_point, run_test
+from dyno.session.root import RunSpec, run_test
+from dyno.session.summary import public_point
 from dyno.control.plans import plan_named
 from dyno.session.drills import parse_drill
 from dyno.runlog.replay import replay
@@ -67,7 +68,7 @@ def test_speed_hold_replays_exactly(hold_run):
 
 
 def test_a_drill_during_a_hold_still_trips_within_its_bound(tmp_path):
-    r = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"), sim_params=IDEAL,
+    r = run_test(RunSpec(sim=True, seed=2, out_dir=tmp_path / "run", plan=plan_named("speed-hold"), sim_params=IDEAL,
                             drills=[parse_drill("bus-lost@95")], handle_signals=True))
     assert r["state"] == "aborted"
     a = r["aborts"][0]

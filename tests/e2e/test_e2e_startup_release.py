@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from dyno.control.plans import plan_named
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.rig_params import RigParams
 
 REPO = Path(__file__).resolve().parents[2]
@@ -50,7 +50,7 @@ def test_an_applied_brake_and_a_stuck_closed_switch_the_chain_closes_only_after_
 
 @pytest.mark.parametrize("start_mm", [0.0, 20.0])
 def test_the_simulated_driver_holds_the_ignition_too(tmp_path, start_mm):
-    r = run_test(RunOptions(sim=True, seed=1, plan=plan_named("speed-hold"), out_dir=tmp_path / "run",
+    r = run_test(RunSpec(sim=True, seed=1, plan=plan_named("speed-hold"), out_dir=tmp_path / "run",
                             sim_params=RigParams(ideal=True, brake_start_mm=start_mm)))
     assert r["state"] == "done", r["reason"]
     o = r["outputs"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.rig_params import RigParams
 from scipy import stats
@@ -25,7 +25,7 @@ def _run(tmp_path, tare: bool):
     # an offset 3 N m off the calibration's (300 counts), nothing else different from the host's knowledge
     params = RigParams(ideal=False, engine_map_dev_rel_sd=0.0, adc_gain_drift_rel_sd=0.0,
                        adc_offset_drift_counts_sd=300.0, ambient_day=(25.0, 99.0, 0.0), world_seed=14)
-    res = run_test(RunOptions(sim=True, seed=3, sim_params=params, plan=plan_named(str(plan)), rig_path=rig,
+    res = run_test(RunSpec(sim=True, seed=3, sim_params=params, plan=plan_named(str(plan)), rig_path=rig,
                               out_dir=tmp_path / f"run-{tare}"))
     assert abs(res["sim_world"]["adc_offset_drift_counts"]) > 100  # (world seed 14: +175 counts, +1.6 N m)
     return res

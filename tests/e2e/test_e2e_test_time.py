@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
 from dyno.sim.rig_params import RigParams
 
@@ -21,7 +21,7 @@ def runs_and_truth():
     with tempfile.TemporaryDirectory() as tmp:
         for s in SEEDS:
             ctxs = []
-            r = run_test(RunOptions(sim=True, seed=s, plan=plan_named("speed-hold"), out_dir=Path(tmp) / str(s),
+            r = run_test(RunSpec(sim=True, seed=s, plan=plan_named("speed-hold"), out_dir=Path(tmp) / str(s),
                                     sim_params=RigParams(ideal=True), setup=ctxs.append))
             docs = [json.loads(line) for line in (Path(tmp) / str(s) / "documents.jsonl").read_text().splitlines()]
             out.append((r, ctxs[0].sim.truth, docs))

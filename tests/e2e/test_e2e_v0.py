@@ -4,14 +4,14 @@
 plausibility check, aborted on a false over-speed from a corrupted time slot.)
 """
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.sim.bus import BusFaults
 
 from .conftest import IDEAL  # perfect knowledge: this test checks the statistics alone
 
 
 def test_v0_bit_errors_never_end_the_test_early(tmp_path):
-    r = run_test(RunOptions(sim=True, seed=3, protocol="v0", faults=BusFaults(bit_error_rate=1e-3), sim_params=IDEAL,
+    r = run_test(RunSpec(sim=True, seed=3, protocol="v0", faults=BusFaults(bit_error_rate=1e-3), sim_params=IDEAL,
                             out_dir=tmp_path / "run"))
     assert r["state"] == "done" and r["reason"].startswith("secondary below"), (r["reason"], r["aborts"])
     fr = r["frames"]

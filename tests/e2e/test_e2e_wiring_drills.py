@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.cli.run_cmd import exit_code
 from dyno.session.drills import parse_drill
 from dyno.errors import ConfigError
@@ -47,7 +47,7 @@ def _run(tmp_path, *drills, rig=None, **kw) -> dict:
     from dyno.control.plans import plan_named
 
     rig = rig or wired_rig(tmp_path)
-    return run_test(RunOptions(sim=True, seed=3, out_dir=tmp_path / "run", rig_path=rig, mock_pins=True,
+    return run_test(RunSpec(sim=True, seed=3, out_dir=tmp_path / "run", rig_path=rig, mock_pins=True,
                                drills=[parse_drill(d) for d in drills], plan=plan_named("speed-hold"), **kw))
 
 
@@ -103,9 +103,9 @@ def test_k3_fitted_releases_by_wiring_and_the_driver_still_agrees(tmp_path):
 
 def test_a_wiring_drill_the_run_cannot_have_is_refused_before_anything_is_written(tmp_path):
     with pytest.raises(ConfigError, match="needs --mock-pins"):  # the shipped rig declares the E-stop input
-        run_test(RunOptions(sim=True, out_dir=tmp_path / "a", drills=[parse_drill("estop-held:5@10")]))
+        run_test(RunSpec(sim=True, out_dir=tmp_path / "a", drills=[parse_drill("estop-held:5@10")]))
     with pytest.raises(ConfigError, match="--mock-pins .* and an E-stop monitor input"):  # everything missing, one line
-        run_test(RunOptions(sim=True, out_dir=tmp_path / "a", rig_path=wired_rig(tmp_path, estop=False),
+        run_test(RunSpec(sim=True, out_dir=tmp_path / "a", rig_path=wired_rig(tmp_path, estop=False),
                             drills=[parse_drill("estop-held:5@10")]))
     with pytest.raises(ConfigError, match="estop_input"):
         _run(tmp_path, "estop-twice@10", rig=wired_rig(tmp_path, estop=False))

@@ -8,7 +8,7 @@ import pytest
 from dyno.acquisition.poller import Poller
 from dyno.acquisition.reader import make_reader
 from dyno.acquisition.rpm import rpm_per_period
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.clock import run
 from dyno.protocol import v1
 from dyno.runlog.reader import load_run
@@ -24,7 +24,7 @@ WRAP_US = 1 << 32
 def test_full_test_across_the_wrap(tmp_path):
     """A complete test whose device clock wraps 60 s in: points as good as ever."""
     # perfect knowledge (--sim-ideal): this checks the timestamps across the wrap, so only noise may differ
-    result = run_test(RunOptions(sim=True, seed=5, out_dir=tmp_path / "w", clock_offset_us=WRAP_US - 60_000_000,
+    result = run_test(RunSpec(sim=True, seed=5, out_dir=tmp_path / "w", clock_offset_us=WRAP_US - 60_000_000,
                                  sim_params=IDEAL))
     assert result["state"] == "done"
     assert len(result["points"]) >= 15

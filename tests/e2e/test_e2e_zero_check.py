@@ -7,9 +7,9 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan as StepPlan
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,7 +18,7 @@ def test_drift_is_measured_flagged_and_corrected(tmp_path):
     rig = tmp_path / "rig.toml"
     rig.write_text((ROOT / "hardware" / "rig.toml").read_text().replace("correct = false", "correct = true"))
     drift_per_min = 2.0
-    res = run_test(RunOptions(sim=True, seed=2, out_dir=tmp_path / "run", rig_path=rig,
+    res = run_test(RunSpec(sim=True, seed=2, out_dir=tmp_path / "run", rig_path=rig,
                               plan=replace(StepPlan(), max_points=5, max_measure_s=4.0),
                               sim_params=RigParams(adc_zero_drift_nm_per_min=drift_per_min, ideal=True)))
     assert res["state"] == "done"

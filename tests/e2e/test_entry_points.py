@@ -96,11 +96,11 @@ def test_entry_run_sim_headless_json(sim_run):
     docs = [json.loads(x) for x in (run_dir / "documents.jsonl").read_text().splitlines() if x.strip()]
     skips = [d["reason"] for d in docs if d.get("type") == "skip"]
     assert skips and doc["skipped"] == skips  # (the speed-hold plan's setpoints in the shift region)
-    from dyno.cli.run_cmd import _print_table
+    from dyno.cli.run_cmd import print_result_table
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        _print_table(doc)
+        print_result_table(doc)
     assert all(f"skipped: {why}" in buf.getvalue() for why in skips)
 
 

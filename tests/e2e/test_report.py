@@ -182,12 +182,12 @@ def test_report_of_a_legacy_import(tmp_path):
 
 
 def test_report_of_an_aborted_run(tmp_path):
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.session.drills import parse_drill
     from dyno.report.writer import write_report
 
     out = tmp_path / "aborted"
-    result = run_test(RunOptions(sim=True, seed=2, out_dir=out, drills=[parse_drill("overtemp@45")]))
+    result = run_test(RunSpec(sim=True, seed=2, out_dir=out, drills=[parse_drill("overtemp@45")]))
     assert result["state"] == "aborted"
     page = write_report(out).read_text(encoding="utf-8")
     assert '<span class="bad">abort</span>' in page and "<h3>Aborts</h3>" in page

@@ -13,6 +13,7 @@ import pytest
 from dyno.acquisition.reader import make_reader
 from dyno.session.firmware_sim import simulate
 from dyno.protocol import v2
+from dyno.protocol import v1
 from dyno.transports.simavr import SimavrTransport
 
 from .test_firmware_fil import _assert_lossless
@@ -96,7 +97,7 @@ def test_firmware_fil_old_host_never_sees_tag_4(firmware_build):
     assert not [e for e in got if e.channel == v2.CH_INPUT]  # ... and never sent unasked
     assert reader.stats.rejected_total == 0 if hasattr(reader.stats, "rejected_total") else \
         sum(reader.stats.rejected.values()) == 0
-    assert len([e for e in got if e.channel == v2.CH_ADC]) > 150
+    assert len([e for e in got if e.channel == v1.CH_ADC]) > 150
 
 
 def test_firmware_sim_cli_input_hz_as_a_process(firmware_build):

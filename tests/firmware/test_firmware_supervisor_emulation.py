@@ -13,6 +13,7 @@ import pytest
 
 from dyno.acquisition.reader import make_reader
 from dyno.protocol import v2
+from dyno.protocol import v1
 from dyno.sim.device import EmulatedFirmware
 from dyno.transports.simavr import SimavrTransport
 
@@ -63,7 +64,7 @@ def _firmware_run(build, primary_rpm, stop_s=None, resume_s=None, end_s=1.6):
 def _emulate(log, events):
     """Replay the firmware's own timestamps (device us = simulated us) and the host's transactions."""
     fw = EmulatedFirmware()
-    fw.boot_id = next(r[5] << 8 | r[6] for _, _, _, r in log if len(r) >= 32 and r[2] == v2.KIND_DATA)
+    fw.boot_id = next(r[5] << 8 | r[6] for _, _, _, r in log if len(r) >= 32 and r[2] == v1.KIND_DATA)
     # The host's instants on the device's clock: micros() starts after the MCU's start-up and a command
     # acts when its bytes are in, so the offset is taken where both clocks saw one thing, the arming
     t_sup = next(t for t, req, _, _ in log if req[:1] == bytes([v2.OP_SET_SUPERVISOR]))
@@ -89,7 +90,7 @@ def _sup(raws):
     """The tag-5 events of each distinct data frame (a frame read again unacknowledged counts once)."""
     out, seen = [], set()
     for raw in raws:
-        if len(raw) < 32 or raw[2] != v2.KIND_DATA:
+        if len(raw) < 32 or raw[2] != v1.KIND_DATA:
             continue
         try:
             f = v2.decode_frame(raw)
@@ -103,7 +104,7 @@ def _sup(raws):
 
 
 def _run_flags(raws):
-    return [bool(r[4] & v2.FLAG_RUN) if len(r) >= 32 and r[2] == v2.KIND_DATA else None for r in raws]
+    return [bool(r[4] & v2.FLAG_RUN) if len(r) >= 32 and r[2] == v1.KIND_DATA else None for r in raws]
 
 
 def _compare(log, events):

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 from gpiozero import Device
 
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.hw.testing import RecordingFactory
 from dyno.rig.config import load_rig
 

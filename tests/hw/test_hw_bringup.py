@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from dyno.acquisition.reader import make_reader
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.rig.config import load_rig
 from dyno.sim.device import BOOTLOADER_S
 from dyno.sim.rig import SimRig
@@ -58,17 +58,17 @@ def test_a_port_that_never_answers_is_one_line_naming_it():
 
 
 def test_after_a_reset_the_doctor_waits_for_the_new_boot_not_a_fixed_time():
-    from dyno.hw.doctor import _boots, _new_boot
+    from dyno.hw.doctor import boot_identity, boot_identity_after_reset
 
     sim, clock = _sim()
     cfg = load_rig()
     transport = open_serial(cfg, port=SimSerialPort(sim, clock), clock=clock)
-    before = _boots(cfg, transport)
+    before = boot_identity(cfg, transport)
     sim.bus.sync()
     sim.firmware.reset(clock.now(), cause=0x2)  # the RESET line: the bootloader listens ~1 s again
     clock.advance(1.0)  # [reset] boot_s: the old fixed wait, shorter than the bootloader's
-    assert _boots(cfg, transport) is None  # what the old check read: "reset line not wired?"
-    assert _new_boot(cfg, transport, before, clock) == before + 1
+    assert boot_identity(cfg, transport) is None  # what the old check read: "reset line not wired?"
+    assert boot_identity_after_reset(cfg, transport, before, clock) == before + 1
 
 
 def test_the_open_sends_nothing_into_a_talking_bootloader_and_drops_what_it_said():

@@ -103,7 +103,7 @@ def test_hw_doctor_reads_the_bme280_the_rig_file_fits(tmp_path):
 def test_hw_doctor_checks_the_nanos_run_enable():
     """The firmware's capabilities say whether it has the run-enable (issue 37); without it, a rig whose kill
     chain has the Nano's transistor cannot run the engine: a warning naming the fix."""
-    from dyno.hw.doctor import Report
+    from dyno.hw.doctor_report import Report
     from dyno.hw.doctor_nano import check_run_enable
     from dyno.rig.config import load_rig
     from dyno.sim.device import EmulatedFirmware

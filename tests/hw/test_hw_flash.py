@@ -14,7 +14,7 @@ import pytest
 
 from dyno.errors import ConfigError
 from dyno.hw import flash as fl
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.rig.config import load_rig
 from dyno.sim.device import FW_VERSION
 from dyno.sim.rig import SimRig

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from dyno.control.outputs import APPLY
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 from dyno.hw.outputs import GpioActuators
 from dyno.hw.safety import SafetyGuard, Watchdog
 from dyno.hw.testing import assert_direction_never_switched_with_enable_on, assert_settled_before_enable, gpio
@@ -121,7 +121,7 @@ def test_hw_installed_handler_catches_real_signal(rig, factory, clock, sig):
 CHILD = textwrap.dedent("""
     import json, sys, time
     from gpiozero import Device
-    from dyno.hw.clock import FakeClock
+    from dyno.clock import FakeClock
     from dyno.hw.outputs import GpioActuators
     from dyno.hw.safety import SafetyGuard
     from dyno.hw.testing import RecordingFactory

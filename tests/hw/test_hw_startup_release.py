@@ -16,7 +16,7 @@ import pytest
 
 from dyno.control.outputs import APPLY
 from dyno.errors import SafetyAbort
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.hw.mockpins import SimPinFactory
 from dyno.hw.outputs import GpioActuators
 from dyno.rig.config import load_rig

@@ -9,7 +9,7 @@ import pytest
 import serial
 
 from dyno.errors import TransportError
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.hw.thermometer import MLX90614, ThermometerError, smbus_pec
 from dyno.protocol import v1
 from dyno.transports.base import TransportFault

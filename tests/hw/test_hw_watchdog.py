@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import time
 
-from dyno.hw.clock import MonotonicClock
+from dyno.clock import MonotonicClock
 from dyno.hw.outputs import GpioActuators
 from dyno.hw.safety import Watchdog
 from dyno.hw.testing import RecordingFactory, gpio

@@ -14,7 +14,7 @@ import pytest
 
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.errors import SafetyAbort
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.hw.estop import EstopInput
 from dyno.hw.mockpins import SimPinFactory
 from dyno.hw.outputs import GpioActuators
@@ -183,10 +183,10 @@ def test_a_held_estop_gives_one_release_stroke_then_nothing(rig_wired):
 def test_a_signal_inside_a_command_cannot_let_the_command_through_after_the_latch(rig_wired):
     """The handler (the rig path's: safe state, latched) runs inside ``brake(APPLY)``, between its latch check
     and its writes.  From the latch on, the actuator is never powered toward the rotor."""
-    from dyno.session.safety import _LoopTimeClock
+    from dyno.session.safety import LoopTimeClock
 
     fake = FakeClock()
-    clock = _LoopTimeClock(fake.now)
+    clock = LoopTimeClock(fake.now)
     toy, twin, act = _build(rig_wired, clock)
     while not act.released:
         fake.advance(0.01)
@@ -265,7 +265,8 @@ def test_clear_latch_refuses_while_the_release_runs(rig_wired):
 def test_a_switch_fault_outlives_the_process_until_doctor_passes(rig_wired, tmp_path, monkeypatch):
     """Found stuck in one session, the switch is not trusted by the next (a new driver would have forgotten):
     releases run their full stroke and the re-arm is refused until ``dyno doctor --toggle``'s switch check passes."""
-    from dyno.hw.doctor import Report, check_end_switch
+    from dyno.hw.doctor_report import Report
+    from dyno.hw.doctor_switch import check_end_switch
     from dyno.hw import rig_faults
     from dyno.hw.rig import HardwareRig
 
@@ -306,7 +307,7 @@ def test_the_nano_reset_wait_keeps_the_watchdog_fed(rig_wired, factory):
     """``dyno doctor --toggle`` pulses RESET and waits 1.25 s for the bootloader: longer than the watchdog's
     0.5 s.  The wait is the control loop while it runs (it used to sleep silently: the watchdog thread tripped
     and the brake step that followed was refused, "the watchdog tripped during the step")."""
-    from dyno.hw.clock import MonotonicClock
+    from dyno.clock import MonotonicClock
 
     act = GpioActuators(rig_wired, pin_factory=factory, clock=MonotonicClock())
     wd = Watchdog(act, 0.2, clock=MonotonicClock())

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from dyno.errors import ConfigError
-from dyno.hw.clock import FakeClock
+from dyno.clock import FakeClock
 from dyno.rig.config import load_rig
 from dyno.protocol import v2
 from dyno.transports.budget import (MAX_BUSY, ChargedTransport, LinkMeter, check_budget, fits,
@@ -210,7 +210,8 @@ def test_a_simulated_link_is_charged_at_the_rig_files_clock():
 
 
 def test_doctor_says_planned_and_measured_and_warns_above_60_percent():
-    from dyno.hw.doctor_link import Report, check_link_budget, check_link_measured
+    from dyno.hw.doctor_report import Report
+    from dyno.hw.doctor_link import check_link_budget, check_link_measured
 
     clock = FakeClock(start_s=0.0)
     meter = LinkMeter(clock.now)

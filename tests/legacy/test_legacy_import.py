@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.session.root import public_point
+from dyno.session.summary import public_point
 from dyno.cli import main
 from dyno.datapaths import legacy_data_dir, legacy_data_missing
 from dyno.errors import ConfigError

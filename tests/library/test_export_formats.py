@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan as Plan
 from dyno.library.exports import POINT_UNITS
 from dyno.runlog.replay import replay
@@ -28,7 +28,7 @@ def _dyno(*args, env_extra=None, pythonpath=None):
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("exp") / "run"
-    res = run_test(RunOptions(sim=True, seed=7, out_dir=out, plan=QUICK_PLAN))
+    res = run_test(RunSpec(sim=True, seed=7, out_dir=out, plan=QUICK_PLAN))
     assert len(res["points"]) >= 2
     return out
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.api import TestPlan as Plan
 from dyno.session.drills import parse_drill
 from dyno.library import index as lib
@@ -44,7 +44,7 @@ def library(tmp_path_factory):
         assert r.returncode == 3, r.stderr  # aborted by the drill: the exit code is the run's, not the index's
         assert "not indexed" not in r.stderr
     # a complete (short) run with points, written in-process into the runs directory; indexed by `dyno runs`
-    run_test(RunOptions(sim=True, seed=4, out_dir=root / "quick", plan=QUICK_PLAN, tune_path=STOCK))
+    run_test(RunSpec(sim=True, seed=4, out_dir=root / "quick", plan=QUICK_PLAN, tune_path=STOCK))
     return {"root": root, "outside": outside, "results": [json.loads(r.stdout) for r in results]}
 
 
@@ -153,7 +153,7 @@ def test_deleted_run_directory_leaves_the_listing(tmp_path):
     import shutil
 
     root = tmp_path / "runs"
-    run_test(RunOptions(sim=True, seed=5, out_dir=root / "a", plan=QUICK_PLAN,
+    run_test(RunSpec(sim=True, seed=5, out_dir=root / "a", plan=QUICK_PLAN,
                         drills=[parse_drill("overspeed@3")]))
     conn = lib.open_library(root)
     assert lib.sync(conn, root) == 1 and len(lib.query(conn)) == 1

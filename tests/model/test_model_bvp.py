@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dyno.errors import DidNotConverge
-from dyno.model import bvp, capstan
+from dyno.model import boundary, capstan, collocation, equations, guess
 from dyno.model import closed_form as cf
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
 from dyno.model.solution import solve_point
@@ -18,19 +18,19 @@ pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 def test_converged_and_every_boundary_condition_holds(table_6_1):
     raw = table_6_1.raw
     assert raw.residual_max <= raw.tol
-    bc = bvp.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
+    bc = boundary.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
     assert bc.shape == (34,)
     assert np.max(np.abs(bc)) < raw.tol
     y = raw.y
     # Penetration zero at all four contact ends (5.51), torque and slack tension as imposed.
-    for i in (bvp.P_X, bvp.S_X):
+    for i in (equations.P_X, equations.S_X):
         assert abs(y[i, 0]) < 1e-6 and abs(y[i, -1]) < 1e-6
     s = table_6_1.summary
     assert s["torque_nm"]["primary"] == pytest.approx(18.0, rel=1e-6)
     assert s["span_tension_n"]["slack"] == pytest.approx(100.0, rel=1e-6)
     # Tension continuous into both spans.
-    assert y[bvp.P_T, 0] == pytest.approx(y[bvp.T_TAU, -1], abs=1e-6)
-    assert y[bvp.S_T, 0] == pytest.approx(y[bvp.L_TAU, -1], abs=1e-6)
+    assert y[equations.P_T, 0] == pytest.approx(y[equations.T_TAU, -1], abs=1e-6)
+    assert y[equations.S_T, 0] == pytest.approx(y[equations.L_TAU, -1], abs=1e-6)
 
 
 def test_required_outputs_present_and_physical(table_6_1):
@@ -63,8 +63,8 @@ def test_torque_balance_on_both_pulleys(table_6_1):
     y, p, case = raw.y, raw.p, raw.case
     loads = balance.interface_loads(raw)
     for which, i_t, i_th, i_th1, k_phi, radius, torque in (
-        ("primary", bvp.P_T, bvp.P_TH, bvp.P_TH1, bvp.K_PHIP, case.r_primary_m, -s["torque_nm"]["primary"]),
-        ("secondary", bvp.S_T, bvp.S_TH, bvp.S_TH1, bvp.K_PHIS, case.r_secondary_m, s["torque_nm"]["secondary"]),
+        ("primary", equations.P_T, equations.P_TH, equations.P_TH1, equations.K_PHIP, case.r_primary_m, -s["torque_nm"]["primary"]),
+        ("secondary", equations.S_T, equations.S_TH, equations.S_TH1, equations.K_PHIS, case.r_secondary_m, s["torque_nm"]["secondary"]),
     ):
         t_in, t_out = y[i_t, 0] * 100, y[i_t, -1] * 100
         arm_in, arm_out = radius * math.cos(y[i_th, 0]), radius * math.cos(y[i_th, -1])
@@ -92,7 +92,7 @@ def test_torque_balance_on_both_pulleys(table_6_1):
 def test_capstan_bound_never_exceeded(table_6_1):
     s, case = table_6_1.summary, table_6_1.case
     y = table_6_1.raw.y
-    for i_t, k_phi in ((bvp.P_T, bvp.K_PHIP), (bvp.S_T, bvp.K_PHIS)):
+    for i_t, k_phi in ((equations.P_T, equations.K_PHIP), (equations.S_T, equations.K_PHIS)):
         tension = y[i_t] * 100
         ratio = tension.max() / tension.min()
         bound = capstan.max_tension_ratio(table_6_1.raw.p[k_phi], case.mu, case.beta_rad)
@@ -104,7 +104,7 @@ def test_span_first_integral(table_6_1):
     raw = table_6_1.raw
     t = np.linspace(0, 1, 401)
     y = raw.sol(t)
-    for i_tau, i_v1, k_len in ((bvp.T_TAU, bvp.T_V1, bvp.K_LT), (bvp.L_TAU, bvp.L_V1, bvp.K_LS)):
+    for i_tau, i_v1, k_len in ((equations.T_TAU, equations.T_V1, equations.K_LT), (equations.L_TAU, equations.L_V1, equations.K_LS)):
         kappa = y[i_v1] / raw.p[k_len]
         invariant = y[i_tau] * 100 + 0.5 * raw.case.ei_nm2 * kappa**2
         assert np.ptp(invariant) < 1e-3 * invariant.mean()
@@ -127,7 +127,7 @@ def test_mesh_independence_of_quadrature(table_6_1):
     raw = table_6_1.raw
     from dyno.model.solution import postprocess
 
-    coarse = replace(raw, t=bvp.remesh(raw.t, 200))
+    coarse = replace(raw, t=guess.remesh(raw.t, 200))
     a, b = table_6_1.summary, postprocess(coarse).summary
     assert b["axial_force_n"]["secondary"] == pytest.approx(a["axial_force_n"]["secondary"], rel=1e-3)
     assert b["torque_nm"]["secondary"] == pytest.approx(a["torque_nm"]["secondary"], rel=1e-3)
@@ -207,9 +207,9 @@ def test_fast_jacobians_match_scipy_estimates():
     """The coloured fun_jac and the block-structured collocation Jacobian equal scipy's own (same steps)."""
     import scipy.integrate._bvp as sb
 
-    case = bvp.make_case(TABLE_6_1, TABLE_6_1_POINT)
-    t, y, p = bvp.initial_guess(case, 120)
-    fun, bc, fun_jac = bvp.make_fun(case), bvp.make_bc(case), bvp.make_fun_jac(case)
+    case = equations.make_case(TABLE_6_1, TABLE_6_1_POINT)
+    t, y, p = guess.initial_guess(case, 120)
+    fun, bc, fun_jac = equations.make_fun(case), boundary.make_bc(case), equations.make_fun_jac(case)
     a, b = sb.estimate_fun_jac(fun, t, y, p)
     c, d = fun_jac(t, y, p)
     assert np.array_equal(a, c) and np.array_equal(b, d)
@@ -220,7 +220,7 @@ def test_fast_jacobians_match_scipy_estimates():
     dya, dyb, dp = sb.estimate_bc_jac(bc, y[:, 0], y[:, -1], p)
     i_jac, j_jac = sb.compute_jac_indices(n, m, k)
     ref = sb.construct_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
-    ours = bvp._block_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
+    ours = collocation.block_global_jac(n, m, k, i_jac, j_jac, h, a, am, b, bm.copy(), dya, dyb, dp)
     assert abs(ref - ours).max() < 1e-12 * abs(ref).max()
     ours.check_format(full_check=True)  # written straight into compressed columns: a valid, sorted CSC matrix
     assert ours.has_sorted_indices and ours.nnz == abs(ref).astype(bool).sum() + np.count_nonzero(ours.data == 0)
@@ -230,7 +230,7 @@ def test_equidistributed_mesh_removes_needless_nodes():
     t = np.linspace(0, 1, 2001)
     rms = np.full(2000, 1e-6)
     rms[1000:1010] = 5e-4  # one busy spot
-    mesh = bvp.equidistributed_mesh(t, rms, 1e-3)
+    mesh = guess.equidistributed_mesh(t, rms, 1e-3)
     assert mesh[0] == 0 and mesh[-1] == 1 and np.all(np.diff(mesh) > 0)
     assert mesh.size < 1000
     dens = 1 / np.diff(mesh)
@@ -243,8 +243,8 @@ def test_warm_start_keeps_the_sliding_velocity(table_6_1):
     from dyno.model.solution import _contact_eval
 
     raw = table_6_1.raw
-    new = bvp.make_case(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=1.02))
-    y, p = bvp.transfer_guess(raw.case, new, raw.y, raw.p)
+    new = equations.make_case(TABLE_6_1, replace(TABLE_6_1_POINT, ratio=1.02))
+    y, p = guess.transfer_guess(raw.case, new, raw.y, raw.p)
     old_v = _contact_eval(raw.case, raw.y, raw.p, "primary")[4]["sliding_speed_m_s"]
     new_v = _contact_eval(new, y, p, "primary")[4]["sliding_speed_m_s"]
     assert new_v.min() == pytest.approx(old_v.min(), abs=0.5 * raw.case.slip_threshold_m_s)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dyno.errors import DidNotConverge, GrossSlip
-from dyno.model import bvp, capstan
+from dyno.model import boundary, capstan, equations
 from dyno.model.params import TABLE_6_1, TABLE_6_1_POINT
 from dyno.model.solution import solve_point
 
@@ -32,12 +32,12 @@ CASES = {
 def verify(sol):
     raw = sol.raw
     assert raw.residual_max <= raw.tol
-    bc = bvp.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
+    bc = boundary.make_bc(raw.case)(raw.y[:, 0], raw.y[:, -1], raw.p)
     assert np.max(np.abs(bc)) < raw.tol
     s = sol.summary
     assert 0 < s["efficiency"]["overall"] < 1
     assert s["axial_force_n"]["primary"] > 0 and s["axial_force_n"]["secondary"] > 0
-    for i_t, k_phi in ((bvp.P_T, bvp.K_PHIP), (bvp.S_T, bvp.K_PHIS)):
+    for i_t, k_phi in ((equations.P_T, equations.K_PHIP), (equations.S_T, equations.K_PHIS)):
         tension = raw.y[i_t] * 100
         assert tension.min() > 0
         assert tension.max() / tension.min() < capstan.max_tension_ratio(raw.p[k_phi], raw.case.mu, raw.case.beta_rad)
@@ -94,8 +94,7 @@ def test_a_heavy_clamp_at_a_light_torque_solves_cold(table_6_1, monkeypatch, rat
         # Since the exact bc Jacobian the equal-radii anchor passes on these cases; the last resort is driven here
         # by a geometric guess that is useless at any clamp-force condition (NaN states), as it was before
         from dyno.model import bvp
-
-        real_guess = bvp.initial_guess
+        from dyno.model.guess import initial_guess as real_guess
 
         def guess(case, n):
             t, y, p = real_guess(case, n)

@@ -15,7 +15,7 @@ from dyno.errors import GrossSlip
 from dyno.model import inverse as inv
 from dyno.model.closed_form import closed_form_point
 from dyno.model.params import TABLE_6_1, OperatingPoint
-from dyno.tuning.shift_curve import model_params_for
+from dyno.tuning.tune import model_params_for
 from dyno.tuning.tune import load_tune
 
 ROOT = Path(__file__).resolve().parents[2]

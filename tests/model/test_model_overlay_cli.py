@@ -5,7 +5,7 @@ import json
 import pytest
 
 from dyno.cli import main
-from dyno.model import overlay
+from dyno.model import cache_keys, overlay
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
@@ -43,7 +43,7 @@ def test_full_overlay_never_solves_twice(tmp_path, monkeypatch, table_6_1):
 
 def test_overlay_env_cache_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("DYNO_MODEL_CACHE", str(tmp_path / "c"))
-    assert overlay.default_cache_dir() == tmp_path / "c"
+    assert cache_keys.default_cache_dir() == tmp_path / "c"
     overlay.predict_overlay(POINTS[:1], tier="closed_form")
     assert list((tmp_path / "c").glob("*.json"))
 
@@ -101,9 +101,7 @@ def test_cache_key_covers_the_model_code_and_failures_are_retried_after_a_change
     assert not first[0]["converged"] and first[0]["state"] == "failed" and len(calls) == 1
     again = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
     assert again[0]["cached"] and len(calls) == 1  # same code: the failure is remembered
-    assert len(overlay.model_code_hash()) == 64
-    from dyno.model import cache_keys
-
+    assert len(cache_keys.model_code_hash()) == 64
     monkeypatch.setattr(cache_keys, "model_code_hash", lambda: "0" * 64)  # the model's code changed
     retried = overlay.predict_overlay([POINTS[0]], cache_dir=tmp_path)
     assert not retried[0]["cached"] and len(calls) == 2
@@ -119,8 +117,8 @@ def test_model_code_hash_reads_every_model_module():
     plumbing = {"overlay", "overlay_service", "overlay_worker", "cache_keys"}
     on_disk = {p.stem for p in here.glob("*.py")} - {"__init__", "sweep", "studies", "inverse", "overlay_inputs",
                                                       "executor", "study_tasks"} - plumbing
-    assert on_disk <= set(overlay._MODEL_MODULES), on_disk - set(overlay._MODEL_MODULES)
-    assert not plumbing & set(overlay._MODEL_MODULES)
+    assert on_disk <= set(cache_keys.MODEL_MODULES), on_disk - set(cache_keys.MODEL_MODULES)
+    assert not plumbing & set(cache_keys.MODEL_MODULES)
 
 
 def test_the_cache_key_follows_the_maths_not_the_plumbing(tmp_path):
@@ -134,7 +132,7 @@ def test_the_cache_key_follows_the_maths_not_the_plumbing(tmp_path):
     copy = tmp_path / "model"
     shutil.copytree(here, copy, ignore=shutil.ignore_patterns("__pycache__"))
     before = code_hash(copy)
-    assert before == overlay.model_code_hash()
+    assert before == cache_keys.model_code_hash()
     for name in ("overlay_worker", "overlay_service", "overlay", "cache_keys"):
         f = copy / f"{name}.py"
         f.write_text(f.read_text() + "\n# a comment, a line split: plumbing\n")

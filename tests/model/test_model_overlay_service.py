@@ -11,9 +11,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from dyno.model import overlay
-from dyno.model.overlay_service import (Cancelled, InlineExecutor, OverlayService, WarmState, op_distance,
-                                        solve_job)
+from dyno.model import cache_keys, overlay
+from dyno.model.overlay_worker import Cancelled, InlineExecutor, solve_job
+from dyno.model.overlay_service import OverlayService, op_distance
+from dyno.model.point_solve import WarmState
 from dyno.model.params import TABLE_6_1, OperatingPoint
 
 SLIP = 1e-3  # a looser friction law than the default 1e-4: the same code paths, ~2x quicker solves
@@ -191,7 +192,7 @@ def test_stored_warm_states_are_bounded(tmp_path, monkeypatch):
     warm = tmp_path / "warm"
     warm.mkdir()
     (warm / "0123456789abcdef-old.npz").write_bytes(b"other model code")
-    code = overlay.model_code_hash()[:16]
+    code = cache_keys.model_code_hash()[:16]
     for i in range(5):
         (warm / f"{code}-{i}.npz").write_bytes(b"damaged")  # unreadable: skipped, not fatal
     monkeypatch.setattr(overlay_service, "KEEP_WARM_FILES", 3)
@@ -202,7 +203,7 @@ def test_stored_warm_states_are_bounded(tmp_path, monkeypatch):
 
 def test_process_pool_solves_in_another_interpreter_and_close_cancels(tmp_path):
     """The UI's executor: one spawned process, cancelled through the event it got at start."""
-    from dyno.model.overlay_service import process_pool
+    from dyno.model.overlay_worker import process_pool
 
     pool, cancel = process_pool()
     svc = OverlayService(TABLE_6_1, executor=pool, cancel=cancel, slip_threshold_m_s=1e-2, cache_dir=tmp_path)
@@ -238,7 +239,8 @@ def test_a_dead_worker_process_is_replaced_by_a_thread(tmp_path):
 
 
 def _retry_service(tmp_path):
-    from dyno.model.overlay_service import InlineExecutor, OverlayService
+    from dyno.model.overlay_worker import InlineExecutor
+    from dyno.model.overlay_service import OverlayService
 
     calls = []
 

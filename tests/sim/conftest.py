@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 
 HOST_DT_S = 1.0 / 150.0   # the host polls at 150 Hz; the device steps the physics at that pace
 

@@ -8,7 +8,8 @@ import pytest
 
 from dyno.sim.cvt_friction import CLUTCH_MU_RANGE, friction_n
 from dyno.sim.driven import characterisation_truth
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 
 STOCK = "calibration/tunes/cvtech-stock.toml"
 

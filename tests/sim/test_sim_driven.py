@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from dyno.sim.driven import characterisation_truth
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 

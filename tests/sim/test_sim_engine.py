@@ -9,13 +9,14 @@ import pytest
 
 from dyno.errors import ConfigError
 from dyno.sim.engine import EngineMap, load_engine_map
-from dyno.sim.physics import RigModel, RigParams, _resolve_map_path
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams, resolve_map_path
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
 
 def test_engine_map_file_is_representative_and_shaped():
-    path = _resolve_map_path(RigParams().engine_map_path)
+    path = resolve_map_path(RigParams().engine_map_path)
     head = path.read_text().lower()
     assert "representative" in head and "not a measurement" in head
     rpm, torque = load_engine_map(path)
@@ -26,7 +27,7 @@ def test_engine_map_file_is_representative_and_shaped():
 
 
 def test_engine_map_clamps_outside_its_range():
-    m = EngineMap.from_csv(_resolve_map_path(RigParams().engine_map_path))
+    m = EngineMap.from_csv(resolve_map_path(RigParams().engine_map_path))
     assert m.torque_nm_at(500.0) == pytest.approx(m.torque_nm_at(m.rpm_min))
     assert m.torque_nm_at(6000.0) == pytest.approx(m.torque_nm_at(m.rpm_max))
     grid = np.linspace(m.rpm_min, m.rpm_max, 997)

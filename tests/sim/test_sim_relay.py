@@ -8,7 +8,8 @@ from dyno.clock import FakeClock
 from dyno.control.outputs import APPLY, RELEASE, STOP
 from dyno.hw.mockpins import mock_pin_actuators
 from dyno.rig.config import load_rig
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 from dyno.sim.rig import SimActuators
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2

@@ -11,7 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from dyno.sim.physics import RigModel, RigParams
+from dyno.sim.physics import RigModel
+from dyno.sim.rig_params import RigParams
 from dyno.sim.tune_deviation import deviate_tune
 from dyno.tuning.tune import load_tune
 

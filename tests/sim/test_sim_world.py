@@ -8,9 +8,9 @@ import statistics
 import numpy as np
 import pytest
 
-from dyno.analysis.calibration import load_history
+from dyno.analysis.calibration_history import load_history
 from dyno.analysis.systematic import calibration_rel_u
-from dyno.session.root import DEFAULT_CALIBRATION
+from dyno.resources import DEFAULT_CALIBRATION
 from dyno.sim.engine import EngineMap
 from dyno.sim.rig_params import RigParams
 from dyno.sim.world import realise

@@ -52,7 +52,7 @@ def test_primary_forces_at_the_logged_points_lie_in_the_thesis_band(logged):
     from dyno.model.params import OperatingPoint
     from dyno.model.solution import solve_point
     from dyno.tuning.actuators import primary_axial_force_n
-    from dyno.tuning.shift_curve import model_params_for
+    from dyno.tuning.tune import model_params_for
     from dyno.tuning.tune import load_tune
 
     new, old = load_tune(NEW), load_tune(OLD)
@@ -85,7 +85,8 @@ def test_primary_forces_at_the_logged_points_lie_in_the_thesis_band(logged):
 
 
 def test_the_shift_model_with_this_tune_predicts_the_logged_engine_speeds(logged):
-    from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
+    from dyno.tuning.shift_curve import Solver, load_engine_map
+    from dyno.tuning.tune import model_params_for
     from dyno.tuning.tune import load_tune
 
     def rms(tune_path, run):

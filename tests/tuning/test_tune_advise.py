@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 
 STOCK = Path("calibration/tunes/cvtech-stock.toml").resolve()
 WORLD = 23
@@ -24,7 +24,7 @@ TARGETS = {"engagement": 2300.0, "shift_out": 2850.0}  # (the stock rig of world
 
 def _run(tune: Path, seed: int, out: Path) -> dict:
     # in-process on the sim's loss-model efficiency: the belt-model table costs ~90 s per new tune
-    return run_test(RunOptions(sim=True, seed=seed, out_dir=out, tune_path=tune, plan=plan_named("engagement"),
+    return run_test(RunSpec(sim=True, seed=seed, out_dir=out, tune_path=tune, plan=plan_named("engagement"),
                                sim_params=RigParams(cvt_tune_path=str(tune), tune_deviation_rel=0.1,
                                                     world_seed=WORLD, belt_efficiency_source="loss_model")))
 
@@ -107,18 +107,18 @@ def test_the_run_library_shows_advised_beside_measured(loop):
 def test_the_runs_own_summary_shows_its_figures_and_the_advice(loop, monkeypatch, capsys):
     """`dyno run`'s text summary of an engagement run (no points table): the figures it measured, the tune's
     label prediction, and the advisor's prediction beside the measurement (the same function prints it)."""
-    from dyno.cli.run_cmd import _print_table
+    from dyno.cli.run_cmd import print_result_table
 
     monkeypatch.setenv("DYNO_RUNS_DIR", loop["env"]["DYNO_RUNS_DIR"])
     second = loop["second"]
-    _print_table(second)
+    print_result_table(second)
     out = capsys.readouterr().out
     assert "rpm_p" not in out  # no empty table
     assert f"engagement {second['engagement_rpm']:.0f} ± " in out and f"shift-out {second['shift_out_rpm']:.0f}" in out
     pred = loop["advice"]["tunes"][0]["predicted"]["engagement"]
     assert (f"advised: engagement predicted {pred['rpm']:.0f} ± {pred['u95_rpm']:.0f}, "
             f"measured {second['engagement_rpm']:.0f}") in out
-    _print_table(loop["first"])  # the stock tune was never advised
+    print_result_table(loop["first"])  # the stock tune was never advised
     assert "advised:" not in capsys.readouterr().out
     # and its report.html, which `dyno run` writes at the end (and `dyno report RUN` again)
     from dyno.report.writer import write_report
@@ -178,7 +178,7 @@ def test_steady_points_calibrate_the_full_load_figure(loop):
     from dyno.tuning.fit import NOMINAL, newton_residual_rpm, solver_for
     from dyno.tuning.parts import load_catalogue
 
-    sh = run_test(RunOptions(sim=True, seed=5, out_dir=loop["tmp"] / "sh", tune_path=STOCK,
+    sh = run_test(RunSpec(sim=True, seed=5, out_dir=loop["tmp"] / "sh", tune_path=STOCK,
                              plan=plan_named("speed-hold"),
                              sim_params=RigParams(cvt_tune_path=str(STOCK), tune_deviation_rel=0.1, world_seed=WORLD,
                                                   belt_efficiency_source="loss_model")))

@@ -20,9 +20,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from dyno.session.root import RunOptions, run_test
+from dyno.session.root import RunSpec, run_test
 from dyno.control.plans import plan_named
-from dyno.sim.physics import RigParams
+from dyno.sim.rig_params import RigParams
 from dyno.tuning.parts import apply_part, load_catalogue
 from dyno.tuning.tune import dumps_tune, load_tune
 
@@ -62,7 +62,7 @@ def test_stock_run_advise_run_reaches_targets_within_75_rpm_in_two_advised_tunes
     for pid in HIDDEN:
         hidden = apply_part(hidden, next(p for p in cat if p.id == pid))
     (tmp_path / "hidden.toml").write_text(dumps_tune(hidden))
-    ref = run_test(RunOptions(sim=True, seed=9, out_dir=tmp_path / "hidden", tune_path=tmp_path / "hidden.toml",
+    ref = run_test(RunSpec(sim=True, seed=9, out_dir=tmp_path / "hidden", tune_path=tmp_path / "hidden.toml",
                               plan=plan_named("engagement"),
                               sim_params=RigParams(cvt_tune_path=str(tmp_path / "hidden.toml"), tune_deviation_rel=0.1,
                                                    world_seed=WORLD, belt_efficiency_source="loss_model")))

@@ -47,10 +47,11 @@ TUNE_CHANGES = {
 def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
     """One complete simulated steady-state test (~10-15 s), its tune saved
     with the run (runs do not store their tune yet; the setup hook does)."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.api import TestPlan
-    from dyno.sim.physics import RigParams
-    from dyno.tuning.shift_curve import Solver, load_engine_map, model_params_for
+    from dyno.sim.rig_params import RigParams
+    from dyno.tuning.shift_curve import Solver, load_engine_map
+    from dyno.tuning.tune import model_params_for
 
     tune = load_tune(STOCK).with_changes(**{"drive.primary_radius_max_m": 0.079, "name": name, **changes})
     tune_path = Path(root) / f"{name}.toml"
@@ -69,7 +70,7 @@ def _simulate(name: str, changes: dict, seed: int, root: str) -> str:
         (Path(ctx.writer.run_dir) / "tune.toml").write_text(dumps_tune(tune))
 
     # 3 s averages (no efficiency-SEM extension): the fit needs rpm, not efficiency.
-    res = run_test(RunOptions(sim=True, seed=seed, out_dir=out, sim_params=rig, setup=save_tune,
+    res = run_test(RunSpec(sim=True, seed=seed, out_dir=out, sim_params=rig, setup=save_tune,
                               plan=TestPlan(target_efficiency_sem=1.0)))
     assert res["state"] == "done", res["reason"]
     return str(out)

@@ -13,8 +13,9 @@ import pytest
 from dyno.model.closed_form import closed_form_point
 from dyno.model.params import OperatingPoint
 from dyno.tuning import actuators as act
-from dyno.tuning.shift_curve import (EngineMap, compare_to_measured, key_speeds_rpm,
-                                     load_engine_map, model_params_for, predict_shift_curve, sensitivities)
+from dyno.tuning.shift_curve import (EngineMap, compare_to_measured, key_speeds_rpm, load_engine_map,
+                                     predict_shift_curve, sensitivities)
+from dyno.tuning.tune import model_params_for
 from dyno.tuning.tune import load_tune
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from dyno.analysis.calibration import load_history
+from dyno.analysis.calibration_history import load_history
 from dyno.ui.calibrate_app import CalibrateApp, CalibrateOptions
 from dyno.ui.calibration_wizard import Phase
 from tests.screens import screen_text

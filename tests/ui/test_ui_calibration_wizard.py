@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dyno.analysis.calibration import CalibrationRejected, load_history
+from dyno.analysis.calibration_history import CalibrationRejected, load_history
 from dyno.clock import run
 from dyno.ui.calibration_feed import run_sim_calibration
-from dyno.ui.calibration_wizard import CalibrationWizard, Phase, check_loads, parse_masses
+from dyno.ui.calibration_wizard import CalibrationWizard, Phase, parse_masses
+from dyno.analysis.calibration import check_loads
 
 pytestmark = pytest.mark.quick  # the inner loop: python -m pytest -m quick -n 2
 
@@ -145,7 +146,7 @@ def test_ui_wizard_zero_drift_is_judged_against_its_noise():
 def _truth_of_a_run(seed: int) -> float:
     """The input channel's true gain as a *run* on this seed draws its world (the simulator's physics, never
     what the wizard prints): the fixture must calibrate the same load cell."""
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.world import realise
 
     _, _, _, world = realise(RigParams(input_torque_fitted=True), seed, np.array([1800.0, 3800.0]),
@@ -238,7 +239,7 @@ def test_ui_wizard_history_term_after_append():
 def test_ui_wizard_input_channel_measures_the_cradle_bearings_friction(seed):
     """The fixture's cradle holds its seed's bearing friction off the cell (the run's draw): the wizard's
     line between the branches keeps the gain on the truth, and its friction is the physics' b."""
-    from dyno.sim.physics import RigParams
+    from dyno.sim.rig_params import RigParams
     from dyno.sim.world import input_channel_truth
 
     true_gain, _, b_true = input_channel_truth(RigParams(), seed)

@@ -217,7 +217,7 @@ async def main():
         while time.monotonic() < t_end and not (solved() or stored()):
             await pilot.pause(0.2)
         out["seed"] = "stored" if stored() else [e.result.get("converged") for e in svc().entries.values() if e.result]
-        out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay") if m in sys.modules]
+        out["after"] = [m for m in ("dyno.model.bvp", "dyno.model.overlay_service") if m in sys.modules]
         await pilot.press("space")
         await pilot.pause(0.2)
         await pilot.press("q")
@@ -239,7 +239,7 @@ def test_ui_live_imports_belt_model_only_when_overlay_requested(tmp_path):
     # after it: the solver runs in the overlay's own process (its numerics never hold this interpreter's GIL,
     # which the poller and the controller need); here only the light overlay modules
     assert out["seed"] in ([True], "stored"), out
-    assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay" in out["after"], out
+    assert "dyno.model.bvp" not in out["after"] and "dyno.model.overlay_service" in out["after"], out
 
 
 # --- the pure parts ------------------------------------------------------------------------
@@ -263,7 +263,7 @@ def test_ui_live_model_pieces():
     # the geometric ratio is the speed ratio less the belt's slip (Table 6.1 belt, 100 N slack)
     assert 1.5 * (1 - 0.01) < op.ratio < 1.5 and op.slack_tension_n == 100.0
     from dyno.analysis.engine_map import load_engine_map
-    from dyno.session.root import DEFAULT_ENGINE_MAP
+    from dyno.resources import DEFAULT_ENGINE_MAP
 
     assert 2800 < ideal_engine_rpm(load_engine_map(DEFAULT_ENGINE_MAP)) < 4000
 

@@ -9,7 +9,7 @@ import asyncio
 import sys
 from pathlib import Path
 
-from dyno.control.controller import State
+from dyno.control.api import State
 from dyno.session.root import RunningTest
 from dyno.session.safety import _WatchdogKick
 from dyno.ui.session import LiveOptions, LiveSession

@@ -23,7 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):
     """Two short simulated runs of one rig (3 points each, different seeds), as fast as the sim goes."""
-    from dyno.session.root import RunOptions, run_test
+    from dyno.session.root import RunSpec, run_test
     from dyno.control.api import TestPlan
     from dyno.sim.rig_params import RigParams
 
@@ -32,7 +32,7 @@ def two_runs(tmp_path_factory):
     for seed in (0, 1):
         d = root / f"run{seed}"
         # one rig measured twice (world_seed: its engine, sensor and day shared; dyno.sim.world), new noise
-        r = run_test(RunOptions(sim=True, seed=seed, out_dir=d, plan=replace(TestPlan(), max_points=3),
+        r = run_test(RunSpec(sim=True, seed=seed, out_dir=d, plan=replace(TestPlan(), max_points=3),
                                 sim_params=RigParams(world_seed=0)))
         assert r["state"] == "done" and len(r["points"]) == 3
         out.append(d)
@@ -47,7 +47,7 @@ def test_ui_replay_model_reprocess_and_png(two_runs, tmp_path):
     d = point_streams(rs.runs[0].run, rs.runs[0].points[0])
     assert d["adc_counts"] and d["primary_rpm"] and d["window_s"] > 2.9
     # Re-process with a calibration whose slope is 10 % higher: torque (and efficiency) 10 % lower.
-    from dyno.analysis.calibration import CalibrationEntry, append_entry
+    from dyno.analysis.calibration_history import CalibrationEntry, append_entry
 
     cal = rs.runs[0].result["calibration"]
     hist = tmp_path / "cal.csv"
