@@ -197,7 +197,7 @@ def test_the_face_check_sees_a_second_root(tmp_path):
 
 
 # The test is run one way (issue 50): `dyno run` and `dyno ui` get the exit guard, the watchdog, the drills, the polls
-# and the controller's run from dyno.session.root (run_test, RunningTest). No face installs a SafetyGuard, starts
+# and the controller's run from dyno.session (root.run_test, running.RunningTest). No face installs a SafetyGuard, starts
 # the watchdog or the drills, or runs a run's controller or poller itself.
 RUN_LOOP_NAMES = {"SafetyGuard", "start_watchdog", "rehook_watchdog", "make_watchdog", "arm_from_first_frame",
                   "start_next_controller", "DrillRunner", "run_test_async"}
@@ -348,7 +348,7 @@ def test_the_architecture_doc_says_what_is_checked():
             "test_callbacks_are_given_at_construction"} <= named
     assert named <= set(globals()), f"the doc names tests that do not exist: {named - set(globals())}"
     assert all(f"`{attr}`" in doc for attr in CALLBACK_ATTRS) and "`*_hooks`" in doc
-    root = ast.parse((DYNO / "session" / "root.py").read_text())
+    root = ast.parse((DYNO / "session" / "running.py").read_text())
     cls = next(n for n in root.body if isinstance(n, ast.ClassDef) and n.name == "RunningTest")
     methods = {n.name for n in cls.body if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
     said = set(re.findall(r"`(\w+)`", doc[doc.index("The test is run one way: `RunningTest`"):]))

@@ -92,7 +92,7 @@ class LiveSession(RearmMixin):
             self._signals.armed(self.ctx)
 
     def _build(self, opts, run_opts, build, loop) -> None:
-        from dyno.session.root import RunningTest
+        from dyno.session.running import RunningTest
 
         # the simulated rig paced from the scaled clock by the root: the controller's clock, actuators', polls, ring
         self.ctx = build(run_opts, self.sim_now if opts.sim else loop.time)

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from dyno.control.api import State
-from dyno.session.root import RunningTest
+from dyno.session.running import RunningTest
 from dyno.session.safety import _WatchdogKick
 from dyno.ui.session import LiveOptions, LiveSession
 
