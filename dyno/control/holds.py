@@ -78,8 +78,6 @@ class HoldService:
                 self._setpoint = req.setpoint
             self._target = req.setpoint
         self._rate = req.rate_per_s if req.rate_per_s > 0 else 0.0
-        if self._rate == 0.0:
-            self._setpoint = req.setpoint
         if not req.wait:
             return HoldResult(False, self._last_value, 0.0, self._quiet_s())
         return await self._settle(req, gains)
@@ -180,8 +178,3 @@ class HoldService:
     def law(self) -> HoldLaw | None:
         """The running loop's law (its state: the travel owed, the integral), None before the first hold."""
         return self._law
-
-    @property
-    def setpoint(self) -> float:
-        """The setpoint held now (a ramp's moves)."""
-        return self._setpoint
